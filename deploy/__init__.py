@@ -1,0 +1,1 @@
+"""The `swarm` command: launcher, reports, and deployment configurations."""

@@ -1,0 +1,56 @@
+"""``swarm``: the user-facing command. Each subcommand lives in its own module.
+
+A subcommand module provides ``add_arguments(parser)`` and ``run(args) -> int``. Modules
+are imported only when their subcommand runs, so ``swarm --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+# name -> (module, one-line help)
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "wellstirred": ("deploy.wellstirred_cmd", "the paper's Section 4 well-stirred model"),
+    "run": ("deploy.launcher", "run a swarm of robot processes to consensus"),
+}
+
+
+class UsageError(Exception):
+    """A bad argument found after parsing: printed as one line, exit code 2."""
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(arguments)
+    args = parser.parse_args(arguments)
+    module = importlib.import_module(args.module)
+    try:
+        return int(module.run(args) or 0)
+    except UsageError as error:
+        parser.exit(2, f"swarm {args.command}: error: {error}\n")
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+def build_parser(arguments: Sequence[str]) -> argparse.ArgumentParser:
+    """The parser, with full options only for the subcommand being run."""
+    parser = argparse.ArgumentParser(
+        prog="swarm",
+        description="Best-of-n decisions by negative updating and opinion pooling.",
+    )
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    chosen = arguments[0] if arguments else None
+    for command, (module_name, summary) in SUBCOMMANDS.items():
+        sub = commands.add_parser(command, help=summary, description=summary)
+        if command == chosen:
+            importlib.import_module(module_name).add_arguments(sub)
+        sub.set_defaults(module=module_name)
+    return parser
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""The nest beacon: a radio transmitter at the nest."""

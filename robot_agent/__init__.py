@@ -1,0 +1,1 @@
+"""The robot: its decision controller and everything a port to hardware needs."""

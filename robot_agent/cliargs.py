@@ -1,0 +1,125 @@
+"""Argument types and shared options for every command-line entry point.
+
+Each type raises ``argparse.ArgumentTypeError`` with a message that says what was
+wrong, so argparse prints one line and exits with code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+
+from robot_agent import protocol
+
+
+def _number(kind: type, text: str) -> float:
+    try:
+        value = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a valid {kind.__name__}") from None
+    if isinstance(value, float) and not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def int_range(low: int | None = None, high: int | None = None) -> Callable[[str], int]:
+    """An integer in [low, high] (either bound may be open)."""
+
+    def parse(text: str) -> int:
+        value = int(_number(int, text))
+        if (low is not None and value < low) or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"{value} is outside {_bounds(low, high)}")
+        return value
+
+    return parse
+
+
+def float_range(
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_open: bool = False,
+    high_open: bool = False,
+) -> Callable[[str], float]:
+    """A finite float within the given bounds (closed unless marked open)."""
+
+    def parse(text: str) -> float:
+        value = float(_number(float, text))
+        too_low = low is not None and (value <= low if low_open else value < low)
+        too_high = high is not None and (value >= high if high_open else value > high)
+        if too_low or too_high:
+            raise argparse.ArgumentTypeError(
+                f"{value:g} is outside {_bounds(low, high, low_open, high_open)}"
+            )
+        return value
+
+    return parse
+
+
+def _bounds(low: object, high: object, low_open: bool = False, high_open: bool = False) -> str:
+    left = "(" if low_open or low is None else "["
+    right = ")" if high_open or high is None else "]"
+    return f"{left}{'-inf' if low is None else low}, {'inf' if high is None else high}{right}"
+
+
+def name(text: str) -> str:
+    """A key-safe name (run id, key root): letters, digits, '-', '_', '.'."""
+    try:
+        protocol.Keys(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+    if len(text) > 64 or not all(c.isalnum() or c in "-_." for c in text):
+        raise argparse.ArgumentTypeError(
+            f"invalid name {text!r}: use up to 64 letters, digits, '-', '_', '.'"
+        )
+    return text
+
+
+def endpoint(text: str) -> str:
+    """A Zenoh endpoint such as ``tcp/127.0.0.1:7447``."""
+    proto, sep, rest = text.partition("/")
+    if not sep or proto not in {"tcp", "udp", "tls", "quic", "ws", "unixsock-stream"} or not rest:
+        raise argparse.ArgumentTypeError(
+            f"invalid Zenoh endpoint {text!r}: expected e.g. tcp/127.0.0.1:7447"
+        )
+    return text
+
+
+alpha = float_range(0.0, 0.5)
+probability = float_range(0.0, 1.0)
+threshold = float_range(0.0, 1.0, low_open=True)
+seed = int_range(0, 2**63 - 1)
+positive_int = int_range(1)
+non_negative_int = int_range(0)
+positive_float = float_range(0.0, low_open=True)
+non_negative_float = float_range(0.0)
+
+
+def add_zenoh_options(parser: argparse.ArgumentParser, *, default_mode: str = "client") -> None:
+    """--connect/--listen/--mode/--zenoh-config, --root and --run-id, shared by all processes."""
+    group = parser.add_argument_group("Zenoh")
+    group.add_argument(
+        "--connect", type=endpoint, action="append", default=[], metavar="ENDPOINT",
+        help="router endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)",
+    )
+    group.add_argument(
+        "--listen", type=endpoint, action="append", default=[], metavar="ENDPOINT",
+        help="endpoint to listen on (repeatable)",
+    )
+    group.add_argument(
+        "--mode", choices=["client", "peer", "router"], default=default_mode,
+        help=f"Zenoh session mode (default: {default_mode})",
+    )
+    group.add_argument(
+        "--zenoh-config", metavar="FILE",
+        help="a Zenoh JSON5 configuration file (TLS, access control); "
+        "--connect/--listen/--mode override it",
+    )
+    group.add_argument(
+        "--root", type=name, default=protocol.DEFAULT_ROOT,
+        help=f"key expression root (default: {protocol.DEFAULT_ROOT})",
+    )
+    group.add_argument(
+        "--run-id", type=name, default="run", help="names one swarm on the network (default: run)"
+    )

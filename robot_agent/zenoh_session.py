@@ -1,0 +1,52 @@
+"""Opening Zenoh sessions the same way in every process (an adapter, like node.py).
+
+Multicast scouting is always off: a local run is deterministic and sandbox-safe, and
+multi-host swarms name their routers explicitly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from collections.abc import Sequence
+
+import zenoh
+
+# Small Zenoh thread pools: a machine may host hundreds of sessions' processes. Only
+# set when the user has not chosen (an empty value makes zenoh panic).
+os.environ.setdefault(
+    "ZENOH_RUNTIME",
+    "(app: (worker_threads: 1), acc: (worker_threads: 1), tx: (max_blocking_threads: 1),"
+    " rx: (max_blocking_threads: 1), net: (worker_threads: 1))",
+)
+
+
+def make_config(
+    mode: str = "client",
+    connect: Sequence[str] = (),
+    listen: Sequence[str] = (),
+    config_file: str | None = None,
+) -> zenoh.Config:
+    config = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
+    config.insert_json5("mode", json.dumps(mode))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    if connect:
+        config.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    if listen:
+        config.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    return config
+
+
+def open_session(
+    mode: str = "client",
+    connect: Sequence[str] = (),
+    listen: Sequence[str] = (),
+    config_file: str | None = None,
+) -> zenoh.Session:
+    return zenoh.open(make_config(mode, connect, listen, config_file))
+
+
+def open_from_args(args: argparse.Namespace) -> zenoh.Session:
+    """A session from the options added by ``cliargs.add_zenoh_options``."""
+    return open_session(args.mode, args.connect, args.listen, args.zenoh_config)

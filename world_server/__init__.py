@@ -1,0 +1,1 @@
+"""The world server: physics, camera rendering, the radio medium and the clock."""
