@@ -217,7 +217,7 @@ RadioPayload = OpinionPayload | BeaconPayload
 # --- robot -> anyone -----------------------------------------------------------------
 
 Phase = Literal[
-    "waiting", "to_site", "sensing", "to_nest", "at_nest", "deciding", "to_decision", "stopped"
+    "waiting", "to_site", "sensing", "to_nest", "at_nest", "lingering", "to_decision", "stopped"
 ]
 
 
