@@ -4,52 +4,80 @@
 * ``mprodop``: Definition 2, the multi-option product operator.
 * ``choose_pair``: a weighted choice of two distinct options without replacement.
 * ``decided_option``: the decision test.
+* ``evidence_probability``, ``pooled_opinion``, ``pooled_opinion_alpha0`` and
+  ``expected_pooled_opinion``: Equations (1) to (4) of Section 3, the pooled opinion
+  of k agents with uniform priors after one comparison each.
 
-Options are 0-based indices into an opinion vector.
+Options are 0-based indices into an opinion vector; option 0 is the paper's option 1
+(the best). An opinion may be given unnormalised (any non-negative weights with a
+positive sum); every result is normalised.
 """
 
 from __future__ import annotations
 
 import math
+import numbers
+import operator
 import random
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 __all__ = [
+    "MAX_ENUMERATION_TERMS",
     "choose_pair",
     "decided_option",
+    "enumeration_terms",
+    "evidence_probability",
+    "expected_pooled_opinion",
     "mprodop",
     "negative_update",
+    "pooled_opinion",
+    "pooled_opinion_alpha0",
     "uniform_opinion",
     "validate_alpha",
     "validate_opinion",
 ]
 
+# Equation (3) sums over every way k pieces of evidence can fall on options 2..n:
+# C(k + n - 2, n - 2) terms. Beyond this many the enumeration takes minutes in Python.
+MAX_ENUMERATION_TERMS = 2_000_000
+
+
+def _is_real(value: object) -> bool:
+    # bool is an int subclass, but True is no probability.
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
 
 def validate_alpha(alpha: float) -> float:
-    if not isinstance(alpha, (int, float)) or math.isnan(alpha) or not 0.0 <= alpha <= 0.5:
-        raise ValueError(f"alpha must be in [0, 0.5], got {alpha!r}")
+    """``alpha`` as a float, or ValueError unless it is a number in [0, 0.5]."""
+    if not _is_real(alpha) or math.isnan(alpha) or not 0.0 <= alpha <= 0.5:
+        raise ValueError(f"alpha must be a number in [0, 0.5], got {alpha!r}")
     return float(alpha)
 
 
 def validate_opinion(opinion: Sequence[float], n: int | None = None) -> list[float]:
-    """Return ``opinion`` as a list of floats, or raise ValueError saying what is wrong."""
+    """Return ``opinion`` as a list of floats, or raise ValueError saying what is wrong.
+
+    Checks: ``n`` entries when ``n`` is given, at least 2 entries, every entry a finite
+    non-negative number, and a positive sum.
+    """
     values = list(opinion)
     if n is not None and len(values) != n:
         raise ValueError(f"opinion has {len(values)} entries, expected {n}")
     if len(values) < 2:
         raise ValueError(f"an opinion needs at least 2 options, got {len(values)}")
     for index, value in enumerate(values):
-        if not isinstance(value, (int, float)) or math.isnan(value) or math.isinf(value):
+        if not _is_real(value) or not math.isfinite(value):
             raise ValueError(f"opinion[{index}] is {value!r}, not a finite number")
         if value < 0.0:
             raise ValueError(f"opinion[{index}] is negative ({value!r})")
-    total = math.fsum(values)
-    if total <= 0.0:
-        raise ValueError("opinion sums to zero")
+    if max(values) <= 0.0:
+        raise ValueError("opinion is all zeros: it gives no probability to any option")
     return [float(value) for value in values]
 
 
 def uniform_opinion(n: int) -> list[float]:
+    """The uninformed prior over ``n`` options."""
+    n = _count(n, "number of options")
     if n < 2:
         raise ValueError(f"need at least 2 options, got {n}")
     return [1.0 / n] * n
@@ -59,22 +87,22 @@ def negative_update(opinion: Sequence[float], eliminated: int, alpha: float = 0.
     """Definition 1: the posterior after learning that ``eliminated`` is not the best.
 
     With alpha = 0 the eliminated option drops to zero and the rest are rescaled; with
-    alpha = 0.5 the evidence is worthless and the opinion is unchanged.
+    alpha = 0.5 the evidence is worthless and the opinion is unchanged. If the opinion
+    is already certain of ``eliminated`` and alpha = 0, the evidence contradicts it
+    entirely and Bayes' rule would divide by zero: the opinion is returned unchanged
+    (normalised), so an agent keeps its own belief, as with an all-zero pool.
     """
-    values = validate_opinion(opinion)
+    values = _normalised(validate_opinion(opinion))
     alpha = validate_alpha(alpha)
-    if not 0 <= eliminated < len(values):
-        raise ValueError(f"eliminated option {eliminated} is outside 0..{len(values) - 1}")
-    total = math.fsum(values)
-    values = [value / total for value in values]
-    x_i = values[eliminated]
-    denominator = alpha * x_i + (1.0 - alpha) * (1.0 - x_i)
+    eliminated = _option_index(eliminated, len(values))
+    x_eliminated = values[eliminated]
+    # 1 - x_i from the other entries, so that x_i = 1 - 1e-17 still leaves a posterior.
+    x_rest = math.fsum(values[:eliminated] + values[eliminated + 1 :])
+    denominator = alpha * x_eliminated + (1.0 - alpha) * x_rest
     if denominator <= 0.0:
-        # Certain of the eliminated option and alpha = 0: the evidence contradicts the
-        # opinion entirely, so there is nothing Bayesian to do; keep it.
         return values
     updated = [(1.0 - alpha) * value / denominator for value in values]
-    updated[eliminated] = alpha * x_i / denominator
+    updated[eliminated] = alpha * x_eliminated / denominator
     return _normalised(updated)
 
 
@@ -82,21 +110,37 @@ def mprodop(opinions: Sequence[Sequence[float]]) -> list[float] | None:
     """Definition 2: the normalised Hadamard product of ``opinions``.
 
     Returns None when the product is all zeros (the opinions contradict each other,
-    possible with alpha = 0); the caller then keeps its own opinion.
+    possible with alpha = 0); the caller then keeps its own opinion. Every opinion must
+    have the same number of entries as the first. The product is kept as mantissa and
+    exponent per option, so pooling many small probabilities never underflows to a
+    false contradiction.
     """
     if not opinions:
         raise ValueError("mprodop needs at least one opinion")
-    first = validate_opinion(opinions[0])
-    product = [value / math.fsum(first) for value in first]
-    for opinion in opinions[1:]:
-        values = validate_opinion(opinion, len(product))
-        total = math.fsum(values)
-        product = [p * value / total for p, value in zip(product, values, strict=True)]
-        # Rescale as we go so that long pools of small numbers do not underflow.
-        peak = max(product)
-        if peak == 0.0:
-            return None
-        product = [p / peak for p in product]
+    pool: list[list[float]] = []
+    for position, opinion in enumerate(opinions):
+        try:
+            pool.append(validate_opinion(opinion, len(pool[0]) if pool else None))
+        except ValueError as error:
+            raise ValueError(f"opinion {position} of the pool: {error}") from None
+    size = len(pool[0])
+    mantissas = [1.0] * size
+    exponents = [0] * size
+    for values in pool:
+        peak = max(values)
+        for index, value in enumerate(values):
+            value_mantissa, value_exponent = math.frexp(value / peak)
+            mantissa, exponent = math.frexp(mantissas[index] * value_mantissa)
+            mantissas[index] = mantissa
+            exponents[index] += value_exponent + exponent
+    alive = [index for index in range(size) if mantissas[index] > 0.0]
+    if not alive:
+        return None
+    top = max(exponents[index] for index in alive)
+    product = [
+        math.ldexp(mantissas[index], exponents[index] - top) if mantissas[index] > 0.0 else 0.0
+        for index in range(size)
+    ]
     return _normalised(product)
 
 
@@ -106,11 +150,11 @@ def choose_pair(opinion: Sequence[float], rng: random.Random) -> tuple[int, int]
     If fewer than two options have positive weight, the second is drawn uniformly from
     the zero-weight options, so a pair always exists.
     """
-    values = validate_opinion(opinion)
+    values = _normalised(validate_opinion(opinion))
     first = _weighted_index(values, rng)
     rest = list(values)
     rest[first] = 0.0
-    if math.fsum(rest) > 0.0:
+    if max(rest) > 0.0:
         second = _weighted_index(rest, rng)
     else:
         others = [index for index in range(len(values)) if index != first]
@@ -119,13 +163,151 @@ def choose_pair(opinion: Sequence[float], rng: random.Random) -> tuple[int, int]
 
 
 def decided_option(opinion: Sequence[float], threshold: float = 1.0) -> int | None:
-    """The option whose probability is at least ``threshold`` (1 means certainty), or None."""
-    if not 0.0 < threshold <= 1.0 or math.isnan(threshold):
-        raise ValueError(f"threshold must be in (0, 1], got {threshold!r}")
-    values = validate_opinion(opinion)
-    total = math.fsum(values)
+    """The option whose probability is at least ``threshold`` (1 means certainty), or None.
+
+    With a threshold of 0.5 or less two options can both pass; the lower index wins.
+    """
+    if not _is_real(threshold) or math.isnan(threshold) or not 0.0 < threshold <= 1.0:
+        raise ValueError(f"threshold must be a number in (0, 1], got {threshold!r}")
+    values = _normalised(validate_opinion(opinion))
     best = max(range(len(values)), key=values.__getitem__)
-    return best if values[best] / total >= threshold else None
+    return best if values[best] >= threshold else None
+
+
+# --- Section 3: the pooled opinion after one round, from uniform priors -----------------
+
+
+def evidence_probability(n: int) -> list[float]:
+    """P(E_i) for an agent with a uniform opinion: 2(i-1) / (n(n-1)), i = 1..n.
+
+    A uniformly random pair of distinct options eliminates option i when the other
+    option of the pair is better, i.e. one of the i - 1 options before it.
+    """
+    n = _count(n, "number of options")
+    if n < 2:
+        raise ValueError(f"need at least 2 options, got {n}")
+    return [2.0 * (i - 1) / (n * (n - 1)) for i in range(1, n + 1)]
+
+
+def pooled_opinion(evidence_counts: Sequence[int], alpha: float) -> list[float]:
+    """Equation (1): the pool's opinion when m_i of its members learnt E_i.
+
+    ``evidence_counts`` holds m_1..m_n; the pool size k is their sum. Each member starts
+    uniform, so option i keeps alpha^(m_i) (1 - alpha)^(k - m_i) before normalising.
+    With alpha = 0, see ``pooled_opinion_alpha0``.
+    """
+    counts = _evidence_counts(evidence_counts)
+    alpha = validate_alpha(alpha)
+    if alpha == 0.0:
+        return pooled_opinion_alpha0(counts)
+    # Divide every weight by (1 - alpha)^k: option i keeps (alpha / (1 - alpha))^(m_i).
+    ratio = alpha / (1.0 - alpha)
+    return _normalised([ratio**m for m in counts])
+
+
+def pooled_opinion_alpha0(evidence_counts: Sequence[int]) -> list[float]:
+    """Equation (4): with alpha = 0, an option any member eliminated is gone, and the
+    pool is uniform over the options nobody eliminated.
+
+    If every option was eliminated (impossible when option 1 is the best, since the best
+    is never the worse of a pair), there is no pooled opinion: ValueError.
+    """
+    counts = _evidence_counts(evidence_counts)
+    survivors = sum(1 for m in counts if m == 0)
+    if survivors == 0:
+        raise ValueError("every option was eliminated: the pooled opinion is all zeros")
+    return [1.0 / survivors if m == 0 else 0.0 for m in counts]
+
+
+def enumeration_terms(n: int, k: int) -> int:
+    """How many evidence vectors Equation (3) sums over: C(k + n - 2, n - 2)."""
+    return math.comb(k + n - 2, n - 2)
+
+
+def expected_pooled_opinion(
+    n: int, k: int, alpha: float, *, max_terms: int = MAX_ENUMERATION_TERMS
+) -> list[float]:
+    """Equation (3): the exact expected pooled opinion of k agents after one round.
+
+    Each agent starts uniform, compares a uniformly random pair of distinct options and
+    updates on the worse; the pool is combined with MProdOp. The expectation is summed
+    over every evidence vector m (m_1 = 0, sum m_i = k) weighted by its multinomial
+    probability (Equation 2). With alpha = 0 each term is Equation (4). Raises
+    ValueError if that needs more than ``max_terms`` terms.
+    """
+    n = _count(n, "number of options")
+    k = _count(k, "pool size")
+    if n < 2:
+        raise ValueError(f"need at least 2 options, got {n}")
+    if k < 1:
+        raise ValueError(f"pool size must be at least 1, got {k}")
+    alpha = validate_alpha(alpha)
+    terms = enumeration_terms(n, k)
+    if terms > max_terms:
+        raise ValueError(
+            f"Equation (3) for n={n}, k={k} sums {terms} terms, more than max_terms={max_terms}"
+        )
+    expected = [0.0] * n
+    for counts, probability in _evidence_vectors(n, k):
+        pooled = pooled_opinion(counts, alpha)
+        for index, value in enumerate(pooled):
+            expected[index] += probability * value
+    return expected
+
+
+def _evidence_vectors(n: int, k: int) -> Iterator[tuple[list[int], float]]:
+    """Every evidence vector (m_1 = 0, m_2..m_n summing to k) with its probability.
+
+    Equation (2) in exact integer arithmetic: with P(E_i) = 2(i-1) / (n(n-1)) the
+    probability is prod_i C(r_i, m_i) (2(i-1))^(m_i) / (n(n-1))^k, where r_i is the
+    evidence not yet placed; one correctly rounded division per vector.
+    """
+    counts = [0] * n
+    denominator = (n * (n - 1)) ** k
+
+    def place(index: int, remaining: int, weight: int) -> Iterator[tuple[list[int], float]]:
+        if index == n - 1:
+            counts[index] = remaining
+            yield counts, weight * (2 * index) ** remaining / denominator
+            return
+        for m in range(remaining + 1):
+            counts[index] = m
+            yield from place(
+                index + 1, remaining - m, weight * math.comb(remaining, m) * (2 * index) ** m
+            )
+        counts[index] = 0
+
+    # Option 1 (index 0) is the best: never the worse of a pair, so m_1 = 0.
+    yield from place(1, k, 1)
+
+
+# --- helpers -------------------------------------------------------------------------------
+
+
+def _count(value: object, what: str) -> int:
+    if isinstance(value, bool):
+        raise ValueError(f"{what} must be an integer, got {value!r}")
+    try:
+        return operator.index(value)  # type: ignore[arg-type]
+    except TypeError:
+        raise ValueError(f"{what} must be an integer, got {value!r}") from None
+
+
+def _option_index(value: object, size: int) -> int:
+    index = _count(value, "option index")
+    if not 0 <= index < size:
+        raise ValueError(f"option index {index} is outside 0..{size - 1}")
+    return index
+
+
+def _evidence_counts(evidence_counts: Sequence[int]) -> list[int]:
+    counts = [_count(m, "evidence count") for m in evidence_counts]
+    if len(counts) < 2:
+        raise ValueError(f"need evidence counts for at least 2 options, got {len(counts)}")
+    negative = [index for index, m in enumerate(counts) if m < 0]
+    if negative:
+        raise ValueError(f"evidence count {negative[0]} is negative ({counts[negative[0]]})")
+    return counts
 
 
 def _weighted_index(weights: Sequence[float], rng: random.Random) -> int:
@@ -139,9 +321,19 @@ def _weighted_index(weights: Sequence[float], rng: random.Random) -> int:
             last_positive = index
             if target < running:
                 return index
+    # Rounding can leave target at the very top of the range: the last positive wins.
     return last_positive
 
 
 def _normalised(values: Sequence[float]) -> list[float]:
-    total = math.fsum(values)
+    """``values`` divided by their sum (a normalised opinion comes back unchanged)."""
+    try:
+        total = math.fsum(values)
+    except OverflowError:
+        total = math.inf
+    if math.isinf(total):
+        # Weights near the float maximum: scale by the peak so the sum fits.
+        peak = max(values)
+        values = [value / peak for value in values]
+        total = math.fsum(values)
     return [value / total for value in values]

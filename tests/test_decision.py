@@ -1,0 +1,406 @@
+"""The decision math: Definitions 1 and 2, pair choice, decision test, Equations (1)-(4)."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import random
+from collections import Counter
+
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from robot_agent.decision import (
+    choose_pair,
+    decided_option,
+    enumeration_terms,
+    evidence_probability,
+    expected_pooled_opinion,
+    mprodop,
+    negative_update,
+    pooled_opinion,
+    pooled_opinion_alpha0,
+    uniform_opinion,
+    validate_alpha,
+    validate_opinion,
+)
+
+# --- strategies ------------------------------------------------------------------------
+
+# No per-example deadline: timing varies on a loaded CI machine.
+relaxed = settings(deadline=None)
+
+weights = st.floats(min_value=0.0, max_value=1e6, allow_nan=False, allow_infinity=False)
+alphas = st.floats(min_value=0.0, max_value=0.5, allow_nan=False)
+# An alpha so small that alpha * x underflows to zero acts as alpha = 0; where a test
+# relies on alpha > 0 keeping every option alive, it draws from these instead.
+working_alphas = st.one_of(st.just(0.0), st.floats(min_value=1e-6, max_value=0.5))
+
+
+@st.composite
+def opinions(draw: st.DrawFn, size: int | None = None) -> list[float]:
+    """Non-negative weights with a positive sum (not necessarily normalised)."""
+    n = size if size is not None else draw(st.integers(2, 12))
+    values = draw(st.lists(weights, min_size=n, max_size=n))
+    assume(max(values) > 0.0)
+    return values
+
+
+@st.composite
+def opinion_with_option(draw: st.DrawFn) -> tuple[list[float], int]:
+    values = draw(opinions())
+    return values, draw(st.integers(0, len(values) - 1))
+
+
+@st.composite
+def pools(draw: st.DrawFn) -> list[list[float]]:
+    n = draw(st.integers(2, 8))
+    return draw(st.lists(opinions(n), min_size=1, max_size=6))
+
+
+def normalise(values: list[float]) -> list[float]:
+    total = math.fsum(values)
+    return [value / total for value in values]
+
+
+def assert_close(actual: list[float], expected: list[float], tolerance: float = 1e-9) -> None:
+    assert len(actual) == len(expected)
+    for a, b in zip(actual, expected, strict=True):
+        assert a == pytest.approx(b, abs=tolerance)
+
+
+def assert_distribution(values: list[float]) -> None:
+    assert all(value >= 0.0 for value in values)
+    assert math.fsum(values) == pytest.approx(1.0, abs=1e-12)
+
+
+# --- validation ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("opinion", "message"),
+    [
+        ([0.5, float("nan")], r"opinion\[1\] is nan"),
+        ([0.5, float("inf")], r"opinion\[1\] is inf"),
+        ([0.5, -0.1, 0.6], r"opinion\[1\] is negative"),
+        ([0.0, 0.0], "all zeros"),
+        ([1.0], "at least 2 options"),
+        ([], "at least 2 options"),
+        ([True, 0.5], r"opinion\[0\] is True"),
+        (["0.5", 0.5], r"opinion\[0\] is '0.5'"),
+    ],
+)
+def test_bad_opinions_say_what_is_wrong(opinion: list[object], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        validate_opinion(opinion)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=message):
+        negative_update(opinion, 0, 0.0)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=message):
+        mprodop([opinion])  # type: ignore[list-item]
+    with pytest.raises(ValueError, match=message):
+        choose_pair(opinion, random.Random(0))  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=message):
+        decided_option(opinion)  # type: ignore[arg-type]
+
+
+def test_wrong_length_is_reported() -> None:
+    with pytest.raises(ValueError, match="opinion has 3 entries, expected 2"):
+        validate_opinion([0.2, 0.3, 0.5], 2)
+    expected = "opinion 2 of the pool: opinion has 3 entries, expected 2"
+    with pytest.raises(ValueError, match=expected):
+        mprodop([[0.5, 0.5], [0.1, 0.9], [0.2, 0.3, 0.5]])
+
+
+@pytest.mark.parametrize("alpha", [-0.01, 0.51, 1.0, float("nan"), float("inf"), "0.1", None, True])
+def test_alpha_outside_the_range_is_rejected(alpha: object) -> None:
+    with pytest.raises(ValueError, match=r"alpha must be a number in \[0, 0.5\]"):
+        validate_alpha(alpha)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="alpha"):
+        negative_update([0.5, 0.5], 0, alpha)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("eliminated", [-1, 3, 1.0, "1", None])
+def test_eliminated_must_be_an_option_index(eliminated: object) -> None:
+    with pytest.raises(ValueError, match="option index"):
+        negative_update([0.2, 0.3, 0.5], eliminated, 0.0)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("threshold", [0.0, -0.5, 1.01, float("nan"), "1"])
+def test_threshold_outside_the_range_is_rejected(threshold: object) -> None:
+    with pytest.raises(ValueError, match=r"threshold must be a number in \(0, 1\]"):
+        decided_option([0.5, 0.5], threshold)  # type: ignore[arg-type]
+
+
+def test_empty_pool_is_rejected() -> None:
+    with pytest.raises(ValueError, match="at least one opinion"):
+        mprodop([])
+
+
+def test_uniform_opinion() -> None:
+    assert uniform_opinion(4) == [0.25] * 4
+    with pytest.raises(ValueError, match="at least 2 options"):
+        uniform_opinion(1)
+
+
+# --- Definition 1: negative updating ---------------------------------------------------
+
+
+def test_update_with_reliable_evidence_eliminates_the_option() -> None:
+    assert negative_update([0.25] * 4, 2, 0.0) == pytest.approx([1 / 3, 1 / 3, 0.0, 1 / 3])
+
+
+def test_update_matches_definition_1() -> None:
+    x, alpha = [0.1, 0.2, 0.3, 0.4], 0.2
+    denominator = alpha * 0.3 + (1 - alpha) * 0.7
+    expected = [(1 - alpha) * v / denominator for v in x]
+    expected[2] = alpha * 0.3 / denominator
+    assert_close(negative_update(x, 2, alpha), expected, 1e-15)
+
+
+def test_update_with_worthless_evidence_changes_nothing() -> None:
+    assert_close(negative_update([1.0, 2.0, 5.0], 1, 0.5), [0.125, 0.25, 0.625], 1e-15)
+
+
+def test_contradicting_a_certain_opinion_keeps_it() -> None:
+    # Bayes would divide by zero; the agent keeps its belief instead.
+    assert negative_update([0.0, 1.0, 0.0], 1, 0.0) == [0.0, 1.0, 0.0]
+
+
+def test_update_uses_the_rest_not_one_minus_x() -> None:
+    # x_0 rounds to 1.0 in the sum, yet the evidence still moves all mass to option 1.
+    assert negative_update([1.0, 1e-20], 0, 0.0) == [0.0, 1.0]
+
+
+@relaxed
+@given(opinion_with_option(), alphas)
+def test_update_stays_a_distribution(case: tuple[list[float], int], alpha: float) -> None:
+    opinion, eliminated = case
+    assert_distribution(negative_update(opinion, eliminated, alpha))
+
+
+@relaxed
+@given(opinion_with_option(), alphas)
+def test_update_never_raises_the_eliminated_option(
+    case: tuple[list[float], int], alpha: float
+) -> None:
+    opinion, eliminated = case
+    before = normalise(opinion)[eliminated]
+    after = negative_update(opinion, eliminated, alpha)[eliminated]
+    assert after <= before * (1 + 1e-12) + 1e-300
+
+
+# --- Definition 2: MProdOp -------------------------------------------------------------
+
+
+def test_product_matches_definition_2() -> None:
+    assert_close(mprodop([[0.5, 0.5, 0.0], [0.2, 0.3, 0.5]]), [0.4, 0.6, 0.0], 1e-15)
+
+
+def test_contradictory_pool_is_reported_as_none() -> None:
+    assert mprodop([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]) is None
+    assert mprodop([[0.5, 0.5, 0.0], [0.0, 0.0, 1.0]]) is None
+
+
+def test_product_of_tiny_probabilities_does_not_underflow() -> None:
+    # The true product is (0, 1e-400, 0): tiny, but not a contradiction.
+    assert mprodop([[1.0, 1e-200, 0.0], [0.0, 1e-200, 1.0]]) == [0.0, 1.0, 0.0]
+    many = [[0.5, 1e-10, 0.5 - 1e-10]] * 200
+    result = mprodop(many)
+    assert result is not None
+    assert result[0] == pytest.approx(1 / (1 + ((0.5 - 1e-10) / 0.5) ** 200), rel=1e-9)
+
+
+def test_huge_weights_do_not_overflow() -> None:
+    assert mprodop([[1e308, 1e308], [1e308, 3e307]]) == pytest.approx([1 / 1.3, 0.3 / 1.3])
+    assert negative_update([1e308, 1e308, 1e308], 0, 0.0) == pytest.approx([0, 0.5, 0.5])
+
+
+@relaxed
+@given(pools())
+def test_product_stays_a_distribution(pool: list[list[float]]) -> None:
+    result = mprodop(pool)
+    if result is None:
+        # Reported only for a true contradiction: every option is zero in some opinion.
+        assert all(0.0 in values for values in zip(*pool, strict=True))
+    else:
+        assert_distribution(result)
+
+
+@relaxed
+@given(pools(), st.randoms(use_true_random=False))
+def test_pooling_is_commutative(pool: list[list[float]], rng: random.Random) -> None:
+    shuffled = list(pool)
+    rng.shuffle(shuffled)
+    first, second = mprodop(pool), mprodop(shuffled)
+    assert (first is None) == (second is None)
+    if first is not None and second is not None:
+        assert_close(first, second, 1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.data(), alphas)
+def test_pooling_preserves_evidence(data: st.DataObject, alpha: float) -> None:
+    """Pooling updated opinions equals updating the pooled opinion (Section 3)."""
+    n = data.draw(st.integers(2, 8))
+    # Bounded away from zero so the products stay representable and comparable.
+    entry = st.floats(min_value=1e-3, max_value=1.0)
+    pool = data.draw(st.lists(st.lists(entry, min_size=n, max_size=n), min_size=1, max_size=5))
+    evidence = data.draw(st.lists(st.integers(0, n - 1), min_size=len(pool), max_size=len(pool)))
+    updated = [negative_update(x, e, alpha) for x, e in zip(pool, evidence, strict=True)]
+    pooled_after = mprodop(updated)
+    assume(pooled_after is not None)  # with alpha = 0 the evidence can eliminate everything
+    assert pooled_after is not None
+    pooled_first = mprodop(pool)
+    assert pooled_first is not None
+    for eliminated in evidence:
+        pooled_first = negative_update(pooled_first, eliminated, alpha)
+    assert_close(pooled_after, pooled_first, 1e-9)
+
+
+# --- pair choice and decisions ---------------------------------------------------------
+
+
+@relaxed
+@given(opinions(), st.randoms(use_true_random=False))
+def test_pair_is_two_distinct_options_the_first_with_weight(
+    opinion: list[float], rng: random.Random
+) -> None:
+    first, second = choose_pair(opinion, rng)
+    assert first != second
+    assert 0 <= first < len(opinion) and 0 <= second < len(opinion)
+    assert opinion[first] > 0.0
+    if sum(1 for value in opinion if value > 0.0) >= 2:
+        assert opinion[second] > 0.0
+
+
+def test_pair_frequencies_follow_the_weights_without_replacement() -> None:
+    weights = [0.5, 0.3, 0.2, 0.0]
+    rng = random.Random(7)
+    draws = 60_000
+    counts = Counter(choose_pair(weights, rng) for _ in range(draws))
+    for (i, j), count in counts.items():
+        p = weights[i] * weights[j] / (1 - weights[i])
+        standard_error = math.sqrt(p * (1 - p) / draws)
+        assert abs(count / draws - p) < 5 * standard_error, (i, j)
+    assert set(counts) == {(i, j) for i in range(3) for j in range(3) if i != j}
+
+
+def test_a_certain_opinion_pairs_its_option_with_a_uniform_other() -> None:
+    rng = random.Random(3)
+    counts = Counter(choose_pair([0.0, 1.0, 0.0, 0.0], rng) for _ in range(3000))
+    assert {pair[0] for pair in counts} == {1}
+    assert set(counts) == {(1, 0), (1, 2), (1, 3)}
+    assert min(counts.values()) > 850
+
+
+def test_decided_option() -> None:
+    assert decided_option([0.0, 1.0, 0.0]) == 1
+    assert decided_option([0.1, 0.9]) is None
+    assert decided_option([0.1, 0.9], 0.9) == 1
+    assert decided_option([2.0, 8.0], 0.8) == 1  # normalised first
+    assert decided_option([0.5, 0.5], 0.5) == 0  # a tie goes to the lower index
+
+
+# --- Section 3: Equations (1)-(4) ------------------------------------------------------
+
+
+def test_evidence_probability() -> None:
+    assert evidence_probability(4) == pytest.approx([0, 2 / 12, 4 / 12, 6 / 12])
+    assert math.fsum(evidence_probability(37)) == pytest.approx(1.0)
+
+
+def test_equation_1() -> None:
+    # k = 3; counts (0, 2, 1): option i keeps alpha^m_i (1-alpha)^(3-m_i).
+    alpha = 0.2
+    raw = [0.8**3, 0.2**2 * 0.8, 0.2 * 0.8**2]
+    assert_close(pooled_opinion([0, 2, 1], alpha), normalise(raw), 1e-15)
+
+
+@relaxed
+@given(st.lists(st.integers(0, 5), min_size=2, max_size=8))
+def test_equation_4_is_equation_1_at_alpha_0(counts: list[int]) -> None:
+    assume(0 in counts)
+    survivors = counts.count(0)
+    expected = [1 / survivors if m == 0 else 0.0 for m in counts]
+    assert pooled_opinion_alpha0(counts) == pytest.approx(expected)
+    assert pooled_opinion(counts, 0.0) == pytest.approx(expected)
+    # Equation (1) with a tiny alpha tends to Equation (4).
+    assert_close(pooled_opinion(counts, 1e-12), expected, 1e-9)
+
+
+@relaxed
+@given(st.lists(st.integers(0, 4), min_size=2, max_size=6), working_alphas)
+def test_equation_1_is_mprodop_of_updated_uniform_opinions(counts: list[int], alpha: float) -> None:
+    assume(sum(counts) > 0 and (alpha > 0 or 0 in counts))
+    n = len(counts)
+    updated = [
+        negative_update(uniform_opinion(n), option, alpha)
+        for option, m in enumerate(counts)
+        for _ in range(m)
+    ]
+    pooled = mprodop(updated)
+    assert pooled is not None
+    assert_close(pooled, pooled_opinion(counts, alpha), 1e-9)
+
+
+def test_all_eliminated_has_no_pooled_opinion() -> None:
+    with pytest.raises(ValueError, match="every option was eliminated"):
+        pooled_opinion_alpha0([1, 2])
+
+
+@pytest.mark.parametrize(("n", "k", "alpha"), [(2, 3, 0.1), (5, 3, 0.0), (6, 4, 0.3), (4, 1, 0.0)])
+def test_equation_3_is_a_distribution(n: int, k: int, alpha: float) -> None:
+    expected = expected_pooled_opinion(n, k, alpha)
+    assert_distribution(expected)
+    # Better options keep more belief on average.
+    assert all(a >= b for a, b in itertools.pairwise(expected))
+
+
+def test_equation_3_closed_cases() -> None:
+    # n = 2: option 2 is always eliminated by all k agents.
+    ratio = (0.1 / 0.9) ** 3
+    assert_close(expected_pooled_opinion(2, 3, 0.1), [1 / (1 + ratio), ratio / (1 + ratio)], 1e-15)
+    # alpha = 0.5: evidence is worthless, the pool stays uniform.
+    assert_close(expected_pooled_opinion(5, 3, 0.5), [0.2] * 5, 1e-12)
+    # k = 1, alpha = 0: option i survives unless eliminated, then it shares 1/(n-1).
+    n = 5
+    p = evidence_probability(n)
+    by_hand = [
+        (1 - p[i]) / (n - 1) if i > 0 else 1 / (n - 1) for i in range(n)
+    ]
+    assert_close(expected_pooled_opinion(n, 1, 0.0), by_hand, 1e-15)
+
+
+def test_equation_3_refuses_enumerations_that_are_too_large() -> None:
+    assert enumeration_terms(10, 5) == math.comb(13, 8)
+    with pytest.raises(ValueError, match="sums 1287 terms"):
+        expected_pooled_opinion(10, 5, 0.0, max_terms=1000)
+
+
+def _monte_carlo_pool(n: int, k: int, alpha: float, samples: int, seed: int) -> list[list[float]]:
+    """Samples of the pooled opinion after one round, built from the primitives."""
+    rng = random.Random(seed)
+    results = []
+    for _ in range(samples):
+        updated = []
+        for _agent in range(k):
+            pair = choose_pair(uniform_opinion(n), rng)
+            updated.append(negative_update(uniform_opinion(n), max(pair), alpha))
+        pooled = mprodop(updated)
+        assert pooled is not None
+        results.append(pooled)
+    return results
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(("n", "k", "alpha"), [(5, 3, 0.0), (4, 4, 0.2), (6, 2, 0.1)])
+def test_equation_3_and_4_match_monte_carlo(n: int, k: int, alpha: float) -> None:
+    samples = _monte_carlo_pool(n, k, alpha, 6000, seed=n * 100 + k)
+    exact = expected_pooled_opinion(n, k, alpha)
+    for option in range(n):
+        values = [sample[option] for sample in samples]
+        mean = math.fsum(values) / len(values)
+        spread = math.sqrt(math.fsum((v - mean) ** 2 for v in values) / (len(values) - 1))
+        standard_error = spread / math.sqrt(len(values))
+        assert abs(mean - exact[option]) <= 4.5 * standard_error + 1e-12, option
