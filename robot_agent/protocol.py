@@ -73,7 +73,7 @@ class WorldInfo(Message):
     """Answer of the ``world/info`` queryable: the map a robot is given (never qualities)."""
 
     run: _Name
-    seed: Annotated[int, msgspec.Meta(ge=0, lt=2**63)]
+    seed: Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)]
     dt: _Positive
     arena_radius: _Positive
     nest: Nest

@@ -1,0 +1,375 @@
+"""``swarm run``: a whole swarm on this machine, to consensus or timeout.
+
+Starts the world server (the Zenoh router of the run, on a free loopback port), the nest
+beacon and the robot processes; watches their status over Zenoh; shows progress; stops
+every process it started, by pid, however the run ends; prints a summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import queue
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import zenoh
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from deploy.processes import Child, ProcessGroup, free_port, python_module, wait_for_port
+from deploy.summary import RobotRecord, RunOutcome, build_summary, describe
+from robot_agent import cliargs, protocol
+from robot_agent.node import add_controller_options, controller_config
+from robot_agent.zenoh_session import open_session
+from world_server.layout import make_layout
+
+log = logging.getLogger("swarm.run")
+
+EXIT_OK, EXIT_CRASH, EXIT_USAGE = 0, 1, 2
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    swarm = parser.add_argument_group("swarm")
+    swarm.add_argument("--robots", type=cliargs.int_range(1, 1000), default=10,
+                       help="number of robots (default: 10)")
+    swarm.add_argument("--sites", type=cliargs.int_range(2, protocol.MAX_OPTIONS), default=10,
+                       help="number of sites n (default: 10)")
+    swarm.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
+    swarm.add_argument("--run-id", type=cliargs.name, default=None,
+                       help="names this swarm on the network (default: run-<seed>-<time>)")
+    add_controller_options(parser)
+    clock = parser.add_argument_group("clock")
+    clock.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep",
+                       help="lockstep: deterministic, as fast as the processes go; realtime: "
+                       "follows the wall clock (default: lockstep)")
+    clock.add_argument("--speed", type=cliargs.float_range(0.01, 1000.0), default=1.0,
+                       help="real-time speed factor, realtime clock only (default: 1)")
+    clock.add_argument("--timeout", type=cliargs.positive_float, default=1800.0,
+                       metavar="SIM_SECONDS", help="give up after this much sim time "
+                       "(default: 1800)")
+    clock.add_argument("--stall-timeout", type=cliargs.positive_float, default=2.0,
+                       help="wall seconds the world waits for a silent controller (default: 2)")
+    radio = parser.add_argument_group("radio")
+    radio.add_argument("--radio-range", type=cliargs.positive_float, default=0.5,
+                       help="robot radio range in metres (default: 0.5)")
+    radio.add_argument("--beacon-range", type=cliargs.positive_float, default=None,
+                       help="beacon range in metres (default: the nest radius)")
+    radio.add_argument("--drop", type=cliargs.probability, default=0.0,
+                       help="iid radio drop probability (default: 0)")
+    radio.add_argument("--latency", type=cliargs.non_negative_int, default=0,
+                       metavar="TICKS", help="extra radio latency in ticks (default: 0)")
+    output = parser.add_argument_group("output")
+    output.add_argument("--json", action="store_true",
+                        help="print one JSON object with the summary on stdout")
+    output.add_argument("--quiet", action="store_true", help="no progress display")
+    output.add_argument("--verbose", action="store_true",
+                        help="echo the processes' logs on stderr")
+
+
+@dataclass
+class RunPlan:
+    """Everything needed to start one run, derived from the command line."""
+
+    run_id: str
+    robots: int
+    sites: int
+    seed: int
+    timeout: float
+    port: int
+    world_args: list[str]
+    robot_args: list[str]
+    beacon_args: list[str]
+    config: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def endpoint(self) -> str:
+        return f"tcp/127.0.0.1:{self.port}"
+
+
+def plan_from_args(args: argparse.Namespace) -> RunPlan:
+    controller_config(args)  # validates alpha/threshold together; ValueError -> usage error
+    run_id = args.run_id or f"run-{args.seed}-{int(time.time() * 1000) % 10**9}"
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    common = ["--run-id", run_id, "--seed", str(args.seed)]
+    world_args = [
+        *common, "--mode", "router", "--listen", endpoint,
+        "--robots", str(args.robots), "--sites", str(args.sites),
+        "--clock", args.clock, "--speed", str(args.speed),
+        "--stall-timeout", str(args.stall_timeout),
+        "--radio-range", str(args.radio_range), "--drop", str(args.drop),
+        "--latency", str(args.latency),
+    ]
+    if args.beacon_range is not None:
+        world_args += ["--beacon-range", str(args.beacon_range)]
+    client = ["--mode", "client", "--connect", endpoint]
+    robot_args = [
+        *common, *client, "--alpha", str(args.alpha), "--dwell", str(args.dwell),
+        "--broadcast-period", str(args.broadcast_period), "--linger", str(args.linger),
+    ]
+    if args.threshold is not None:
+        robot_args += ["--threshold", str(args.threshold)]
+    config = {
+        key: getattr(args, key)
+        for key in (
+            "robots", "sites", "seed", "alpha", "threshold", "dwell", "broadcast_period",
+            "linger", "clock", "speed", "timeout", "radio_range", "beacon_range", "drop",
+            "latency", "stall_timeout",
+        )
+    }
+    return RunPlan(
+        run_id=run_id, robots=args.robots, sites=args.sites, seed=args.seed,
+        timeout=args.timeout, port=port, world_args=world_args, robot_args=robot_args,
+        beacon_args=[*common, *client], config=config,
+    )
+
+
+class Swarm:
+    """One local run: its processes, its observer session, its progress."""
+
+    def __init__(self, plan: RunPlan, on_log: Callable[[str, str], None] | None = None) -> None:
+        self.plan = plan
+        self.keys = protocol.Keys(plan.run_id)
+        self.group = ProcessGroup(on_log)
+        self.records = {robot: RobotRecord(robot) for robot in range(plan.robots)}
+        self.robot_children: dict[int, Child] = {}
+        self.events: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
+        self.session: zenoh.Session | None = None
+        self.sim_time = 0.0
+        self.started_at: float | None = None
+        self.ended_at: float | None = None
+        self.last_state: protocol.WorldState | None = None
+        self.rejected_status = 0
+        self.final_stats: protocol.WorldState | None = None
+
+    # --- start -----------------------------------------------------------------------
+
+    def start(self) -> None:
+        plan = self.plan
+        world = self.group.start("world", python_module("world_server.server", *plan.world_args))
+        if not wait_for_port(plan.port, 30.0, world.alive):
+            raise StartError("the world server did not start", world)
+        self.session = open_session("client", [plan.endpoint])
+        self._declared = [
+            self.session.declare_subscriber(
+                self.keys.status("*"), lambda s: self.events.put(("status", s.payload.to_bytes()))
+            ),
+            self.session.declare_subscriber(
+                self.keys.world_clock, lambda s: self.events.put(("clock", s.payload.to_bytes()))
+            ),
+            self.session.declare_subscriber(
+                self.keys.world_state, lambda s: self.events.put(("state", s.payload.to_bytes()))
+            ),
+        ]
+        self.group.start("beacon", python_module("nest_beacon", *plan.beacon_args))
+        for robot in range(plan.robots):
+            self.robot_children[robot] = self.group.start(
+                f"robot-{robot}",
+                python_module("robot_agent.node", "--id", str(robot), *plan.robot_args),
+            )
+
+    # --- watch -----------------------------------------------------------------------
+
+    def poll(self) -> None:
+        """Take in everything that arrived; note crashed robots."""
+        while True:
+            try:
+                kind, payload = self.events.get_nowait()
+            except queue.Empty:
+                break
+            try:
+                if kind == "status":
+                    status = protocol.decode(payload, protocol.Status)
+                    if status.id in self.records:
+                        self.records[status.id].update(status)
+                elif kind == "clock":
+                    clock = protocol.decode(payload, protocol.Clock)
+                    if self.started_at is None:
+                        self.started_at = time.monotonic()
+                    self.sim_time = clock.t
+                elif kind == "state":
+                    self.last_state = protocol.decode(payload, protocol.WorldState)
+            except protocol.ProtocolError:
+                self.rejected_status += 1
+        for robot, child in self.robot_children.items():
+            if not child.alive() and not child.expected_exit:
+                self.records[robot].crashed = True
+
+    def infrastructure_crash(self) -> Child | None:
+        for child in self.group.crashed():
+            if not child.name.startswith("robot-"):
+                return child
+        return None
+
+    def live_robots(self) -> list[int]:
+        return [robot for robot, child in self.robot_children.items() if child.alive()]
+
+    def decided(self) -> int:
+        return sum(1 for record in self.records.values() if record.decided_site is not None)
+
+    def all_live_decided(self) -> bool:
+        return all(self.records[robot].decided_site is not None for robot in self.live_robots())
+
+    def trips(self) -> int:
+        return sum(record.status.trips for record in self.records.values() if record.status)
+
+    # --- stop ------------------------------------------------------------------------
+
+    def world_stats(self) -> protocol.WorldState | None:
+        if self.session is None:
+            return None
+        try:
+            for reply in self.session.get(self.keys.world_stats, timeout=2.0):
+                if reply.ok is not None:
+                    return protocol.decode(reply.ok.payload.to_bytes(), protocol.WorldState)
+        except (zenoh.ZError, protocol.ProtocolError):
+            return None
+        return None
+
+    def stop(self) -> protocol.WorldState | None:
+        """Stop robots and beacon, read the world's final counters, stop the world.
+
+        Safe to call again: later calls return the counters read by the first.
+        """
+        if self.ended_at is not None:
+            return self.final_stats
+        self.ended_at = time.monotonic()
+        others = [child for child in self.group.children if child.name != "world"]
+        self.group.stop(others)
+        self.poll()
+        stats = self.world_stats() or self.last_state
+        if self.session is not None:
+            for entity in self._declared:
+                entity.undeclare()
+            self.session.close()
+            self.session = None
+        self.group.stop_all()
+        self.final_stats = stats
+        return stats
+
+
+class StartError(Exception):
+    def __init__(self, message: str, child: Child | None = None) -> None:
+        super().__init__(message)
+        self.child = child
+
+
+def run(args: argparse.Namespace) -> int:
+    from deploy.cli import UsageError
+
+    try:
+        plan = plan_from_args(args)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    console = Console(stderr=True)
+    echo = (lambda name, line: console.print(f"[dim]{name}:[/] {line}", highlight=False)) \
+        if args.verbose else None
+    swarm = Swarm(plan, echo)
+    best_site = make_layout(plan.sites, plan.robots, plan.seed).best_site
+    timed_out, crashed = False, None
+    try:
+        swarm.start()
+        timed_out, crashed = _watch(swarm, console, quiet=args.quiet)
+    except StartError as error:
+        print(f"swarm run: could not start: {error}", file=sys.stderr)
+        if error.child is not None:
+            print(error.child.tail(), file=sys.stderr)
+        return EXIT_CRASH
+    except KeyboardInterrupt:
+        print("swarm run: interrupted; stopping every process", file=sys.stderr)
+        return 130
+    finally:
+        stats = swarm.stop()
+    if crashed is not None:
+        print(f"swarm run: the {crashed.name} process crashed (exit code "
+              f"{crashed.process.returncode}):\n{crashed.tail()}", file=sys.stderr)
+        return EXIT_CRASH
+    summary = build_summary(
+        RunOutcome(
+            run_id=plan.run_id, num_robots=plan.robots, num_sites=plan.sites, seed=plan.seed,
+            best_site=best_site, sim_time_s=swarm.sim_time,
+            wall_time_s=(swarm.ended_at or 0.0) - swarm.started_at if swarm.started_at else 0.0,
+            timed_out=timed_out,
+            radio=stats.radio if stats else protocol.RadioCounters(),
+            world_rejected=stats.rejected if stats else 0,
+            stalls=stats.stalls if stats else 0,
+            config=plan.config,
+        ),
+        swarm.records.values(),
+    )
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print_summary(summary, Console())
+    robot_crashes = [record.id for record in swarm.records.values() if record.crashed]
+    if robot_crashes:
+        print(f"swarm run: robot process(es) {robot_crashes} crashed", file=sys.stderr)
+        return EXIT_CRASH
+    return EXIT_OK
+
+
+def _watch(swarm: Swarm, console: Console, quiet: bool) -> tuple[bool, Child | None]:
+    """Follow the run until every live robot decided, the timeout, or a crash."""
+    plan = swarm.plan
+    progress = Progress(
+        TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.fields[info]}"),
+        TimeElapsedColumn(), console=console, transient=True, disable=quiet,
+    )
+    with progress:
+        task = progress.add_task("decided", total=plan.robots, info="starting")
+        while True:
+            time.sleep(0.1)
+            swarm.poll()
+            crashed = swarm.infrastructure_crash()
+            if crashed is not None:
+                return False, crashed
+            elapsed = time.monotonic() - swarm.started_at if swarm.started_at else 0.0
+            factor = swarm.sim_time / elapsed if elapsed > 0 else 0.0
+            progress.update(
+                task, completed=swarm.decided(),
+                info=f"{swarm.decided()}/{plan.robots} decided, {swarm.trips()} trips, "
+                f"sim {swarm.sim_time:.0f}s, {factor:.0f}x real time"
+                if swarm.started_at else "waiting for the robots to join",
+            )
+            if swarm.started_at is not None and swarm.all_live_decided():
+                return False, None
+            if swarm.sim_time >= plan.timeout:
+                return True, None
+
+
+def print_summary(summary: dict[str, Any], console: Console) -> None:
+    robots = summary["per_robot"]
+    table = Table(title=f"run {summary['run_id']}: {summary['num_robots']} robots, "
+                  f"{summary['num_sites']} sites, seed {summary['seed']}")
+    for column in ("robot", "decided site", "steps", "decision time (s)", "pool sizes"):
+        table.add_column(column, justify="right")
+    for robot in robots:
+        table.add_row(
+            str(robot["id"]),
+            "-" if robot["decided_site"] is None else str(robot["decided_site"]),
+            "-" if robot["steps"] is None else str(robot["steps"]),
+            "-" if robot["decision_time_s"] is None else f"{robot['decision_time_s']:.1f}",
+            " ".join(map(str, robot["pool_sizes"])) or "-",
+        )
+    console.print(table)
+    steps = [robot["steps"] for robot in robots if robot["steps"] is not None]
+    pools = [size for robot in robots for size in robot["pool_sizes"]]
+    verdict = (
+        f"consensus on site {summary['chosen_site']}, the best" if summary["correct"]
+        else f"consensus on site {summary['chosen_site']}, NOT the best ({summary['best_site']})"
+        if summary["consensus"] else "no consensus"
+    )
+    console.print(
+        f"{verdict}{' (timed out)' if summary['timed_out'] else ''}; "
+        f"steps to decision {describe(steps)}; pool size {describe(pools)}; "
+        f"sim {summary['sim_time_s']:.1f}s in {summary['wall_time_s']:.1f}s wall "
+        f"({summary['real_time_factor']:.0f}x); radio sent {summary['radio']['sent']}, "
+        f"delivered {summary['radio']['delivered']}, dropped {summary['radio']['dropped']}, "
+        f"rejected {summary['radio']['rejected']}"
+    )

@@ -1,0 +1,126 @@
+"""Child processes of a local run: start them, keep their logs, stop every one of them.
+
+Children die with the launcher (robot_agent.lifecycle), their stderr is kept in a
+ring buffer so a crash can be explained, and ``stop_all`` ends each by pid: SIGTERM, a
+grace period, then SIGKILL.
+"""
+
+from __future__ import annotations
+
+import collections
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from robot_agent.lifecycle import PARENT_ENV
+
+LOG_LINES_KEPT = 200
+
+
+def free_port() -> int:
+    """A TCP port on loopback that is free right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def wait_for_port(port: int, timeout: float, alive: Callable[[], bool]) -> bool:
+    """Wait until something accepts connections on 127.0.0.1:port."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and alive():
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+            sock.settimeout(0.2)
+            if sock.connect_ex(("127.0.0.1", port)) == 0:
+                return True
+        time.sleep(0.05)
+    return False
+
+
+@dataclass
+class Child:
+    name: str
+    argv: list[str]
+    process: subprocess.Popen[bytes]
+    log: collections.deque[str] = field(
+        default_factory=lambda: collections.deque(maxlen=LOG_LINES_KEPT)
+    )
+    expected_exit: bool = False
+    on_line: Callable[[str, str], None] | None = None
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def tail(self, lines: int = 20) -> str:
+        return "\n".join(list(self.log)[-lines:])
+
+
+class ProcessGroup:
+    """Every process a run started, so that each is stopped by pid, whatever happens."""
+
+    def __init__(self, on_line: Callable[[str, str], None] | None = None) -> None:
+        self.children: list[Child] = []
+        self.on_line = on_line
+
+    def start(self, name: str, argv: Sequence[str], env: dict[str, str] | None = None) -> Child:
+        process = subprocess.Popen(
+            list(argv),
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            env={**os.environ, PARENT_ENV: str(os.getpid()), **(env or {})},
+        )
+        child = Child(name, list(argv), process, on_line=self.on_line)
+        self.children.append(child)
+        threading.Thread(target=self._pump, args=(child,), daemon=True).start()
+        return child
+
+    def _pump(self, child: Child) -> None:
+        assert child.process.stderr is not None
+        for raw in child.process.stderr:
+            line = raw.decode("utf-8", "replace").rstrip()
+            child.log.append(line)
+            if child.on_line is not None:
+                child.on_line(child.name, line)
+
+    def crashed(self) -> list[Child]:
+        """Children that exited without being asked to."""
+        return [
+            child for child in self.children if not child.alive() and not child.expected_exit
+        ]
+
+    def stop(self, children: Sequence[Child], grace: float = 3.0) -> None:
+        for child in children:
+            child.expected_exit = True
+            if child.alive():
+                child.process.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + grace
+        for child in children:
+            try:
+                child.process.wait(timeout=max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                child.process.kill()
+                child.process.wait()
+
+    def kill(self, child: Child) -> None:
+        """SIGKILL one child on purpose (fault injection), and say it was meant."""
+        child.expected_exit = True
+        if child.alive():
+            child.process.kill()
+            child.process.wait()
+
+    def stop_all(self, grace: float = 3.0) -> None:
+        self.stop(self.children, grace)
+
+
+def python_module(module: str, *args: str) -> list[str]:
+    return [sys.executable, "-m", module, *args]

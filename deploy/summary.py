@@ -1,0 +1,115 @@
+"""What a run decided, gathered from robots' status messages (pure, no I/O)."""
+
+from __future__ import annotations
+
+import statistics
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+from robot_agent import protocol
+
+
+@dataclass
+class RobotRecord:
+    """Everything the launcher learned about one robot from its status messages."""
+
+    id: int
+    status: protocol.Status | None = None
+    pool_sizes: list[int] = field(default_factory=list)
+    missed_poolings: int = 0
+    restarts: int = 0
+    crashed: bool = False
+    _poolings_before_restart: int = 0
+
+    def update(self, status: protocol.Status) -> None:
+        if self.status is not None and _is_restart(self.status, status):
+            # A fresh controller (a restarted robot) counts its poolings from zero again.
+            self.restarts += 1
+            self._poolings_before_restart = len(self.pool_sizes) + self.missed_poolings
+        known = len(self.pool_sizes) + self.missed_poolings - self._poolings_before_restart
+        if status.poolings > known:
+            self.missed_poolings += status.poolings - known - 1
+            self.pool_sizes.append(status.pool_size)
+        self.status = status
+
+    @property
+    def decided_site(self) -> int | None:
+        return self.status.decided_site if self.status else None
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    run_id: str
+    num_robots: int
+    num_sites: int
+    seed: int
+    best_site: int
+    sim_time_s: float
+    wall_time_s: float
+    timed_out: bool
+    radio: protocol.RadioCounters
+    world_rejected: int
+    stalls: int
+    config: dict[str, Any]
+
+
+def _is_restart(previous: protocol.Status, current: protocol.Status) -> bool:
+    return current.poolings < previous.poolings or current.trips < previous.trips
+
+
+def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[str, Any]:
+    """The ``swarm run --json`` object."""
+    robots = sorted(records, key=lambda record: record.id)
+    decided = [record.decided_site for record in robots]
+    consensus = (
+        bool(robots) and all(site is not None for site in decided) and len(set(decided)) == 1
+    )
+    chosen = decided[0] if consensus else None
+    wall = max(outcome.wall_time_s, 1e-9)
+    return {
+        "run_id": outcome.run_id,
+        "num_robots": outcome.num_robots,
+        "num_sites": outcome.num_sites,
+        "seed": outcome.seed,
+        "best_site": outcome.best_site,
+        "consensus": consensus,
+        "chosen_site": chosen,
+        "correct": consensus and chosen == outcome.best_site,
+        "timed_out": outcome.timed_out,
+        "sim_time_s": round(outcome.sim_time_s, 3),
+        "wall_time_s": round(outcome.wall_time_s, 3),
+        "real_time_factor": round(outcome.sim_time_s / wall, 2),
+        "radio": {
+            "sent": outcome.radio.sent,
+            "delivered": outcome.radio.delivered,
+            "dropped": outcome.radio.dropped,
+            "rejected": outcome.radio.rejected,
+        },
+        "world": {"rejected": outcome.world_rejected, "stalls": outcome.stalls},
+        "config": outcome.config,
+        "per_robot": [robot_summary(record) for record in robots],
+    }
+
+
+def robot_summary(record: RobotRecord) -> dict[str, Any]:
+    status = record.status
+    return {
+        "id": record.id,
+        "decided_site": status.decided_site if status else None,
+        "steps": status.decision_trips if status else None,
+        "decision_time_s": round(status.decision_time, 3)
+        if status and status.decision_time is not None
+        else None,
+        "trips": status.trips if status else 0,
+        "phase": status.phase if status else None,
+        "pool_sizes": list(record.pool_sizes),
+        "crashed": record.crashed,
+    }
+
+
+def describe(values: list[float]) -> str:
+    """``mean (min-max)`` of a list, or ``-``."""
+    if not values:
+        return "-"
+    return f"{statistics.fmean(values):.2f} ({min(values):g}-{max(values):g})"

@@ -1,0 +1,328 @@
+"""``robot-agent``: robots on Zenoh. The only Zenoh code of the robot.
+
+Each robot has its own Zenoh session, keys, liveliness token and RNG; a process can host
+one robot or many (they share one inbox and one thread, and are indistinguishable on the
+wire from single-robot processes). Zenoh callbacks only copy bytes into the inbox.
+
+Lockstep: the world's ``sense`` for tick t says how many radio messages and whether a
+camera frame belong to tick t; the robot steps only when all of them are in, so the
+order in which Zenoh delivers different keys cannot change a run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import queue
+import random
+import signal
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import zenoh
+
+from robot_agent import cliargs, protocol, vision
+from robot_agent.controller import Controller, ControllerConfig
+from robot_agent.lifecycle import die_with_launcher
+from robot_agent.ports import BodyReading, RejectCounter, decode_received
+from robot_agent.zenoh_session import open_from_args
+
+log = logging.getLogger("robot_agent")
+
+
+@dataclass(frozen=True)
+class Event:
+    robot: int
+    kind: str  # sense | camera | rx | stop
+    payload: bytes = b""
+    attachment: bytes | None = None
+
+
+@dataclass
+class _TickInputs:
+    sense: protocol.Sense | None = None
+    rx: list[tuple[str, bytes]] = field(default_factory=list)
+    frame: bytes | None = None
+    frame_seen: bool = False
+
+
+class RobotNode:
+    """One robot: its session, its controller, and the lockstep bookkeeping."""
+
+    def __init__(
+        self,
+        robot_id: int,
+        *,
+        session: zenoh.Session,
+        keys: protocol.Keys,
+        controller: Controller,
+        inbox: queue.SimpleQueue[Event],
+        lockstep: bool,
+    ) -> None:
+        self.robot_id = robot_id
+        self.session = session
+        self.keys = keys
+        self.controller = controller
+        self.inbox = inbox
+        self.lockstep = lockstep
+        self.rejects = RejectCounter()
+        self.pending: dict[int, _TickInputs] = {}
+        self.seq = 0
+        self.skipped_ticks = 0
+        self.last_tick = -1
+        self._declared: list[object] = []
+
+    def start(self) -> None:
+        """Subscribe first, then announce liveliness, so no tick is missed."""
+        keys, robot, session = self.keys, self.robot_id, self.session
+
+        def forward(kind: str) -> Callable[[zenoh.Sample], None]:
+            def callback(sample: zenoh.Sample) -> None:
+                attachment = sample.attachment
+                self.inbox.put(
+                    Event(
+                        robot,
+                        kind,
+                        sample.payload.to_bytes(),
+                        attachment.to_bytes() if attachment is not None else None,
+                    )
+                )
+
+            return callback
+
+        self._declared = [
+            session.declare_subscriber(keys.sense(robot), forward("sense")),
+            session.declare_subscriber(keys.camera(robot), forward("camera")),
+            session.declare_subscriber(keys.radio_rx(protocol.radio_name(robot)), forward("rx")),
+        ]
+        self._act = session.declare_publisher(keys.act(robot))
+        self._status = session.declare_publisher(keys.status(robot))
+        self._tx = session.declare_publisher(keys.radio_tx(protocol.radio_name(robot)))
+        self._publish_status(0)
+        self._token = session.liveliness().declare_token(keys.alive("robot", robot))
+
+    def close(self) -> None:
+        self._token.undeclare()
+        for entity in self._declared:
+            entity.undeclare()  # type: ignore[attr-defined]
+
+    # --- inputs --------------------------------------------------------------------
+
+    def handle(self, event: Event) -> None:
+        if event.kind == "sense":
+            try:
+                sense = protocol.decode(event.payload, protocol.Sense)
+            except protocol.ProtocolError as error:
+                self._reject("sense", error)
+                return
+            if sense.tick <= self.last_tick:
+                return  # a repeat of a tick already answered
+            self.pending.setdefault(sense.tick, _TickInputs()).sense = sense
+            self._advance(sense.tick)
+        elif event.kind == "rx":
+            try:
+                if event.attachment is None:
+                    raise protocol.ProtocolError("missing attachment")
+                meta = protocol.decode(event.attachment, protocol.RadioRxMeta)
+            except protocol.ProtocolError as error:
+                self._reject("radio/rx", error)
+                return
+            if meta.tick > self.last_tick:
+                self.pending.setdefault(meta.tick, _TickInputs()).rx.append(
+                    (meta.sender, event.payload)
+                )
+                self._advance(meta.tick)
+        elif event.kind == "camera":
+            try:
+                if event.attachment is None:
+                    raise protocol.ProtocolError("missing attachment")
+                meta = protocol.decode(event.attachment, protocol.CameraMeta)
+            except protocol.ProtocolError as error:
+                self._reject("camera", error)
+                return
+            if meta.tick > self.last_tick:
+                inputs = self.pending.setdefault(meta.tick, _TickInputs())
+                inputs.frame, inputs.frame_seen = event.payload, True
+                self._advance(meta.tick)
+
+    def _reject(self, key: str, error: Exception) -> None:
+        self.rejects.reject(f"robot {self.robot_id} {key}", error)
+
+    def _advance(self, tick: int) -> None:
+        inputs = self.pending.get(tick)
+        if inputs is None or inputs.sense is None:
+            return
+        sense = inputs.sense
+        if self.lockstep:
+            complete = len(inputs.rx) >= sense.rx and (inputs.frame_seen or not sense.camera)
+            if not complete:
+                return
+            stale = [old for old in self.pending if old < tick]
+            self.skipped_ticks += len(stale)
+            for old in stale:
+                del self.pending[old]
+        else:
+            # Real time: use whatever has arrived, including earlier ticks' radio.
+            for old in sorted(t for t in self.pending if t < tick):
+                inputs.rx[:0] = self.pending.pop(old).rx
+        del self.pending[tick]
+        self._step(sense, inputs)
+
+    # --- one control step ----------------------------------------------------------
+
+    def _step(self, sense: protocol.Sense, inputs: _TickInputs) -> None:
+        frame = None
+        if inputs.frame is not None:
+            try:
+                frame = vision.decode_frame(inputs.frame)
+            except ValueError as error:
+                self._reject("camera", error)
+        reading = BodyReading(
+            t=sense.t, x=sense.x, y=sense.y, theta=sense.theta,
+            proximity=tuple(sense.prox), frame=frame,
+        )
+        command = self.controller.step(reading, decode_received(inputs.rx, self.rejects))
+        for payload in command.broadcasts:
+            self.seq += 1
+            meta = protocol.RadioTxMeta(v=protocol.VERSION, tick=sense.tick, seq=self.seq)
+            self._tx.put(protocol.encode(payload), attachment=protocol.encode(meta))
+        act = protocol.Act(
+            v=protocol.VERSION, tick=sense.tick, left=command.left, right=command.right,
+            capture=command.capture, radio_tx=len(command.broadcasts),
+        )
+        self._act.put(protocol.encode(act))
+        self.last_tick = sense.tick
+        if self.controller.take_status_change():
+            self._publish_status(sense.tick)
+
+    def _publish_status(self, tick: int) -> None:
+        self._status.put(protocol.encode(self.controller.status(tick)))
+
+
+def fetch_world_info(
+    session: zenoh.Session, keys: protocol.Keys, timeout: float
+) -> protocol.WorldInfo:
+    """Ask ``world/info`` until a world server answers, or raise TimeoutError."""
+    deadline = time.monotonic() + timeout
+    last_error = "no reply"
+    while time.monotonic() < deadline:
+        for reply in session.get(keys.world_info, timeout=1.0):
+            if reply.ok is None:
+                last_error = str(reply.err.payload.to_bytes()) if reply.err else "error reply"
+                continue
+            try:
+                return protocol.decode(reply.ok.payload.to_bytes(), protocol.WorldInfo)
+            except protocol.ProtocolError as error:
+                last_error = f"invalid world/info: {error}"
+        time.sleep(0.1)
+    raise TimeoutError(f"no world server answered on {keys.world_info} ({last_error})")
+
+
+def serve(nodes: Sequence[RobotNode], inbox: queue.SimpleQueue[Event]) -> None:
+    """Feed every node its events until a stop event arrives."""
+    by_id = {node.robot_id: node for node in nodes}
+    while True:
+        event = inbox.get()
+        if event.kind == "stop":
+            return
+        by_id[event.robot].handle(event)
+
+
+# --- command line ------------------------------------------------------------------------
+
+
+def add_controller_options(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("decision")
+    group.add_argument("--alpha", type=cliargs.alpha, default=0.0,
+                       help="evidence reliability parameter of Definition 1, in [0, 0.5] "
+                       "(default: 0)")
+    group.add_argument("--threshold", type=cliargs.threshold, default=None,
+                       help="decide when an option reaches this probability "
+                       "(default: 1, or 0.99 when alpha > 0)")
+    group.add_argument("--dwell", type=cliargs.positive_float, default=3.0,
+                       help="sim seconds at the nest broadcasting and listening (default: 3)")
+    group.add_argument("--broadcast-period", type=cliargs.positive_float, default=0.5,
+                       help="sim seconds between opinion broadcasts at the nest (default: 0.5)")
+    group.add_argument("--linger", type=cliargs.non_negative_float, default=0.0,
+                       help="sim seconds broadcasting at the nest after deciding (default: 0)")
+
+
+def controller_config(args: argparse.Namespace) -> ControllerConfig:
+    threshold = args.threshold
+    if threshold is None:
+        threshold = 1.0 if args.alpha == 0 else 0.99
+    return ControllerConfig(
+        alpha=args.alpha, threshold=threshold, dwell=args.dwell,
+        broadcast_period=args.broadcast_period, linger=args.linger,
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="robot-agent",
+        description="A robot of the swarm: the decision controller on Zenoh. Several --id "
+        "options host several robots in this process, each with its own Zenoh session.",
+    )
+    parser.add_argument("--id", dest="ids", type=cliargs.int_range(0, protocol.MAX_ROBOTS - 1),
+                        action="append", required=True, metavar="N",
+                        help="robot id (repeatable to host several robots)")
+    parser.add_argument("--seed", type=cliargs.seed, default=0,
+                        help="run seed; each robot's RNG derives from it and its id (default: 0)")
+    parser.add_argument("--info-timeout", type=cliargs.positive_float, default=60.0,
+                        help="wall seconds to wait for the world server (default: 60)")
+    add_controller_options(parser)
+    cliargs.add_zenoh_options(parser)
+    parser.add_argument("--log-level", default="INFO",
+                        choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if len(set(args.ids)) != len(args.ids):
+        parser.exit(2, "robot-agent: error: the same --id is given twice\n")
+    try:
+        config = controller_config(args)
+    except ValueError as error:
+        parser.exit(2, f"robot-agent: error: {error}\n")
+    logging.basicConfig(
+        level=args.log_level, format="%(asctime)s robot-agent %(levelname)s %(message)s"
+    )
+    keys = protocol.Keys(args.run_id, args.root)
+    inbox: queue.SimpleQueue[Event] = queue.SimpleQueue()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: inbox.put(Event(-1, "stop")))
+    sessions: list[zenoh.Session] = []
+    nodes: list[RobotNode] = []
+    try:
+        for robot in args.ids:
+            session = open_from_args(args)
+            sessions.append(session)
+            info = fetch_world_info(session, keys, args.info_timeout)
+            rng = random.Random(protocol.derive_seed(args.seed, "robot", robot))
+            controller = Controller(robot, info, config, rng)
+            node = RobotNode(
+                robot, session=session, keys=keys, controller=controller, inbox=inbox,
+                lockstep=info.clock == "lockstep",
+            )
+            node.start()
+            nodes.append(node)
+        log.info("robot(s) %s running", ", ".join(map(str, args.ids)))
+        serve(nodes, inbox)
+    except (zenoh.ZError, TimeoutError) as error:
+        print(f"robot-agent: {error}", file=sys.stderr)
+        return 1
+    finally:
+        for node in nodes:
+            node.close()
+        for session in sessions:
+            session.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,82 @@
+"""Time for the world: the lockstep barrier and the real-time pacer (pure, no I/O).
+
+Lockstep closes tick t only when every participant that was live when the tick opened
+has answered it and every radio message it announced for the tick has arrived; a
+participant that leaves (liveliness lost) stops being waited for. Real time closes a
+tick when the wall clock says so, with whatever has arrived.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+
+@dataclass
+class _Answer:
+    radio_tx: int | None = None  # announced count; None until the answer arrives
+    received_tx: int = 0
+
+
+@dataclass
+class Barrier:
+    """Book-keeping of one lockstep tick."""
+
+    tick: int = -1
+    answers: dict[str, _Answer] = field(default_factory=dict)
+
+    def open(self, tick: int, participants: Iterable[str]) -> None:
+        self.tick = tick
+        self.answers = {name: _Answer() for name in participants}
+
+    def answer(self, tick: int, who: str, radio_tx: int) -> bool:
+        """Record ``who``'s answer to ``tick``; False if it is stale, foreign or repeated."""
+        entry = self.answers.get(who)
+        if tick != self.tick or entry is None or entry.radio_tx is not None:
+            return False
+        entry.radio_tx = radio_tx
+        return True
+
+    def transmitted(self, tick: int, who: str) -> bool:
+        """Count a radio message ``who`` sent during ``tick``; False if it does not belong."""
+        entry = self.answers.get(who)
+        if tick != self.tick or entry is None:
+            return False
+        entry.received_tx += 1
+        return True
+
+    def leave(self, who: str) -> None:
+        self.answers.pop(who, None)
+
+    @property
+    def complete(self) -> bool:
+        return all(
+            entry.radio_tx is not None and entry.received_tx >= entry.radio_tx
+            for entry in self.answers.values()
+        )
+
+    def missing(self) -> list[str]:
+        return sorted(
+            who
+            for who, entry in self.answers.items()
+            if entry.radio_tx is None or entry.received_tx < entry.radio_tx
+        )
+
+
+@dataclass
+class Pacer:
+    """Real-time pacing: tick k closes at ``start + k * dt / speed`` wall seconds."""
+
+    dt: float
+    speed: float = 1.0
+    start: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.dt <= 0 or self.speed <= 0:
+            raise ValueError(f"dt and speed must be positive, got dt={self.dt} speed={self.speed}")
+
+    def deadline(self, tick: int, now: float) -> float:
+        """Wall time at which ``tick`` should close (the first call starts the clock)."""
+        if self.start is None:
+            self.start = now - tick * self.dt / self.speed
+        return self.start + (tick + 1) * self.dt / self.speed

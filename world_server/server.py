@@ -1,0 +1,500 @@
+"""``world-server``: the world of one run on Zenoh (the only Zenoh code of the world).
+
+Zenoh callbacks only copy bytes into one inbox; a single thread owns the World and does
+everything else, so there are no locks around the simulation. By default the server is
+the Zenoh router of a local run, listening on loopback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import queue
+import signal
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import zenoh
+
+from robot_agent import cliargs, protocol
+from robot_agent.lifecycle import die_with_launcher
+from robot_agent.zenoh_session import open_from_args
+from world_server.camera import CameraNoise
+from world_server.clock import Barrier, Pacer
+from world_server.radio import RadioConfig
+from world_server.world import DEFAULT_CAMERA, Transmission, World, WorldConfig
+
+log = logging.getLogger("world_server")
+
+DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
+
+
+@dataclass(frozen=True)
+class Event:
+    kind: str  # act | ack | tx | alive | gone | stats | stop
+    key: str = ""
+    payload: bytes = b""
+    attachment: bytes | None = None
+    query: Any = None
+
+
+@dataclass
+class Counters:
+    rejected: int = 0
+    late: int = 0
+    stalls: int = 0
+    logged_keys: set[str] = field(default_factory=set)
+
+
+class WorldServer:
+    """Runs the tick loop of one World over a Zenoh session."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        world: World,
+        keys: protocol.Keys,
+        *,
+        speed: float = 1.0,
+        stall_timeout: float = 2.0,
+        start_timeout: float = 60.0,
+        expect_robots: int = 0,
+        expect_beacons: int = 0,
+        state_every: int = 10,
+    ) -> None:
+        self.session = session
+        self.world = world
+        self.keys = keys
+        self.lockstep = world.config.clock == "lockstep"
+        self.pacer = Pacer(world.config.dt, speed)
+        self.stall_timeout = stall_timeout
+        self.start_timeout = start_timeout
+        self.expect_robots = expect_robots
+        self.expect_beacons = expect_beacons
+        self.state_every = max(1, state_every)
+        self.inbox: queue.SimpleQueue[Event] = queue.SimpleQueue()
+        self.counters = Counters()
+        self.barrier = Barrier()
+        self.acts: dict[int, protocol.Act] = {}
+        self.transmissions: list[Transmission] = []
+        self.pending_joins: list[tuple[str, str]] = []
+        self._info_bytes = protocol.encode(world.info)
+        self._sense_publishers: dict[int, zenoh.Publisher] = {}
+        self._declared: list[Any] = []
+
+    # --- Zenoh side: callbacks copy bytes and return ----------------------------------
+
+    def _on_sample(self, kind: str) -> Any:
+        def callback(sample: zenoh.Sample) -> None:
+            attachment = sample.attachment
+            self.inbox.put(
+                Event(
+                    kind,
+                    str(sample.key_expr),
+                    sample.payload.to_bytes(),
+                    attachment.to_bytes() if attachment is not None else None,
+                )
+            )
+
+        return callback
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        kind = "alive" if sample.kind == zenoh.SampleKind.PUT else "gone"
+        self.inbox.put(Event(kind, str(sample.key_expr)))
+
+    def _on_info(self, query: zenoh.Query) -> None:
+        query.reply(self.keys.world_info, self._info_bytes)
+
+    def declare(self) -> None:
+        keys, session = self.keys, self.session
+        self._declared = [
+            session.declare_subscriber(keys.act("*"), self._on_sample("act")),
+            session.declare_subscriber(keys.beacon_ack("*"), self._on_sample("ack")),
+            session.declare_subscriber(keys.radio_tx("*"), self._on_sample("tx")),
+            session.liveliness().declare_subscriber(
+                f"{keys.prefix}/alive/**", self._on_alive, history=True
+            ),
+            session.declare_queryable(keys.world_info, self._on_info),
+            session.declare_queryable(
+                keys.world_stats, lambda query: self.inbox.put(Event("stats", query=query))
+            ),
+            session.liveliness().declare_token(keys.alive("world", 0)),
+        ]
+        self._clock_publisher = session.declare_publisher(keys.world_clock)
+        self._state_publisher = session.declare_publisher(keys.world_state)
+
+    def stop(self) -> None:
+        self.inbox.put(Event("stop"))
+
+    # --- the loop ----------------------------------------------------------------------
+
+    def run(self) -> int:
+        self.declare()
+        if not self._wait_for_start():
+            return 0
+        self._open_tick(self.world.tick, rx_counts={}, frames={})
+        stall_deadline = time.monotonic() + self.stall_timeout
+        while True:
+            now = time.monotonic()
+            if self.lockstep:
+                timeout = max(0.0, stall_deadline - now)
+            else:
+                timeout = max(0.0, self.pacer.deadline(self.world.tick, now) - now)
+            try:
+                event = self.inbox.get(timeout=min(timeout, 0.5))
+            except queue.Empty:
+                event = None
+            if event is not None:
+                if event.kind == "stop":
+                    break
+                self._handle(event)
+            now = time.monotonic()
+            if self.lockstep:
+                if not self.barrier.answers and not self.world.live_robots():
+                    stall_deadline = now + self.stall_timeout  # nobody to wait for: idle
+                    continue
+                stalled = now >= stall_deadline
+                if self.barrier.complete or stalled:
+                    if stalled and not self.barrier.complete:
+                        self._log_stall()
+                    self._close_tick()
+                    stall_deadline = time.monotonic() + self.stall_timeout
+            elif now >= self.pacer.deadline(self.world.tick, now):
+                self._close_tick()
+        self._publish_state()
+        return 0
+
+    def _wait_for_start(self) -> bool:
+        """Wait until the expected robots and beacons are live, then start at tick 0."""
+        deadline = time.monotonic() + self.start_timeout
+        log.info(
+            "waiting for %d robot(s) and %d beacon(s)", self.expect_robots, self.expect_beacons
+        )
+        while True:
+            self._apply_joins()
+            robots, beacons = len(self.world.live_robots()), len(self.world.beacons())
+            if robots >= self.expect_robots and beacons >= self.expect_beacons and robots > 0:
+                log.info("starting with %d robot(s), %d beacon(s)", robots, beacons)
+                return True
+            remaining = deadline - time.monotonic()
+            if remaining <= 0 and robots > 0:
+                log.warning(
+                    "start timeout: starting with %d of %d robot(s), %d of %d beacon(s)",
+                    robots, self.expect_robots, beacons, self.expect_beacons,
+                )
+                return True
+            try:
+                event = self.inbox.get(timeout=0.5 if remaining <= 0 else min(remaining, 0.5))
+            except queue.Empty:
+                continue
+            if event.kind == "stop":
+                return False
+            self._handle(event)
+
+    def _handle(self, event: Event) -> None:
+        handler = {
+            "act": self._handle_act,
+            "ack": self._handle_ack,
+            "tx": self._handle_tx,
+            "alive": self._handle_alive,
+            "gone": self._handle_gone,
+            "stats": self._handle_stats,
+        }[event.kind]
+        handler(event)
+
+    def _reject(self, key: str, reason: object) -> None:
+        self.counters.rejected += 1
+        if key not in self.counters.logged_keys:
+            self.counters.logged_keys.add(key)
+            log.warning(
+                "rejected message on %s: %s (further ones on this key not logged)", key, reason
+            )
+
+    def _handle_act(self, event: Event) -> None:
+        robot = self.keys.robot_of(event.key)
+        if robot is None:
+            self._reject(event.key, "not a robot key")
+            return
+        try:
+            act = protocol.decode(event.payload, protocol.Act)
+        except protocol.ProtocolError as error:
+            self._reject(event.key, error)
+            return
+        if not self.lockstep:
+            if robot in self.world.live_robots():
+                self.acts[robot] = act
+            return
+        if self.barrier.answer(act.tick, f"robot/{robot}", act.radio_tx):
+            self.acts[robot] = act
+        else:
+            self._unexpected_answer(event.key, act.tick)
+
+    def _handle_ack(self, event: Event) -> None:
+        name = self.keys.last_chunk(event.key.rsplit("/", 1)[0])
+        try:
+            ack = protocol.decode(event.payload, protocol.Ack)
+        except protocol.ProtocolError as error:
+            self._reject(event.key, error)
+            return
+        if self.lockstep and not self.barrier.answer(ack.tick, f"beacon/{name}", ack.radio_tx):
+            self._unexpected_answer(event.key, ack.tick)
+
+    def _unexpected_answer(self, key: str, tick: int) -> None:
+        """An answer the barrier did not take: stale, repeated, or from a newcomer (late),
+        or for a tick that has not begun (rejected)."""
+        if tick <= self.barrier.tick:
+            self.counters.late += 1
+        else:
+            self._reject(key, f"answer for tick {tick} while at tick {self.barrier.tick}")
+
+    def _handle_tx(self, event: Event) -> None:
+        sender = self.keys.last_chunk(event.key)
+        if not self.world.is_sender(sender):
+            self._reject(event.key, f"{sender!r} is not a live robot or beacon")
+            self.world.radio.reject()
+            return
+        try:
+            if event.attachment is None:
+                raise protocol.ProtocolError("missing attachment")
+            meta = protocol.decode(event.attachment, protocol.RadioTxMeta)
+            if len(event.payload) > protocol.MAX_PAYLOAD_BYTES:
+                raise protocol.ProtocolError(f"payload of {len(event.payload)} bytes")
+        except protocol.ProtocolError as error:
+            self._reject(event.key, error)
+            self.world.radio.reject()
+            return
+        if self.lockstep:
+            role = "beacon" if sender in self.world.beacons() else "robot"
+            if not self.barrier.transmitted(meta.tick, f"{role}/{sender}"):
+                if meta.tick < self.barrier.tick:
+                    self.counters.late += 1
+                else:
+                    self._reject(event.key, f"tx for tick {meta.tick} at tick {self.barrier.tick}")
+                    self.world.radio.reject()
+                return
+        self.transmissions.append(Transmission(sender, meta.seq, event.payload))
+
+    def _handle_alive(self, event: Event) -> None:
+        parts = event.key[len(self.keys.prefix) + 1 :].split("/")
+        if len(parts) != 3 or parts[0] != "alive":
+            return
+        self.pending_joins.append((parts[1], parts[2]))
+
+    def _handle_gone(self, event: Event) -> None:
+        parts = event.key[len(self.keys.prefix) + 1 :].split("/")
+        if len(parts) != 3 or parts[0] != "alive":
+            return
+        role, ident = parts[1], parts[2]
+        self.pending_joins = [join for join in self.pending_joins if join != (role, ident)]
+        if role == "robot" and ident.isdigit():
+            log.warning("robot %s left (liveliness lost); its body stays as an obstacle", ident)
+            self.world.leave_robot(int(ident))
+            self.acts.pop(int(ident), None)
+            self.barrier.leave(f"robot/{ident}")
+        elif role == "beacon":
+            log.warning("beacon %s left", ident)
+            self.world.leave_beacon(ident)
+            self.barrier.leave(f"beacon/{ident}")
+
+    def _handle_stats(self, event: Event) -> None:
+        state = self.world.state(self.counters.rejected, self.counters.stalls)
+        event.query.reply(self.keys.world_stats, protocol.encode(state))
+
+    def _apply_joins(self) -> None:
+        for role, ident in self.pending_joins:
+            if role == "robot" and ident.isdigit() and int(ident) < protocol.MAX_ROBOTS:
+                if int(ident) not in self.world.live_robots():
+                    log.info("robot %s joined at tick %d", ident, self.world.tick)
+                self.world.join_robot(int(ident))
+            elif role == "beacon" and not ident.isdigit():
+                self.world.join_beacon(ident)
+        self.pending_joins.clear()
+
+    def _log_stall(self) -> None:
+        self.counters.stalls += 1
+        missing = self.barrier.missing()
+        if self.counters.stalls <= 5 or self.counters.stalls % 100 == 0:
+            log.warning(
+                "tick %d stalled for %.1fs waiting for %s (stall #%d)",
+                self.world.tick, self.stall_timeout, ", ".join(missing[:10]), self.counters.stalls,
+            )
+
+    def _close_tick(self) -> None:
+        result = self.world.advance(self.acts, self.transmissions)
+        self.transmissions = []
+        if self.lockstep:
+            self.acts = {}
+        else:  # real time: a command holds until replaced, but a capture happens once
+            self.acts = {
+                robot: protocol.Act(
+                    v=act.v, tick=act.tick, left=act.left, right=act.right,
+                    capture=False, radio_tx=0,
+                )
+                for robot, act in self.acts.items()
+            }
+        self._apply_joins()
+        rx_counts = {name: len(items) for name, items in result.deliveries.items()}
+        for name, deliveries in result.deliveries.items():
+            key = self.keys.radio_rx(name)
+            for delivery in deliveries:
+                meta = protocol.RadioRxMeta(
+                    v=protocol.VERSION,
+                    tick=result.tick,
+                    sender=delivery.sender,
+                    seq=delivery.seq,
+                    sent_tick=delivery.sent_tick,
+                )
+                self.session.put(key, delivery.payload, attachment=protocol.encode(meta))
+        self._open_tick(result.tick, rx_counts, result.frames)
+
+    def _open_tick(
+        self, tick: int, rx_counts: dict[str, int], frames: dict[int, bytes]
+    ) -> None:
+        spec = self.world.config.camera
+        for robot, frame in frames.items():
+            meta = protocol.CameraMeta(
+                v=protocol.VERSION, tick=tick, width=spec.width, height=spec.height,
+                encoding="png",
+            )
+            self.session.put(self.keys.camera(robot), frame, attachment=protocol.encode(meta))
+        robots = self.world.live_robots()
+        for robot in robots:
+            sense = self.world.sense(
+                robot, rx_counts.get(protocol.radio_name(robot), 0), robot in frames
+            )
+            publisher = self._sense_publishers.get(robot)
+            if publisher is None:
+                publisher = self.session.declare_publisher(self.keys.sense(robot))
+                self._sense_publishers[robot] = publisher
+            publisher.put(protocol.encode(sense))
+        self.barrier.open(
+            tick,
+            [f"robot/{robot}" for robot in robots]
+            + [f"beacon/{name}" for name in self.world.beacons()],
+        )
+        self._clock_publisher.put(
+            protocol.encode(protocol.Clock(v=protocol.VERSION, tick=tick, t=self.world.t))
+        )
+        if tick % self.state_every == 0:
+            self._publish_state()
+
+    def _publish_state(self) -> None:
+        state = self.world.state(self.counters.rejected, self.counters.stalls)
+        self._state_publisher.put(protocol.encode(state))
+
+
+# --- command line ------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="world-server",
+        description="The world of one swarm: physics, cameras, the radio medium and the clock. "
+        "By default it is the Zenoh router of a local run.",
+    )
+    world = parser.add_argument_group("world")
+    world.add_argument("--sites", type=cliargs.int_range(2, protocol.MAX_OPTIONS), default=10,
+                       help="number of sites n (default: 10)")
+    world.add_argument("--robots", type=cliargs.int_range(1, protocol.MAX_ROBOTS), default=10,
+                       help="expected swarm size: sizes the arena; the run starts when "
+                       "this many robots are live (default: 10)")
+    world.add_argument("--beacons", type=cliargs.non_negative_int, default=1,
+                       help="nest beacons to wait for before starting (default: 1)")
+    world.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
+    world.add_argument("--dt", type=cliargs.float_range(0.001, 1.0), default=0.1,
+                       help="control tick in sim seconds (default: 0.1)")
+    world.add_argument("--substeps", type=cliargs.int_range(1, 50), default=2,
+                       help="physics steps per tick (default: 2)")
+    clock = parser.add_argument_group("clock")
+    clock.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep",
+                       help="lockstep waits for every controller each tick; realtime follows "
+                       "the wall clock (default: lockstep)")
+    clock.add_argument("--speed", type=cliargs.float_range(0.01, 1000.0), default=1.0,
+                       help="real-time speed factor (realtime clock only; default: 1)")
+    clock.add_argument("--stall-timeout", type=cliargs.positive_float, default=2.0,
+                       help="lockstep: wall seconds to wait for a silent controller (default: 2)")
+    clock.add_argument("--start-timeout", type=cliargs.positive_float, default=60.0,
+                       help="wall seconds to wait for the expected robots (default: 60)")
+    clock.add_argument("--state-every", type=cliargs.positive_int, default=10,
+                       help="publish world/state every N ticks (default: 10)")
+    radio = parser.add_argument_group("radio medium")
+    radio.add_argument("--radio-range", type=cliargs.positive_float, default=0.5,
+                       help="robot radio range in metres (default: 0.5)")
+    radio.add_argument("--beacon-range", type=cliargs.positive_float, default=None,
+                       help="beacon range in metres (default: the nest radius)")
+    radio.add_argument("--drop", type=cliargs.probability, default=0.0,
+                       help="iid drop probability per message and receiver (default: 0)")
+    radio.add_argument("--latency", type=cliargs.non_negative_int, default=0,
+                       help="extra delivery latency in ticks (default: 0)")
+    cliargs.add_zenoh_options(parser, default_mode="router")
+    parser.add_argument("--log-level", default="INFO",
+                        choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    return parser
+
+
+def config_from_args(args: argparse.Namespace) -> WorldConfig:
+    from world_server.layout import nest_radius_for
+
+    beacon_range = args.beacon_range or nest_radius_for(args.robots)
+    return WorldConfig(
+        run=args.run_id,
+        seed=args.seed,
+        num_sites=args.sites,
+        num_robots=args.robots,
+        dt=args.dt,
+        substeps=args.substeps,
+        clock=args.clock,
+        radio=RadioConfig(
+            robot_range=args.radio_range,
+            beacon_range=beacon_range,
+            drop=args.drop,
+            latency=args.latency,
+        ),
+        camera=DEFAULT_CAMERA,
+        camera_noise=CameraNoise(),
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()
+    args = build_parser().parse_args(argv)
+    if args.mode == "router" and not args.listen and not args.zenoh_config:
+        args.listen = [DEFAULT_LISTEN]
+    logging.basicConfig(
+        level=args.log_level, format="%(asctime)s world-server %(levelname)s %(message)s"
+    )
+    world = World(config_from_args(args))
+    keys = protocol.Keys(args.run_id, args.root)
+    try:
+        session = open_from_args(args)
+    except zenoh.ZError as error:
+        print(f"world-server: cannot open Zenoh session: {error}", file=sys.stderr)
+        return 1
+    with session:
+        server = WorldServer(
+            session, world, keys,
+            speed=args.speed, stall_timeout=args.stall_timeout,
+            start_timeout=args.start_timeout, expect_robots=args.robots,
+            expect_beacons=args.beacons, state_every=args.state_every,
+        )
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, lambda *_: server.stop())
+        log.info(
+            "run %s: %d sites, arena radius %.2f m, best site %d, listening on %s",
+            args.run_id, args.sites, world.layout.arena_radius, world.layout.best_site,
+            ", ".join(args.listen) or "(client)",
+        )
+        thread_result: list[int] = []
+        worker = threading.Thread(target=lambda: thread_result.append(server.run()), daemon=True)
+        worker.start()
+        while worker.is_alive():
+            worker.join(0.2)
+        return thread_result[0] if thread_result else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

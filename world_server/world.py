@@ -1,0 +1,212 @@
+"""The world of one run, without any I/O: layout, physics, camera and radio together.
+
+``server.py`` feeds it what arrives over Zenoh and publishes what it returns; tests and
+benchmarks drive it directly. One call to ``advance`` closes one control tick.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from robot_agent import protocol
+from world_server.camera import CameraNoise, CameraRenderer
+from world_server.layout import Layout, make_layout, start_poses
+from world_server.physics import EpuckSpec, Physics
+from world_server.radio import Delivery, RadioConfig, RadioMedium
+
+DEFAULT_CAMERA = protocol.CameraSpec(width=64, height=48, fov=0.84)
+OCCLUSION_RANGE = 1.0  # metres: robots further away are too small to hide a site
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    run: str = "run"
+    seed: int = 0
+    num_sites: int = 10
+    num_robots: int = 10  # expected swarm size: sizes the arena and the nest
+    dt: float = 0.1  # control tick, seconds of sim time
+    substeps: int = 2
+    clock: Literal["lockstep", "realtime"] = "lockstep"
+    radio: RadioConfig = field(default_factory=RadioConfig)
+    camera: protocol.CameraSpec = DEFAULT_CAMERA
+    camera_noise: CameraNoise = field(default_factory=CameraNoise)
+    spec: EpuckSpec = field(default_factory=EpuckSpec)
+
+
+@dataclass(frozen=True)
+class Transmission:
+    """A radio message a controller sent during the tick being closed."""
+
+    sender: str
+    seq: int
+    payload: bytes
+
+
+@dataclass(frozen=True)
+class TickResult:
+    tick: int  # the tick that now begins
+    deliveries: dict[str, list[Delivery]]  # by receiver name, in delivery order
+    frames: dict[int, bytes]  # encoded camera frames by robot id
+
+
+class World:
+    def __init__(self, config: WorldConfig) -> None:
+        self.config = config
+        self.layout: Layout = make_layout(
+            config.num_sites, config.num_robots, config.seed, config.spec.radius
+        )
+        self.physics = Physics(self.layout.arena_radius, config.spec, config.substeps)
+        self.radio = RadioMedium(config.radio, protocol.derive_seed(config.seed, "radio"))
+        self.camera = CameraRenderer(
+            self.layout,
+            config.camera,
+            robot_radius=config.spec.radius,
+            noise=config.camera_noise,
+            seed=protocol.derive_seed(config.seed, "camera"),
+        )
+        self._camera_rng = np.random.default_rng(protocol.derive_seed(config.seed, "frames"))
+        self.tick = 0
+        self._live_robots: set[int] = set()
+        self._beacons: set[str] = set()
+        self.info = protocol.WorldInfo(
+            v=protocol.VERSION,
+            run=config.run,
+            seed=config.seed,
+            dt=config.dt,
+            arena_radius=self.layout.arena_radius,
+            nest=protocol.Nest(0.0, 0.0, self.layout.nest_radius),
+            sites=self.layout.info_sites(),
+            robot_radius=config.spec.radius,
+            wheel_base=config.spec.wheel_base,
+            max_wheel_speed=config.spec.max_wheel_speed,
+            camera=config.camera,
+            clock=config.clock,
+        )
+
+    @property
+    def t(self) -> float:
+        return self.tick * self.config.dt
+
+    # --- membership ----------------------------------------------------------------
+
+    def join_robot(self, robot_id: int) -> None:
+        """A controller for ``robot_id`` is live; a body appears at its start pose if new."""
+        if not self.physics.has_robot(robot_id):
+            x, y, theta = self.start_pose(robot_id)
+            self.physics.add_robot(robot_id, x, y, theta)
+        self._live_robots.add(robot_id)
+
+    def leave_robot(self, robot_id: int) -> None:
+        """Its controller is gone: the body stops and stays as an obstacle."""
+        self._live_robots.discard(robot_id)
+        if self.physics.has_robot(robot_id):
+            self.physics.set_wheels(robot_id, 0.0, 0.0)
+
+    def join_beacon(self, name: str) -> None:
+        self._beacons.add(name)
+
+    def leave_beacon(self, name: str) -> None:
+        self._beacons.discard(name)
+
+    def live_robots(self) -> list[int]:
+        return sorted(self._live_robots)
+
+    def beacons(self) -> list[str]:
+        return sorted(self._beacons)
+
+    def start_pose(self, robot_id: int) -> tuple[float, float, float]:
+        if robot_id < len(self.layout.start_poses):
+            return self.layout.start_poses[robot_id]
+        extra = start_poses(robot_id + 1, self.layout.nest_radius, self.config.spec.radius)
+        return extra[robot_id]
+
+    # --- one tick ------------------------------------------------------------------
+
+    def sense(self, robot_id: int, rx: int, camera: bool) -> protocol.Sense:
+        x, y, theta = self.physics.pose(robot_id)
+        return protocol.Sense(
+            v=protocol.VERSION,
+            tick=self.tick,
+            t=self.t,
+            x=x,
+            y=y,
+            theta=theta,
+            prox=list(self.physics.proximity(robot_id)),
+            rx=rx,
+            camera=camera,
+        )
+
+    def advance(
+        self, acts: Mapping[int, protocol.Act], transmissions: Sequence[Transmission]
+    ) -> TickResult:
+        """Close the current tick: transmit, move, render, and deliver what is due next."""
+        receivers = {
+            protocol.radio_name(robot): self.physics.pose(robot)[:2]
+            for robot in sorted(self._live_robots)
+        }
+        for message in sorted(transmissions, key=_transmission_order):
+            if message.sender in self._beacons:
+                position, kind = (self.info.nest.x, self.info.nest.y), "beacon"
+            else:
+                position, kind = receivers[message.sender], "robot"
+            self.radio.transmit(
+                self.tick, message.sender, message.seq, message.payload, position, kind, receivers
+            )
+        for robot, act in sorted(acts.items()):
+            if robot in self._live_robots:
+                self.physics.set_wheels(robot, act.left, act.right)
+        self.physics.step(self.config.dt)
+        self.tick += 1
+        frames = {
+            robot: self.camera.encode(self._render(robot))
+            for robot, act in sorted(acts.items())
+            if act.capture and robot in self._live_robots
+        }
+        deliveries: dict[str, list[Delivery]] = {}
+        for delivery in self.radio.deliveries(self.tick):
+            deliveries.setdefault(delivery.receiver, []).append(delivery)
+        return TickResult(self.tick, deliveries, frames)
+
+    def is_sender(self, name: str) -> bool:
+        """Whether ``name`` may transmit now (a live robot or a known beacon)."""
+        if name in self._beacons:
+            return True
+        return name.isdigit() and int(name) in self._live_robots
+
+    def _render(self, robot_id: int) -> np.ndarray:
+        x, y, theta = self.physics.pose(robot_id)
+        others = [
+            (ox, oy)
+            for other, (ox, oy, _) in sorted(self.physics.poses().items())
+            if other != robot_id and math.hypot(ox - x, oy - y) < OCCLUSION_RANGE
+        ]
+        return self.camera.render(x, y, theta, others, rng=self._camera_rng)
+
+    def state(self, rejected: int = 0, stalls: int = 0) -> protocol.WorldState:
+        counters = self.radio.counters
+        return protocol.WorldState(
+            v=protocol.VERSION,
+            tick=self.tick,
+            t=self.t,
+            robots=[
+                protocol.Pose(robot, x, y, theta)
+                for robot, (x, y, theta) in sorted(self.physics.poses().items())
+            ],
+            radio=protocol.RadioCounters(
+                sent=counters.sent,
+                delivered=counters.delivered,
+                dropped=counters.dropped,
+                rejected=counters.rejected,
+            ),
+            rejected=rejected,
+            stalls=stalls,
+        )
+
+
+def _transmission_order(message: Transmission) -> tuple[object, ...]:
+    return (*RadioMedium.sender_order(message.sender), message.seq)
