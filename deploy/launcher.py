@@ -8,6 +8,7 @@ every process it started, by pid, however the run ends; prints a summary.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import queue
@@ -15,6 +16,7 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import zenoh
@@ -25,7 +27,7 @@ from rich.table import Table
 from deploy.processes import Child, ProcessGroup, free_port, python_module, wait_for_port
 from deploy.summary import RobotRecord, RunOutcome, build_summary, describe
 from robot_agent import cliargs, protocol
-from robot_agent.node import add_controller_options, controller_config
+from robot_agent.node import add_controller_options, controller_config, fetch_world_info
 from robot_agent.zenoh_session import open_session
 from world_server.layout import make_layout
 
@@ -64,7 +66,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="iid radio drop probability (default: 0)")
     radio.add_argument("--latency", type=cliargs.non_negative_int, default=0,
                        metavar="TICKS", help="extra radio latency in ticks (default: 0)")
+    network = parser.add_argument_group("network")
+    network.add_argument("--connect", type=cliargs.endpoint, default=None, metavar="ENDPOINT",
+                         help="use this existing Zenoh router instead of making the world "
+                         "server the router of the run (several runs can share one router)")
     output = parser.add_argument_group("output")
+    output.add_argument("--record", metavar="PATH", default=None,
+                        help="MCAP recording of the run (default: runs/<run-id>.mcap)")
+    output.add_argument("--no-record", action="store_true", help="do not record the run")
     output.add_argument("--json", action="store_true",
                         help="print one JSON object with the summary on stdout")
     output.add_argument("--quiet", action="store_true", help="no progress display")
@@ -81,25 +90,29 @@ class RunPlan:
     sites: int
     seed: int
     timeout: float
-    port: int
+    endpoint: str
+    port: int | None  # the loopback port the world listens on, when it is the router
+    record: Path | None
     world_args: list[str]
     robot_args: list[str]
     beacon_args: list[str]
+    recorder_args: list[str] = field(default_factory=list)
     config: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def endpoint(self) -> str:
-        return f"tcp/127.0.0.1:{self.port}"
 
 
 def plan_from_args(args: argparse.Namespace) -> RunPlan:
     controller_config(args)  # validates alpha/threshold together; ValueError -> usage error
     run_id = args.run_id or f"run-{args.seed}-{int(time.time() * 1000) % 10**9}"
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
+    if args.connect:
+        port, endpoint = None, args.connect
+        world_network = ["--mode", "client", "--connect", endpoint]
+    else:
+        port = free_port()
+        endpoint = f"tcp/127.0.0.1:{port}"
+        world_network = ["--mode", "router", "--listen", endpoint]
     common = ["--run-id", run_id, "--seed", str(args.seed)]
     world_args = [
-        *common, "--mode", "router", "--listen", endpoint,
+        *common, *world_network,
         "--robots", str(args.robots), "--sites", str(args.sites),
         "--clock", args.clock, "--speed", str(args.speed),
         "--stall-timeout", str(args.stall_timeout),
@@ -123,24 +136,33 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
             "latency", "stall_timeout",
         )
     }
+    record = None if args.no_record else Path(args.record or f"runs/{run_id}.mcap")
+    recorder_args = [
+        *common, *client, "--out", str(record), "--robots", str(args.robots),
+        "--sites", str(args.sites), "--config-json", json.dumps(config),
+    ]
     return RunPlan(
         run_id=run_id, robots=args.robots, sites=args.sites, seed=args.seed,
-        timeout=args.timeout, port=port, world_args=world_args, robot_args=robot_args,
-        beacon_args=[*common, *client], config=config,
+        timeout=args.timeout, endpoint=endpoint, port=port, record=record,
+        world_args=world_args, robot_args=robot_args, beacon_args=[*common, *client],
+        recorder_args=recorder_args, config=config,
     )
 
 
 class Swarm:
     """One local run: its processes, its observer session, its progress."""
 
-    def __init__(self, plan: RunPlan, on_log: Callable[[str, str], None] | None = None) -> None:
+    def __init__(self, plan: RunPlan, echo: Callable[[str, str], None] | None = None) -> None:
         self.plan = plan
         self.keys = protocol.Keys(plan.run_id)
-        self.group = ProcessGroup(on_log)
+        self.echo = echo
+        self.group = ProcessGroup(self._on_log_line)
         self.records = {robot: RobotRecord(robot) for robot in range(plan.robots)}
         self.robot_children: dict[int, Child] = {}
+        self.recorder: Child | None = None
         self.events: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
         self.session: zenoh.Session | None = None
+        self._declared: list[Any] = []
         self.sim_time = 0.0
         self.started_at: float | None = None
         self.ended_at: float | None = None
@@ -148,14 +170,30 @@ class Swarm:
         self.rejected_status = 0
         self.final_stats: protocol.WorldState | None = None
 
+    def _on_log_line(self, process: str, line: str) -> None:
+        """Echo a child's log line, and publish it so that the recorder keeps it."""
+        if self.echo is not None:
+            self.echo(process, line)
+        session = self.session
+        if session is not None and line:
+            message = protocol.LogLine(
+                v=protocol.VERSION, process=process, wall_time=time.time(), line=line[:4096]
+            )
+            with contextlib.suppress(zenoh.ZError):
+                session.put(self.keys.log(process), protocol.encode(message))
+
     # --- start -----------------------------------------------------------------------
 
     def start(self) -> None:
         plan = self.plan
         world = self.group.start("world", python_module("world_server.server", *plan.world_args))
-        if not wait_for_port(plan.port, 30.0, world.alive):
+        if plan.port is not None and not wait_for_port(plan.port, 30.0, world.alive):
             raise StartError("the world server did not start", world)
         self.session = open_session("client", [plan.endpoint])
+        try:
+            fetch_world_info(self.session, self.keys, timeout=30.0)
+        except TimeoutError as error:
+            raise StartError(str(error), world) from None
         self._declared = [
             self.session.declare_subscriber(
                 self.keys.status("*"), lambda s: self.events.put(("status", s.payload.to_bytes()))
@@ -167,12 +205,29 @@ class Swarm:
                 self.keys.world_state, lambda s: self.events.put(("state", s.payload.to_bytes()))
             ),
         ]
+        if plan.record is not None:
+            plan.record.parent.mkdir(parents=True, exist_ok=True)
+            self.recorder = self.group.start(
+                "recorder", python_module("world_server.recorder", *plan.recorder_args)
+            )
+            if not self._wait_alive("recorder", 0, 30.0, self.recorder):
+                raise StartError("the recorder did not start", self.recorder)
         self.group.start("beacon", python_module("nest_beacon", *plan.beacon_args))
         for robot in range(plan.robots):
             self.robot_children[robot] = self.group.start(
                 f"robot-{robot}",
                 python_module("robot_agent.node", "--id", str(robot), *plan.robot_args),
             )
+
+    def _wait_alive(self, role: str, ident: int | str, timeout: float, child: Child) -> bool:
+        """Wait for a liveliness token, as long as the process that should declare it lives."""
+        assert self.session is not None
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and child.alive():
+            if list(self.session.liveliness().get(self.keys.alive(role, ident), timeout=1.0)):
+                return True
+            time.sleep(0.05)
+        return False
 
     # --- watch -----------------------------------------------------------------------
 
@@ -221,7 +276,23 @@ class Swarm:
 
     # --- stop ------------------------------------------------------------------------
 
-    def world_stats(self) -> protocol.WorldState | None:
+    def stop_swarm(self) -> protocol.WorldState | None:
+        """Stop the robots and the beacon, and read the world's final counters.
+
+        Safe to call again: later calls return the counters read by the first.
+        """
+        if self.ended_at is not None:
+            return self.final_stats
+        self.ended_at = time.monotonic()
+        swarm = [
+            child for child in self.group.children if child.name not in ("world", "recorder")
+        ]
+        self.group.stop(swarm)
+        self.poll()
+        self.final_stats = self._world_stats() or self.last_state
+        return self.final_stats
+
+    def _world_stats(self) -> protocol.WorldState | None:
         if self.session is None:
             return None
         try:
@@ -232,26 +303,25 @@ class Swarm:
             return None
         return None
 
-    def stop(self) -> protocol.WorldState | None:
-        """Stop robots and beacon, read the world's final counters, stop the world.
+    def finish_recording(self, summary: dict[str, Any]) -> bool:
+        """Hand the summary to the recorder and wait until the file is complete."""
+        if self.session is None or self.recorder is None or not self.recorder.alive():
+            return False
+        payload = json.dumps(summary).encode()
+        for reply in self.session.get(self.keys.recorder_finish, payload=payload, timeout=30.0):
+            if reply.ok is not None:
+                return True
+        return False
 
-        Safe to call again: later calls return the counters read by the first.
-        """
-        if self.ended_at is not None:
-            return self.final_stats
-        self.ended_at = time.monotonic()
-        others = [child for child in self.group.children if child.name != "world"]
-        self.group.stop(others)
-        self.poll()
-        stats = self.world_stats() or self.last_state
+    def close(self) -> None:
+        """Stop every process still running and close the observer session."""
+        self.stop_swarm()
         if self.session is not None:
             for entity in self._declared:
                 entity.undeclare()
             self.session.close()
             self.session = None
         self.group.stop_all()
-        self.final_stats = stats
-        return stats
 
 
 class StartError(Exception):
@@ -268,34 +338,42 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as error:
         raise UsageError(str(error)) from None
     console = Console(stderr=True)
-    echo = (lambda name, line: console.print(f"[dim]{name}:[/] {line}", highlight=False)) \
-        if args.verbose else None
+    echo = (
+        (lambda name, line: console.print(f"[dim]{name}:[/] {line}", highlight=False))
+        if args.verbose
+        else None
+    )
     swarm = Swarm(plan, echo)
-    best_site = make_layout(plan.sites, plan.robots, plan.seed).best_site
-    timed_out, crashed = False, None
+    try:
+        return _run_swarm(swarm, args, console)
+    except KeyboardInterrupt:
+        print("swarm run: interrupted; stopping every process", file=sys.stderr)
+        return 130
+    finally:
+        swarm.close()
+
+
+def _run_swarm(swarm: Swarm, args: argparse.Namespace, console: Console) -> int:
+    plan = swarm.plan
     try:
         swarm.start()
-        timed_out, crashed = _watch(swarm, console, quiet=args.quiet)
     except StartError as error:
         print(f"swarm run: could not start: {error}", file=sys.stderr)
         if error.child is not None:
             print(error.child.tail(), file=sys.stderr)
         return EXIT_CRASH
-    except KeyboardInterrupt:
-        print("swarm run: interrupted; stopping every process", file=sys.stderr)
-        return 130
-    finally:
-        stats = swarm.stop()
+    timed_out, crashed = _watch(swarm, console, quiet=args.quiet)
     if crashed is not None:
         print(f"swarm run: the {crashed.name} process crashed (exit code "
               f"{crashed.process.returncode}):\n{crashed.tail()}", file=sys.stderr)
         return EXIT_CRASH
+    stats = swarm.stop_swarm()
+    wall = (swarm.ended_at or 0.0) - swarm.started_at if swarm.started_at else 0.0
     summary = build_summary(
         RunOutcome(
             run_id=plan.run_id, num_robots=plan.robots, num_sites=plan.sites, seed=plan.seed,
-            best_site=best_site, sim_time_s=swarm.sim_time,
-            wall_time_s=(swarm.ended_at or 0.0) - swarm.started_at if swarm.started_at else 0.0,
-            timed_out=timed_out,
+            best_site=make_layout(plan.sites, plan.robots, plan.seed).best_site,
+            sim_time_s=swarm.sim_time, wall_time_s=wall, timed_out=timed_out,
             radio=stats.radio if stats else protocol.RadioCounters(),
             world_rejected=stats.rejected if stats else 0,
             stalls=stats.stalls if stats else 0,
@@ -303,6 +381,10 @@ def run(args: argparse.Namespace) -> int:
         ),
         swarm.records.values(),
     )
+    summary["recording"] = str(plan.record) if plan.record else None
+    if plan.record is not None and not swarm.finish_recording(summary):
+        print(f"swarm run: the recorder did not confirm {plan.record}", file=sys.stderr)
+        summary["recording"] = None
     if args.json:
         print(json.dumps(summary))
     else:

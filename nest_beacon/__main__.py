@@ -20,7 +20,7 @@ import zenoh
 from nest_beacon.beacon import Beacon, BeaconConfig, parse_outages
 from robot_agent import cliargs, protocol
 from robot_agent.lifecycle import die_with_launcher
-from robot_agent.zenoh_session import open_from_args
+from robot_agent.zenoh_session import open_from_args, reliable_publisher
 
 log = logging.getLogger("nest_beacon")
 
@@ -71,8 +71,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     rejected = 0
     with session:
-        transmitter = session.declare_publisher(keys.radio_tx(args.name))
-        acknowledger = session.declare_publisher(keys.beacon_ack(args.name))
+        transmitter = reliable_publisher(session, keys.radio_tx(args.name))
+        acknowledger = reliable_publisher(session, keys.beacon_ack(args.name))
         session.declare_subscriber(
             keys.world_clock, lambda sample: clocks.put(sample.payload.to_bytes())
         )

@@ -27,7 +27,7 @@ from robot_agent import cliargs, protocol, vision
 from robot_agent.controller import Controller, ControllerConfig
 from robot_agent.lifecycle import die_with_launcher
 from robot_agent.ports import BodyReading, RejectCounter, decode_received
-from robot_agent.zenoh_session import open_from_args
+from robot_agent.zenoh_session import open_from_args, reliable_publisher
 
 log = logging.getLogger("robot_agent")
 
@@ -97,9 +97,9 @@ class RobotNode:
             session.declare_subscriber(keys.camera(robot), forward("camera")),
             session.declare_subscriber(keys.radio_rx(protocol.radio_name(robot)), forward("rx")),
         ]
-        self._act = session.declare_publisher(keys.act(robot))
-        self._status = session.declare_publisher(keys.status(robot))
-        self._tx = session.declare_publisher(keys.radio_tx(protocol.radio_name(robot)))
+        self._act = reliable_publisher(session, keys.act(robot))
+        self._status = reliable_publisher(session, keys.status(robot))
+        self._tx = reliable_publisher(session, keys.radio_tx(protocol.radio_name(robot)))
         self._publish_status(0)
         self._token = session.liveliness().declare_token(keys.alive("robot", robot))
 

@@ -246,6 +246,14 @@ class Status(Message):
     comparison: Comparison | None
 
 
+class LogLine(Message):
+    """One line a process of the run wrote to its log (published by the launcher)."""
+
+    process: _Name
+    wall_time: Annotated[float, msgspec.Meta(ge=0.0, le=1e11)]
+    line: Annotated[str, msgspec.Meta(max_length=4096)]
+
+
 # --- keys ----------------------------------------------------------------------------
 
 
@@ -300,6 +308,15 @@ class Keys:
 
     def radio_rx(self, receiver: int | str) -> str:
         return f"{self.prefix}/radio/rx/{receiver}"
+
+    def log(self, process: str) -> str:
+        return f"{self.prefix}/log/{process}"
+
+    @property
+    def recorder_finish(self) -> str:
+        """Queryable of the recorder: the payload is the run summary (JSON); it replies once
+        the recording is complete on disk."""
+        return f"{self.prefix}/recorder/finish"
 
     def alive(self, role: str, ident: int | str) -> str:
         return f"{self.prefix}/alive/{role}/{ident}"

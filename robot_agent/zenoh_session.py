@@ -50,3 +50,20 @@ def open_session(
 def open_from_args(args: argparse.Namespace) -> zenoh.Session:
     """A session from the options added by ``cliargs.add_zenoh_options``."""
     return open_session(args.mode, args.connect, args.listen, args.zenoh_config)
+
+
+def reliable_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    """A publisher that blocks rather than drops under congestion.
+
+    The body link (sense, act, camera) and the recorder must not lose messages: a lost
+    ``sense`` would stall a lockstep tick, a lost status would corrupt a summary.
+    """
+    return session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+
+
+def reliable_put(
+    session: zenoh.Session, key: str, payload: bytes, attachment: bytes | None = None
+) -> None:
+    session.put(
+        key, payload, attachment=attachment, congestion_control=zenoh.CongestionControl.BLOCK
+    )

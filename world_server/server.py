@@ -22,7 +22,7 @@ import zenoh
 
 from robot_agent import cliargs, protocol
 from robot_agent.lifecycle import die_with_launcher
-from robot_agent.zenoh_session import open_from_args
+from robot_agent.zenoh_session import open_from_args, reliable_publisher, reliable_put
 from world_server.camera import CameraNoise
 from world_server.clock import Barrier, Pacer
 from world_server.radio import RadioConfig
@@ -124,8 +124,8 @@ class WorldServer:
             ),
             session.liveliness().declare_token(keys.alive("world", 0)),
         ]
-        self._clock_publisher = session.declare_publisher(keys.world_clock)
-        self._state_publisher = session.declare_publisher(keys.world_state)
+        self._clock_publisher = reliable_publisher(session, keys.world_clock)
+        self._state_publisher = reliable_publisher(session, keys.world_state)
 
     def stop(self) -> None:
         self.inbox.put(Event("stop"))
@@ -348,7 +348,7 @@ class WorldServer:
                     seq=delivery.seq,
                     sent_tick=delivery.sent_tick,
                 )
-                self.session.put(key, delivery.payload, attachment=protocol.encode(meta))
+                reliable_put(self.session, key, delivery.payload, protocol.encode(meta))
         self._open_tick(result.tick, rx_counts, result.frames)
 
     def _open_tick(
@@ -360,7 +360,7 @@ class WorldServer:
                 v=protocol.VERSION, tick=tick, width=spec.width, height=spec.height,
                 encoding="png",
             )
-            self.session.put(self.keys.camera(robot), frame, attachment=protocol.encode(meta))
+            reliable_put(self.session, self.keys.camera(robot), frame, protocol.encode(meta))
         robots = self.world.live_robots()
         for robot in robots:
             sense = self.world.sense(
@@ -368,7 +368,7 @@ class WorldServer:
             )
             publisher = self._sense_publishers.get(robot)
             if publisher is None:
-                publisher = self.session.declare_publisher(self.keys.sense(robot))
+                publisher = reliable_publisher(self.session, self.keys.sense(robot))
                 self._sense_publishers[robot] = publisher
             publisher.put(protocol.encode(sense))
         self.barrier.open(
