@@ -11,15 +11,15 @@ import importlib
 import sys
 from collections.abc import Sequence
 
+from robot_agent.cliargs import UsageError
+
+__all__ = ["SUBCOMMANDS", "UsageError", "main"]
+
 # name -> (module, one-line help)
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "wellstirred": ("deploy.wellstirred_cmd", "the paper's Section 4 well-stirred model"),
     "run": ("deploy.launcher", "run a swarm of robot processes to consensus"),
 }
-
-
-class UsageError(Exception):
-    """A bad argument found after parsing: printed as one line, exit code 2."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -27,6 +27,7 @@ from rich.table import Table
 from deploy.processes import Child, ProcessGroup, free_port, python_module, wait_for_port
 from deploy.summary import RobotRecord, RunOutcome, build_summary, describe
 from robot_agent import cliargs, protocol
+from robot_agent.cliargs import UsageError
 from robot_agent.node import add_controller_options, controller_config, fetch_world_info
 from robot_agent.zenoh_session import open_session
 from world_server.layout import make_layout
@@ -160,14 +161,14 @@ class Swarm:
         self.records = {robot: RobotRecord(robot) for robot in range(plan.robots)}
         self.robot_children: dict[int, Child] = {}
         self.recorder: Child | None = None
-        self.events: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
+        self.events: queue.SimpleQueue[tuple[str, str, bytes]] = queue.SimpleQueue()
         self.session: zenoh.Session | None = None
         self._declared: list[Any] = []
         self.sim_time = 0.0
         self.started_at: float | None = None
         self.ended_at: float | None = None
         self.last_state: protocol.WorldState | None = None
-        self.rejected_status = 0
+        self.rejected = 0  # invalid messages the launcher itself received
         self.final_stats: protocol.WorldState | None = None
 
     def _on_log_line(self, process: str, line: str) -> None:
@@ -196,13 +197,13 @@ class Swarm:
             raise StartError(str(error), world) from None
         self._declared = [
             self.session.declare_subscriber(
-                self.keys.status("*"), lambda s: self.events.put(("status", s.payload.to_bytes()))
+                self.keys.status("*"), self._on("status")
             ),
             self.session.declare_subscriber(
-                self.keys.world_clock, lambda s: self.events.put(("clock", s.payload.to_bytes()))
+                self.keys.world_clock, self._on("clock")
             ),
             self.session.declare_subscriber(
-                self.keys.world_state, lambda s: self.events.put(("state", s.payload.to_bytes()))
+                self.keys.world_state, self._on("state")
             ),
         ]
         if plan.record is not None:
@@ -218,6 +219,12 @@ class Swarm:
                 f"robot-{robot}",
                 python_module("robot_agent.node", "--id", str(robot), *plan.robot_args),
             )
+
+    def _on(self, kind: str) -> Callable[[zenoh.Sample], None]:
+        def callback(sample: zenoh.Sample) -> None:
+            self.events.put((kind, str(sample.key_expr), sample.payload.to_bytes()))
+
+        return callback
 
     def _wait_alive(self, role: str, ident: int | str, timeout: float, child: Child) -> bool:
         """Wait for a liveliness token, as long as the process that should declare it lives."""
@@ -235,14 +242,15 @@ class Swarm:
         """Take in everything that arrived; note crashed robots."""
         while True:
             try:
-                kind, payload = self.events.get_nowait()
+                kind, key, payload = self.events.get_nowait()
             except queue.Empty:
                 break
             try:
                 if kind == "status":
                     status = protocol.decode(payload, protocol.Status)
-                    if status.id in self.records:
-                        self.records[status.id].update(status)
+                    if status.id != self.keys.robot_of(key) or status.id not in self.records:
+                        raise protocol.ProtocolError(f"status of robot {status.id} on {key}")
+                    self.records[status.id].update(status)
                 elif kind == "clock":
                     clock = protocol.decode(payload, protocol.Clock)
                     if self.started_at is None:
@@ -251,7 +259,7 @@ class Swarm:
                 elif kind == "state":
                     self.last_state = protocol.decode(payload, protocol.WorldState)
             except protocol.ProtocolError:
-                self.rejected_status += 1
+                self.rejected += 1
         for robot, child in self.robot_children.items():
             if not child.alive() and not child.expected_exit:
                 self.records[robot].crashed = True
@@ -331,8 +339,6 @@ class StartError(Exception):
 
 
 def run(args: argparse.Namespace) -> int:
-    from deploy.cli import UsageError
-
     try:
         plan = plan_from_args(args)
     except ValueError as error:
@@ -377,6 +383,7 @@ def _run_swarm(swarm: Swarm, args: argparse.Namespace, console: Console) -> int:
             radio=stats.radio if stats else protocol.RadioCounters(),
             world_rejected=stats.rejected if stats else 0,
             stalls=stats.stalls if stats else 0,
+            observer_rejected=swarm.rejected,
             config=plan.config,
         ),
         swarm.records.values(),

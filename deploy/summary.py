@@ -45,12 +45,13 @@ class RunOutcome:
     num_sites: int
     seed: int
     best_site: int
-    sim_time_s: float
+    sim_time_s: float  # sim time the launcher saw when it stopped the run
     wall_time_s: float
     timed_out: bool
     radio: protocol.RadioCounters
     world_rejected: int
     stalls: int
+    observer_rejected: int
     config: dict[str, Any]
 
 
@@ -67,6 +68,11 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
     )
     chosen = decided[0] if consensus else None
     wall = max(outcome.wall_time_s, 1e-9)
+    decision_times = [r.status.decision_time for r in robots if r.status and r.status.decision_time]
+    # The run's length in sim time is when its last robot decided (deterministic in
+    # lockstep); the launcher notices a little later, which only the speed figure uses.
+    all_decided = bool(robots) and all(site is not None for site in decided)
+    sim_time = max(decision_times) if all_decided and decision_times else outcome.sim_time_s
     return {
         "run_id": outcome.run_id,
         "num_robots": outcome.num_robots,
@@ -77,7 +83,7 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
         "chosen_site": chosen,
         "correct": consensus and chosen == outcome.best_site,
         "timed_out": outcome.timed_out,
-        "sim_time_s": round(outcome.sim_time_s, 3),
+        "sim_time_s": round(sim_time, 3),
         "wall_time_s": round(outcome.wall_time_s, 3),
         "real_time_factor": round(outcome.sim_time_s / wall, 2),
         "radio": {
@@ -87,6 +93,11 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
             "rejected": outcome.radio.rejected,
         },
         "world": {"rejected": outcome.world_rejected, "stalls": outcome.stalls},
+        "rejected": {
+            "world": outcome.world_rejected,
+            "robots": sum(r.status.rejected for r in robots if r.status),
+            "observer": outcome.observer_rejected,
+        },
         "config": outcome.config,
         "per_robot": [robot_summary(record) for record in robots],
     }
@@ -104,6 +115,8 @@ def robot_summary(record: RobotRecord) -> dict[str, Any]:
         "trips": status.trips if status else 0,
         "phase": status.phase if status else None,
         "pool_sizes": list(record.pool_sizes),
+        "rejected": status.rejected if status else 0,
+        "restarts": record.restarts,
         "crashed": record.crashed,
     }
 

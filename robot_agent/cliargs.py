@@ -13,6 +13,10 @@ from collections.abc import Callable
 from robot_agent import protocol
 
 
+class UsageError(Exception):
+    """A bad argument found after parsing: printed as one line, exit code 2."""
+
+
 def _number(kind: type, text: str) -> float:
     try:
         value = kind(text)

@@ -268,6 +268,7 @@ class Controller:
             decision_time=self._decision_time,
             decision_trips=self._decision_trips,
             comparison=self._comparison,
+            rejected=self._rejected,
         )
 
     def take_status_change(self) -> bool:

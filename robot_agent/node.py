@@ -21,6 +21,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+import msgspec
 import zenoh
 
 from robot_agent import cliargs, protocol, vision
@@ -198,7 +199,9 @@ class RobotNode:
             self._publish_status(sense.tick)
 
     def _publish_status(self, tick: int) -> None:
-        self._status.put(protocol.encode(self.controller.status(tick)))
+        status = self.controller.status(tick)
+        status = msgspec.structs.replace(status, rejected=status.rejected + self.rejects.count)
+        self._status.put(protocol.encode(status))
 
 
 def fetch_world_info(

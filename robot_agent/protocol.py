@@ -244,6 +244,7 @@ class Status(Message):
     decision_time: _SimTime | None
     decision_trips: _Count | None
     comparison: Comparison | None
+    rejected: _Count = 0  # invalid messages this robot dropped so far
 
 
 class LogLine(Message):

@@ -1,0 +1,100 @@
+"""Helpers for tests that start real swarm processes: run them, find them, clean up.
+
+Every process a test starts is found by the unique run id in its command line, so a
+test can check that nothing is left behind and kill stragglers by pid.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from deploy.processes import free_port
+from robot_agent.zenoh_session import open_session
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def unique_run_id(prefix: str = "t") -> str:
+    return f"{prefix}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+
+
+def swarm_command(*args: str) -> list[str]:
+    return [sys.executable, "-m", "deploy.cli", *args]
+
+
+def processes_of(run_id: str) -> list[int]:
+    """Pids of live processes whose command line mentions ``run_id``."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit() or int(entry.name) == os.getpid():
+            continue
+        try:
+            cmdline = (entry / "cmdline").read_bytes().split(b"\0")
+            state = (entry / "stat").read_text().split()[2]
+        except OSError:
+            continue
+        if state != "Z" and run_id.encode() in cmdline:
+            found.append(int(entry.name))
+    return found
+
+
+def wait_for_processes(run_id: str, needle: str, count: int, timeout: float) -> list[int]:
+    """Wait until ``count`` processes of the run have ``needle`` in their command line."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        pids = [pid for pid in processes_of(run_id) if needle in _cmdline(pid)]
+        if len(pids) >= count:
+            return pids
+        time.sleep(0.05)
+    raise TimeoutError(f"fewer than {count} '{needle}' processes of {run_id} appeared")
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def kill_leftovers(run_id: str) -> list[int]:
+    """SIGKILL anything of the run still alive; return the pids that were left."""
+    left = processes_of(run_id)
+    for pid in left:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+    return left
+
+
+def run_swarm(args: Sequence[str], run_id: str, timeout: float = 120.0) -> tuple[int, Any, str]:
+    """Run ``swarm run ... --json`` to the end; return (exit code, summary, stderr)."""
+    command = swarm_command("run", "--run-id", run_id, "--json", "--quiet", *args)
+    try:
+        done = subprocess.run(command, capture_output=True, timeout=timeout, cwd=REPO)
+    finally:
+        kill_leftovers(run_id)
+    stdout = done.stdout.decode()
+    summary = json.loads(stdout) if stdout.strip() else None
+    return done.returncode, summary, done.stderr.decode()
+
+
+@contextlib.contextmanager
+def loopback_router() -> Iterator[tuple[zenoh.Session, str]]:
+    """A Zenoh router in the test process on a free loopback port."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    session = open_session("router", listen=[endpoint])
+    try:
+        yield session, endpoint
+    finally:
+        session.close()

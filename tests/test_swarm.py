@@ -1,0 +1,208 @@
+"""The real swarm: world server, nest beacon and robot processes over Zenoh on loopback."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import time
+
+import pytest
+from swarm_helpers import (
+    REPO,
+    kill_leftovers,
+    loopback_router,
+    processes_of,
+    run_swarm,
+    swarm_command,
+    unique_run_id,
+    wait_for_processes,
+)
+
+from robot_agent import protocol
+
+pytestmark = pytest.mark.timeout(240)
+
+SMALL = ["--robots", "4", "--sites", "5", "--timeout", "900", "--no-record"]
+
+
+def test_a_small_swarm_reaches_the_right_consensus_and_leaves_nothing_behind() -> None:
+    run_id = unique_run_id("consensus")
+    code, summary, stderr = run_swarm([*SMALL, "--seed", "1"], run_id)
+    assert code == 0, stderr
+    assert summary["consensus"] and summary["correct"], summary
+    assert summary["chosen_site"] == summary["best_site"]
+    assert not summary["timed_out"]
+    robots = summary["per_robot"]
+    assert [robot["id"] for robot in robots] == [0, 1, 2, 3]
+    for robot in robots:
+        assert robot["decided_site"] == summary["best_site"]
+        assert robot["steps"] >= 1
+        assert len(robot["pool_sizes"]) == robot["steps"]
+        assert all(size >= 1 for size in robot["pool_sizes"])
+        assert 0 < robot["decision_time_s"] <= summary["sim_time_s"]
+    assert summary["radio"]["sent"] > 0 and summary["radio"]["delivered"] > 0
+    assert summary["radio"]["dropped"] == 0
+    assert summary["real_time_factor"] > 0
+    assert processes_of(run_id) == []
+
+
+def test_the_same_seed_gives_the_same_per_robot_results() -> None:
+    def outcome(run_id: str) -> list[tuple[object, ...]]:
+        code, summary, stderr = run_swarm([*SMALL, "--robots", "3", "--seed", "7"], run_id)
+        assert code == 0, stderr
+        return [
+            (r["id"], r["decided_site"], r["steps"], r["decision_time_s"], r["pool_sizes"])
+            for r in summary["per_robot"]
+        ]
+
+    first = outcome(unique_run_id("same-a"))
+    assert first == outcome(unique_run_id("same-b"))
+
+
+def test_killing_a_robot_mid_run_does_not_hang_the_world() -> None:
+    run_id = unique_run_id("kill")
+    command = swarm_command(
+        "run", "--run-id", run_id, "--json", "--quiet", *SMALL, "--seed", "2",
+        "--stall-timeout", "1",
+    )
+    process = subprocess.Popen(
+        command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    try:
+        robots = wait_for_processes(run_id, "robot_agent.node", 4, timeout=60)
+        victim = next(pid for pid in robots if "--id 3 " in _cmdline(pid))
+        time.sleep(2.0)  # let the swarm get going
+        os.kill(victim, signal.SIGKILL)
+        stdout, stderr = process.communicate(timeout=180)
+    finally:
+        if process.poll() is None:
+            process.kill()
+        left = kill_leftovers(run_id)
+    assert process.returncode == 1, stderr.decode()  # a component crashed
+    summary = json.loads(stdout)
+    by_id = {robot["id"]: robot for robot in summary["per_robot"]}
+    assert by_id[3]["crashed"]
+    for robot in (0, 1, 2):
+        assert not by_id[robot]["crashed"]
+        assert by_id[robot]["decided_site"] == summary["best_site"]
+    assert "crashed" in stderr.decode()
+    assert left == []
+
+
+def _cmdline(pid: int) -> str:
+    with open(f"/proc/{pid}/cmdline", "rb") as file:
+        return file.read().replace(b"\0", b" ").decode() + " "
+
+
+def _garbage(run: protocol.Keys, tick: int) -> list[tuple[str, bytes, bytes | None]]:
+    """Malformed, wrong-version, wrong-length, NaN, oversized and impostor messages."""
+    huge = b"[" + b"0," * 60_000 + b"0]"
+    good_sense = protocol.encode(
+        protocol.Sense(
+            v=1, tick=tick, t=0.0, x=0.0, y=0.0, theta=0.0, prox=[0.0] * 8, rx=0, camera=False
+        )
+    )
+    impostor = protocol.encode(
+        protocol.OpinionPayload(v=1, id=2, trip=1, decided=True, opinion=[1.0, 0, 0, 0, 0])
+    )
+    tx_meta = protocol.encode(protocol.RadioTxMeta(v=1, tick=tick, seq=1))
+    bad = [
+        b"not json",
+        b"",
+        good_sense.replace(b'"v":1', b'"v":2'),
+        good_sense.replace(b'"prox":[0.0,0.0,0.0,0.0,0.0,0.0,0.0,0.0]', b'"prox":[0.0]'),
+        good_sense.replace(b'"x":0.0', b'"x":NaN'),
+        huge,
+    ]
+    keys = [
+        run.sense(0), run.act(0), run.status(0), run.world_clock, run.world_state,
+        run.beacon_ack("nest"), run.radio_tx(0), run.radio_tx(77), run.camera(0),
+        run.radio_rx(0), run.log("world"),
+    ]
+    messages: list[tuple[str, bytes, bytes | None]] = [
+        (key, payload, None) for key in keys for payload in bad
+    ]
+    messages += [(run.radio_tx(1), payload, tx_meta) for payload in bad]
+    messages += [(run.radio_rx(0), payload, b"{}") for payload in bad]
+    messages.append((run.radio_tx(1), impostor, tx_meta))  # robot 1 claiming to be robot 2
+    messages.append((run.radio_tx(77), impostor, tx_meta))  # no such robot
+    return messages
+
+
+def test_malformed_payloads_on_every_key_are_rejected_and_counted() -> None:
+    run_id = unique_run_id("junk")
+    keys = protocol.Keys(run_id)
+    with loopback_router() as (session, endpoint):
+        ticks: list[int] = []
+        session.declare_subscriber(
+            keys.world_clock,
+            lambda sample: ticks.append(protocol.decode(sample.payload.to_bytes(),
+                                                        protocol.Clock).tick),
+        )
+        command = swarm_command(
+            "run", "--run-id", run_id, "--json", "--quiet", *SMALL, "--seed", "3",
+            "--connect", endpoint,
+        )
+        process = subprocess.Popen(
+            command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        )
+        try:
+            deadline = time.monotonic() + 60
+            while len(ticks) < 20 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert ticks, "the run never started"
+            for _ in range(3):
+                for key, payload, attachment in _garbage(keys, ticks[-1]):
+                    session.put(key, payload, attachment=attachment)
+                time.sleep(0.3)
+            stdout, stderr = process.communicate(timeout=180)
+        finally:
+            if process.poll() is None:
+                process.kill()
+            left = kill_leftovers(run_id)
+    assert process.returncode == 0, stderr.decode()
+    summary = json.loads(stdout)
+    assert summary["correct"], summary
+    assert summary["rejected"]["world"] > 0
+    assert summary["rejected"]["robots"] > 0
+    assert summary["rejected"]["observer"] > 0
+    assert summary["radio"]["rejected"] > 0
+    for robot in summary["per_robot"]:
+        assert robot["decided_site"] == summary["best_site"]
+    assert left == []
+
+
+def test_bad_arguments_exit_with_code_2_and_one_line() -> None:
+    for bad in (["--robots", "0"], ["--alpha", "0.7"], ["--drop", "1.5"], ["--sites", "1"],
+                ["--run-id", "a/b"], ["--threshold", "0"], ["--timeout", "nan"]):
+        done = subprocess.run(
+            swarm_command("run", *bad), capture_output=True, timeout=60, cwd=REPO
+        )
+        assert done.returncode == 2, bad
+        lines = done.stderr.decode().strip().splitlines()
+        assert lines[-1].startswith("swarm run: error:"), lines
+        assert "Traceback" not in done.stderr.decode()
+
+
+@pytest.mark.parametrize(
+    "module", ["world_server.server", "nest_beacon", "robot_agent.node"]
+)
+def test_every_component_prints_its_help(module: str) -> None:
+    done = subprocess.run(
+        [*swarm_command()[:1], "-m", module, "--help"], capture_output=True, timeout=60, cwd=REPO
+    )
+    assert done.returncode == 0
+    assert "usage:" in done.stdout.decode()
+    assert "--connect" in done.stdout.decode()
+
+
+def test_alpha_without_threshold_is_a_usage_error_not_a_traceback() -> None:
+    done = subprocess.run(
+        swarm_command("run", "--alpha", "0.2", "--threshold", "1"), capture_output=True,
+        timeout=60, cwd=REPO,
+    )
+    assert done.returncode == 2
+    assert "Traceback" not in done.stderr.decode()
+    assert "threshold" in done.stderr.decode()
