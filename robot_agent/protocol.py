@@ -42,8 +42,11 @@ _Opinion = Annotated[list[_Unit], msgspec.Meta(min_length=2, max_length=MAX_OPTI
 _Name = Annotated[str, msgspec.Meta(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
 
 
-class Message(msgspec.Struct, kw_only=True, forbid_unknown_fields=True, frozen=True):
-    """Base of every message: a version field first, unknown fields refused."""
+class Message(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """Base of every message: a version field first, unknown fields refused.
+
+    Fields encode in declaration order, base class first, so ``v`` always leads.
+    """
 
     v: Literal[1]
 
