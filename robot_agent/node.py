@@ -24,10 +24,11 @@ from dataclasses import dataclass, field
 import msgspec
 import zenoh
 
-from robot_agent import cliargs, protocol, vision
+from robot_agent import cliargs, protocol
 from robot_agent.controller import Controller, ControllerConfig
 from robot_agent.lifecycle import die_with_launcher
-from robot_agent.ports import BodyReading, RejectCounter, decode_received
+from robot_agent.lockstep import answer_tick
+from robot_agent.ports import RejectCounter
 from robot_agent.zenoh_session import open_from_args, reliable_publisher
 
 log = logging.getLogger("robot_agent")
@@ -174,26 +175,14 @@ class RobotNode:
     # --- one control step ----------------------------------------------------------
 
     def _step(self, sense: protocol.Sense, inputs: _TickInputs) -> None:
-        frame = None
-        if inputs.frame is not None:
-            try:
-                frame = vision.decode_frame(inputs.frame)
-            except ValueError as error:
-                self._reject("camera", error)
-        reading = BodyReading(
-            t=sense.t, x=sense.x, y=sense.y, theta=sense.theta,
-            proximity=tuple(sense.prox), frame=frame,
+        answer = answer_tick(
+            self.controller, sense, inputs.rx, inputs.frame, self.rejects, seq=self.seq
         )
-        command = self.controller.step(reading, decode_received(inputs.rx, self.rejects))
-        for payload in command.broadcasts:
-            self.seq += 1
-            meta = protocol.RadioTxMeta(v=protocol.VERSION, tick=sense.tick, seq=self.seq)
-            self._tx.put(protocol.encode(payload), attachment=protocol.encode(meta))
-        act = protocol.Act(
-            v=protocol.VERSION, tick=sense.tick, left=command.left, right=command.right,
-            capture=command.capture, radio_tx=len(command.broadcasts),
-        )
-        self._act.put(protocol.encode(act))
+        for seq, payload in answer.transmissions:
+            meta = protocol.RadioTxMeta(v=protocol.VERSION, tick=sense.tick, seq=seq)
+            self._tx.put(payload, attachment=protocol.encode(meta))
+        self._act.put(protocol.encode(answer.act))
+        self.seq = answer.next_seq
         self.last_tick = sense.tick
         if self.controller.take_status_change():
             self._publish_status(sense.tick)

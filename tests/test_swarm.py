@@ -63,27 +63,41 @@ def test_the_same_seed_gives_the_same_per_robot_results() -> None:
 
 def test_killing_a_robot_mid_run_does_not_hang_the_world() -> None:
     run_id = unique_run_id("kill")
-    command = swarm_command(
-        "run", "--run-id", run_id, "--json", "--quiet", *SMALL, "--seed", "2",
-        "--stall-timeout", "1",
-    )
-    process = subprocess.Popen(
-        command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE
-    )
-    try:
-        robots = wait_for_processes(run_id, "robot_agent.node", 4, timeout=60)
-        victim = next(pid for pid in robots if "--id 3 " in _cmdline(pid))
-        time.sleep(2.0)  # let the swarm get going
-        os.kill(victim, signal.SIGKILL)
-        stdout, stderr = process.communicate(timeout=180)
-    finally:
-        if process.poll() is None:
-            process.kill()
-        left = kill_leftovers(run_id)
+    keys = protocol.Keys(run_id)
+    with loopback_router() as (session, endpoint):
+        sim_time = [0.0]
+        session.declare_subscriber(
+            keys.world_clock,
+            lambda sample: sim_time.__setitem__(
+                0, protocol.decode(sample.payload.to_bytes(), protocol.Clock).t
+            ),
+        )
+        command = swarm_command(
+            "run", "--run-id", run_id, "--json", "--quiet", *SMALL, "--seed", "2",
+            "--stall-timeout", "1", "--connect", endpoint,
+        )
+        process = subprocess.Popen(
+            command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        )
+        try:
+            robots = wait_for_processes(run_id, "robot_agent.node", 4, timeout=60)
+            victim = next(pid for pid in robots if "--id 3 " in _cmdline(pid))
+            deadline = time.monotonic() + 60
+            while sim_time[0] < 5.0 and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert sim_time[0] >= 5.0, "the run never started"
+            os.kill(victim, signal.SIGKILL)
+            killed_at = sim_time[0]
+            stdout, stderr = process.communicate(timeout=180)
+        finally:
+            if process.poll() is None:
+                process.kill()
+            left = kill_leftovers(run_id)
     assert process.returncode == 1, stderr.decode()  # a component crashed
     summary = json.loads(stdout)
     by_id = {robot["id"]: robot for robot in summary["per_robot"]}
     assert by_id[3]["crashed"]
+    assert by_id[3]["decided_site"] is None or by_id[3]["decision_time_s"] <= killed_at
     for robot in (0, 1, 2):
         assert not by_id[robot]["crashed"]
         assert by_id[robot]["decided_site"] == summary["best_site"]
@@ -206,3 +220,31 @@ def test_alpha_without_threshold_is_a_usage_error_not_a_traceback() -> None:
     assert done.returncode == 2
     assert "Traceback" not in done.stderr.decode()
     assert "threshold" in done.stderr.decode()
+
+
+def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run() -> None:
+    """Same seed: the distributed run and the single-process run agree robot by robot."""
+    from deploy.inmemory import run_in_memory
+    from robot_agent import node
+    from world_server import server
+
+    seed, robots, sites = 5, 3, 6
+    common = ["--seed", str(seed), "--robots", str(robots), "--sites", str(sites)]
+    world_config = server.config_from_args(
+        server.build_parser().parse_args([*common, "--run-id", "memory"])
+    )
+    controller_config = node.controller_config(node.build_parser().parse_args(["--id", "0"]))
+    in_memory = run_in_memory(world_config, controller_config, timeout=900)
+    code, over_zenoh, stderr = run_swarm(
+        [*common, "--timeout", "900", "--no-record"], unique_run_id("vs-memory")
+    )
+    assert code == 0, stderr
+
+    def decisions(summary: dict[str, object]) -> list[tuple[object, ...]]:
+        return [
+            (r["id"], r["decided_site"], r["steps"], r["decision_time_s"], r["pool_sizes"])
+            for r in summary["per_robot"]  # type: ignore[attr-defined]
+        ]
+
+    assert decisions(over_zenoh) == decisions(in_memory)
+    assert over_zenoh["sim_time_s"] == in_memory["sim_time_s"]

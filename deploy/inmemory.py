@@ -1,0 +1,100 @@
+"""A whole lockstep run in one process, without Zenoh: for tests, sweeps and benchmarks.
+
+It drives the same World, the same controllers (through ``robot_agent.lockstep``, as
+``node.py`` does) and the same beacon logic as ``swarm run``, tick by tick in the same
+order, so a seed gives the same per-robot results here as over Zenoh.
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from deploy.summary import RobotRecord, RunOutcome, build_summary
+from nest_beacon.beacon import Beacon, BeaconConfig
+from robot_agent import protocol
+from robot_agent.controller import Controller, ControllerConfig
+from robot_agent.lockstep import answer_tick
+from robot_agent.ports import RejectCounter
+from world_server.world import Transmission, World, WorldConfig
+
+
+@dataclass
+class _Robot:
+    controller: Controller
+    record: RobotRecord
+    rejects: RejectCounter = field(default_factory=RejectCounter)
+    seq: int = 0
+
+
+def run_in_memory(
+    world_config: WorldConfig,
+    controller_config: ControllerConfig,
+    beacon_config: BeaconConfig | None = None,
+    *,
+    timeout: float = 1800.0,
+    on_tick: Callable[[World], None] | None = None,
+) -> dict[str, Any]:
+    """Run to consensus (every robot decided) or ``timeout`` sim seconds; the summary is
+    the ``swarm run --json`` object (wall-clock fields are zero)."""
+    world = World(world_config)
+    beacon_config = beacon_config or BeaconConfig()
+    beacon = Beacon(
+        beacon_config,
+        random.Random(protocol.derive_seed(world_config.seed, "beacon", beacon_config.name)),
+    )
+    world.join_beacon(beacon_config.name)
+    robots: dict[int, _Robot] = {}
+    for robot_id in range(world_config.num_robots):
+        world.join_robot(robot_id)
+        rng = random.Random(protocol.derive_seed(world_config.seed, "robot", robot_id))
+        controller = Controller(robot_id, world.info, controller_config, rng)
+        robots[robot_id] = _Robot(controller, RobotRecord(robot_id))
+    deliveries: dict[str, list[tuple[str, bytes]]] = {}
+    frames: dict[int, bytes] = {}
+    while True:
+        acts: dict[int, protocol.Act] = {}
+        transmissions: list[Transmission] = []
+        for robot_id, robot in robots.items():
+            name = protocol.radio_name(robot_id)
+            radio = deliveries.get(name, [])
+            sense = world.sense(robot_id, len(radio), robot_id in frames)
+            answer = answer_tick(
+                robot.controller, sense, radio, frames.get(robot_id), robot.rejects,
+                seq=robot.seq,
+            )
+            robot.seq = answer.next_seq
+            acts[robot_id] = answer.act
+            transmissions += [Transmission(name, seq, data) for seq, data in answer.transmissions]
+            if robot.controller.take_status_change():
+                robot.record.update(robot.controller.status(world.tick))
+        for message in beacon.on_tick(world.t):
+            transmissions.append(
+                Transmission(beacon_config.name, message.seq, protocol.encode(message))
+            )
+        if on_tick is not None:
+            on_tick(world)
+        decided = all(robot.controller.decided_site is not None for robot in robots.values())
+        if decided or world.t >= timeout:
+            break
+        result = world.advance(acts, transmissions)
+        deliveries = {
+            receiver: [(item.sender, item.payload) for item in items]
+            for receiver, items in result.deliveries.items()
+        }
+        frames = result.frames
+    for robot in robots.values():
+        robot.record.update(robot.controller.status(world.tick))
+    state = world.state()
+    return build_summary(
+        RunOutcome(
+            run_id=world_config.run, num_robots=world_config.num_robots,
+            num_sites=world_config.num_sites, seed=world_config.seed,
+            best_site=world.layout.best_site, sim_time_s=world.t, wall_time_s=0.0,
+            timed_out=not decided, radio=state.radio, world_rejected=0, stalls=0,
+            observer_rejected=0, config={},
+        ),
+        [robot.record for robot in robots.values()],
+    )
