@@ -26,15 +26,41 @@ from rich.table import Table
 
 from deploy.processes import Child, ProcessGroup, free_port, python_module, wait_for_port
 from deploy.summary import RobotRecord, RunOutcome, build_summary, describe
+from nest_beacon.options import add_beacon_options
 from robot_agent import cliargs, protocol
 from robot_agent.cliargs import UsageError
-from robot_agent.node import add_controller_options, controller_config, fetch_world_info
+from robot_agent.node import fetch_world_info
+from robot_agent.options import add_controller_options, controller_config
 from robot_agent.zenoh_session import open_session
 from world_server.layout import make_layout
+from world_server.options import add_world_options
 
 log = logging.getLogger("swarm.run")
 
 EXIT_OK, EXIT_CRASH, EXIT_USAGE = 0, 1, 2
+
+
+def robot_at_time(text: str) -> tuple[int, float]:
+    """``ROBOT@SIMTIME``, e.g. ``3@60``: robot 3 at 60 s of sim time."""
+    robot, sep, when = text.partition("@")
+    try:
+        if not sep or not robot.isdigit():
+            raise ValueError
+        at = float(when)
+        if not 0.0 <= at < 1e9:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not ROBOT@SIMTIME, e.g. 3@60 (robot 3 at 60 sim seconds)"
+        ) from None
+    return int(robot), at
+
+
+@dataclass(frozen=True)
+class ForwardedOptions:
+    world: list[argparse.Action]
+    beacon: list[argparse.Action]
+    controller: list[argparse.Action]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -46,27 +72,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     swarm.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
     swarm.add_argument("--run-id", type=cliargs.name, default=None,
                        help="names this swarm on the network (default: run-<seed>-<time>)")
-    add_controller_options(parser)
-    clock = parser.add_argument_group("clock")
-    clock.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep",
-                       help="lockstep: deterministic, as fast as the processes go; realtime: "
-                       "follows the wall clock (default: lockstep)")
-    clock.add_argument("--speed", type=cliargs.float_range(0.01, 1000.0), default=1.0,
-                       help="real-time speed factor, realtime clock only (default: 1)")
-    clock.add_argument("--timeout", type=cliargs.positive_float, default=1800.0,
-                       metavar="SIM_SECONDS", help="give up after this much sim time "
-                       "(default: 1800)")
-    clock.add_argument("--stall-timeout", type=cliargs.positive_float, default=2.0,
-                       help="wall seconds the world waits for a silent controller (default: 2)")
-    radio = parser.add_argument_group("radio")
-    radio.add_argument("--radio-range", type=cliargs.positive_float, default=0.5,
-                       help="robot radio range in metres (default: 0.5)")
-    radio.add_argument("--beacon-range", type=cliargs.positive_float, default=None,
-                       help="beacon range in metres (default: the nest radius)")
-    radio.add_argument("--drop", type=cliargs.probability, default=0.0,
-                       help="iid radio drop probability (default: 0)")
-    radio.add_argument("--latency", type=cliargs.non_negative_int, default=0,
-                       metavar="TICKS", help="extra radio latency in ticks (default: 0)")
+    swarm.add_argument("--timeout", type=cliargs.positive_float, default=1800.0,
+                       metavar="SIM_SECONDS",
+                       help="give up after this much sim time (default: 1800)")
+    controller = add_controller_options(parser)
+    world = add_world_options(parser)
+    beacon = add_beacon_options(parser, prefix="beacon-")
+    faults = parser.add_argument_group("robot faults")
+    faults.add_argument("--kill", type=robot_at_time, action="append", default=[],
+                        metavar="ROBOT@SIMTIME",
+                        help="SIGKILL robot ROBOT's process at SIMTIME sim seconds "
+                        "(repeatable); the swarm goes on without it")
+    faults.add_argument("--restart", type=robot_at_time, action="append", default=[],
+                        metavar="ROBOT@SIMTIME",
+                        help="start a fresh process for robot ROBOT at SIMTIME (repeatable); "
+                        "it is killed first if still running, and rejoins with a new "
+                        "controller and its old body")
     network = parser.add_argument_group("network")
     network.add_argument("--connect", type=cliargs.endpoint, default=None, metavar="ENDPOINT",
                          help="use this existing Zenoh router instead of making the world "
@@ -80,6 +101,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     output.add_argument("--quiet", action="store_true", help="no progress display")
     output.add_argument("--verbose", action="store_true",
                         help="echo the processes' logs on stderr")
+    parser.set_defaults(forwarded=ForwardedOptions(world, beacon, controller))
+
+
+@dataclass(frozen=True)
+class Fault:
+    robot: int
+    action: str  # kill | restart
+    at: float  # sim seconds
 
 
 @dataclass
@@ -98,11 +127,24 @@ class RunPlan:
     robot_args: list[str]
     beacon_args: list[str]
     recorder_args: list[str] = field(default_factory=list)
+    faults: list[Fault] = field(default_factory=list)
     config: dict[str, Any] = field(default_factory=dict)
+
+
+NOT_CONFIG = {"module", "command", "json", "quiet", "verbose", "forwarded"}
 
 
 def plan_from_args(args: argparse.Namespace) -> RunPlan:
     controller_config(args)  # validates alpha/threshold together; ValueError -> usage error
+    faults = sorted(
+        [Fault(robot, "kill", at) for robot, at in args.kill]
+        + [Fault(robot, "restart", at) for robot, at in args.restart],
+        key=lambda fault: fault.at,
+    )
+    for fault in faults:
+        if fault.robot >= args.robots:
+            raise ValueError(f"--{fault.action} {fault.robot}@...: there is no robot "
+                             f"{fault.robot} in a swarm of {args.robots}")
     run_id = args.run_id or f"run-{args.seed}-{int(time.time() * 1000) % 10**9}"
     if args.connect:
         port, endpoint = None, args.connect
@@ -111,32 +153,19 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         port = free_port()
         endpoint = f"tcp/127.0.0.1:{port}"
         world_network = ["--mode", "router", "--listen", endpoint]
+    forwarded: ForwardedOptions = args.forwarded
     common = ["--run-id", run_id, "--seed", str(args.seed)]
-    world_args = [
-        *common, *world_network,
-        "--robots", str(args.robots), "--sites", str(args.sites),
-        "--clock", args.clock, "--speed", str(args.speed),
-        "--stall-timeout", str(args.stall_timeout),
-        "--radio-range", str(args.radio_range), "--drop", str(args.drop),
-        "--latency", str(args.latency),
-    ]
-    if args.beacon_range is not None:
-        world_args += ["--beacon-range", str(args.beacon_range)]
     client = ["--mode", "client", "--connect", endpoint]
-    robot_args = [
-        *common, *client, "--alpha", str(args.alpha), "--dwell", str(args.dwell),
-        "--broadcast-period", str(args.broadcast_period), "--linger", str(args.linger),
+    world_args = [
+        *common, *world_network, "--robots", str(args.robots), "--sites", str(args.sites),
+        *cliargs.forward_argv(forwarded.world, args),
     ]
-    if args.threshold is not None:
-        robot_args += ["--threshold", str(args.threshold)]
-    config = {
-        key: getattr(args, key)
-        for key in (
-            "robots", "sites", "seed", "alpha", "threshold", "dwell", "broadcast_period",
-            "linger", "clock", "speed", "timeout", "radio_range", "beacon_range", "drop",
-            "latency", "stall_timeout",
-        )
-    }
+    robot_args = [*common, *client, *cliargs.forward_argv(forwarded.controller, args)]
+    beacon_args = [
+        *common, *client, *cliargs.forward_argv(forwarded.beacon, args, strip_prefix="beacon-")
+    ]
+    config = {key: value for key, value in vars(args).items() if key not in NOT_CONFIG}
+    config["run_id"] = run_id
     record = None if args.no_record else Path(args.record or f"runs/{run_id}.mcap")
     recorder_args = [
         *common, *client, "--out", str(record), "--robots", str(args.robots),
@@ -145,8 +174,8 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     return RunPlan(
         run_id=run_id, robots=args.robots, sites=args.sites, seed=args.seed,
         timeout=args.timeout, endpoint=endpoint, port=port, record=record,
-        world_args=world_args, robot_args=robot_args, beacon_args=[*common, *client],
-        recorder_args=recorder_args, config=config,
+        world_args=world_args, robot_args=robot_args, beacon_args=beacon_args,
+        recorder_args=recorder_args, faults=faults, config=config,
     )
 
 
@@ -170,6 +199,8 @@ class Swarm:
         self.last_state: protocol.WorldState | None = None
         self.rejected = 0  # invalid messages the launcher itself received
         self.final_stats: protocol.WorldState | None = None
+        self.pending_faults = list(plan.faults)
+        self.fault_log: list[dict[str, Any]] = []
 
     def _on_log_line(self, process: str, line: str) -> None:
         """Echo a child's log line, and publish it so that the recorder keeps it."""
@@ -215,10 +246,7 @@ class Swarm:
                 raise StartError("the recorder did not start", self.recorder)
         self.group.start("beacon", python_module("nest_beacon", *plan.beacon_args))
         for robot in range(plan.robots):
-            self.robot_children[robot] = self.group.start(
-                f"robot-{robot}",
-                python_module("robot_agent.node", "--id", str(robot), *plan.robot_args),
-            )
+            self.robot_children[robot] = self._start_robot(robot)
 
     def _on(self, kind: str) -> Callable[[zenoh.Sample], None]:
         def callback(sample: zenoh.Sample) -> None:
@@ -264,6 +292,31 @@ class Swarm:
             if not child.alive() and not child.expected_exit:
                 self.records[robot].crashed = True
 
+    def apply_faults(self) -> None:
+        """Kill and restart robots whose time has come (in sim time)."""
+        while self.pending_faults and self.pending_faults[0].at <= self.sim_time:
+            fault = self.pending_faults.pop(0)
+            child = self.robot_children[fault.robot]
+            was_alive = child.alive()
+            self.group.kill(child)
+            record = self.records[fault.robot]
+            record.killed = fault.action == "kill"
+            if fault.action == "restart":
+                record.restarting = True
+                record.crashed = False
+                self.robot_children[fault.robot] = self._start_robot(fault.robot)
+            self.fault_log.append({
+                "robot": fault.robot, "action": fault.action, "at_s": fault.at,
+                "applied_at_s": round(self.sim_time, 3), "was_running": was_alive,
+            })
+            log.info("%s robot %d at sim time %.1f", fault.action, fault.robot, self.sim_time)
+
+    def _start_robot(self, robot: int) -> Child:
+        return self.group.start(
+            f"robot-{robot}",
+            python_module("robot_agent.node", "--id", str(robot), *self.plan.robot_args),
+        )
+
     def infrastructure_crash(self) -> Child | None:
         for child in self.group.crashed():
             if not child.name.startswith("robot-"):
@@ -277,6 +330,9 @@ class Swarm:
         return sum(1 for record in self.records.values() if record.decided_site is not None)
 
     def all_live_decided(self) -> bool:
+        """Every running robot has decided, and no restart is still to come."""
+        if any(fault.action == "restart" for fault in self.pending_faults):
+            return False
         return all(self.records[robot].decided_site is not None for robot in self.live_robots())
 
     def trips(self) -> int:
@@ -388,6 +444,7 @@ def _run_swarm(swarm: Swarm, args: argparse.Namespace, console: Console) -> int:
         ),
         swarm.records.values(),
     )
+    summary["faults"] = swarm.fault_log
     summary["recording"] = str(plan.record) if plan.record else None
     if plan.record is not None and not swarm.finish_recording(summary):
         print(f"swarm run: the recorder did not confirm {plan.record}", file=sys.stderr)
@@ -413,8 +470,10 @@ def _watch(swarm: Swarm, console: Console, quiet: bool) -> tuple[bool, Child | N
     with progress:
         task = progress.add_task("decided", total=plan.robots, info="starting")
         while True:
-            time.sleep(0.1)
+            # Poll often while a fault is due, so it lands close to its sim time.
+            time.sleep(0.005 if swarm.pending_faults else 0.1)
             swarm.poll()
+            swarm.apply_faults()
             crashed = swarm.infrastructure_crash()
             if crashed is not None:
                 return False, crashed

@@ -20,9 +20,12 @@ class RobotRecord:
     missed_poolings: int = 0
     restarts: int = 0
     crashed: bool = False
+    killed: bool = False  # on purpose (--kill), not restarted
+    restarting: bool = False  # a fresh process was started and has not reported yet
     _poolings_before_restart: int = 0
 
     def update(self, status: protocol.Status) -> None:
+        self.restarting = False
         if self.status is not None and _is_restart(self.status, status):
             # A fresh controller (a restarted robot) counts its poolings from zero again.
             self.restarts += 1
@@ -35,7 +38,9 @@ class RobotRecord:
 
     @property
     def decided_site(self) -> int | None:
-        return self.status.decided_site if self.status else None
+        if self.restarting or self.status is None:
+            return None
+        return self.status.decided_site
 
 
 @dataclass(frozen=True)
@@ -62,16 +67,21 @@ def _is_restart(previous: protocol.Status, current: protocol.Status) -> bool:
 def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[str, Any]:
     """The ``swarm run --json`` object."""
     robots = sorted(records, key=lambda record: record.id)
-    decided = [record.decided_site for record in robots]
+    # Consensus is among the robots still running at the end: one killed on purpose or
+    # crashed cannot hold up or spoil the swarm's decision (it is reported separately).
+    survivors = [record for record in robots if not record.killed and not record.crashed]
+    decided = [record.decided_site for record in survivors]
     consensus = (
-        bool(robots) and all(site is not None for site in decided) and len(set(decided)) == 1
+        bool(survivors) and all(site is not None for site in decided) and len(set(decided)) == 1
     )
     chosen = decided[0] if consensus else None
     wall = max(outcome.wall_time_s, 1e-9)
-    decision_times = [r.status.decision_time for r in robots if r.status and r.status.decision_time]
+    decision_times = [
+        r.status.decision_time for r in survivors if r.status and r.status.decision_time
+    ]
     # The run's length in sim time is when its last robot decided (deterministic in
     # lockstep); the launcher notices a little later, which only the speed figure uses.
-    all_decided = bool(robots) and all(site is not None for site in decided)
+    all_decided = bool(survivors) and all(site is not None for site in decided)
     sim_time = max(decision_times) if all_decided and decision_times else outcome.sim_time_s
     return {
         "run_id": outcome.run_id,
@@ -117,6 +127,7 @@ def robot_summary(record: RobotRecord) -> dict[str, Any]:
         "pool_sizes": list(record.pool_sizes),
         "rejected": status.rejected if status else 0,
         "restarts": record.restarts,
+        "killed": record.killed,
         "crashed": record.crashed,
     }
 

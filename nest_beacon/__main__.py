@@ -17,7 +17,8 @@ from collections.abc import Sequence
 
 import zenoh
 
-from nest_beacon.beacon import Beacon, BeaconConfig, parse_outages
+from nest_beacon.beacon import Beacon
+from nest_beacon.options import add_beacon_options, beacon_config
 from robot_agent import cliargs, protocol
 from robot_agent.lifecycle import die_with_launcher
 from robot_agent.zenoh_session import open_from_args, reliable_publisher
@@ -32,12 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--name", type=cliargs.name, default="nest",
                         help="beacon id on the radio; not all digits (default: nest)")
-    parser.add_argument("--period", type=cliargs.positive_float, default=0.5,
-                        help="sim seconds between transmissions (default: 0.5)")
-    parser.add_argument("--outage", action="append", default=[], metavar="START:END",
-                        help="silent from START to END sim seconds (repeatable)")
-    parser.add_argument("--flaky", type=cliargs.probability, default=0.0,
-                        help="probability that a due transmission is skipped (default: 0)")
+    add_beacon_options(parser)
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
     cliargs.add_zenoh_options(parser)
     parser.add_argument("--log-level", default="INFO",
@@ -50,10 +46,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        config = BeaconConfig(
-            name=args.name, period=args.period, outages=parse_outages(args.outage),
-            flaky=args.flaky,
-        )
+        config = beacon_config(args, args.name)
     except ValueError as error:
         parser.exit(2, f"nest-beacon: error: {error}\n")
     logging.basicConfig(
@@ -77,7 +70,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             keys.world_clock, lambda sample: clocks.put(sample.payload.to_bytes())
         )
         token = session.liveliness().declare_token(keys.alive("beacon", args.name))
-        log.info("beacon %s transmitting every %.2fs of sim time", args.name, args.period)
+        log.info("beacon %s transmitting every %.2fs of sim time", args.name, config.period)
         while True:
             try:
                 payload = clocks.get(timeout=0.5)

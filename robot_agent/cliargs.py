@@ -127,3 +127,29 @@ def add_zenoh_options(parser: argparse.ArgumentParser, *, default_mode: str = "c
     group.add_argument(
         "--run-id", type=name, default="run", help="names one swarm on the network (default: run)"
     )
+
+
+def forward_argv(
+    actions: list[argparse.Action], args: argparse.Namespace, *, strip_prefix: str = ""
+) -> list[str]:
+    """The command-line options that reproduce ``args`` for ``actions`` in a child process.
+
+    Only values that differ from the defaults are forwarded. ``strip_prefix`` turns a
+    launcher's ``--beacon-period`` into the child's ``--period``.
+    """
+    argv: list[str] = []
+    for action in actions:
+        value = getattr(args, action.dest, None)
+        if value is None or value == action.default:
+            continue
+        flag = max(action.option_strings, key=len).replace(f"--{strip_prefix}", "--", 1)
+        if isinstance(action, argparse._StoreTrueAction):
+            argv.append(flag)
+        elif isinstance(action, argparse._AppendAction):
+            for item in value:
+                argv += [flag, str(item)]
+        elif isinstance(value, list):
+            argv += [flag, *map(str, value)]
+        else:
+            argv += [flag, str(value)]
+    return argv

@@ -25,9 +25,10 @@ import msgspec
 import zenoh
 
 from robot_agent import cliargs, protocol
-from robot_agent.controller import Controller, ControllerConfig
+from robot_agent.controller import Controller
 from robot_agent.lifecycle import die_with_launcher
 from robot_agent.lockstep import answer_tick
+from robot_agent.options import add_controller_options, controller_config
 from robot_agent.ports import RejectCounter
 from robot_agent.zenoh_session import open_from_args, reliable_publisher
 
@@ -223,32 +224,6 @@ def serve(nodes: Sequence[RobotNode], inbox: queue.SimpleQueue[Event]) -> None:
 
 
 # --- command line ------------------------------------------------------------------------
-
-
-def add_controller_options(parser: argparse.ArgumentParser) -> None:
-    group = parser.add_argument_group("decision")
-    group.add_argument("--alpha", type=cliargs.alpha, default=0.0,
-                       help="evidence reliability parameter of Definition 1, in [0, 0.5] "
-                       "(default: 0)")
-    group.add_argument("--threshold", type=cliargs.threshold, default=None,
-                       help="decide when an option reaches this probability "
-                       "(default: 1, or 0.99 when alpha > 0)")
-    group.add_argument("--dwell", type=cliargs.positive_float, default=3.0,
-                       help="sim seconds at the nest broadcasting and listening (default: 3)")
-    group.add_argument("--broadcast-period", type=cliargs.positive_float, default=0.5,
-                       help="sim seconds between opinion broadcasts at the nest (default: 0.5)")
-    group.add_argument("--linger", type=cliargs.non_negative_float, default=0.0,
-                       help="sim seconds broadcasting at the nest after deciding (default: 0)")
-
-
-def controller_config(args: argparse.Namespace) -> ControllerConfig:
-    threshold = args.threshold
-    if threshold is None:
-        threshold = 1.0 if args.alpha == 0 else 0.99
-    return ControllerConfig(
-        alpha=args.alpha, threshold=threshold, dwell=args.dwell,
-        broadcast_period=args.broadcast_period, linger=args.linger,
-    )
 
 
 def build_parser() -> argparse.ArgumentParser:

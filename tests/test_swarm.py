@@ -225,7 +225,7 @@ def test_alpha_without_threshold_is_a_usage_error_not_a_traceback() -> None:
 def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run() -> None:
     """Same seed: the distributed run and the single-process run agree robot by robot."""
     from deploy.inmemory import run_in_memory
-    from robot_agent import node
+    from robot_agent import node, options
     from world_server import server
 
     seed, robots, sites = 5, 3, 6
@@ -233,7 +233,9 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run() -> None:
     world_config = server.config_from_args(
         server.build_parser().parse_args([*common, "--run-id", "memory"])
     )
-    controller_config = node.controller_config(node.build_parser().parse_args(["--id", "0"]))
+    controller_config = options.controller_config(
+        node.build_parser().parse_args(["--id", "0"])
+    )
     in_memory = run_in_memory(world_config, controller_config, timeout=900)
     code, over_zenoh, stderr = run_swarm(
         [*common, "--timeout", "900", "--no-record"], unique_run_id("vs-memory")

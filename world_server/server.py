@@ -23,10 +23,9 @@ import zenoh
 from robot_agent import cliargs, protocol
 from robot_agent.lifecycle import die_with_launcher
 from robot_agent.zenoh_session import open_from_args, reliable_publisher, reliable_put
-from world_server.camera import CameraNoise
 from world_server.clock import Barrier, Pacer
-from world_server.radio import RadioConfig
-from world_server.world import DEFAULT_CAMERA, Transmission, World, WorldConfig
+from world_server.options import add_world_options, world_config
+from world_server.world import Transmission, World, WorldConfig
 
 log = logging.getLogger("world_server")
 
@@ -405,31 +404,9 @@ def build_parser() -> argparse.ArgumentParser:
     world.add_argument("--beacons", type=cliargs.non_negative_int, default=1,
                        help="nest beacons to wait for before starting (default: 1)")
     world.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
-    world.add_argument("--dt", type=cliargs.float_range(0.001, 1.0), default=0.1,
-                       help="control tick in sim seconds (default: 0.1)")
-    world.add_argument("--substeps", type=cliargs.int_range(1, 50), default=2,
-                       help="physics steps per tick (default: 2)")
-    clock = parser.add_argument_group("clock")
-    clock.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep",
-                       help="lockstep waits for every controller each tick; realtime follows "
-                       "the wall clock (default: lockstep)")
-    clock.add_argument("--speed", type=cliargs.float_range(0.01, 1000.0), default=1.0,
-                       help="real-time speed factor (realtime clock only; default: 1)")
-    clock.add_argument("--stall-timeout", type=cliargs.positive_float, default=2.0,
-                       help="lockstep: wall seconds to wait for a silent controller (default: 2)")
-    clock.add_argument("--start-timeout", type=cliargs.positive_float, default=60.0,
+    world.add_argument("--start-timeout", type=cliargs.positive_float, default=60.0,
                        help="wall seconds to wait for the expected robots (default: 60)")
-    clock.add_argument("--state-every", type=cliargs.positive_int, default=10,
-                       help="publish world/state every N ticks (default: 10)")
-    radio = parser.add_argument_group("radio medium")
-    radio.add_argument("--radio-range", type=cliargs.positive_float, default=0.5,
-                       help="robot radio range in metres (default: 0.5)")
-    radio.add_argument("--beacon-range", type=cliargs.positive_float, default=None,
-                       help="beacon range in metres (default: the nest radius)")
-    radio.add_argument("--drop", type=cliargs.probability, default=0.0,
-                       help="iid drop probability per message and receiver (default: 0)")
-    radio.add_argument("--latency", type=cliargs.non_negative_int, default=0,
-                       help="extra delivery latency in ticks (default: 0)")
+    add_world_options(parser)
     cliargs.add_zenoh_options(parser, default_mode="router")
     parser.add_argument("--log-level", default="INFO",
                         choices=["DEBUG", "INFO", "WARNING", "ERROR"])
@@ -437,26 +414,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def config_from_args(args: argparse.Namespace) -> WorldConfig:
-    from world_server.layout import nest_radius_for
-
-    beacon_range = args.beacon_range or nest_radius_for(args.robots)
-    return WorldConfig(
-        run=args.run_id,
-        seed=args.seed,
-        num_sites=args.sites,
-        num_robots=args.robots,
-        dt=args.dt,
-        substeps=args.substeps,
-        clock=args.clock,
-        radio=RadioConfig(
-            robot_range=args.radio_range,
-            beacon_range=beacon_range,
-            drop=args.drop,
-            latency=args.latency,
-        ),
-        camera=DEFAULT_CAMERA,
-        camera_noise=CameraNoise(),
-    )
+    return world_config(args, run=args.run_id, seed=args.seed, sites=args.sites,
+                        robots=args.robots)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
