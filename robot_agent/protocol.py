@@ -366,7 +366,7 @@ def decode(payload: bytes | bytearray | memoryview, kind: type[M]) -> M:
         decoder = _decoders[kind] = msgspec.json.Decoder(kind)
     try:
         return decoder.decode(payload)
-    except (msgspec.DecodeError, msgspec.ValidationError) as error:
+    except (msgspec.DecodeError, msgspec.ValidationError, UnicodeDecodeError) as error:
         raise ProtocolError(str(error)) from None
 
 

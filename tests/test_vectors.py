@@ -1,0 +1,170 @@
+"""The conformance vectors in tests/vectors/ agree with the codec, and with their generator.
+
+A port in another language runs the same checks against the same files (docs/porting.md).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import make_vectors
+import msgspec
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from robot_agent import protocol
+from robot_agent.udp_radio import (
+    MAX_DATAGRAM_BYTES,
+    MAX_PAYLOAD_BYTES,
+    FrameError,
+    decode_frame,
+    encode_frame,
+)
+
+VECTORS = Path(__file__).resolve().parent / "vectors"
+ZENOH_PICO_BATCH = 2048  # bytes: one opinion and its attachment must fit one batch
+
+
+def load(path: Path) -> dict[str, Any]:
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+MESSAGE_FILES = {
+    path.name: load(path)
+    for path in sorted(VECTORS.glob("*.json"))
+    if path.name != "udp_frame.json"
+}
+
+def cases(section: str) -> list[Any]:
+    return [
+        pytest.param(
+            name, content, vector,
+            id=f"{name[:-5]}-{vector['name']}",
+        )
+        for name, content in MESSAGE_FILES.items()
+        for vector in content[section]
+    ]
+
+
+def bytes_of(vector: dict[str, Any]) -> bytes:
+    data = bytes.fromhex(vector["hex"])
+    if vector["utf8"] is not None:
+        assert vector["utf8"].encode("utf-8") == data  # the two spellings agree
+    return data
+
+
+def decode(content: dict[str, Any], data: bytes) -> msgspec.Struct:
+    if content["decoder"] == "radio":
+        return protocol.decode_radio(data)
+    assert content["decoder"] == "message"
+    return protocol.decode(data, getattr(protocol, content["type"]))
+
+
+def test_every_message_type_has_vectors_of_every_kind() -> None:
+    defined = {
+        name
+        for name, value in vars(protocol).items()
+        if isinstance(value, type)
+        and issubclass(value, protocol.Message | protocol.OpinionPayload | protocol.BeaconPayload)
+        and value is not protocol.Message
+    }
+    covered = {content["type"] for content in MESSAGE_FILES.values()}
+    assert defined == covered
+    for name, content in MESSAGE_FILES.items():
+        assert content["protocol_version"] == protocol.VERSION
+        assert content["valid"], name
+        categories = {vector["category"] for vector in content["invalid"]}
+        assert {"wrong_version", "unknown_field", "missing_field"} <= categories, name
+    every_category = {
+        vector["category"] for content in MESSAGE_FILES.values() for vector in content["invalid"]
+    }
+    assert {
+        "nan_token", "out_of_range", "wrong_length", "wrong_type", "malformed_json",
+        "opinion_sum", "bad_enum", "bad_name", "number_overflow",
+    } <= every_category
+
+
+@pytest.mark.parametrize(("file", "content", "vector"), cases("valid"))
+def test_valid_vectors_decode_and_encode_to_the_same_bytes(
+    file: str, content: dict[str, Any], vector: dict[str, Any]
+) -> None:
+    data = bytes_of(vector)
+    message = decode(content, data)
+    assert type(message).__name__ == content["type"]
+    assert protocol.encode(message) == data
+    assert json.loads(data) == vector["message"]
+    assert msgspec.to_builtins(message) == vector["message"]
+
+
+@pytest.mark.parametrize(("file", "content", "vector"), cases("accepted"))
+def test_accepted_spellings_decode_to_the_canonical_message(
+    file: str, content: dict[str, Any], vector: dict[str, Any]
+) -> None:
+    data = bytes_of(vector)
+    canonical = bytes.fromhex(vector["canonical_hex"])
+    assert data != canonical
+    assert protocol.encode(decode(content, data)) == canonical
+
+
+@pytest.mark.parametrize(("file", "content", "vector"), cases("invalid"))
+def test_invalid_vectors_are_rejected_for_their_reason(
+    file: str, content: dict[str, Any], vector: dict[str, Any]
+) -> None:
+    with pytest.raises(protocol.ProtocolError) as error:
+        decode(content, bytes_of(vector))
+    if "at" in vector:
+        assert f"`{vector['at']}`" in str(error.value)
+    if vector["category"] == "opinion_sum":
+        assert "sums to" in str(error.value)
+
+
+UDP = load(VECTORS / "udp_frame.json")
+
+
+@pytest.mark.parametrize("vector", UDP["valid"], ids=[v["name"] for v in UDP["valid"]])
+def test_udp_frame_vectors_are_what_the_radio_sends(vector: dict[str, Any]) -> None:
+    frame = bytes.fromhex(vector["hex"])
+    payload = vector["payload_utf8"].encode()
+    assert encode_frame(vector["sender"], payload) == frame
+    assert decode_frame(frame) == (vector["sender"], payload)
+    assert len(frame) <= MAX_DATAGRAM_BYTES
+    protocol.decode_radio(payload)
+
+
+@pytest.mark.parametrize("vector", UDP["invalid"], ids=[v["name"] for v in UDP["invalid"]])
+def test_udp_frame_vectors_that_the_radio_drops(vector: dict[str, Any]) -> None:
+    with pytest.raises(FrameError):
+        decode_frame(bytes.fromhex(vector["hex"]))
+
+
+def test_the_files_are_exactly_what_the_generator_writes() -> None:
+    on_disk = {path.name: path.read_text(encoding="utf-8") for path in VECTORS.glob("*.json")}
+    assert on_disk == make_vectors.build(), "run: python tests/make_vectors.py"
+
+
+# --- the 2 KB budget ---------------------------------------------------------------------
+
+
+def test_the_longest_opinion_over_100_sites_fits_one_2kb_batch() -> None:
+    worst = make_vectors.worst_case_opinion(100)
+    assert len(set(worst)) == 100
+    assert protocol.wire_opinion(worst) == worst  # already at the wire's precision
+    assert sorted(len(msgspec.json.encode(value)) for value in worst)[-99:] == [15] * 99
+    payload = protocol.encode(protocol.OpinionPayload(
+        v=1, id=protocol.MAX_ROBOTS - 1, trip=2**53, decided=False, opinion=worst,
+    ))
+    assert protocol.decode_radio(payload).opinion == worst
+    attachment = protocol.encode(protocol.RadioTxMeta(v=1, tick=2**53, seq=2**53))
+    assert len(payload) + len(attachment) <= ZENOH_PICO_BATCH
+    assert len(payload) <= MAX_PAYLOAD_BYTES
+    assert len(encode_frame(str(protocol.MAX_ROBOTS - 1), payload)) <= MAX_DATAGRAM_BYTES
+
+
+@given(st.floats(min_value=0.0, max_value=1.0))
+def test_no_opinion_value_takes_more_than_15_characters_on_the_wire(value: float) -> None:
+    """What makes the vector above the worst case: 9 significant digits never print longer."""
+    (rounded,) = protocol.wire_opinion([value])
+    assert len(msgspec.json.encode(rounded)) <= 15
