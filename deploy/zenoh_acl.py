@@ -1,0 +1,499 @@
+"""Who may speak: Zenoh TLS and access-control configurations for a multi-host swarm.
+
+Every process of a secured swarm is a Zenoh client of its host's router over mutual TLS;
+the certificate's common name is its identity (``robot-3``, ``world``, ``beacon-nest``,
+``observer``, ``launcher``, ``recorder``; routers use their host name). The router's
+access control denies by default and allows each identity exactly its part of the
+protocol (robot_agent/protocol.py), so a robot can only publish its own ``act``,
+``status`` and ``radio/tx/<id>`` and only the world server can publish ``sense``,
+``camera`` and ``radio/rx``. See deploy/zenoh/README.md.
+
+    python -m deploy.zenoh_acl --robots 10 --run-id run --ca ca.pem --ca-key ca.key \\
+        --new-ca --out swarm-zenoh
+
+writes ``routers/<router>.json5``, ``clients/<identity>.json5`` and, when the CA key is
+given, a key and certificate per identity in ``certs/`` (issued with the openssl CLI).
+"""
+
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path, PurePath
+from typing import Any
+
+from robot_agent import cliargs, protocol
+
+DEFAULT_PORT = 7447
+DEFAULT_ROUTER = "router"
+DEFAULT_BEACON = "nest"
+# Identities (certificate common names) of the processes that are neither robots nor beacons.
+OBSERVER, LAUNCHER, RECORDER, WORLD = "observer", "launcher", "recorder", "world"
+# Zenoh 1.10's ACL message types (the config parser rejects any other name).
+ALL_MESSAGES = (
+    "put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
+    "liveliness_token", "declare_liveliness_subscriber", "liveliness_query",
+)
+_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")  # a key chunk and a certificate name
+_HOST_NAME = re.compile(r"[A-Za-z0-9]([A-Za-z0-9.-]{0,62}[A-Za-z0-9])?")
+
+
+def robot_identity(robot: int) -> str:
+    return f"robot-{robot}"
+
+
+def beacon_identity(name: str) -> str:
+    return f"beacon-{name}"
+
+
+@dataclass(frozen=True)
+class SwarmPlan:
+    """Who takes part in one secured run: the identities the router will know."""
+
+    keys: protocol.Keys
+    robots: tuple[int, ...]
+    beacons: tuple[str, ...] = (DEFAULT_BEACON,)
+    routers: tuple[str, ...] = (DEFAULT_ROUTER,)
+    port: int = DEFAULT_PORT
+
+    def __post_init__(self) -> None:
+        if len(set(self.robots)) != len(self.robots) or any(
+            not 0 <= robot < protocol.MAX_ROBOTS for robot in self.robots
+        ):
+            raise ValueError(f"robot ids must be distinct and in [0, {protocol.MAX_ROBOTS})")
+        for beacon in self.beacons:
+            if not _NAME.fullmatch(beacon):
+                raise ValueError(f"invalid beacon name {beacon!r}: use up to 64 letters, "
+                                 "digits, '-', '_', '.'")
+            # The world server tells beacons from robots by a non-numeric radio name.
+            if beacon.isdigit():
+                raise ValueError(f"beacon name {beacon!r} is a number: it would be a robot's")
+        if len(set(self.beacons)) != len(self.beacons):
+            raise ValueError("each beacon name may be given once")
+        clients = set(self.client_identities())
+        for router in self.routers:
+            if not _HOST_NAME.fullmatch(router) and not _is_ip(router):
+                raise ValueError(f"router name {router!r} is not a host name or IP address")
+            # A router's certificate grants everything: it must not name a client too.
+            if router in clients:
+                raise ValueError(f"router name {router!r} is also a client identity")
+        if not self.routers or len(set(self.routers)) != len(self.routers):
+            raise ValueError("give at least one router, each name once")
+        if not 0 < self.port < 65536:
+            raise ValueError(f"port {self.port} is outside [1, 65535]")
+
+    def client_identities(self) -> list[str]:
+        return [
+            WORLD,
+            *(robot_identity(robot) for robot in self.robots),
+            *(beacon_identity(beacon) for beacon in self.beacons),
+            OBSERVER,
+            LAUNCHER,
+            RECORDER,
+        ]
+
+
+# --- access control ------------------------------------------------------------------
+
+
+def _rule(
+    rule_id: str, flow: str, messages: Sequence[str], key_exprs: Sequence[str]
+) -> dict[str, Any]:
+    return {
+        "id": rule_id,
+        "permission": "allow",
+        "flows": [flow],
+        "messages": list(messages),
+        "key_exprs": list(key_exprs),
+    }
+
+
+def access_control(plan: SwarmPlan) -> dict[str, Any]:
+    """The router's ``access_control`` section: deny by default, allow each role its keys.
+
+    A router checks a message twice: ``ingress`` rules of the identity it comes from
+    (may it say this?) and ``egress`` rules of the identity it goes to (may it hear
+    this?). Rules only allow, so the deny-by-default decides everything else; rule key
+    expressions must include a message's key (a wider subscription is not matched).
+    """
+    keys = plan.keys
+    everything = [keys.all]
+    world_services = [keys.world_info, keys.world_stats]
+    rules: list[dict[str, Any]] = [
+        # Watching: subscribe to anything of the run, see who is alive, read world services.
+        _rule("read-subscribe", "ingress",
+              ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+              everything),
+        _rule("read-receive", "egress", ["put", "liveliness_token"], everything),
+        # Everyone may learn who subscribes: a declared publisher sends nothing until its
+        # router has told it of a matching subscriber (Zenoh's write-side filtering).
+        _rule("discover-subscribers", "egress", ["declare_subscriber"], everything),
+        _rule("read-query", "ingress", ["query"], world_services),
+        _rule("read-answer", "egress", ["reply"], world_services),
+        # A robot asks for the map.
+        _rule("robot-query-info", "ingress", ["query"], [keys.world_info]),
+        _rule("robot-answer-info", "egress", ["reply"], [keys.world_info]),
+        # The world server: the robots' bodies, the radio medium, the clock.
+        _rule("world-speak", "ingress", ["put"], [
+            keys.sense("*"), keys.camera("*"), keys.radio_rx("*"),
+            keys.world_clock, keys.world_state,
+        ]),
+        _rule("world-alive", "ingress", ["liveliness_token"], [keys.alive(WORLD, "*")]),
+        _rule("world-serve", "ingress", ["declare_queryable", "reply"], world_services),
+        _rule("world-asked", "egress", ["query"], world_services),
+        # Beacons hear the clock.
+        _rule("beacon-subscribe-clock", "ingress", ["declare_subscriber"], [keys.world_clock]),
+        _rule("beacon-receive-clock", "egress", ["put"], [keys.world_clock]),
+        # The launcher relays process logs and asks the recorder to finish.
+        _rule("launcher-log", "ingress", ["put"], [keys.log("*")]),
+        _rule("launcher-finish", "ingress", ["query"], [keys.recorder_finish]),
+        _rule("launcher-finished", "egress", ["reply"], [keys.recorder_finish]),
+        # The recorder answers the finish query once its file is complete.
+        _rule("recorder-serve", "ingress", ["declare_queryable", "reply"],
+              [keys.recorder_finish]),
+        _rule("recorder-asked", "egress", ["query"], [keys.recorder_finish]),
+        # Routers of the other hosts relay everyone's traffic; each checks its own clients.
+        _rule("router-relay-in", "ingress", ALL_MESSAGES, everything),
+        _rule("router-relay-out", "egress", ALL_MESSAGES, everything),
+    ]
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+
+    def grant(subject: str, rule_ids: Sequence[str], common_names: Sequence[str]) -> None:
+        subjects.append({
+            "id": subject, "cert_common_names": list(common_names), "link_protocols": ["tls"],
+        })
+        policies.append({"id": subject, "rules": list(rule_ids), "subjects": [subject]})
+
+    def grant_client(identity: str, rule_ids: Sequence[str]) -> None:
+        grant(identity, [*rule_ids, "discover-subscribers"], [identity])
+
+    reading = ["read-subscribe", "read-receive", "read-query", "read-answer"]
+    grant_client(WORLD, ["world-speak", "world-alive", "world-serve", "world-asked", *reading])
+    for robot in plan.robots:
+        identity, name = robot_identity(robot), protocol.radio_name(robot)
+        own_inputs = [keys.sense(robot), keys.camera(robot), keys.radio_rx(name)]
+        rules += [
+            _rule(f"{identity}-speak", "ingress", ["put"],
+                  [keys.act(robot), keys.status(robot), keys.radio_tx(name)]),
+            _rule(f"{identity}-alive", "ingress", ["liveliness_token"],
+                  [keys.alive("robot", robot)]),
+            _rule(f"{identity}-subscribe", "ingress", ["declare_subscriber"], own_inputs),
+            _rule(f"{identity}-receive", "egress", ["put"], own_inputs),
+        ]
+        grant_client(identity, [
+            f"{identity}-speak", f"{identity}-alive", f"{identity}-subscribe",
+            f"{identity}-receive", "robot-query-info", "robot-answer-info",
+        ])
+    for beacon in plan.beacons:
+        identity = beacon_identity(beacon)
+        rules += [
+            _rule(f"{identity}-speak", "ingress", ["put"],
+                  [keys.radio_tx(beacon), keys.beacon_ack(beacon)]),
+            _rule(f"{identity}-alive", "ingress", ["liveliness_token"],
+                  [keys.alive("beacon", beacon)]),
+        ]
+        grant_client(identity, [f"{identity}-speak", f"{identity}-alive",
+                                "beacon-subscribe-clock", "beacon-receive-clock"])
+    grant_client(OBSERVER, reading)
+    grant_client(LAUNCHER, [*reading, "launcher-log", "launcher-finish", "launcher-finished"])
+    grant_client(RECORDER, [*reading, "recorder-serve", "recorder-asked"])
+    grant("routers", ["router-relay-in", "router-relay-out"], plan.routers)
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
+# --- configurations ------------------------------------------------------------------
+
+
+def _certificate_paths(cert_dir: PurePath, identity: str) -> tuple[str, str]:
+    return str(cert_dir / f"{identity}.key"), str(cert_dir / f"{identity}.pem")
+
+
+def router_config(plan: SwarmPlan, router: str, cert_dir: PurePath) -> dict[str, Any]:
+    """A router that accepts only mutual-TLS clients and enforces ``access_control``."""
+    if router not in plan.routers:
+        raise ValueError(f"{router!r} is not one of the plan's routers {plan.routers}")
+    key, certificate = _certificate_paths(cert_dir, router)
+    others = [f"tls/{_host_in_endpoint(other)}:{plan.port}" for other in plan.routers
+              if other != router]
+    return {
+        "mode": "router",
+        "listen": {"endpoints": [f"tls/0.0.0.0:{plan.port}"]},
+        "connect": {"endpoints": others},
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": {"link": {
+            "protocols": ["tls"],
+            "tls": {
+                "root_ca_certificate": str(cert_dir / "ca.pem"),
+                "listen_private_key": key,
+                "listen_certificate": certificate,
+                "enable_mtls": True,
+                # Its own identity when it connects to the other hosts' routers.
+                "connect_private_key": key,
+                "connect_certificate": certificate,
+                "verify_name_on_connect": True,
+                "close_link_on_expiration": True,
+            },
+        }},
+        "access_control": access_control(plan),
+    }
+
+
+def client_config(plan: SwarmPlan, identity: str, cert_dir: PurePath) -> dict[str, Any]:
+    """A process's client session: mutual TLS to its host's router, nothing else."""
+    if identity not in plan.client_identities():
+        raise ValueError(f"{identity!r} is not one of the plan's identities")
+    key, certificate = _certificate_paths(cert_dir, identity)
+    return {
+        "mode": "client",
+        "connect": {"endpoints": [f"tls/127.0.0.1:{plan.port}"]},
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": {"link": {
+            "protocols": ["tls"],
+            "tls": {
+                "root_ca_certificate": str(cert_dir / "ca.pem"),
+                "enable_mtls": True,
+                "connect_private_key": key,
+                "connect_certificate": certificate,
+                "verify_name_on_connect": True,
+            },
+        }},
+    }
+
+
+def render(config: dict[str, Any], title: str) -> str:
+    """JSON5 text (plain JSON, which is JSON5) with a comment saying where it came from."""
+    header = (
+        f"// {title}\n"
+        "// Written by `python -m deploy.zenoh_acl`; see deploy/zenoh/README.md.\n"
+    )
+    return header + _json(config, 0) + "\n"
+
+
+def _json(value: Any, depth: int) -> str:
+    """Indented JSON that keeps short lists of plain values on one line, to stay readable."""
+    inner = "  " * (depth + 1)
+    if isinstance(value, dict) and value:
+        items = [f"{inner}{json.dumps(key)}: {_json(item, depth + 1)}"
+                 for key, item in value.items()]
+        return "{\n" + ",\n".join(items) + "\n" + "  " * depth + "}"
+    if isinstance(value, list) and value:
+        one_line = json.dumps(value)
+        if len(inner) + len(one_line) <= 90 and not any(
+            isinstance(item, dict | list) for item in value
+        ):
+            return one_line
+        return "[\n" + ",\n".join(inner + _json(item, depth + 1) for item in value) + "\n" \
+            + "  " * depth + "]"
+    return json.dumps(value)
+
+
+def plan_title(plan: SwarmPlan) -> str:
+    return (f"run {plan.keys.prefix}: {len(plan.robots)} robot(s), "
+            f"beacon(s) {', '.join(plan.beacons) or 'none'}")
+
+
+def write_configs(plan: SwarmPlan, out: Path, cert_dir: PurePath) -> list[Path]:
+    """Write ``routers/<router>.json5`` and ``clients/<identity>.json5`` under ``out``."""
+    written = []
+    for folder, names, make in (
+        ("routers", plan.routers, router_config),
+        ("clients", plan.client_identities(), client_config),
+    ):
+        (out / folder).mkdir(parents=True, exist_ok=True)
+        for name in names:
+            path = out / folder / f"{name}.json5"
+            path.write_text(render(make(plan, name, cert_dir), f"{name}, {plan_title(plan)}"))
+            written.append(path)
+    return written
+
+
+# --- certificates (openssl CLI) ------------------------------------------------------
+
+# P-256 keys: small, fast to make, accepted by rustls (Zenoh's TLS) and zenoh-pico's mbedTLS.
+_NEW_KEY = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:P-256", "-nodes"]
+
+
+def _openssl(*arguments: str) -> None:
+    executable = shutil.which("openssl")
+    if executable is None:
+        raise RuntimeError("the openssl command is needed to make certificates")
+    result = subprocess.run([executable, *arguments], capture_output=True, text=True,
+                            check=False, timeout=60)
+    if result.returncode != 0:
+        raise RuntimeError(f"openssl {arguments[0]} failed: {result.stderr.strip()}")
+
+
+def create_ca(certificate: Path, key: Path, *, days: int = 365,
+              common_name: str = "bestofn-swarm-ca") -> None:
+    """A new self-signed certificate authority (refuses to overwrite an existing one)."""
+    for path in (certificate, key):
+        if path.exists():
+            raise FileExistsError(f"{path} exists; not replacing a certificate authority")
+        path.parent.mkdir(parents=True, exist_ok=True)
+    _openssl("req", "-x509", "-new", *_NEW_KEY, "-keyout", str(key), "-out", str(certificate),
+             "-days", str(days), "-subj", f"/CN={common_name}",
+             "-addext", "basicConstraints=critical,CA:TRUE",
+             "-addext", "keyUsage=critical,keyCertSign,cRLSign")
+    key.chmod(0o600)
+
+
+def issue_certificate(
+    ca_certificate: Path,
+    ca_key: Path,
+    common_name: str,
+    out_dir: Path,
+    *,
+    server_names: Sequence[str] = (),
+    days: int = 365,
+) -> tuple[Path, Path]:
+    """A key and a certificate signed by the CA, named ``<common_name>.key/.pem``.
+
+    Every certificate may authenticate a client (mutual TLS); one with ``server_names``
+    (host names or IP addresses) may also serve, for routers.
+    """
+    out_dir.mkdir(parents=True, exist_ok=True)
+    key, certificate = out_dir / f"{common_name}.key", out_dir / f"{common_name}.pem"
+    usages = "serverAuth,clientAuth" if server_names else "clientAuth"
+    extensions = [
+        "basicConstraints=critical,CA:FALSE",
+        "keyUsage=critical,digitalSignature",
+        f"extendedKeyUsage={usages}",
+    ]
+    if server_names:
+        alt_names = [f"IP:{name}" if _is_ip(name) else f"DNS:{name}" for name in server_names]
+        extensions.append(f"subjectAltName={','.join(alt_names)}")
+    with tempfile.TemporaryDirectory() as scratch:
+        request, extension_file = Path(scratch) / "request.csr", Path(scratch) / "ext.cnf"
+        extension_file.write_text("\n".join(extensions) + "\n")
+        _openssl("req", "-new", *_NEW_KEY, "-keyout", str(key), "-out", str(request),
+                 "-subj", f"/CN={common_name}")
+        key.chmod(0o600)
+        _openssl("x509", "-req", "-in", str(request), "-CA", str(ca_certificate),
+                 "-CAkey", str(ca_key), "-CAserial", str(out_dir / "ca.srl"),
+                 "-CAcreateserial", "-out", str(certificate), "-days", str(days),
+                 "-extfile", str(extension_file))
+    return key, certificate
+
+
+def issue_all(plan: SwarmPlan, ca_certificate: Path, ca_key: Path, cert_dir: Path,
+              *, days: int = 365) -> None:
+    """Certificates for every router and client identity of the plan, plus ``ca.pem``."""
+    cert_dir.mkdir(parents=True, exist_ok=True)
+    if ca_certificate.resolve() != (cert_dir / "ca.pem").resolve():
+        shutil.copyfile(ca_certificate, cert_dir / "ca.pem")
+    for router in plan.routers:
+        # Clients reach their own host's router on loopback; routers reach it by name.
+        names = list(dict.fromkeys([router, "localhost", "127.0.0.1"]))
+        issue_certificate(ca_certificate, ca_key, router, cert_dir, server_names=names,
+                          days=days)
+    for identity in plan.client_identities():
+        issue_certificate(ca_certificate, ca_key, identity, cert_dir, days=days)
+
+
+def _is_ip(text: str) -> bool:
+    try:
+        ipaddress.ip_address(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _host_in_endpoint(host: str) -> str:
+    return f"[{host}]" if _is_ip(host) and ":" in host else host
+
+
+# --- command line --------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m deploy.zenoh_acl",
+        description="Write Zenoh router and client configurations (mutual TLS, access "
+        "control) for one swarm run and, given the CA key, issue its certificates.",
+    )
+    parser.add_argument("--robots", type=cliargs.int_range(1, protocol.MAX_ROBOTS),
+                        required=True, help="number of robots (ids 0 to N-1)")
+    parser.add_argument("--run-id", type=cliargs.name, required=True,
+                        help="the run id the processes use (--run-id)")
+    parser.add_argument("--root", type=cliargs.name, default=protocol.DEFAULT_ROOT,
+                        help=f"key expression root (default: {protocol.DEFAULT_ROOT})")
+    parser.add_argument("--beacon", dest="beacons", action="append", type=cliargs.name,
+                        metavar="NAME", help=f"a nest beacon's name (repeatable; default: "
+                        f"{DEFAULT_BEACON})")
+    parser.add_argument("--router", dest="routers", action="append", metavar="HOST",
+                        help="host name or IP address of a host's router; routers connect "
+                        f"to each other (repeatable; default: one named {DEFAULT_ROUTER})")
+    parser.add_argument("--port", type=cliargs.int_range(1, 65535), default=DEFAULT_PORT,
+                        help=f"routers' TLS port (default: {DEFAULT_PORT})")
+    parser.add_argument("--ca", type=Path, required=True, metavar="FILE",
+                        help="the certificate authority's certificate (PEM)")
+    parser.add_argument("--ca-key", type=Path, metavar="FILE",
+                        help="the CA's private key: issue a key and certificate for every "
+                        "identity into OUT/certs")
+    parser.add_argument("--new-ca", action="store_true",
+                        help="first create the CA at --ca and --ca-key (never overwrites)")
+    parser.add_argument("--days", type=cliargs.int_range(1, 36500), default=365,
+                        help="validity of new certificates in days (default: 365)")
+    parser.add_argument("--cert-dir", type=PurePath, metavar="DIR",
+                        help="where the certificates are on the hosts that run the processes, "
+                        "as the configurations name them (default: OUT/certs)")
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR",
+                        help="output directory")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.new_ca and args.ca_key is None:
+        parser.error("--new-ca needs --ca-key")
+    try:
+        plan = SwarmPlan(
+            keys=protocol.Keys(args.run_id, args.root),
+            robots=tuple(range(args.robots)),
+            beacons=tuple(args.beacons or [DEFAULT_BEACON]),
+            routers=tuple(args.routers or [DEFAULT_ROUTER]),
+            port=args.port,
+        )
+    except ValueError as error:
+        parser.error(str(error))
+    out: Path = args.out
+    local_certs = out / "certs"
+    try:
+        if args.new_ca:
+            create_ca(args.ca, args.ca_key, days=args.days)
+        if args.ca_key is not None:
+            issue_all(plan, args.ca, args.ca_key, local_certs, days=args.days)
+        elif not args.ca.is_file():
+            parser.error(f"no CA certificate at {args.ca} (create one with --new-ca)")
+        else:
+            local_certs.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(args.ca, local_certs / "ca.pem")
+    except (OSError, RuntimeError, subprocess.TimeoutExpired) as error:
+        print(f"zenoh_acl: error: {error}", file=sys.stderr)
+        return 1
+    cert_dir = args.cert_dir or PurePath(os.path.abspath(local_certs))
+    written = write_configs(plan, out, cert_dir)
+    issued = "certificates in " + str(local_certs) if args.ca_key else "no certificates issued"
+    print(f"wrote {len(written)} configurations under {out} ({issued})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
