@@ -302,8 +302,7 @@ class Swarm:
             record = self.records[fault.robot]
             record.killed = fault.action == "kill"
             if fault.action == "restart":
-                record.restarting = True
-                record.crashed = False
+                record.restarted()
                 self.robot_children[fault.robot] = self._start_robot(fault.robot)
             self.fault_log.append({
                 "robot": fault.robot, "action": fault.action, "at_s": fault.at,

@@ -26,15 +26,18 @@ class RobotRecord:
 
     def update(self, status: protocol.Status) -> None:
         self.restarting = False
-        if self.status is not None and _is_restart(self.status, status):
-            # A fresh controller (a restarted robot) counts its poolings from zero again.
-            self.restarts += 1
-            self._poolings_before_restart = len(self.pool_sizes) + self.missed_poolings
         known = len(self.pool_sizes) + self.missed_poolings - self._poolings_before_restart
         if status.poolings > known:
             self.missed_poolings += status.poolings - known - 1
             self.pool_sizes.append(status.pool_size)
         self.status = status
+
+    def restarted(self) -> None:
+        """A fresh process now runs this robot: its controller counts from zero again."""
+        self.restarts += 1
+        self.restarting = True
+        self.crashed = False
+        self._poolings_before_restart = len(self.pool_sizes) + self.missed_poolings
 
     @property
     def decided_site(self) -> int | None:
@@ -58,10 +61,6 @@ class RunOutcome:
     stalls: int
     observer_rejected: int
     config: dict[str, Any]
-
-
-def _is_restart(previous: protocol.Status, current: protocol.Status) -> bool:
-    return current.poolings < previous.poolings or current.trips < previous.trips
 
 
 def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[str, Any]:

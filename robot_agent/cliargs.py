@@ -112,14 +112,16 @@ def add_zenoh_options(parser: argparse.ArgumentParser, *, default_mode: str = "c
         help="endpoint to listen on (repeatable)",
     )
     group.add_argument(
-        "--mode", choices=["client", "peer", "router"], default=default_mode,
-        help=f"Zenoh session mode (default: {default_mode})",
+        "--mode", choices=["client", "peer", "router"], default=None,
+        help=f"Zenoh session mode (default: the --zenoh-config file's, else {default_mode})",
     )
     group.add_argument(
         "--zenoh-config", metavar="FILE",
         help="a Zenoh JSON5 configuration file (TLS, access control); "
-        "--connect/--listen/--mode override it",
+        "--connect/--listen/--mode override it; '{id}' in the name is replaced by the "
+        "robot id, so each hosted robot can have its own certificate",
     )
+    parser.set_defaults(default_zenoh_mode=default_mode)
     group.add_argument(
         "--root", type=name, default=protocol.DEFAULT_ROOT,
         help=f"key expression root (default: {protocol.DEFAULT_ROOT})",

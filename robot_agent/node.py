@@ -75,6 +75,9 @@ class RobotNode:
         self.seq = 0
         self.skipped_ticks = 0
         self.last_tick = -1
+        self.time_offset = 0.0  # keeps the controller's clock monotonic across world restarts
+        self.last_t = 0.0
+        self.world: str | None = None  # the world server's instance id (its Zenoh id)
         self._declared: list[object] = []
 
     def start(self) -> None:
@@ -99,6 +102,17 @@ class RobotNode:
             session.declare_subscriber(keys.sense(robot), forward("sense")),
             session.declare_subscriber(keys.camera(robot), forward("camera")),
             session.declare_subscriber(keys.radio_rx(protocol.radio_name(robot)), forward("rx")),
+            session.liveliness().declare_subscriber(
+                keys.alive("world", "*"),
+                lambda sample: self.inbox.put(
+                    Event(
+                        robot,
+                        "world" if sample.kind == zenoh.SampleKind.PUT else "no-world",
+                        keys.last_chunk(str(sample.key_expr)).encode(),
+                    )
+                ),
+                history=True,
+            ),
         ]
         self._act = reliable_publisher(session, keys.act(robot))
         self._status = reliable_publisher(session, keys.status(robot))
@@ -114,7 +128,9 @@ class RobotNode:
     # --- inputs --------------------------------------------------------------------
 
     def handle(self, event: Event) -> None:
-        if event.kind == "sense":
+        if event.kind in ("world", "no-world"):
+            self._world_presence(event.payload.decode(), event.kind == "world")
+        elif event.kind == "sense":
             try:
                 sense = protocol.decode(event.payload, protocol.Sense)
             except protocol.ProtocolError as error:
@@ -150,6 +166,23 @@ class RobotNode:
                 inputs.frame, inputs.frame_seen = event.payload, True
                 self._advance(meta.tick)
 
+    def _world_presence(self, instance: str, present: bool) -> None:
+        """Wait while the world server is gone; when another one appears, follow its ticks.
+
+        A new world counts ticks from zero again: forget the old tick numbers, and shift
+        its time so that the controller's clock never runs backwards.
+        """
+        if not present:
+            if instance == self.world:
+                log.warning("robot %d lost the world server; waiting", self.robot_id)
+            return
+        if self.world is not None and instance != self.world:
+            log.warning("robot %d: a new world server appeared; resuming", self.robot_id)
+            self.pending.clear()
+            self.last_tick = -1
+            self.time_offset = self.last_t
+        self.world = instance
+
     def _reject(self, key: str, error: Exception) -> None:
         self.rejects.reject(f"robot {self.robot_id} {key}", error)
 
@@ -176,6 +209,9 @@ class RobotNode:
     # --- one control step ----------------------------------------------------------
 
     def _step(self, sense: protocol.Sense, inputs: _TickInputs) -> None:
+        if self.time_offset:
+            sense = msgspec.structs.replace(sense, t=sense.t + self.time_offset)
+        self.last_t = sense.t
         answer = answer_tick(
             self.controller, sense, inputs.rx, inputs.frame, self.rejects, seq=self.seq
         )
@@ -267,7 +303,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     nodes: list[RobotNode] = []
     try:
         for robot in args.ids:
-            session = open_from_args(args)
+            session = open_from_args(args, robot)
             sessions.append(session)
             info = fetch_world_info(session, keys, args.info_timeout)
             rng = random.Random(protocol.derive_seed(args.seed, "robot", robot))

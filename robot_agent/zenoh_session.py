@@ -23,13 +23,14 @@ os.environ.setdefault(
 
 
 def make_config(
-    mode: str = "client",
+    mode: str | None = "client",
     connect: Sequence[str] = (),
     listen: Sequence[str] = (),
     config_file: str | None = None,
 ) -> zenoh.Config:
     config = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
-    config.insert_json5("mode", json.dumps(mode))
+    if mode is not None:
+        config.insert_json5("mode", json.dumps(mode))
     config.insert_json5("scouting/multicast/enabled", "false")
     if connect:
         config.insert_json5("connect/endpoints", json.dumps(list(connect)))
@@ -39,7 +40,7 @@ def make_config(
 
 
 def open_session(
-    mode: str = "client",
+    mode: str | None = "client",
     connect: Sequence[str] = (),
     listen: Sequence[str] = (),
     config_file: str | None = None,
@@ -47,9 +48,22 @@ def open_session(
     return zenoh.open(make_config(mode, connect, listen, config_file))
 
 
-def open_from_args(args: argparse.Namespace) -> zenoh.Session:
-    """A session from the options added by ``cliargs.add_zenoh_options``."""
-    return open_session(args.mode, args.connect, args.listen, args.zenoh_config)
+def session_mode(args: argparse.Namespace) -> str | None:
+    """--mode if given; else the config file's mode; else the program's default."""
+    if args.mode is not None:
+        return str(args.mode)
+    return None if args.zenoh_config else str(args.default_zenoh_mode)
+
+
+def open_from_args(args: argparse.Namespace, robot: int | None = None) -> zenoh.Session:
+    """A session from the options added by ``cliargs.add_zenoh_options``.
+
+    For a hosted robot, ``{id}`` in the --zenoh-config path becomes its id.
+    """
+    config_file = args.zenoh_config
+    if config_file and robot is not None:
+        config_file = config_file.replace("{id}", str(robot))
+    return open_session(session_mode(args), args.connect, args.listen, config_file)
 
 
 def reliable_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:

@@ -22,7 +22,12 @@ import zenoh
 
 from robot_agent import cliargs, protocol
 from robot_agent.lifecycle import die_with_launcher
-from robot_agent.zenoh_session import open_from_args, reliable_publisher, reliable_put
+from robot_agent.zenoh_session import (
+    open_from_args,
+    reliable_publisher,
+    reliable_put,
+    session_mode,
+)
 from world_server.clock import Barrier, Pacer
 from world_server.options import add_world_options, world_config
 from world_server.world import Transmission, World, WorldConfig
@@ -121,7 +126,8 @@ class WorldServer:
             session.declare_queryable(
                 keys.world_stats, lambda query: self.inbox.put(Event("stats", query=query))
             ),
-            session.liveliness().declare_token(keys.alive("world", 0)),
+            # The token names this world instance, so robots can tell a restarted world.
+            session.liveliness().declare_token(keys.alive("world", str(session.info.zid()))),
         ]
         self._clock_publisher = reliable_publisher(session, keys.world_clock)
         self._state_publisher = reliable_publisher(session, keys.world_state)
@@ -421,7 +427,7 @@ def config_from_args(args: argparse.Namespace) -> WorldConfig:
 def main(argv: Sequence[str] | None = None) -> int:
     die_with_launcher()
     args = build_parser().parse_args(argv)
-    if args.mode == "router" and not args.listen and not args.zenoh_config:
+    if session_mode(args) == "router" and not args.listen and not args.zenoh_config:
         args.listen = [DEFAULT_LISTEN]
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s world-server %(levelname)s %(message)s"
