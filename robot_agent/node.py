@@ -129,7 +129,7 @@ class RobotNode:
 
     def handle(self, event: Event) -> None:
         if event.kind in ("world", "no-world"):
-            self._world_presence(event.payload.decode(), event.kind == "world")
+            self._world_presence(event.payload.decode(errors="replace"), event.kind == "world")
         elif event.kind == "sense":
             try:
                 sense = protocol.decode(event.payload, protocol.Sense)

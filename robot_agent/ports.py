@@ -70,7 +70,7 @@ class Radio(Protocol):
 
 @dataclass
 class RejectCounter:
-    """Counts invalid radio payloads; logs the first one per sender."""
+    """Counts invalid messages; logs the first one from each source (sender or key)."""
 
     count: int = 0
     logged: set[str] = field(default_factory=set)
@@ -79,7 +79,8 @@ class RejectCounter:
         self.count += 1
         if sender not in self.logged:
             self.logged.add(sender)
-            log.warning("dropped invalid radio payload from %r: %s", sender, error)
+            log.warning("dropped an invalid message from %s: %s (further ones not logged)",
+                        sender, error)
 
 
 def decode_received(

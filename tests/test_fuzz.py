@@ -1,0 +1,192 @@
+"""Every decoder, fuzzed: any bytes give a decoded message or a counted rejection, never
+an exception escaping a process, never a corrupted opinion."""
+
+from __future__ import annotations
+
+import math
+import queue
+import random
+from typing import Any
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from deploy.launcher import Swarm, plan_from_args
+from robot_agent import protocol
+from robot_agent.controller import Controller, ControllerConfig
+from robot_agent.node import Event, RobotNode
+from world_server.server import Event as WorldEvent
+from world_server.server import WorldServer
+from world_server.world import World, WorldConfig
+
+MESSAGE_TYPES = [
+    value
+    for value in vars(protocol).values()
+    if isinstance(value, type) and issubclass(value, protocol.Message)
+    and value is not protocol.Message
+]
+
+# Bytes that are often almost valid: real messages with a few bytes changed.
+VALID = [
+    b'{"v":1,"tick":3,"t":0.3,"x":0.1,"y":0.2,"theta":0.0,'
+    b'"prox":[0.0,0.0,0.0,0.0,0.0,0.0,0.0,0.0],"rx":0,"camera":false}',
+    b'{"v":1,"tick":3,"left":0.1,"right":0.1,"capture":false,"radio_tx":0}',
+    b'{"kind":"opinion","v":1,"id":1,"trip":1,"decided":false,"opinion":[0.5,0.5,0,0,0]}',
+    b'{"kind":"beacon","v":1,"id":"nest","seq":1}',
+    b'{"v":1,"tick":3,"sender":"1","seq":1,"sent_tick":2}',
+    b'{"v":1,"tick":3,"width":64,"height":48,"encoding":"png"}',
+    b'{"v":1,"tick":3,"seq":1}',
+    b'{"v":1,"tick":3,"t":0.3}',
+]
+
+
+@st.composite
+def payloads(draw: st.DrawFn) -> bytes:
+    if draw(st.booleans()):
+        return draw(st.binary(max_size=400))
+    data = bytearray(draw(st.sampled_from(VALID)))
+    for _ in range(draw(st.integers(0, 4))):
+        if not data:
+            break
+        position = draw(st.integers(0, len(data) - 1))
+        data[position] = draw(st.integers(0, 255))
+    return bytes(data)
+
+
+FUZZ = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+@FUZZ
+@given(data=payloads(), kind=st.sampled_from([*MESSAGE_TYPES, protocol.RadioPayload]))
+def test_decode_gives_a_message_or_a_protocol_error(data: bytes, kind: Any) -> None:
+    try:
+        message = protocol.decode(data, kind)
+    except protocol.ProtocolError:
+        return
+    assert protocol.decode(protocol.encode(message), kind) == message
+
+
+@FUZZ
+@given(data=payloads())
+def test_radio_decode_gives_a_payload_or_a_protocol_error(data: bytes) -> None:
+    try:
+        message = protocol.decode_radio(data)
+    except protocol.ProtocolError:
+        return
+    if isinstance(message, protocol.OpinionPayload):
+        assert all(0.0 <= value <= 1.0 for value in message.opinion)
+        assert math.isclose(sum(message.opinion), 1.0, abs_tol=1e-6)
+
+
+class _Publisher:
+    def __init__(self) -> None:
+        self.sent: list[tuple[bytes, bytes | None]] = []
+
+    def put(self, payload: bytes, attachment: bytes | None = None) -> None:
+        self.sent.append((payload, attachment))
+
+
+def _world_info() -> protocol.WorldInfo:
+    return World(WorldConfig(num_sites=5, num_robots=2)).info
+
+
+def _node() -> RobotNode:
+    controller = Controller(1, _world_info(), ControllerConfig(), random.Random(1))
+    node = RobotNode(
+        1, session=None, keys=protocol.Keys("fuzz"), controller=controller,  # type: ignore[arg-type]
+        inbox=queue.SimpleQueue(), lockstep=True,
+    )
+    node._act, node._status, node._tx = _Publisher(), _Publisher(), _Publisher()
+    return node
+
+
+@FUZZ
+@given(
+    events=st.lists(
+        st.tuples(
+            st.sampled_from(["sense", "rx", "camera", "world", "no-world"]),
+            payloads(),
+            st.one_of(st.none(), payloads()),
+        ),
+        max_size=12,
+    )
+)
+def test_a_robot_survives_any_sequence_of_inputs(
+    events: list[tuple[str, bytes, bytes | None]],
+) -> None:
+    node = _node()
+    for kind, payload, attachment in events:
+        node.handle(Event(1, kind, payload, attachment))
+    opinion = node.controller.opinion
+    assert all(value >= 0.0 and math.isfinite(value) for value in opinion)
+    assert math.isclose(sum(opinion), 1.0, rel_tol=1e-9)
+    for payload, _ in node._act.sent:  # type: ignore[attr-defined]
+        protocol.decode(payload, protocol.Act)
+
+
+def _world_server() -> WorldServer:
+    world = World(WorldConfig(run="fuzz", num_sites=5, num_robots=2))
+    server = WorldServer(None, world, protocol.Keys("fuzz"))  # type: ignore[arg-type]
+    world.join_robot(0)
+    world.join_robot(1)
+    world.join_beacon("nest")
+    server.barrier.open(3, ["robot/0", "robot/1", "beacon/nest"])
+    return server
+
+
+@FUZZ
+@given(
+    events=st.lists(
+        st.tuples(
+            st.sampled_from(["act", "ack", "tx"]),
+            st.sampled_from([
+                "bestofn/fuzz/robot/0/act", "bestofn/fuzz/robot/7/act", "bestofn/fuzz/x",
+                "bestofn/fuzz/beacon/nest/ack", "bestofn/fuzz/radio/tx/1",
+                "bestofn/fuzz/radio/tx/nest", "bestofn/fuzz/radio/tx/99", "bogus",
+            ]),
+            payloads(),
+            st.one_of(st.none(), payloads()),
+        ),
+        max_size=12,
+    )
+)
+def test_the_world_server_survives_any_sequence_of_inputs(
+    events: list[tuple[str, str, bytes, bytes | None]],
+) -> None:
+    server = _world_server()
+    for kind, key, payload, attachment in events:
+        server._handle(WorldEvent(kind, key, payload, attachment))
+    accepted = len(server.acts) + len(server.transmissions)
+    assert server.counters.rejected + server.counters.late + accepted >= 0
+    for transmission in server.transmissions:
+        assert server.world.is_sender(transmission.sender)
+
+
+@pytest.fixture(scope="module")
+def observer() -> Swarm:
+    from deploy.cli import build_parser
+
+    args = build_parser(["run"]).parse_args(["run", "--robots", "2", "--no-record"])
+    return Swarm(plan_from_args(args))
+
+
+@FUZZ
+@given(
+    events=st.lists(
+        st.tuples(
+            st.sampled_from(["status", "clock", "state"]),
+            st.sampled_from(["bestofn/r/robot/0/status", "bestofn/r/robot/5/status", "x"]),
+            payloads(),
+        ),
+        max_size=10,
+    )
+)
+def test_the_launcher_survives_any_status_clock_or_state(
+    observer: Swarm, events: list[tuple[str, str, bytes]]
+) -> None:
+    before = observer.rejected
+    for event in events:
+        observer.events.put(event)
+    observer.poll()
+    assert observer.rejected >= before
