@@ -11,6 +11,8 @@ import argparse
 import contextlib
 import json
 import logging
+import math
+import os
 import queue
 import sys
 import time
@@ -38,6 +40,8 @@ from world_server.options import add_world_options
 log = logging.getLogger("swarm.run")
 
 EXIT_OK, EXIT_CRASH, EXIT_USAGE = 0, 1, 2
+ROBOT_PROCESSES_PER_CORE = 25
+RUN_ID_ENV = "BESTOFN_RUN_ID"
 
 
 def robot_at_time(text: str) -> tuple[int, float]:
@@ -88,6 +92,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="start a fresh process for robot ROBOT at SIMTIME (repeatable); "
                         "it is killed first if still running, and rejoins with a new "
                         "controller and its old body")
+    processes = parser.add_argument_group("processes")
+    processes.add_argument("--robots-per-process", type=cliargs.int_range(1, 1000),
+                           default=None, metavar="K",
+                           help="host K robots in each robot process, each robot still with "
+                           "its own Zenoh session, keys and RNG (default: chosen from the "
+                           "swarm size and the cores)")
+    processes.add_argument("--spawn", choices=["fork", "exec"], default="fork",
+                           help="start robot processes by forking a preloaded server (fast) "
+                           "or as fresh interpreters (default: fork)")
     network = parser.add_argument_group("network")
     network.add_argument("--connect", type=cliargs.endpoint, default=None, metavar="ENDPOINT",
                          help="use this existing Zenoh router instead of making the world "
@@ -128,6 +141,8 @@ class RunPlan:
     beacon_args: list[str]
     recorder_args: list[str] = field(default_factory=list)
     faults: list[Fault] = field(default_factory=list)
+    robots_per_process: int = 1
+    spawn: str = "fork"
     config: dict[str, Any] = field(default_factory=dict)
 
 
@@ -145,6 +160,10 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         if fault.robot >= args.robots:
             raise ValueError(f"--{fault.action} {fault.robot}@...: there is no robot "
                              f"{fault.robot} in a swarm of {args.robots}")
+    per_process = args.robots_per_process or default_robots_per_process(args.robots)
+    if faults and per_process > 1:
+        raise ValueError("--kill and --restart act on one robot's process: "
+                         "use them with --robots-per-process 1")
     run_id = args.run_id or f"run-{args.seed}-{int(time.time() * 1000) % 10**9}"
     if args.connect:
         port, endpoint = None, args.connect
@@ -176,7 +195,16 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         timeout=args.timeout, endpoint=endpoint, port=port, record=record,
         world_args=world_args, robot_args=robot_args, beacon_args=beacon_args,
         recorder_args=recorder_args, faults=faults, config=config,
+        robots_per_process=per_process, spawn=args.spawn,
     )
+
+
+def default_robots_per_process(robots: int, cores: int | None = None) -> int:
+    """One robot per process for small swarms; beyond that, about ROBOT_PROCESSES_PER_CORE
+    processes per core, which measured fastest on a 2-core machine (benchmarks/
+    swarm_speed.py)."""
+    cores = cores or os.cpu_count() or 1
+    return max(1, math.ceil(robots / (ROBOT_PROCESSES_PER_CORE * cores)))
 
 
 class Swarm:
@@ -218,6 +246,9 @@ class Swarm:
 
     def start(self) -> None:
         plan = self.plan
+        # Every process of the run carries its id in its environment (forked robots have
+        # no command line of their own), so it can be found by run id, e.g. by tests.
+        os.environ[RUN_ID_ENV] = plan.run_id
         world = self.group.start("world", python_module("world_server.server", *plan.world_args))
         if plan.port is not None and not wait_for_port(plan.port, 30.0, world.alive):
             raise StartError("the world server did not start", world)
@@ -245,8 +276,12 @@ class Swarm:
             if not self._wait_alive("recorder", 0, 30.0, self.recorder):
                 raise StartError("the recorder did not start", self.recorder)
         self.group.start("beacon", python_module("nest_beacon", *plan.beacon_args))
-        for robot in range(plan.robots):
-            self.robot_children[robot] = self._start_robot(robot)
+        hosts = range(0, plan.robots, plan.robots_per_process)
+        for first in hosts:
+            robots = list(range(first, min(first + plan.robots_per_process, plan.robots)))
+            child = self._start_robots(robots)
+            for robot in robots:
+                self.robot_children[robot] = child
 
     def _on(self, kind: str) -> Callable[[zenoh.Sample], None]:
         def callback(sample: zenoh.Sample) -> None:
@@ -303,18 +338,21 @@ class Swarm:
             record.killed = fault.action == "kill"
             if fault.action == "restart":
                 record.restarted()
-                self.robot_children[fault.robot] = self._start_robot(fault.robot)
+                self.robot_children[fault.robot] = self._start_robots([fault.robot])
             self.fault_log.append({
                 "robot": fault.robot, "action": fault.action, "at_s": fault.at,
                 "applied_at_s": round(self.sim_time, 3), "was_running": was_alive,
             })
             log.info("%s robot %d at sim time %.1f", fault.action, fault.robot, self.sim_time)
 
-    def _start_robot(self, robot: int) -> Child:
-        return self.group.start(
-            f"robot-{robot}",
-            python_module("robot_agent.node", "--id", str(robot), *self.plan.robot_args),
-        )
+    def _start_robots(self, robots: list[int]) -> Child:
+        """One process for ``robots`` (each with its own Zenoh session inside it)."""
+        name = f"robot-{robots[0]}" + (f"-{robots[-1]}" if len(robots) > 1 else "")
+        argv = [arg for robot in robots for arg in ("--id", str(robot))]
+        argv += self.plan.robot_args
+        if self.plan.spawn == "fork":
+            return self.group.fork(name, "robot_agent.node", argv)
+        return self.group.start(name, python_module("robot_agent.node", *argv))
 
     def infrastructure_crash(self) -> Child | None:
         for child in self.group.crashed():

@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from deploy.forking import QUIET_THREADS, ForkedProcess, ForkServer
 from robot_agent.lifecycle import PARENT_ENV
 
 LOG_LINES_KEPT = 200
@@ -46,7 +47,7 @@ def wait_for_port(port: int, timeout: float, alive: Callable[[], bool]) -> bool:
 class Child:
     name: str
     argv: list[str]
-    process: subprocess.Popen[bytes]
+    process: subprocess.Popen[bytes] | ForkedProcess
     log: collections.deque[str] = field(
         default_factory=lambda: collections.deque(maxlen=LOG_LINES_KEPT)
     )
@@ -70,6 +71,7 @@ class ProcessGroup:
     def __init__(self, on_line: Callable[[str, str], None] | None = None) -> None:
         self.children: list[Child] = []
         self.on_line = on_line
+        self._fork_server: ForkServer | None = None
 
     def start(self, name: str, argv: Sequence[str], env: dict[str, str] | None = None) -> Child:
         process = subprocess.Popen(
@@ -77,9 +79,18 @@ class ProcessGroup:
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,
-            env={**os.environ, PARENT_ENV: str(os.getpid()), **(env or {})},
+            env={**os.environ, **QUIET_THREADS, PARENT_ENV: str(os.getpid()), **(env or {})},
         )
-        child = Child(name, list(argv), process, on_line=self.on_line)
+        return self._adopt(Child(name, list(argv), process, on_line=self.on_line))
+
+    def fork(self, name: str, module: str, argv: Sequence[str]) -> Child:
+        """Like ``start(python -m module argv)``, but forked from a preloaded server."""
+        if self._fork_server is None:
+            self._fork_server = ForkServer()
+        process = self._fork_server.start(module, list(argv))
+        return self._adopt(Child(name, [module, *argv], process, on_line=self.on_line))
+
+    def _adopt(self, child: Child) -> Child:
         self.children.append(child)
         threading.Thread(target=self._pump, args=(child,), daemon=True).start()
         return child

@@ -31,7 +31,13 @@ def make_config(
     config = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
     if mode is not None:
         config.insert_json5("mode", json.dumps(mode))
+    if mode == "router":
+        # Room for big swarms: every robot is its own session (Zenoh's default is 1000).
+        config.insert_json5("transport/unicast/max_sessions", "100000")
     config.insert_json5("scouting/multicast/enabled", "false")
+    # No shared-memory transport: every session would map its own segments, and a router
+    # refuses sessions beyond about 350 on this kind of machine.
+    config.insert_json5("transport/shared_memory/enabled", "false")
     if connect:
         config.insert_json5("connect/endpoints", json.dumps(list(connect)))
     if listen:

@@ -20,6 +20,7 @@ from typing import Any
 
 import zenoh
 
+from deploy.launcher import RUN_ID_ENV
 from deploy.processes import free_port
 from robot_agent.zenoh_session import open_session
 
@@ -35,17 +36,20 @@ def swarm_command(*args: str) -> list[str]:
 
 
 def processes_of(run_id: str) -> list[int]:
-    """Pids of live processes whose command line mentions ``run_id``."""
+    """Pids of live processes of the run: ``run_id`` in their command line, or in their
+    environment (forked robots have no command line of their own)."""
     found = []
+    marker = f"{RUN_ID_ENV}={run_id}".encode()
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit() or int(entry.name) == os.getpid():
             continue
         try:
             cmdline = (entry / "cmdline").read_bytes().split(b"\0")
+            environ = (entry / "environ").read_bytes().split(b"\0")
             state = (entry / "stat").read_text().split()[2]
         except OSError:
             continue
-        if state != "Z" and run_id.encode() in cmdline:
+        if state != "Z" and (run_id.encode() in cmdline or marker in environ):
             found.append(int(entry.name))
     return found
 

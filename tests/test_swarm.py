@@ -74,7 +74,7 @@ def test_killing_a_robot_mid_run_does_not_hang_the_world() -> None:
         )
         command = swarm_command(
             "run", "--run-id", run_id, "--json", "--quiet", *SMALL, "--seed", "2",
-            "--stall-timeout", "1", "--connect", endpoint,
+            "--stall-timeout", "1", "--connect", endpoint, "--spawn", "exec",
         )
         process = subprocess.Popen(
             command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE

@@ -64,8 +64,10 @@ def add_world_options(parser: argparse.ArgumentParser) -> list[argparse.Action]:
             "the processes go; realtime: follows the wall clock (default: lockstep)"),
         add("--speed", type=cliargs.float_range(0.01, 1000.0), default=1.0,
             help="real-time speed factor, realtime clock only (default: 1)"),
-        add("--stall-timeout", type=cliargs.positive_float, default=2.0,
-            help="lockstep: wall seconds to wait for a silent controller (default: 2)"),
+        add("--stall-timeout", type=cliargs.positive_float, default=5.0,
+            help="lockstep: wall seconds to wait for a silent controller before closing the "
+            "tick without it; after 3 such ticks it is not waited for until it answers "
+            "again (default: 5)"),
         add("--dt", type=cliargs.float_range(0.001, 1.0), default=0.1,
             help="control tick in sim seconds (default: 0.1)"),
         add("--state-every", type=cliargs.positive_int, default=10,

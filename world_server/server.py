@@ -35,6 +35,7 @@ from world_server.world import Transmission, World, WorldConfig
 log = logging.getLogger("world_server")
 
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
+SUSPEND_AFTER = 3  # consecutive stalled ticks before the barrier stops waiting
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,7 @@ class Counters:
     rejected: int = 0
     late: int = 0
     stalls: int = 0
+    missed: dict[str, int] = field(default_factory=dict)  # consecutive stalled ticks
     logged_keys: set[str] = field(default_factory=set)
 
 
@@ -64,7 +66,7 @@ class WorldServer:
         keys: protocol.Keys,
         *,
         speed: float = 1.0,
-        stall_timeout: float = 2.0,
+        stall_timeout: float = 5.0,
         start_timeout: float = 60.0,
         expect_robots: int = 0,
         expect_beacons: int = 0,
@@ -233,6 +235,7 @@ class WorldServer:
             if robot in self.world.live_robots():
                 self.acts[robot] = act
             return
+        self.counters.missed.pop(f"robot/{robot}", None)  # it is alive: wait for it again
         if self.barrier.answer(act.tick, f"robot/{robot}", act.radio_tx):
             self.acts[robot] = act
         else:
@@ -245,6 +248,7 @@ class WorldServer:
         except protocol.ProtocolError as error:
             self._reject(event.key, error)
             return
+        self.counters.missed.pop(f"beacon/{name}", None)
         if self.lockstep and not self.barrier.answer(ack.tick, f"beacon/{name}", ack.radio_tx):
             self._unexpected_answer(event.key, ack.tick)
 
@@ -322,6 +326,13 @@ class WorldServer:
     def _log_stall(self) -> None:
         self.counters.stalls += 1
         missing = self.barrier.missing()
+        for who in missing:
+            self.counters.missed[who] = self.counters.missed.get(who, 0) + 1
+            if self.counters.missed[who] == SUSPEND_AFTER:
+                log.warning(
+                    "%s missed %d ticks in a row: not waiting for it until it answers again",
+                    who, SUSPEND_AFTER,
+                )
         if self.counters.stalls <= 5 or self.counters.stalls % 100 == 0:
             log.warning(
                 "tick %d stalled for %.1fs waiting for %s (stall #%d)",
@@ -376,10 +387,13 @@ class WorldServer:
                 publisher = reliable_publisher(self.session, self.keys.sense(robot))
                 self._sense_publishers[robot] = publisher
             publisher.put(protocol.encode(sense))
+        participants = [f"robot/{robot}" for robot in robots]
+        participants += [f"beacon/{name}" for name in self.world.beacons()]
+        # A controller that went silent (hung, not gone) is not waited for until it
+        # answers again, so one stuck process cannot slow the swarm to its stall timeout.
         self.barrier.open(
             tick,
-            [f"robot/{robot}" for robot in robots]
-            + [f"beacon/{name}" for name in self.world.beacons()],
+            [who for who in participants if self.counters.missed.get(who, 0) < SUSPEND_AFTER],
         )
         self._clock_publisher.put(
             protocol.encode(protocol.Clock(v=protocol.VERSION, tick=tick, t=self.world.t))
