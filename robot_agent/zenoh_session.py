@@ -22,6 +22,9 @@ os.environ.setdefault(
 )
 
 
+CONNECT_TIMEOUT_MS = 30_000
+
+
 def make_config(
     mode: str | None = "client",
     connect: Sequence[str] = (),
@@ -31,6 +34,13 @@ def make_config(
     config = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
     if mode is not None:
         config.insert_json5("mode", json.dumps(mode))
+    if mode == "client" and not config_file:
+        # Machines of a swarm come up in any order: keep trying the router for a while
+        # (Zenoh's client default is a single attempt), then fail with a clear error.
+        config.insert_json5("connect/timeout_ms", str(CONNECT_TIMEOUT_MS))
+        config.insert_json5("connect/retry", json.dumps(
+            {"period_init_ms": 200, "period_max_ms": 1000, "period_increase_factor": 2}
+        ))
     if mode == "router":
         # Room for big swarms: every robot is its own session (Zenoh's default is 1000).
         config.insert_json5("transport/unicast/max_sessions", "100000")

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import os
 import select
-import shutil
 import signal
 import socket
 import subprocess
@@ -18,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from netns import UDP_SUBNET, Lan, lan_address, netns_unavailable
 
 from robot_agent import ports, protocol
 from robot_agent.udp_radio import (
@@ -297,86 +297,12 @@ def test_worked_example_robots_decide_over_udp() -> None:
 # --- network namespaces ------------------------------------------------------------------
 
 
-def netns_unavailable() -> str | None:
-    """Why network namespaces cannot be used here, or None."""
-    if not sys.platform.startswith("linux"):
-        return "network namespaces need Linux"
-    if os.geteuid() != 0:
-        return f"creating network namespaces needs root (running as uid {os.geteuid()})"
-    if shutil.which("ip") is None:
-        return "no `ip` command (iproute2) on PATH"
-    probe = subprocess.run(
-        ["ip", "netns", "list"], capture_output=True, text=True, timeout=10, check=False
-    )
-    if probe.returncode != 0:
-        return f"`ip netns` does not work here: {probe.stderr.strip()}"
-    return None
-
-
-@dataclass
-class Lan:
-    """Robot namespaces, each with an ``eth0`` (a veth) on a bridge in a hub namespace:
-    10.77.0.10, .11, ... /24, with a multicast route on eth0."""
-
-    prefix: str
-    size: int
-    created: list[str] = field(default_factory=list)
-
-    @property
-    def hub(self) -> str:
-        return f"{self.prefix}h"
-
-    def robot_ns(self, index: int) -> str:
-        return f"{self.prefix}r{index}"
-
-    @staticmethod
-    def address(index: int) -> str:
-        return f"10.77.0.{10 + index}"
-
-    def _ip(self, *args: str) -> None:
-        subprocess.run(["ip", *args], check=True, capture_output=True, timeout=10)
-
-    def _add_namespace(self, name: str) -> None:
-        self._ip("netns", "add", name)
-        self.created.append(name)
-
-    def create(self) -> None:
-        self._add_namespace(self.hub)
-        # Snooping off: with no IGMP querier on this LAN the bridge simply floods multicast.
-        self._ip("-n", self.hub, "link", "add", "br0", "type", "bridge", "mcast_snooping", "0")
-        self._ip("-n", self.hub, "link", "set", "br0", "up")
-        for index in range(self.size):
-            ns = self.robot_ns(index)
-            self._add_namespace(ns)
-            port = f"veth{index}"
-            self._ip("-n", self.hub, "link", "add", port, "type", "veth",
-                     "peer", "name", "eth0", "netns", ns)
-            self._ip("-n", self.hub, "link", "set", port, "master", "br0", "up")
-            self._ip("-n", ns, "addr", "add", f"{self.address(index)}/24", "brd", "+",
-                     "dev", "eth0")
-            self._ip("-n", ns, "link", "set", "eth0", "up")
-            self._ip("-n", ns, "link", "set", "lo", "up")
-            self._ip("-n", ns, "route", "add", "224.0.0.0/4", "dev", "eth0")
-
-    def destroy(self) -> list[str]:
-        """Delete every namespace created (their veths go with them); the ones left."""
-        for name in reversed(self.created):
-            subprocess.run(["ip", "netns", "del", name], capture_output=True, timeout=10,
-                           check=False)
-        listing = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True,
-                                 timeout=10, check=False).stdout.split()
-        return [name for name in self.created if name in listing]
-
-    def run(self, index: int, *command: str) -> list[str]:
-        return ["ip", "netns", "exec", self.robot_ns(index), *command]
-
-
 @pytest.fixture(scope="module")
 def lan() -> Iterator[Lan]:
     reason = netns_unavailable()
     if reason is not None:
         pytest.skip(reason)
-    network = Lan(prefix=f"bon{os.getpid()}", size=3)
+    network = Lan(prefix=f"bon{os.getpid()}", size=3, subnet=UDP_SUBNET)
     try:
         network.create()
         yield network
@@ -394,9 +320,9 @@ def node(lan: Lan, index: int, *args: str) -> list[str]:
     ("address", "interfaces"),
     [
         # Multicast, the interface chosen by name, by address, and by the route.
-        ("239.255.77.77", ["eth0", Lan.address(1), None]),
-        ("10.77.0.255", [Lan.address(index) for index in range(3)]),  # subnet broadcast
-        ("255.255.255.255", [Lan.address(index) for index in range(3)]),  # limited broadcast
+        ("239.255.77.77", ["eth0", lan_address(1), None]),
+        ("10.77.0.255", [lan_address(index) for index in range(3)]),  # subnet broadcast
+        ("255.255.255.255", [lan_address(index) for index in range(3)]),  # limited broadcast
     ],
 )
 def test_every_namespace_hears_every_other(
@@ -420,7 +346,7 @@ def test_every_namespace_hears_every_other(
     for index, summary in enumerate(summaries):
         others = {f"n{other}" for other in range(lan.size) if other != index}
         assert summary["heard"] == dict.fromkeys(others, 5), summary
-        assert summary["local_address"] == [Lan.address(index), summary["local_address"][1]]
+        assert summary["local_address"] == [lan_address(index), summary["local_address"][1]]
         radio = summary["radio"]
         assert radio["own_echoes"] == radio["sent"] == 5
         assert radio["malformed"] == radio["oversize"] == 0
@@ -430,11 +356,11 @@ def test_every_namespace_hears_every_other(
 def test_controllers_in_separate_namespaces_pool_opinions_and_decide(lan: Lan) -> None:
     """The Section 5 controller in one process per namespace, over UDP multicast only."""
     sites, seed = 4, 0
-    interfaces = ["eth0", Lan.address(1), None]
+    interfaces = ["eth0", lan_address(1), None]
     processes = Processes()
     try:
         beacon = processes.start(
-            node(lan, 0, "--interface", Lan.address(0), "--seed", str(seed), "beacon")
+            node(lan, 0, "--interface", lan_address(0), "--seed", str(seed), "beacon")
         )
         robots = []
         for index, interface in enumerate(interfaces):
@@ -483,7 +409,7 @@ with UdpRadio("1", interface=sys.argv[1]) as radio:
 
 @pytest.mark.timeout(60)
 def test_a_link_going_down_costs_broadcasts_not_the_robot(lan: Lan) -> None:
-    ns, address = lan.robot_ns(2), Lan.address(2)
+    ns, address = lan.robot_ns(2), lan_address(2)
 
     def set_link(state: str) -> None:
         subprocess.run(["ip", "-n", ns, "link", "set", "eth0", state], check=True, timeout=10)

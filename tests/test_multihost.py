@@ -1,0 +1,119 @@
+"""A swarm across three hosts: network namespaces joined by veth pairs on a bridge.
+
+Host 0 runs a Zenoh router, the world server and the nest beacon; hosts 1 and 2 each
+run a router (connected to host 0's) and a robot host process with two robots. Every
+process is a client of its own host's router, as on real machines.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from netns import Lan, netns_unavailable
+from swarm_helpers import REPO
+
+from world_server.layout import make_layout
+
+pytestmark = pytest.mark.timeout(180)
+
+SUBNET = "10.78.0"  # only ever inside the namespaces this test creates
+PORT = 7447
+RUN, SEED, SITES, ROBOTS = "multihost", 3, 5, 4
+
+OBSERVER = """
+import json, sys, time
+from robot_agent import protocol
+from robot_agent.zenoh_session import open_session
+keys = protocol.Keys(sys.argv[2])
+statuses = {}
+session = open_session("client", [sys.argv[1]])
+session.declare_subscriber(
+    keys.status("*"),
+    lambda s: statuses.__setitem__(
+        keys.robot_of(str(s.key_expr)), protocol.decode(s.payload.to_bytes(), protocol.Status)
+    ),
+)
+deadline = time.monotonic() + float(sys.argv[4])
+while time.monotonic() < deadline:
+    if len(statuses) == int(sys.argv[3]) and all(
+        status.decided_site is not None for status in statuses.values()
+    ):
+        break
+    time.sleep(0.1)
+print(json.dumps({robot: status.decided_site for robot, status in statuses.items()}), flush=True)
+session.close()  # an open session can hold up the interpreter's exit
+"""
+
+
+@pytest.fixture(scope="module")
+def hosts() -> Iterator[Lan]:
+    reason = netns_unavailable()
+    if reason is not None:
+        pytest.skip(reason)
+    network = Lan(prefix=f"bmh{os.getpid()}", size=3, subnet=SUBNET)
+    try:
+        network.create()
+        yield network
+    finally:
+        left = network.destroy()
+        assert not left, f"network namespaces left behind: {left}"
+
+
+def test_routers_per_host_carry_a_swarm_to_the_right_consensus(
+    hosts: Lan, tmp_path: Path
+) -> None:
+    started: list[subprocess.Popen[bytes]] = []
+    logs = (tmp_path / "processes.log").open("wb")
+
+    def on(host: int, *command: str) -> subprocess.Popen[bytes]:
+        # Logs go to a file: a pipe nobody reads would block a chatty process.
+        process = subprocess.Popen(
+            hosts.run(host, sys.executable, *command), cwd=REPO, stdout=logs, stderr=logs
+        )
+        started.append(process)
+        return process
+
+    def endpoint(host: int) -> str:
+        return f"tcp/{hosts.address(host)}:{PORT}"
+
+    common = ["--run-id", RUN, "--seed", str(SEED), "--mode", "client"]
+    try:
+        on(0, "-m", "deploy.router", "--listen", endpoint(0))
+        for host in (1, 2):
+            on(host, "-m", "deploy.router", "--listen", endpoint(host), "--connect", endpoint(0))
+        on(0, "-m", "world_server.server", *common, "--connect", endpoint(0),
+           "--robots", str(ROBOTS), "--sites", str(SITES))
+        on(0, "-m", "nest_beacon", *common, "--connect", endpoint(0))
+        for host, robots in ((1, (0, 1)), (2, (2, 3))):
+            ids = [arg for robot in robots for arg in ("--id", str(robot))]
+            on(host, "-m", "robot_agent.node", *ids, *common, "--connect", endpoint(host))
+        observer = subprocess.Popen(
+            hosts.run(2, sys.executable, "-c", OBSERVER, endpoint(2), RUN, str(ROBOTS), "120"),
+            cwd=REPO, stdout=subprocess.PIPE, stderr=logs,
+        )
+        started.append(observer)
+        output, _ = observer.communicate(timeout=170)
+        crashed = [p.args for p in started if p is not observer and p.poll() is not None]
+    finally:
+        for process in started:
+            if process.poll() is None:
+                process.send_signal(signal.SIGTERM)
+        for process in started:
+            try:
+                process.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+        logs.close()
+    log_text = (tmp_path / "processes.log").read_text(errors="replace")[-3000:]
+    assert not crashed, f"processes exited early: {crashed}\n{log_text}"
+    decisions = json.loads(output.decode().strip().splitlines()[-1])
+    best = make_layout(SITES, ROBOTS, SEED).best_site
+    assert decisions == {str(robot): best for robot in range(ROBOTS)}, log_text
