@@ -262,15 +262,39 @@ def serve(nodes: Sequence[RobotNode], inbox: queue.SimpleQueue[Event]) -> None:
 # --- command line ------------------------------------------------------------------------
 
 
+def robot_id(text: str) -> int | None:
+    """A robot id, or None for ``auto``."""
+    if text == "auto":
+        return None
+    return cliargs.int_range(0, protocol.MAX_ROBOTS - 1)(text)
+
+
+def ask_for_id(session: zenoh.Session, keys: protocol.Keys, timeout: float) -> int:
+    """Ask the world server for a free robot id (``--id auto``)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for reply in session.get(keys.world_join, timeout=1.0):
+            if reply.ok is not None:
+                try:
+                    return protocol.decode(reply.ok.payload.to_bytes(), protocol.JoinReply).id
+                except protocol.ProtocolError as error:
+                    raise TimeoutError(f"invalid answer on {keys.world_join}: {error}") from None
+            if reply.err is not None:
+                raise TimeoutError(f"the world server gave no id: {reply.err.payload.to_bytes()!r}")
+        time.sleep(0.2)
+    raise TimeoutError(f"no world server answered on {keys.world_join}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="robot-agent",
         description="A robot of the swarm: the decision controller on Zenoh. Several --id "
         "options host several robots in this process, each with its own Zenoh session.",
     )
-    parser.add_argument("--id", dest="ids", type=cliargs.int_range(0, protocol.MAX_ROBOTS - 1),
-                        action="append", required=True, metavar="N",
-                        help="robot id (repeatable to host several robots)")
+    parser.add_argument("--id", dest="ids", type=robot_id, action="append", required=True,
+                        metavar="N|auto",
+                        help="robot id, or 'auto' to be given one by the world server "
+                        "(repeatable to host several robots)")
     parser.add_argument("--seed", type=cliargs.seed, default=0,
                         help="run seed; each robot's RNG derives from it and its id (default: 0)")
     parser.add_argument("--info-timeout", type=cliargs.positive_float, default=60.0,
@@ -286,7 +310,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     die_with_launcher()
     parser = build_parser()
     args = parser.parse_args(argv)
-    if len(set(args.ids)) != len(args.ids):
+    fixed = [robot for robot in args.ids if robot is not None]
+    if len(set(fixed)) != len(fixed):
         parser.exit(2, "robot-agent: error: the same --id is given twice\n")
     try:
         config = controller_config(args)
@@ -302,10 +327,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     sessions: list[zenoh.Session] = []
     nodes: list[RobotNode] = []
     try:
-        for robot in args.ids:
-            session = open_from_args(args, robot)
+        for requested in args.ids:
+            session = open_from_args(args, requested)
             sessions.append(session)
             info = fetch_world_info(session, keys, args.info_timeout)
+            robot = requested if requested is not None else ask_for_id(
+                session, keys, args.info_timeout
+            )
             rng = random.Random(protocol.derive_seed(args.seed, "robot", robot))
             controller = Controller(robot, info, config, rng)
             node = RobotNode(
@@ -314,7 +342,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
             node.start()
             nodes.append(node)
-        log.info("robot(s) %s running", ", ".join(map(str, args.ids)))
+        log.info("robot(s) %s running", ", ".join(str(node.robot_id) for node in nodes))
         serve(nodes, inbox)
     except (zenoh.ZError, TimeoutError) as error:
         print(f"robot-agent: {error}", file=sys.stderr)

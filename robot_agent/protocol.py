@@ -88,6 +88,12 @@ class WorldInfo(Message):
     clock: Literal["lockstep", "realtime"]
 
 
+class JoinReply(Message):
+    """Answer of the ``world/join`` queryable: an id for a robot started with ``--id auto``."""
+
+    id: _RobotId
+
+
 class Clock(Message):
     tick: _Tick
     t: _SimTime
@@ -287,6 +293,10 @@ class Keys:
     @property
     def world_state(self) -> str:
         return f"{self.prefix}/world/state"
+
+    @property
+    def world_join(self) -> str:
+        return f"{self.prefix}/world/join"
 
     @property
     def world_stats(self) -> str:

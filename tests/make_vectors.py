@@ -201,6 +201,15 @@ def ack_vectors() -> TypeVectors:
     return vectors
 
 
+def join_reply_vectors() -> TypeVectors:
+    vectors = TypeVectors("join_reply.json", protocol.JoinReply)
+    data = vectors.add_valid("typical", protocol.JoinReply(v=1, id=7))
+    common_faults(vectors, data, b',"id":7', "id")
+    vectors.add_invalid("negative_id", OUT_OF_RANGE, "robot ids are non-negative",
+                        changed(data, b'"id":7', b'"id":-7'), at="$.id")
+    return vectors
+
+
 def clock_vectors() -> TypeVectors:
     vectors = TypeVectors("clock.json", protocol.Clock)
     data = vectors.add_valid(
@@ -477,7 +486,8 @@ def _compact(value: Any) -> bytes:
 
 
 BUILDERS: tuple[Callable[[], TypeVectors], ...] = (
-    world_info_vectors, clock_vectors, world_state_vectors, sense_vectors, camera_meta_vectors,
+    world_info_vectors, join_reply_vectors, clock_vectors, world_state_vectors, sense_vectors,
+    camera_meta_vectors,
     act_vectors, ack_vectors, status_vectors, radio_tx_meta_vectors, radio_rx_meta_vectors,
     log_line_vectors, opinion_vectors, beacon_vectors,
 )

@@ -88,6 +88,7 @@ class WorldServer:
         self.acts: dict[int, protocol.Act] = {}
         self.transmissions: list[Transmission] = []
         self.pending_joins: list[tuple[str, str]] = []
+        self.assigned: set[int] = set()  # ids handed out on world/join
         self._info_bytes = protocol.encode(world.info)
         self._sense_publishers: dict[int, zenoh.Publisher] = {}
         self._declared: list[Any] = []
@@ -127,6 +128,9 @@ class WorldServer:
             session.declare_queryable(keys.world_info, self._on_info),
             session.declare_queryable(
                 keys.world_stats, lambda query: self.inbox.put(Event("stats", query=query))
+            ),
+            session.declare_queryable(
+                keys.world_join, lambda query: self.inbox.put(Event("join", query=query))
             ),
             # The token names this world instance, so robots can tell a restarted world.
             session.liveliness().declare_token(keys.alive("world", str(session.info.zid()))),
@@ -210,6 +214,7 @@ class WorldServer:
             "alive": self._handle_alive,
             "gone": self._handle_gone,
             "stats": self._handle_stats,
+            "join": self._handle_join,
         }[event.kind]
         handler(event)
 
@@ -309,6 +314,25 @@ class WorldServer:
             self.world.leave_beacon(ident)
             self.barrier.leave(f"beacon/{ident}")
 
+    def _handle_join(self, event: Event) -> None:
+        """Give a robot started with ``--id auto`` an id: the smallest never handed out,
+        else (a replacement container) the smallest whose robot is not running."""
+        live = set(self.world.live_robots())
+        free = next(
+            (robot for robot in range(protocol.MAX_ROBOTS)
+             if robot not in self.assigned and robot not in live),
+            None,
+        )
+        if free is None or free >= self.expect_robots:
+            free = next((robot for robot in sorted(self.assigned) if robot not in live), free)
+        if free is None:
+            event.query.reply_err(b"no robot id left")
+            return
+        self.assigned.add(free)
+        log.info("assigned id %d to a robot that asked for one", free)
+        reply = protocol.JoinReply(v=protocol.VERSION, id=free)
+        event.query.reply(self.keys.world_join, protocol.encode(reply))
+
     def _handle_stats(self, event: Event) -> None:
         state = self.world.state(self.counters.rejected, self.counters.stalls)
         event.query.reply(self.keys.world_stats, protocol.encode(state))
@@ -316,6 +340,7 @@ class WorldServer:
     def _apply_joins(self) -> None:
         for role, ident in self.pending_joins:
             if role == "robot" and ident.isdigit() and int(ident) < protocol.MAX_ROBOTS:
+                self.assigned.add(int(ident))
                 if int(ident) not in self.world.live_robots():
                     log.info("robot %s joined at tick %d", ident, self.world.tick)
                 self.world.join_robot(int(ident))
