@@ -71,6 +71,11 @@ class World:
         )
         self._camera_rng = np.random.default_rng(protocol.derive_seed(config.seed, "frames"))
         self.tick = 0
+        # Bodies of the expected swarm are created now, in id order: pymunk's contact
+        # solving depends on the order bodies were added, and the order in which robot
+        # processes happen to join must not change a run.
+        for robot_id in range(config.num_robots):
+            self.physics.add_robot(robot_id, *self.start_pose(robot_id))
         self._live_robots: set[int] = set()
         self._beacons: set[str] = set()
         self.info = protocol.WorldInfo(
@@ -95,7 +100,8 @@ class World:
     # --- membership ----------------------------------------------------------------
 
     def join_robot(self, robot_id: int) -> None:
-        """A controller for ``robot_id`` is live; a body appears at its start pose if new."""
+        """A controller for ``robot_id`` is live; beyond the expected swarm, a body appears
+        at its start pose."""
         if not self.physics.has_robot(robot_id):
             x, y, theta = self.start_pose(robot_id)
             self.physics.add_robot(robot_id, x, y, theta)
