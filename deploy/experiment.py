@@ -1,0 +1,302 @@
+"""``swarm experiment``: the paper's Section 5 protocol in one command.
+
+For every swarm size N and number of sites n, ``--runs`` runs with seeds ``--seed``,
+``--seed + 1``, ...: each is a ``swarm run`` subprocess with its own run id, recorded to
+``DIR/<run-id>.mcap``, and all of them share one Zenoh router (``deploy/router.py``) on a
+free loopback port, ``--parallel`` at a time. A progress bar follows the runs; at the end
+``swarm report`` turns the recordings into the figures and the summary table in DIR.
+Each run's stderr and JSON summary are kept in ``DIR/logs/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+from deploy.cli import UsageError
+from robot_agent import cliargs, protocol
+
+# Options forwarded to every ``swarm run`` when given (flag, attribute).
+FORWARDED = (
+    ("--alpha", "alpha"), ("--threshold", "threshold"), ("--dwell", "dwell"),
+    ("--drop", "drop"), ("--timeout", "timeout"),
+)
+STOP_GRACE = 10.0  # wall seconds a run has to stop after SIGINT before SIGKILL
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.usage = "%(prog)s --out DIR [options] [-- SWARM-RUN-OPTIONS]  (see --help)"
+    parser.add_argument("--robots", type=cliargs.int_range(1, 1000), nargs="+", default=[10],
+                        metavar="N", help="swarm sizes N (default: 10)")
+    parser.add_argument("--sites", type=cliargs.int_range(2, protocol.MAX_OPTIONS), nargs="+",
+                        default=[5, 8, 10], metavar="n",
+                        help="numbers of sites n (default: 5 8 10, as in the paper)")
+    parser.add_argument("--runs", type=cliargs.positive_int, default=10,
+                        help="runs per (N, n) (default: 10, as in the paper)")
+    parser.add_argument("--seed", type=cliargs.int_range(0, 2**62), default=0,
+                        help="seed of the first run; run i uses seed + i - 1 (default: 0)")
+    parser.add_argument("--parallel", type=cliargs.int_range(1, 64), default=2, metavar="J",
+                        help="runs at a time (default: 2, the fastest for ten-robot runs on "
+                        "2 cores; see docs/recording.md)")
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR",
+                        help="directory for recordings, logs and the report")
+    parser.add_argument("--name", type=cliargs.name, default="exp",
+                        help="run id prefix: <name>-N<robots>-n<sites>-r<run> (default: exp)")
+    parser.add_argument("--alpha", type=cliargs.alpha, default=None,
+                        help="evidence reliability alpha, forwarded to swarm run")
+    parser.add_argument("--threshold", type=cliargs.threshold, default=None,
+                        help="decision threshold, forwarded to swarm run")
+    parser.add_argument("--dwell", type=cliargs.positive_float, default=None,
+                        help="sim seconds at the nest, forwarded to swarm run")
+    parser.add_argument("--drop", type=cliargs.probability, default=None,
+                        help="radio drop probability, forwarded to swarm run")
+    parser.add_argument("--timeout", type=cliargs.positive_float, default=None,
+                        metavar="SIM_SECONDS", help="per-run sim time limit, forwarded")
+    parser.add_argument("--run-timeout", type=cliargs.positive_float, default=1800.0,
+                        metavar="WALL_SECONDS",
+                        help="stop a run that takes longer than this in wall time "
+                        "(default: 1800)")
+    parser.add_argument("--no-report", action="store_true", help="only record the runs")
+    parser.add_argument("--json", action="store_true",
+                        help="print the report (runs, groups, failures) as JSON on stdout")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("run_options", nargs=argparse.REMAINDER,
+                        help="after --: further swarm run options for every run, e.g. "
+                        "-- --latency 2 --radio-range 0.3")
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    run_id: str
+    robots: int
+    sites: int
+    seed: int
+    argv: list[str]
+    recording: Path
+
+
+@dataclass
+class RunResult:
+    spec: RunSpec
+    returncode: int | None = None
+    summary: dict[str, Any] | None = None
+    wall_s: float = 0.0
+    note: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.returncode == 0 and self.spec.recording.is_file()
+
+
+@dataclass
+class _Running:
+    spec: RunSpec
+    process: subprocess.Popen[bytes]
+    started: float
+    streams: list[IO[bytes]] = field(default_factory=list)
+
+
+def plan_runs(args: argparse.Namespace, endpoint: str) -> list[RunSpec]:
+    """Every run of the experiment, in order: by N, then n, then run number."""
+    extra = _run_options(args)
+    specs = []
+    for robots in args.robots:
+        for sites in args.sites:
+            for number in range(1, args.runs + 1):
+                seed = args.seed + number - 1
+                run_id = f"{args.name}-N{robots}-n{sites}-r{number:02d}"
+                recording = args.out / f"{run_id}.mcap"
+                argv = [
+                    "--robots", str(robots), "--sites", str(sites), "--seed", str(seed),
+                    "--run-id", run_id, "--connect", endpoint, "--record", str(recording),
+                    "--json", "--quiet", *extra,
+                ]
+                specs.append(RunSpec(run_id, robots, sites, seed, argv, recording))
+    return specs
+
+
+def _run_options(args: argparse.Namespace) -> list[str]:
+    extra: list[str] = []
+    for flag, attribute in FORWARDED:
+        value = getattr(args, attribute)
+        if value is not None:
+            extra += [flag, str(value)]
+    options = list(args.run_options)
+    if options and options[0] == "--":
+        options = options[1:]
+    return extra + options
+
+
+def validate_run_options(spec: RunSpec) -> None:
+    """Parse one run's command line as ``swarm run`` would, so mistakes show up now."""
+    from deploy import launcher
+
+    class Probe(argparse.ArgumentParser):
+        def error(self, message: str) -> Any:  # type: ignore[override]
+            raise UsageError(f"swarm run option: {message}")
+
+    probe = Probe(prog="swarm run")
+    launcher.add_arguments(probe)
+    namespace = probe.parse_args(spec.argv)
+    try:
+        launcher.plan_from_args(namespace)
+    except ValueError as error:
+        raise UsageError(f"swarm run option: {error}") from None
+
+
+def _start(spec: RunSpec, logs: Path) -> _Running:
+    stdout = open(logs / f"{spec.run_id}.json", "wb")  # noqa: SIM115 (closed in _reap)
+    stderr = open(logs / f"{spec.run_id}.log", "wb")  # noqa: SIM115
+    process = subprocess.Popen(
+        [sys.executable, "-m", "deploy.cli", "run", *spec.argv],
+        stdin=subprocess.DEVNULL, stdout=stdout, stderr=stderr,
+    )
+    return _Running(spec, process, time.monotonic(), [stdout, stderr])
+
+
+def _reap(running: _Running, logs: Path, note: str = "") -> RunResult:
+    for stream in running.streams:
+        stream.close()
+    result = RunResult(running.spec, running.process.returncode,
+                       wall_s=time.monotonic() - running.started, note=note)
+    text = (logs / f"{running.spec.run_id}.json").read_text().strip()
+    if text:
+        try:
+            result.summary = json.loads(text.splitlines()[-1])
+        except ValueError:
+            result.note = result.note or "no JSON summary"
+    return result
+
+
+def _stop(running: _Running) -> None:
+    """Ask a run to stop (its launcher cleans up on SIGINT), then insist."""
+    if running.process.poll() is None:
+        running.process.send_signal(signal.SIGINT)
+        try:
+            running.process.wait(timeout=STOP_GRACE)
+        except subprocess.TimeoutExpired:
+            running.process.kill()
+            running.process.wait()
+
+
+def _describe(result: RunResult) -> str:
+    summary = result.summary
+    if not result.ok or summary is None:
+        return f"{result.spec.run_id} FAILED ({result.note or f'exit {result.returncode}'})"
+    steps = [robot["steps"] for robot in summary["per_robot"] if robot["steps"] is not None]
+    verdict = ("correct" if summary["correct"] else "wrong") if summary["consensus"] else \
+        "no consensus"
+    return (f"{result.spec.run_id}: {verdict}, steps {max(steps) if steps else '-'}, "
+            f"{result.wall_s:.1f}s")
+
+
+def run_all(specs: Sequence[RunSpec], parallel: int, logs: Path, run_timeout: float,
+            quiet: bool) -> list[RunResult]:
+    """Run every spec, ``parallel`` at a time, with a progress bar on stderr."""
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    pending = list(specs)
+    running: list[_Running] = []
+    results: list[RunResult] = []
+    progress = Progress(
+        TextColumn("[bold]runs"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+        TextColumn("eta"), TimeRemainingColumn(), TextColumn("{task.fields[info]}"),
+        console=Console(stderr=True), disable=quiet,
+    )
+    try:
+        with progress:
+            task = progress.add_task("runs", total=len(specs), info="starting")
+            while pending or running:
+                while pending and len(running) < parallel:
+                    running.append(_start(pending.pop(0), logs))
+                time.sleep(0.1)
+                for item in list(running):
+                    overdue = time.monotonic() - item.started > run_timeout
+                    if item.process.poll() is None and not overdue:
+                        continue
+                    note = ""
+                    if overdue and item.process.poll() is None:
+                        _stop(item)
+                        note = f"stopped after {run_timeout:g} wall seconds"
+                    running.remove(item)
+                    result = _reap(item, logs, note)
+                    results.append(result)
+                    progress.update(task, advance=1, info=_describe(result))
+    finally:
+        for item in running:  # interrupted: stop what is still running, by pid
+            _stop(item)
+            _reap(item, logs, "interrupted")
+    order = {spec.run_id: index for index, spec in enumerate(specs)}
+    return sorted(results, key=lambda result: order[result.spec.run_id])
+
+
+def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from deploy.processes import ProcessGroup, free_port, python_module, wait_for_port
+    from deploy.report import print_report, write_report
+
+    if args.out.exists() and not args.out.is_dir():
+        raise UsageError(f"--out {args.out} exists and is not a directory")
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    specs = plan_runs(args, endpoint)
+    validate_run_options(specs[0])
+    taken = sorted(str(spec.recording) for spec in specs if spec.recording.exists())
+    if taken:
+        raise UsageError(f"{len(taken)} recording(s) already in {args.out}, e.g. {taken[0]}: "
+                         "use another --out or --name")
+    logs = args.out / "logs"
+    logs.mkdir(parents=True, exist_ok=True)
+    group = ProcessGroup()
+    try:
+        router = group.start("router", python_module("deploy.router", "--listen", endpoint))
+        if not wait_for_port(port, 30.0, router.alive):
+            print(f"swarm experiment: the router did not start:\n{router.tail()}",
+                  file=sys.stderr)
+            return 1
+        started = time.monotonic()
+        results = run_all(specs, args.parallel, logs, args.run_timeout, args.quiet)
+        elapsed = time.monotonic() - started
+    finally:
+        group.stop_all()
+    failed = [result for result in results if not result.ok]
+    for result in failed:
+        print(f"swarm experiment: {_describe(result)}; see "
+              f"{logs / (result.spec.run_id + '.log')}", file=sys.stderr)
+    print(f"swarm experiment: {len(results) - len(failed)}/{len(specs)} runs recorded in "
+          f"{elapsed:.0f}s wall ({args.parallel} at a time)", file=sys.stderr)
+    recordings = [result.spec.recording for result in results
+                  if result.spec.recording.is_file()]
+    output: dict[str, Any] = {
+        "wall_time_s": round(elapsed, 1),
+        "parallel": args.parallel,
+        "failed": [result.spec.run_id for result in failed],
+    }
+    if not args.no_report and recordings:
+        report = write_report(
+            recordings, args.out,
+            warn=lambda text: print(f"swarm report: {text}", file=sys.stderr),
+        )
+        output.update(report.as_json())
+        if not args.json:
+            print_report(report, Console())
+    if args.json:
+        print(json.dumps(output))
+    return 1 if failed else 0

@@ -1,0 +1,69 @@
+"""``python -m deploy.router``: a Zenoh router that several runs on one machine share.
+
+A Python Zenoh session in router mode (no zenohd needed), listening on loopback by
+default. ``swarm experiment`` starts one and points every run at it with ``--connect``;
+each run keeps to its own keys (``<root>/<run-id>/...``). It stops on SIGINT or SIGTERM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+from collections.abc import Sequence
+
+from robot_agent import cliargs
+from robot_agent.lifecycle import die_with_launcher
+
+log = logging.getLogger("router")
+
+DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="router", description="A Zenoh router for swarm runs that share one network."
+    )
+    parser.add_argument("--listen", type=cliargs.endpoint, action="append", default=[],
+                        metavar="ENDPOINT",
+                        help=f"endpoint to listen on, repeatable (default: {DEFAULT_LISTEN})")
+    parser.add_argument("--connect", type=cliargs.endpoint, action="append", default=[],
+                        metavar="ENDPOINT", help="another router to connect to (repeatable)")
+    parser.add_argument("--zenoh-config", metavar="FILE",
+                        help="a Zenoh JSON5 configuration file (TLS, access control)")
+    parser.add_argument("--log-level", default="INFO",
+                        choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=args.log_level, format="%(asctime)s router %(levelname)s %(message)s"
+    )
+    import zenoh
+
+    from robot_agent.zenoh_session import open_session
+
+    listen = args.listen or ([] if args.zenoh_config else [DEFAULT_LISTEN])
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+    try:
+        session = open_session("router", args.connect, listen, args.zenoh_config)
+    except zenoh.ZError as error:
+        print(f"router: cannot open Zenoh session: {error}", file=sys.stderr)
+        return 1
+    with session:
+        log.info("routing on %s", ", ".join(listen) or "(configured endpoints)")
+        while not stop.wait(0.5):
+            pass
+    log.info("router stopped")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,71 @@
+"""``swarm experiment``: a small real experiment end to end, and its argument errors."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+from swarm_helpers import REPO, kill_leftovers, processes_of, swarm_command, unique_run_id
+
+from deploy import report
+from deploy.cli import main
+
+
+@pytest.mark.timeout(300)
+def test_a_small_experiment_records_every_run_and_reports(tmp_path: Path) -> None:
+    name = unique_run_id("exp")
+    out = tmp_path / "experiment"
+    try:
+        done = subprocess.run(
+            swarm_command("experiment", "--robots", "3", "--sites", "5", "--runs", "2",
+                          "--parallel", "2", "--seed", "4", "--name", name, "--out", str(out),
+                          "--json", "--quiet", "--", "--stall-timeout", "5"),
+            capture_output=True, timeout=280, cwd=REPO,
+        )
+    finally:
+        left = kill_leftovers(name)
+    assert done.returncode == 0, done.stderr.decode()[-3000:]
+    assert left == [] and processes_of(name) == []
+    result = json.loads(done.stdout)
+    run_ids = [f"{name}-N3-n5-r01", f"{name}-N3-n5-r02"]
+    assert result["failed"] == [] and result["parallel"] == 2
+    assert [row["run_id"] for row in result["runs"]] == run_ids
+    assert [row["seed"] for row in result["runs"]] == [4, 5]
+    for row in result["runs"]:
+        assert (row["robots"], row["sites"]) == (3, 5) and row["complete"]
+        assert row["source"] == "metadata" and row["consensus"]
+        config = json.loads(
+            report.read_recording(Path(row["recording"])).description["config"]
+        )
+        assert config["stall_timeout"] == 5.0
+    for run_id in run_ids:
+        assert (out / f"{run_id}.mcap").is_file()
+        summary = json.loads((out / "logs" / f"{run_id}.json").read_text())
+        assert summary["run_id"] == run_id and summary["recording"] == str(out / f"{run_id}.mcap")
+    for figure in report.FIGURES:
+        assert (out / figure).stat().st_size > 0
+    with open(out / "summary.csv") as stream:
+        assert [line["run_id"] for line in csv.DictReader(stream)] == run_ids
+    (group,) = result["groups"]
+    assert group["runs"] == 2 and group["complete_runs"] == 2
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--runs", "0"], "--runs"),
+    (["--sites", "1"], "--sites"),
+    (["--", "--no-such-option", "3"], "swarm run option"),
+    (["--", "--drop", "2"], "swarm run option"),
+    (["--alpha", "0.2", "--threshold", "1"], "swarm run option"),
+])
+def test_bad_arguments_exit_with_code_2_and_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], arguments: list[str], message: str
+) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["experiment", "--out", str(tmp_path / "out"), *arguments])
+    assert exit_info.value.code == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert message in lines[-1] and sum("error" in line for line in lines) == 1
+    assert not (tmp_path / "out").exists()  # nothing was started

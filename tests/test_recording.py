@@ -1,0 +1,311 @@
+"""Recordings: a real short run read back with mcap's reader, every message validated.
+
+One module-scoped run (3 robots, 5 sites, loopback, hard timeout) is recorded; the tests
+read it back and check schemas, Foxglove types, metadata, timing and message counts. The
+recorder's own decisions (rejected samples, a stop by signal) are tested on their own.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import pytest
+from mcap.reader import make_reader
+from swarm_helpers import REPO, kill_leftovers, loopback_router, run_swarm, unique_run_id
+
+from deploy import report
+from robot_agent import protocol
+from world_server import foxglove, recorder
+from world_server.layout import make_layout
+
+ROBOTS, SITES, SEED = 3, 5, 3
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+FOXGLOVE_TOPICS = {
+    "foxglove/scene": foxglove.SCENE_UPDATE,
+    "foxglove/transforms": foxglove.FRAME_TRANSFORMS,
+    "foxglove/log": foxglove.LOG,
+}
+
+
+class Run:
+    def __init__(self, path: Path, run_id: str, summary: dict[str, Any]) -> None:
+        self.path = path
+        self.run_id = run_id
+        self.summary = summary
+        self.keys = protocol.Keys(run_id)
+        with open(path, "rb") as stream:
+            reader = make_reader(stream)
+            self.statistics = reader.get_summary().statistics  # type: ignore[union-attr]
+            self.messages = [
+                (schema, channel, message) for schema, channel, message in reader.iter_messages()
+            ]
+            self.metadata = {record.name: record.metadata for record in reader.iter_metadata()}
+
+    def of_schema(self, name: str) -> list[tuple[Any, Any, dict[str, Any]]]:
+        return [
+            (channel, message, json.loads(message.data))
+            for schema, channel, message in self.messages
+            if schema.name == name
+        ]
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> Run:
+    path = tmp_path_factory.mktemp("recording") / "run.mcap"
+    run_id = unique_run_id("rec")
+    code, summary, stderr = run_swarm(
+        ["--robots", str(ROBOTS), "--sites", str(SITES), "--seed", str(SEED),
+         "--timeout", "900", "--record", str(path)],
+        run_id, timeout=120.0,
+    )
+    assert code == 0, stderr
+    assert summary["recording"] == str(path)
+    return Run(path, run_id, summary)
+
+
+@pytest.mark.timeout(180)
+def test_every_message_validates_against_its_channels_json_schema(run: Run) -> None:
+    validators: dict[int, jsonschema.Draft202012Validator] = {}
+    for schema, channel, message in run.messages:
+        assert schema.encoding == "jsonschema" and channel.message_encoding == "json"
+        validator = validators.get(schema.id)
+        if validator is None:
+            document = json.loads(schema.data)
+            jsonschema.Draft202012Validator.check_schema(document)
+            validator = validators[schema.id] = jsonschema.Draft202012Validator(document)
+        validator.validate(json.loads(message.data))
+    assert len(run.messages) == run.statistics.message_count > 1000
+
+
+@pytest.mark.timeout(180)
+def test_one_channel_per_key_with_its_protocol_schema(run: Run) -> None:
+    topics = Counter(channel.topic for _, channel, _ in {
+        (schema.id, channel.id): (schema, channel, None) for schema, channel, _ in run.messages
+    }.values())
+    assert all(count == 1 for count in topics.values())
+    by_topic = {channel.topic: schema for schema, channel, _ in run.messages}
+    keys = run.keys
+    expected = {
+        keys.world_clock: "bestofn.Clock",
+        keys.world_state: "bestofn.WorldState",
+        keys.beacon_ack("nest"): "bestofn.Ack",
+        keys.radio_tx("nest"): "bestofn.RadioTxRecord",
+        keys.log("world"): "bestofn.LogLine",
+    }
+    for robot in range(ROBOTS):
+        expected |= {
+            keys.sense(robot): "bestofn.Sense",
+            keys.act(robot): "bestofn.Act",
+            keys.status(robot): "bestofn.Status",
+            keys.camera(robot): foxglove.COMPRESSED_IMAGE,
+            keys.radio_tx(robot): "bestofn.RadioTxRecord",
+            keys.radio_rx(robot): "bestofn.RadioRxRecord",
+        }
+    for topic, name in expected.items():
+        assert by_topic[topic].name == name, topic
+    # The schemas are the protocol's own definitions, not a second copy.
+    assert json.loads(by_topic[keys.sense(0)].data) == recorder.inline_refs(
+        protocol.json_schema(protocol.Sense)
+    )
+    assert "$ref" not in by_topic[keys.world_state].data.decode()
+    assert not [topic for topic in by_topic if topic.endswith("recorder/rejected")]
+
+
+@pytest.mark.timeout(180)
+def test_foxglove_channels_use_the_official_schemas(run: Run) -> None:
+    by_name = {schema.name: schema for schema, _, _ in run.messages}
+    for name in foxglove.SCHEMA_NAMES:
+        official = json.loads((foxglove.SCHEMA_DIR / f"{name.split('.')[1]}.json").read_text())
+        assert json.loads(by_name[name].data) == official
+        assert official["title"] == name
+    topics = {channel.topic: schema.name for schema, channel, _ in run.messages}
+    for leaf, name in FOXGLOVE_TOPICS.items():
+        assert topics[f"{run.keys.prefix}/{leaf}"] == name
+
+
+@pytest.mark.timeout(180)
+def test_foxglove_messages_carry_the_required_fields_and_the_run(run: Run) -> None:
+    images = run.of_schema(foxglove.COMPRESSED_IMAGE)
+    assert images
+    for _, message, image in images:
+        assert set(image) == {"timestamp", "frame_id", "data", "format"}
+        assert image["format"] == "png" and base64.b64decode(image["data"]).startswith(PNG_MAGIC)
+        assert image["timestamp"]["sec"] * 10**9 + image["timestamp"]["nsec"] == message.log_time
+    layout = make_layout(SITES, ROBOTS, SEED)
+    scenes = run.of_schema(foxglove.SCENE_UPDATE)
+    full = [scene for _, _, scene in scenes if len(scene["entities"]) > 1]
+    assert full
+    entities = {entity["id"]: entity for entity in full[-1]["entities"]}
+    assert {"arena", "radio-links", *(f"robot-{robot}" for robot in range(ROBOTS))} <= set(entities)
+    panels = entities["arena"]["cubes"]
+    assert [panel["color"] for panel in panels] == [
+        foxglove.colour(foxglove.site_colour(site.quality)) for site in layout.sites
+    ]
+    labels = [text["text"] for text in entities["arena"]["texts"]]
+    assert f"site {layout.best_site}\nrho = 1.00" in labels
+    robot = entities["robot-0"]
+    assert robot["frame_id"] == "robot-0" and robot["frame_locked"] is True
+    links = [entity for scene in full for entity in scene["entities"]
+             if entity["id"] == "radio-links" and entity["lines"]]
+    assert links and all(len(entity["lines"][0]["points"]) % 2 == 0 for entity in links)
+    transforms = run.of_schema(foxglove.FRAME_TRANSFORMS)
+    children = {t["child_frame_id"] for _, _, message in transforms for t in message["transforms"]}
+    assert children == {f"robot-{robot}" for robot in range(ROBOTS)}
+    assert all(t["parent_frame_id"] == foxglove.ARENA_FRAME
+               for _, _, message in transforms for t in message["transforms"])
+    logs = run.of_schema(foxglove.LOG)
+    assert {entry["name"] for _, _, entry in logs} >= {"world", "beacon", "robot-0"}
+    assert foxglove.LOG_INFO in {entry["level"] for _, _, entry in logs}
+
+
+@pytest.mark.timeout(180)
+def test_log_time_is_sim_time_and_publish_time_is_wall_time(run: Run) -> None:
+    dt_ns = 100_000_000  # the world's default tick
+    for _, message, sense in run.of_schema("bestofn.Sense"):
+        assert message.log_time == sense["tick"] * dt_ns
+    for _, message, record in run.of_schema("bestofn.RadioRxRecord"):
+        assert message.log_time == record["meta"]["tick"] * dt_ns
+    now = time.time_ns()
+    publish = [message.publish_time for _, _, message in run.messages]
+    assert now - 600 * 10**9 < min(publish) <= max(publish) <= now
+    assert max(message.log_time for _, _, message in run.messages) >= round(
+        run.summary["sim_time_s"] * 1e9
+    )
+
+
+@pytest.mark.timeout(180)
+def test_metadata_holds_config_versions_seed_and_summary(run: Run) -> None:
+    start, final = run.metadata[recorder.START_METADATA], run.metadata[recorder.RUN_METADATA]
+    for record in (start, final):
+        assert record["run_id"] == run.run_id and record["seed"] == str(SEED)
+        assert record["robots"] == str(ROBOTS) and record["sites"] == str(SITES)
+        config = json.loads(record["config"])
+        assert config == run.summary["config"]
+        versions = json.loads(record["versions"])
+        assert versions["protocol"] == str(protocol.VERSION)
+        assert {"python", "mcap", "eclipse-zenoh", "msgspec", "bestofn-swarm"} <= set(versions)
+        assert json.loads(record["layout"])["best_site"] == make_layout(SITES, ROBOTS,
+                                                                         SEED).best_site
+        assert protocol.decode(record["world_info"].encode(), protocol.WorldInfo).seed == SEED
+    assert json.loads(final["summary"]) == run.summary
+    assert final["finished_by"] == "finish query"
+    counts = json.loads(final["recorder"])
+    assert counts["rejected"] == 0
+    assert sum(counts["messages"].values()) == run.statistics.message_count
+
+
+@pytest.mark.timeout(180)
+def test_nothing_published_is_missing_from_the_recording(run: Run) -> None:
+    recording = report.read_recording(run.path)
+    assert recording.complete and recording.problem is None
+    audit = report.audit(recording)
+    for kind, counts in audit.items():
+        assert counts["recorded"] == counts["expected"], kind
+    assert audit["radio/rx/*"]["recorded"] == run.summary["radio"]["delivered"] > 0
+    assert audit["robot/*/camera"]["recorded"] > 0
+    assert report.rebuild_summary(recording)["per_robot"] == run.summary["per_robot"]
+
+
+@pytest.mark.timeout(180)
+def test_a_cut_short_recording_still_gives_a_report(run: Run, tmp_path: Path) -> None:
+    data = run.path.read_bytes()
+    for fraction in (0.35, 0.7, 0.97):
+        cut = tmp_path / f"cut-{fraction}.mcap"
+        cut.write_bytes(data[: int(len(data) * fraction)])
+        out = tmp_path / f"report-{fraction}"
+        done = subprocess.run(
+            [sys.executable, "-m", "deploy.cli", "report", str(cut), "--out", str(out), "--json"],
+            capture_output=True, timeout=120, cwd=REPO,
+        )
+        assert done.returncode == 0, done.stderr.decode()
+        assert "cut short" in done.stderr.decode()
+        result = json.loads(done.stdout)
+        (row,) = result["runs"]
+        assert row["complete"] is False and row["run_id"] == run.run_id
+        for name in (*report.FIGURES, "summary.csv", "summary.json"):
+            assert (out / name).stat().st_size > 0
+        if fraction < 0.9:  # the summary section and the final metadata are gone
+            assert row["source"] == "status messages"
+            assert row["robots"] == ROBOTS and row["sites"] == SITES
+
+
+def _sample(key: str, payload: bytes, attachment: bytes | None = None) -> recorder.Sample:
+    return recorder.Sample(key, payload, attachment, time.time_ns())
+
+
+def test_samples_that_do_not_decode_are_kept_raw_on_the_rejected_channel() -> None:
+    keys = protocol.Keys("rejects")
+    stream = io.BytesIO()
+    mcap = recorder.McapRecorder(stream, keys, recorder.RunDescription("rejects", 1, 2, 3))
+    clock = protocol.encode(protocol.Clock(v=1, tick=5, t=0.5))
+    bad = [
+        _sample(keys.sense(0), b'{"v": 1, "tick": -1}'),
+        _sample(keys.radio_tx(1), b"{}", None),
+        _sample(keys.camera(0), b"\x89PNG", b"not json"),
+        _sample(f"{keys.prefix}/nonsense", b"x"),
+    ]
+    for sample in [_sample(keys.world_clock, clock), *bad]:
+        mcap.record(sample)
+    mcap.finish()
+    stream.seek(0)
+    reader = make_reader(stream)
+    rejected = [
+        (channel.topic, json.loads(message.data))
+        for schema, channel, message in reader.iter_messages()
+        if schema.name == "bestofn.RejectedSample"
+    ]
+    assert [record["key"] for _, record in rejected] == [sample.key for sample in bad]
+    assert {topic for topic, _ in rejected} == {f"{keys.prefix}/recorder/rejected"}
+    assert base64.b64decode(rejected[0][1]["payload"]) == bad[0].payload
+    assert rejected[2][1]["attachment"] == base64.b64encode(b"not json").decode()
+    assert mcap.rejected == len(bad) and mcap.counts == {"clock": 1, "rejected": len(bad)}
+    schema = recorder.message_schema("rejected")
+    for _, record in rejected:
+        jsonschema.validate(record, schema)
+
+
+@pytest.mark.timeout(60)
+def test_sigterm_without_a_finish_query_closes_the_file_cleanly(tmp_path: Path) -> None:
+    run_id = unique_run_id("rec-term")
+    keys = protocol.Keys(run_id)
+    out = tmp_path / "term.mcap"
+    with loopback_router() as (session, endpoint):
+        process = subprocess.Popen(
+            [sys.executable, "-m", "world_server.recorder", "--run-id", run_id, "--mode",
+             "client", "--connect", endpoint, "--out", str(out), "--robots", "2", "--sites",
+             "4", "--info-timeout", "0.5", "--config-json", '{"robots": 2}'],
+            cwd=REPO, stderr=subprocess.PIPE,
+        )
+        try:
+            deadline = time.monotonic() + 30
+            while not list(session.liveliness().get(keys.alive("recorder", 0), timeout=1.0)):
+                assert process.poll() is None and time.monotonic() < deadline
+                time.sleep(0.05)
+            for tick in range(1, 4):
+                session.put(keys.world_clock,
+                            protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * 0.1)))
+            time.sleep(0.5)
+            process.send_signal(signal.SIGTERM)
+            assert process.wait(timeout=20) == 0
+        finally:
+            process.kill()
+            process.wait()
+            kill_leftovers(run_id)
+    with open(out, "rb") as stream:
+        reader = make_reader(stream)
+        clocks = [json.loads(m.data)["tick"] for _, _, m in reader.iter_messages()]
+        final = {record.name: record.metadata for record in reader.iter_metadata()}
+    assert clocks == [1, 2, 3]
+    record = final[recorder.RUN_METADATA]
+    assert record["finished_by"] == "signal" and "summary" not in record
+    assert json.loads(record["config"]) == {"robots": 2}

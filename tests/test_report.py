@@ -1,0 +1,204 @@
+"""``swarm report``: figures and tables from recordings, including cut-short ones.
+
+The recordings here are written by the real recorder class from made-up samples whose
+outcome is known exactly (robots' steps and pool sizes), so the table can be checked to
+the number; tests/test_recording.py reports on a real run's recording.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from deploy import report
+from deploy.cli import main
+from robot_agent import protocol
+from world_server import recorder
+from world_server.layout import make_layout
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+SITES, ROBOTS, SEED = 4, 3, 7
+# Pool sizes of each robot's poolings; each robot decides at its last pooling.
+POOLS = {0: [2, 3], 1: [1, 2, 3], 2: [2, 2]}
+
+
+def _status(robot: int, tick: int, pools: list[int], decided: int | None,
+            opinion: list[float]) -> bytes:
+    """A status after ``len(pools)`` trips, each ending in a pooling."""
+    trips = len(pools)
+    return protocol.encode(protocol.Status(
+        v=1, id=robot, tick=tick, t=tick * 0.1,
+        phase="to_decision" if decided is not None else "to_site",
+        trips=trips, opinion=opinion, pool_size=pools[-1] if pools else 0,
+        poolings=trips, decided_site=decided,
+        decision_time=tick * 0.1 if decided is not None else None,
+        decision_trips=trips if decided is not None else None, comparison=None,
+    ))
+
+
+def make_recording(path: Path, run_id: str, sites: int = SITES, *, finish: bool = True,
+                   summary: dict[str, Any] | None = None) -> tuple[int, int]:
+    """Write a recording of a made-up run. Returns two file sizes: before the last status
+    message, and before the records that finishing the file adds."""
+    keys = protocol.Keys(run_id)
+    best = make_layout(sites, ROBOTS, SEED).best_site
+    stream = io.BytesIO()
+    mcap = recorder.McapRecorder(
+        stream, keys, recorder.RunDescription(run_id, SEED, ROBOTS, sites, {"sites": sites}),
+        chunk_size=1,  # every message in its own chunk: a cut loses only what is after it
+    )
+    uniform = [1.0 / sites] * sites
+    certain = [1.0 if site == best else 0.0 for site in range(sites)]
+
+    def put(key: str, payload: bytes) -> None:
+        mcap.record(recorder.Sample(key, payload, None, time.time_ns()))
+
+    for tick in range(0, 400, 10):
+        put(keys.world_clock, protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * 0.1)))
+        for robot in range(ROBOTS):
+            sense = protocol.Sense(v=1, tick=tick, t=tick * 0.1, x=0.001 * tick, y=0.1 * robot,
+                                   theta=0.0, prox=[0.0] * 8, rx=0, camera=False)
+            put(keys.sense(robot), protocol.encode(sense))
+    before_last = 0
+    for robot, pools in POOLS.items():
+        put(keys.status(robot), _status(robot, 0, [], None, uniform))
+        for trip in range(1, len(pools) + 1):
+            last = trip == len(pools)
+            before_last = stream.tell()
+            put(keys.status(robot), _status(
+                robot, 100 * trip + robot, pools[:trip], best if last else None,
+                certain if last else uniform,
+            ))
+    unfinished = stream.tell()
+    if finish:
+        mcap.finish(summary)
+    path.write_bytes(stream.getvalue())
+    return before_last, unfinished
+
+
+def run_report(capsys: pytest.CaptureFixture[str], *arguments: str) -> tuple[int, dict[str, Any]]:
+    """``swarm report ... --json`` in this process: exit code and JSON output."""
+    code = main(["report", *arguments, "--json"])
+    output = capsys.readouterr().out
+    return code, json.loads(output) if output.strip() else {}
+
+
+def test_the_table_has_each_runs_steps_and_pool_sizes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    make_recording(tmp_path / "a.mcap", "made-a")
+    code, result = run_report(capsys, str(tmp_path / "a.mcap"), "--out", str(tmp_path / "out"))
+    assert code == 0
+    (row,) = result["runs"]
+    assert row["run_id"] == "made-a" and (row["robots"], row["sites"]) == (ROBOTS, SITES)
+    assert row["source"] == "status messages" and row["complete"] is True
+    assert row["consensus"] and row["correct"]
+    assert row["best_site"] == make_layout(SITES, ROBOTS, SEED).best_site
+    assert (row["swarm_steps"], row["steps_min"], row["steps_max"]) == (3, 2, 3)
+    assert row["steps_mean"] == pytest.approx(7 / 3, abs=1e-3)
+    assert row["pool_mean"] == pytest.approx(15 / 7, abs=1e-3)
+    assert (row["pool_min"], row["pool_max"], row["poolings"]) == (1, 3, 7)
+    assert row["robots_within_half_n"] == 2 and row["within_half_n"] is False
+    (group,) = result["groups"]
+    assert group["runs"] == group["correct_runs"] == 1 and group["runs_within_half_n"] == 0
+    with open(tmp_path / "out" / "summary.csv") as stream:
+        (line,) = list(csv.DictReader(stream))
+    assert line["run_id"] == "made-a" and line["swarm_steps"] == "3"
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["runs"] == [row]
+    for name in report.FIGURES:
+        assert (tmp_path / "out" / name).read_bytes().startswith(PNG_MAGIC)
+
+
+def test_the_launchers_summary_is_used_when_recorded(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "made.mcap"
+    make_recording(path, "made-b")
+    rebuilt = report.rebuild_summary(report.read_recording(path))
+    rebuilt["wall_time_s"] = 12.5  # something only the launcher knew
+    make_recording(path, "made-b", summary=rebuilt)
+    code, result = run_report(capsys, str(path), "--out", str(tmp_path / "out"))
+    assert code == 0
+    (row,) = result["runs"]
+    assert row["source"] == "metadata" and row["wall_time_s"] == 12.5
+    assert row["swarm_steps"] == 3
+
+
+def test_a_cut_short_recording_is_reported_from_its_status_messages(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    whole = tmp_path / "whole.mcap"
+    before_last, unfinished = make_recording(whole, "made-c", finish=False)
+    data = whole.read_bytes()
+    (tmp_path / "cut.mcap").write_bytes(data[:unfinished])
+    code, result = run_report(capsys, str(tmp_path / "cut.mcap"), "--out", str(tmp_path / "o"))
+    assert code == 0
+    (row,) = result["runs"]
+    assert row["complete"] is False and row["source"] == "status messages"
+    assert (row["swarm_steps"], row["poolings"]) == (3, 7)
+    # Cut inside the last robot's last status: what was recorded before is still reported.
+    (tmp_path / "cut2.mcap").write_bytes(data[: before_last + 20])
+    code, result = run_report(capsys, str(tmp_path / "cut2.mcap"), "--out", str(tmp_path / "p"))
+    assert code == 0
+    (row,) = result["runs"]
+    assert row["complete"] is False and row["consensus"] is False and row["decided"] == 2
+    assert (tmp_path / "p" / "fig4.png").read_bytes().startswith(PNG_MAGIC)
+
+
+def test_runs_are_grouped_by_swarm_size_and_sites(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    paths = []
+    for index, sites in enumerate((4, 6, 4)):
+        paths.append(tmp_path / f"r{index}.mcap")
+        make_recording(paths[-1], f"made-n{sites}-r{index}", sites)
+    code, result = run_report(capsys, *map(str, paths), "--out", str(tmp_path / "out"),
+                              "--example", "made-n6-r1", "--per-run")
+    assert code == 0
+    assert [(group["sites"], group["runs"]) for group in result["groups"]] == [(4, 2), (6, 1)]
+    assert result["groups"][1]["runs_within_half_n"] == 1  # 3 steps <= 6 / 2
+    for index, sites in enumerate((4, 6, 4)):
+        folder = tmp_path / "out" / "runs" / f"made-n{sites}-r{index}"
+        assert (folder / "opinion.png").read_bytes().startswith(PNG_MAGIC)
+
+
+def test_an_unreadable_file_is_skipped_and_reported(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "junk.mcap").write_bytes(b"not an mcap file at all")
+    make_recording(tmp_path / "good.mcap", "made-d")
+    code = main(["report", str(tmp_path / "junk.mcap"), str(tmp_path / "good.mcap"),
+                 "--out", str(tmp_path / "out"), "--json"])
+    captured = capsys.readouterr()
+    result = json.loads(captured.out)
+    assert code == 0 and len(result["runs"]) == 1
+    assert "junk.mcap" in result["unreadable"][0]
+    assert "skipping" in captured.err and "junk.mcap" in captured.err
+    code, result = run_report(capsys, str(tmp_path / "junk.mcap"), "--out", str(tmp_path / "x"))
+    assert code == 1 and result["runs"] == []
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["missing.mcap", "--out", "out"], "no such recording"),
+    (["{good}", "--out", "{good}"], "not a directory"),
+    (["{good}", "--out", "out", "--robot", "-1"], "--robot"),
+    (["{good}"], "--out"),
+])
+def test_bad_arguments_exit_with_code_2_and_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], arguments: list[str], message: str
+) -> None:
+    good = tmp_path / "good.mcap"
+    make_recording(good, "made-e")
+    argv = [argument.replace("{good}", str(good)) for argument in arguments]
+    argv = [str(tmp_path / a) if a in ("missing.mcap", "out") else a for a in argv]
+    with pytest.raises(SystemExit) as exit_info:
+        main(["report", *argv])
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert message in error[-1] and len([line for line in error if "error" in line]) == 1
