@@ -21,6 +21,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "run": ("deploy.launcher", "run a swarm of robot processes to consensus"),
     "report": ("deploy.report", "the paper's Section 5 figures and a summary from recordings"),
     "experiment": ("deploy.experiment", "the paper's Section 5 protocol: many runs, one report"),
+    "router": ("deploy.router", "a Zenoh router (a Python session; no zenohd needed)"),
 }
 
 

@@ -22,25 +22,34 @@ log = logging.getLogger("router")
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="router", description="A Zenoh router for swarm runs that share one network."
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--listen", type=cliargs.endpoint, action="append", default=[],
                         metavar="ENDPOINT",
-                        help=f"endpoint to listen on, repeatable (default: {DEFAULT_LISTEN})")
+                        help=f"endpoint to listen on, repeatable (default: {DEFAULT_LISTEN}); "
+                        "use tcp/0.0.0.0:7447 to accept other hosts")
     parser.add_argument("--connect", type=cliargs.endpoint, action="append", default=[],
                         metavar="ENDPOINT", help="another router to connect to (repeatable)")
     parser.add_argument("--zenoh-config", metavar="FILE",
                         help="a Zenoh JSON5 configuration file (TLS, access control)")
     parser.add_argument("--log-level", default="INFO",
                         choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="router", description="A Zenoh router for swarm runs that share one network."
+    )
+    add_arguments(parser)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     die_with_launcher()
-    args = build_parser().parse_args(argv)
+    return run(build_parser().parse_args(argv))
+
+
+def run(args: argparse.Namespace) -> int:
+    """``swarm router``: route until SIGINT or SIGTERM."""
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s router %(levelname)s %(message)s"
     )
