@@ -1,14 +1,19 @@
 """How fast does a lockstep swarm run? Real-time factor and wall time, to consensus.
 
-For each swarm size it runs `swarm run --json` to consensus and reports the real-time
-factor (sim seconds per wall second while ticking), the wall time of the run, and the
-time to start. As a baseline measured in the same run, it times the bare lockstep
-exchange of the same number of processes over Zenoh (sense out, act back, no physics,
+For 10, 50 and 100 robots it runs `swarm run --json` to consensus and reports the
+real-time factor (sim seconds per wall second while ticking), the wall time of the run,
+and the time to start and stop. Then a scale curve: wall time per simulated second and
+real-time factor for 10 to 500 robots over a fixed stretch of sim time, with one process
+per robot and with robots hosted many to a process.
+
+As a baseline measured in the same run, it times the bare lockstep exchange of the
+same number of processes over Zenoh (sense out, act back, no physics,
 no controller): the floor our own code sits on, so the ratio says what the swarm's
 logic costs on top of the messaging.
 
-    .venv/bin/python benchmarks/swarm_speed.py                 # 10, 50 and 100 robots
-    .venv/bin/python benchmarks/swarm_speed.py --robots 10 --seeds 0 1 2
+    .venv/bin/python benchmarks/swarm_speed.py                 # everything
+    .venv/bin/python benchmarks/swarm_speed.py --robots 10 --seeds 0 1 2 --scale
+    .venv/bin/python benchmarks/swarm_speed.py --robots --scale 200 500 --modes hosted
 """
 
 from __future__ import annotations
@@ -98,26 +103,20 @@ def swarm_run(robots: int, seed: int, sites: int, extra: list[str]) -> dict[str,
     if done.returncode != 0:
         raise RuntimeError(f"swarm run failed: {done.stderr.decode()[-2000:]}")
     summary = json.loads(done.stdout)
+    wall = summary["wall_time_s"]
     return {
         "rtf": summary["real_time_factor"],
-        "wall": summary["wall_time_s"],
+        "wall": wall,
         "sim": summary["sim_time_s"],
-        "overhead": total - summary["wall_time_s"],
+        "sim_seen": summary["real_time_factor"] * wall,
+        "overhead": total - wall,
         "correct": float(summary["correct"]),
+        "timed_out": float(summary["timed_out"]),
     }
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--robots", type=int, nargs="+", default=[10, 50, 100])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
-    parser.add_argument("--sites", type=int, default=10)
-    parser.add_argument("--floor-ticks", type=int, default=300)
-    parser.add_argument("--no-floor", action="store_true", help="skip the messaging baseline")
-    parser.add_argument("swarm_args", nargs=argparse.REMAINDER,
-                        help="extra `swarm run` options after --")
-    args = parser.parse_args()
-    extra = [a for a in args.swarm_args if a != "--"]
+def to_consensus(args: argparse.Namespace, extra: list[str]) -> None:
+    print("To consensus (lockstep, default robots per process):")
     print(f"{'robots':>6} {'RTF':>7} {'target':>7} {'wall s':>8} {'sim s':>8} "
           f"{'start+stop s':>12} {'correct':>7} {'floor RTF':>9} {'RTF/floor':>9}")
     for robots in args.robots:
@@ -133,6 +132,46 @@ def main() -> None:
             f"{floor:>8.0f}x {rtf / floor if floor else float('nan'):>9.2f}",
             flush=True,
         )
+
+
+def scale_curve(args: argparse.Namespace, extra: list[str]) -> None:
+    print(f"\nScale curve ({args.scale_sim:g} s of sim time each; 'hosted' = the default "
+          "robots per process):")
+    print(f"{'robots':>6} {'processes':>10} {'RTF':>7} {'wall s / sim s':>14} {'start+stop s':>12}")
+    for robots in args.scale:
+        for mode in args.modes:
+            per_process = ["--robots-per-process", "1"] if mode == "1" else []
+            run = swarm_run(
+                robots, 0, args.sites, [*per_process, "--timeout", str(args.scale_sim), *extra]
+            )
+            label = "1 per robot" if mode == "1" else "hosted"
+            print(f"{robots:>6} {label:>10} {run['rtf']:>6.2f}x "
+                  f"{run['wall'] / max(run['sim_seen'], 1e-9):>14.3f} "
+                  f"{run['overhead']:>12.1f}", flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--robots", type=int, nargs="*", default=[10, 50, 100],
+                        help="swarm sizes to run to consensus")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
+    parser.add_argument("--sites", type=int, default=10)
+    parser.add_argument("--floor-ticks", type=int, default=300)
+    parser.add_argument("--no-floor", action="store_true", help="skip the messaging baseline")
+    parser.add_argument("--scale", type=int, nargs="*", default=[10, 50, 100, 200, 500],
+                        help="swarm sizes of the scale curve (fixed sim time)")
+    parser.add_argument("--scale-sim", type=float, default=60.0,
+                        help="sim seconds per scale-curve run")
+    parser.add_argument("--modes", nargs="+", default=["1", "hosted"], choices=["1", "hosted"],
+                        help="robots per process in the scale curve: 1, or the default")
+    parser.add_argument("swarm_args", nargs=argparse.REMAINDER,
+                        help="extra `swarm run` options after --")
+    args = parser.parse_args()
+    extra = [a for a in args.swarm_args if a != "--"]
+    if args.robots:
+        to_consensus(args, extra)
+    if args.scale:
+        scale_curve(args, extra)
 
 
 if __name__ == "__main__":
