@@ -6,6 +6,7 @@ import json
 import os
 import signal
 import subprocess
+import sys
 import time
 
 import pytest
@@ -253,3 +254,48 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run() -> None:
 
     assert decisions(over_zenoh) == decisions(in_memory)
     assert over_zenoh["sim_time_s"] == in_memory["sim_time_s"]
+
+
+def test_the_realtime_clock_follows_the_wall_clock_at_the_asked_speed() -> None:
+    code, summary, stderr = run_swarm(
+        [*SMALL, "--seed", "1", "--clock", "realtime", "--speed", "25"],
+        unique_run_id("realtime"),
+    )
+    assert code == 0, stderr
+    assert summary["correct"]
+    # Paced by the wall clock: a lockstep world would run several times faster than this.
+    # (Only an upper bound: a slow machine may fall behind the asked speed.)
+    assert summary["real_time_factor"] <= 25 * 1.1
+
+
+@pytest.mark.parametrize(
+    ("command", "bad"),
+    [
+        (["world-server"], ["--sites", "1"]),
+        (["world-server"], ["--drop", "2"]),
+        (["world-server"], ["--burst-loss", "0.1"]),
+        (["nest-beacon"], ["--beacon-outage", "5:1"]),
+        (["nest-beacon"], ["--name", "7"]),
+        (["robot-agent"], ["--id", "-1"]),
+        (["robot-agent"], ["--id", "1", "--alpha", "0.9"]),
+        (["robot-agent"], ["--id", "1", "--connect", "nowhere"]),
+        (["swarm", "wellstirred"], ["--pool", "0"]),
+        (["swarm", "report"], ["--out"]),
+        (["swarm", "experiment"], ["--runs", "0"]),
+        (["swarm", "router"], ["--listen", "x"]),
+        (["swarm", "run"], ["--kill", "3"]),
+        (["swarm", "run"], ["--robots", "2", "--kill", "5@10"]),
+        (["swarm"], ["nonsense"]),
+    ],
+)
+def test_every_command_rejects_bad_arguments_in_one_line_with_code_2(
+    command: list[str], bad: list[str]
+) -> None:
+    modules = {"world-server": "world_server.server", "nest-beacon": "nest_beacon",
+               "robot-agent": "robot_agent.node", "swarm": "deploy.cli"}
+    argv = [sys.executable, "-m", modules[command[0]], *command[1:], *bad]
+    done = subprocess.run(argv, capture_output=True, timeout=60, cwd=REPO)
+    errors = done.stderr.decode()
+    assert done.returncode == 2, errors
+    assert "Traceback" not in errors
+    assert errors.strip().splitlines()[-1].count("error") >= 1
