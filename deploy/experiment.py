@@ -22,13 +22,9 @@ from pathlib import Path
 from typing import IO, Any
 
 from deploy.cli import UsageError
+from deploy.launcher import add_swarm_switches
 from robot_agent import cliargs, protocol
 
-# Options forwarded to every ``swarm run`` when given (flag, attribute).
-FORWARDED = (
-    ("--alpha", "alpha"), ("--threshold", "threshold"), ("--dwell", "dwell"),
-    ("--drop", "drop"), ("--timeout", "timeout"),
-)
 STOP_GRACE = 10.0  # wall seconds a run has to stop after SIGINT before SIGKILL
 
 
@@ -50,14 +46,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="directory for recordings, logs and the report")
     parser.add_argument("--name", type=cliargs.name, default="exp",
                         help="run id prefix: <name>-N<robots>-n<sites>-r<run> (default: exp)")
-    parser.add_argument("--alpha", type=cliargs.alpha, default=None,
-                        help="evidence reliability alpha, forwarded to swarm run")
-    parser.add_argument("--threshold", type=cliargs.threshold, default=None,
-                        help="decision threshold, forwarded to swarm run")
-    parser.add_argument("--dwell", type=cliargs.positive_float, default=None,
-                        help="sim seconds at the nest, forwarded to swarm run")
-    parser.add_argument("--drop", type=cliargs.probability, default=None,
-                        help="radio drop probability, forwarded to swarm run")
     parser.add_argument("--timeout", type=cliargs.positive_float, default=None,
                         metavar="SIM_SECONDS", help="per-run sim time limit, forwarded")
     parser.add_argument("--run-timeout", type=cliargs.positive_float, default=1800.0,
@@ -68,9 +56,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true",
                         help="print the report (runs, groups, failures) as JSON on stdout")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    # Every switch of `swarm run` (decision, radio faults, camera noise, beacon, robot
+    # faults) is a switch here too, passed on to every run.
+    parser.set_defaults(switches=add_swarm_switches(parser))
     parser.add_argument("run_options", nargs=argparse.REMAINDER,
                         help="after --: further swarm run options for every run, e.g. "
-                        "-- --latency 2 --radio-range 0.3")
+                        "-- --robots-per-process 5")
 
 
 @dataclass(frozen=True)
@@ -124,11 +115,9 @@ def plan_runs(args: argparse.Namespace, endpoint: str) -> list[RunSpec]:
 
 
 def _run_options(args: argparse.Namespace) -> list[str]:
-    extra: list[str] = []
-    for flag, attribute in FORWARDED:
-        value = getattr(args, attribute)
-        if value is not None:
-            extra += [flag, str(value)]
+    extra = cliargs.forward_argv(args.switches.all, args)
+    if args.timeout is not None:
+        extra += ["--timeout", str(args.timeout)]
     options = list(args.run_options)
     if options and options[0] == "--":
         options = options[1:]

@@ -62,9 +62,37 @@ def robot_at_time(text: str) -> tuple[int, float]:
 
 @dataclass(frozen=True)
 class ForwardedOptions:
+    """The run-shaping options, by the process they are passed on to."""
+
     world: list[argparse.Action]
     beacon: list[argparse.Action]
     controller: list[argparse.Action]
+    robot_faults: list[argparse.Action]
+
+    @property
+    def all(self) -> list[argparse.Action]:
+        return [*self.controller, *self.world, *self.beacon, *self.robot_faults]
+
+
+def add_swarm_switches(parser: argparse.ArgumentParser) -> ForwardedOptions:
+    """The options that shape a run: decision, world, radio faults, camera, beacon and
+    robot faults. ``swarm run`` and ``swarm experiment`` both take all of them."""
+    controller = add_controller_options(parser)
+    world = add_world_options(parser)
+    beacon = add_beacon_options(parser, prefix="beacon-")
+    faults = parser.add_argument_group("robot faults")
+    robot_faults = [
+        faults.add_argument("--kill", type=robot_at_time, action="append", default=[],
+                            metavar="ROBOT@SIMTIME",
+                            help="SIGKILL robot ROBOT's process at SIMTIME sim seconds "
+                            "(repeatable); the swarm goes on without it"),
+        faults.add_argument("--restart", type=robot_at_time, action="append", default=[],
+                            metavar="ROBOT@SIMTIME",
+                            help="start a fresh process for robot ROBOT at SIMTIME "
+                            "(repeatable); it is killed first if still running, and rejoins "
+                            "with a new controller and its old body"),
+    ]
+    return ForwardedOptions(world, beacon, controller, robot_faults)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -79,19 +107,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     swarm.add_argument("--timeout", type=cliargs.positive_float, default=1800.0,
                        metavar="SIM_SECONDS",
                        help="give up after this much sim time (default: 1800)")
-    controller = add_controller_options(parser)
-    world = add_world_options(parser)
-    beacon = add_beacon_options(parser, prefix="beacon-")
-    faults = parser.add_argument_group("robot faults")
-    faults.add_argument("--kill", type=robot_at_time, action="append", default=[],
-                        metavar="ROBOT@SIMTIME",
-                        help="SIGKILL robot ROBOT's process at SIMTIME sim seconds "
-                        "(repeatable); the swarm goes on without it")
-    faults.add_argument("--restart", type=robot_at_time, action="append", default=[],
-                        metavar="ROBOT@SIMTIME",
-                        help="start a fresh process for robot ROBOT at SIMTIME (repeatable); "
-                        "it is killed first if still running, and rejoins with a new "
-                        "controller and its old body")
+    switches = add_swarm_switches(parser)
     processes = parser.add_argument_group("processes")
     processes.add_argument("--robots-per-process", type=cliargs.int_range(1, 1000),
                            default=None, metavar="K",
@@ -114,7 +130,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     output.add_argument("--quiet", action="store_true", help="no progress display")
     output.add_argument("--verbose", action="store_true",
                         help="echo the processes' logs on stderr")
-    parser.set_defaults(forwarded=ForwardedOptions(world, beacon, controller))
+    parser.set_defaults(forwarded=switches)
 
 
 @dataclass(frozen=True)
