@@ -31,8 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="ENDPOINT", help="another router to connect to (repeatable)")
     parser.add_argument("--zenoh-config", metavar="FILE",
                         help="a Zenoh JSON5 configuration file (TLS, access control)")
-    parser.add_argument("--log-level", default="INFO",
-                        choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    cliargs.add_log_level(parser)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -50,9 +49,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """``swarm router``: route until SIGINT or SIGTERM."""
-    logging.basicConfig(
-        level=args.log_level, format="%(asctime)s router %(levelname)s %(message)s"
-    )
+    cliargs.configure_logging("router", args.log_level)
     import zenoh
 
     from robot_agent.zenoh_session import open_session

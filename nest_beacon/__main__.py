@@ -36,8 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_beacon_options(parser)
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
     cliargs.add_zenoh_options(parser)
-    parser.add_argument("--log-level", default="INFO",
-                        choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    cliargs.add_log_level(parser)
     return parser
 
 
@@ -49,9 +48,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         config = beacon_config(args, args.name)
     except ValueError as error:
         parser.exit(2, f"nest-beacon: error: {error}\n")
-    logging.basicConfig(
-        level=args.log_level, format="%(asctime)s nest-beacon %(levelname)s %(message)s"
-    )
+    cliargs.configure_logging("nest-beacon", args.log_level)
     beacon = Beacon(config, random.Random(protocol.derive_seed(args.seed, "beacon", args.name)))
     keys = protocol.Keys(args.run_id, args.root)
     clocks: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()

@@ -7,6 +7,7 @@ wrong, so argparse prints one line and exits with code 2.
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 from collections.abc import Callable
 
@@ -155,3 +156,14 @@ def forward_argv(
         else:
             argv += [flag, str(value)]
     return argv
+
+
+def add_log_level(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--log-level", default="INFO",
+                        choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+                        help="how much to log on stderr (default: INFO)")
+
+
+def configure_logging(program: str, level: str) -> None:
+    """One log format for every process: time, program, level, message."""
+    logging.basicConfig(level=level, format=f"%(asctime)s {program} %(levelname)s %(message)s")

@@ -20,6 +20,7 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import msgspec
 import zenoh
@@ -33,6 +34,7 @@ from robot_agent.ports import RejectCounter
 from robot_agent.zenoh_session import open_from_args, reliable_publisher
 
 log = logging.getLogger("robot_agent")
+Meta = TypeVar("Meta", protocol.RadioRxMeta, protocol.CameraMeta)
 
 
 @dataclass(frozen=True)
@@ -141,30 +143,28 @@ class RobotNode:
             self.pending.setdefault(sense.tick, _TickInputs()).sense = sense
             self._advance(sense.tick)
         elif event.kind == "rx":
-            try:
-                if event.attachment is None:
-                    raise protocol.ProtocolError("missing attachment")
-                meta = protocol.decode(event.attachment, protocol.RadioRxMeta)
-            except protocol.ProtocolError as error:
-                self._reject("radio/rx", error)
-                return
-            if meta.tick > self.last_tick:
+            meta = self._attachment(event, protocol.RadioRxMeta, "radio/rx")
+            if meta is not None and meta.tick > self.last_tick:
                 self.pending.setdefault(meta.tick, _TickInputs()).rx.append(
                     (meta.sender, event.payload)
                 )
                 self._advance(meta.tick)
         elif event.kind == "camera":
-            try:
-                if event.attachment is None:
-                    raise protocol.ProtocolError("missing attachment")
-                meta = protocol.decode(event.attachment, protocol.CameraMeta)
-            except protocol.ProtocolError as error:
-                self._reject("camera", error)
-                return
-            if meta.tick > self.last_tick:
+            meta = self._attachment(event, protocol.CameraMeta, "camera")
+            if meta is not None and meta.tick > self.last_tick:
                 inputs = self.pending.setdefault(meta.tick, _TickInputs())
                 inputs.frame, inputs.frame_seen = event.payload, True
                 self._advance(meta.tick)
+
+    def _attachment(self, event: Event, kind: type[Meta], key: str) -> Meta | None:
+        """The event's metadata (its Zenoh attachment) as ``kind``, or None, rejected."""
+        try:
+            if event.attachment is None:
+                raise protocol.ProtocolError("missing attachment")
+            return protocol.decode(event.attachment, kind)
+        except protocol.ProtocolError as error:
+            self._reject(key, error)
+            return None
 
     def _world_presence(self, instance: str, present: bool) -> None:
         """Wait while the world server is gone; when another one appears, follow its ticks.
@@ -301,8 +301,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="wall seconds to wait for the world server (default: 60)")
     add_controller_options(parser)
     cliargs.add_zenoh_options(parser)
-    parser.add_argument("--log-level", default="INFO",
-                        choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    cliargs.add_log_level(parser)
     return parser
 
 
@@ -317,9 +316,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         config = controller_config(args)
     except ValueError as error:
         parser.exit(2, f"robot-agent: error: {error}\n")
-    logging.basicConfig(
-        level=args.log_level, format="%(asctime)s robot-agent %(levelname)s %(message)s"
-    )
+    cliargs.configure_logging("robot-agent", args.log_level)
     keys = protocol.Keys(args.run_id, args.root)
     inbox: queue.SimpleQueue[Event] = queue.SimpleQueue()
     for signum in (signal.SIGINT, signal.SIGTERM):

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import subprocess
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass, field
+
+import pytest
 
 UDP_SUBNET = "10.77.0"
 
@@ -90,3 +94,19 @@ class Lan:
         return ["ip", "netns", "exec", self.robot_ns(index), *command]
 
 
+
+
+@contextlib.contextmanager
+def namespaces(prefix: str, size: int, subnet: str) -> Iterator[Lan]:
+    """A Lan for the duration of a test (skipped where namespaces cannot be made), and a
+    check afterwards that every namespace it made is gone."""
+    reason = netns_unavailable()
+    if reason is not None:
+        pytest.skip(reason)
+    network = Lan(prefix=f"{prefix}{os.getpid()}", size=size, subnet=subnet)
+    try:
+        network.create()
+        yield network
+    finally:
+        left = network.destroy()
+        assert not left, f"network namespaces left behind: {left}"

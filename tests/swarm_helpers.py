@@ -81,6 +81,19 @@ def kill_leftovers(run_id: str) -> list[int]:
     return left
 
 
+def stop_processes(processes: Sequence[subprocess.Popen[bytes]], grace: float = 5.0) -> None:
+    """SIGTERM every process still running, then SIGKILL those that outlive ``grace``."""
+    for process in processes:
+        if process.poll() is None:
+            process.send_signal(signal.SIGTERM)
+    for process in processes:
+        try:
+            process.wait(timeout=grace)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
 def run_swarm(args: Sequence[str], run_id: str, timeout: float = 120.0) -> tuple[int, Any, str]:
     """Run ``swarm run ... --json`` to the end; return (exit code, summary, stderr)."""
     command = swarm_command("run", "--run-id", run_id, "--json", "--quiet", *args)

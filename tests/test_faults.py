@@ -11,7 +11,14 @@ from collections.abc import Callable
 from typing import Any
 
 import pytest
-from swarm_helpers import REPO, kill_leftovers, loopback_router, run_swarm, unique_run_id
+from swarm_helpers import (
+    REPO,
+    kill_leftovers,
+    loopback_router,
+    run_swarm,
+    stop_processes,
+    unique_run_id,
+)
 
 from robot_agent import protocol
 from world_server.layout import make_layout
@@ -122,15 +129,7 @@ def test_robots_wait_for_a_lost_world_server_and_resume_with_a_new_one() -> None
                 time.sleep(0.1)
             assert all(robot.poll() is None for robot in robots)
         finally:
-            for process in started:
-                if process.poll() is None:
-                    process.send_signal(signal.SIGTERM)
-            for process in started:
-                try:
-                    process.wait(timeout=5)
-                except subprocess.TimeoutExpired:
-                    process.kill()
-                    process.wait()
+            stop_processes(started)
             kill_leftovers(run_id)
         errors = b"".join(process.stderr.read() for process in started if process.stderr)
     assert {status.decided_site for status in statuses.values()} == {best}

@@ -8,16 +8,14 @@ process is a client of its own host's router, as on real machines.
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from netns import Lan, netns_unavailable
-from swarm_helpers import REPO
+from netns import Lan, namespaces
+from swarm_helpers import REPO, stop_processes
 
 from world_server.layout import make_layout
 
@@ -54,16 +52,8 @@ session.close()  # an open session can hold up the interpreter's exit
 
 @pytest.fixture(scope="module")
 def hosts() -> Iterator[Lan]:
-    reason = netns_unavailable()
-    if reason is not None:
-        pytest.skip(reason)
-    network = Lan(prefix=f"bmh{os.getpid()}", size=3, subnet=SUBNET)
-    try:
-        network.create()
+    with namespaces("bmh", 3, SUBNET) as network:
         yield network
-    finally:
-        left = network.destroy()
-        assert not left, f"network namespaces left behind: {left}"
 
 
 def test_routers_per_host_carry_a_swarm_to_the_right_consensus(
@@ -102,15 +92,7 @@ def test_routers_per_host_carry_a_swarm_to_the_right_consensus(
         output, _ = observer.communicate(timeout=170)
         crashed = [p.args for p in started if p is not observer and p.poll() is not None]
     finally:
-        for process in started:
-            if process.poll() is None:
-                process.send_signal(signal.SIGTERM)
-        for process in started:
-            try:
-                process.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
+        stop_processes(started)
         logs.close()
     log_text = (tmp_path / "processes.log").read_text(errors="replace")[-3000:]
     assert not crashed, f"processes exited early: {crashed}\n{log_text}"

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from netns import UDP_SUBNET, Lan, lan_address, netns_unavailable
+from netns import UDP_SUBNET, Lan, lan_address, namespaces
 
 from robot_agent import ports, protocol
 from robot_agent.udp_radio import (
@@ -299,16 +299,8 @@ def test_worked_example_robots_decide_over_udp() -> None:
 
 @pytest.fixture(scope="module")
 def lan() -> Iterator[Lan]:
-    reason = netns_unavailable()
-    if reason is not None:
-        pytest.skip(reason)
-    network = Lan(prefix=f"bon{os.getpid()}", size=3, subnet=UDP_SUBNET)
-    try:
-        network.create()
+    with namespaces("bon", 3, UDP_SUBNET) as network:
         yield network
-    finally:
-        left = network.destroy()
-        assert not left, f"network namespaces left behind: {left}"
 
 
 def node(lan: Lan, index: int, *args: str) -> list[str]:

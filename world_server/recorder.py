@@ -575,8 +575,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--info-timeout", type=cliargs.positive_float, default=10.0,
                         help="wall seconds to wait for world/info (default: 10)")
     cliargs.add_zenoh_options(parser)
-    parser.add_argument("--log-level", default="INFO",
-                        choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    cliargs.add_log_level(parser)
     return parser
 
 
@@ -653,9 +652,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ValueError("not a JSON object")
     except ValueError as error:
         parser.exit(2, f"recorder: error: --config-json: {error}\n")
-    logging.basicConfig(
-        level=args.log_level, format="%(asctime)s recorder %(levelname)s %(message)s"
-    )
+    cliargs.configure_logging("recorder", args.log_level)
     import zenoh
 
     from robot_agent.zenoh_session import open_from_args

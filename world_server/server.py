@@ -453,8 +453,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="wall seconds to wait for the expected robots (default: 60)")
     add_world_options(parser)
     cliargs.add_zenoh_options(parser, default_mode="router")
-    parser.add_argument("--log-level", default="INFO",
-                        choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    cliargs.add_log_level(parser)
     return parser
 
 
@@ -468,9 +467,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if session_mode(args) == "router" and not args.listen and not args.zenoh_config:
         args.listen = [DEFAULT_LISTEN]
-    logging.basicConfig(
-        level=args.log_level, format="%(asctime)s world-server %(levelname)s %(message)s"
-    )
+    cliargs.configure_logging("world-server", args.log_level)
     world = World(config_from_args(args))
     keys = protocol.Keys(args.run_id, args.root)
     try:
