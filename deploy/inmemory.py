@@ -36,9 +36,14 @@ def run_in_memory(
     *,
     timeout: float = 1800.0,
     on_tick: Callable[[World], None] | None = None,
+    controller_factory: type[Controller] = Controller,
 ) -> dict[str, Any]:
     """Run to consensus (every robot decided) or ``timeout`` sim seconds; the summary is
-    the ``swarm run --json`` object (wall-clock fields are zero)."""
+    the ``swarm run --json`` object (wall-clock fields are zero).
+
+    ``controller_factory`` lets a study observe the controllers (a subclass of
+    Controller); ``on_tick`` sees the world before each tick closes.
+    """
     world = World(world_config)
     beacon_config = beacon_config or BeaconConfig()
     beacon = Beacon(
@@ -50,7 +55,7 @@ def run_in_memory(
     for robot_id in range(world_config.num_robots):
         world.join_robot(robot_id)
         rng = random.Random(protocol.derive_seed(world_config.seed, "robot", robot_id))
-        controller = Controller(robot_id, world.info, controller_config, rng)
+        controller = controller_factory(robot_id, world.info, controller_config, rng)
         robots[robot_id] = _Robot(controller, RobotRecord(robot_id))
     deliveries: dict[str, list[tuple[str, bytes]]] = {}
     frames: dict[int, bytes] = {}

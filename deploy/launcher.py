@@ -166,7 +166,7 @@ NOT_CONFIG = {"module", "command", "json", "quiet", "verbose", "forwarded"}
 
 
 def plan_from_args(args: argparse.Namespace) -> RunPlan:
-    controller_config(args)  # validates alpha/threshold together; ValueError -> usage error
+    controller = controller_config(args)  # alpha and threshold together; ValueError: usage
     faults = sorted(
         [Fault(robot, "kill", at) for robot, at in args.kill]
         + [Fault(robot, "restart", at) for robot, at in args.restart],
@@ -201,6 +201,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     ]
     config = {key: value for key, value in vars(args).items() if key not in NOT_CONFIG}
     config["run_id"] = run_id
+    config["threshold"] = controller.threshold  # the one in force, also when defaulted
     record = None if args.no_record else Path(args.record or f"runs/{run_id}.mcap")
     recorder_args = [
         *common, *client, "--out", str(record), "--robots", str(args.robots),

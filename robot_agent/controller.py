@@ -13,7 +13,7 @@ One cycle ("trip"):
     compare, negative update (Definition 1)
     to_nest [-> waiting]                         until the nest beacon is heard
     at_nest                                      stop, broadcast the opinion, listen `dwell` s
-    pool (MProdOp) with every neighbour heard; trips += 1; decision test
+    pool (MProdOp, or config.pooling) with every neighbour heard; trips += 1; decision test
     -> next pair (to_site), or lingering -> to_decision -> stopped once decided.
 
 Where the paper leaves the robot to its path planner, this controller adds the guards a
@@ -50,6 +50,7 @@ class ControllerConfig:
 
     alpha: float = 0.0  # Definition 1 reliability parameter, in [0, 0.5]
     threshold: float = 1.0  # decide when an option reaches it (use < 1 with alpha > 0)
+    pooling: decision.PoolingName = "mprodop"  # operator at the nest (decision.POOLING_OPERATORS)
     dwell: float = 3.0  # seconds at the nest broadcasting + listening before pooling
     broadcast_period: float = 0.5  # seconds between opinion broadcasts at the nest
     linger: float = 0.0  # seconds broadcasting at the nest after deciding (the paper's fix)
@@ -71,6 +72,11 @@ class ControllerConfig:
 
     def __post_init__(self) -> None:
         decision.validate_alpha(self.alpha)
+        if not isinstance(self.pooling, str) or self.pooling not in decision.POOLING_OPERATORS:
+            raise ValueError(
+                f"pooling must be one of {', '.join(decision.POOLING_OPERATORS)}, "
+                f"got {self.pooling!r}"
+            )
         if not (isinstance(self.threshold, (int, float)) and 0.0 < self.threshold <= 1.0):
             raise ValueError(f"threshold must be in (0, 1], got {self.threshold!r}")
         if self.alpha > 0.0 and self.threshold >= 1.0:
@@ -555,7 +561,7 @@ class Controller:
             opinion for _, (heard, opinion) in sorted(self._heard.items()) if heard >= since
         ]
         pool = [self._opinion, *neighbours]
-        pooled = decision.mprodop(pool)
+        pooled = decision.POOLING_OPERATORS[self.config.pooling](pool)
         if pooled is not None:  # None: contradictory evidence, keep our own opinion
             self._opinion = pooled
         self._heard = {}
