@@ -20,11 +20,15 @@ Where the paper leaves the robot to its path planner, this controller adds the g
 crowded arena needs: a viewpoint taken by another robot counts as reached once the robot
 has been stalled close to it; a site that cannot be seen after ``capture_attempts`` tries
 is given up (no update that trip); a leg to a site that takes longer than
-``travel_timeout`` is abandoned. A decided robot parks ``park_offset`` behind its site's
-viewpoint (towards the centre), not on it: robots still sensing that site need the
-viewpoint and the view. Later arrivals dock against the robots already parked, from the
-centre's side and clear of the nest, and only against a contact that lasts
-``park_settle`` seconds, so that parked robots do not wall in a robot passing by.
+``travel_timeout`` is abandoned. A decided robot parks in a slot of its own against the
+wall, as near its site as its slot allows, never on a viewpoint: robots still sensing
+need the viewpoints, the views and the paths to them, and a crowd parked round a site
+would wall them in (with a hundred robots it did, and the swarm never finished). Slots
+are ``park_spacing`` apart along the wall, outside a corridor of ``park_corridor`` either
+side of every site; robot k takes the k-th slot nearest its site, so no two robots ever
+want the same slot and none has to pass another to reach its own. When the wall is
+full, further slots lie on rings further in, spaced wider so the outer ones stay
+reachable.
 """
 
 from __future__ import annotations
@@ -65,10 +69,9 @@ class ControllerConfig:
     stall_timeout: float = 4.0  # seconds without progress near a goal -> take it as reached
     near_distance: float = 0.2  # metres: how near a stalled robot must be to sense from there
     travel_timeout: float = 120.0  # seconds for a leg to a site (or parking) before giving up
-    park_offset: float = 0.2  # metres behind the viewpoint (towards the centre) to park
-    park_contact: float = 0.2  # proximity reading (1 = touching) at which a parker stops
-    park_radius: float = 0.25  # metres from the parking spot within which it stops on contact
-    park_settle: float = 2.0  # seconds a contact must last before a parker stops against it
+    park_clearance: float = 0.06  # metres from the wall to the centre of a parking slot
+    park_spacing: float = 0.1  # metres between parking slots along the wall
+    park_corridor: float = 0.11  # metres either side of each site kept free of parking
 
     def __post_init__(self) -> None:
         decision.validate_alpha(self.alpha)
@@ -103,14 +106,13 @@ class ControllerConfig:
         for name, value in (
             ("linger", self.linger),
             ("wiggle", self.wiggle),
-            ("park_offset", self.park_offset),
-            ("park_radius", self.park_radius),
-            ("park_settle", self.park_settle),
+            ("park_clearance", self.park_clearance),
+            ("park_corridor", self.park_corridor),
         ):
             if not _finite(value) or value < 0.0:
                 raise ValueError(f"{name} must be zero or positive, got {value!r}")
-        if not _finite(self.park_contact) or not 0.0 < self.park_contact <= 1.0:
-            raise ValueError(f"park_contact must be in (0, 1], got {self.park_contact!r}")
+        if not _finite(self.park_spacing) or self.park_spacing <= 0.0:
+            raise ValueError(f"park_spacing must be a positive distance, got {self.park_spacing!r}")
         if self.wiggle > math.pi / 2:
             raise ValueError(f"wiggle must be at most pi/2 radians, got {self.wiggle!r}")
         if isinstance(self.capture_attempts, bool) or not isinstance(self.capture_attempts, int):
@@ -142,10 +144,10 @@ class Controller:
         if len(site_ids) < 2:
             raise ValueError(f"need at least 2 sites, got {len(site_ids)}")
         sensing_radius = world.arena_radius - config.view_distance
-        if sensing_radius - config.park_offset < world.robot_radius:
+        if world.arena_radius - config.park_clearance < world.nest.radius + world.robot_radius:
             raise ValueError(
-                f"view_distance {config.view_distance} + park_offset {config.park_offset} "
-                f"leaves no room in an arena of radius {world.arena_radius}"
+                f"park_clearance {config.park_clearance} leaves no room to park in an arena "
+                f"of radius {world.arena_radius}"
             )
         if config.view_distance < world.robot_radius:
             raise ValueError(
@@ -164,9 +166,8 @@ class Controller:
         sites = sorted(world.sites, key=lambda site: site.id)
         self._site_xy = [(site.x, site.y) for site in sites]
         self._viewpoints = [_along_radius(site.x, site.y, sensing_radius) for site in sites]
-        self._parking = [
-            _along_radius(site.x, site.y, sensing_radius - config.park_offset) for site in sites
-        ]
+        self._site_angles = [math.atan2(site.y, site.x) for site in sites]
+        self._park_goal: tuple[float, float] | None = None
         params = nav_params or NavParams(
             max_speed=world.max_wheel_speed,
             wheel_base=world.wheel_base,
@@ -203,7 +204,6 @@ class Controller:
         self._next_broadcast = 0.0
         self._linger_end = 0.0
         self._heard: dict[int, tuple[float, list[float]]] = {}
-        self._contact_since: float | None = None
         self._started = False
         self._handlers: dict[str, Callable[[ports.BodyReading], ports.Command]] = {
             "to_site": self._to_site,
@@ -448,53 +448,29 @@ class Controller:
 
     def _to_decision(self, reading: ports.BodyReading) -> ports.Command:
         assert self._decided_site is not None
-        goal = self._parking[self._decided_site]
+        if self._park_goal is None:
+            self._park_goal = parking_slot(
+                self._site_angles, self._decided_site, self.robot_id,
+                arena_radius=self.world.arena_radius,
+                inner_radius=self.world.nest.radius + 3 * self.world.robot_radius,
+                clearance=self.config.park_clearance, spacing=self.config.park_spacing,
+                corridor=self.config.park_corridor,
+            )
+        goal = self._park_goal
         if self._t - self._leg_start > self.config.travel_timeout:
             self._set_phase("stopped")
             return _stop()
-        # Near the spot, head straight for it without going round anything: a robot that
-        # arrives after others then docks against their centre-facing side instead of
-        # sliding round them towards the viewpoint.
-        docking = _distance(reading, goal) <= self.config.park_radius
-        if docking and self._in_parking_zone(reading, goal):
-            if self._contact_lasts(reading):
-                self._set_phase("stopped")
-                return _stop()
-            if self._contact_since is not None:
-                return _stop()  # hold still: is it parked, or passing by?
-        else:
-            self._contact_since = None
-        sensed = (0.0,) * len(reading.proximity) if docking else reading.proximity
+        # The last stretch into the slot goes straight in: the wall and the neighbouring
+        # parked robots are expected there, not obstacles to steer round.
+        near = _distance(reading, goal) <= self.config.near_distance
+        sensed = (0.0,) * len(reading.proximity) if near else reading.proximity
         left, right, arrived = self._navigator.drive_to(
             reading.x, reading.y, reading.theta, sensed, goal, self.config.view_tolerance
         )
-        if arrived or (
-            docking
-            and self._in_parking_zone(reading, goal)
-            and self._stalled_near(reading, goal, self.config.park_radius)
-        ):
+        if arrived or self._stalled_near(reading, goal, self.config.near_distance):
             self._set_phase("stopped")
             return _stop()
         return ports.Command(left, right)
-
-    def _in_parking_zone(self, reading: ports.BodyReading, goal: tuple[float, float]) -> bool:
-        """Clear of the nest's crowd and no further out than the spot.
-
-        Parked robots then neither wall in robots dwelling at the nest (nor park against
-        them) nor block the viewpoint beyond the spot.
-        """
-        radius = math.hypot(reading.x, reading.y)
-        inner = self.world.nest.radius + 3 * self.world.robot_radius
-        return inner <= radius <= math.hypot(*goal) + self.world.robot_radius
-
-    def _contact_lasts(self, reading: ports.BodyReading) -> bool:
-        """Touching something for ``park_settle`` s: a parked robot, not a passer-by."""
-        if max(reading.proximity) < self.config.park_contact:
-            self._contact_since = None
-            return False
-        if self._contact_since is None:
-            self._contact_since = self._t
-        return self._t - self._contact_since + _TIME_EPSILON >= self.config.park_settle
 
     def _stopped(self, reading: ports.BodyReading) -> ports.Command:
         return _stop()
@@ -620,6 +596,49 @@ def _stop() -> ports.Command:
 
 def _finite(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def parking_slot(
+    site_angles: Sequence[float],
+    site: int,
+    robot_id: int,
+    *,
+    arena_radius: float,
+    inner_radius: float,
+    clearance: float,
+    spacing: float,
+    corridor: float,
+) -> tuple[float, float]:
+    """Robot ``robot_id``'s parking slot for ``site``: the ``robot_id``-th slot nearest the
+    site. Ring j lies ``clearance + j * spacing`` in from the wall with slots ``(j + 1) *
+    spacing`` apart, so a robot can always pass between the parked robots of the rings
+    further in; a corridor of ``corridor`` metres either side of every site stays free."""
+    rings: list[tuple[float, list[float]]] = []
+    ring = 0
+    while arena_radius - clearance - ring * spacing >= inner_radius or not rings:
+        radius = arena_radius - clearance - ring * spacing
+        step = (ring + 1) * spacing / radius  # radians between slots on this ring
+        slots = [
+            index * step
+            for index in range(int(2 * math.pi / step))
+            if all(
+                abs(math.remainder(index * step - other, 2 * math.pi)) * radius >= corridor
+                for other in site_angles
+            )
+        ]
+        home = site_angles[site]
+        slots.sort(key=lambda angle: abs(math.remainder(angle - home, 2 * math.pi)))
+        rings.append((radius, slots))
+        ring += 1
+    # More robots than slots: the count starts again at the wall (best effort).
+    remaining = robot_id % max(1, sum(len(slots) for _, slots in rings))
+    for radius, slots in rings:
+        if remaining < len(slots):
+            return radius * math.cos(slots[remaining]), radius * math.sin(slots[remaining])
+        remaining -= len(slots)
+    radius, slots = rings[0]
+    angle = slots[0] if slots else site_angles[site]
+    return radius * math.cos(angle), radius * math.sin(angle)
 
 
 def _along_radius(x: float, y: float, radius: float) -> tuple[float, float]:

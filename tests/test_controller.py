@@ -56,10 +56,9 @@ def one_hot(n: int, option: int) -> list[float]:
         ("heading_tolerance", -0.1),
         ("wiggle", 2.0),
         ("travel_timeout", 0.0),
-        ("park_offset", -0.1),
-        ("park_contact", 0.0),
-        ("park_settle", -1.0),
-        ("park_radius", math.nan),
+        ("park_clearance", -0.1),
+        ("park_spacing", 0.0),
+        ("park_corridor", math.nan),
     ],
 )
 def test_config_rejects_bad_values(field: str, value: object) -> None:
@@ -83,7 +82,7 @@ def test_controller_checks_its_world() -> None:
     with pytest.raises(ValueError, match="view_distance"):
         Controller(0, info, ControllerConfig(view_distance=0.02), rng)
     with pytest.raises(ValueError, match="no room"):
-        Controller(0, info, ControllerConfig(view_distance=0.5, park_offset=0.3), rng)
+        Controller(0, info, ControllerConfig(park_clearance=0.7), rng)
     with pytest.raises(ValueError, match="robot id"):
         Controller(-1, info, ControllerConfig(), rng)
     controller = Controller(0, info, ControllerConfig(), rng)
@@ -437,3 +436,45 @@ def test_swarm_decides_on_real_physics_camera_and_vision() -> None:
     for robot in swarm.controllers:
         assert robot.phase == "stopped"
         assert robot.decided_site == layout.best_site
+
+
+@pytest.mark.parametrize("robots", [10, 100, 500])
+def test_parking_slots_are_distinct_clear_of_every_site_and_inside_the_arena(
+    robots: int,
+) -> None:
+    from robot_agent.controller import parking_slot
+    from world_server.layout import make_layout
+
+    layout = make_layout(10, robots, seed=0)
+    angles = [site.angle for site in layout.sites]
+    inner = layout.nest_radius + 3 * 0.037
+    config = ControllerConfig()
+    slots = [
+        parking_slot(
+            angles, 4, robot, arena_radius=layout.arena_radius, inner_radius=inner,
+            clearance=config.park_clearance, spacing=config.park_spacing,
+            corridor=config.park_corridor,
+        )
+        for robot in range(robots)
+    ]
+    assert len(set(slots)) == robots
+    for x, y in slots:
+        radius = math.hypot(x, y)
+        assert inner <= radius <= layout.arena_radius - 0.037
+        for site in layout.sites:  # never in a site's corridor: viewpoints stay free
+            lateral = abs(math.remainder(math.atan2(y, x) - site.angle, 2 * math.pi)) * radius
+            assert lateral >= config.park_corridor - 1e-9
+    # The first robots park nearest their site.
+    site = layout.sites[4]
+    distances = [math.dist(slot, (site.x, site.y)) for slot in slots[:4]]
+    assert max(distances) < 0.6
+
+
+def test_a_hundred_robots_all_park_and_decide_in_one_process() -> None:
+    from deploy.inmemory import run_in_memory
+    from world_server.world import WorldConfig
+
+    summary = run_in_memory(
+        WorldConfig(seed=0, num_sites=10, num_robots=100), ControllerConfig(), timeout=1800
+    )
+    assert summary["correct"], [r["phase"] for r in summary["per_robot"]]

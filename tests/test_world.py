@@ -15,7 +15,7 @@ pytestmark = pytest.mark.timeout(120)
 def _config(seed: int, robots: int = 6, sites: int = 8, **radio: float) -> WorldConfig:
     return WorldConfig(
         run="memory", seed=seed, num_sites=sites, num_robots=robots,
-        radio=RadioConfig(beacon_range=0.2, **radio),
+        radio=RadioConfig(**radio),
     )
 
 

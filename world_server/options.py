@@ -10,7 +10,6 @@ import argparse
 
 from robot_agent import cliargs
 from world_server.camera import CameraNoise
-from world_server.layout import nest_radius_for
 from world_server.radio import RadioConfig
 from world_server.world import DEFAULT_CAMERA, WorldConfig
 
@@ -116,7 +115,6 @@ def world_config(
     """The WorldConfig for the options of ``add_world_options``."""
     radio: dict[str, float | int | bool] = {
         "robot_range": args.radio_range,
-        "beacon_range": args.beacon_range or nest_radius_for(robots),
         "drop": args.drop,
         "latency": args.latency,
         "jitter": args.jitter,
@@ -136,6 +134,7 @@ def world_config(
     return WorldConfig(
         run=run, seed=seed, num_sites=sites, num_robots=robots, dt=args.dt,
         clock=args.clock, radio=RadioConfig(**radio),  # type: ignore[arg-type]
+        beacon_range=args.beacon_range,
         camera=DEFAULT_CAMERA,
         camera_noise=CameraNoise(pixel_sigma=args.camera_noise, lighting=args.lighting),
     )

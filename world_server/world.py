@@ -6,6 +6,7 @@ benchmarks drive it directly. One call to ``advance`` closes one control tick.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -32,7 +33,8 @@ class WorldConfig:
     dt: float = 0.1  # control tick, seconds of sim time
     substeps: int = 2
     clock: Literal["lockstep", "realtime"] = "lockstep"
-    radio: RadioConfig = field(default_factory=RadioConfig)
+    radio: RadioConfig = field(default_factory=RadioConfig)  # its beacon_range is replaced:
+    beacon_range: float | None = None  # metres the beacon reaches; None: the nest radius
     camera: protocol.CameraSpec = DEFAULT_CAMERA
     camera_noise: CameraNoise = field(default_factory=CameraNoise)
     spec: EpuckSpec = field(default_factory=EpuckSpec)
@@ -61,7 +63,11 @@ class World:
             config.num_sites, config.num_robots, config.seed, config.spec.radius
         )
         self.physics = Physics(self.layout.arena_radius, config.spec, config.substeps)
-        self.radio = RadioMedium(config.radio, protocol.derive_seed(config.seed, "radio"))
+        # The beacon reaches exactly the nest unless a range was chosen.
+        radio = dataclasses.replace(
+            config.radio, beacon_range=config.beacon_range or self.layout.nest_radius
+        )
+        self.radio = RadioMedium(radio, protocol.derive_seed(config.seed, "radio"))
         self.camera = CameraRenderer(
             self.layout,
             config.camera,
