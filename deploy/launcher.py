@@ -575,3 +575,5 @@ def print_summary(summary: dict[str, Any], console: Console) -> None:
         f"delivered {summary['radio']['delivered']}, dropped {summary['radio']['dropped']}, "
         f"rejected {summary['radio']['rejected']}"
     )
+    if summary.get("recording"):
+        console.print(f"recording: {summary['recording']} (swarm report, or open in Foxglove)")
