@@ -123,14 +123,7 @@ def mprodop(opinions: Sequence[Sequence[float]]) -> list[float] | None:
     exponent per option, so pooling many small probabilities never underflows to a
     false contradiction.
     """
-    if not opinions:
-        raise ValueError("mprodop needs at least one opinion")
-    pool: list[list[float]] = []
-    for position, opinion in enumerate(opinions):
-        try:
-            pool.append(validate_opinion(opinion, len(pool[0]) if pool else None))
-        except ValueError as error:
-            raise ValueError(f"opinion {position} of the pool: {error}") from None
+    pool = _validated_pool(opinions, "mprodop")
     size = len(pool[0])
     mantissas = [1.0] * size
     exponents = [0] * size
@@ -200,14 +193,7 @@ def loglinear_pool(
         or not 0.0 <= neighbour_weight <= 1.0
     ):
         raise ValueError(f"neighbour_weight must be a number in [0, 1], got {neighbour_weight!r}")
-    if not opinions:
-        raise ValueError("loglinear_pool needs at least one opinion")
-    pool: list[list[float]] = []
-    for position, opinion in enumerate(opinions):
-        try:
-            pool.append(validate_opinion(opinion, len(pool[0]) if pool else None))
-        except ValueError as error:
-            raise ValueError(f"opinion {position} of the pool: {error}") from None
+    pool = _validated_pool(opinions, "loglinear_pool")
     weights = [1.0] + [float(neighbour_weight)] * (len(pool) - 1)
     # Sums of logarithms: products of many small probabilities neither underflow nor
     # overflow. Each opinion is scaled by its peak, which normalisation cancels.
@@ -404,6 +390,20 @@ def _evidence_counts(evidence_counts: Sequence[int]) -> list[int]:
     if negative:
         raise ValueError(f"evidence count {negative[0]} is negative ({counts[negative[0]]})")
     return counts
+
+
+def _validated_pool(opinions: Sequence[Sequence[float]], operator: str) -> list[list[float]]:
+    """The opinions of a pool as lists of floats, all as long as the first; ValueError
+    saying which opinion is wrong otherwise."""
+    if not opinions:
+        raise ValueError(f"{operator} needs at least one opinion")
+    pool: list[list[float]] = []
+    for position, opinion in enumerate(opinions):
+        try:
+            pool.append(validate_opinion(opinion, len(pool[0]) if pool else None))
+        except ValueError as error:
+            raise ValueError(f"opinion {position} of the pool: {error}") from None
+    return pool
 
 
 def _weighted_index(weights: Sequence[float], rng: random.Random) -> int:
