@@ -39,7 +39,7 @@ from world_server.options import add_world_options
 
 log = logging.getLogger("swarm.run")
 
-EXIT_OK, EXIT_CRASH, EXIT_USAGE = 0, 1, 2
+EXIT_OK, EXIT_CRASH = 0, 1  # usage errors exit 2 through argparse and UsageError
 ROBOT_PROCESSES_PER_CORE = 25
 RUN_ID_ENV = "BESTOFN_RUN_ID"
 

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import msgspec
 import zenoh
 
 from robot_agent import cliargs, protocol
@@ -371,10 +372,7 @@ class WorldServer:
             self.acts = {}
         else:  # real time: a command holds until replaced, but a capture happens once
             self.acts = {
-                robot: protocol.Act(
-                    v=act.v, tick=act.tick, left=act.left, right=act.right,
-                    capture=False, radio_tx=0,
-                )
+                robot: msgspec.structs.replace(act, capture=False, radio_tx=0)
                 for robot, act in self.acts.items()
             }
         self._apply_joins()
