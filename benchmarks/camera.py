@@ -25,7 +25,7 @@ import numpy as np
 from robot_agent import protocol
 from robot_agent.vision import decode_frame, estimate_quality
 from world_server.camera import CameraNoise, CameraRenderer
-from world_server.layout import Layout, make_layout
+from world_server.layout import make_layout
 
 
 def per_call_us(
@@ -45,18 +45,6 @@ def per_call_us(
     return min(samples), statistics.median(samples)
 
 
-def viewpoint(
-    layout: Layout, site_id: int, distance: float = 0.15, sideways: float = 0.0,
-    heading_error: float = 0.0,
-) -> tuple[float, float, float]:
-    """The sensing pose for a site, shifted left by ``sideways`` and turned by the error."""
-    angle = layout.site(site_id).angle
-    radius = layout.arena_radius - distance
-    x = radius * math.cos(angle) - sideways * math.sin(angle)
-    y = radius * math.sin(angle) + sideways * math.cos(angle)
-    return x, y, angle + heading_error
-
-
 def accuracy(spec: protocol.CameraSpec, site_counts: list[int]) -> None:
     """Print estimate errors: clean over perturbed poses, then under each kind of noise."""
     perturbations = list(itertools.product(
@@ -70,7 +58,7 @@ def accuracy(spec: protocol.CameraSpec, site_counts: list[int]) -> None:
         renderer = CameraRenderer(layout, spec)
         errors, missing = [], 0
         for site, (sideways, heading, distance) in itertools.product(layout.sites, perturbations):
-            pose = viewpoint(layout, site.id, 0.15 + distance, sideways, heading)
+            pose = layout.sensing_pose(site.id, 0.15 + distance, sideways, heading)
             estimate = estimate_quality(renderer.render(*pose))
             if estimate is None:
                 missing += 1
@@ -86,7 +74,7 @@ def accuracy(spec: protocol.CameraSpec, site_counts: list[int]) -> None:
             errors, missing = [], 0
             for site in layout.sites:
                 for _ in range(frames_per_site if noise.pixel_sigma > 0 else 1):
-                    estimate = estimate_quality(renderer.render(*viewpoint(layout, site.id),
+                    estimate = estimate_quality(renderer.render(*layout.sensing_pose(site.id),
                                                                 rng=rng))
                     if estimate is None:
                         missing += 1

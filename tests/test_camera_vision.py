@@ -40,21 +40,6 @@ DISTANCE_ERRORS = (-0.02, 0.0, 0.02)
 pytestmark = pytest.mark.timeout(60)
 
 
-def viewpoint(
-    layout: Layout,
-    site_id: int,
-    distance: float = VIEW_DISTANCE,
-    sideways: float = 0.0,
-    heading_error: float = 0.0,
-) -> tuple[float, float, float]:
-    """Pose ``distance`` from the wall on the site's radius, shifted left by ``sideways``."""
-    angle = layout.site(site_id).angle
-    radius = layout.arena_radius - distance
-    x = radius * math.cos(angle) - sideways * math.sin(angle)
-    y = radius * math.sin(angle) + sideways * math.cos(angle)
-    return x, y, angle + heading_error
-
-
 def tolerance(num_sites: int) -> float:
     return 0.5 / (num_sites - 1)
 
@@ -108,7 +93,7 @@ def test_every_site_is_read_within_half_a_quality_step_from_perturbed_viewpoints
         for sideways, heading, distance in itertools.product(
             SIDEWAYS_ERRORS, HEADING_ERRORS, DISTANCE_ERRORS
         ):
-            pose = viewpoint(layout, site.id, VIEW_DISTANCE + distance, sideways, heading)
+            pose = layout.sensing_pose(site.id, VIEW_DISTANCE + distance, sideways, heading)
             estimate = estimate_quality(renderer.render(*pose))
             assert estimate is not None, (site.id, sideways, heading, distance)
             worst = max(worst, abs(estimate - site.quality))
@@ -121,7 +106,7 @@ def test_estimates_order_every_pair_of_sites_like_their_qualities(num_sites: int
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS)
     estimates = {}
     for site in layout.sites:
-        frame = decode_frame(renderer.encode(renderer.render(*viewpoint(layout, site.id))))
+        frame = decode_frame(renderer.encode(renderer.render(*layout.sensing_pose(site.id))))
         estimates[site.id] = estimate_quality(frame)
     for first, second in itertools.combinations(layout.sites, 2):
         better_by_estimate = estimates[first.id] > estimates[second.id]
@@ -161,7 +146,7 @@ def test_facing_the_arena_centre_gives_none(num_sites: int) -> None:
     layout = layout_for(num_sites)
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS)
     for site in layout.sites:
-        x, y, theta = viewpoint(layout, site.id)
+        x, y, theta = layout.sensing_pose(site.id)
         assert estimate_quality(renderer.render(x, y, theta + math.pi)) is None, site.id
     for heading in np.linspace(0, 2 * math.pi, 16, endpoint=False):
         assert estimate_quality(renderer.render(0.0, 0.0, float(heading))) is None
@@ -172,7 +157,7 @@ def test_facing_the_arena_centre_gives_none(num_sites: int) -> None:
 
 def occluder_positions(layout: Layout, site_id: int) -> list[tuple[float, float]]:
     """Robot centres between the viewer and the wall, none overlapping the viewer."""
-    x, y, theta = viewpoint(layout, site_id)
+    x, y, theta = layout.sensing_pose(site_id)
     forward = (math.cos(theta), math.sin(theta))
     left = (-forward[1], forward[0])
     positions = []
@@ -193,7 +178,7 @@ def test_an_occluding_robot_gives_none_or_the_right_value(num_sites: int) -> Non
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS)
     outcomes = {"none": 0, "right": 0}
     for site in layout.sites[:10]:
-        pose = viewpoint(layout, site.id)
+        pose = layout.sensing_pose(site.id)
         for occluder in occluder_positions(layout, site.id):
             frame = renderer.render(*pose, others=[occluder])
             estimate = estimate_quality(frame)
@@ -212,8 +197,8 @@ def test_two_occluders_from_perturbed_poses_never_give_a_wrong_value() -> None:
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS)
     rng = np.random.default_rng(5)
     for site in layout.sites[:20]:
-        pose = viewpoint(
-            layout, site.id, VIEW_DISTANCE, rng.uniform(-0.03, 0.03), rng.uniform(-0.17, 0.17)
+        pose = layout.sensing_pose(
+            site.id, VIEW_DISTANCE, rng.uniform(-0.03, 0.03), rng.uniform(-0.17, 0.17)
         )
         candidates = occluder_positions(layout, site.id)
         for _ in range(10):
@@ -226,7 +211,7 @@ def test_two_occluders_from_perturbed_poses_never_give_a_wrong_value() -> None:
 def test_a_robot_touching_the_camera_blacks_out_the_view() -> None:
     layout = layout_for(5)
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS)
-    x, y, theta = viewpoint(layout, 0)
+    x, y, theta = layout.sensing_pose(0)
     touching = (x + 2 * ROBOT_RADIUS * math.cos(theta), y + 2 * ROBOT_RADIUS * math.sin(theta))
     frame = renderer.render(x, y, theta, others=[touching])
     assert estimate_quality(frame) is None
@@ -236,7 +221,7 @@ def test_a_robot_touching_the_camera_blacks_out_the_view() -> None:
 def test_robots_behind_or_the_robot_itself_do_not_change_the_view() -> None:
     layout = layout_for(10)
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS)
-    x, y, theta = viewpoint(layout, 3)
+    x, y, theta = layout.sensing_pose(3)
     behind = (x - 0.1 * math.cos(theta), y - 0.1 * math.sin(theta))
     clear = renderer.render(x, y, theta)
     assert np.array_equal(renderer.render(x, y, theta, others=[(x, y), behind]), clear)
@@ -256,8 +241,8 @@ def test_robot_pressed_against_the_wall_still_renders() -> None:
     layout = layout_for(5)
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS)
     with np.errstate(all="raise"):
-        frame = renderer.render(*viewpoint(layout, 2, distance=ROBOT_RADIUS))
-        beyond = renderer.render(*viewpoint(layout, 2, distance=0.0))
+        frame = renderer.render(*layout.sensing_pose(2, distance=ROBOT_RADIUS))
+        beyond = renderer.render(*layout.sensing_pose(2, distance=0.0))
     estimate = estimate_quality(frame)
     assert estimate == pytest.approx(layout.site(2).quality, abs=tolerance(5))
     assert beyond.shape == (48, 64, 3)
@@ -270,7 +255,7 @@ def test_noise_off_frames_are_deterministic_and_survive_png() -> None:
     layout = layout_for(10)
     first = CameraRenderer(layout, SPEC, ROBOT_RADIUS, seed=1)
     second = CameraRenderer(layout, SPEC, ROBOT_RADIUS, seed=2)
-    pose = viewpoint(layout, 4, sideways=0.01, heading_error=0.05)
+    pose = layout.sensing_pose(4, sideways=0.01, heading_error=0.05)
     frame = first.render(*pose, rng=np.random.default_rng(1))
     assert frame.shape == (48, 64, 3)
     assert frame.dtype == np.uint8
@@ -283,7 +268,7 @@ def test_camera_spec_sets_the_frame_size() -> None:
     layout = layout_for(5)
     spec = protocol.CameraSpec(width=160, height=120, fov=0.84)
     renderer = CameraRenderer(layout, spec, ROBOT_RADIUS)
-    frame = renderer.render(*viewpoint(layout, 1))
+    frame = renderer.render(*layout.sensing_pose(1))
     assert frame.shape == (120, 160, 3)
     assert estimate_quality(frame) == pytest.approx(layout.site(1).quality, abs=1 / 255)
 
@@ -291,7 +276,7 @@ def test_camera_spec_sets_the_frame_size() -> None:
 def test_pixel_noise_is_fresh_per_frame_and_reproducible_from_the_rng() -> None:
     layout = layout_for(5)
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS, CameraNoise(pixel_sigma=10.0))
-    pose = viewpoint(layout, 0)
+    pose = layout.sensing_pose(0)
     a = renderer.render(*pose, rng=np.random.default_rng(3))
     b = renderer.render(*pose, rng=np.random.default_rng(3))
     c = renderer.render(*pose, rng=np.random.default_rng(4))
@@ -308,7 +293,7 @@ def estimate_errors(layout: Layout, noise: CameraNoise, frames: int) -> np.ndarr
     errors = []
     for site in layout.sites:
         for _ in range(frames):
-            estimate = estimate_quality(renderer.render(*viewpoint(layout, site.id), rng=rng))
+            estimate = estimate_quality(renderer.render(*layout.sensing_pose(site.id), rng=rng))
             assert estimate is not None
             errors.append(estimate - site.quality)
     return np.array(errors)
@@ -336,7 +321,7 @@ def test_lighting_is_a_fixed_property_of_each_site_for_the_run() -> None:
     assert colours != [other_seed.panel_colour_bgr(site.id) for site in layout.sites]
     assert colours != [site_colour_bgr(site.quality) for site in layout.sites]
     for site in layout.sites:
-        pose = viewpoint(layout, site.id)
+        pose = layout.sensing_pose(site.id)
         first = estimate_quality(renderer.render(*pose))
         assert first == estimate_quality(renderer.render(*pose))  # no frame-to-frame change
         assert first is not None
@@ -374,7 +359,7 @@ def test_camera_noise_rejects_bad_values(fields: dict[str, float]) -> None:
 def sample_png() -> bytes:
     layout = layout_for(5)
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS, CameraNoise(pixel_sigma=20.0))
-    return renderer.encode(renderer.render(*viewpoint(layout, 0)))
+    return renderer.encode(renderer.render(*layout.sensing_pose(0)))
 
 
 def sample_jpeg() -> bytes:

@@ -46,6 +46,19 @@ class Layout:
     def site(self, site_id: int) -> SiteSpec:
         return self.sites[site_id]
 
+    def sensing_pose(
+        self, site_id: int, distance: float = 0.15, sideways: float = 0.0,
+        heading_error: float = 0.0,
+    ) -> tuple[float, float, float]:
+        """A robot's pose for looking at a site: ``distance`` from the wall on the site's
+        radius, facing it; shifted left by ``sideways`` and turned by ``heading_error``
+        (for tests and benchmarks of imperfect poses)."""
+        angle = self.site(site_id).angle
+        radius = self.arena_radius - distance
+        x = radius * math.cos(angle) - sideways * math.sin(angle)
+        y = radius * math.sin(angle) + sideways * math.cos(angle)
+        return x, y, angle + heading_error
+
     def info_sites(self) -> list[protocol.Site]:
         return [protocol.Site(site.id, site.x, site.y) for site in self.sites]
 
