@@ -403,15 +403,7 @@ class Controller:
     def _to_nest(self, reading: ports.BodyReading) -> ports.Command:
         if self._hears_beacon(self._leg_start):
             return self._arrive_at_nest()
-        nest = (self.world.nest.x, self.world.nest.y)
-        left, right, arrived = self._navigator.drive_to(
-            reading.x,
-            reading.y,
-            reading.theta,
-            reading.proximity,
-            nest,
-            self.config.nest_tolerance,
-        )
+        left, right, arrived = self._drive_to_nest(reading)
         if arrived:
             self._set_phase("waiting")
             return _stop()
@@ -424,15 +416,15 @@ class Controller:
         nest = (self.world.nest.x, self.world.nest.y)
         if math.hypot(reading.x - nest[0], reading.y - nest[1]) <= 2 * self.config.nest_tolerance:
             return _stop()  # pushed a little: not worth driving back yet
-        left, right, _ = self._navigator.drive_to(
-            reading.x,
-            reading.y,
-            reading.theta,
-            reading.proximity,
-            nest,
+        left, right, _ = self._drive_to_nest(reading)
+        return ports.Command(left, right)
+
+    def _drive_to_nest(self, reading: ports.BodyReading) -> tuple[float, float, bool]:
+        nest = (self.world.nest.x, self.world.nest.y)
+        return self._navigator.drive_to(
+            reading.x, reading.y, reading.theta, reading.proximity, nest,
             self.config.nest_tolerance,
         )
-        return ports.Command(left, right)
 
     def _at_nest(self, reading: ports.BodyReading) -> ports.Command:
         broadcasts = self._broadcasts()
