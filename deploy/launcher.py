@@ -274,16 +274,13 @@ class Swarm:
             fetch_world_info(self.session, self.keys, timeout=30.0)
         except TimeoutError as error:
             raise StartError(str(error), world) from None
+        watched = {
+            "status": self.keys.status("*"),
+            "clock": self.keys.world_clock,
+            "state": self.keys.world_state,
+        }
         self._declared = [
-            self.session.declare_subscriber(
-                self.keys.status("*"), self._on("status")
-            ),
-            self.session.declare_subscriber(
-                self.keys.world_clock, self._on("clock")
-            ),
-            self.session.declare_subscriber(
-                self.keys.world_state, self._on("state")
-            ),
+            self.session.declare_subscriber(key, self._on(kind)) for kind, key in watched.items()
         ]
         if plan.record is not None:
             plan.record.parent.mkdir(parents=True, exist_ok=True)

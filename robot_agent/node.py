@@ -50,7 +50,6 @@ class _TickInputs:
     sense: protocol.Sense | None = None
     rx: list[tuple[str, bytes]] = field(default_factory=list)
     frame: bytes | None = None
-    frame_seen: bool = False
 
 
 class RobotNode:
@@ -153,7 +152,7 @@ class RobotNode:
             meta = self._attachment(event, protocol.CameraMeta, "camera")
             if meta is not None and meta.tick > self.last_tick:
                 inputs = self.pending.setdefault(meta.tick, _TickInputs())
-                inputs.frame, inputs.frame_seen = event.payload, True
+                inputs.frame = event.payload
                 self._advance(meta.tick)
 
     def _attachment(self, event: Event, kind: type[Meta], key: str) -> Meta | None:
@@ -192,7 +191,7 @@ class RobotNode:
             return
         sense = inputs.sense
         if self.lockstep:
-            complete = len(inputs.rx) >= sense.rx and (inputs.frame_seen or not sense.camera)
+            complete = len(inputs.rx) >= sense.rx and (inputs.frame is not None or not sense.camera)
             if not complete:
                 return
             stale = [old for old in self.pending if old < tick]
