@@ -14,7 +14,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -93,6 +93,16 @@ class WorldServer:
         self._info_bytes = protocol.encode(world.info)
         self._sense_publishers: dict[int, zenoh.Publisher] = {}
         self._declared: list[Any] = []
+        # Built once: every act and radio message of every tick goes through it.
+        self._handlers: dict[str, Callable[[Event], None]] = {
+            "act": self._handle_act,
+            "ack": self._handle_ack,
+            "tx": self._handle_tx,
+            "alive": self._handle_alive,
+            "gone": self._handle_gone,
+            "stats": self._handle_stats,
+            "join": self._handle_join,
+        }
 
     # --- Zenoh side: callbacks copy bytes and return ----------------------------------
 
@@ -208,16 +218,7 @@ class WorldServer:
             self._handle(event)
 
     def _handle(self, event: Event) -> None:
-        handler = {
-            "act": self._handle_act,
-            "ack": self._handle_ack,
-            "tx": self._handle_tx,
-            "alive": self._handle_alive,
-            "gone": self._handle_gone,
-            "stats": self._handle_stats,
-            "join": self._handle_join,
-        }[event.kind]
-        handler(event)
+        self._handlers[event.kind](event)
 
     def _reject(self, key: str, reason: object) -> None:
         self.counters.rejected += 1
