@@ -239,9 +239,15 @@ def test_pooling_is_commutative(pool: list[list[float]], rng: random.Random) -> 
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.data(), alphas)
+@given(st.data(), working_alphas)
 def test_pooling_preserves_evidence(data: st.DataObject, alpha: float) -> None:
-    """Pooling updated opinions equals updating the pooled opinion (Section 3)."""
+    """Pooling updated opinions equals updating the pooled opinion (Section 3).
+
+    The reference side applies the updates one after another to a normalised opinion,
+    so an option hit twice by a subnormal alpha (hypothesis found 5e-324) underflows
+    to zero there while the pooled side keeps it; ``working_alphas`` keeps every
+    alpha ** 5 representable.
+    """
     n = data.draw(st.integers(2, 8))
     # Bounded away from zero so the products stay representable and comparable.
     entry = st.floats(min_value=1e-3, max_value=1.0)
