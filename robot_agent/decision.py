@@ -128,9 +128,9 @@ def mprodop(opinions: Sequence[Sequence[float]]) -> list[float] | None:
     mantissas = [1.0] * size
     exponents = [0] * size
     for values in pool:
-        peak = max(values)
         for index, value in enumerate(values):
-            value_mantissa, value_exponent = math.frexp(value / peak)
+            # Not scaled by the opinion's peak first: 5e-324 / 2.0 underflows to zero.
+            value_mantissa, value_exponent = math.frexp(value)
             mantissa, exponent = math.frexp(mantissas[index] * value_mantissa)
             mantissas[index] = mantissa
             exponents[index] += value_exponent + exponent

@@ -205,6 +205,8 @@ def test_contradictory_pool_is_reported_as_none() -> None:
 def test_product_of_tiny_probabilities_does_not_underflow() -> None:
     # The true product is (0, 1e-400, 0): tiny, but not a contradiction.
     assert mprodop([[1.0, 1e-200, 0.0], [0.0, 1e-200, 1.0]]) == [0.0, 1.0, 0.0]
+    # Found by hypothesis: the smallest subnormal next to a weight of 2 (not normalised).
+    assert mprodop([[0.0, 1.0], [2.0, 5e-324]]) == [0.0, 1.0]
     many = [[0.5, 1e-10, 0.5 - 1e-10]] * 200
     result = mprodop(many)
     assert result is not None
