@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test lint bench clean
+.PHONY: run test explore lint bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +25,11 @@ run: $(VENV)/.installed
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest
+
+# The property tests with fresh random examples (make test repeats the same ones).
+explore: $(VENV)/.installed-test
+	HYPOTHESIS_PROFILE=explore $(BIN)/python -m pytest tests/test_decision.py \
+		tests/test_pooling.py tests/test_fuzz.py tests/test_vectors.py tests/test_camera_vision.py
 
 lint: $(VENV)/.installed-test
 	$(BIN)/ruff check .

@@ -13,6 +13,8 @@ logic costs on top of the messaging.
 
     .venv/bin/python benchmarks/swarm_speed.py                 # everything
     .venv/bin/python benchmarks/swarm_speed.py --robots 10 --seeds 0 1 2 --scale
+    .venv/bin/python benchmarks/swarm_speed.py --robots 10 --seeds 0 1 2 3 4 --scale \
+        --no-floor --with-recording
     .venv/bin/python benchmarks/swarm_speed.py --robots --scale 200 500 --modes hosted
 """
 
@@ -23,6 +25,7 @@ import json
 import statistics
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -92,10 +95,12 @@ def messaging_floor(robots: int, ticks: int) -> float:
         session.close()
 
 
-def swarm_run(robots: int, seed: int, sites: int, extra: list[str]) -> dict[str, float]:
+def swarm_run(robots: int, seed: int, sites: int, extra: list[str],
+              record: Path | None = None) -> dict[str, float]:
+    output = ["--record", str(record)] if record is not None else ["--no-record"]
     command = [
         sys.executable, "-m", "deploy.cli", "run", "--robots", str(robots), "--sites",
-        str(sites), "--seed", str(seed), "--json", "--quiet", "--no-record", *extra,
+        str(sites), "--seed", str(seed), "--json", "--quiet", *output, *extra,
     ]
     started = time.perf_counter()
     done = subprocess.run(command, capture_output=True, cwd=REPO, timeout=7200)
@@ -132,6 +137,15 @@ def to_consensus(args: argparse.Namespace, extra: list[str]) -> None:
             f"{floor:>8.0f}x {rtf / floor if floor else float('nan'):>9.2f}",
             flush=True,
         )
+        if args.with_recording:
+            with tempfile.TemporaryDirectory(prefix="swarm-speed-") as folder:
+                recorded = [
+                    swarm_run(robots, seed, args.sites, extra, Path(folder) / f"{seed}.mcap")
+                    for seed in args.seeds
+                ]
+            recorded_rtf = statistics.fmean(run["rtf"] for run in recorded)
+            print(f"{'':>6} {recorded_rtf:>6.1f}x  the same seeds recorded (the default): "
+                  f"{recorded_rtf / rtf:.2f} of the unrecorded real-time factor", flush=True)
 
 
 def scale_curve(args: argparse.Namespace, extra: list[str]) -> None:
@@ -158,6 +172,9 @@ def main() -> None:
     parser.add_argument("--sites", type=int, default=10)
     parser.add_argument("--floor-ticks", type=int, default=300)
     parser.add_argument("--no-floor", action="store_true", help="skip the messaging baseline")
+    parser.add_argument("--with-recording", action="store_true",
+                        help="also run every seed recorded to MCAP, as `swarm run` does by "
+                        "default, and compare")
     parser.add_argument("--scale", type=int, nargs="*", default=[10, 50, 100, 200, 500],
                         help="swarm sizes of the scale curve (fixed sim time)")
     parser.add_argument("--scale-sim", type=float, default=60.0,

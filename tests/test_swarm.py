@@ -194,7 +194,8 @@ def test_malformed_payloads_on_every_key_are_rejected_and_counted() -> None:
 
 def test_bad_arguments_exit_with_code_2_and_one_line() -> None:
     for bad in (["--robots", "0"], ["--alpha", "0.7"], ["--drop", "1.5"], ["--sites", "1"],
-                ["--run-id", "a/b"], ["--threshold", "0"], ["--timeout", "nan"]):
+                ["--run-id", "a/b"], ["--threshold", "0"], ["--timeout", "nan"],
+                ["--record", "x.mcap", "--no-record"]):
         done = subprocess.run(
             swarm_command("run", *bad), capture_output=True, timeout=60, cwd=REPO
         )

@@ -33,6 +33,7 @@ import functools
 import importlib.metadata
 import json
 import logging
+import os
 import platform
 import queue
 import signal
@@ -63,6 +64,7 @@ CHUNK_BYTES = 256 * 1024  # a crash loses at most the chunk being filled
 # After a finish query (or a stop signal), keep recording until nothing arrived for QUIET
 # seconds, but no longer than LIMIT: within the launcher's 30 s reply and 3 s stop grace.
 FINISH_QUIET, FINISH_DRAIN_LIMIT = 0.2, 10.0
+DEFAULT_NICENESS = 10
 STOP_QUIET, STOP_DRAIN_LIMIT = 0.1, 1.0
 
 
@@ -574,9 +576,22 @@ def build_parser() -> argparse.ArgumentParser:
                         help="the run's full configuration, kept in the metadata record")
     parser.add_argument("--info-timeout", type=cliargs.positive_float, default=10.0,
                         help="wall seconds to wait for world/info (default: 10)")
+    parser.add_argument("--niceness", type=cliargs.int_range(0, 19), default=DEFAULT_NICENESS,
+                        help="how much to lower this process's CPU priority, 0 to 19: "
+                        "recording is off the barrier's critical path, so on a busy "
+                        f"machine it yields to the swarm and catches up (default: "
+                        f"{DEFAULT_NICENESS})")
     cliargs.add_zenoh_options(parser)
     cliargs.add_log_level(parser)
     return parser
+
+
+def _lower_priority(niceness: int) -> None:
+    """Yield the CPU to the swarm; a platform without nice() just records at full priority."""
+    try:
+        os.nice(niceness)
+    except (AttributeError, OSError) as error:
+        log.info("could not lower the recorder's priority: %s", error)
 
 
 def _world_info(session: Any, keys: protocol.Keys, timeout: float) -> protocol.WorldInfo | None:
@@ -653,6 +668,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as error:
         parser.exit(2, f"recorder: error: --config-json: {error}\n")
     cliargs.configure_logging("recorder", args.log_level)
+    if args.niceness:
+        _lower_priority(args.niceness)
     import zenoh
 
     from robot_agent.zenoh_session import open_from_args
