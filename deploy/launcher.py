@@ -15,6 +15,7 @@ import math
 import os
 import queue
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -248,18 +249,38 @@ class Swarm:
         self.final_stats: protocol.WorldState | None = None
         self.pending_faults = list(plan.faults)
         self.fault_log: list[dict[str, Any]] = []
+        # Log lines from before the recorder listens, held back so that the recording has
+        # them too (None: pass lines straight on). Reader threads append; hence the lock.
+        self._held_logs: list[protocol.LogLine] | None = [] if plan.record else None
+        self._log_lock = threading.Lock()
 
     def _on_log_line(self, process: str, line: str) -> None:
         """Echo a child's log line, and publish it so that the recorder keeps it."""
         if self.echo is not None:
             self.echo(process, line)
+        if not line:
+            return
+        message = protocol.LogLine(
+            v=protocol.VERSION, process=process, wall_time=time.time(), line=line[:4096]
+        )
+        with self._log_lock:
+            if self._held_logs is not None:
+                self._held_logs.append(message)
+                return
+        self._publish_log(message)
+
+    def _publish_log(self, message: protocol.LogLine) -> None:
         session = self.session
-        if session is not None and line:
-            message = protocol.LogLine(
-                v=protocol.VERSION, process=process, wall_time=time.time(), line=line[:4096]
-            )
+        if session is not None:
             with contextlib.suppress(zenoh.ZError):
-                session.put(self.keys.log(process), protocol.encode(message))
+                session.put(self.keys.log(message.process), protocol.encode(message))
+
+    def _release_held_logs(self) -> None:
+        """Publish the lines held back until the recorder listened, in their order."""
+        with self._log_lock:
+            held, self._held_logs = self._held_logs or [], None
+            for message in held:  # under the lock, so no newer line overtakes them
+                self._publish_log(message)
 
     # --- start -----------------------------------------------------------------------
 
@@ -291,6 +312,7 @@ class Swarm:
             )
             if not self._wait_alive("recorder", 0, 30.0, self.recorder):
                 raise StartError("the recorder did not start", self.recorder)
+            self._release_held_logs()
         self.group.start("beacon", python_module("nest_beacon", *plan.beacon_args))
         hosts = range(0, plan.robots, plan.robots_per_process)
         for first in hosts:

@@ -167,6 +167,9 @@ def test_foxglove_messages_carry_the_required_fields_and_the_run(run: Run) -> No
     logs = run.of_schema(foxglove.LOG)
     assert {entry["name"] for _, _, entry in logs} >= {"world", "beacon", "robot-0"}
     assert foxglove.LOG_INFO in {entry["level"] for _, _, entry in logs}
+    # Lines from before the recorder listened are held back and recorded, in order.
+    world_lines = [entry["message"] for _, _, entry in logs if entry["name"] == "world"]
+    assert "listening on" in world_lines[0] and "waiting for" in world_lines[1]
 
 
 @pytest.mark.timeout(180)
