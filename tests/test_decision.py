@@ -28,9 +28,6 @@ from robot_agent.decision import (
 
 # --- strategies ------------------------------------------------------------------------
 
-# No per-example deadline: timing varies on a loaded CI machine.
-relaxed = settings(deadline=None)
-
 weights = st.floats(min_value=0.0, max_value=1e6, allow_nan=False, allow_infinity=False)
 alphas = st.floats(min_value=0.0, max_value=0.5, allow_nan=False)
 # An alpha so small that alpha * x underflows to zero acts as alpha = 0; where a test
@@ -172,14 +169,12 @@ def test_update_uses_the_rest_not_one_minus_x() -> None:
     assert negative_update([1.0, 1e-20], 0, 0.0) == [0.0, 1.0]
 
 
-@relaxed
 @given(opinion_with_option(), alphas)
 def test_update_stays_a_distribution(case: tuple[list[float], int], alpha: float) -> None:
     opinion, eliminated = case
     assert_distribution(negative_update(opinion, eliminated, alpha))
 
 
-@relaxed
 @given(opinion_with_option(), alphas)
 def test_update_never_raises_the_eliminated_option(
     case: tuple[list[float], int], alpha: float
@@ -218,7 +213,6 @@ def test_huge_weights_do_not_overflow() -> None:
     assert negative_update([1e308, 1e308, 1e308], 0, 0.0) == pytest.approx([0, 0.5, 0.5])
 
 
-@relaxed
 @given(pools())
 def test_product_stays_a_distribution(pool: list[list[float]]) -> None:
     result = mprodop(pool)
@@ -229,7 +223,6 @@ def test_product_stays_a_distribution(pool: list[list[float]]) -> None:
         assert_distribution(result)
 
 
-@relaxed
 @given(pools(), st.randoms(use_true_random=False))
 def test_pooling_is_commutative(pool: list[list[float]], rng: random.Random) -> None:
     shuffled = list(pool)
@@ -240,7 +233,7 @@ def test_pooling_is_commutative(pool: list[list[float]], rng: random.Random) -> 
         assert_close(first, second, 1e-12)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200)
 @given(st.data(), working_alphas)
 def test_pooling_preserves_evidence(data: st.DataObject, alpha: float) -> None:
     """Pooling updated opinions equals updating the pooled opinion (Section 3).
@@ -269,7 +262,6 @@ def test_pooling_preserves_evidence(data: st.DataObject, alpha: float) -> None:
 # --- pair choice and decisions ---------------------------------------------------------
 
 
-@relaxed
 @given(opinions(), st.randoms(use_true_random=False))
 def test_pair_is_two_distinct_options_the_first_with_weight(
     opinion: list[float], rng: random.Random
@@ -325,7 +317,6 @@ def test_equation_1() -> None:
     assert_close(pooled_opinion([0, 2, 1], alpha), normalise(raw), 1e-15)
 
 
-@relaxed
 @given(st.lists(st.integers(0, 5), min_size=2, max_size=8))
 def test_equation_4_is_equation_1_at_alpha_0(counts: list[int]) -> None:
     assume(0 in counts)
@@ -337,7 +328,6 @@ def test_equation_4_is_equation_1_at_alpha_0(counts: list[int]) -> None:
     assert_close(pooled_opinion(counts, 1e-12), expected, 1e-9)
 
 
-@relaxed
 @given(st.lists(st.integers(0, 4), min_size=2, max_size=6), working_alphas)
 def test_equation_1_is_mprodop_of_updated_uniform_opinions(counts: list[int], alpha: float) -> None:
     assume(sum(counts) > 0 and (alpha > 0 or 0 in counts))

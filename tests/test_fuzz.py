@@ -54,7 +54,7 @@ def payloads(draw: st.DrawFn) -> bytes:
     return bytes(data)
 
 
-FUZZ = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+FUZZ = settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
 
 
 @FUZZ

@@ -19,9 +19,6 @@ from robot_agent.decision import (
     negative_update,
 )
 
-# No per-example deadline: timing varies on a loaded CI machine.
-relaxed = settings(deadline=None)
-
 weights = st.floats(min_value=0.0, max_value=1e6, allow_nan=False, allow_infinity=False)
 neighbour_weights = st.floats(min_value=0.0, max_value=1.0)
 # Entries bounded away from zero, so that products stay representable and comparable.
@@ -122,7 +119,6 @@ def test_pooling_operators_are_named_by_the_config_literal() -> None:
 # --- properties ------------------------------------------------------------------------
 
 
-@relaxed
 @given(pools(), neighbour_weights)
 def test_result_is_normalised_and_non_negative(pool: list[list[float]], weight: float) -> None:
     result = loglinear_pool(pool, weight)
@@ -139,7 +135,6 @@ def test_result_is_normalised_and_non_negative(pool: list[list[float]], weight: 
                 assert value == 0.0
 
 
-@relaxed
 @given(pools(), neighbour_weights, st.randoms(use_true_random=False))
 def test_commutative_in_the_neighbours(
     pool: list[list[float]], weight: float, rng: random.Random
@@ -162,13 +157,11 @@ def test_not_commutative_between_the_agent_and_a_neighbour() -> None:
     assert loglinear_pool([theirs, mine])[0] < 0.5  # type: ignore[index]
 
 
-@relaxed
 @given(pools(positive_entries))
 def test_full_trust_is_mprodop(pool: list[list[float]]) -> None:
     assert_close(loglinear_pool(pool, 1.0) or [], mprodop(pool) or [], 1e-9)
 
 
-@relaxed
 @given(pools())
 def test_no_trust_keeps_the_own_opinion(pool: list[list[float]]) -> None:
     own = pool[0]
@@ -176,7 +169,6 @@ def test_no_trust_keeps_the_own_opinion(pool: list[list[float]]) -> None:
     assert_close(loglinear_pool(pool, 0.0) or [], [value / total for value in own], 1e-12)
 
 
-@relaxed
 @given(pools(positive_entries), neighbour_weights)
 def test_a_single_opinion_is_returned_normalised(
     pool: list[list[float]], weight: float
@@ -186,7 +178,7 @@ def test_a_single_opinion_is_returned_normalised(
     assert_close(loglinear_pool([own], weight) or [], [value / total for value in own], 1e-12)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200)
 @given(st.data(), st.floats(min_value=1e-3, max_value=1.0))
 def test_at_alpha_zero_it_is_mprodop(data: st.DataObject, weight: float) -> None:
     """With alpha = 0 every opinion is uniform over what it has not eliminated: with any
@@ -207,7 +199,7 @@ def test_at_alpha_zero_it_is_mprodop(data: st.DataObject, weight: float) -> None
 # --- evidence: MProdOp preserves it, the log-linear pool dilutes a neighbour's --------
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200)
 @given(st.data(), distrust_alphas, st.floats(min_value=0.1, max_value=0.9))
 def test_a_neighbours_evidence_is_diluted_where_mprodop_preserves_it(
     data: st.DataObject, alpha: float, weight: float
@@ -237,7 +229,7 @@ def test_a_neighbours_evidence_is_diluted_where_mprodop_preserves_it(
     assert diluted_after[eliminated] > preserved[eliminated]
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200)
 @given(st.data(), distrust_alphas, neighbour_weights)
 def test_the_agents_own_evidence_is_kept_whole(
     data: st.DataObject, alpha: float, weight: float
