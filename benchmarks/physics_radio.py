@@ -48,8 +48,13 @@ def wander(physics: Physics, rng: random.Random) -> None:
 
 
 def time_physics(
-    num_robots: int, ticks: int, dt: float, *, spatial_hash: bool,
-    max_substep: float | None = MAX_SUBSTEP, seed: int = 1,
+    num_robots: int,
+    ticks: int,
+    dt: float,
+    *,
+    spatial_hash: bool,
+    max_substep: float | None = MAX_SUBSTEP,
+    seed: int = 1,
 ) -> tuple[float, float, int]:
     """Median and 95th percentile milliseconds of step + proximity_all, and substeps."""
     physics, rng = make_world(num_robots, spatial_hash, seed, max_substep)
@@ -108,16 +113,25 @@ def time_radio(num_robots: int, ticks: int, senders_fraction: float, seed: int =
         # Uniform over the disc, inside the wall.
         radius = (arena_radius - 0.04) * math.sqrt(rng.random())
         angle = rng.uniform(-math.pi, math.pi)
-        positions[protocol.radio_name(robot_id)] = (radius * math.cos(angle),
-                                                    radius * math.sin(angle))
+        positions[protocol.radio_name(robot_id)] = (
+            radius * math.cos(angle),
+            radius * math.sin(angle),
+        )
     names = sorted(positions, key=sender_order)
     payload = bytes(200)
     results = {}
     configs = {
         "clean": RadioConfig(),
         "all faults": RadioConfig(
-            drop=0.05, latency=1, jitter=2, duplicate=0.05, reorder=True,
-            burst_enter=0.05, burst_exit=0.3, burst_loss_bad=0.8, range_loss_start=0.7,
+            drop=0.05,
+            latency=1,
+            jitter=2,
+            duplicate=0.05,
+            reorder=True,
+            burst_enter=0.05,
+            burst_exit=0.3,
+            burst_loss_bad=0.8,
+            range_loss_start=0.7,
         ),
     }
     for label, config in configs.items():
@@ -125,8 +139,9 @@ def time_radio(num_robots: int, ticks: int, senders_fraction: float, seed: int =
         samples = []
         copies = 0
         for tick in range(ticks):
-            senders = sorted(rng.sample(names, int(senders_fraction * num_robots)),
-                             key=sender_order)
+            senders = sorted(
+                rng.sample(names, int(senders_fraction * num_robots)), key=sender_order
+            )
             start = time.perf_counter()
             for sender in senders:
                 medium.transmit(tick, sender, tick, payload, positions[sender], "robot", positions)
@@ -140,8 +155,11 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--ticks", type=int, default=300)
     parser.add_argument("--dt", type=float, default=0.1, help="control period, seconds")
-    parser.add_argument("--no-compare", action="store_true",
-                        help="skip the bounding-box-tree and plain-substeps comparisons")
+    parser.add_argument(
+        "--no-compare",
+        action="store_true",
+        help="skip the bounding-box-tree and plain-substeps comparisons",
+    )
     args = parser.parse_args(argv)
 
     print(f"physics: step({args.dt}) + proximity_all(), {args.ticks} ticks after warm-up")

@@ -36,20 +36,35 @@ sys.path.insert(0, str(REPO))
 
 from deploy import report  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
+from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
 from robot_agent import protocol  # noqa: E402
-from robot_agent.zenoh_session import open_session, reliable_publisher  # noqa: E402
 from world_server import recorder as recorder_module  # noqa: E402
 
 SIM_SECONDS = {10: 100.0, 100: 60.0}
 
 
-def swarm_run(robots: int, seed: int, sim_seconds: float, record: Path | None,
-              run_id: str) -> dict[str, Any]:
+def swarm_run(
+    robots: int, seed: int, sim_seconds: float, record: Path | None, run_id: str
+) -> dict[str, Any]:
     output = ["--record", str(record)] if record else ["--no-record"]
     command = [
-        sys.executable, "-m", "deploy.cli", "run", "--robots", str(robots), "--sites", "10",
-        "--seed", str(seed), "--timeout", str(sim_seconds), "--run-id", run_id, "--json",
-        "--quiet", *output,
+        sys.executable,
+        "-m",
+        "deploy.cli",
+        "run",
+        "--robots",
+        str(robots),
+        "--sites",
+        "10",
+        "--seed",
+        str(seed),
+        "--timeout",
+        str(sim_seconds),
+        "--run-id",
+        run_id,
+        "--json",
+        "--quiet",
+        *output,
     ]
     started = time.monotonic()
     done = subprocess.run(command, capture_output=True, timeout=3600, cwd=REPO)
@@ -67,8 +82,13 @@ def overhead(robots: int, seed: int, sim_seconds: float, repeats: int, folder: P
     for repeat in range(repeats):
         for mode in ("no record", "record"):
             path = folder / f"bench-{robots}-{repeat}.mcap" if mode == "record" else None
-            result = swarm_run(robots, seed, sim_seconds, path, f"bench-{robots}-{repeat}-"
-                               f"{'rec' if path else 'norec'}-{int(time.time())}")
+            result = swarm_run(
+                robots,
+                seed,
+                sim_seconds,
+                path,
+                f"bench-{robots}-{repeat}-{'rec' if path else 'norec'}-{int(time.time())}",
+            )
             if path is not None:
                 recording = report.read_recording(path)
                 result["bytes"] = path.stat().st_size
@@ -76,11 +96,16 @@ def overhead(robots: int, seed: int, sim_seconds: float, repeats: int, folder: P
                 audits.append((report.audit(recording), result["summary"]))
             rows[mode].append(result)
             summary = result["summary"]
-            print(f"  {mode:9}  command {result['command_s']:6.1f} s   ticking "
-                  f"{summary['wall_time_s']:6.1f} s   {summary['real_time_factor']:6.1f}x real "
-                  f"time   sim {summary['sim_time_s']:.0f} s"
-                  + (f"   {result['bytes'] / 1e6:.1f} MB, {result['messages']} messages"
-                     if path else ""))
+            print(
+                f"  {mode:9}  command {result['command_s']:6.1f} s   ticking "
+                f"{summary['wall_time_s']:6.1f} s   {summary['real_time_factor']:6.1f}x real "
+                f"time   sim {summary['sim_time_s']:.0f} s"
+                + (
+                    f"   {result['bytes'] / 1e6:.1f} MB, {result['messages']} messages"
+                    if path
+                    else ""
+                )
+            )
     print("  median:")
     medians = {}
     for mode, results in rows.items():
@@ -88,21 +113,30 @@ def overhead(robots: int, seed: int, sim_seconds: float, repeats: int, folder: P
         ticking = statistics.median(r["summary"]["wall_time_s"] for r in results)
         factor = statistics.median(r["summary"]["real_time_factor"] for r in results)
         medians[mode] = (command, ticking, factor)
-        print(f"  {mode:9}  command {command:6.1f} s   ticking {ticking:6.1f} s   "
-              f"{factor:6.1f}x real time")
+        print(
+            f"  {mode:9}  command {command:6.1f} s   ticking {ticking:6.1f} s   "
+            f"{factor:6.1f}x real time"
+        )
     (c0, t0, f0), (c1, t1, f1) = medians["no record"], medians["record"]
-    print(f"  recording adds {100 * (c1 / c0 - 1):+.1f}% to the command's wall time, "
-          f"{100 * (t1 / t0 - 1):+.1f}% to the ticking time (real-time factor "
-          f"{f0:.1f}x -> {f1:.1f}x)")
+    print(
+        f"  recording adds {100 * (c1 / c0 - 1):+.1f}% to the command's wall time, "
+        f"{100 * (t1 / t0 - 1):+.1f}% to the ticking time (real-time factor "
+        f"{f0:.1f}x -> {f1:.1f}x)"
+    )
     print("  published (declared) vs recorded, every recorded run:")
     for audit, summary in audits:
-        lost = {kind: c["expected"] - c["recorded"] for kind, c in audit.items()
-                if c["expected"] != c["recorded"]}
+        lost = {
+            kind: c["expected"] - c["recorded"]
+            for kind, c in audit.items()
+            if c["expected"] != c["recorded"]
+        }
         total = sum(c["recorded"] for c in audit.values())
         delivered = summary["radio"]["delivered"]
-        print(f"    {total} protocol messages recorded; radio/rx recorded "
-              f"{audit['radio/rx/*']['recorded']} of {delivered} the world delivered; "
-              f"mismatches: {lost or 'none'}")
+        print(
+            f"    {total} protocol messages recorded; radio/rx recorded "
+            f"{audit['radio/rx/*']['recorded']} of {delivered} the world delivered; "
+            f"mismatches: {lost or 'none'}"
+        )
     kinds = audits[0][0] if audits else {}
     for kind in kinds:
         expected = sum(audit[kind]["expected"] for audit, _ in audits)
@@ -119,9 +153,27 @@ def flood(count: int, folder: Path) -> None:
     out = folder / "flood.mcap"
     router = open_session("router", listen=[endpoint])
     recorder = subprocess.Popen(
-        [sys.executable, "-m", "world_server.recorder", "--run-id", run_id, "--mode", "client",
-         "--connect", endpoint, "--out", str(out), "--robots", "100", "--sites", "10",
-         "--info-timeout", "0.2", "--log-level", "WARNING"],
+        [
+            sys.executable,
+            "-m",
+            "world_server.recorder",
+            "--run-id",
+            run_id,
+            "--mode",
+            "client",
+            "--connect",
+            endpoint,
+            "--out",
+            str(out),
+            "--robots",
+            "100",
+            "--sites",
+            "10",
+            "--info-timeout",
+            "0.2",
+            "--log-level",
+            "WARNING",
+        ],
         cwd=REPO,
     )
     try:
@@ -131,8 +183,19 @@ def flood(count: int, folder: Path) -> None:
             time.sleep(0.05)
         publishers = [reliable_publisher(router, keys.sense(robot)) for robot in range(100)]
         payloads = [
-            protocol.encode(protocol.Sense(v=1, tick=tick, t=tick * 0.1, x=0.1, y=0.2,
-                                           theta=0.3, prox=[0.0] * 8, rx=0, camera=False))
+            protocol.encode(
+                protocol.Sense(
+                    v=1,
+                    tick=tick,
+                    t=tick * 0.1,
+                    x=0.1,
+                    y=0.2,
+                    theta=0.3,
+                    prox=[0.0] * 8,
+                    rx=0,
+                    camera=False,
+                )
+            )
             for tick in range(count // 100 + 1)
         ]
         started, started_ns = time.monotonic(), time.time_ns()
@@ -150,27 +213,40 @@ def flood(count: int, folder: Path) -> None:
     recording = report.read_recording(out)
     recorded = recording.messages["bestofn.Sense"]
     with open(out, "rb") as stream:  # publish time = when the recorder's callback got it
-        last_arrival = max(message.publish_time for _, _, message in
-                           make_reader(stream).iter_messages())
+        last_arrival = max(
+            message.publish_time for _, _, message in make_reader(stream).iter_messages()
+        )
     received = (last_arrival - started_ns) / 1e9
-    print(f"  published {count} in {published:.2f} s ({count / published:,.0f} msg/s); "
-          f"all received by {received:.2f} s ({count / received:,.0f} msg/s); "
-          f"closed after {finished:.2f} s (incl. {recorder_module.FINISH_QUIET:g} s quiet); "
-          f"{recorded} of {count} in the file; finish reply: "
-          f"{'ok' if replies and replies[0].ok is not None else 'MISSING'}; recorder exit "
-          f"code {exit_code}")
+    print(
+        f"  published {count} in {published:.2f} s ({count / published:,.0f} msg/s); "
+        f"all received by {received:.2f} s ({count / received:,.0f} msg/s); "
+        f"closed after {finished:.2f} s (incl. {recorder_module.FINISH_QUIET:g} s quiet); "
+        f"{recorded} of {count} in the file; finish reply: "
+        f"{'ok' if replies and replies[0].ok is not None else 'MISSING'}; recorder exit "
+        f"code {exit_code}"
+    )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--robots", type=int, nargs="*", default=[10, 100],
-                        help="swarm sizes (none: only the capacity test)")
+    parser.add_argument(
+        "--robots",
+        type=int,
+        nargs="*",
+        default=[10, 100],
+        help="swarm sizes (none: only the capacity test)",
+    )
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--repeats", type=int, default=2)
-    parser.add_argument("--sim-seconds", type=float, default=None,
-                        help="sim seconds per run (default: 100 for 10 robots, 60 for 100)")
-    parser.add_argument("--flood", type=int, default=200_000,
-                        help="messages for the capacity test (0: skip it)")
+    parser.add_argument(
+        "--sim-seconds",
+        type=float,
+        default=None,
+        help="sim seconds per run (default: 100 for 10 robots, 60 for 100)",
+    )
+    parser.add_argument(
+        "--flood", type=int, default=200_000, help="messages for the capacity test (0: skip it)"
+    )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         for robots in args.robots:

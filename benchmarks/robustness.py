@@ -159,7 +159,10 @@ def run_task(task: Task) -> Outcome:
     log: list[tuple[int, Any]] = []
     started = time.perf_counter()
     summary = run_in_memory(
-        world_config, controller_config, timeout=task.timeout, on_tick=learn_qualities,
+        world_config,
+        controller_config,
+        timeout=task.timeout,
+        on_tick=learn_qualities,
         controller_factory=observing_controller(log),
     )
     wall = time.perf_counter() - started
@@ -216,8 +219,17 @@ def drop_tasks(
     levels: Sequence[float], seeds: Sequence[int], args: argparse.Namespace
 ) -> list[Task]:
     return [
-        Task("drop", level, "alpha0", seed, args.robots, args.sites, args.timeout,
-             ("--drop", str(level)), ())
+        Task(
+            "drop",
+            level,
+            "alpha0",
+            seed,
+            args.robots,
+            args.sites,
+            args.timeout,
+            ("--drop", str(level)),
+            (),
+        )
         for level in levels
         for seed in seeds
     ]
@@ -228,8 +240,17 @@ def noise_tasks(
 ) -> list[Task]:
     lighting = ("--lighting", str(args.lighting)) if args.lighting else ()
     return [
-        Task("noise", level, setup.key, seed, args.robots, args.sites, args.timeout,
-             ("--camera-noise", str(level), *lighting), setup.options)
+        Task(
+            "noise",
+            level,
+            setup.key,
+            seed,
+            args.robots,
+            args.sites,
+            args.timeout,
+            ("--camera-noise", str(level), *lighting),
+            setup.options,
+        )
         for level in levels
         for setup in SETUPS
         for seed in seeds
@@ -260,29 +281,33 @@ def summarise(outcomes: Sequence[Outcome]) -> list[PointSummary]:
     for (level, controller), runs in groups.items():
         times = [run.sim_time_s for run in runs if run.consensus]
         comparisons = sum(run.comparisons for run in runs)
-        rows.append(PointSummary(
-            level=level,
-            controller=controller,
-            runs=len(runs),
-            correct=sum(run.correct for run in runs),
-            wrong_consensus=sum(run.consensus and not run.correct for run in runs),
-            split_or_timeout=sum(not run.consensus for run in runs),
-            time_mean=statistics.fmean(times) if times else math.nan,
-            time_median=statistics.median(times) if times else math.nan,
-            time_max=max(times) if times else math.nan,
-            comparisons=comparisons / len(runs),
-            wrong_share=sum(run.wrong_comparisons for run in runs) / max(comparisons, 1),
-            best_eliminated=sum(run.best_eliminated for run in runs) / len(runs),
-        ))
+        rows.append(
+            PointSummary(
+                level=level,
+                controller=controller,
+                runs=len(runs),
+                correct=sum(run.correct for run in runs),
+                wrong_consensus=sum(run.consensus and not run.correct for run in runs),
+                split_or_timeout=sum(not run.consensus for run in runs),
+                time_mean=statistics.fmean(times) if times else math.nan,
+                time_median=statistics.median(times) if times else math.nan,
+                time_max=max(times) if times else math.nan,
+                comparisons=comparisons / len(runs),
+                wrong_share=sum(run.wrong_comparisons for run in runs) / max(comparisons, 1),
+                best_eliminated=sum(run.best_eliminated for run in runs) / len(runs),
+            )
+        )
     return rows
 
 
 def print_table(title: str, level_name: str, rows: Sequence[PointSummary]) -> None:
     labels = {setup.key: setup.label for setup in SETUPS}
     print(f"\n{title}\n")
-    print(f"| {level_name} | controller | correct | wrong consensus | split/timeout "
-          "| consensus time s: mean / median / max | comparisons/run | wrong comparisons "
-          "| best eliminated/run |")
+    print(
+        f"| {level_name} | controller | correct | wrong consensus | split/timeout "
+        "| consensus time s: mean / median / max | comparisons/run | wrong comparisons "
+        "| best eliminated/run |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     for row in rows:
         print(
@@ -319,9 +344,11 @@ def claim_report(outcomes: Sequence[Outcome]) -> dict[str, Any]:
     print(f"  every run right at drop 0:   {report['all_correct_drop_0']}")
     print(f"  every run right at drop 0.3: {report['all_correct_drop_0.3']}")
     ratios = report["per_seed_ratio"]
-    print(f"  mean consensus sim time: {report['mean_drop_0']:.1f} s -> "
-          f"{report['mean_drop_0.3']:.1f} s, slowdown x{report['slowdown']:.2f} "
-          f"(per seed x{min(ratios):.2f} to x{max(ratios):.2f})")
+    print(
+        f"  mean consensus sim time: {report['mean_drop_0']:.1f} s -> "
+        f"{report['mean_drop_0.3']:.1f} s, slowdown x{report['slowdown']:.2f} "
+        f"(per seed x{min(ratios):.2f} to x{max(ratios):.2f})"
+    )
     return report
 
 
@@ -346,14 +373,20 @@ def sensing_table(sigmas: Sequence[float], args: argparse.Namespace, frames: int
     best, second = sorted(layout.sites, key=lambda site: site.rank)[:2]
     radius = layout.arena_radius - ControllerConfig().view_distance
     light = f", lighting {args.lighting:g}" if args.lighting else ""
-    print(f"\nOne comparison of the best (rho {best.quality:.3f}) and second-best site "
-          f"(rho {second.quality:.3f}), {frames} frames each{light}\n")
-    print("| sigma | best: mean (sd) | second: mean (sd) | frames with no site found "
-          "| P(best reads below second) |")
+    print(
+        f"\nOne comparison of the best (rho {best.quality:.3f}) and second-best site "
+        f"(rho {second.quality:.3f}), {frames} frames each{light}\n"
+    )
+    print(
+        "| sigma | best: mean (sd) | second: mean (sd) | frames with no site found "
+        "| P(best reads below second) |"
+    )
     print("|---|---|---|---|---|")
     for sigma in sigmas:
         renderer = CameraRenderer(
-            layout, DEFAULT_CAMERA, noise=CameraNoise(sigma, args.lighting),
+            layout,
+            DEFAULT_CAMERA,
+            noise=CameraNoise(sigma, args.lighting),
             seed=protocol.derive_seed(0, "camera"),
         )
         rng = np.random.default_rng(protocol.derive_seed(0, "frames"))
@@ -372,57 +405,92 @@ def sensing_table(sigmas: Sequence[float], args: argparse.Namespace, frames: int
         pairs = list(zip(*readings, strict=False))
         swapped = sum(a < b for a, b in pairs) / len(pairs) if pairs else math.nan
         cells = [
-            f"{statistics.fmean(values):.3f} ({statistics.pstdev(values):.3f})" if values
-            else "-"
+            f"{statistics.fmean(values):.3f} ({statistics.pstdev(values):.3f})" if values else "-"
             for values in readings
         ]
-        print(f"| {sigma:g} | {cells[0]} | {cells[1]} | {100 * missed / (2 * frames):.0f} % "
-              f"| {100 * swapped:.1f} % |")
+        print(
+            f"| {sigma:g} | {cells[0]} | {cells[1]} | {100 * missed / (2 * frames):.0f} % "
+            f"| {100 * swapped:.1f} % |"
+        )
 
 
 # --- real processes --------------------------------------------------------------------
 
 
-def process_runs(seeds: Sequence[int], drops: Sequence[float], args: argparse.Namespace,
-                 in_memory: Sequence[Outcome]) -> list[dict[str, Any]]:
+def process_runs(
+    seeds: Sequence[int],
+    drops: Sequence[float],
+    args: argparse.Namespace,
+    in_memory: Sequence[Outcome],
+) -> list[dict[str, Any]]:
     """The claim with real processes (``swarm run``), compared with the in-memory runs."""
     memory = {(o.task.level, o.task.seed): o for o in in_memory if o.task.sweep == "drop"}
     swarm = REPO / ".venv" / "bin" / "swarm"
     rows = []
-    print("\nreal processes: swarm run --robots R --sites N --seed S --drop D "
-          "--json --no-record --quiet")
+    print(
+        "\nreal processes: swarm run --robots R --sites N --seed S --drop D "
+        "--json --no-record --quiet"
+    )
     print("| drop | seed | correct | sim time s (processes) | in memory | same | wall s |")
     print("|---|---|---|---|---|---|---|")
     for drop in drops:
         for seed in seeds:
-            command = [str(swarm), "run", "--robots", str(args.robots), "--sites",
-                       str(args.sites), "--seed", str(seed), "--drop", str(drop),
-                       "--timeout", str(args.timeout), "--json", "--no-record", "--quiet"]
+            command = [
+                str(swarm),
+                "run",
+                "--robots",
+                str(args.robots),
+                "--sites",
+                str(args.sites),
+                "--seed",
+                str(seed),
+                "--drop",
+                str(drop),
+                "--timeout",
+                str(args.timeout),
+                "--json",
+                "--no-record",
+                "--quiet",
+            ]
             started = time.perf_counter()
-            result = subprocess.run(command, capture_output=True, text=True, cwd=REPO,
-                                    check=False)
+            result = subprocess.run(command, capture_output=True, text=True, cwd=REPO, check=False)
             wall = time.perf_counter() - started
             if result.returncode != 0:
-                print(f"| {drop:g} | {seed} | failed (exit {result.returncode}): "
-                      f"{result.stderr.strip()[-200:]} | | | | |")
+                print(
+                    f"| {drop:g} | {seed} | failed (exit {result.returncode}): "
+                    f"{result.stderr.strip()[-200:]} | | | | |"
+                )
                 rows.append({"drop": drop, "seed": seed, "exit": result.returncode})
                 continue
             summary = json.loads(result.stdout)
             twin = memory.get((drop, seed))
             same = twin is not None and (twin.correct, twin.sim_time_s) == (
-                summary["correct"], summary["sim_time_s"])
-            print(f"| {drop:g} | {seed} | {summary['correct']} | {summary['sim_time_s']:.1f} "
-                  f"| {twin.sim_time_s if twin else float('nan'):.1f} | {same} | {wall:.1f} |")
-            rows.append({"drop": drop, "seed": seed, "correct": summary["correct"],
-                         "sim_time_s": summary["sim_time_s"], "same_as_in_memory": same,
-                         "wall_time_s": round(wall, 2)})
+                summary["correct"],
+                summary["sim_time_s"],
+            )
+            print(
+                f"| {drop:g} | {seed} | {summary['correct']} | {summary['sim_time_s']:.1f} "
+                f"| {twin.sim_time_s if twin else float('nan'):.1f} | {same} | {wall:.1f} |"
+            )
+            rows.append(
+                {
+                    "drop": drop,
+                    "seed": seed,
+                    "correct": summary["correct"],
+                    "sim_time_s": summary["sim_time_s"],
+                    "same_as_in_memory": same,
+                    "wall_time_s": round(wall, 2),
+                }
+            )
     for drop in drops:
         done = [row for row in rows if row["drop"] == drop and "sim_time_s" in row]
         times = [row["sim_time_s"] for row in done]
         right = [row["correct"] for row in done]
         if times:
-            print(f"  drop {drop:g}: {sum(right)}/{len(seeds)} right, "
-                  f"mean consensus sim time {statistics.fmean(times):.1f} s")
+            print(
+                f"  drop {drop:g}: {sum(right)}/{len(seeds)} right, "
+                f"mean consensus sim time {statistics.fmean(times):.1f} s"
+            )
     return rows
 
 
@@ -444,11 +512,11 @@ def plot_drop(outcomes: Sequence[Outcome], rows: Sequence[PointSummary], path: P
     accuracy.grid(alpha=0.3)
     for outcome in outcomes:
         if outcome.consensus:
-            timing.plot(outcome.task.level, outcome.sim_time_s, ".", color="tab:grey",
-                        alpha=0.5)
+            timing.plot(outcome.task.level, outcome.sim_time_s, ".", color="tab:grey", alpha=0.5)
     timing.plot(levels, [row.time_mean for row in rows], "o-", color="tab:blue", label="mean")
-    timing.plot(levels, [row.time_median for row in rows], "s--", color="tab:orange",
-                label="median")
+    timing.plot(
+        levels, [row.time_median for row in rows], "s--", color="tab:orange", label="median"
+    )
     timing.set_xlabel("iid radio loss (drop probability)")
     timing.set_ylabel("consensus time (sim s, last robot decided)")
     timing.grid(alpha=0.3)
@@ -460,8 +528,9 @@ def plot_drop(outcomes: Sequence[Outcome], rows: Sequence[PointSummary], path: P
     plt.close(fig)
 
 
-def plot_noise(outcomes: Sequence[Outcome], rows: Sequence[PointSummary], path: Path,
-               lighting: float) -> None:
+def plot_noise(
+    outcomes: Sequence[Outcome], rows: Sequence[PointSummary], path: Path, lighting: float
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -478,16 +547,22 @@ def plot_noise(outcomes: Sequence[Outcome], rows: Sequence[PointSummary], path: 
         mine = [row for row in rows if row.controller == setup.key]
         levels = [row.level for row in mine]
         style = {"color": colours[setup.key], "marker": markers[setup.key]}
-        accuracy.plot(levels, [row.correct / row.runs for row in mine], "-",
-                      label=setup.label, **style)
-        timing.plot(levels, [row.time_mean for row in mine], "-", label=setup.label,
-                    **style)
-        errors.plot(levels, [100 * row.wrong_share for row in mine], "-",
-                    label=setup.label, **style)
+        accuracy.plot(
+            levels, [row.correct / row.runs for row in mine], "-", label=setup.label, **style
+        )
+        timing.plot(levels, [row.time_mean for row in mine], "-", label=setup.label, **style)
+        errors.plot(
+            levels, [100 * row.wrong_share for row in mine], "-", label=setup.label, **style
+        )
         for outcome in outcomes:
             if outcome.task.controller == setup.key and outcome.consensus:
-                timing.plot(outcome.task.level + nudge, outcome.sim_time_s, ".",
-                            color=colours[setup.key], alpha=0.35)
+                timing.plot(
+                    outcome.task.level + nudge,
+                    outcome.sim_time_s,
+                    ".",
+                    color=colours[setup.key],
+                    alpha=0.35,
+                )
     accuracy.set_ylabel("accuracy (share of runs: all robots chose the best)")
     accuracy.set_ylim(-0.05, 1.05)
     timing.set_ylabel("consensus time (sim s; mean line, dots are runs)")
@@ -509,30 +584,69 @@ def plot_noise(outcomes: Sequence[Outcome], rows: Sequence[PointSummary], path: 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true",
-                        help="fewer levels and 3 seeds per point (a few minutes)")
-    parser.add_argument("--only", choices=["drop", "noise", "none"], default=None,
-                        help="run one sweep only (none: just --processes)")
-    parser.add_argument("--seeds", type=int, default=None,
-                        help="seeds 0..N-1 per point (default: 10, or 3 with --quick)")
-    parser.add_argument("--drops", type=float, nargs="+", default=None,
-                        help="drop levels (default: 0 to 0.8 in steps of 0.1)")
-    parser.add_argument("--sigmas", type=float, nargs="+", default=None,
-                        help=f"pixel noise levels (default: {' '.join(map(str, SIGMA_LEVELS))})")
-    parser.add_argument("--lighting", type=float, default=0.0,
-                        help="per-site lighting variation added to every noise point")
+    parser.add_argument(
+        "--quick", action="store_true", help="fewer levels and 3 seeds per point (a few minutes)"
+    )
+    parser.add_argument(
+        "--only",
+        choices=["drop", "noise", "none"],
+        default=None,
+        help="run one sweep only (none: just --processes)",
+    )
+    parser.add_argument(
+        "--seeds",
+        type=int,
+        default=None,
+        help="seeds 0..N-1 per point (default: 10, or 3 with --quick)",
+    )
+    parser.add_argument(
+        "--drops",
+        type=float,
+        nargs="+",
+        default=None,
+        help="drop levels (default: 0 to 0.8 in steps of 0.1)",
+    )
+    parser.add_argument(
+        "--sigmas",
+        type=float,
+        nargs="+",
+        default=None,
+        help=f"pixel noise levels (default: {' '.join(map(str, SIGMA_LEVELS))})",
+    )
+    parser.add_argument(
+        "--lighting",
+        type=float,
+        default=0.0,
+        help="per-site lighting variation added to every noise point",
+    )
     parser.add_argument("--robots", type=int, default=10)
     parser.add_argument("--sites", type=int, default=10)
-    parser.add_argument("--timeout", type=float, default=1800.0,
-                        help="sim seconds before a run counts as undecided (default: 1800)")
-    parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
-                        help="runs at a time, one process each (default: 2)")
-    parser.add_argument("--processes", action="store_true",
-                        help="also run the 30 %% loss claim with real processes (swarm run)")
-    parser.add_argument("--out", type=Path, default=REPO / "docs",
-                        help="directory for the figures (default: docs/)")
-    parser.add_argument("--results", type=Path, default=None,
-                        help="also write every run's outcome to this JSON file")
+    parser.add_argument(
+        "--timeout",
+        type=float,
+        default=1800.0,
+        help="sim seconds before a run counts as undecided (default: 1800)",
+    )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=min(2, os.cpu_count() or 1),
+        help="runs at a time, one process each (default: 2)",
+    )
+    parser.add_argument(
+        "--processes",
+        action="store_true",
+        help="also run the 30 %% loss claim with real processes (swarm run)",
+    )
+    parser.add_argument(
+        "--out", type=Path, default=REPO / "docs", help="directory for the figures (default: docs/)"
+    )
+    parser.add_argument(
+        "--results",
+        type=Path,
+        default=None,
+        help="also write every run's outcome to this JSON file",
+    )
     return parser
 
 
@@ -561,8 +675,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             plot_drop(drop_outcomes, rows, args.out / "robustness_drop.png")
             print(f"wrote {args.out / 'robustness_drop.png'}")
     if args.only in (None, "noise"):
-        print(f"noise sweep: {len(sigmas)} levels x {len(SETUPS)} controllers x "
-              f"{len(seeds)} seeds", file=sys.stderr)
+        print(
+            f"noise sweep: {len(sigmas)} levels x {len(SETUPS)} controllers x {len(seeds)} seeds",
+            file=sys.stderr,
+        )
         noise_outcomes = run_all(noise_tasks(sigmas, seeds, args), args.jobs)
         rows = summarise(noise_outcomes)
         light = f", lighting {args.lighting:g}" if args.lighting else ""

@@ -21,8 +21,8 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from deploy.processes import ProcessGroup, free_port, python_module, wait_for_port  # noqa: E402
+from plumbing.zenoh_session import open_session  # noqa: E402
 from robot_agent import protocol  # noqa: E402
-from robot_agent.zenoh_session import open_session  # noqa: E402
 
 
 def time_to_ready(robots: int, spawn: str) -> float:
@@ -32,16 +32,31 @@ def time_to_ready(robots: int, spawn: str) -> float:
     keys = protocol.Keys(run)
     group = ProcessGroup()
     try:
-        world = group.start("world", python_module(
-            "world_server.server", "--run-id", run, "--listen", endpoint, "--mode", "router",
-            "--robots", str(robots), "--beacons", "0", "--start-timeout", "600",
-        ))
+        world = group.start(
+            "world",
+            python_module(
+                "world_server.server",
+                "--run-id",
+                run,
+                "--listen",
+                endpoint,
+                "--mode",
+                "router",
+                "--robots",
+                str(robots),
+                "--beacons",
+                "0",
+                "--start-timeout",
+                "600",
+            ),
+        )
         if not wait_for_port(port, 30.0, world.alive):
             raise RuntimeError(f"the world server did not start:\n{world.tail()}")
         ready: set[str] = set()
         with open_session("client", [endpoint]) as session:
             session.liveliness().declare_subscriber(
-                keys.alive("robot", "*"), lambda sample: ready.add(str(sample.key_expr)),
+                keys.alive("robot", "*"),
+                lambda sample: ready.add(str(sample.key_expr)),
                 history=True,
             )
             argv = ["--run-id", run, "--connect", endpoint, "--mode", "client"]

@@ -34,13 +34,13 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from deploy.processes import free_port  # noqa: E402
-from robot_agent.zenoh_session import open_session, reliable_publisher  # noqa: E402
+from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
 
 TARGETS = {10: 50.0, 50: 10.0, 100: 2.0, 200: 3.0, 500: 1.0}
 
 ECHO_ROBOT = """
 import sys, time
-from robot_agent.zenoh_session import open_session, reliable_publisher
+from plumbing.zenoh_session import open_session, reliable_publisher
 robot, endpoint = sys.argv[1], sys.argv[2]
 session = open_session("client", [endpoint])
 act = reliable_publisher(session, f"floor/robot/{robot}/act")
@@ -95,12 +95,25 @@ def messaging_floor(robots: int, ticks: int) -> float:
         session.close()
 
 
-def swarm_run(robots: int, seed: int, sites: int, extra: list[str],
-              record: Path | None = None) -> dict[str, float]:
+def swarm_run(
+    robots: int, seed: int, sites: int, extra: list[str], record: Path | None = None
+) -> dict[str, float]:
     output = ["--record", str(record)] if record is not None else ["--no-record"]
     command = [
-        sys.executable, "-m", "deploy.cli", "run", "--robots", str(robots), "--sites",
-        str(sites), "--seed", str(seed), "--json", "--quiet", *output, *extra,
+        sys.executable,
+        "-m",
+        "deploy.cli",
+        "run",
+        "--robots",
+        str(robots),
+        "--sites",
+        str(sites),
+        "--seed",
+        str(seed),
+        "--json",
+        "--quiet",
+        *output,
+        *extra,
     ]
     started = time.perf_counter()
     done = subprocess.run(command, capture_output=True, cwd=REPO, timeout=7200)
@@ -122,8 +135,10 @@ def swarm_run(robots: int, seed: int, sites: int, extra: list[str],
 
 def to_consensus(args: argparse.Namespace, extra: list[str]) -> None:
     print("To consensus (lockstep, default robots per process):")
-    print(f"{'robots':>6} {'RTF':>7} {'target':>7} {'wall s':>8} {'sim s':>8} "
-          f"{'start+stop s':>12} {'correct':>7} {'floor RTF':>9} {'RTF/floor':>9}")
+    print(
+        f"{'robots':>6} {'RTF':>7} {'target':>7} {'wall s':>8} {'sim s':>8} "
+        f"{'start+stop s':>12} {'correct':>7} {'floor RTF':>9} {'RTF/floor':>9}"
+    )
     for robots in args.robots:
         runs = [swarm_run(robots, seed, args.sites, extra) for seed in args.seeds]
         rtf = statistics.fmean(run["rtf"] for run in runs)
@@ -144,13 +159,18 @@ def to_consensus(args: argparse.Namespace, extra: list[str]) -> None:
                     for seed in args.seeds
                 ]
             recorded_rtf = statistics.fmean(run["rtf"] for run in recorded)
-            print(f"{'':>6} {recorded_rtf:>6.1f}x  the same seeds recorded (the default): "
-                  f"{recorded_rtf / rtf:.2f} of the unrecorded real-time factor", flush=True)
+            print(
+                f"{'':>6} {recorded_rtf:>6.1f}x  the same seeds recorded (the default): "
+                f"{recorded_rtf / rtf:.2f} of the unrecorded real-time factor",
+                flush=True,
+            )
 
 
 def scale_curve(args: argparse.Namespace, extra: list[str]) -> None:
-    print(f"\nScale curve ({args.scale_sim:g} s of sim time each; 'hosted' = the default "
-          "robots per process):")
+    print(
+        f"\nScale curve ({args.scale_sim:g} s of sim time each; 'hosted' = the default "
+        "robots per process):"
+    )
     print(f"{'robots':>6} {'processes':>10} {'RTF':>7} {'wall s / sim s':>14} {'start+stop s':>12}")
     for robots in args.scale:
         for mode in args.modes:
@@ -159,30 +179,52 @@ def scale_curve(args: argparse.Namespace, extra: list[str]) -> None:
                 robots, 0, args.sites, [*per_process, "--timeout", str(args.scale_sim), *extra]
             )
             label = "1 per robot" if mode == "1" else "hosted"
-            print(f"{robots:>6} {label:>10} {run['rtf']:>6.2f}x "
-                  f"{run['wall'] / max(run['sim_seen'], 1e-9):>14.3f} "
-                  f"{run['overhead']:>12.1f}", flush=True)
+            print(
+                f"{robots:>6} {label:>10} {run['rtf']:>6.2f}x "
+                f"{run['wall'] / max(run['sim_seen'], 1e-9):>14.3f} "
+                f"{run['overhead']:>12.1f}",
+                flush=True,
+            )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--robots", type=int, nargs="*", default=[10, 50, 100],
-                        help="swarm sizes to run to consensus")
+    parser.add_argument(
+        "--robots",
+        type=int,
+        nargs="*",
+        default=[10, 50, 100],
+        help="swarm sizes to run to consensus",
+    )
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
     parser.add_argument("--sites", type=int, default=10)
     parser.add_argument("--floor-ticks", type=int, default=300)
     parser.add_argument("--no-floor", action="store_true", help="skip the messaging baseline")
-    parser.add_argument("--with-recording", action="store_true",
-                        help="also run every seed recorded to MCAP, as `swarm run` does by "
-                        "default, and compare")
-    parser.add_argument("--scale", type=int, nargs="*", default=[10, 50, 100, 200, 500],
-                        help="swarm sizes of the scale curve (fixed sim time)")
-    parser.add_argument("--scale-sim", type=float, default=60.0,
-                        help="sim seconds per scale-curve run")
-    parser.add_argument("--modes", nargs="+", default=["1", "hosted"], choices=["1", "hosted"],
-                        help="robots per process in the scale curve: 1, or the default")
-    parser.add_argument("swarm_args", nargs=argparse.REMAINDER,
-                        help="extra `swarm run` options after --")
+    parser.add_argument(
+        "--with-recording",
+        action="store_true",
+        help="also run every seed recorded to MCAP, as `swarm run` does by default, and compare",
+    )
+    parser.add_argument(
+        "--scale",
+        type=int,
+        nargs="*",
+        default=[10, 50, 100, 200, 500],
+        help="swarm sizes of the scale curve (fixed sim time)",
+    )
+    parser.add_argument(
+        "--scale-sim", type=float, default=60.0, help="sim seconds per scale-curve run"
+    )
+    parser.add_argument(
+        "--modes",
+        nargs="+",
+        default=["1", "hosted"],
+        choices=["1", "hosted"],
+        help="robots per process in the scale curve: 1, or the default",
+    )
+    parser.add_argument(
+        "swarm_args", nargs=argparse.REMAINDER, help="extra `swarm run` options after --"
+    )
     args = parser.parse_args()
     extra = [a for a in args.swarm_args if a != "--"]
     if args.robots:

@@ -27,8 +27,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from robot_agent import cliargs
-from robot_agent.wellstirred import (
+from plumbing import cliargs
+from wellstirred.model import (
     FIGURE1_OPTIONS,
     FIGURE1_POOLS,
     Cell,
@@ -64,29 +64,40 @@ def largest_z(first: Sequence[Cell], second: Sequence[Cell]) -> tuple[float, Cel
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--repeat", type=cliargs.positive_int, default=3,
-                        help="timed repetitions of the fast sweep (default: %(default)s)")
+    parser.add_argument(
+        "--repeat",
+        type=cliargs.positive_int,
+        default=3,
+        help="timed repetitions of the fast sweep (default: %(default)s)",
+    )
     parser.add_argument("--runs", type=cliargs.positive_int, default=1000)
     parser.add_argument("--seed", type=cliargs.seed, default=0)
     args = parser.parse_args(argv)
 
     cells_count = len(FIGURE1_OPTIONS) * len(FIGURE1_POOLS)
     print(f"Figure 1 sweep: {cells_count} cells x {args.runs} runs, 100 steps, alpha = 0")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"Python {platform.python_version()}, numpy {np.__version__}")
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"Python {platform.python_version()}, numpy {np.__version__}"
+    )
 
     fast_times = []
     fast_cells: list[Cell] = []
     for _ in range(args.repeat):
         elapsed, fast_cells = timed_sweep(args.runs, args.seed, "auto")
         fast_times.append(elapsed)
-    print("fast (survivors path):   " + ", ".join(f"{t:.3f} s" for t in fast_times)
-          + f"  (best {min(fast_times):.3f} s, median {statistics.median(fast_times):.3f} s)")
+    print(
+        "fast (survivors path):   "
+        + ", ".join(f"{t:.3f} s" for t in fast_times)
+        + f"  (best {min(fast_times):.3f} s, median {statistics.median(fast_times):.3f} s)"
+    )
 
     reference_time, reference_cells = timed_sweep(args.runs, args.seed, "opinions")
     print(f"reference (full opinions): {reference_time:.3f} s")
-    print(f"speed-up: {reference_time / min(fast_times):.1f}x best, "
-          f"{reference_time / statistics.median(fast_times):.1f}x median")
+    print(
+        f"speed-up: {reference_time / min(fast_times):.1f}x best, "
+        f"{reference_time / statistics.median(fast_times):.1f}x median"
+    )
 
     start = time.perf_counter()
     exact = [exact_consensus_time(cell.model).mean for cell in fast_cells]
@@ -94,8 +105,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"exact chain for all {cells_count} cells: {exact_time:.3f} s")
 
     z, where = largest_z(fast_cells, reference_cells)
-    print(f"fast vs reference: largest |mean difference| = {z:.2f} standard errors "
-          f"(n={where.model.options}, k={where.model.pool})")
+    print(
+        f"fast vs reference: largest |mean difference| = {z:.2f} standard errors "
+        f"(n={where.model.options}, k={where.model.pool})"
+    )
     z_exact, where = max(
         (
             (abs(cell.summary.mean - mean) / standard_error(cell), cell)
@@ -104,8 +117,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         ),
         key=lambda pair: pair[0],
     )
-    print(f"fast vs exact: largest |mean - exact mean| = {z_exact:.2f} standard errors "
-          f"(n={where.model.options}, k={where.model.pool})")
+    print(
+        f"fast vs exact: largest |mean - exact mean| = {z_exact:.2f} standard errors "
+        f"(n={where.model.options}, k={where.model.pool})"
+    )
     return 0
 
 

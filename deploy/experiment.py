@@ -23,45 +23,92 @@ from typing import IO, Any
 
 from deploy.cli import UsageError
 from deploy.launcher import add_swarm_switches
-from robot_agent import cliargs, protocol
+from plumbing import cliargs
+from robot_agent import protocol
 
 STOP_GRACE = 10.0  # wall seconds a run has to stop after SIGINT before SIGKILL
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.usage = "%(prog)s --out DIR [options] [-- SWARM-RUN-OPTIONS]  (see --help)"
-    parser.add_argument("--robots", type=cliargs.int_range(1, 1000), nargs="+", default=[10],
-                        metavar="N", help="swarm sizes N (default: 10)")
-    parser.add_argument("--sites", type=cliargs.int_range(2, protocol.MAX_OPTIONS), nargs="+",
-                        default=[5, 8, 10], metavar="n",
-                        help="numbers of sites n (default: 5 8 10, as in the paper)")
-    parser.add_argument("--runs", type=cliargs.positive_int, default=10,
-                        help="runs per (N, n) (default: 10, as in the paper)")
-    parser.add_argument("--seed", type=cliargs.int_range(0, 2**62), default=0,
-                        help="seed of the first run; run i uses seed + i - 1 (default: 0)")
-    parser.add_argument("--parallel", type=cliargs.int_range(1, 64), default=2, metavar="J",
-                        help="runs at a time (default: 2, the fastest for ten-robot runs on "
-                        "2 cores; see docs/recording.md)")
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR",
-                        help="directory for recordings, logs and the report")
-    parser.add_argument("--name", type=cliargs.name, default="exp",
-                        help="run id prefix: <name>-N<robots>-n<sites>-r<run> (default: exp)")
-    parser.add_argument("--timeout", type=cliargs.positive_float, default=None,
-                        metavar="SIM_SECONDS", help="per-run sim time limit, forwarded")
-    parser.add_argument("--run-timeout", type=cliargs.positive_float, default=1800.0,
-                        metavar="WALL_SECONDS",
-                        help="stop a run that takes longer than this in wall time "
-                        "(default: 1800)")
+    parser.add_argument(
+        "--robots",
+        type=cliargs.int_range(1, 1000),
+        nargs="+",
+        default=[10],
+        metavar="N",
+        help="swarm sizes N (default: 10)",
+    )
+    parser.add_argument(
+        "--sites",
+        type=cliargs.int_range(2, protocol.MAX_OPTIONS),
+        nargs="+",
+        default=[5, 8, 10],
+        metavar="n",
+        help="numbers of sites n (default: 5 8 10, as in the paper)",
+    )
+    parser.add_argument(
+        "--runs",
+        type=cliargs.positive_int,
+        default=10,
+        help="runs per (N, n) (default: 10, as in the paper)",
+    )
+    parser.add_argument(
+        "--seed",
+        type=cliargs.int_range(0, 2**62),
+        default=0,
+        help="seed of the first run; run i uses seed + i - 1 (default: 0)",
+    )
+    parser.add_argument(
+        "--parallel",
+        type=cliargs.int_range(1, 64),
+        default=2,
+        metavar="J",
+        help="runs at a time (default: 2, the fastest for ten-robot runs on "
+        "2 cores; see docs/recording.md)",
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="directory for recordings, logs and the report",
+    )
+    parser.add_argument(
+        "--name",
+        type=cliargs.name,
+        default="exp",
+        help="run id prefix: <name>-N<robots>-n<sites>-r<run> (default: exp)",
+    )
+    parser.add_argument(
+        "--timeout",
+        type=cliargs.positive_float,
+        default=None,
+        metavar="SIM_SECONDS",
+        help="per-run sim time limit, forwarded",
+    )
+    parser.add_argument(
+        "--run-timeout",
+        type=cliargs.positive_float,
+        default=1800.0,
+        metavar="WALL_SECONDS",
+        help="stop a run that takes longer than this in wall time (default: 1800)",
+    )
     parser.add_argument("--no-report", action="store_true", help="only record the runs")
-    parser.add_argument("--json", action="store_true",
-                        help="print the report (runs, groups, failures) as JSON on stdout")
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print the report (runs, groups, failures) as JSON on stdout",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     # Every switch of `swarm run` (decision, radio faults, camera noise, beacon, robot
     # faults) is a switch here too, passed on to every run.
     parser.set_defaults(switches=add_swarm_switches(parser))
-    parser.add_argument("run_options", nargs=argparse.REMAINDER,
-                        help="after --: further swarm run options for every run, e.g. "
-                        "-- --robots-per-process 5")
+    parser.add_argument(
+        "run_options",
+        nargs=argparse.REMAINDER,
+        help="after --: further swarm run options for every run, e.g. -- --robots-per-process 5",
+    )
 
 
 @dataclass(frozen=True)
@@ -106,9 +153,21 @@ def plan_runs(args: argparse.Namespace, endpoint: str) -> list[RunSpec]:
                 run_id = f"{args.name}-N{robots}-n{sites}-r{number:02d}"
                 recording = args.out / f"{run_id}.mcap"
                 argv = [
-                    "--robots", str(robots), "--sites", str(sites), "--seed", str(seed),
-                    "--run-id", run_id, "--connect", endpoint, "--record", str(recording),
-                    "--json", "--quiet", *extra,
+                    "--robots",
+                    str(robots),
+                    "--sites",
+                    str(sites),
+                    "--seed",
+                    str(seed),
+                    "--run-id",
+                    run_id,
+                    "--connect",
+                    endpoint,
+                    "--record",
+                    str(recording),
+                    "--json",
+                    "--quiet",
+                    *extra,
                 ]
                 specs.append(RunSpec(run_id, robots, sites, seed, argv, recording))
     return specs
@@ -146,7 +205,9 @@ def _start(spec: RunSpec, logs: Path) -> _Running:
     stderr = open(logs / f"{spec.run_id}.log", "wb")  # noqa: SIM115
     process = subprocess.Popen(
         [sys.executable, "-m", "deploy.cli", "run", *spec.argv],
-        stdin=subprocess.DEVNULL, stdout=stdout, stderr=stderr,
+        stdin=subprocess.DEVNULL,
+        stdout=stdout,
+        stderr=stderr,
     )
     return _Running(spec, process, time.monotonic(), [stdout, stderr])
 
@@ -154,8 +215,12 @@ def _start(spec: RunSpec, logs: Path) -> _Running:
 def _reap(running: _Running, logs: Path, note: str = "") -> RunResult:
     for stream in running.streams:
         stream.close()
-    result = RunResult(running.spec, running.process.returncode,
-                       wall_s=time.monotonic() - running.started, note=note)
+    result = RunResult(
+        running.spec,
+        running.process.returncode,
+        wall_s=time.monotonic() - running.started,
+        note=note,
+    )
     text = (logs / f"{running.spec.run_id}.json").read_text().strip()
     if text:
         try:
@@ -181,14 +246,18 @@ def _describe(result: RunResult) -> str:
     if not result.ok or summary is None:
         return f"{result.spec.run_id} FAILED ({result.note or f'exit {result.returncode}'})"
     steps = [robot["steps"] for robot in summary["per_robot"] if robot["steps"] is not None]
-    verdict = ("correct" if summary["correct"] else "wrong") if summary["consensus"] else \
-        "no consensus"
-    return (f"{result.spec.run_id}: {verdict}, steps {max(steps) if steps else '-'}, "
-            f"{result.wall_s:.1f}s")
+    verdict = (
+        ("correct" if summary["correct"] else "wrong") if summary["consensus"] else "no consensus"
+    )
+    return (
+        f"{result.spec.run_id}: {verdict}, steps {max(steps) if steps else '-'}, "
+        f"{result.wall_s:.1f}s"
+    )
 
 
-def run_all(specs: Sequence[RunSpec], parallel: int, logs: Path, run_timeout: float,
-            quiet: bool) -> list[RunResult]:
+def run_all(
+    specs: Sequence[RunSpec], parallel: int, logs: Path, run_timeout: float, quiet: bool
+) -> list[RunResult]:
     """Run every spec, ``parallel`` at a time, with a progress bar on stderr."""
     from rich.console import Console
     from rich.progress import (
@@ -204,9 +273,15 @@ def run_all(specs: Sequence[RunSpec], parallel: int, logs: Path, run_timeout: fl
     running: list[_Running] = []
     results: list[RunResult] = []
     progress = Progress(
-        TextColumn("[bold]runs"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        TextColumn("eta"), TimeRemainingColumn(), TextColumn("{task.fields[info]}"),
-        console=Console(stderr=True), disable=quiet,
+        TextColumn("[bold]runs"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("eta"),
+        TimeRemainingColumn(),
+        TextColumn("{task.fields[info]}"),
+        console=Console(stderr=True),
+        disable=quiet,
     )
     try:
         with progress:
@@ -249,16 +324,17 @@ def run(args: argparse.Namespace) -> int:
     validate_run_options(specs[0])
     taken = sorted(str(spec.recording) for spec in specs if spec.recording.exists())
     if taken:
-        raise UsageError(f"{len(taken)} recording(s) already in {args.out}, e.g. {taken[0]}: "
-                         "use another --out or --name")
+        raise UsageError(
+            f"{len(taken)} recording(s) already in {args.out}, e.g. {taken[0]}: "
+            "use another --out or --name"
+        )
     logs = args.out / "logs"
     logs.mkdir(parents=True, exist_ok=True)
     group = ProcessGroup()
     try:
         router = group.start("router", python_module("deploy.router", "--listen", endpoint))
         if not wait_for_port(port, 30.0, router.alive):
-            print(f"swarm experiment: the router did not start:\n{router.tail()}",
-                  file=sys.stderr)
+            print(f"swarm experiment: the router did not start:\n{router.tail()}", file=sys.stderr)
             return 1
         started = time.monotonic()
         results = run_all(specs, args.parallel, logs, args.run_timeout, args.quiet)
@@ -267,12 +343,16 @@ def run(args: argparse.Namespace) -> int:
         group.stop_all()
     failed = [result for result in results if not result.ok]
     for result in failed:
-        print(f"swarm experiment: {_describe(result)}; see "
-              f"{logs / (result.spec.run_id + '.log')}", file=sys.stderr)
-    print(f"swarm experiment: {len(results) - len(failed)}/{len(specs)} runs recorded in "
-          f"{elapsed:.0f}s wall ({args.parallel} at a time)", file=sys.stderr)
-    recordings = [result.spec.recording for result in results
-                  if result.spec.recording.is_file()]
+        print(
+            f"swarm experiment: {_describe(result)}; see {logs / (result.spec.run_id + '.log')}",
+            file=sys.stderr,
+        )
+    print(
+        f"swarm experiment: {len(results) - len(failed)}/{len(specs)} runs recorded in "
+        f"{elapsed:.0f}s wall ({args.parallel} at a time)",
+        file=sys.stderr,
+    )
+    recordings = [result.spec.recording for result in results if result.spec.recording.is_file()]
     output: dict[str, Any] = {
         "wall_time_s": round(elapsed, 1),
         "parallel": args.parallel,
@@ -280,7 +360,8 @@ def run(args: argparse.Namespace) -> int:
     }
     if not args.no_report and recordings:
         report = write_report(
-            recordings, args.out,
+            recordings,
+            args.out,
             warn=lambda text: print(f"swarm report: {text}", file=sys.stderr),
         )
         output.update(report.as_json())

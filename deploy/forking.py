@@ -18,7 +18,7 @@ import sys
 from multiprocessing.connection import Connection
 from typing import IO
 
-from robot_agent.lifecycle import PARENT_ENV, die_with_launcher
+from plumbing.lifecycle import PARENT_ENV, die_with_launcher
 
 PRELOAD = ["robot_agent.node", "nest_beacon.__main__"]
 

@@ -67,7 +67,11 @@ def run_in_memory(
             radio = deliveries.get(name, [])
             sense = world.sense(robot_id, len(radio), robot_id in frames)
             answer = answer_tick(
-                robot.controller, sense, radio, frames.get(robot_id), robot.rejects,
+                robot.controller,
+                sense,
+                radio,
+                frames.get(robot_id),
+                robot.rejects,
                 seq=robot.seq,
             )
             robot.seq = answer.next_seq
@@ -95,11 +99,19 @@ def run_in_memory(
     state = world.state()
     return build_summary(
         RunOutcome(
-            run_id=world_config.run, num_robots=world_config.num_robots,
-            num_sites=world_config.num_sites, seed=world_config.seed,
-            best_site=world.layout.best_site, sim_time_s=world.t, wall_time_s=0.0,
-            timed_out=not decided, radio=state.radio, world_rejected=0, stalls=0,
-            observer_rejected=0, config={},
+            run_id=world_config.run,
+            num_robots=world_config.num_robots,
+            num_sites=world_config.num_sites,
+            seed=world_config.seed,
+            best_site=world.layout.best_site,
+            sim_time_s=world.t,
+            wall_time_s=0.0,
+            timed_out=not decided,
+            radio=state.radio,
+            world_rejected=0,
+            stalls=0,
+            observer_rejected=0,
+            config={},
         ),
         [robot.record for robot in robots.values()],
     )

@@ -30,11 +30,12 @@ from rich.table import Table
 from deploy.processes import Child, ProcessGroup, free_port, python_module, wait_for_port
 from deploy.summary import RobotRecord, RunOutcome, build_summary, describe
 from nest_beacon.options import add_beacon_options
-from robot_agent import cliargs, protocol
-from robot_agent.cliargs import UsageError
-from robot_agent.node import fetch_world_info
+from plumbing import cliargs
+from plumbing.cliargs import UsageError
+from plumbing.world_info import fetch_world_info
+from plumbing.zenoh_session import open_session
+from robot_agent import protocol
 from robot_agent.options import add_controller_options, controller_config
-from robot_agent.zenoh_session import open_session
 from world_server.layout import make_layout
 from world_server.options import add_world_options
 
@@ -84,55 +85,98 @@ def add_swarm_switches(parser: argparse.ArgumentParser) -> ForwardedOptions:
     beacon = add_beacon_options(parser, prefix="beacon-")
     faults = parser.add_argument_group("robot faults")
     robot_faults = [
-        faults.add_argument("--kill", type=robot_at_time, action="append", default=[],
-                            metavar="ROBOT@SIMTIME",
-                            help="SIGKILL robot ROBOT's process at SIMTIME sim seconds "
-                            "(repeatable); the swarm goes on without it"),
-        faults.add_argument("--restart", type=robot_at_time, action="append", default=[],
-                            metavar="ROBOT@SIMTIME",
-                            help="start a fresh process for robot ROBOT at SIMTIME "
-                            "(repeatable); it is killed first if still running, and rejoins "
-                            "with a new controller and its old body"),
+        faults.add_argument(
+            "--kill",
+            type=robot_at_time,
+            action="append",
+            default=[],
+            metavar="ROBOT@SIMTIME",
+            help="SIGKILL robot ROBOT's process at SIMTIME sim seconds "
+            "(repeatable); the swarm goes on without it",
+        ),
+        faults.add_argument(
+            "--restart",
+            type=robot_at_time,
+            action="append",
+            default=[],
+            metavar="ROBOT@SIMTIME",
+            help="start a fresh process for robot ROBOT at SIMTIME "
+            "(repeatable); it is killed first if still running, and rejoins "
+            "with a new controller and its old body",
+        ),
     ]
     return ForwardedOptions(world, beacon, controller, robot_faults)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     swarm = parser.add_argument_group("swarm")
-    swarm.add_argument("--robots", type=cliargs.int_range(1, 1000), default=10,
-                       help="number of robots (default: 10)")
-    swarm.add_argument("--sites", type=cliargs.int_range(2, protocol.MAX_OPTIONS), default=10,
-                       help="number of sites n (default: 10)")
+    swarm.add_argument(
+        "--robots",
+        type=cliargs.int_range(1, 1000),
+        default=10,
+        help="number of robots (default: 10)",
+    )
+    swarm.add_argument(
+        "--sites",
+        type=cliargs.int_range(2, protocol.MAX_OPTIONS),
+        default=10,
+        help="number of sites n (default: 10)",
+    )
     swarm.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
-    swarm.add_argument("--run-id", type=cliargs.name, default=None,
-                       help="names this swarm on the network (default: run-<seed>-<time>)")
-    swarm.add_argument("--timeout", type=cliargs.positive_float, default=1800.0,
-                       metavar="SIM_SECONDS",
-                       help="give up after this much sim time (default: 1800)")
+    swarm.add_argument(
+        "--run-id",
+        type=cliargs.name,
+        default=None,
+        help="names this swarm on the network (default: run-<seed>-<time>)",
+    )
+    swarm.add_argument(
+        "--timeout",
+        type=cliargs.positive_float,
+        default=1800.0,
+        metavar="SIM_SECONDS",
+        help="give up after this much sim time (default: 1800)",
+    )
     switches = add_swarm_switches(parser)
     processes = parser.add_argument_group("processes")
-    processes.add_argument("--robots-per-process", type=cliargs.int_range(1, 1000),
-                           default=None, metavar="K",
-                           help="host K robots in each robot process, each robot still with "
-                           "its own Zenoh session, keys and RNG (default: chosen from the "
-                           "swarm size and the cores)")
-    processes.add_argument("--spawn", choices=["fork", "exec"], default="fork",
-                           help="start robot processes by forking a preloaded server (fast) "
-                           "or as fresh interpreters (default: fork)")
+    processes.add_argument(
+        "--robots-per-process",
+        type=cliargs.int_range(1, 1000),
+        default=None,
+        metavar="K",
+        help="host K robots in each robot process, each robot still with "
+        "its own Zenoh session, keys and RNG (default: chosen from the "
+        "swarm size and the cores)",
+    )
+    processes.add_argument(
+        "--spawn",
+        choices=["fork", "exec"],
+        default="fork",
+        help="start robot processes by forking a preloaded server (fast) "
+        "or as fresh interpreters (default: fork)",
+    )
     network = parser.add_argument_group("network")
-    network.add_argument("--connect", type=cliargs.endpoint, default=None, metavar="ENDPOINT",
-                         help="use this existing Zenoh router instead of making the world "
-                         "server the router of the run (several runs can share one router)")
+    network.add_argument(
+        "--connect",
+        type=cliargs.endpoint,
+        default=None,
+        metavar="ENDPOINT",
+        help="use this existing Zenoh router instead of making the world "
+        "server the router of the run (several runs can share one router)",
+    )
     output = parser.add_argument_group("output")
     recording = output.add_mutually_exclusive_group()
-    recording.add_argument("--record", metavar="PATH", default=None,
-                           help="MCAP recording of the run (default: runs/<run-id>.mcap)")
+    recording.add_argument(
+        "--record",
+        metavar="PATH",
+        default=None,
+        help="MCAP recording of the run (default: runs/<run-id>.mcap)",
+    )
     recording.add_argument("--no-record", action="store_true", help="do not record the run")
-    output.add_argument("--json", action="store_true",
-                        help="print one JSON object with the summary on stdout")
+    output.add_argument(
+        "--json", action="store_true", help="print one JSON object with the summary on stdout"
+    )
     output.add_argument("--quiet", action="store_true", help="no progress display")
-    output.add_argument("--verbose", action="store_true",
-                        help="echo the processes' logs on stderr")
+    output.add_argument("--verbose", action="store_true", help="echo the processes' logs on stderr")
     parser.set_defaults(forwarded=switches)
 
 
@@ -177,12 +221,15 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     )
     for fault in faults:
         if fault.robot >= args.robots:
-            raise ValueError(f"--{fault.action} {fault.robot}@...: there is no robot "
-                             f"{fault.robot} in a swarm of {args.robots}")
+            raise ValueError(
+                f"--{fault.action} {fault.robot}@...: there is no robot "
+                f"{fault.robot} in a swarm of {args.robots}"
+            )
     per_process = args.robots_per_process or default_robots_per_process(args.robots)
     if faults and per_process > 1:
-        raise ValueError("--kill and --restart act on one robot's process: "
-                         "use them with --robots-per-process 1")
+        raise ValueError(
+            "--kill and --restart act on one robot's process: use them with --robots-per-process 1"
+        )
     run_id = args.run_id or f"run-{args.seed}-{int(time.time() * 1000) % 10**9}"
     if args.connect:
         port, endpoint = None, args.connect
@@ -195,27 +242,53 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     common = ["--run-id", run_id, "--seed", str(args.seed)]
     client = ["--mode", "client", "--connect", endpoint]
     world_args = [
-        *common, *world_network, "--robots", str(args.robots), "--sites", str(args.sites),
+        *common,
+        *world_network,
+        "--robots",
+        str(args.robots),
+        "--sites",
+        str(args.sites),
         *cliargs.forward_argv(forwarded.world, args),
     ]
     robot_args = [*common, *client, *cliargs.forward_argv(forwarded.controller, args)]
     beacon_args = [
-        *common, *client, *cliargs.forward_argv(forwarded.beacon, args, strip_prefix="beacon-")
+        *common,
+        *client,
+        *cliargs.forward_argv(forwarded.beacon, args, strip_prefix="beacon-"),
     ]
     config = {key: value for key, value in vars(args).items() if key not in NOT_CONFIG}
     config["run_id"] = run_id
     config["threshold"] = controller.threshold  # the one in force, also when defaulted
     record = None if args.no_record else Path(args.record or f"runs/{run_id}.mcap")
     recorder_args = [
-        *common, *client, "--out", str(record), "--robots", str(args.robots),
-        "--sites", str(args.sites), "--config-json", json.dumps(config),
+        *common,
+        *client,
+        "--out",
+        str(record),
+        "--robots",
+        str(args.robots),
+        "--sites",
+        str(args.sites),
+        "--config-json",
+        json.dumps(config),
     ]
     return RunPlan(
-        run_id=run_id, robots=args.robots, sites=args.sites, seed=args.seed,
-        timeout=args.timeout, endpoint=endpoint, port=port, record=record,
-        world_args=world_args, robot_args=robot_args, beacon_args=beacon_args,
-        recorder_args=recorder_args, faults=faults, config=config,
-        robots_per_process=per_process, spawn=args.spawn,
+        run_id=run_id,
+        robots=args.robots,
+        sites=args.sites,
+        seed=args.seed,
+        timeout=args.timeout,
+        endpoint=endpoint,
+        port=port,
+        record=record,
+        world_args=world_args,
+        robot_args=robot_args,
+        beacon_args=beacon_args,
+        recorder_args=recorder_args,
+        faults=faults,
+        config=config,
+        robots_per_process=per_process,
+        spawn=args.spawn,
     )
 
 
@@ -377,10 +450,15 @@ class Swarm:
             if fault.action == "restart":
                 record.restarted()
                 self.robot_children[fault.robot] = self._start_robots([fault.robot])
-            self.fault_log.append({
-                "robot": fault.robot, "action": fault.action, "at_s": fault.at,
-                "applied_at_s": round(self.sim_time, 3), "was_running": was_alive,
-            })
+            self.fault_log.append(
+                {
+                    "robot": fault.robot,
+                    "action": fault.action,
+                    "at_s": fault.at,
+                    "applied_at_s": round(self.sim_time, 3),
+                    "was_running": was_alive,
+                }
+            )
             log.info("%s robot %d at sim time %.1f", fault.action, fault.robot, self.sim_time)
 
     def _start_robots(self, robots: list[int]) -> Child:
@@ -423,9 +501,7 @@ class Swarm:
         if self.ended_at is not None:
             return self.final_stats
         self.ended_at = time.monotonic()
-        swarm = [
-            child for child in self.group.children if child.name not in ("world", "recorder")
-        ]
+        swarm = [child for child in self.group.children if child.name not in ("world", "recorder")]
         self.group.stop(swarm)
         self.poll()
         self.final_stats = self._world_stats() or self.last_state
@@ -439,8 +515,10 @@ class Swarm:
             if stats is not None:
                 return stats
             time.sleep(STATS_RETRY_PAUSE)
-        log.warning("the world did not answer on world/stats; the summary's counters are "
-                    "those of its last world/state")
+        log.warning(
+            "the world did not answer on world/stats; the summary's counters are "
+            "those of its last world/state"
+        )
         return None
 
     def _query_world_stats(self) -> protocol.WorldState | None:
@@ -513,16 +591,24 @@ def _run_swarm(swarm: Swarm, args: argparse.Namespace, console: Console) -> int:
         return EXIT_CRASH
     timed_out, crashed = _watch(swarm, console, quiet=args.quiet)
     if crashed is not None:
-        print(f"swarm run: the {crashed.name} process crashed (exit code "
-              f"{crashed.process.returncode}):\n{crashed.tail()}", file=sys.stderr)
+        print(
+            f"swarm run: the {crashed.name} process crashed (exit code "
+            f"{crashed.process.returncode}):\n{crashed.tail()}",
+            file=sys.stderr,
+        )
         return EXIT_CRASH
     stats = swarm.stop_swarm()
     wall = (swarm.ended_at or 0.0) - swarm.started_at if swarm.started_at else 0.0
     summary = build_summary(
         RunOutcome(
-            run_id=plan.run_id, num_robots=plan.robots, num_sites=plan.sites, seed=plan.seed,
+            run_id=plan.run_id,
+            num_robots=plan.robots,
+            num_sites=plan.sites,
+            seed=plan.seed,
             best_site=make_layout(plan.sites, plan.robots, plan.seed).best_site,
-            sim_time_s=swarm.sim_time, wall_time_s=wall, timed_out=timed_out,
+            sim_time_s=swarm.sim_time,
+            wall_time_s=wall,
+            timed_out=timed_out,
             radio=stats.radio if stats else protocol.RadioCounters(),
             world_rejected=stats.rejected if stats else 0,
             stalls=stats.stalls if stats else 0,
@@ -551,8 +637,13 @@ def _watch(swarm: Swarm, console: Console, quiet: bool) -> tuple[bool, Child | N
     """Follow the run until every live robot decided, the timeout, or a crash."""
     plan = swarm.plan
     progress = Progress(
-        TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.fields[info]}"),
-        TimeElapsedColumn(), console=console, transient=True, disable=quiet,
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        TextColumn("{task.fields[info]}"),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=quiet,
     )
     with progress:
         task = progress.add_task("decided", total=plan.robots, info="starting")
@@ -567,10 +658,12 @@ def _watch(swarm: Swarm, console: Console, quiet: bool) -> tuple[bool, Child | N
             elapsed = time.monotonic() - swarm.started_at if swarm.started_at else 0.0
             factor = swarm.sim_time / elapsed if elapsed > 0 else 0.0
             progress.update(
-                task, completed=swarm.decided(),
+                task,
+                completed=swarm.decided(),
                 info=f"{swarm.decided()}/{plan.robots} decided, {swarm.trips()} trips, "
                 f"sim {swarm.sim_time:.0f}s, {factor:.0f}x real time"
-                if swarm.started_at else "waiting for the robots to join",
+                if swarm.started_at
+                else "waiting for the robots to join",
             )
             if swarm.started_at is not None and swarm.all_live_decided():
                 return False, None
@@ -580,8 +673,10 @@ def _watch(swarm: Swarm, console: Console, quiet: bool) -> tuple[bool, Child | N
 
 def print_summary(summary: dict[str, Any], console: Console) -> None:
     robots = summary["per_robot"]
-    table = Table(title=f"run {summary['run_id']}: {summary['num_robots']} robots, "
-                  f"{summary['num_sites']} sites, seed {summary['seed']}")
+    table = Table(
+        title=f"run {summary['run_id']}: {summary['num_robots']} robots, "
+        f"{summary['num_sites']} sites, seed {summary['seed']}"
+    )
     for column in ("robot", "decided site", "steps", "decision time (s)", "pool sizes"):
         table.add_column(column, justify="right")
     for robot in robots:
@@ -596,9 +691,11 @@ def print_summary(summary: dict[str, Any], console: Console) -> None:
     steps = [robot["steps"] for robot in robots if robot["steps"] is not None]
     pools = [size for robot in robots for size in robot["pool_sizes"]]
     verdict = (
-        f"consensus on site {summary['chosen_site']}, the best" if summary["correct"]
+        f"consensus on site {summary['chosen_site']}, the best"
+        if summary["correct"]
         else f"consensus on site {summary['chosen_site']}, NOT the best ({summary['best_site']})"
-        if summary["consensus"] else "no consensus"
+        if summary["consensus"]
+        else "no consensus"
     )
     console.print(
         f"{verdict}{' (timed out)' if summary['timed_out'] else ''}; "

@@ -1,6 +1,6 @@
 """Child processes of a local run: start them, keep their logs, stop every one of them.
 
-Children die with the launcher (robot_agent.lifecycle), their stderr is kept in a
+Children die with the launcher (plumbing.lifecycle), their stderr is kept in a
 ring buffer so a crash can be explained, and ``stop_all`` ends each by pid: SIGTERM, a
 grace period, then SIGKILL.
 """
@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from deploy.forking import QUIET_THREADS, ForkedProcess, ForkServer
-from robot_agent.lifecycle import PARENT_ENV
+from plumbing.lifecycle import PARENT_ENV
 
 LOG_LINES_KEPT = 200
 
@@ -105,9 +105,7 @@ class ProcessGroup:
 
     def crashed(self) -> list[Child]:
         """Children that exited without being asked to."""
-        return [
-            child for child in self.children if not child.alive() and not child.expected_exit
-        ]
+        return [child for child in self.children if not child.alive() and not child.expected_exit]
 
     def stop(self, children: Sequence[Child], grace: float = 3.0) -> None:
         for child in children:

@@ -41,10 +41,32 @@ START_METADATA = "bestofn.start"  # the names the recorder writes (world_server/
 RUN_METADATA = "bestofn.run"
 FIGURES = ("fig4.png", "fig5.png", "fig2.png", "trajectories.png")
 CSV_COLUMNS = (
-    "run_id", "robots", "sites", "seed", "consensus", "chosen_site", "best_site", "correct",
-    "timed_out", "complete", "source", "sim_time_s", "wall_time_s", "decided", "swarm_steps",
-    "steps_mean", "steps_median", "steps_min", "steps_max", "robots_within_half_n",
-    "within_half_n", "pool_mean", "pool_median", "pool_min", "pool_max", "poolings",
+    "run_id",
+    "robots",
+    "sites",
+    "seed",
+    "consensus",
+    "chosen_site",
+    "best_site",
+    "correct",
+    "timed_out",
+    "complete",
+    "source",
+    "sim_time_s",
+    "wall_time_s",
+    "decided",
+    "swarm_steps",
+    "steps_mean",
+    "steps_median",
+    "steps_min",
+    "steps_max",
+    "robots_within_half_n",
+    "within_half_n",
+    "pool_mean",
+    "pool_median",
+    "pool_min",
+    "pool_max",
+    "poolings",
     "recording",
 )
 
@@ -272,8 +294,11 @@ def run_summary(recording: Recording) -> dict[str, Any]:
     summary = recording.summary
     if summary is not None:
         return {**summary, "source": "metadata", "complete": recording.complete}
-    return {**rebuild_summary(recording), "source": "status messages",
-            "complete": recording.complete}
+    return {
+        **rebuild_summary(recording),
+        "source": "status messages",
+        "complete": recording.complete,
+    }
 
 
 def rebuild_summary(recording: Recording) -> dict[str, Any]:
@@ -287,8 +312,11 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
     num_robots = recording.robots or len(records)
     seed = recording.seed or 0
     layout = recording.layout
-    best = layout["best_site"] if layout else make_layout(num_sites, max(num_robots, 1),
-                                                          seed).best_site
+    best = (
+        layout["best_site"]
+        if layout
+        else make_layout(num_sites, max(num_robots, 1), seed).best_site
+    )
     state = recording.last_state
     clock = recording.last_clock
     wall = 0.0
@@ -296,11 +324,19 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
         wall = (recording.last_clock_wall_ns - recording.first_clock_wall_ns) / 1e9
     return build_summary(
         RunOutcome(
-            run_id=recording.run_id, num_robots=num_robots, num_sites=num_sites, seed=seed,
-            best_site=best, sim_time_s=clock.t if clock else 0.0, wall_time_s=wall,
-            timed_out=False, radio=state.radio if state else protocol.RadioCounters(),
-            world_rejected=state.rejected if state else 0, stalls=state.stalls if state else 0,
-            observer_rejected=recording.undecodable, config=recording.config,
+            run_id=recording.run_id,
+            num_robots=num_robots,
+            num_sites=num_sites,
+            seed=seed,
+            best_site=best,
+            sim_time_s=clock.t if clock else 0.0,
+            wall_time_s=wall,
+            timed_out=False,
+            radio=state.radio if state else protocol.RadioCounters(),
+            world_rejected=state.rejected if state else 0,
+            stalls=state.stalls if state else 0,
+            observer_rejected=recording.undecodable,
+            config=recording.config,
         ),
         records.values(),
     )
@@ -370,8 +406,9 @@ def report_row(summary: dict[str, Any], recording: Path | str) -> dict[str, Any]
     }
 
 
-def group_rows(runs: Sequence[dict[str, Any]],
-               summaries: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def group_rows(
+    runs: Sequence[dict[str, Any]], summaries: Sequence[dict[str, Any]]
+) -> list[dict[str, Any]]:
     """Aggregates per (robots, sites): what the paper's Section 5 text reports."""
     groups: dict[tuple[int, int], list[int]] = {}
     for index, row in enumerate(runs):
@@ -383,21 +420,23 @@ def group_rows(runs: Sequence[dict[str, Any]],
         steps = [value for i in members for value in steps_of(summaries[i])]
         pools = [value for i in members for value in pools_of(summaries[i])]
         run_pool_means = [row["pool_mean"] for row in rows if row["pool_mean"] is not None]
-        result.append({
-            "robots": robots,
-            "sites": sites,
-            "half_n": sites / 2,
-            "runs": len(rows),
-            "complete_runs": sum(1 for row in rows if row["complete"]),
-            "consensus_runs": sum(1 for row in rows if row["consensus"]),
-            "correct_runs": sum(1 for row in rows if row["correct"]),
-            "runs_within_half_n": sum(1 for value in swarm if value <= sites / 2),
-            "runs_below_half_n": sum(1 for value in swarm if value < sites / 2),
-            "swarm_steps": _stats(swarm),
-            "robot_steps": _stats(steps),
-            "pool_size": _stats(pools),
-            "run_mean_pool_size": _stats(run_pool_means),
-        })
+        result.append(
+            {
+                "robots": robots,
+                "sites": sites,
+                "half_n": sites / 2,
+                "runs": len(rows),
+                "complete_runs": sum(1 for row in rows if row["complete"]),
+                "consensus_runs": sum(1 for row in rows if row["consensus"]),
+                "correct_runs": sum(1 for row in rows if row["correct"]),
+                "runs_within_half_n": sum(1 for value in swarm if value <= sites / 2),
+                "runs_below_half_n": sum(1 for value in swarm if value < sites / 2),
+                "swarm_steps": _stats(swarm),
+                "robot_steps": _stats(steps),
+                "pool_size": _stats(pools),
+                "run_mean_pool_size": _stats(run_pool_means),
+            }
+        )
     return result
 
 
@@ -415,7 +454,8 @@ def audit(recording: Recording) -> dict[str, dict[str, int]]:
     state_step = steps[0] if steps and steps[0] > 0 else 1
     state_expected = (
         (max(recording.state_ticks) - min(recording.state_ticks)) // state_step + 1
-        if recording.state_ticks else 0
+        if recording.state_ticks
+        else 0
     )
     return {
         "world/clock": {"expected": recording.clock.expected, "recorded": recording.clock.count},
@@ -430,7 +470,8 @@ def audit(recording: Recording) -> dict[str, dict[str, int]]:
         },
         "beacon/*/ack": {"expected": recording.ack.expected, "recorded": recording.ack.count},
         "robot/*/camera": {
-            "expected": declared.camera, "recorded": counts["foxglove.CompressedImage"],
+            "expected": declared.camera,
+            "recorded": counts["foxglove.CompressedImage"],
         },
         "radio/tx/*": {"expected": declared.tx, "recorded": counts["bestofn.RadioTxRecord"]},
         "radio/rx/*": {"expected": declared.rx, "recorded": counts["bestofn.RadioRxRecord"]},
@@ -481,18 +522,21 @@ def plot_boxes(summaries: Sequence[dict[str, Any]], path: Path, *, pools: bool) 
             f"{number}" + ("" if run["consensus"] and run["complete"] else "*")
             for number, run in enumerate(runs, start=1)
         ]
-        axis.boxplot([values or [float("nan")] for values in data], tick_labels=labels,
-                     flierprops={"markersize": 3})
+        axis.boxplot(
+            [values or [float("nan")] for values in data],
+            tick_labels=labels,
+            flierprops={"markersize": 3},
+        )
         if pools:
             axis.set_ylabel("pool size k")
         else:
-            axis.axhline(sites / 2, linestyle="--", color="tab:red",
-                         label=f"n/2 = {sites / 2:g}")
+            axis.axhline(sites / 2, linestyle="--", color="tab:red", label=f"n/2 = {sites / 2:g}")
             axis.set_ylabel("time steps (trips) to decision")
             axis.legend(loc="upper right")
         axis.set_title(f"({chr(ord('a') + index)}) n = {sites}, N = {robots}")
-        axis.set_xlabel("run" + ("  (* no consensus, or cut short)" if "*" in "".join(labels)
-                                 else ""))
+        axis.set_xlabel(
+            "run" + ("  (* no consensus, or cut short)" if "*" in "".join(labels) else "")
+        )
         axis.set_ylim(bottom=0)
         axis.yaxis.get_major_locator().set_params(integer=True)
     if not panels:
@@ -525,16 +569,22 @@ def plot_opinion(recording: Recording, robot: int, path: Path) -> None:
         times = [status.t for status in statuses]
         for site in range(sites):
             label = f"site {site}" + (f" (rho {qualities[site]:.2f})" if site in qualities else "")
-            axis.step(times, [status.opinion[site] for status in statuses], where="post",
-                      color=colours.get(site, (0.5, 0.5, 0.5, 1.0)),
-                      linewidth=2.5 if site == best else 1.2, label=label)
+            axis.step(
+                times,
+                [status.opinion[site] for status in statuses],
+                where="post",
+                color=colours.get(site, (0.5, 0.5, 0.5, 1.0)),
+                linewidth=2.5 if site == best else 1.2,
+                label=label,
+            )
         for previous, status in itertools.pairwise(statuses):
             if status.poolings > previous.poolings:
                 axis.axvline(status.t, color="grey", linestyle=":", linewidth=0.8)
         axis.legend(fontsize="small", ncols=2, loc="center left", bbox_to_anchor=(1.0, 0.5))
     else:
-        axis.text(0.5, 0.5, f"no status messages of robot {robot}", ha="center",
-                  transform=axis.transAxes)
+        axis.text(
+            0.5, 0.5, f"no status messages of robot {robot}", ha="center", transform=axis.transAxes
+        )
     axis.set_ylim(-0.02, 1.02)
     axis.set_xlabel("sim time (s); dotted lines: poolings at the nest")
     axis.set_ylabel(f"robot {robot}'s probability")
@@ -559,20 +609,37 @@ def plot_trajectories(recording: Recording, path: Path) -> None:
         half = 3.14159 / len(layout["sites"]) * 0.7
         for site in layout["sites"]:
             angle = site["angle"]
-            axis.add_patch(Wedge((0, 0), radius * 1.04, _degrees(angle - half),
-                                 _degrees(angle + half), width=radius * 0.04,
-                                 color=colours[site["id"]]))
-            axis.annotate(f"{site['id']}\nrho {site['quality']:.2f}",
-                          (1.14 * site["x"], 1.14 * site["y"]), ha="center", va="center",
-                          fontsize=7)
+            axis.add_patch(
+                Wedge(
+                    (0, 0),
+                    radius * 1.04,
+                    _degrees(angle - half),
+                    _degrees(angle + half),
+                    width=radius * 0.04,
+                    color=colours[site["id"]],
+                )
+            )
+            axis.annotate(
+                f"{site['id']}\nrho {site['quality']:.2f}",
+                (1.14 * site["x"], 1.14 * site["y"]),
+                ha="center",
+                va="center",
+                fontsize=7,
+            )
     cmap = plt.get_cmap("tab10" if len(recording.paths) <= 10 else "viridis")
     robots = sorted(recording.paths)
     for index, robot in enumerate(robots):
         points = recording.paths[robot]
         colour = cmap(index % 10 if len(robots) <= 10 else index / max(len(robots) - 1, 1))
         xs, ys = [p[1] for p in points], [p[2] for p in points]
-        axis.plot(xs, ys, color=colour, linewidth=0.6, alpha=0.8,
-                  label=f"robot {robot}" if len(robots) <= 10 else None)
+        axis.plot(
+            xs,
+            ys,
+            color=colour,
+            linewidth=0.6,
+            alpha=0.8,
+            label=f"robot {robot}" if len(robots) <= 10 else None,
+        )
         axis.plot(xs[:1], ys[:1], "o", color=colour, markersize=3)
         axis.plot(xs[-1:], ys[-1:], "x", color=colour, markersize=5)
     if not robots:
@@ -605,8 +672,12 @@ class Report:
     files: list[str]
 
     def as_json(self) -> dict[str, Any]:
-        return {"runs": self.runs, "groups": self.groups, "unreadable": self.unreadable,
-                "files": self.files}
+        return {
+            "runs": self.runs,
+            "groups": self.groups,
+            "unreadable": self.unreadable,
+            "files": self.files,
+        }
 
 
 def write_report(
@@ -634,9 +705,14 @@ def write_report(
             warn(f"{path}: {recording.problem}; reporting what was recorded")
         recordings.append(recording)
     summaries = [run_summary(recording) for recording in recordings]
-    order = sorted(range(len(recordings)), key=lambda i: (
-        summaries[i]["num_robots"], summaries[i]["num_sites"], _natural(summaries[i]["run_id"])
-    ))
+    order = sorted(
+        range(len(recordings)),
+        key=lambda i: (
+            summaries[i]["num_robots"],
+            summaries[i]["num_sites"],
+            _natural(summaries[i]["run_id"]),
+        ),
+    )
     recordings = [recordings[i] for i in order]
     summaries = [summaries[i] for i in order]
     runs = [
@@ -686,19 +762,43 @@ def _robot(recording: Recording, robot: int | None) -> int:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recordings", nargs="+", type=Path, metavar="RUN.mcap",
-                        help="MCAP recordings of swarm runs (cut-short ones too)")
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR",
-                        help="directory for the figures and the summary table")
-    parser.add_argument("--json", action="store_true",
-                        help="print the summary (runs and groups) as one JSON object on stdout")
-    parser.add_argument("--example", metavar="RUN_ID", default=None,
-                        help="the run shown in fig2.png and trajectories.png (default: the "
-                        "first recording)")
-    parser.add_argument("--robot", type=int, default=None, metavar="ID",
-                        help="the robot whose opinion fig2.png shows (default: the lowest id)")
-    parser.add_argument("--per-run", action="store_true",
-                        help="also write an opinion and a trajectories plot for every run")
+    parser.add_argument(
+        "recordings",
+        nargs="+",
+        type=Path,
+        metavar="RUN.mcap",
+        help="MCAP recordings of swarm runs (cut-short ones too)",
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="directory for the figures and the summary table",
+    )
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print the summary (runs and groups) as one JSON object on stdout",
+    )
+    parser.add_argument(
+        "--example",
+        metavar="RUN_ID",
+        default=None,
+        help="the run shown in fig2.png and trajectories.png (default: the first recording)",
+    )
+    parser.add_argument(
+        "--robot",
+        type=int,
+        default=None,
+        metavar="ID",
+        help="the robot whose opinion fig2.png shows (default: the lowest id)",
+    )
+    parser.add_argument(
+        "--per-run",
+        action="store_true",
+        help="also write an opinion and a trajectories plot for every run",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -713,11 +813,18 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--robot must be a robot id (>= 0), got {args.robot}")
     if args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} exists and is not a directory")
+
     def warn(text: str) -> None:
         print(f"swarm report: {text}", file=sys.stderr)
 
-    report = write_report(args.recordings, args.out, example=args.example, robot=args.robot,
-                          per_run=args.per_run, warn=warn)
+    report = write_report(
+        args.recordings,
+        args.out,
+        example=args.example,
+        robot=args.robot,
+        per_run=args.per_run,
+        warn=warn,
+    )
     if args.json:
         print(json.dumps(report.as_json()))
     else:
@@ -735,13 +842,16 @@ def print_report(report: Report, console: Any) -> None:
     for row in report.runs:
         table.add_row(
             row["run_id"] + ("" if row["complete"] else " (cut short)"),
-            str(row["robots"]), str(row["sites"]),
+            str(row["robots"]),
+            str(row["sites"]),
             ("correct" if row["correct"] else "wrong") if row["consensus"] else "none",
             "-" if row["swarm_steps"] is None else str(row["swarm_steps"]),
-            "-" if row["steps_mean"] is None else
-            f"{row['steps_mean']:.1f} {row['steps_min']}-{row['steps_max']}",
-            "-" if row["pool_mean"] is None else
-            f"{row['pool_mean']:.1f} {row['pool_min']}-{row['pool_max']}",
+            "-"
+            if row["steps_mean"] is None
+            else f"{row['steps_mean']:.1f} {row['steps_min']}-{row['steps_max']}",
+            "-"
+            if row["pool_mean"] is None
+            else f"{row['pool_mean']:.1f} {row['pool_min']}-{row['pool_max']}",
         )
     console.print(table)
     for group in report.groups:

@@ -14,8 +14,8 @@ import sys
 import threading
 from collections.abc import Sequence
 
-from robot_agent import cliargs
-from robot_agent.lifecycle import die_with_launcher
+from plumbing import cliargs
+from plumbing.lifecycle import die_with_launcher
 
 log = logging.getLogger("router")
 
@@ -23,14 +23,28 @@ DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--listen", type=cliargs.endpoint, action="append", default=[],
-                        metavar="ENDPOINT",
-                        help=f"endpoint to listen on, repeatable (default: {DEFAULT_LISTEN}); "
-                        "use tcp/0.0.0.0:7447 to accept other hosts")
-    parser.add_argument("--connect", type=cliargs.endpoint, action="append", default=[],
-                        metavar="ENDPOINT", help="another router to connect to (repeatable)")
-    parser.add_argument("--zenoh-config", metavar="FILE",
-                        help="a Zenoh JSON5 configuration file (TLS, access control)")
+    parser.add_argument(
+        "--listen",
+        type=cliargs.endpoint,
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help=f"endpoint to listen on, repeatable (default: {DEFAULT_LISTEN}); "
+        "use tcp/0.0.0.0:7447 to accept other hosts",
+    )
+    parser.add_argument(
+        "--connect",
+        type=cliargs.endpoint,
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="another router to connect to (repeatable)",
+    )
+    parser.add_argument(
+        "--zenoh-config",
+        metavar="FILE",
+        help="a Zenoh JSON5 configuration file (TLS, access control)",
+    )
     cliargs.add_log_level(parser)
 
 
@@ -52,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     cliargs.configure_logging("router", args.log_level)
     import zenoh
 
-    from robot_agent.zenoh_session import open_session
+    from plumbing.zenoh_session import open_session
 
     listen = args.listen or ([] if args.zenoh_config else [DEFAULT_LISTEN])
     stop = threading.Event()

@@ -31,7 +31,8 @@ from dataclasses import dataclass
 from pathlib import Path, PurePath
 from typing import Any
 
-from robot_agent import cliargs, protocol
+from plumbing import cliargs
+from robot_agent import protocol
 
 DEFAULT_PORT = 7447
 DEFAULT_ROUTER = "router"
@@ -40,8 +41,15 @@ DEFAULT_BEACON = "nest"
 OBSERVER, LAUNCHER, RECORDER, WORLD = "observer", "launcher", "recorder", "world"
 # Zenoh 1.10's ACL message types (the config parser rejects any other name).
 ALL_MESSAGES = (
-    "put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
-    "liveliness_token", "declare_liveliness_subscriber", "liveliness_query",
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "reply",
+    "declare_queryable",
+    "liveliness_token",
+    "declare_liveliness_subscriber",
+    "liveliness_query",
 )
 _NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")  # a key chunk and a certificate name
 _HOST_NAME = re.compile(r"[A-Za-z0-9]([A-Za-z0-9.-]{0,62}[A-Za-z0-9])?")
@@ -72,8 +80,9 @@ class SwarmPlan:
             raise ValueError(f"robot ids must be distinct and in [0, {protocol.MAX_ROBOTS})")
         for beacon in self.beacons:
             if not _NAME.fullmatch(beacon):
-                raise ValueError(f"invalid beacon name {beacon!r}: use up to 64 letters, "
-                                 "digits, '-', '_', '.'")
+                raise ValueError(
+                    f"invalid beacon name {beacon!r}: use up to 64 letters, digits, '-', '_', '.'"
+                )
             # The world server tells beacons from robots by a non-numeric radio name.
             if beacon.isdigit():
                 raise ValueError(f"beacon name {beacon!r} is a number: it would be a robot's")
@@ -130,9 +139,12 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
     world_services = [keys.world_info, keys.world_stats]
     rules: list[dict[str, Any]] = [
         # Watching: subscribe to anything of the run, see who is alive, read world services.
-        _rule("read-subscribe", "ingress",
-              ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
-              everything),
+        _rule(
+            "read-subscribe",
+            "ingress",
+            ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+            everything,
+        ),
         _rule("read-receive", "egress", ["put", "liveliness_token"], everything),
         # Everyone may learn who subscribes: a declared publisher sends nothing until its
         # router has told it of a matching subscriber (Zenoh's write-side filtering).
@@ -143,10 +155,18 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         _rule("robot-query-info", "ingress", ["query"], [keys.world_info]),
         _rule("robot-answer-info", "egress", ["reply"], [keys.world_info]),
         # The world server: the robots' bodies, the radio medium, the clock.
-        _rule("world-speak", "ingress", ["put"], [
-            keys.sense("*"), keys.camera("*"), keys.radio_rx("*"),
-            keys.world_clock, keys.world_state,
-        ]),
+        _rule(
+            "world-speak",
+            "ingress",
+            ["put"],
+            [
+                keys.sense("*"),
+                keys.camera("*"),
+                keys.radio_rx("*"),
+                keys.world_clock,
+                keys.world_state,
+            ],
+        ),
         _rule("world-alive", "ingress", ["liveliness_token"], [keys.alive(WORLD, "*")]),
         _rule("world-serve", "ingress", ["declare_queryable", "reply"], world_services),
         _rule("world-asked", "egress", ["query"], world_services),
@@ -158,8 +178,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         _rule("launcher-finish", "ingress", ["query"], [keys.recorder_finish]),
         _rule("launcher-finished", "egress", ["reply"], [keys.recorder_finish]),
         # The recorder answers the finish query once its file is complete.
-        _rule("recorder-serve", "ingress", ["declare_queryable", "reply"],
-              [keys.recorder_finish]),
+        _rule("recorder-serve", "ingress", ["declare_queryable", "reply"], [keys.recorder_finish]),
         _rule("recorder-asked", "egress", ["query"], [keys.recorder_finish]),
         # Routers of the other hosts relay everyone's traffic; each checks its own clients.
         _rule("router-relay-in", "ingress", ALL_MESSAGES, everything),
@@ -169,9 +188,13 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
     policies: list[dict[str, Any]] = []
 
     def grant(subject: str, rule_ids: Sequence[str], common_names: Sequence[str]) -> None:
-        subjects.append({
-            "id": subject, "cert_common_names": list(common_names), "link_protocols": ["tls"],
-        })
+        subjects.append(
+            {
+                "id": subject,
+                "cert_common_names": list(common_names),
+                "link_protocols": ["tls"],
+            }
+        )
         policies.append({"id": subject, "rules": list(rule_ids), "subjects": [subject]})
 
     def grant_client(identity: str, rule_ids: Sequence[str]) -> None:
@@ -183,27 +206,51 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         identity, name = robot_identity(robot), protocol.radio_name(robot)
         own_inputs = [keys.sense(robot), keys.camera(robot), keys.radio_rx(name)]
         rules += [
-            _rule(f"{identity}-speak", "ingress", ["put"],
-                  [keys.act(robot), keys.status(robot), keys.radio_tx(name)]),
-            _rule(f"{identity}-alive", "ingress", ["liveliness_token"],
-                  [keys.alive("robot", robot)]),
+            _rule(
+                f"{identity}-speak",
+                "ingress",
+                ["put"],
+                [keys.act(robot), keys.status(robot), keys.radio_tx(name)],
+            ),
+            _rule(
+                f"{identity}-alive", "ingress", ["liveliness_token"], [keys.alive("robot", robot)]
+            ),
             _rule(f"{identity}-subscribe", "ingress", ["declare_subscriber"], own_inputs),
             _rule(f"{identity}-receive", "egress", ["put"], own_inputs),
         ]
-        grant_client(identity, [
-            f"{identity}-speak", f"{identity}-alive", f"{identity}-subscribe",
-            f"{identity}-receive", "robot-query-info", "robot-answer-info",
-        ])
+        grant_client(
+            identity,
+            [
+                f"{identity}-speak",
+                f"{identity}-alive",
+                f"{identity}-subscribe",
+                f"{identity}-receive",
+                "robot-query-info",
+                "robot-answer-info",
+            ],
+        )
     for beacon in plan.beacons:
         identity = beacon_identity(beacon)
         rules += [
-            _rule(f"{identity}-speak", "ingress", ["put"],
-                  [keys.radio_tx(beacon), keys.beacon_ack(beacon)]),
-            _rule(f"{identity}-alive", "ingress", ["liveliness_token"],
-                  [keys.alive("beacon", beacon)]),
+            _rule(
+                f"{identity}-speak",
+                "ingress",
+                ["put"],
+                [keys.radio_tx(beacon), keys.beacon_ack(beacon)],
+            ),
+            _rule(
+                f"{identity}-alive", "ingress", ["liveliness_token"], [keys.alive("beacon", beacon)]
+            ),
         ]
-        grant_client(identity, [f"{identity}-speak", f"{identity}-alive",
-                                "beacon-subscribe-clock", "beacon-receive-clock"])
+        grant_client(
+            identity,
+            [
+                f"{identity}-speak",
+                f"{identity}-alive",
+                "beacon-subscribe-clock",
+                "beacon-receive-clock",
+            ],
+        )
     grant_client(OBSERVER, reading)
     grant_client(LAUNCHER, [*reading, "launcher-log", "launcher-finish", "launcher-finished"])
     grant_client(RECORDER, [*reading, "recorder-serve", "recorder-asked"])
@@ -229,27 +276,30 @@ def router_config(plan: SwarmPlan, router: str, cert_dir: PurePath) -> dict[str,
     if router not in plan.routers:
         raise ValueError(f"{router!r} is not one of the plan's routers {plan.routers}")
     key, certificate = _certificate_paths(cert_dir, router)
-    others = [f"tls/{_host_in_endpoint(other)}:{plan.port}" for other in plan.routers
-              if other != router]
+    others = [
+        f"tls/{_host_in_endpoint(other)}:{plan.port}" for other in plan.routers if other != router
+    ]
     return {
         "mode": "router",
         "listen": {"endpoints": [f"tls/0.0.0.0:{plan.port}"]},
         "connect": {"endpoints": others},
         "scouting": {"multicast": {"enabled": False}},
-        "transport": {"link": {
-            "protocols": ["tls"],
-            "tls": {
-                "root_ca_certificate": str(cert_dir / "ca.pem"),
-                "listen_private_key": key,
-                "listen_certificate": certificate,
-                "enable_mtls": True,
-                # Its own identity when it connects to the other hosts' routers.
-                "connect_private_key": key,
-                "connect_certificate": certificate,
-                "verify_name_on_connect": True,
-                "close_link_on_expiration": True,
-            },
-        }},
+        "transport": {
+            "link": {
+                "protocols": ["tls"],
+                "tls": {
+                    "root_ca_certificate": str(cert_dir / "ca.pem"),
+                    "listen_private_key": key,
+                    "listen_certificate": certificate,
+                    "enable_mtls": True,
+                    # Its own identity when it connects to the other hosts' routers.
+                    "connect_private_key": key,
+                    "connect_certificate": certificate,
+                    "verify_name_on_connect": True,
+                    "close_link_on_expiration": True,
+                },
+            }
+        },
         "access_control": access_control(plan),
     }
 
@@ -263,24 +313,25 @@ def client_config(plan: SwarmPlan, identity: str, cert_dir: PurePath) -> dict[st
         "mode": "client",
         "connect": {"endpoints": [f"tls/127.0.0.1:{plan.port}"]},
         "scouting": {"multicast": {"enabled": False}},
-        "transport": {"link": {
-            "protocols": ["tls"],
-            "tls": {
-                "root_ca_certificate": str(cert_dir / "ca.pem"),
-                "enable_mtls": True,
-                "connect_private_key": key,
-                "connect_certificate": certificate,
-                "verify_name_on_connect": True,
-            },
-        }},
+        "transport": {
+            "link": {
+                "protocols": ["tls"],
+                "tls": {
+                    "root_ca_certificate": str(cert_dir / "ca.pem"),
+                    "enable_mtls": True,
+                    "connect_private_key": key,
+                    "connect_certificate": certificate,
+                    "verify_name_on_connect": True,
+                },
+            }
+        },
     }
 
 
 def render(config: dict[str, Any], title: str) -> str:
     """JSON5 text (plain JSON, which is JSON5) with a comment saying where it came from."""
     header = (
-        f"// {title}\n"
-        "// Written by `python -m deploy.zenoh_acl`; see deploy/zenoh/README.md.\n"
+        f"// {title}\n// Written by `python -m deploy.zenoh_acl`; see deploy/zenoh/README.md.\n"
     )
     return header + _json(config, 0) + "\n"
 
@@ -289,8 +340,9 @@ def _json(value: Any, depth: int) -> str:
     """Indented JSON that keeps short lists of plain values on one line, to stay readable."""
     inner = "  " * (depth + 1)
     if isinstance(value, dict) and value:
-        items = [f"{inner}{json.dumps(key)}: {_json(item, depth + 1)}"
-                 for key, item in value.items()]
+        items = [
+            f"{inner}{json.dumps(key)}: {_json(item, depth + 1)}" for key, item in value.items()
+        ]
         return "{\n" + ",\n".join(items) + "\n" + "  " * depth + "}"
     if isinstance(value, list) and value:
         one_line = json.dumps(value)
@@ -298,14 +350,21 @@ def _json(value: Any, depth: int) -> str:
             isinstance(item, dict | list) for item in value
         ):
             return one_line
-        return "[\n" + ",\n".join(inner + _json(item, depth + 1) for item in value) + "\n" \
-            + "  " * depth + "]"
+        return (
+            "[\n"
+            + ",\n".join(inner + _json(item, depth + 1) for item in value)
+            + "\n"
+            + "  " * depth
+            + "]"
+        )
     return json.dumps(value)
 
 
 def plan_title(plan: SwarmPlan) -> str:
-    return (f"run {plan.keys.prefix}: {len(plan.robots)} robot(s), "
-            f"beacon(s) {', '.join(plan.beacons) or 'none'}")
+    return (
+        f"run {plan.keys.prefix}: {len(plan.robots)} robot(s), "
+        f"beacon(s) {', '.join(plan.beacons) or 'none'}"
+    )
 
 
 def write_configs(plan: SwarmPlan, out: Path, cert_dir: PurePath) -> list[Path]:
@@ -333,23 +392,39 @@ def _openssl(*arguments: str) -> None:
     executable = shutil.which("openssl")
     if executable is None:
         raise RuntimeError("the openssl command is needed to make certificates")
-    result = subprocess.run([executable, *arguments], capture_output=True, text=True,
-                            check=False, timeout=60)
+    result = subprocess.run(
+        [executable, *arguments], capture_output=True, text=True, check=False, timeout=60
+    )
     if result.returncode != 0:
         raise RuntimeError(f"openssl {arguments[0]} failed: {result.stderr.strip()}")
 
 
-def create_ca(certificate: Path, key: Path, *, days: int = 365,
-              common_name: str = "bestofn-swarm-ca") -> None:
+def create_ca(
+    certificate: Path, key: Path, *, days: int = 365, common_name: str = "bestofn-swarm-ca"
+) -> None:
     """A new self-signed certificate authority (refuses to overwrite an existing one)."""
     for path in (certificate, key):
         if path.exists():
             raise FileExistsError(f"{path} exists; not replacing a certificate authority")
         path.parent.mkdir(parents=True, exist_ok=True)
-    _openssl("req", "-x509", "-new", *_NEW_KEY, "-keyout", str(key), "-out", str(certificate),
-             "-days", str(days), "-subj", f"/CN={common_name}",
-             "-addext", "basicConstraints=critical,CA:TRUE",
-             "-addext", "keyUsage=critical,keyCertSign,cRLSign")
+    _openssl(
+        "req",
+        "-x509",
+        "-new",
+        *_NEW_KEY,
+        "-keyout",
+        str(key),
+        "-out",
+        str(certificate),
+        "-days",
+        str(days),
+        "-subj",
+        f"/CN={common_name}",
+        "-addext",
+        "basicConstraints=critical,CA:TRUE",
+        "-addext",
+        "keyUsage=critical,keyCertSign,cRLSign",
+    )
     key.chmod(0o600)
 
 
@@ -381,18 +456,43 @@ def issue_certificate(
     with tempfile.TemporaryDirectory() as scratch:
         request, extension_file = Path(scratch) / "request.csr", Path(scratch) / "ext.cnf"
         extension_file.write_text("\n".join(extensions) + "\n")
-        _openssl("req", "-new", *_NEW_KEY, "-keyout", str(key), "-out", str(request),
-                 "-subj", f"/CN={common_name}")
+        _openssl(
+            "req",
+            "-new",
+            *_NEW_KEY,
+            "-keyout",
+            str(key),
+            "-out",
+            str(request),
+            "-subj",
+            f"/CN={common_name}",
+        )
         key.chmod(0o600)
-        _openssl("x509", "-req", "-in", str(request), "-CA", str(ca_certificate),
-                 "-CAkey", str(ca_key), "-CAserial", str(out_dir / "ca.srl"),
-                 "-CAcreateserial", "-out", str(certificate), "-days", str(days),
-                 "-extfile", str(extension_file))
+        _openssl(
+            "x509",
+            "-req",
+            "-in",
+            str(request),
+            "-CA",
+            str(ca_certificate),
+            "-CAkey",
+            str(ca_key),
+            "-CAserial",
+            str(out_dir / "ca.srl"),
+            "-CAcreateserial",
+            "-out",
+            str(certificate),
+            "-days",
+            str(days),
+            "-extfile",
+            str(extension_file),
+        )
     return key, certificate
 
 
-def issue_all(plan: SwarmPlan, ca_certificate: Path, ca_key: Path, cert_dir: Path,
-              *, days: int = 365) -> None:
+def issue_all(
+    plan: SwarmPlan, ca_certificate: Path, ca_key: Path, cert_dir: Path, *, days: int = 365
+) -> None:
     """Certificates for every router and client identity of the plan, plus ``ca.pem``."""
     cert_dir.mkdir(parents=True, exist_ok=True)
     if ca_certificate.resolve() != (cert_dir / "ca.pem").resolve():
@@ -400,8 +500,7 @@ def issue_all(plan: SwarmPlan, ca_certificate: Path, ca_key: Path, cert_dir: Pat
     for router in plan.routers:
         # Clients reach their own host's router on loopback; routers reach it by name.
         names = list(dict.fromkeys([router, "localhost", "127.0.0.1"]))
-        issue_certificate(ca_certificate, ca_key, router, cert_dir, server_names=names,
-                          days=days)
+        issue_certificate(ca_certificate, ca_key, router, cert_dir, server_names=names, days=days)
     for identity in plan.client_identities():
         issue_certificate(ca_certificate, ca_key, identity, cert_dir, days=days)
 
@@ -427,34 +526,75 @@ def build_parser() -> argparse.ArgumentParser:
         description="Write Zenoh router and client configurations (mutual TLS, access "
         "control) for one swarm run and, given the CA key, issue its certificates.",
     )
-    parser.add_argument("--robots", type=cliargs.int_range(1, protocol.MAX_ROBOTS),
-                        required=True, help="number of robots (ids 0 to N-1)")
-    parser.add_argument("--run-id", type=cliargs.name, required=True,
-                        help="the run id the processes use (--run-id)")
-    parser.add_argument("--root", type=cliargs.name, default=protocol.DEFAULT_ROOT,
-                        help=f"key expression root (default: {protocol.DEFAULT_ROOT})")
-    parser.add_argument("--beacon", dest="beacons", action="append", type=cliargs.name,
-                        metavar="NAME", help=f"a nest beacon's name (repeatable; default: "
-                        f"{DEFAULT_BEACON})")
-    parser.add_argument("--router", dest="routers", action="append", metavar="HOST",
-                        help="host name or IP address of a host's router; routers connect "
-                        f"to each other (repeatable; default: one named {DEFAULT_ROUTER})")
-    parser.add_argument("--port", type=cliargs.int_range(1, 65535), default=DEFAULT_PORT,
-                        help=f"routers' TLS port (default: {DEFAULT_PORT})")
-    parser.add_argument("--ca", type=Path, required=True, metavar="FILE",
-                        help="the certificate authority's certificate (PEM)")
-    parser.add_argument("--ca-key", type=Path, metavar="FILE",
-                        help="the CA's private key: issue a key and certificate for every "
-                        "identity into OUT/certs")
-    parser.add_argument("--new-ca", action="store_true",
-                        help="first create the CA at --ca and --ca-key (never overwrites)")
-    parser.add_argument("--days", type=cliargs.int_range(1, 36500), default=365,
-                        help="validity of new certificates in days (default: 365)")
-    parser.add_argument("--cert-dir", type=PurePath, metavar="DIR",
-                        help="where the certificates are on the hosts that run the processes, "
-                        "as the configurations name them (default: OUT/certs)")
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR",
-                        help="output directory")
+    parser.add_argument(
+        "--robots",
+        type=cliargs.int_range(1, protocol.MAX_ROBOTS),
+        required=True,
+        help="number of robots (ids 0 to N-1)",
+    )
+    parser.add_argument(
+        "--run-id", type=cliargs.name, required=True, help="the run id the processes use (--run-id)"
+    )
+    parser.add_argument(
+        "--root",
+        type=cliargs.name,
+        default=protocol.DEFAULT_ROOT,
+        help=f"key expression root (default: {protocol.DEFAULT_ROOT})",
+    )
+    parser.add_argument(
+        "--beacon",
+        dest="beacons",
+        action="append",
+        type=cliargs.name,
+        metavar="NAME",
+        help=f"a nest beacon's name (repeatable; default: {DEFAULT_BEACON})",
+    )
+    parser.add_argument(
+        "--router",
+        dest="routers",
+        action="append",
+        metavar="HOST",
+        help="host name or IP address of a host's router; routers connect "
+        f"to each other (repeatable; default: one named {DEFAULT_ROUTER})",
+    )
+    parser.add_argument(
+        "--port",
+        type=cliargs.int_range(1, 65535),
+        default=DEFAULT_PORT,
+        help=f"routers' TLS port (default: {DEFAULT_PORT})",
+    )
+    parser.add_argument(
+        "--ca",
+        type=Path,
+        required=True,
+        metavar="FILE",
+        help="the certificate authority's certificate (PEM)",
+    )
+    parser.add_argument(
+        "--ca-key",
+        type=Path,
+        metavar="FILE",
+        help="the CA's private key: issue a key and certificate for every identity into OUT/certs",
+    )
+    parser.add_argument(
+        "--new-ca",
+        action="store_true",
+        help="first create the CA at --ca and --ca-key (never overwrites)",
+    )
+    parser.add_argument(
+        "--days",
+        type=cliargs.int_range(1, 36500),
+        default=365,
+        help="validity of new certificates in days (default: 365)",
+    )
+    parser.add_argument(
+        "--cert-dir",
+        type=PurePath,
+        metavar="DIR",
+        help="where the certificates are on the hosts that run the processes, "
+        "as the configurations name them (default: OUT/certs)",
+    )
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
     return parser
 
 

@@ -20,7 +20,8 @@ from collections.abc import Sequence
 from dataclasses import asdict
 
 from nest_beacon.beacon import Beacon, BeaconConfig
-from robot_agent import cliargs, protocol
+from plumbing import cliargs
+from robot_agent import protocol
 from robot_agent.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 
 STOP = threading.Event()
@@ -31,8 +32,9 @@ def run(args: argparse.Namespace) -> dict[str, object]:
         BeaconConfig(name=args.name, period=args.period),
         random.Random(protocol.derive_seed(args.seed, "beacon", args.name)),
     )
-    with UdpRadio(args.name, address=args.address, port=args.port,
-                  interface=args.interface) as radio:
+    with UdpRadio(
+        args.name, address=args.address, port=args.port, interface=args.interface
+    ) as radio:
         start = time.monotonic()
         tick = 0
         while not STOP.is_set():
@@ -53,22 +55,48 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="udp_beacon", description="The nest beacon of a swarm on a UDP radio."
     )
-    parser.add_argument("--name", type=cliargs.name, default="nest",
-                        help="sender name; not all digits, which are robot ids (default: nest)")
-    parser.add_argument("--period", type=cliargs.positive_float, default=0.5,
-                        help="clock seconds between transmissions (default: 0.5)")
-    parser.add_argument("--dt", type=cliargs.positive_float, default=0.1,
-                        help="clock seconds between checks (default: 0.1)")
+    parser.add_argument(
+        "--name",
+        type=cliargs.name,
+        default="nest",
+        help="sender name; not all digits, which are robot ids (default: nest)",
+    )
+    parser.add_argument(
+        "--period",
+        type=cliargs.positive_float,
+        default=0.5,
+        help="clock seconds between transmissions (default: 0.5)",
+    )
+    parser.add_argument(
+        "--dt",
+        type=cliargs.positive_float,
+        default=0.1,
+        help="clock seconds between checks (default: 0.1)",
+    )
     parser.add_argument("--seed", type=cliargs.seed, default=0)
-    parser.add_argument("--address", default=DEFAULT_GROUP,
-                        help=f"multicast group or broadcast address (default: {DEFAULT_GROUP})")
+    parser.add_argument(
+        "--address",
+        default=DEFAULT_GROUP,
+        help=f"multicast group or broadcast address (default: {DEFAULT_GROUP})",
+    )
     parser.add_argument("--port", type=cliargs.int_range(1, 65535), default=DEFAULT_PORT)
-    parser.add_argument("--interface", default=None,
-                        help="network interface: IPv4 address, or name (Linux, multicast)")
-    parser.add_argument("--speed", type=cliargs.positive_float, default=1.0,
-                        help="clock seconds per wall second (default: 1, real time)")
-    parser.add_argument("--max-seconds", type=cliargs.positive_float, default=float("inf"),
-                        help="stop after this many clock seconds (default: never)")
+    parser.add_argument(
+        "--interface",
+        default=None,
+        help="network interface: IPv4 address, or name (Linux, multicast)",
+    )
+    parser.add_argument(
+        "--speed",
+        type=cliargs.positive_float,
+        default=1.0,
+        help="clock seconds per wall second (default: 1, real time)",
+    )
+    parser.add_argument(
+        "--max-seconds",
+        type=cliargs.positive_float,
+        default=float("inf"),
+        help="stop after this many clock seconds (default: never)",
+    )
     return parser
 
 

@@ -29,7 +29,8 @@ from dataclasses import asdict
 
 import numpy as np
 
-from robot_agent import cliargs, ports, protocol
+from plumbing import cliargs
+from robot_agent import ports, protocol
 from robot_agent.controller import Controller, ControllerConfig
 from robot_agent.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 
@@ -205,7 +206,9 @@ def run(args: argparse.Namespace) -> dict[str, object]:
     controller = Controller(args.id, world, config, rng)
     rejects = ports.RejectCounter()
     with UdpRadio(
-        protocol.radio_name(args.id), address=args.address, port=args.port,
+        protocol.radio_name(args.id),
+        address=args.address,
+        port=args.port,
         interface=args.interface,
     ) as udp:
         radio = NestRange(udp, body, world.nest)
@@ -249,27 +252,62 @@ def build_parser() -> argparse.ArgumentParser:
         prog="udp_robot", description="One robot of the swarm on a UDP radio, with a stub body."
     )
     parser.add_argument("--id", type=cliargs.int_range(0, protocol.MAX_ROBOTS - 1), required=True)
-    parser.add_argument("--robots", type=cliargs.positive_int, default=10,
-                        help="swarm size, to spread start poses round the nest (default: 10)")
-    parser.add_argument("--seed", type=cliargs.seed, default=0,
-                        help="run seed; the robot's RNG derives from it and its id")
-    parser.add_argument("--qualities", type=qualities, required=True,
-                        help="comma-separated site qualities the stub camera shows, site 0 first")
-    parser.add_argument("--world", default=None,
-                        help="a WorldInfo JSON file (default: the Section 5 arena)")
-    parser.add_argument("--dwell", type=cliargs.positive_float, default=3.0,
-                        help="seconds at the nest broadcasting and listening (default: 3)")
-    parser.add_argument("--address", default=DEFAULT_GROUP,
-                        help=f"multicast group or broadcast address (default: {DEFAULT_GROUP})")
+    parser.add_argument(
+        "--robots",
+        type=cliargs.positive_int,
+        default=10,
+        help="swarm size, to spread start poses round the nest (default: 10)",
+    )
+    parser.add_argument(
+        "--seed",
+        type=cliargs.seed,
+        default=0,
+        help="run seed; the robot's RNG derives from it and its id",
+    )
+    parser.add_argument(
+        "--qualities",
+        type=qualities,
+        required=True,
+        help="comma-separated site qualities the stub camera shows, site 0 first",
+    )
+    parser.add_argument(
+        "--world", default=None, help="a WorldInfo JSON file (default: the Section 5 arena)"
+    )
+    parser.add_argument(
+        "--dwell",
+        type=cliargs.positive_float,
+        default=3.0,
+        help="seconds at the nest broadcasting and listening (default: 3)",
+    )
+    parser.add_argument(
+        "--address",
+        default=DEFAULT_GROUP,
+        help=f"multicast group or broadcast address (default: {DEFAULT_GROUP})",
+    )
     parser.add_argument("--port", type=cliargs.int_range(1, 65535), default=DEFAULT_PORT)
-    parser.add_argument("--interface", default=None,
-                        help="network interface: IPv4 address, or name (Linux, multicast)")
-    parser.add_argument("--speed", type=cliargs.positive_float, default=1.0,
-                        help="clock seconds per wall second (default: 1, real time)")
-    parser.add_argument("--start-at", type=float, default=None,
-                        help="wall time (seconds since the epoch) of the common start")
-    parser.add_argument("--max-seconds", type=cliargs.positive_float, default=600.0,
-                        help="give up after this many clock seconds (default: 600)")
+    parser.add_argument(
+        "--interface",
+        default=None,
+        help="network interface: IPv4 address, or name (Linux, multicast)",
+    )
+    parser.add_argument(
+        "--speed",
+        type=cliargs.positive_float,
+        default=1.0,
+        help="clock seconds per wall second (default: 1, real time)",
+    )
+    parser.add_argument(
+        "--start-at",
+        type=float,
+        default=None,
+        help="wall time (seconds since the epoch) of the common start",
+    )
+    parser.add_argument(
+        "--max-seconds",
+        type=cliargs.positive_float,
+        default=600.0,
+        help="give up after this many clock seconds (default: 600)",
+    )
     return parser
 
 

@@ -19,9 +19,10 @@ import zenoh
 
 from nest_beacon.beacon import Beacon
 from nest_beacon.options import add_beacon_options, beacon_config
-from robot_agent import cliargs, protocol
-from robot_agent.lifecycle import die_with_launcher
-from robot_agent.zenoh_session import open_from_args, reliable_publisher
+from plumbing import cliargs
+from plumbing.lifecycle import die_with_launcher
+from plumbing.zenoh_session import open_from_args, reliable_publisher
+from robot_agent import protocol
 
 log = logging.getLogger("nest_beacon")
 
@@ -31,8 +32,12 @@ def build_parser() -> argparse.ArgumentParser:
         prog="nest-beacon",
         description="The nest beacon: robots that hear it know they are at the nest.",
     )
-    parser.add_argument("--name", type=cliargs.name, default="nest",
-                        help="beacon id on the radio; not all digits (default: nest)")
+    parser.add_argument(
+        "--name",
+        type=cliargs.name,
+        default="nest",
+        help="beacon id on the radio; not all digits (default: nest)",
+    )
     add_beacon_options(parser)
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
     cliargs.add_zenoh_options(parser)

@@ -422,7 +422,11 @@ class Controller:
     def _drive_to_nest(self, reading: ports.BodyReading) -> tuple[float, float, bool]:
         nest = (self.world.nest.x, self.world.nest.y)
         return self._navigator.drive_to(
-            reading.x, reading.y, reading.theta, reading.proximity, nest,
+            reading.x,
+            reading.y,
+            reading.theta,
+            reading.proximity,
+            nest,
             self.config.nest_tolerance,
         )
 
@@ -442,10 +446,13 @@ class Controller:
         assert self._decided_site is not None
         if self._park_goal is None:
             self._park_goal = parking_slot(
-                self._site_angles, self._decided_site, self.robot_id,
+                self._site_angles,
+                self._decided_site,
+                self.robot_id,
                 arena_radius=self.world.arena_radius,
                 inner_radius=self.world.nest.radius + 3 * self.world.robot_radius,
-                clearance=self.config.park_clearance, spacing=self.config.park_spacing,
+                clearance=self.config.park_clearance,
+                spacing=self.config.park_spacing,
                 corridor=self.config.park_corridor,
             )
         goal = self._park_goal

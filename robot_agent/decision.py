@@ -7,9 +7,6 @@
   neighbour's only with ``neighbour_weight`` < 1. ``POOLING_OPERATORS`` names both.
 * ``choose_pair``: a weighted choice of two distinct options without replacement.
 * ``decided_option``: the decision test.
-* ``evidence_probability``, ``pooled_opinion``, ``pooled_opinion_alpha0`` and
-  ``expected_pooled_opinion``: Equations (1) to (4) of Section 3, the pooled opinion
-  of k agents with uniform priors after one comparison each.
 
 Options are 0-based indices into an opinion vector; option 0 is the paper's option 1
 (the best). An opinion may be given unnormalised (any non-negative weights with a
@@ -22,32 +19,24 @@ import math
 import numbers
 import operator
 import random
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from typing import Literal
 
 __all__ = [
     "LOGLINEAR_NEIGHBOUR_WEIGHT",
-    "MAX_ENUMERATION_TERMS",
     "POOLING_OPERATORS",
     "PoolingName",
+    "as_count",
     "choose_pair",
     "decided_option",
-    "enumeration_terms",
-    "evidence_probability",
-    "expected_pooled_opinion",
     "loglinear_pool",
     "mprodop",
     "negative_update",
-    "pooled_opinion",
-    "pooled_opinion_alpha0",
+    "normalised",
     "uniform_opinion",
     "validate_alpha",
     "validate_opinion",
 ]
-
-# Equation (3) sums over every way k pieces of evidence can fall on options 2..n:
-# C(k + n - 2, n - 2) terms. Beyond this many the enumeration takes minutes in Python.
-MAX_ENUMERATION_TERMS = 2_000_000
 
 
 def _is_real(value: object) -> bool:
@@ -85,7 +74,7 @@ def validate_opinion(opinion: Sequence[float], n: int | None = None) -> list[flo
 
 def uniform_opinion(n: int) -> list[float]:
     """The uninformed prior over ``n`` options."""
-    n = _count(n, "number of options")
+    n = as_count(n, "number of options")
     if n < 2:
         raise ValueError(f"need at least 2 options, got {n}")
     return [1.0 / n] * n
@@ -100,7 +89,7 @@ def negative_update(opinion: Sequence[float], eliminated: int, alpha: float = 0.
     entirely and Bayes' rule would divide by zero: the opinion is returned unchanged
     (normalised), so an agent keeps its own belief, as with an all-zero pool.
     """
-    values = _normalised(validate_opinion(opinion))
+    values = normalised(validate_opinion(opinion))
     alpha = validate_alpha(alpha)
     eliminated = _option_index(eliminated, len(values))
     x_eliminated = values[eliminated]
@@ -111,7 +100,7 @@ def negative_update(opinion: Sequence[float], eliminated: int, alpha: float = 0.
         return values
     updated = [(1.0 - alpha) * value / denominator for value in values]
     updated[eliminated] = alpha * x_eliminated / denominator
-    return _normalised(updated)
+    return normalised(updated)
 
 
 def mprodop(opinions: Sequence[Sequence[float]]) -> list[float] | None:
@@ -142,7 +131,7 @@ def mprodop(opinions: Sequence[Sequence[float]]) -> list[float] | None:
         math.ldexp(mantissas[index], exponents[index] - top) if mantissas[index] > 0.0 else 0.0
         for index in range(size)
     ]
-    return _normalised(product)
+    return normalised(product)
 
 
 # How far a robot trusts each neighbour's opinion in ``loglinear_pool``: half way between
@@ -214,7 +203,7 @@ def loglinear_pool(
     top = max(logs)
     if top == -math.inf:
         return None
-    return _normalised([math.exp(value - top) for value in logs])
+    return normalised([math.exp(value - top) for value in logs])
 
 
 PoolingName = Literal["mprodop", "loglinear"]
@@ -232,7 +221,7 @@ def choose_pair(opinion: Sequence[float], rng: random.Random) -> tuple[int, int]
     If fewer than two options have positive weight, the second is drawn uniformly from
     the zero-weight options, so a pair always exists.
     """
-    values = _normalised(validate_opinion(opinion))
+    values = normalised(validate_opinion(opinion))
     first = _weighted_index(values, rng)
     rest = list(values)
     rest[first] = 0.0
@@ -251,122 +240,16 @@ def decided_option(opinion: Sequence[float], threshold: float = 1.0) -> int | No
     """
     if not _is_real(threshold) or math.isnan(threshold) or not 0.0 < threshold <= 1.0:
         raise ValueError(f"threshold must be a number in (0, 1], got {threshold!r}")
-    values = _normalised(validate_opinion(opinion))
+    values = normalised(validate_opinion(opinion))
     best = max(range(len(values)), key=values.__getitem__)
     return best if values[best] >= threshold else None
-
-
-# --- Section 3: the pooled opinion after one round, from uniform priors -----------------
-
-
-def evidence_probability(n: int) -> list[float]:
-    """P(E_i) for an agent with a uniform opinion: 2(i-1) / (n(n-1)), i = 1..n.
-
-    A uniformly random pair of distinct options eliminates option i when the other
-    option of the pair is better, i.e. one of the i - 1 options before it.
-    """
-    n = _count(n, "number of options")
-    if n < 2:
-        raise ValueError(f"need at least 2 options, got {n}")
-    return [2.0 * (i - 1) / (n * (n - 1)) for i in range(1, n + 1)]
-
-
-def pooled_opinion(evidence_counts: Sequence[int], alpha: float) -> list[float]:
-    """Equation (1): the pool's opinion when m_i of its members learnt E_i.
-
-    ``evidence_counts`` holds m_1..m_n; the pool size k is their sum. Each member starts
-    uniform, so option i keeps alpha^(m_i) (1 - alpha)^(k - m_i) before normalising.
-    With alpha = 0, see ``pooled_opinion_alpha0``.
-    """
-    counts = _evidence_counts(evidence_counts)
-    alpha = validate_alpha(alpha)
-    if alpha == 0.0:
-        return pooled_opinion_alpha0(counts)
-    # Divide every weight by (1 - alpha)^k: option i keeps (alpha / (1 - alpha))^(m_i).
-    ratio = alpha / (1.0 - alpha)
-    return _normalised([ratio**m for m in counts])
-
-
-def pooled_opinion_alpha0(evidence_counts: Sequence[int]) -> list[float]:
-    """Equation (4): with alpha = 0, an option any member eliminated is gone, and the
-    pool is uniform over the options nobody eliminated.
-
-    If every option was eliminated (impossible when option 1 is the best, since the best
-    is never the worse of a pair), there is no pooled opinion: ValueError.
-    """
-    counts = _evidence_counts(evidence_counts)
-    survivors = sum(1 for m in counts if m == 0)
-    if survivors == 0:
-        raise ValueError("every option was eliminated: the pooled opinion is all zeros")
-    return [1.0 / survivors if m == 0 else 0.0 for m in counts]
-
-
-def enumeration_terms(n: int, k: int) -> int:
-    """How many evidence vectors Equation (3) sums over: C(k + n - 2, n - 2)."""
-    return math.comb(k + n - 2, n - 2)
-
-
-def expected_pooled_opinion(
-    n: int, k: int, alpha: float, *, max_terms: int = MAX_ENUMERATION_TERMS
-) -> list[float]:
-    """Equation (3): the exact expected pooled opinion of k agents after one round.
-
-    Each agent starts uniform, compares a uniformly random pair of distinct options and
-    updates on the worse; the pool is combined with MProdOp. The expectation is summed
-    over every evidence vector m (m_1 = 0, sum m_i = k) weighted by its multinomial
-    probability (Equation 2). With alpha = 0 each term is Equation (4). Raises
-    ValueError if that needs more than ``max_terms`` terms.
-    """
-    n = _count(n, "number of options")
-    k = _count(k, "pool size")
-    if n < 2:
-        raise ValueError(f"need at least 2 options, got {n}")
-    if k < 1:
-        raise ValueError(f"pool size must be at least 1, got {k}")
-    alpha = validate_alpha(alpha)
-    terms = enumeration_terms(n, k)
-    if terms > max_terms:
-        raise ValueError(
-            f"Equation (3) for n={n}, k={k} sums {terms} terms, more than max_terms={max_terms}"
-        )
-    expected = [0.0] * n
-    for counts, probability in _evidence_vectors(n, k):
-        pooled = pooled_opinion(counts, alpha)
-        for index, value in enumerate(pooled):
-            expected[index] += probability * value
-    return expected
-
-
-def _evidence_vectors(n: int, k: int) -> Iterator[tuple[list[int], float]]:
-    """Every evidence vector (m_1 = 0, m_2..m_n summing to k) with its probability.
-
-    Equation (2) in exact integer arithmetic: with P(E_i) = 2(i-1) / (n(n-1)) the
-    probability is prod_i C(r_i, m_i) (2(i-1))^(m_i) / (n(n-1))^k, where r_i is the
-    evidence not yet placed; one correctly rounded division per vector.
-    """
-    counts = [0] * n
-    denominator = (n * (n - 1)) ** k
-
-    def place(index: int, remaining: int, weight: int) -> Iterator[tuple[list[int], float]]:
-        if index == n - 1:
-            counts[index] = remaining
-            yield counts, weight * (2 * index) ** remaining / denominator
-            return
-        for m in range(remaining + 1):
-            counts[index] = m
-            yield from place(
-                index + 1, remaining - m, weight * math.comb(remaining, m) * (2 * index) ** m
-            )
-        counts[index] = 0
-
-    # Option 1 (index 0) is the best: never the worse of a pair, so m_1 = 0.
-    yield from place(1, k, 1)
 
 
 # --- helpers -------------------------------------------------------------------------------
 
 
-def _count(value: object, what: str) -> int:
+def as_count(value: object, what: str) -> int:
+    """``value`` as an int (ValueError naming ``what`` unless it is an integer, not a bool)."""
     if isinstance(value, bool):
         raise ValueError(f"{what} must be an integer, got {value!r}")
     try:
@@ -376,20 +259,10 @@ def _count(value: object, what: str) -> int:
 
 
 def _option_index(value: object, size: int) -> int:
-    index = _count(value, "option index")
+    index = as_count(value, "option index")
     if not 0 <= index < size:
         raise ValueError(f"option index {index} is outside 0..{size - 1}")
     return index
-
-
-def _evidence_counts(evidence_counts: Sequence[int]) -> list[int]:
-    counts = [_count(m, "evidence count") for m in evidence_counts]
-    if len(counts) < 2:
-        raise ValueError(f"need evidence counts for at least 2 options, got {len(counts)}")
-    negative = [index for index, m in enumerate(counts) if m < 0]
-    if negative:
-        raise ValueError(f"evidence count {negative[0]} is negative ({counts[negative[0]]})")
-    return counts
 
 
 def _validated_pool(opinions: Sequence[Sequence[float]], operator: str) -> list[list[float]]:
@@ -421,7 +294,7 @@ def _weighted_index(weights: Sequence[float], rng: random.Random) -> int:
     return last_positive
 
 
-def _normalised(values: Sequence[float]) -> list[float]:
+def normalised(values: Sequence[float]) -> list[float]:
     """``values`` divided by their sum (a normalised opinion comes back unchanged)."""
     try:
         total = math.fsum(values)

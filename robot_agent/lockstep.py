@@ -38,8 +38,12 @@ def answer_tick(
         except ValueError as error:
             rejects.reject("camera", error)
     reading = BodyReading(
-        t=sense.t, x=sense.x, y=sense.y, theta=sense.theta,
-        proximity=tuple(sense.prox), frame=image,
+        t=sense.t,
+        x=sense.x,
+        y=sense.y,
+        theta=sense.theta,
+        proximity=tuple(sense.prox),
+        frame=image,
     )
     command = controller.step(reading, decode_received(radio, rejects))
     transmissions = []
@@ -47,7 +51,11 @@ def answer_tick(
         seq += 1
         transmissions.append((seq, protocol.encode(payload)))
     act = protocol.Act(
-        v=protocol.VERSION, tick=sense.tick, left=command.left, right=command.right,
-        capture=command.capture, radio_tx=len(transmissions),
+        v=protocol.VERSION,
+        tick=sense.tick,
+        left=command.left,
+        right=command.right,
+        capture=command.capture,
+        radio_tx=len(transmissions),
     )
     return TickAnswer(act, tuple(transmissions), seq)

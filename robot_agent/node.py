@@ -25,13 +25,15 @@ from typing import TypeVar
 import msgspec
 import zenoh
 
-from robot_agent import cliargs, protocol
+from plumbing import cliargs
+from plumbing.lifecycle import die_with_launcher
+from plumbing.world_info import fetch_world_info
+from plumbing.zenoh_session import open_from_args, reliable_publisher
+from robot_agent import protocol
 from robot_agent.controller import Controller
-from robot_agent.lifecycle import die_with_launcher
 from robot_agent.lockstep import answer_tick
 from robot_agent.options import add_controller_options, controller_config
 from robot_agent.ports import RejectCounter
-from robot_agent.zenoh_session import open_from_args, reliable_publisher
 
 log = logging.getLogger("robot_agent")
 Meta = TypeVar("Meta", protocol.RadioRxMeta, protocol.CameraMeta)
@@ -229,25 +231,6 @@ class RobotNode:
         self._status.put(protocol.encode(status))
 
 
-def fetch_world_info(
-    session: zenoh.Session, keys: protocol.Keys, timeout: float
-) -> protocol.WorldInfo:
-    """Ask ``world/info`` until a world server answers, or raise TimeoutError."""
-    deadline = time.monotonic() + timeout
-    last_error = "no reply"
-    while time.monotonic() < deadline:
-        for reply in session.get(keys.world_info, timeout=1.0):
-            if reply.ok is None:
-                last_error = str(reply.err.payload.to_bytes()) if reply.err else "error reply"
-                continue
-            try:
-                return protocol.decode(reply.ok.payload.to_bytes(), protocol.WorldInfo)
-            except protocol.ProtocolError as error:
-                last_error = f"invalid world/info: {error}"
-        time.sleep(0.1)
-    raise TimeoutError(f"no world server answered on {keys.world_info} ({last_error})")
-
-
 def serve(nodes: Sequence[RobotNode], inbox: queue.SimpleQueue[Event]) -> None:
     """Feed every node its events until a stop event arrives."""
     by_id = {node.robot_id: node for node in nodes}
@@ -290,14 +273,28 @@ def build_parser() -> argparse.ArgumentParser:
         description="A robot of the swarm: the decision controller on Zenoh. Several --id "
         "options host several robots in this process, each with its own Zenoh session.",
     )
-    parser.add_argument("--id", dest="ids", type=robot_id, action="append", required=True,
-                        metavar="N|auto",
-                        help="robot id, or 'auto' to be given one by the world server "
-                        "(repeatable to host several robots)")
-    parser.add_argument("--seed", type=cliargs.seed, default=0,
-                        help="run seed; each robot's RNG derives from it and its id (default: 0)")
-    parser.add_argument("--info-timeout", type=cliargs.positive_float, default=60.0,
-                        help="wall seconds to wait for the world server (default: 60)")
+    parser.add_argument(
+        "--id",
+        dest="ids",
+        type=robot_id,
+        action="append",
+        required=True,
+        metavar="N|auto",
+        help="robot id, or 'auto' to be given one by the world server "
+        "(repeatable to host several robots)",
+    )
+    parser.add_argument(
+        "--seed",
+        type=cliargs.seed,
+        default=0,
+        help="run seed; each robot's RNG derives from it and its id (default: 0)",
+    )
+    parser.add_argument(
+        "--info-timeout",
+        type=cliargs.positive_float,
+        default=60.0,
+        help="wall seconds to wait for the world server (default: 60)",
+    )
     add_controller_options(parser)
     cliargs.add_zenoh_options(parser)
     cliargs.add_log_level(parser)
@@ -327,13 +324,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             session = open_from_args(args, requested)
             sessions.append(session)
             info = fetch_world_info(session, keys, args.info_timeout)
-            robot = requested if requested is not None else ask_for_id(
-                session, keys, args.info_timeout
+            robot = (
+                requested if requested is not None else ask_for_id(session, keys, args.info_timeout)
             )
             rng = random.Random(protocol.derive_seed(args.seed, "robot", robot))
             controller = Controller(robot, info, config, rng)
             node = RobotNode(
-                robot, session=session, keys=keys, controller=controller, inbox=inbox,
+                robot,
+                session=session,
+                keys=keys,
+                controller=controller,
+                inbox=inbox,
                 lockstep=info.clock == "lockstep",
             )
             node.start()

@@ -79,13 +79,12 @@ class RejectCounter:
         self.count += 1
         if sender not in self.logged:
             self.logged.add(sender)
-            log.warning("dropped an invalid message from %s: %s (further ones not logged)",
-                        sender, error)
+            log.warning(
+                "dropped an invalid message from %s: %s (further ones not logged)", sender, error
+            )
 
 
-def decode_received(
-    raw: Sequence[tuple[str, bytes]], rejects: RejectCounter
-) -> list[Received]:
+def decode_received(raw: Sequence[tuple[str, bytes]], rejects: RejectCounter) -> list[Received]:
     """Validate raw radio messages; invalid ones are dropped and counted, never raised."""
     received = []
     for sender, payload in raw:

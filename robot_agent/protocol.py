@@ -197,8 +197,12 @@ class RadioRxMeta(Message):
 
 
 class OpinionPayload(
-    msgspec.Struct, tag_field="kind", tag="opinion", kw_only=True,
-    forbid_unknown_fields=True, frozen=True,
+    msgspec.Struct,
+    tag_field="kind",
+    tag="opinion",
+    kw_only=True,
+    forbid_unknown_fields=True,
+    frozen=True,
 ):
     """A robot's broadcast at the nest: its current opinion over the sites."""
 
@@ -210,8 +214,12 @@ class OpinionPayload(
 
 
 class BeaconPayload(
-    msgspec.Struct, tag_field="kind", tag="beacon", kw_only=True,
-    forbid_unknown_fields=True, frozen=True,
+    msgspec.Struct,
+    tag_field="kind",
+    tag="beacon",
+    kw_only=True,
+    forbid_unknown_fields=True,
+    frozen=True,
 ):
     """The nest beacon's broadcast: hearing it means being at the nest."""
 

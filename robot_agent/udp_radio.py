@@ -241,7 +241,10 @@ class UdpRadio:
                 self._send_failure_logged = True
                 log.warning(
                     "UDP radio %s could not send to %s:%d: %s (further failures not logged)",
-                    self.name, self.address, self.port, error,
+                    self.name,
+                    self.address,
+                    self.port,
+                    error,
                 )
             return
         self._stats.sent += 1
@@ -312,7 +315,10 @@ class UdpRadio:
         self._logged_sources.add(source)
         log.warning(
             "UDP radio %s dropped a bad datagram from %s:%d: %s (further ones not logged)",
-            self.name, source[0], source[1], error,
+            self.name,
+            source[0],
+            source[1],
+            error,
         )
 
 

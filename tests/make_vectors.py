@@ -125,15 +125,22 @@ def common_faults(vectors: TypeVectors, data: bytes, drop: bytes, at_drop: str) 
     ``drop`` is the run of ``data`` to remove: a field, its value and one comma.
     """
     vectors.add_invalid(
-        "wrong_version", WRONG_VERSION, "v is 2; this is protocol version 1",
-        changed(data, b'"v":1', b'"v":2'), at="$.v",
+        "wrong_version",
+        WRONG_VERSION,
+        "v is 2; this is protocol version 1",
+        changed(data, b'"v":1', b'"v":2'),
+        at="$.v",
     )
     vectors.add_invalid(
-        "unknown_field", UNKNOWN_FIELD, "a field the message does not define",
+        "unknown_field",
+        UNKNOWN_FIELD,
+        "a field the message does not define",
         data[:-1] + b',"extra":0}',
     )
     vectors.add_invalid(
-        "missing_field", MISSING_FIELD, f"required field {at_drop} left out",
+        "missing_field",
+        MISSING_FIELD,
+        f"required field {at_drop} left out",
         changed(data, drop, b""),
     )
 
@@ -143,10 +150,21 @@ def common_faults(vectors: TypeVectors, data: bytes, drop: bytes, at_drop: str) 
 
 def sense_vectors() -> TypeVectors:
     vectors = TypeVectors("sense.json", protocol.Sense)
-    data = vectors.add_valid("typical", protocol.Sense(
-        v=1, tick=42, t=4.2, x=0.31, y=-0.12, theta=1.5708,
-        prox=[0.0, 0.0, 0.0, 0.000015, 1.5e-6, 0.0, 0.25, 1.0], rx=2, camera=True,
-    ), note="0.000015 and 1.5e-6: plain decimals from 1e-5 up, exponent form below")
+    data = vectors.add_valid(
+        "typical",
+        protocol.Sense(
+            v=1,
+            tick=42,
+            t=4.2,
+            x=0.31,
+            y=-0.12,
+            theta=1.5708,
+            prox=[0.0, 0.0, 0.0, 0.000015, 1.5e-6, 0.0, 0.25, 1.0],
+            rx=2,
+            camera=True,
+        ),
+        note="0.000015 and 1.5e-6: plain decimals from 1e-5 up, exponent form below",
+    )
     vectors.add_accepted(
         "whitespace_and_field_order",
         b'{ "camera": true, "rx": 2,\n  "prox": [0, 0, 0, 1.5E-5, 0.0000015, 0, 0.25, 1],\n'
@@ -154,39 +172,101 @@ def sense_vectors() -> TypeVectors:
         data,
     )
     common_faults(vectors, data, b'"tick":42,', "tick")
-    vectors.add_invalid("nan_token", NAN_TOKEN, "NaN is not JSON",
-                        changed(data, b'"x":0.31', b'"x":NaN'))
-    vectors.add_invalid("infinity_token", NAN_TOKEN, "Infinity is not JSON",
-                        changed(data, b'"y":-0.12', b'"y":-Infinity'))
-    vectors.add_invalid("number_overflow", NUMBER_OVERFLOW, "1e999 overflows a double",
-                        changed(data, b'"theta":1.5708', b'"theta":1e999'))
-    vectors.add_invalid("proximity_above_1", OUT_OF_RANGE, "proximity readings are in [0, 1]",
-                        changed(data, b"0.25,1.0]", b"0.25,1.5]"), at="$.prox[7]")
-    vectors.add_invalid("negative_tick", OUT_OF_RANGE, "ticks are non-negative",
-                        changed(data, b'"tick":42', b'"tick":-1'), at="$.tick")
-    vectors.add_invalid("seven_proximity_readings", WRONG_LENGTH, "prox has exactly 8 readings",
-                        changed(data, b"[0.0,0.0,0.0,", b"[0.0,0.0,"), at="$.prox")
-    vectors.add_invalid("nine_proximity_readings", WRONG_LENGTH, "prox has exactly 8 readings",
-                        changed(data, b"0.25,1.0]", b"0.25,1.0,0.0]"), at="$.prox")
-    vectors.add_invalid("float_tick", WRONG_TYPE, "tick is an integer; 42.0 is a float",
-                        changed(data, b'"tick":42', b'"tick":42.0'), at="$.tick")
-    vectors.add_invalid("string_for_bool", WRONG_TYPE, "camera is true or false",
-                        changed(data, b'"camera":true', b'"camera":"true"'), at="$.camera")
+    vectors.add_invalid(
+        "nan_token", NAN_TOKEN, "NaN is not JSON", changed(data, b'"x":0.31', b'"x":NaN')
+    )
+    vectors.add_invalid(
+        "infinity_token",
+        NAN_TOKEN,
+        "Infinity is not JSON",
+        changed(data, b'"y":-0.12', b'"y":-Infinity'),
+    )
+    vectors.add_invalid(
+        "number_overflow",
+        NUMBER_OVERFLOW,
+        "1e999 overflows a double",
+        changed(data, b'"theta":1.5708', b'"theta":1e999'),
+    )
+    vectors.add_invalid(
+        "proximity_above_1",
+        OUT_OF_RANGE,
+        "proximity readings are in [0, 1]",
+        changed(data, b"0.25,1.0]", b"0.25,1.5]"),
+        at="$.prox[7]",
+    )
+    vectors.add_invalid(
+        "negative_tick",
+        OUT_OF_RANGE,
+        "ticks are non-negative",
+        changed(data, b'"tick":42', b'"tick":-1'),
+        at="$.tick",
+    )
+    vectors.add_invalid(
+        "seven_proximity_readings",
+        WRONG_LENGTH,
+        "prox has exactly 8 readings",
+        changed(data, b"[0.0,0.0,0.0,", b"[0.0,0.0,"),
+        at="$.prox",
+    )
+    vectors.add_invalid(
+        "nine_proximity_readings",
+        WRONG_LENGTH,
+        "prox has exactly 8 readings",
+        changed(data, b"0.25,1.0]", b"0.25,1.0,0.0]"),
+        at="$.prox",
+    )
+    vectors.add_invalid(
+        "float_tick",
+        WRONG_TYPE,
+        "tick is an integer; 42.0 is a float",
+        changed(data, b'"tick":42', b'"tick":42.0'),
+        at="$.tick",
+    )
+    vectors.add_invalid(
+        "string_for_bool",
+        WRONG_TYPE,
+        "camera is true or false",
+        changed(data, b'"camera":true', b'"camera":"true"'),
+        at="$.camera",
+    )
     return vectors
 
 
 def act_vectors() -> TypeVectors:
     vectors = TypeVectors("act.json", protocol.Act)
-    data = vectors.add_valid("typical", protocol.Act(
-        v=1, tick=42, left=0.13, right=-0.065, capture=False, radio_tx=1,
-    ))
+    data = vectors.add_valid(
+        "typical",
+        protocol.Act(
+            v=1,
+            tick=42,
+            left=0.13,
+            right=-0.065,
+            capture=False,
+            radio_tx=1,
+        ),
+    )
     common_faults(vectors, data, b'"capture":false,', "capture")
-    vectors.add_invalid("wheel_too_fast", OUT_OF_RANGE, "wheel speeds are within +-10 m/s",
-                        changed(data, b'"left":0.13', b'"left":10.5'), at="$.left")
-    vectors.add_invalid("too_many_transmissions", OUT_OF_RANGE, "radio_tx is at most 1000",
-                        changed(data, b'"radio_tx":1', b'"radio_tx":1001'), at="$.radio_tx")
-    vectors.add_invalid("null_wheel", WRONG_TYPE, "right is a number, never null",
-                        changed(data, b'"right":-0.065', b'"right":null'), at="$.right")
+    vectors.add_invalid(
+        "wheel_too_fast",
+        OUT_OF_RANGE,
+        "wheel speeds are within +-10 m/s",
+        changed(data, b'"left":0.13', b'"left":10.5'),
+        at="$.left",
+    )
+    vectors.add_invalid(
+        "too_many_transmissions",
+        OUT_OF_RANGE,
+        "radio_tx is at most 1000",
+        changed(data, b'"radio_tx":1', b'"radio_tx":1001'),
+        at="$.radio_tx",
+    )
+    vectors.add_invalid(
+        "null_wheel",
+        WRONG_TYPE,
+        "right is a number, never null",
+        changed(data, b'"right":-0.065', b'"right":null'),
+        at="$.right",
+    )
     return vectors
 
 
@@ -194,10 +274,19 @@ def ack_vectors() -> TypeVectors:
     vectors = TypeVectors("ack.json", protocol.Ack)
     data = vectors.add_valid("typical", protocol.Ack(v=1, tick=42, radio_tx=1))
     common_faults(vectors, data, b'"tick":42,', "tick")
-    vectors.add_invalid("negative_transmissions", OUT_OF_RANGE, "radio_tx is non-negative",
-                        changed(data, b'"radio_tx":1', b'"radio_tx":-1'), at="$.radio_tx")
-    vectors.add_invalid("invalid_utf8_in_key", MALFORMED_JSON, "text is UTF-8; 0xff never is",
-                        changed(data, b'"tick"', b'"tick\xff"'))
+    vectors.add_invalid(
+        "negative_transmissions",
+        OUT_OF_RANGE,
+        "radio_tx is non-negative",
+        changed(data, b'"radio_tx":1', b'"radio_tx":-1'),
+        at="$.radio_tx",
+    )
+    vectors.add_invalid(
+        "invalid_utf8_in_key",
+        MALFORMED_JSON,
+        "text is UTF-8; 0xff never is",
+        changed(data, b'"tick"', b'"tick\xff"'),
+    )
     return vectors
 
 
@@ -205,221 +294,502 @@ def join_reply_vectors() -> TypeVectors:
     vectors = TypeVectors("join_reply.json", protocol.JoinReply)
     data = vectors.add_valid("typical", protocol.JoinReply(v=1, id=7))
     common_faults(vectors, data, b',"id":7', "id")
-    vectors.add_invalid("negative_id", OUT_OF_RANGE, "robot ids are non-negative",
-                        changed(data, b'"id":7', b'"id":-7'), at="$.id")
+    vectors.add_invalid(
+        "negative_id",
+        OUT_OF_RANGE,
+        "robot ids are non-negative",
+        changed(data, b'"id":7', b'"id":-7'),
+        at="$.id",
+    )
     return vectors
 
 
 def clock_vectors() -> TypeVectors:
     vectors = TypeVectors("clock.json", protocol.Clock)
     data = vectors.add_valid(
-        "typical", protocol.Clock(v=1, tick=3, t=0.30000000000000004),
+        "typical",
+        protocol.Clock(v=1, tick=3, t=0.30000000000000004),
         note="a sum of 0.1 s ticks: the shortest round-trip text has 17 digits",
     )
     vectors.add_valid("start", protocol.Clock(v=1, tick=0, t=0.0))
-    vectors.add_accepted("integer_for_float", b'{"v":1,"tick":7,"t":1}',
-                         protocol.encode(protocol.Clock(v=1, tick=7, t=1.0)))
-    vectors.add_accepted("exponent_form", b'{"v":1,"tick":7,"t":12E-1}',
-                         protocol.encode(protocol.Clock(v=1, tick=7, t=1.2)))
+    vectors.add_accepted(
+        "integer_for_float",
+        b'{"v":1,"tick":7,"t":1}',
+        protocol.encode(protocol.Clock(v=1, tick=7, t=1.0)),
+    )
+    vectors.add_accepted(
+        "exponent_form",
+        b'{"v":1,"tick":7,"t":12E-1}',
+        protocol.encode(protocol.Clock(v=1, tick=7, t=1.2)),
+    )
     common_faults(vectors, data, b'"tick":3,', "tick")
-    vectors.add_invalid("missing_version", MISSING_FIELD, "every message carries v",
-                        changed(data, b'"v":1,', b""))
-    vectors.add_invalid("float_version", WRONG_TYPE, "v is the integer 1",
-                        changed(data, b'"v":1', b'"v":1.0'), at="$.v")
-    vectors.add_invalid("negative_time", OUT_OF_RANGE, "sim time is non-negative",
-                        changed(data, b'"t":0.30000000000000004', b'"t":-0.1'), at="$.t")
+    vectors.add_invalid(
+        "missing_version", MISSING_FIELD, "every message carries v", changed(data, b'"v":1,', b"")
+    )
+    vectors.add_invalid(
+        "float_version",
+        WRONG_TYPE,
+        "v is the integer 1",
+        changed(data, b'"v":1', b'"v":1.0'),
+        at="$.v",
+    )
+    vectors.add_invalid(
+        "negative_time",
+        OUT_OF_RANGE,
+        "sim time is non-negative",
+        changed(data, b'"t":0.30000000000000004', b'"t":-0.1'),
+        at="$.t",
+    )
     vectors.add_invalid("empty", MALFORMED_JSON, "no bytes at all", b"")
     vectors.add_invalid("truncated", MALFORMED_JSON, "the object never closes", data[:-1])
-    vectors.add_invalid("trailing_garbage", MALFORMED_JSON, "bytes after the JSON value",
-                        data + b"x")
-    vectors.add_invalid("top_level_array", WRONG_TYPE, "a message is a JSON object",
-                        b"[1,3,0.30000000000000004]")
-    vectors.add_invalid("single_quotes", MALFORMED_JSON, "JSON strings use double quotes",
-                        changed(data, b'"tick"', b"'tick'"))
+    vectors.add_invalid(
+        "trailing_garbage", MALFORMED_JSON, "bytes after the JSON value", data + b"x"
+    )
+    vectors.add_invalid(
+        "top_level_array", WRONG_TYPE, "a message is a JSON object", b"[1,3,0.30000000000000004]"
+    )
+    vectors.add_invalid(
+        "single_quotes",
+        MALFORMED_JSON,
+        "JSON strings use double quotes",
+        changed(data, b'"tick"', b"'tick'"),
+    )
     return vectors
 
 
 def world_info_vectors() -> TypeVectors:
     vectors = TypeVectors("world_info.json", protocol.WorldInfo)
     sites = [
-        protocol.Site(index, 0.75 * math.cos(2 * math.pi * index / 3),
-                      0.75 * math.sin(2 * math.pi * index / 3))
+        protocol.Site(
+            index,
+            0.75 * math.cos(2 * math.pi * index / 3),
+            0.75 * math.sin(2 * math.pi * index / 3),
+        )
         for index in range(3)
     ]
-    data = vectors.add_valid("three_sites", protocol.WorldInfo(
-        v=1, run="demo", seed=12345678901234567, dt=0.1, arena_radius=0.75,
-        nest=protocol.Nest(0.0, 0.0, 0.2), sites=sites, robot_radius=0.037, wheel_base=0.053,
-        max_wheel_speed=0.13, camera=protocol.CameraSpec(width=64, height=48, fov=0.84),
-        clock="lockstep",
-    ), note="site coordinates are full doubles: only opinions are rounded")
+    data = vectors.add_valid(
+        "three_sites",
+        protocol.WorldInfo(
+            v=1,
+            run="demo",
+            seed=12345678901234567,
+            dt=0.1,
+            arena_radius=0.75,
+            nest=protocol.Nest(0.0, 0.0, 0.2),
+            sites=sites,
+            robot_radius=0.037,
+            wheel_base=0.053,
+            max_wheel_speed=0.13,
+            camera=protocol.CameraSpec(width=64, height=48, fov=0.84),
+            clock="lockstep",
+        ),
+        note="site coordinates are full doubles: only opinions are rounded",
+    )
     common_faults(vectors, data, b'"dt":0.1,', "dt")
     one_site = json.loads(data)
     one_site["sites"] = one_site["sites"][:1]
-    vectors.add_invalid("one_site", WRONG_LENGTH, "a choice needs at least 2 sites",
-                        _compact(one_site), at="$.sites")
-    vectors.add_invalid("bad_clock", BAD_ENUM, "clock is lockstep or realtime",
-                        changed(data, b'"lockstep"', b'"fast"'), at="$.clock")
-    vectors.add_invalid("run_with_slash", BAD_NAME, "names are letters, digits, '_', '.', '-'",
-                        changed(data, b'"run":"demo"', b'"run":"de/mo"'), at="$.run")
-    vectors.add_invalid("nest_unknown_field", UNKNOWN_FIELD, "nested objects refuse them too",
-                        changed(data, b'"radius":0.2}', b'"radius":0.2,"z":0.0}'), at="$.nest")
-    vectors.add_invalid("zero_nest_radius", OUT_OF_RANGE, "radii are positive",
-                        changed(data, b'"radius":0.2', b'"radius":0.0'), at="$.nest.radius")
-    vectors.add_invalid("wide_camera", OUT_OF_RANGE, "the field of view is below 3.2 rad",
-                        changed(data, b'"fov":0.84', b'"fov":3.5'), at="$.camera.fov")
+    vectors.add_invalid(
+        "one_site",
+        WRONG_LENGTH,
+        "a choice needs at least 2 sites",
+        _compact(one_site),
+        at="$.sites",
+    )
+    vectors.add_invalid(
+        "bad_clock",
+        BAD_ENUM,
+        "clock is lockstep or realtime",
+        changed(data, b'"lockstep"', b'"fast"'),
+        at="$.clock",
+    )
+    vectors.add_invalid(
+        "run_with_slash",
+        BAD_NAME,
+        "names are letters, digits, '_', '.', '-'",
+        changed(data, b'"run":"demo"', b'"run":"de/mo"'),
+        at="$.run",
+    )
+    vectors.add_invalid(
+        "nest_unknown_field",
+        UNKNOWN_FIELD,
+        "nested objects refuse them too",
+        changed(data, b'"radius":0.2}', b'"radius":0.2,"z":0.0}'),
+        at="$.nest",
+    )
+    vectors.add_invalid(
+        "zero_nest_radius",
+        OUT_OF_RANGE,
+        "radii are positive",
+        changed(data, b'"radius":0.2', b'"radius":0.0'),
+        at="$.nest.radius",
+    )
+    vectors.add_invalid(
+        "wide_camera",
+        OUT_OF_RANGE,
+        "the field of view is below 3.2 rad",
+        changed(data, b'"fov":0.84', b'"fov":3.5'),
+        at="$.camera.fov",
+    )
     return vectors
 
 
 def world_state_vectors() -> TypeVectors:
     vectors = TypeVectors("world_state.json", protocol.WorldState)
-    data = vectors.add_valid("two_robots", protocol.WorldState(
-        v=1, tick=420, t=42.0,
-        robots=[protocol.Pose(0, 0.31, -0.12, 1.5708), protocol.Pose(1, -0.2, 0.05, -3.1)],
-        radio=protocol.RadioCounters(sent=120, delivered=310, dropped=4, rejected=0),
-        rejected=0, stalls=1,
-    ), note="a pose is the array [id, x, y, theta]")
-    vectors.add_valid("no_robots", protocol.WorldState(
-        v=1, tick=0, t=0.0, robots=[], radio=protocol.RadioCounters(), rejected=0, stalls=0,
-    ))
+    data = vectors.add_valid(
+        "two_robots",
+        protocol.WorldState(
+            v=1,
+            tick=420,
+            t=42.0,
+            robots=[protocol.Pose(0, 0.31, -0.12, 1.5708), protocol.Pose(1, -0.2, 0.05, -3.1)],
+            radio=protocol.RadioCounters(sent=120, delivered=310, dropped=4, rejected=0),
+            rejected=0,
+            stalls=1,
+        ),
+        note="a pose is the array [id, x, y, theta]",
+    )
+    vectors.add_valid(
+        "no_robots",
+        protocol.WorldState(
+            v=1,
+            tick=0,
+            t=0.0,
+            robots=[],
+            radio=protocol.RadioCounters(),
+            rejected=0,
+            stalls=0,
+        ),
+    )
     common_faults(vectors, data, b',"stalls":1', "stalls")
-    vectors.add_invalid("short_pose", WRONG_LENGTH, "a pose has 4 entries",
-                        changed(data, b"[1,-0.2,0.05,-3.1]", b"[1,-0.2,0.05]"), at="$.robots[1]")
-    vectors.add_invalid("pose_as_object", WRONG_TYPE, "poses are arrays",
-                        changed(data, b"[0,0.31,-0.12,1.5708]",
-                                b'{"id":0,"x":0.31,"y":-0.12,"theta":1.5708}'), at="$.robots[0]")
-    vectors.add_invalid("robot_id_too_large", OUT_OF_RANGE, "robot ids are below 100000",
-                        changed(data, b"[1,-0.2", b"[100000,-0.2"), at="$.robots[1][0]")
+    vectors.add_invalid(
+        "short_pose",
+        WRONG_LENGTH,
+        "a pose has 4 entries",
+        changed(data, b"[1,-0.2,0.05,-3.1]", b"[1,-0.2,0.05]"),
+        at="$.robots[1]",
+    )
+    vectors.add_invalid(
+        "pose_as_object",
+        WRONG_TYPE,
+        "poses are arrays",
+        changed(data, b"[0,0.31,-0.12,1.5708]", b'{"id":0,"x":0.31,"y":-0.12,"theta":1.5708}'),
+        at="$.robots[0]",
+    )
+    vectors.add_invalid(
+        "robot_id_too_large",
+        OUT_OF_RANGE,
+        "robot ids are below 100000",
+        changed(data, b"[1,-0.2", b"[100000,-0.2"),
+        at="$.robots[1][0]",
+    )
     return vectors
 
 
 def status_vectors() -> TypeVectors:
     vectors = TypeVectors("status.json", protocol.Status)
-    vectors.add_valid("initial", protocol.Status(
-        v=1, id=0, tick=0, t=0.0, phase="to_site", trips=0, opinion=[0.25, 0.25, 0.25, 0.25],
-        pool_size=0, poolings=0, decided_site=None, decision_time=None, decision_trips=None,
-        comparison=None,
-    ))
-    data = vectors.add_valid("decided", protocol.Status(
-        v=1, id=3, tick=455, t=45.5, phase="to_decision", trips=3,
-        opinion=[0.0, 1.0, 0.0, 0.0], pool_size=3, poolings=3, decided_site=1,
-        decision_time=45.5, decision_trips=3,
-        comparison=protocol.Comparison(0, 0.666666667, 1, 1.0, 0), rejected=2,
-    ))
+    vectors.add_valid(
+        "initial",
+        protocol.Status(
+            v=1,
+            id=0,
+            tick=0,
+            t=0.0,
+            phase="to_site",
+            trips=0,
+            opinion=[0.25, 0.25, 0.25, 0.25],
+            pool_size=0,
+            poolings=0,
+            decided_site=None,
+            decision_time=None,
+            decision_trips=None,
+            comparison=None,
+        ),
+    )
+    data = vectors.add_valid(
+        "decided",
+        protocol.Status(
+            v=1,
+            id=3,
+            tick=455,
+            t=45.5,
+            phase="to_decision",
+            trips=3,
+            opinion=[0.0, 1.0, 0.0, 0.0],
+            pool_size=3,
+            poolings=3,
+            decided_site=1,
+            decision_time=45.5,
+            decision_trips=3,
+            comparison=protocol.Comparison(0, 0.666666667, 1, 1.0, 0),
+            rejected=2,
+        ),
+    )
     common_faults(vectors, data, b'"poolings":3,', "poolings")
-    vectors.add_invalid("bad_phase", BAD_ENUM, "phase is one of the eight controller phases",
-                        changed(data, b'"to_decision"', b'"dancing"'), at="$.phase")
-    vectors.add_invalid("one_option", WRONG_LENGTH, "an opinion has at least 2 entries",
-                        changed(data, b"[0.0,1.0,0.0,0.0]", b"[1.0]"), at="$.opinion")
-    vectors.add_invalid("negative_probability", OUT_OF_RANGE, "probabilities are in [0, 1]",
-                        changed(data, b"[0.0,1.0,0.0,0.0]", b"[-0.5,1.5,0.0,0.0]"),
-                        at="$.opinion[0]")
-    vectors.add_invalid("comparison_unknown_field", UNKNOWN_FIELD, "nested objects refuse them",
-                        changed(data, b'"eliminated":0}', b'"eliminated":0,"why":"red"}'),
-                        at="$.comparison")
+    vectors.add_invalid(
+        "bad_phase",
+        BAD_ENUM,
+        "phase is one of the eight controller phases",
+        changed(data, b'"to_decision"', b'"dancing"'),
+        at="$.phase",
+    )
+    vectors.add_invalid(
+        "one_option",
+        WRONG_LENGTH,
+        "an opinion has at least 2 entries",
+        changed(data, b"[0.0,1.0,0.0,0.0]", b"[1.0]"),
+        at="$.opinion",
+    )
+    vectors.add_invalid(
+        "negative_probability",
+        OUT_OF_RANGE,
+        "probabilities are in [0, 1]",
+        changed(data, b"[0.0,1.0,0.0,0.0]", b"[-0.5,1.5,0.0,0.0]"),
+        at="$.opinion[0]",
+    )
+    vectors.add_invalid(
+        "comparison_unknown_field",
+        UNKNOWN_FIELD,
+        "nested objects refuse them",
+        changed(data, b'"eliminated":0}', b'"eliminated":0,"why":"red"}'),
+        at="$.comparison",
+    )
     return vectors
 
 
 def camera_meta_vectors() -> TypeVectors:
     vectors = TypeVectors("camera_meta.json", protocol.CameraMeta)
-    data = vectors.add_valid("png", protocol.CameraMeta(
-        v=1, tick=43, width=64, height=48, encoding="png",
-    ))
+    data = vectors.add_valid(
+        "png",
+        protocol.CameraMeta(
+            v=1,
+            tick=43,
+            width=64,
+            height=48,
+            encoding="png",
+        ),
+    )
     common_faults(vectors, data, b'"height":48,', "height")
-    vectors.add_invalid("gif", BAD_ENUM, "frames are png or jpeg",
-                        changed(data, b'"png"', b'"gif"'), at="$.encoding")
-    vectors.add_invalid("zero_width", OUT_OF_RANGE, "frames are 1..4096 pixels wide",
-                        changed(data, b'"width":64', b'"width":0'), at="$.width")
+    vectors.add_invalid(
+        "gif",
+        BAD_ENUM,
+        "frames are png or jpeg",
+        changed(data, b'"png"', b'"gif"'),
+        at="$.encoding",
+    )
+    vectors.add_invalid(
+        "zero_width",
+        OUT_OF_RANGE,
+        "frames are 1..4096 pixels wide",
+        changed(data, b'"width":64', b'"width":0'),
+        at="$.width",
+    )
     return vectors
 
 
 def radio_tx_meta_vectors() -> TypeVectors:
     vectors = TypeVectors("radio_tx_meta.json", protocol.RadioTxMeta)
     data = vectors.add_valid("typical", protocol.RadioTxMeta(v=1, tick=42, seq=7))
-    vectors.add_valid("largest", protocol.RadioTxMeta(v=1, tick=2**53, seq=2**53),
-                      note="the longest attachment: counts go up to 2^53")
+    vectors.add_valid(
+        "largest",
+        protocol.RadioTxMeta(v=1, tick=2**53, seq=2**53),
+        note="the longest attachment: counts go up to 2^53",
+    )
     common_faults(vectors, data, b',"seq":7', "seq")
-    vectors.add_invalid("count_beyond_2_53", OUT_OF_RANGE, "counts are at most 2^53",
-                        changed(data, b'"seq":7', b'"seq":9007199254740993'), at="$.seq")
+    vectors.add_invalid(
+        "count_beyond_2_53",
+        OUT_OF_RANGE,
+        "counts are at most 2^53",
+        changed(data, b'"seq":7', b'"seq":9007199254740993'),
+        at="$.seq",
+    )
     return vectors
 
 
 def radio_rx_meta_vectors() -> TypeVectors:
     vectors = TypeVectors("radio_rx_meta.json", protocol.RadioRxMeta)
-    data = vectors.add_valid("typical", protocol.RadioRxMeta(
-        v=1, tick=43, sender="3", seq=7, sent_tick=42,
-    ))
+    data = vectors.add_valid(
+        "typical",
+        protocol.RadioRxMeta(
+            v=1,
+            tick=43,
+            sender="3",
+            seq=7,
+            sent_tick=42,
+        ),
+    )
     common_faults(vectors, data, b',"sent_tick":42', "sent_tick")
-    vectors.add_invalid("sender_with_space", BAD_NAME, "names are letters, digits, '_.-'",
-                        changed(data, b'"sender":"3"', b'"sender":"robot 3"'), at="$.sender")
-    vectors.add_invalid("sender_too_long", BAD_NAME, "names are at most 64 characters",
-                        changed(data, b'"sender":"3"', b'"sender":"' + b"a" * 65 + b'"'),
-                        at="$.sender")
-    vectors.add_invalid("empty_sender", BAD_NAME, "names are not empty",
-                        changed(data, b'"sender":"3"', b'"sender":""'), at="$.sender")
+    vectors.add_invalid(
+        "sender_with_space",
+        BAD_NAME,
+        "names are letters, digits, '_.-'",
+        changed(data, b'"sender":"3"', b'"sender":"robot 3"'),
+        at="$.sender",
+    )
+    vectors.add_invalid(
+        "sender_too_long",
+        BAD_NAME,
+        "names are at most 64 characters",
+        changed(data, b'"sender":"3"', b'"sender":"' + b"a" * 65 + b'"'),
+        at="$.sender",
+    )
+    vectors.add_invalid(
+        "empty_sender",
+        BAD_NAME,
+        "names are not empty",
+        changed(data, b'"sender":"3"', b'"sender":""'),
+        at="$.sender",
+    )
     return vectors
 
 
 def log_line_vectors() -> TypeVectors:
     vectors = TypeVectors("log_line.json", protocol.LogLine)
-    data = vectors.add_valid("escapes", protocol.LogLine(
-        v=1, process="robot-3", wall_time=1795000000.5,
-        line='said "hi"\tto the nest — naïve\\ok \x01',
-    ), note="UTF-8 stays as is; quote, backslash and control characters are escaped")
+    data = vectors.add_valid(
+        "escapes",
+        protocol.LogLine(
+            v=1,
+            process="robot-3",
+            wall_time=1795000000.5,
+            line='said "hi"\tto the nest — naïve\\ok \x01',
+        ),
+        note="UTF-8 stays as is; quote, backslash and control characters are escaped",
+    )
     common_faults(vectors, data, b'"wall_time":1795000000.5,', "wall_time")
-    vectors.add_invalid("line_too_long", WRONG_LENGTH, "a line is at most 4096 characters",
-                        _compact({"v": 1, "process": "robot-3", "wall_time": 1.0,
-                                  "line": "x" * 4097}), at="$.line")
-    vectors.add_invalid("invalid_utf8", MALFORMED_JSON, "text is UTF-8; 0xff never is",
-                        changed(data, b"na\xc3\xafve", b"na\xffve"))
-    vectors.add_invalid("raw_control_character", MALFORMED_JSON,
-                        "control characters in strings must be escaped",
-                        changed(data, b"\\t", b"\t"))
+    vectors.add_invalid(
+        "line_too_long",
+        WRONG_LENGTH,
+        "a line is at most 4096 characters",
+        _compact({"v": 1, "process": "robot-3", "wall_time": 1.0, "line": "x" * 4097}),
+        at="$.line",
+    )
+    vectors.add_invalid(
+        "invalid_utf8",
+        MALFORMED_JSON,
+        "text is UTF-8; 0xff never is",
+        changed(data, b"na\xc3\xafve", b"na\xffve"),
+    )
+    vectors.add_invalid(
+        "raw_control_character",
+        MALFORMED_JSON,
+        "control characters in strings must be escaped",
+        changed(data, b"\\t", b"\t"),
+    )
     return vectors
 
 
 def opinion_vectors() -> TypeVectors:
     vectors = TypeVectors("opinion_payload.json", protocol.OpinionPayload, decoder="radio")
-    data = vectors.add_valid("five_sites", protocol.OpinionPayload(
-        v=1, id=3, trip=2, decided=False, opinion=[0.0, 0.333333333, 0.333333333, 0.0, 0.333333333],
-    ), note="9 significant digits: protocol.wire_opinion")
-    vectors.add_valid("decided", protocol.OpinionPayload(
-        v=1, id=12, trip=5, decided=True, opinion=[0.0, 1.0],
-    ))
-    vectors.add_valid("tiny_values", protocol.OpinionPayload(
-        v=1, id=4, trip=1, decided=False,
-        opinion=protocol.wire_opinion([0.99998485, 0.000015, 1.5e-7, 1.23456789e-100]),
-    ), note="below 1e-5 a value takes the exponent form: 1.5e-7, not 1.5e-07")
+    data = vectors.add_valid(
+        "five_sites",
+        protocol.OpinionPayload(
+            v=1,
+            id=3,
+            trip=2,
+            decided=False,
+            opinion=[0.0, 0.333333333, 0.333333333, 0.0, 0.333333333],
+        ),
+        note="9 significant digits: protocol.wire_opinion",
+    )
+    vectors.add_valid(
+        "decided",
+        protocol.OpinionPayload(
+            v=1,
+            id=12,
+            trip=5,
+            decided=True,
+            opinion=[0.0, 1.0],
+        ),
+    )
+    vectors.add_valid(
+        "tiny_values",
+        protocol.OpinionPayload(
+            v=1,
+            id=4,
+            trip=1,
+            decided=False,
+            opinion=protocol.wire_opinion([0.99998485, 0.000015, 1.5e-7, 1.23456789e-100]),
+        ),
+        note="below 1e-5 a value takes the exponent form: 1.5e-7, not 1.5e-07",
+    )
     worst = worst_case_opinion()
-    worst_data = vectors.add_valid("worst_case_n100", protocol.OpinionPayload(
-        v=1, id=protocol.MAX_ROBOTS - 1, trip=2**53, decided=False, opinion=worst,
-    ), note="the longest opinion over 100 sites")
+    worst_data = vectors.add_valid(
+        "worst_case_n100",
+        protocol.OpinionPayload(
+            v=1,
+            id=protocol.MAX_ROBOTS - 1,
+            trip=2**53,
+            decided=False,
+            opinion=worst,
+        ),
+        note="the longest opinion over 100 sites",
+    )
     assert len(worst_data) <= MAX_PAYLOAD_BYTES
-    vectors.add_accepted("kind_last", (
-        b'{"v":1,"id":3,"trip":2,"decided":false,'
-        b'"opinion":[0,0.333333333,0.333333333,0,0.333333333],"kind":"opinion"}'
-    ), data)
+    vectors.add_accepted(
+        "kind_last",
+        (
+            b'{"v":1,"id":3,"trip":2,"decided":false,'
+            b'"opinion":[0,0.333333333,0.333333333,0,0.333333333],"kind":"opinion"}'
+        ),
+        data,
+    )
     common_faults(vectors, data, b'"trip":2,', "trip")
-    vectors.add_invalid("no_kind", MISSING_FIELD, "kind tells the two payloads apart",
-                        changed(data, b'"kind":"opinion",', b""))
-    vectors.add_invalid("unknown_kind", BAD_ENUM, "kind is opinion or beacon",
-                        changed(data, b'"kind":"opinion"', b'"kind":"rumour"'), at="$.kind")
-    vectors.add_invalid("sum_below_1", OPINION_SUM, "an opinion sums to 1 (within 1e-6)",
-                        changed(data, b",0.333333333]", b",0.3]"))
-    vectors.add_invalid("sum_above_1", OPINION_SUM, "an opinion sums to 1 (within 1e-6)",
-                        changed(data, b"[0.0,", b"[0.1,"))
-    vectors.add_invalid("negative_value", OUT_OF_RANGE, "probabilities are in [0, 1]",
-                        changed(data, b"[0.0,0.333333333", b"[-1.0,1.333333333"),
-                        at="$.opinion[0]")
-    vectors.add_invalid("nan_value", NAN_TOKEN, "NaN is not JSON",
-                        changed(data, b"[0.0,", b"[NaN,"))
-    vectors.add_invalid("single_option", WRONG_LENGTH, "an opinion has at least 2 entries",
-                        _compact({**json.loads(data), "opinion": [1.0]}), at="$.opinion")
+    vectors.add_invalid(
+        "no_kind",
+        MISSING_FIELD,
+        "kind tells the two payloads apart",
+        changed(data, b'"kind":"opinion",', b""),
+    )
+    vectors.add_invalid(
+        "unknown_kind",
+        BAD_ENUM,
+        "kind is opinion or beacon",
+        changed(data, b'"kind":"opinion"', b'"kind":"rumour"'),
+        at="$.kind",
+    )
+    vectors.add_invalid(
+        "sum_below_1",
+        OPINION_SUM,
+        "an opinion sums to 1 (within 1e-6)",
+        changed(data, b",0.333333333]", b",0.3]"),
+    )
+    vectors.add_invalid(
+        "sum_above_1",
+        OPINION_SUM,
+        "an opinion sums to 1 (within 1e-6)",
+        changed(data, b"[0.0,", b"[0.1,"),
+    )
+    vectors.add_invalid(
+        "negative_value",
+        OUT_OF_RANGE,
+        "probabilities are in [0, 1]",
+        changed(data, b"[0.0,0.333333333", b"[-1.0,1.333333333"),
+        at="$.opinion[0]",
+    )
+    vectors.add_invalid(
+        "nan_value", NAN_TOKEN, "NaN is not JSON", changed(data, b"[0.0,", b"[NaN,")
+    )
+    vectors.add_invalid(
+        "single_option",
+        WRONG_LENGTH,
+        "an opinion has at least 2 entries",
+        _compact({**json.loads(data), "opinion": [1.0]}),
+        at="$.opinion",
+    )
     too_many = [0.0] * protocol.MAX_OPTIONS + [1.0]
-    vectors.add_invalid("too_many_options", WRONG_LENGTH,
-                        f"an opinion has at most {protocol.MAX_OPTIONS} entries",
-                        _compact({**json.loads(data), "opinion": too_many}), at="$.opinion")
-    vectors.add_invalid("id_as_string", WRONG_TYPE, "a robot id is an integer",
-                        changed(data, b'"id":3', b'"id":"3"'), at="$.id")
+    vectors.add_invalid(
+        "too_many_options",
+        WRONG_LENGTH,
+        f"an opinion has at most {protocol.MAX_OPTIONS} entries",
+        _compact({**json.loads(data), "opinion": too_many}),
+        at="$.opinion",
+    )
+    vectors.add_invalid(
+        "id_as_string",
+        WRONG_TYPE,
+        "a robot id is an integer",
+        changed(data, b'"id":3', b'"id":"3"'),
+        at="$.id",
+    )
     return vectors
 
 
@@ -427,27 +797,57 @@ def beacon_vectors() -> TypeVectors:
     vectors = TypeVectors("beacon_payload.json", protocol.BeaconPayload, decoder="radio")
     data = vectors.add_valid("typical", protocol.BeaconPayload(v=1, id="nest", seq=12))
     common_faults(vectors, data, b',"seq":12', "seq")
-    vectors.add_invalid("empty_name", BAD_NAME, "the beacon has a name",
-                        changed(data, b'"id":"nest"', b'"id":""'), at="$.id")
-    vectors.add_invalid("negative_seq", OUT_OF_RANGE, "seq is non-negative",
-                        changed(data, b'"seq":12', b'"seq":-12'), at="$.seq")
-    vectors.add_invalid("invalid_utf8", MALFORMED_JSON, "text is UTF-8; 0xff never is",
-                        changed(data, b'"nest"', b'"n\xffst"'))
+    vectors.add_invalid(
+        "empty_name",
+        BAD_NAME,
+        "the beacon has a name",
+        changed(data, b'"id":"nest"', b'"id":""'),
+        at="$.id",
+    )
+    vectors.add_invalid(
+        "negative_seq",
+        OUT_OF_RANGE,
+        "seq is non-negative",
+        changed(data, b'"seq":12', b'"seq":-12'),
+        at="$.seq",
+    )
+    vectors.add_invalid(
+        "invalid_utf8",
+        MALFORMED_JSON,
+        "text is UTF-8; 0xff never is",
+        changed(data, b'"nest"', b'"n\xffst"'),
+    )
     return vectors
 
 
 def udp_frame_vectors() -> dict[str, Any]:
     """Frames of the UDP radio: header, sender, payload (docs/porting.md)."""
-    opinion = protocol.encode(protocol.OpinionPayload(
-        v=1, id=3, trip=2, decided=False, opinion=[0.5, 0.5],
-    ))
+    opinion = protocol.encode(
+        protocol.OpinionPayload(
+            v=1,
+            id=3,
+            trip=2,
+            decided=False,
+            opinion=[0.5, 0.5],
+        )
+    )
     beacon = protocol.encode(protocol.BeaconPayload(v=1, id="nest", seq=12))
-    worst = protocol.encode(protocol.OpinionPayload(
-        v=1, id=protocol.MAX_ROBOTS - 1, trip=2**53, decided=False, opinion=worst_case_opinion(),
-    ))
+    worst = protocol.encode(
+        protocol.OpinionPayload(
+            v=1,
+            id=protocol.MAX_ROBOTS - 1,
+            trip=2**53,
+            decided=False,
+            opinion=worst_case_opinion(),
+        )
+    )
     valid = [
-        {"name": name, "sender": sender, "payload_utf8": payload.decode(),
-         "hex": encode_frame(sender, payload).hex()}
+        {
+            "name": name,
+            "sender": sender,
+            "payload_utf8": payload.decode(),
+            "hex": encode_frame(sender, payload).hex(),
+        }
         for name, sender, payload in (
             ("opinion", "3", opinion),
             ("beacon", "nest", beacon),
@@ -461,13 +861,18 @@ def udp_frame_vectors() -> dict[str, Any]:
         ("unknown_version", "the frame version is 1", good[:2] + b"\x02" + good[3:]),
         ("empty_sender", "the sender length is 1..64", b"BN\x01\x00" + opinion),
         ("sender_past_the_end", "the sender length runs past the datagram", b"BN\x01\x09nest"),
-        ("sender_with_space", "sender names are letters, digits, '_.-'",
-         b"BN\x01\x03a b" + opinion),
-        ("sender_too_long", "the sender length is at most 64",
-         b"BN\x01\x41" + b"a" * 65 + opinion),
+        (
+            "sender_with_space",
+            "sender names are letters, digits, '_.-'",
+            b"BN\x01\x03a b" + opinion,
+        ),
+        ("sender_too_long", "the sender length is at most 64", b"BN\x01\x41" + b"a" * 65 + opinion),
         ("empty_payload", "a frame carries a payload", b"BN\x01\x013"),
-        ("payload_too_long", f"payloads are at most {MAX_PAYLOAD_BYTES} bytes",
-         b"BN\x01\x013" + b" " * (MAX_PAYLOAD_BYTES + 1)),
+        (
+            "payload_too_long",
+            f"payloads are at most {MAX_PAYLOAD_BYTES} bytes",
+            b"BN\x01\x013" + b" " * (MAX_PAYLOAD_BYTES + 1),
+        ),
     ]
     return {
         "type": "UdpFrame",
@@ -486,10 +891,20 @@ def _compact(value: Any) -> bytes:
 
 
 BUILDERS: tuple[Callable[[], TypeVectors], ...] = (
-    world_info_vectors, join_reply_vectors, clock_vectors, world_state_vectors, sense_vectors,
+    world_info_vectors,
+    join_reply_vectors,
+    clock_vectors,
+    world_state_vectors,
+    sense_vectors,
     camera_meta_vectors,
-    act_vectors, ack_vectors, status_vectors, radio_tx_meta_vectors, radio_rx_meta_vectors,
-    log_line_vectors, opinion_vectors, beacon_vectors,
+    act_vectors,
+    ack_vectors,
+    status_vectors,
+    radio_tx_meta_vectors,
+    radio_rx_meta_vectors,
+    log_line_vectors,
+    opinion_vectors,
+    beacon_vectors,
 )
 
 
@@ -505,8 +920,9 @@ def build() -> dict[str, str]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Write or check tests/vectors/*.json.")
-    parser.add_argument("--check", action="store_true",
-                        help="only compare; exit 1 if a file is missing or differs")
+    parser.add_argument(
+        "--check", action="store_true", help="only compare; exit 1 if a file is missing or differs"
+    )
     args = parser.parse_args(argv)
     stale = []
     for name, text in build().items():

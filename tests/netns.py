@@ -72,11 +72,24 @@ class Lan:
             ns = self.robot_ns(index)
             self._add_namespace(ns)
             port = f"veth{index}"
-            self._ip("-n", self.hub, "link", "add", port, "type", "veth",
-                     "peer", "name", "eth0", "netns", ns)
+            self._ip(
+                "-n",
+                self.hub,
+                "link",
+                "add",
+                port,
+                "type",
+                "veth",
+                "peer",
+                "name",
+                "eth0",
+                "netns",
+                ns,
+            )
             self._ip("-n", self.hub, "link", "set", port, "master", "br0", "up")
-            self._ip("-n", ns, "addr", "add", f"{self.address(index)}/24", "brd", "+",
-                     "dev", "eth0")
+            self._ip(
+                "-n", ns, "addr", "add", f"{self.address(index)}/24", "brd", "+", "dev", "eth0"
+            )
             self._ip("-n", ns, "link", "set", "eth0", "up")
             self._ip("-n", ns, "link", "set", "lo", "up")
             self._ip("-n", ns, "route", "add", "224.0.0.0/4", "dev", "eth0")
@@ -84,16 +97,16 @@ class Lan:
     def destroy(self) -> list[str]:
         """Delete every namespace created (their veths go with them); the ones left."""
         for name in reversed(self.created):
-            subprocess.run(["ip", "netns", "del", name], capture_output=True, timeout=10,
-                           check=False)
-        listing = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True,
-                                 timeout=10, check=False).stdout.split()
+            subprocess.run(
+                ["ip", "netns", "del", name], capture_output=True, timeout=10, check=False
+            )
+        listing = subprocess.run(
+            ["ip", "netns", "list"], capture_output=True, text=True, timeout=10, check=False
+        ).stdout.split()
         return [name for name in self.created if name in listing]
 
     def run(self, index: int, *command: str) -> list[str]:
         return ["ip", "netns", "exec", self.robot_ns(index), *command]
-
-
 
 
 @contextlib.contextmanager

@@ -22,7 +22,7 @@ import zenoh
 
 from deploy.launcher import RUN_ID_ENV
 from deploy.processes import free_port
-from robot_agent.zenoh_session import open_session
+from plumbing.zenoh_session import open_session
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -374,7 +374,9 @@ def png_header_only(width: int, height: int) -> bytes:
     ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
     chunk = b"IHDR" + ihdr
     return (
-        b"\x89PNG\r\n\x1a\n" + struct.pack(">I", len(ihdr)) + chunk
+        b"\x89PNG\r\n\x1a\n"
+        + struct.pack(">I", len(ihdr))
+        + chunk
         + struct.pack(">I", zlib.crc32(chunk))
     )
 

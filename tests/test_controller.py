@@ -451,8 +451,13 @@ def test_parking_slots_are_distinct_clear_of_every_site_and_inside_the_arena(
     config = ControllerConfig()
     slots = [
         parking_slot(
-            angles, 4, robot, arena_radius=layout.arena_radius, inner_radius=inner,
-            clearance=config.park_clearance, spacing=config.park_spacing,
+            angles,
+            4,
+            robot,
+            arena_radius=layout.arena_radius,
+            inner_radius=inner,
+            clearance=config.park_clearance,
+            spacing=config.park_spacing,
             corridor=config.park_corridor,
         )
         for robot in range(robots)

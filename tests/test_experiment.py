@@ -20,10 +20,31 @@ def test_a_small_experiment_records_every_run_and_reports(tmp_path: Path) -> Non
     out = tmp_path / "experiment"
     try:
         done = subprocess.run(
-            swarm_command("experiment", "--robots", "3", "--sites", "5", "--runs", "2",
-                          "--parallel", "2", "--seed", "4", "--name", name, "--out", str(out),
-                          "--json", "--quiet", "--", "--stall-timeout", "5"),
-            capture_output=True, timeout=280, cwd=REPO,
+            swarm_command(
+                "experiment",
+                "--robots",
+                "3",
+                "--sites",
+                "5",
+                "--runs",
+                "2",
+                "--parallel",
+                "2",
+                "--seed",
+                "4",
+                "--name",
+                name,
+                "--out",
+                str(out),
+                "--json",
+                "--quiet",
+                "--",
+                "--stall-timeout",
+                "5",
+            ),
+            capture_output=True,
+            timeout=280,
+            cwd=REPO,
         )
     finally:
         left = kill_leftovers(name)
@@ -37,9 +58,7 @@ def test_a_small_experiment_records_every_run_and_reports(tmp_path: Path) -> Non
     for row in result["runs"]:
         assert (row["robots"], row["sites"]) == (3, 5) and row["complete"]
         assert row["source"] == "metadata" and row["consensus"]
-        config = json.loads(
-            report.read_recording(Path(row["recording"])).description["config"]
-        )
+        config = json.loads(report.read_recording(Path(row["recording"])).description["config"])
         assert config["stall_timeout"] == 5.0
     for run_id in run_ids:
         assert (out / f"{run_id}.mcap").is_file()
@@ -53,13 +72,16 @@ def test_a_small_experiment_records_every_run_and_reports(tmp_path: Path) -> Non
     assert group["runs"] == 2 and group["complete_runs"] == 2
 
 
-@pytest.mark.parametrize("arguments, message", [
-    (["--runs", "0"], "--runs"),
-    (["--sites", "1"], "--sites"),
-    (["--", "--no-such-option", "3"], "swarm run option"),
-    (["--", "--drop", "2"], "swarm run option"),
-    (["--alpha", "0.2", "--threshold", "1"], "swarm run option"),
-])
+@pytest.mark.parametrize(
+    "arguments, message",
+    [
+        (["--runs", "0"], "--runs"),
+        (["--sites", "1"], "--sites"),
+        (["--", "--no-such-option", "3"], "swarm run option"),
+        (["--", "--drop", "2"], "swarm run option"),
+        (["--alpha", "0.2", "--threshold", "1"], "swarm run option"),
+    ],
+)
 def test_bad_arguments_exit_with_code_2_and_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], arguments: list[str], message: str
 ) -> None:

@@ -82,7 +82,14 @@ def test_robots_wait_for_a_lost_world_server_and_resume_with_a_new_one() -> None
     keys = protocol.Keys(run_id)
     common = ["--run-id", run_id, "--seed", "4", "--mode", "client"]
     world_command = [
-        sys.executable, "-m", "world_server.server", *common, "--robots", "3", "--sites", "4",
+        sys.executable,
+        "-m",
+        "world_server.server",
+        *common,
+        "--robots",
+        "3",
+        "--sites",
+        "4",
     ]
     best = make_layout(4, 3, 4).best_site
     statuses: dict[int, protocol.Status] = {}
@@ -106,8 +113,17 @@ def test_robots_wait_for_a_lost_world_server_and_resume_with_a_new_one() -> None
             world = start([*world_command, *connect])
             start([sys.executable, "-m", "nest_beacon", *common, *connect])
             robots = [
-                start([sys.executable, "-m", "robot_agent.node", "--id", str(robot), *common,
-                       *connect])
+                start(
+                    [
+                        sys.executable,
+                        "-m",
+                        "robot_agent.node",
+                        "--id",
+                        str(robot),
+                        *common,
+                        *connect,
+                    ]
+                )
                 for robot in range(3)
             ]
             deadline = time.monotonic() + 60

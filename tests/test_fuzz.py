@@ -23,7 +23,8 @@ from world_server.world import World, WorldConfig
 MESSAGE_TYPES = [
     value
     for value in vars(protocol).values()
-    if isinstance(value, type) and issubclass(value, protocol.Message)
+    if isinstance(value, type)
+    and issubclass(value, protocol.Message)
     and value is not protocol.Message
 ]
 
@@ -94,8 +95,12 @@ def _world_info() -> protocol.WorldInfo:
 def _node() -> RobotNode:
     controller = Controller(1, _world_info(), ControllerConfig(), random.Random(1))
     node = RobotNode(
-        1, session=None, keys=protocol.Keys("fuzz"), controller=controller,  # type: ignore[arg-type]
-        inbox=queue.SimpleQueue(), lockstep=True,
+        1,
+        session=None,
+        keys=protocol.Keys("fuzz"),
+        controller=controller,  # type: ignore[arg-type]
+        inbox=queue.SimpleQueue(),
+        lockstep=True,
     )
     node._act, node._status, node._tx = _Publisher(), _Publisher(), _Publisher()
     return node
@@ -140,11 +145,18 @@ def _world_server() -> WorldServer:
     events=st.lists(
         st.tuples(
             st.sampled_from(["act", "ack", "tx"]),
-            st.sampled_from([
-                "bestofn/fuzz/robot/0/act", "bestofn/fuzz/robot/7/act", "bestofn/fuzz/x",
-                "bestofn/fuzz/beacon/nest/ack", "bestofn/fuzz/radio/tx/1",
-                "bestofn/fuzz/radio/tx/nest", "bestofn/fuzz/radio/tx/99", "bogus",
-            ]),
+            st.sampled_from(
+                [
+                    "bestofn/fuzz/robot/0/act",
+                    "bestofn/fuzz/robot/7/act",
+                    "bestofn/fuzz/x",
+                    "bestofn/fuzz/beacon/nest/ack",
+                    "bestofn/fuzz/radio/tx/1",
+                    "bestofn/fuzz/radio/tx/nest",
+                    "bestofn/fuzz/radio/tx/99",
+                    "bogus",
+                ]
+            ),
             payloads(),
             st.one_of(st.none(), payloads()),
         ),

@@ -28,7 +28,7 @@ RUN, SEED, SITES, ROBOTS = "multihost", 3, 5, 4
 OBSERVER = """
 import json, sys, time
 from robot_agent import protocol
-from robot_agent.zenoh_session import open_session
+from plumbing.zenoh_session import open_session
 keys = protocol.Keys(sys.argv[2])
 statuses = {}
 session = open_session("client", [sys.argv[1]])
@@ -56,9 +56,7 @@ def hosts() -> Iterator[Lan]:
         yield network
 
 
-def test_routers_per_host_carry_a_swarm_to_the_right_consensus(
-    hosts: Lan, tmp_path: Path
-) -> None:
+def test_routers_per_host_carry_a_swarm_to_the_right_consensus(hosts: Lan, tmp_path: Path) -> None:
     started: list[subprocess.Popen[bytes]] = []
     logs = (tmp_path / "processes.log").open("wb")
 
@@ -78,15 +76,27 @@ def test_routers_per_host_carry_a_swarm_to_the_right_consensus(
         on(0, "-m", "deploy.router", "--listen", endpoint(0))
         for host in (1, 2):
             on(host, "-m", "deploy.router", "--listen", endpoint(host), "--connect", endpoint(0))
-        on(0, "-m", "world_server.server", *common, "--connect", endpoint(0),
-           "--robots", str(ROBOTS), "--sites", str(SITES))
+        on(
+            0,
+            "-m",
+            "world_server.server",
+            *common,
+            "--connect",
+            endpoint(0),
+            "--robots",
+            str(ROBOTS),
+            "--sites",
+            str(SITES),
+        )
         on(0, "-m", "nest_beacon", *common, "--connect", endpoint(0))
         for host, robots in ((1, (0, 1)), (2, (2, 3))):
             ids = [arg for robot in robots for arg in ("--id", str(robot))]
             on(host, "-m", "robot_agent.node", *ids, *common, "--connect", endpoint(host))
         observer = subprocess.Popen(
             hosts.run(2, sys.executable, "-c", OBSERVER, endpoint(2), RUN, str(ROBOTS), "120"),
-            cwd=REPO, stdout=subprocess.PIPE, stderr=logs,
+            cwd=REPO,
+            stdout=subprocess.PIPE,
+            stderr=logs,
         )
         started.append(observer)
         output, _ = observer.communicate(timeout=170)

@@ -142,8 +142,9 @@ def test_commutative_in_the_neighbours(
     own, neighbours = pool[0], pool[1:]
     shuffled = list(neighbours)
     rng.shuffle(shuffled)
-    first, second = loglinear_pool([own, *neighbours], weight), loglinear_pool(
-        [own, *shuffled], weight
+    first, second = (
+        loglinear_pool([own, *neighbours], weight),
+        loglinear_pool([own, *shuffled], weight),
     )
     assert (first is None) == (second is None)
     if first is not None and second is not None:
@@ -170,9 +171,7 @@ def test_no_trust_keeps_the_own_opinion(pool: list[list[float]]) -> None:
 
 
 @given(pools(positive_entries), neighbour_weights)
-def test_a_single_opinion_is_returned_normalised(
-    pool: list[list[float]], weight: float
-) -> None:
+def test_a_single_opinion_is_returned_normalised(pool: list[list[float]], weight: float) -> None:
     own = pool[0]
     total = math.fsum(own)
     assert_close(loglinear_pool([own], weight) or [], [value / total for value in own], 1e-12)

@@ -23,7 +23,8 @@ def test_the_document_shows_every_message_type() -> None:
     defined = {
         name
         for name, value in vars(protocol).items()
-        if isinstance(value, type) and issubclass(value, protocol.Message)
+        if isinstance(value, type)
+        and issubclass(value, protocol.Message)
         and value is not protocol.Message
     }
     assert defined <= shown, f"messages without an example: {defined - shown}"

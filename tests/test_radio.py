@@ -20,15 +20,22 @@ Positions = Mapping[str, tuple[float, float]]
 def ring(count: int, radius: float, prefix: int = 100) -> dict[str, tuple[float, float]]:
     """``count`` robot receivers evenly spread on a circle around the origin."""
     return {
-        str(prefix + k): (radius * math.cos(2 * math.pi * k / count),
-                          radius * math.sin(2 * math.pi * k / count))
+        str(prefix + k): (
+            radius * math.cos(2 * math.pi * k / count),
+            radius * math.sin(2 * math.pi * k / count),
+        )
         for k in range(count)
     }
 
 
 def broadcast(
-    medium: RadioMedium, ticks: int, receivers: Positions, *, sender: str = "0",
-    kind: str = "robot", deliver: bool = True,
+    medium: RadioMedium,
+    ticks: int,
+    receivers: Positions,
+    *,
+    sender: str = "0",
+    kind: str = "robot",
+    deliver: bool = True,
 ) -> list[tuple[int, Delivery]]:
     """``sender`` at the origin sends one message a tick; every (tick, delivery) returned.
 
@@ -65,13 +72,18 @@ def loss_runs(lost: list[bool]) -> list[int]:
 
 def test_range_depends_on_the_sender_kind() -> None:
     medium = RadioMedium(RadioConfig(robot_range=0.5, beacon_range=0.2), seed=1)
-    positions = {"1": (0.19, 0.0), "2": (0.0, 0.21), "3": (-0.49, 0.0), "4": (0.0, -0.51),
-                 "0": (0.0, 0.0), "nest": (0.0, 0.0)}
+    positions = {
+        "1": (0.19, 0.0),
+        "2": (0.0, 0.21),
+        "3": (-0.49, 0.0),
+        "4": (0.0, -0.51),
+        "0": (0.0, 0.0),
+        "nest": (0.0, 0.0),
+    }
     medium.transmit(0, "0", 0, b"robot", (0.0, 0.0), "robot", positions)
     medium.transmit(0, "nest", 0, b"beacon", (0.0, 0.0), "beacon", positions)
     got = {(d.sender, d.receiver) for d in medium.deliveries(1)}
-    assert got == {("0", "1"), ("0", "2"), ("0", "3"), ("0", "nest"),
-                   ("nest", "0"), ("nest", "1")}
+    assert got == {("0", "1"), ("0", "2"), ("0", "3"), ("0", "nest"), ("nest", "0"), ("nest", "1")}
 
 
 def test_a_sender_never_hears_itself() -> None:
@@ -92,12 +104,19 @@ def test_next_tick_by_default_and_latency_adds_whole_ticks() -> None:
 
 def test_deliveries_are_sorted_by_receiver_sender_and_seq_in_sender_order() -> None:
     assert sorted(["nest", "10", "2", "beacon", "0"], key=sender_order) == [
-        "0", "2", "10", "beacon", "nest"]
+        "0",
+        "2",
+        "10",
+        "beacon",
+        "nest",
+    ]
     assert RadioMedium.sender_order("10") == sender_order("10")
     positions = {"10": (0.0, 0.0), "2": (0.1, 0.0), "9": (0.0, 0.1), "nest": (0.1, 0.1)}
     medium = RadioMedium(RadioConfig(), seed=1)
-    calls = sorted([("2", 1), ("10", 0), ("2", 0), ("nest", 5), ("9", 3)],
-                   key=lambda call: (sender_order(call[0]), call[1]))
+    calls = sorted(
+        [("2", 1), ("10", 0), ("2", 0), ("nest", 5), ("9", 3)],
+        key=lambda call: (sender_order(call[0]), call[1]),
+    )
     for sender, seq in calls:
         kind = "beacon" if sender == "nest" else "robot"
         medium.transmit(0, sender, seq, b"", positions[sender], kind, positions)
@@ -113,8 +132,14 @@ def test_invalid_calls_and_configs_are_refused() -> None:
         medium.transmit(0, "1", 0, b"", (0.0, 0.0), "drone", {})  # type: ignore[arg-type]
     with pytest.raises(ValueError):
         medium.transmit(0, "1", 0, b"", (math.nan, 0.0), "robot", {})
-    for bad in ({"drop": 1.5}, {"latency": -1}, {"jitter": 0.5}, {"robot_range": 0.0},
-                {"range_loss_start": math.nan}, {"range_loss_exponent": 0.0}):
+    for bad in (
+        {"drop": 1.5},
+        {"latency": -1},
+        {"jitter": 0.5},
+        {"robot_range": 0.0},
+        {"range_loss_start": math.nan},
+        {"range_loss_exponent": 0.0},
+    ):
         with pytest.raises(ValueError):
             RadioConfig(**bad)
 
@@ -190,8 +215,9 @@ def test_jitter_spreads_arrivals_and_reorders_a_senders_messages() -> None:
     delays = Counter(tick - delivery.sent_tick for tick, delivery in received)
     assert set(delays) == {2, 3, 4, 5}
     # Uniform over the four delays: each count within 5 standard deviations of its mean.
-    assert all(abs(count - messages / 4) < 5 * math.sqrt(messages * 3 / 16)
-               for count in delays.values())
+    assert all(
+        abs(count - messages / 4) < 5 * math.sqrt(messages * 3 / 16) for count in delays.values()
+    )
     sequence = [delivery.seq for _, delivery in received]
     assert sorted(sequence) == list(range(messages)) and sequence != list(range(messages))
 
@@ -213,7 +239,11 @@ def test_reorder_shuffles_a_tick_but_delivers_the_same_copies() -> None:
 def test_range_loss_follows_its_formula_and_rises_with_distance() -> None:
     config = RadioConfig(range_loss_start=0.5)
     assert [config.range_loss_probability(f * 0.5, 0.5) for f in (0.2, 0.5, 0.75, 1.0)] == [
-        0.0, 0.0, pytest.approx(0.5), 1.0]
+        0.0,
+        0.0,
+        pytest.approx(0.5),
+        1.0,
+    ]
     curved = RadioConfig(range_loss_start=0.5, range_loss_exponent=2.0)
     assert curved.range_loss_probability(0.375, 0.5) == pytest.approx(0.25)
 
@@ -246,8 +276,16 @@ def test_enabling_one_fault_leaves_the_others_decisions_unchanged() -> None:
 # --- determinism and counters --------------------------------------------------------
 
 ALL_FAULTS = RadioConfig(
-    drop=0.1, latency=1, jitter=2, duplicate=0.1, duplicate_delay=2, reorder=True,
-    burst_enter=0.1, burst_exit=0.3, burst_loss_good=0.02, burst_loss_bad=0.7,
+    drop=0.1,
+    latency=1,
+    jitter=2,
+    duplicate=0.1,
+    duplicate_delay=2,
+    reorder=True,
+    burst_enter=0.1,
+    burst_exit=0.3,
+    burst_loss_good=0.02,
+    burst_loss_bad=0.7,
     range_loss_start=0.6,
 )
 
@@ -258,14 +296,14 @@ def swarm_traffic(seed: int, config: RadioConfig = ALL_FAULTS, ticks: int = 60):
     medium = RadioMedium(config, seed)
     log = []
     for tick in range(ticks):
-        positions = {protocol.radio_name(k): (rng.uniform(-1, 1), rng.uniform(-1, 1))
-                     for k in range(40)}
+        positions = {
+            protocol.radio_name(k): (rng.uniform(-1, 1), rng.uniform(-1, 1)) for k in range(40)
+        }
         positions["beacon"] = (0.0, 0.0)
         senders = sorted(rng.sample(sorted(positions), 9), key=sender_order)
         for sender in senders:
             kind = "beacon" if sender == "beacon" else "robot"
-            medium.transmit(tick, sender, tick, sender.encode(), positions[sender], kind,
-                            positions)
+            medium.transmit(tick, sender, tick, sender.encode(), positions[sender], kind, positions)
         log.append(medium.deliveries(tick))
         assert medium.copies == medium.delivered + medium.dropped + medium.in_flight
     return medium, log
@@ -286,7 +324,8 @@ def test_counters_add_up() -> None:
     medium.reject()
     medium.reject(4)
     assert medium.counters == protocol.RadioCounters(
-        sent=medium.sent, delivered=medium.delivered, dropped=medium.dropped, rejected=5)
+        sent=medium.sent, delivered=medium.delivered, dropped=medium.dropped, rejected=5
+    )
     remaining = drain(medium, 60)
     assert medium.in_flight == 0
     assert medium.copies == medium.delivered + medium.dropped

@@ -65,9 +65,20 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Run:
     path = tmp_path_factory.mktemp("recording") / "run.mcap"
     run_id = unique_run_id("rec")
     code, summary, stderr = run_swarm(
-        ["--robots", str(ROBOTS), "--sites", str(SITES), "--seed", str(SEED),
-         "--timeout", "900", "--record", str(path)],
-        run_id, timeout=120.0,
+        [
+            "--robots",
+            str(ROBOTS),
+            "--sites",
+            str(SITES),
+            "--seed",
+            str(SEED),
+            "--timeout",
+            "900",
+            "--record",
+            str(path),
+        ],
+        run_id,
+        timeout=120.0,
     )
     assert code == 0, stderr
     assert summary["recording"] == str(path)
@@ -90,9 +101,12 @@ def test_every_message_validates_against_its_channels_json_schema(run: Run) -> N
 
 @pytest.mark.timeout(180)
 def test_one_channel_per_key_with_its_protocol_schema(run: Run) -> None:
-    topics = Counter(channel.topic for _, channel, _ in {
-        (schema.id, channel.id): (schema, channel, None) for schema, channel, _ in run.messages
-    }.values())
+    topics = Counter(
+        channel.topic
+        for _, channel, _ in {
+            (schema.id, channel.id): (schema, channel, None) for schema, channel, _ in run.messages
+        }.values()
+    )
     assert all(count == 1 for count in topics.values())
     by_topic = {channel.topic: schema for schema, channel, _ in run.messages}
     keys = run.keys
@@ -156,14 +170,21 @@ def test_foxglove_messages_carry_the_required_fields_and_the_run(run: Run) -> No
     assert f"site {layout.best_site}\nrho = 1.00" in labels
     robot = entities["robot-0"]
     assert robot["frame_id"] == "robot-0" and robot["frame_locked"] is True
-    links = [entity for scene in full for entity in scene["entities"]
-             if entity["id"] == "radio-links" and entity["lines"]]
+    links = [
+        entity
+        for scene in full
+        for entity in scene["entities"]
+        if entity["id"] == "radio-links" and entity["lines"]
+    ]
     assert links and all(len(entity["lines"][0]["points"]) % 2 == 0 for entity in links)
     transforms = run.of_schema(foxglove.FRAME_TRANSFORMS)
     children = {t["child_frame_id"] for _, _, message in transforms for t in message["transforms"]}
     assert children == {f"robot-{robot}" for robot in range(ROBOTS)}
-    assert all(t["parent_frame_id"] == foxglove.ARENA_FRAME
-               for _, _, message in transforms for t in message["transforms"])
+    assert all(
+        t["parent_frame_id"] == foxglove.ARENA_FRAME
+        for _, _, message in transforms
+        for t in message["transforms"]
+    )
     logs = run.of_schema(foxglove.LOG)
     assert {entry["name"] for _, _, entry in logs} >= {"world", "beacon", "robot-0"}
     assert foxglove.LOG_INFO in {entry["level"] for _, _, entry in logs}
@@ -198,8 +219,9 @@ def test_metadata_holds_config_versions_seed_and_summary(run: Run) -> None:
         versions = json.loads(record["versions"])
         assert versions["protocol"] == str(protocol.VERSION)
         assert {"python", "mcap", "eclipse-zenoh", "msgspec", "bestofn-swarm"} <= set(versions)
-        assert json.loads(record["layout"])["best_site"] == make_layout(SITES, ROBOTS,
-                                                                         SEED).best_site
+        assert (
+            json.loads(record["layout"])["best_site"] == make_layout(SITES, ROBOTS, SEED).best_site
+        )
         assert protocol.decode(record["world_info"].encode(), protocol.WorldInfo).seed == SEED
     assert json.loads(final["summary"]) == run.summary
     assert final["finished_by"] == "finish query"
@@ -229,7 +251,9 @@ def test_a_cut_short_recording_still_gives_a_report(run: Run, tmp_path: Path) ->
         out = tmp_path / f"report-{fraction}"
         done = subprocess.run(
             [sys.executable, "-m", "deploy.cli", "report", str(cut), "--out", str(out), "--json"],
-            capture_output=True, timeout=120, cwd=REPO,
+            capture_output=True,
+            timeout=120,
+            cwd=REPO,
         )
         assert done.returncode == 0, done.stderr.decode()
         assert "cut short" in done.stderr.decode()
@@ -281,8 +305,9 @@ def test_samples_that_do_not_decode_are_kept_raw_on_the_rejected_channel() -> No
 @pytest.mark.parametrize("niceness", ["-1", "20", "low"])
 def test_a_bad_niceness_is_a_usage_error(niceness: str, tmp_path: Path) -> None:
     with pytest.raises(SystemExit) as exit_info:
-        recorder.build_parser().parse_args(["--out", str(tmp_path / "x.mcap"),
-                                            "--niceness", niceness])
+        recorder.build_parser().parse_args(
+            ["--out", str(tmp_path / "x.mcap"), "--niceness", niceness]
+        )
     assert exit_info.value.code == 2
 
 
@@ -293,10 +318,29 @@ def test_sigterm_without_a_finish_query_closes_the_file_cleanly(tmp_path: Path) 
     out = tmp_path / "term.mcap"
     with loopback_router() as (session, endpoint):
         process = subprocess.Popen(
-            [sys.executable, "-m", "world_server.recorder", "--run-id", run_id, "--mode",
-             "client", "--connect", endpoint, "--out", str(out), "--robots", "2", "--sites",
-             "4", "--info-timeout", "0.5", "--config-json", '{"robots": 2}'],
-            cwd=REPO, stderr=subprocess.PIPE,
+            [
+                sys.executable,
+                "-m",
+                "world_server.recorder",
+                "--run-id",
+                run_id,
+                "--mode",
+                "client",
+                "--connect",
+                endpoint,
+                "--out",
+                str(out),
+                "--robots",
+                "2",
+                "--sites",
+                "4",
+                "--info-timeout",
+                "0.5",
+                "--config-json",
+                '{"robots": 2}',
+            ],
+            cwd=REPO,
+            stderr=subprocess.PIPE,
         )
         try:
             deadline = time.monotonic() + 30
@@ -304,12 +348,14 @@ def test_sigterm_without_a_finish_query_closes_the_file_cleanly(tmp_path: Path) 
                 assert process.poll() is None and time.monotonic() < deadline
                 time.sleep(0.05)
             # Recording yields the CPU to the swarm (it is off the barrier's critical path).
-            expected_niceness = min(19, os.getpriority(os.PRIO_PROCESS, 0)
-                                    + recorder.DEFAULT_NICENESS)
+            expected_niceness = min(
+                19, os.getpriority(os.PRIO_PROCESS, 0) + recorder.DEFAULT_NICENESS
+            )
             assert os.getpriority(os.PRIO_PROCESS, process.pid) == expected_niceness
             for tick in range(1, 4):
-                session.put(keys.world_clock,
-                            protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * 0.1)))
+                session.put(
+                    keys.world_clock, protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * 0.1))
+                )
             time.sleep(0.5)
             process.send_signal(signal.SIGTERM)
             assert process.wait(timeout=20) == 0

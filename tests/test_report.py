@@ -28,29 +28,47 @@ SITES, ROBOTS, SEED = 4, 3, 7
 POOLS = {0: [2, 3], 1: [1, 2, 3], 2: [2, 2]}
 
 
-def _status(robot: int, tick: int, pools: list[int], decided: int | None,
-            opinion: list[float]) -> bytes:
+def _status(
+    robot: int, tick: int, pools: list[int], decided: int | None, opinion: list[float]
+) -> bytes:
     """A status after ``len(pools)`` trips, each ending in a pooling."""
     trips = len(pools)
-    return protocol.encode(protocol.Status(
-        v=1, id=robot, tick=tick, t=tick * 0.1,
-        phase="to_decision" if decided is not None else "to_site",
-        trips=trips, opinion=opinion, pool_size=pools[-1] if pools else 0,
-        poolings=trips, decided_site=decided,
-        decision_time=tick * 0.1 if decided is not None else None,
-        decision_trips=trips if decided is not None else None, comparison=None,
-    ))
+    return protocol.encode(
+        protocol.Status(
+            v=1,
+            id=robot,
+            tick=tick,
+            t=tick * 0.1,
+            phase="to_decision" if decided is not None else "to_site",
+            trips=trips,
+            opinion=opinion,
+            pool_size=pools[-1] if pools else 0,
+            poolings=trips,
+            decided_site=decided,
+            decision_time=tick * 0.1 if decided is not None else None,
+            decision_trips=trips if decided is not None else None,
+            comparison=None,
+        )
+    )
 
 
-def make_recording(path: Path, run_id: str, sites: int = SITES, *, finish: bool = True,
-                   summary: dict[str, Any] | None = None) -> tuple[int, int]:
+def make_recording(
+    path: Path,
+    run_id: str,
+    sites: int = SITES,
+    *,
+    finish: bool = True,
+    summary: dict[str, Any] | None = None,
+) -> tuple[int, int]:
     """Write a recording of a made-up run. Returns two file sizes: before the last status
     message, and before the records that finishing the file adds."""
     keys = protocol.Keys(run_id)
     best = make_layout(sites, ROBOTS, SEED).best_site
     stream = io.BytesIO()
     mcap = recorder.McapRecorder(
-        stream, keys, recorder.RunDescription(run_id, SEED, ROBOTS, sites, {"sites": sites}),
+        stream,
+        keys,
+        recorder.RunDescription(run_id, SEED, ROBOTS, sites, {"sites": sites}),
         chunk_size=1,  # every message in its own chunk: a cut loses only what is after it
     )
     uniform = [1.0 / sites] * sites
@@ -62,8 +80,17 @@ def make_recording(path: Path, run_id: str, sites: int = SITES, *, finish: bool 
     for tick in range(0, 400, 10):
         put(keys.world_clock, protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * 0.1)))
         for robot in range(ROBOTS):
-            sense = protocol.Sense(v=1, tick=tick, t=tick * 0.1, x=0.001 * tick, y=0.1 * robot,
-                                   theta=0.0, prox=[0.0] * 8, rx=0, camera=False)
+            sense = protocol.Sense(
+                v=1,
+                tick=tick,
+                t=tick * 0.1,
+                x=0.001 * tick,
+                y=0.1 * robot,
+                theta=0.0,
+                prox=[0.0] * 8,
+                rx=0,
+                camera=False,
+            )
             put(keys.sense(robot), protocol.encode(sense))
     before_last = 0
     for robot, pools in POOLS.items():
@@ -71,10 +98,16 @@ def make_recording(path: Path, run_id: str, sites: int = SITES, *, finish: bool 
         for trip in range(1, len(pools) + 1):
             last = trip == len(pools)
             before_last = stream.tell()
-            put(keys.status(robot), _status(
-                robot, 100 * trip + robot, pools[:trip], best if last else None,
-                certain if last else uniform,
-            ))
+            put(
+                keys.status(robot),
+                _status(
+                    robot,
+                    100 * trip + robot,
+                    pools[:trip],
+                    best if last else None,
+                    certain if last else uniform,
+                ),
+            )
     unfinished = stream.tell()
     if finish:
         mcap.finish(summary)
@@ -160,8 +193,15 @@ def test_runs_are_grouped_by_swarm_size_and_sites(
     for index, sites in enumerate((4, 6, 4)):
         paths.append(tmp_path / f"r{index}.mcap")
         make_recording(paths[-1], f"made-n{sites}-r{index}", sites)
-    code, result = run_report(capsys, *map(str, paths), "--out", str(tmp_path / "out"),
-                              "--example", "made-n6-r1", "--per-run")
+    code, result = run_report(
+        capsys,
+        *map(str, paths),
+        "--out",
+        str(tmp_path / "out"),
+        "--example",
+        "made-n6-r1",
+        "--per-run",
+    )
     assert code == 0
     assert [(group["sites"], group["runs"]) for group in result["groups"]] == [(4, 2), (6, 1)]
     assert result["groups"][1]["runs_within_half_n"] == 1  # 3 steps <= 6 / 2
@@ -175,8 +215,16 @@ def test_an_unreadable_file_is_skipped_and_reported(
 ) -> None:
     (tmp_path / "junk.mcap").write_bytes(b"not an mcap file at all")
     make_recording(tmp_path / "good.mcap", "made-d")
-    code = main(["report", str(tmp_path / "junk.mcap"), str(tmp_path / "good.mcap"),
-                 "--out", str(tmp_path / "out"), "--json"])
+    code = main(
+        [
+            "report",
+            str(tmp_path / "junk.mcap"),
+            str(tmp_path / "good.mcap"),
+            "--out",
+            str(tmp_path / "out"),
+            "--json",
+        ]
+    )
     captured = capsys.readouterr()
     result = json.loads(captured.out)
     assert code == 0 and len(result["runs"]) == 1
@@ -186,12 +234,15 @@ def test_an_unreadable_file_is_skipped_and_reported(
     assert code == 1 and result["runs"] == []
 
 
-@pytest.mark.parametrize("arguments, message", [
-    (["missing.mcap", "--out", "out"], "no such recording"),
-    (["{good}", "--out", "{good}"], "not a directory"),
-    (["{good}", "--out", "out", "--robot", "-1"], "--robot"),
-    (["{good}"], "--out"),
-])
+@pytest.mark.parametrize(
+    "arguments, message",
+    [
+        (["missing.mcap", "--out", "out"], "no such recording"),
+        (["{good}", "--out", "{good}"], "not a directory"),
+        (["{good}", "--out", "out", "--robot", "-1"], "--robot"),
+        (["{good}"], "--out"),
+    ],
+)
 def test_bad_arguments_exit_with_code_2_and_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], arguments: list[str], message: str
 ) -> None:

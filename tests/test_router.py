@@ -10,7 +10,7 @@ import pytest
 from swarm_helpers import REPO, swarm_command
 
 from deploy.processes import free_port, wait_for_port
-from robot_agent.zenoh_session import open_session
+from plumbing.zenoh_session import open_session
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -24,8 +24,10 @@ def test_the_router_carries_messages_between_clients_and_stops_cleanly() -> None
     try:
         assert wait_for_port(port, 30.0, lambda: router.poll() is None)
         received: list[bytes] = []
-        with open_session("client", [endpoint]) as listener, \
-                open_session("client", [endpoint]) as talker:
+        with (
+            open_session("client", [endpoint]) as listener,
+            open_session("client", [endpoint]) as talker,
+        ):
             listener.declare_subscriber("demo/**", lambda s: received.append(s.payload.to_bytes()))
             deadline = time.monotonic() + 10
             while not received and time.monotonic() < deadline:
@@ -44,7 +46,9 @@ def test_the_router_carries_messages_between_clients_and_stops_cleanly() -> None
 
 def test_a_bad_endpoint_is_a_usage_error() -> None:
     done = subprocess.run(
-        swarm_command("router", "--listen", "nonsense"), capture_output=True, timeout=30,
+        swarm_command("router", "--listen", "nonsense"),
+        capture_output=True,
+        timeout=30,
         cwd=REPO,
     )
     assert done.returncode == 2

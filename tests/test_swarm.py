@@ -77,8 +77,20 @@ def test_killing_a_robot_mid_run_does_not_hang_the_world() -> None:
             ),
         )
         command = swarm_command(
-            "run", "--run-id", run_id, "--json", "--quiet", *SMALL, "--seed", "2",
-            "--stall-timeout", "1", "--connect", endpoint, "--spawn", "exec",
+            "run",
+            "--run-id",
+            run_id,
+            "--json",
+            "--quiet",
+            *SMALL,
+            "--seed",
+            "2",
+            "--stall-timeout",
+            "1",
+            "--connect",
+            endpoint,
+            "--spawn",
+            "exec",
         )
         process = subprocess.Popen(
             command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE
@@ -135,9 +147,17 @@ def _garbage(run: protocol.Keys, tick: int) -> list[tuple[str, bytes, bytes | No
         huge,
     ]
     keys = [
-        run.sense(0), run.act(0), run.status(0), run.world_clock, run.world_state,
-        run.beacon_ack("nest"), run.radio_tx(0), run.radio_tx(77), run.camera(0),
-        run.radio_rx(0), run.log("world"),
+        run.sense(0),
+        run.act(0),
+        run.status(0),
+        run.world_clock,
+        run.world_state,
+        run.beacon_ack("nest"),
+        run.radio_tx(0),
+        run.radio_tx(77),
+        run.camera(0),
+        run.radio_rx(0),
+        run.log("world"),
     ]
     messages: list[tuple[str, bytes, bytes | None]] = [
         (key, payload, None) for key in keys for payload in bad
@@ -156,12 +176,21 @@ def test_malformed_payloads_on_every_key_are_rejected_and_counted() -> None:
         ticks: list[int] = []
         session.declare_subscriber(
             keys.world_clock,
-            lambda sample: ticks.append(protocol.decode(sample.payload.to_bytes(),
-                                                        protocol.Clock).tick),
+            lambda sample: ticks.append(
+                protocol.decode(sample.payload.to_bytes(), protocol.Clock).tick
+            ),
         )
         command = swarm_command(
-            "run", "--run-id", run_id, "--json", "--quiet", *SMALL, "--seed", "3",
-            "--connect", endpoint,
+            "run",
+            "--run-id",
+            run_id,
+            "--json",
+            "--quiet",
+            *SMALL,
+            "--seed",
+            "3",
+            "--connect",
+            endpoint,
         )
         process = subprocess.Popen(
             command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE
@@ -193,21 +222,24 @@ def test_malformed_payloads_on_every_key_are_rejected_and_counted() -> None:
 
 
 def test_bad_arguments_exit_with_code_2_and_one_line() -> None:
-    for bad in (["--robots", "0"], ["--alpha", "0.7"], ["--drop", "1.5"], ["--sites", "1"],
-                ["--run-id", "a/b"], ["--threshold", "0"], ["--timeout", "nan"],
-                ["--record", "x.mcap", "--no-record"]):
-        done = subprocess.run(
-            swarm_command("run", *bad), capture_output=True, timeout=60, cwd=REPO
-        )
+    for bad in (
+        ["--robots", "0"],
+        ["--alpha", "0.7"],
+        ["--drop", "1.5"],
+        ["--sites", "1"],
+        ["--run-id", "a/b"],
+        ["--threshold", "0"],
+        ["--timeout", "nan"],
+        ["--record", "x.mcap", "--no-record"],
+    ):
+        done = subprocess.run(swarm_command("run", *bad), capture_output=True, timeout=60, cwd=REPO)
         assert done.returncode == 2, bad
         lines = done.stderr.decode().strip().splitlines()
         assert lines[-1].startswith("swarm run: error:"), lines
         assert "Traceback" not in done.stderr.decode()
 
 
-@pytest.mark.parametrize(
-    "module", ["world_server.server", "nest_beacon", "robot_agent.node"]
-)
+@pytest.mark.parametrize("module", ["world_server.server", "nest_beacon", "robot_agent.node"])
 def test_every_component_prints_its_help(module: str) -> None:
     done = subprocess.run(
         [*swarm_command()[:1], "-m", module, "--help"], capture_output=True, timeout=60, cwd=REPO
@@ -219,8 +251,10 @@ def test_every_component_prints_its_help(module: str) -> None:
 
 def test_alpha_without_threshold_is_a_usage_error_not_a_traceback() -> None:
     done = subprocess.run(
-        swarm_command("run", "--alpha", "0.2", "--threshold", "1"), capture_output=True,
-        timeout=60, cwd=REPO,
+        swarm_command("run", "--alpha", "0.2", "--threshold", "1"),
+        capture_output=True,
+        timeout=60,
+        cwd=REPO,
     )
     assert done.returncode == 2
     assert "Traceback" not in done.stderr.decode()
@@ -238,9 +272,7 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run() -> None:
     world_config = server.config_from_args(
         server.build_parser().parse_args([*common, "--run-id", "memory"])
     )
-    controller_config = options.controller_config(
-        node.build_parser().parse_args(["--id", "0"])
-    )
+    controller_config = options.controller_config(node.build_parser().parse_args(["--id", "0"]))
     in_memory = run_in_memory(world_config, controller_config, timeout=900)
     code, over_zenoh, stderr = run_swarm(
         [*common, "--timeout", "900", "--no-record"], unique_run_id("vs-memory")
@@ -292,8 +324,12 @@ def test_the_realtime_clock_follows_the_wall_clock_at_the_asked_speed() -> None:
 def test_every_command_rejects_bad_arguments_in_one_line_with_code_2(
     command: list[str], bad: list[str]
 ) -> None:
-    modules = {"world-server": "world_server.server", "nest-beacon": "nest_beacon",
-               "robot-agent": "robot_agent.node", "swarm": "deploy.cli"}
+    modules = {
+        "world-server": "world_server.server",
+        "nest-beacon": "nest_beacon",
+        "robot-agent": "robot_agent.node",
+        "swarm": "deploy.cli",
+    }
     argv = [sys.executable, "-m", modules[command[0]], *command[1:], *bad]
     done = subprocess.run(argv, capture_output=True, timeout=60, cwd=REPO)
     errors = done.stderr.decode()

@@ -44,9 +44,7 @@ def free_udp_port() -> int:
         return probe.getsockname()[1]
 
 
-def poll_until(
-    radio: UdpRadio, count: int, timeout: float = 5.0
-) -> list[tuple[str, bytes]]:
+def poll_until(radio: UdpRadio, count: int, timeout: float = 5.0) -> list[tuple[str, bytes]]:
     """Poll until ``count`` frames have arrived (or the timeout passes)."""
     received: list[tuple[str, bytes]] = []
     deadline = time.monotonic() + timeout
@@ -61,7 +59,7 @@ def poll_until(
 
 def test_frame_layout_is_magic_version_sender_length_sender_payload() -> None:
     assert encode_frame("12", b"{}") == b"BN\x01\x0212{}"
-    assert decode_frame(b"BN\x01\x04nest{\"a\":1}") == ("nest", b'{"a":1}')
+    assert decode_frame(b'BN\x01\x04nest{"a":1}') == ("nest", b'{"a":1}')
     longest = encode_frame("n" * 64, b"x" * MAX_PAYLOAD_BYTES)
     assert len(longest) == MAX_DATAGRAM_BYTES == 2116
     assert decode_frame(longest) == ("n" * 64, b"x" * MAX_PAYLOAD_BYTES)
@@ -220,8 +218,12 @@ class Processes:
 
     def start(self, command: Sequence[str]) -> subprocess.Popen[str]:
         process = subprocess.Popen(
-            command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-            text=True, cwd=TESTS.parent,
+            command,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            cwd=TESTS.parent,
         )
         self.started.append(process)
         return process
@@ -272,11 +274,23 @@ def test_worked_example_robots_decide_over_udp() -> None:
         beacon = processes.start([sys.executable, str(EXAMPLES / "udp_beacon.py"), *common])
         start_at = time.time() + 3.0  # robots import numpy and OpenCV first
         robots = [
-            processes.start([
-                sys.executable, str(EXAMPLES / "udp_robot.py"), "--id", str(robot),
-                "--robots", "3", "--qualities", ",".join(map(str, qualities)), *common,
-                "--start-at", str(start_at), "--max-seconds", "400",
-            ])
+            processes.start(
+                [
+                    sys.executable,
+                    str(EXAMPLES / "udp_robot.py"),
+                    "--id",
+                    str(robot),
+                    "--robots",
+                    "3",
+                    "--qualities",
+                    ",".join(map(str, qualities)),
+                    *common,
+                    "--start-at",
+                    str(start_at),
+                    "--max-seconds",
+                    "400",
+                ]
+            )
             for robot in range(3)
         ]
         summaries = [summary_of(robot, timeout=60)[0] for robot in robots]
@@ -359,10 +373,24 @@ def test_controllers_in_separate_namespaces_pool_opinions_and_decide(lan: Lan) -
             options = ["--seed", str(seed)]
             if interface is not None:
                 options += ["--interface", interface]
-            robots.append(processes.start(node(
-                lan, index, *options, "robot", "--id", str(index), "--robots", str(lan.size),
-                "--sites", str(sites), "--dwell", "5",
-            )))
+            robots.append(
+                processes.start(
+                    node(
+                        lan,
+                        index,
+                        *options,
+                        "robot",
+                        "--id",
+                        str(index),
+                        "--robots",
+                        str(lan.size),
+                        "--sites",
+                        str(sites),
+                        "--dwell",
+                        "5",
+                    )
+                )
+            )
         read_ready([beacon, *robots], timeout=30)
         start_all([beacon, *robots])
         results = [summary_of(robot, timeout=60) for robot in robots]
@@ -421,7 +449,11 @@ def test_a_link_going_down_costs_broadcasts_not_the_robot(lan: Lan) -> None:
         assert send()["sent"] == 1
         set_link("down")
         assert send() == {
-            "sent": 1, "send_failures": 1, "received": 0, "own_echoes": 0, "malformed": 0,
+            "sent": 1,
+            "send_failures": 1,
+            "received": 0,
+            "own_echoes": 0,
+            "malformed": 0,
             "oversize": 0,
         }
         set_link("up")
@@ -431,5 +463,8 @@ def test_a_link_going_down_costs_broadcasts_not_the_robot(lan: Lan) -> None:
     finally:
         processes.kill_all()
         # Taking the link down dropped its routes; put the multicast route back.
-        subprocess.run(["ip", "-n", ns, "route", "replace", "224.0.0.0/4", "dev", "eth0"],
-                       check=True, timeout=10)
+        subprocess.run(
+            ["ip", "-n", ns, "route", "replace", "224.0.0.0/4", "dev", "eth0"],
+            check=True,
+            timeout=10,
+        )

@@ -38,10 +38,13 @@ MESSAGE_FILES = {
     if path.name != "udp_frame.json"
 }
 
+
 def cases(section: str) -> list[Any]:
     return [
         pytest.param(
-            name, content, vector,
+            name,
+            content,
+            vector,
             id=f"{name[:-5]}-{vector['name']}",
         )
         for name, content in MESSAGE_FILES.items()
@@ -82,8 +85,15 @@ def test_every_message_type_has_vectors_of_every_kind() -> None:
         vector["category"] for content in MESSAGE_FILES.values() for vector in content["invalid"]
     }
     assert {
-        "nan_token", "out_of_range", "wrong_length", "wrong_type", "malformed_json",
-        "opinion_sum", "bad_enum", "bad_name", "number_overflow",
+        "nan_token",
+        "out_of_range",
+        "wrong_length",
+        "wrong_type",
+        "malformed_json",
+        "opinion_sum",
+        "bad_enum",
+        "bad_name",
+        "number_overflow",
     } <= every_category
 
 
@@ -153,9 +163,15 @@ def test_the_longest_opinion_over_100_sites_fits_one_2kb_batch() -> None:
     assert len(set(worst)) == 100
     assert protocol.wire_opinion(worst) == worst  # already at the wire's precision
     assert sorted(len(msgspec.json.encode(value)) for value in worst)[-99:] == [15] * 99
-    payload = protocol.encode(protocol.OpinionPayload(
-        v=1, id=protocol.MAX_ROBOTS - 1, trip=2**53, decided=False, opinion=worst,
-    ))
+    payload = protocol.encode(
+        protocol.OpinionPayload(
+            v=1,
+            id=protocol.MAX_ROBOTS - 1,
+            trip=2**53,
+            decided=False,
+            opinion=worst,
+        )
+    )
     assert protocol.decode_radio(payload).opinion == worst
     attachment = protocol.encode(protocol.RadioTxMeta(v=1, tick=2**53, seq=2**53))
     assert len(payload) + len(attachment) <= ZENOH_PICO_BATCH

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from robot_agent import wellstirred
-from robot_agent.wellstirred import (
+from wellstirred import model as wellstirred
+from wellstirred.model import (
     Model,
     Outcome,
     cell_rng,
@@ -277,12 +277,14 @@ def test_contradictory_pools_keep_their_own_opinions() -> None:
 
 
 def test_consensus_on_a_wrong_option_is_a_failure() -> None:
-    opinions = np.array([
-        [[0.0, 1.0, 0.0], [0.0, 1.0, 0.0]],  # both certain of option 2: wrong consensus
-        [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]],  # both certain of option 1: consensus
-        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],  # disagree: neither
-        [[0.6, 0.4, 0.0], [1.0, 0.0, 0.0]],  # one undecided: neither
-    ])
+    opinions = np.array(
+        [
+            [[0.0, 1.0, 0.0], [0.0, 1.0, 0.0]],  # both certain of option 2: wrong consensus
+            [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]],  # both certain of option 1: consensus
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],  # disagree: neither
+            [[0.6, 0.4, 0.0], [1.0, 0.0, 0.0]],  # one undecided: neither
+        ]
+    )
     reached, wrong = wellstirred._consensus(opinions, 1.0)
     assert reached.tolist() == [False, True, False, False]
     assert wrong.tolist() == [True, False, False, False]
@@ -326,14 +328,21 @@ def test_a_cell_does_not_depend_on_the_rest_of_the_sweep() -> None:
     alone = sweep([20], [3], runs=200, seed=7)
     np.testing.assert_array_equal(full[-1].outcome.times, alone[0].outcome.times)
     assert [(cell.model.options, cell.model.pool) for cell in full] == [
-        (10, 2), (10, 3), (20, 2), (20, 3)
+        (10, 2),
+        (10, 3),
+        (20, 2),
+        (20, 3),
     ]
 
 
 def test_sweep_reports_cells_and_exact_times() -> None:
     seen: list[tuple[int, int]] = []
     cells = sweep(
-        [10], [1, 3, 5], runs=300, seed=0, exact=True,
+        [10],
+        [1, 3, 5],
+        runs=300,
+        seed=0,
+        exact=True,
         on_cell=lambda cell: seen.append((cell.model.options, cell.model.pool)),
     )
     assert seen == [(10, 1), (10, 3), (10, 5)]
@@ -358,7 +367,9 @@ def test_summary_statistics() -> None:
 def test_cell_rng_depends_on_seed_and_cell() -> None:
     draws = {
         (seed, n, k): cell_rng(seed, Model(n, k)).integers(1 << 62)
-        for seed in (0, 1) for n in (10, 20) for k in (2, 3)
+        for seed in (0, 1)
+        for n in (10, 20)
+        for k in (2, 3)
     }
     assert len(set(draws.values())) == len(draws)
     assert cell_rng(0, Model(10, 2)).integers(1 << 62) == draws[(0, 10, 2)]

@@ -11,8 +11,18 @@ import pytest
 
 from deploy.cli import main
 
-KEYS = {"options", "pool", "population", "alpha", "runs", "mean", "median", "q1", "q3",
-        "success_rate"}
+KEYS = {
+    "options",
+    "pool",
+    "population",
+    "alpha",
+    "runs",
+    "mean",
+    "median",
+    "q1",
+    "q3",
+    "success_rate",
+}
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
@@ -52,7 +62,16 @@ def test_exact_mean_is_null_where_population_exceeds_the_pool(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     records = run_json(
-        capsys, "--options", "10", "--pool", "2", "4", "--population", "4", "--runs", "50",
+        capsys,
+        "--options",
+        "10",
+        "--pool",
+        "2",
+        "4",
+        "--population",
+        "4",
+        "--runs",
+        "50",
         "--exact",
     )
     assert records[0]["population"] == 4 and records[0]["exact_mean"] is None
@@ -60,8 +79,22 @@ def test_exact_mean_is_null_where_population_exceeds_the_pool(
 
 
 def test_same_seed_same_output(capsys: pytest.CaptureFixture[str]) -> None:
-    arguments = ("--options", "10", "--pool", "2", "--runs", "100", "--alpha", "0.2",
-                 "--threshold", "0.9", "--population", "3", "--seed", "5")
+    arguments = (
+        "--options",
+        "10",
+        "--pool",
+        "2",
+        "--runs",
+        "100",
+        "--alpha",
+        "0.2",
+        "--threshold",
+        "0.9",
+        "--population",
+        "3",
+        "--seed",
+        "5",
+    )
     assert run_json(capsys, *arguments) == run_json(capsys, *arguments)
     assert run_json(capsys, *arguments) != run_json(capsys, *arguments[:-1], "6")
 
@@ -78,10 +111,25 @@ def test_table_shows_baseline_and_k_star(capsys: pytest.CaptureFixture[str]) -> 
 @pytest.mark.timeout(60)
 def test_figures_are_written(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     figure1, figure2 = tmp_path / "fig1.png", tmp_path / "fig2.png"
-    code = main([
-        "wellstirred", "--options", "10", "20", "--pool", "1", "2", "3", "--runs", "50",
-        "--json", "--plot", str(figure1), "--plot-opinion", str(figure2),
-    ])
+    code = main(
+        [
+            "wellstirred",
+            "--options",
+            "10",
+            "20",
+            "--pool",
+            "1",
+            "2",
+            "3",
+            "--runs",
+            "50",
+            "--json",
+            "--plot",
+            str(figure1),
+            "--plot-opinion",
+            str(figure2),
+        ]
+    )
     assert code == 0
     captured = capsys.readouterr()
     assert len(json.loads(captured.out)) == 6  # the figures do not disturb stdout
@@ -125,16 +173,31 @@ def test_bad_arguments_exit_2_with_one_line(
 @pytest.mark.timeout(60)
 def test_installed_command(tmp_path: Path) -> None:
     ok = subprocess.run(
-        [*swarm_command(), "wellstirred", "--options", "10", "--pool", "2", "--runs", "20",
-         "--json"],
-        capture_output=True, text=True, timeout=60, check=False,
+        [
+            *swarm_command(),
+            "wellstirred",
+            "--options",
+            "10",
+            "--pool",
+            "2",
+            "--runs",
+            "20",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
     )
     assert ok.returncode == 0, ok.stderr
     assert [record["pool"] for record in json.loads(ok.stdout)] == [2]
     assert ok.stderr == ""  # no progress bar when stderr is not a terminal
     bad = subprocess.run(
         [*swarm_command(), "wellstirred", "--alpha", "0.7"],
-        capture_output=True, text=True, timeout=60, check=False,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
     )
     assert bad.returncode == 2
     assert bad.stdout == ""

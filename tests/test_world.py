@@ -14,7 +14,10 @@ pytestmark = pytest.mark.timeout(120)
 
 def _config(seed: int, robots: int = 6, sites: int = 8, **radio: float) -> WorldConfig:
     return WorldConfig(
-        run="memory", seed=seed, num_sites=sites, num_robots=robots,
+        run="memory",
+        seed=seed,
+        num_sites=sites,
+        num_robots=robots,
         radio=RadioConfig(**radio),
     )
 

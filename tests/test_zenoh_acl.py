@@ -2,7 +2,7 @@
 
 Certificates are made in a temporary directory with the openssl CLI; the router is a
 Python Zenoh session in router mode in a subprocess on a free loopback TLS port, killed
-by pid; every client opens through ``robot_agent.zenoh_session`` with ``--zenoh-config``'s
+by pid; every client opens through ``plumbing.zenoh_session`` with ``--zenoh-config``'s
 code path (multicast scouting off).
 """
 
@@ -24,7 +24,8 @@ import pytest
 import zenoh
 
 from deploy import zenoh_acl
-from robot_agent import protocol, zenoh_session
+from plumbing import zenoh_session
+from robot_agent import protocol
 
 REPO = Path(__file__).resolve().parent.parent
 TEMPLATES = REPO / "deploy" / "zenoh"
@@ -36,7 +37,7 @@ SETTLE = 0.3  # seconds given to a forbidden message to show up after its sentin
 
 ROUTER_SCRIPT = """
 import sys
-from robot_agent import zenoh_session
+from plumbing import zenoh_session
 session = zenoh_session.open_session("router", listen=[sys.argv[2]], config_file=sys.argv[1])
 print("ready", flush=True)
 sys.stdin.read()  # serve until the test closes stdin (or kills this process)
@@ -74,10 +75,26 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
         pytest.skip("needs the openssl command")
     base = tmp_path_factory.mktemp("zenoh-acl")
     out, ca = base / "out", base / "ca"
-    assert zenoh_acl.main([
-        "--robots", str(ROBOTS), "--run-id", RUN, "--ca", str(ca / "ca.pem"),
-        "--ca-key", str(ca / "ca.key"), "--new-ca", "--days", "2", "--out", str(out),
-    ]) == 0
+    assert (
+        zenoh_acl.main(
+            [
+                "--robots",
+                str(ROBOTS),
+                "--run-id",
+                RUN,
+                "--ca",
+                str(ca / "ca.pem"),
+                "--ca-key",
+                str(ca / "ca.key"),
+                "--new-ca",
+                "--days",
+                "2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     rogue = base / "rogue"
     zenoh_acl.create_ca(rogue / "ca.pem", rogue / "ca.key", days=2)
     zenoh_acl.issue_certificate(rogue / "ca.pem", rogue / "ca.key", "robot-1", rogue, days=2)
@@ -85,7 +102,10 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
     endpoint = f"tls/127.0.0.1:{free_loopback_port()}"
     router = subprocess.Popen(
         [sys.executable, "-c", ROUTER_SCRIPT, str(out / "routers" / "router.json5"), endpoint],
-        cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        cwd=REPO,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
     )
     try:
         assert router.stdout is not None
@@ -208,9 +228,15 @@ def test_a_robot_cannot_speak_for_another_robot_or_the_world(swarm: Swarm) -> No
         put_until_heard(robot, KEYS.status(1), heard)
 
         forbidden = [
-            KEYS.act(2), KEYS.status(2), KEYS.radio_tx(2),  # another robot's
-            KEYS.sense(1), KEYS.camera(1), KEYS.radio_rx(1), KEYS.world_clock,  # the world's
-            KEYS.beacon_ack("nest"), KEYS.log("robot-1"),
+            KEYS.act(2),
+            KEYS.status(2),
+            KEYS.radio_tx(2),  # another robot's
+            KEYS.sense(1),
+            KEYS.camera(1),
+            KEYS.radio_rx(1),
+            KEYS.world_clock,  # the world's
+            KEYS.beacon_ack("nest"),
+            KEYS.log("robot-1"),
         ]
         for key in forbidden:  # session puts: they reach the router whoever subscribes
             robot.put(key, b"spoofed")
@@ -255,8 +281,9 @@ def test_the_world_senses_for_each_robot_and_only_that_robot_hears_it(swarm: Swa
         robot_1.declare_subscriber(KEYS.sense(1), robot_1_hears)
         robot_2.declare_subscriber(KEYS.sense(1), robot_2_hears)  # not its own: refused
         robot_2.declare_subscriber(KEYS.sense(2), robot_2_hears)
-        senses = {robot: zenoh_session.reliable_publisher(world, KEYS.sense(robot))
-                  for robot in (1, 2)}
+        senses = {
+            robot: zenoh_session.reliable_publisher(world, KEYS.sense(robot)) for robot in (1, 2)
+        }
         put_until_heard(senses[1], KEYS.sense(1), robot_1_hears)
         put_until_heard(senses[2], KEYS.sense(2), robot_2_hears)
         senses[1].put(b"sense 1")
@@ -295,8 +322,9 @@ def test_the_templates_are_what_the_generator_writes(
 
 
 def test_every_policy_names_existing_rules_and_one_subject_per_identity() -> None:
-    plan = zenoh_acl.SwarmPlan(KEYS, robots=(0, 1, 2, 7), beacons=("nest", "b2"),
-                               routers=("host-a", "10.0.0.2"))
+    plan = zenoh_acl.SwarmPlan(
+        KEYS, robots=(0, 1, 2, 7), beacons=("nest", "b2"), routers=("host-a", "10.0.0.2")
+    )
     acl = zenoh_acl.access_control(plan)
     rule_ids = [rule["id"] for rule in acl["rules"]]
     assert len(rule_ids) == len(set(rule_ids))
@@ -309,13 +337,16 @@ def test_every_policy_names_existing_rules_and_one_subject_per_identity() -> Non
     assert all(rule["permission"] == "allow" for rule in acl["rules"])
 
 
-@pytest.mark.parametrize(("beacons", "routers", "reason"), [
-    (("3",), ("router",), "number"),  # would be robot 3's radio name
-    (("a/b",), ("router",), "invalid beacon name"),
-    (("nest",), ("bad name",), "not a host name"),
-    (("nest",), ("world",), "also a client identity"),  # would give the world every right
-    (("nest", "nest"), ("router",), "once"),
-])
+@pytest.mark.parametrize(
+    ("beacons", "routers", "reason"),
+    [
+        (("3",), ("router",), "number"),  # would be robot 3's radio name
+        (("a/b",), ("router",), "invalid beacon name"),
+        (("nest",), ("bad name",), "not a host name"),
+        (("nest",), ("world",), "also a client identity"),  # would give the world every right
+        (("nest", "nest"), ("router",), "once"),
+    ],
+)
 def test_a_plan_refuses_names_that_would_clash_or_break_keys(
     beacons: tuple[str, ...], routers: tuple[str, ...], reason: str
 ) -> None:

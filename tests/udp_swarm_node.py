@@ -38,7 +38,8 @@ from dataclasses import asdict
 from fakes import ROBOT_RADIUS, FakeBody, FakeWorld, make_world_info, shuffled_qualities
 
 from nest_beacon.beacon import Beacon, BeaconConfig
-from robot_agent import cliargs, ports, protocol
+from plumbing import cliargs
+from robot_agent import ports, protocol
 from robot_agent.controller import Controller, ControllerConfig
 from robot_agent.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 
@@ -200,15 +201,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--port", type=cliargs.int_range(1, 65535), default=DEFAULT_PORT)
     parser.add_argument("--interface", default=None)
     parser.add_argument("--seed", type=cliargs.seed, default=0)
-    parser.add_argument("--speed", type=cliargs.positive_float, default=20.0,
-                        help="sim seconds per wall second")
-    parser.add_argument("--max-sim", type=cliargs.positive_float, default=300.0,
-                        help="sim seconds before giving up")
+    parser.add_argument(
+        "--speed", type=cliargs.positive_float, default=20.0, help="sim seconds per wall second"
+    )
+    parser.add_argument(
+        "--max-sim", type=cliargs.positive_float, default=300.0, help="sim seconds before giving up"
+    )
     roles = parser.add_subparsers(dest="role", required=True)
     robot = roles.add_parser("robot")
     robot.add_argument("--id", type=cliargs.int_range(0, protocol.MAX_ROBOTS - 1), required=True)
-    robot.add_argument("--robots", type=cliargs.positive_int, required=True,
-                       help="swarm size (for the start ring)")
+    robot.add_argument(
+        "--robots", type=cliargs.positive_int, required=True, help="swarm size (for the start ring)"
+    )
     robot.add_argument("--sites", type=cliargs.int_range(2, 100), default=4)
     robot.add_argument("--dwell", type=cliargs.positive_float, default=3.0)
     beacon = roles.add_parser("beacon")

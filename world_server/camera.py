@@ -47,7 +47,10 @@ SITE_LABEL0 = 4
 
 # Fast zlib level with run-length matching: frames are flat colour runs (about 160 bytes).
 _PNG_PARAMS = [
-    cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE
+    cv2.IMWRITE_PNG_COMPRESSION,
+    1,
+    cv2.IMWRITE_PNG_STRATEGY,
+    cv2.IMWRITE_PNG_STRATEGY_RLE,
 ]
 
 

@@ -39,8 +39,13 @@ ARENA_FRAME = "arena"  # the fixed frame: metres, origin at the nest, z up
 # foxglove.LogLevel
 LOG_UNKNOWN, LOG_DEBUG, LOG_INFO, LOG_WARNING, LOG_ERROR, LOG_FATAL = range(6)
 _LEVEL_NAMES = {
-    "DEBUG": LOG_DEBUG, "INFO": LOG_INFO, "WARNING": LOG_WARNING, "WARN": LOG_WARNING,
-    "ERROR": LOG_ERROR, "CRITICAL": LOG_ERROR, "FATAL": LOG_FATAL,
+    "DEBUG": LOG_DEBUG,
+    "INFO": LOG_INFO,
+    "WARNING": LOG_WARNING,
+    "WARN": LOG_WARNING,
+    "ERROR": LOG_ERROR,
+    "CRITICAL": LOG_ERROR,
+    "FATAL": LOG_FATAL,
 }
 # foxglove.LineType
 LINE_STRIP, LINE_LOOP, LINE_LIST = 0, 1, 2
@@ -187,8 +192,15 @@ class RobotView:
     poolings: int = 0
 
 
-def _entity(ns: int, frame_id: str, entity_id: str, *, frame_locked: bool = False,
-            metadata: Mapping[str, str] | None = None, **primitives: list[Any]) -> dict[str, Any]:
+def _entity(
+    ns: int,
+    frame_id: str,
+    entity_id: str,
+    *,
+    frame_locked: bool = False,
+    metadata: Mapping[str, str] | None = None,
+    **primitives: list[Any],
+) -> dict[str, Any]:
     """A ``foxglove.SceneEntity`` with every primitive list present (empty unless given)."""
     entity: dict[str, Any] = {
         "timestamp": timestamp(ns),
@@ -198,8 +210,16 @@ def _entity(ns: int, frame_id: str, entity_id: str, *, frame_locked: bool = Fals
         "frame_locked": frame_locked,
         "metadata": [{"key": key, "value": value} for key, value in (metadata or {}).items()],
     }
-    for kind in ("arrows", "cubes", "spheres", "cylinders", "lines", "triangles", "texts",
-                 "models"):
+    for kind in (
+        "arrows",
+        "cubes",
+        "spheres",
+        "cylinders",
+        "lines",
+        "triangles",
+        "texts",
+        "models",
+    ):
         entity[kind] = primitives.pop(kind, [])
     if primitives:
         raise TypeError(f"unknown primitive lists: {sorted(primitives)}")
@@ -232,8 +252,7 @@ def _text(
     }
 
 
-def _lines(line_type: int, points: Sequence[Point], thickness: float,
-           rgba: Rgba) -> dict[str, Any]:
+def _lines(line_type: int, points: Sequence[Point], thickness: float, rgba: Rgba) -> dict[str, Any]:
     return {
         "type": line_type,
         "pose": pose(0.0, 0.0),
@@ -264,19 +283,26 @@ class ArenaScene:
         panels, labels = [], []
         for site in layout.sites:
             width = 2 * radius * math.sin(site.half_width)
-            panels.append({
-                "pose": pose(site.x, site.y, WALL_HEIGHT / 2, site.angle),
-                "size": vector(0.01, width, WALL_HEIGHT),
-                "color": colour(site_colour(site.quality)),
-            })
+            panels.append(
+                {
+                    "pose": pose(site.x, site.y, WALL_HEIGHT / 2, site.angle),
+                    "size": vector(0.01, width, WALL_HEIGHT),
+                    "color": colour(site_colour(site.quality)),
+                }
+            )
             inside = radius - 0.12
-            labels.append(_text(
-                (inside * math.cos(site.angle), inside * math.sin(site.angle), 0.12),
-                f"site {site.id}\nrho = {site.quality:.2f}", 0.04,
-            ))
+            labels.append(
+                _text(
+                    (inside * math.cos(site.angle), inside * math.sin(site.angle), 0.12),
+                    f"site {site.id}\nrho = {site.quality:.2f}",
+                    0.04,
+                )
+            )
         labels.append(_text((0.0, 0.0, 0.1), "nest", 0.04))
         return _entity(
-            ns, ARENA_FRAME, "arena",
+            ns,
+            ARENA_FRAME,
+            "arena",
             metadata={"best_site": str(layout.best_site), "sites": str(len(layout.sites))},
             cylinders=[
                 _cylinder((0.0, 0.0, -0.002), 2 * radius, 0.002, (0.92, 0.92, 0.9, 1.0)),
@@ -299,29 +325,35 @@ class ArenaScene:
         height = 0.05
         decided = "-" if view.decided_site is None else str(view.decided_site)
         return _entity(
-            ns, robot_frame(robot), f"robot-{robot}", frame_locked=True,
+            ns,
+            robot_frame(robot),
+            f"robot-{robot}",
+            frame_locked=True,
             metadata={
-                "phase": view.phase or "unknown", "trips": str(view.trips),
-                "poolings": str(view.poolings), "decided_site": decided,
+                "phase": view.phase or "unknown",
+                "trips": str(view.trips),
+                "poolings": str(view.poolings),
+                "decided_site": decided,
             },
             cylinders=[
-                _cylinder((0.0, 0.0, height / 2), 2 * self.robot_radius, height,
-                          self.robot_colour(view)),
+                _cylinder(
+                    (0.0, 0.0, height / 2), 2 * self.robot_radius, height, self.robot_colour(view)
+                ),
             ],
-            arrows=[{
-                "pose": pose(0.0, 0.0, height + 0.002),
-                "shaft_length": self.robot_radius,
-                "shaft_diameter": 0.008,
-                "head_length": 0.02,
-                "head_diameter": 0.02,
-                "color": colour((0.05, 0.05, 0.05, 1.0)),
-            }],
+            arrows=[
+                {
+                    "pose": pose(0.0, 0.0, height + 0.002),
+                    "shaft_length": self.robot_radius,
+                    "shaft_diameter": 0.008,
+                    "head_length": 0.02,
+                    "head_diameter": 0.02,
+                    "color": colour((0.05, 0.05, 0.05, 1.0)),
+                }
+            ],
             texts=[_text((0.0, 0.0, height + 0.04), str(robot), 0.035)],
         )
 
-    def links(
-        self, ns: int, segments: Iterable[Segment]
-    ) -> dict[str, Any]:
+    def links(self, ns: int, segments: Iterable[Segment]) -> dict[str, Any]:
         """Radio links of recent poolings, as line segments in the arena frame."""
         points: list[Point] = []
         for (x1, y1), (x2, y2) in segments:

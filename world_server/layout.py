@@ -47,7 +47,10 @@ class Layout:
         return self.sites[site_id]
 
     def sensing_pose(
-        self, site_id: int, distance: float = 0.15, sideways: float = 0.0,
+        self,
+        site_id: int,
+        distance: float = 0.15,
+        sideways: float = 0.0,
         heading_error: float = 0.0,
     ) -> tuple[float, float, float]:
         """A robot's pose for looking at a site: ``distance`` from the wall on the site's

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from robot_agent import cliargs
+from plumbing import cliargs
 from world_server.camera import CameraNoise
 from world_server.radio import RadioConfig
 from world_server.world import DEFAULT_CAMERA, WorldConfig
@@ -58,53 +58,120 @@ def add_world_options(parser: argparse.ArgumentParser) -> list[argparse.Action]:
     clock = parser.add_argument_group("clock")
     add = clock.add_argument
     actions += [
-        add("--clock", choices=["lockstep", "realtime"], default="lockstep",
+        add(
+            "--clock",
+            choices=["lockstep", "realtime"],
+            default="lockstep",
             help="lockstep: deterministic, waits for every controller each tick, as fast as "
-            "the processes go; realtime: follows the wall clock (default: lockstep)"),
-        add("--speed", type=cliargs.float_range(0.01, 1000.0), default=1.0,
-            help="real-time speed factor, realtime clock only (default: 1)"),
-        add("--stall-timeout", type=cliargs.positive_float, default=5.0,
+            "the processes go; realtime: follows the wall clock (default: lockstep)",
+        ),
+        add(
+            "--speed",
+            type=cliargs.float_range(0.01, 1000.0),
+            default=1.0,
+            help="real-time speed factor, realtime clock only (default: 1)",
+        ),
+        add(
+            "--stall-timeout",
+            type=cliargs.positive_float,
+            default=5.0,
             help="lockstep: wall seconds to wait for a silent controller before closing the "
             "tick without it; after 3 such ticks it is not waited for until it answers "
-            "again (default: 5)"),
-        add("--dt", type=cliargs.float_range(0.001, 1.0), default=0.1,
-            help="control tick in sim seconds (default: 0.1)"),
-        add("--state-every", type=cliargs.positive_int, default=10,
-            help="publish world/state every N ticks (default: 10)"),
+            "again (default: 5)",
+        ),
+        add(
+            "--dt",
+            type=cliargs.float_range(0.001, 1.0),
+            default=0.1,
+            help="control tick in sim seconds (default: 0.1)",
+        ),
+        add(
+            "--state-every",
+            type=cliargs.positive_int,
+            default=10,
+            help="publish world/state every N ticks (default: 10)",
+        ),
     ]
     radio = parser.add_argument_group("radio medium (all faults off by default)")
     add = radio.add_argument
     actions += [
-        add("--radio-range", type=cliargs.positive_float, default=0.5,
-            help="robot radio range in metres (default: 0.5)"),
-        add("--beacon-range", type=cliargs.positive_float, default=None,
-            help="beacon range in metres (default: the nest radius)"),
-        add("--drop", type=cliargs.probability, default=0.0,
-            help="iid loss probability per message and receiver (default: 0)"),
-        add("--burst-loss", type=burst_loss, default=None, metavar="ENTER:EXIT[:LG:LB]",
+        add(
+            "--radio-range",
+            type=cliargs.positive_float,
+            default=0.5,
+            help="robot radio range in metres (default: 0.5)",
+        ),
+        add(
+            "--beacon-range",
+            type=cliargs.positive_float,
+            default=None,
+            help="beacon range in metres (default: the nest radius)",
+        ),
+        add(
+            "--drop",
+            type=cliargs.probability,
+            default=0.0,
+            help="iid loss probability per message and receiver (default: 0)",
+        ),
+        add(
+            "--burst-loss",
+            type=burst_loss,
+            default=None,
+            metavar="ENTER:EXIT[:LG:LB]",
             help="Gilbert-Elliott burst loss per link: P(good->bad), P(bad->good), and "
-            "loss probability in the good and bad states (default loss 0 and 1)"),
-        add("--latency", type=cliargs.non_negative_int, default=0, metavar="TICKS",
-            help="extra delivery latency in ticks (default: 0)"),
-        add("--jitter", type=cliargs.non_negative_int, default=0, metavar="TICKS",
-            help="a further uniform 0..TICKS delay per copy; copies overtake (default: 0)"),
-        add("--duplicate", type=cliargs.probability, default=0.0,
-            help="probability that a delivered copy arrives twice (default: 0)"),
-        add("--reorder", action="store_true",
-            help="shuffle each tick's deliveries (seeded) instead of sorting them"),
-        add("--range-loss", type=range_loss, default=None, metavar="START[:EXPONENT]",
+            "loss probability in the good and bad states (default loss 0 and 1)",
+        ),
+        add(
+            "--latency",
+            type=cliargs.non_negative_int,
+            default=0,
+            metavar="TICKS",
+            help="extra delivery latency in ticks (default: 0)",
+        ),
+        add(
+            "--jitter",
+            type=cliargs.non_negative_int,
+            default=0,
+            metavar="TICKS",
+            help="a further uniform 0..TICKS delay per copy; copies overtake (default: 0)",
+        ),
+        add(
+            "--duplicate",
+            type=cliargs.probability,
+            default=0.0,
+            help="probability that a delivered copy arrives twice (default: 0)",
+        ),
+        add(
+            "--reorder",
+            action="store_true",
+            help="shuffle each tick's deliveries (seeded) instead of sorting them",
+        ),
+        add(
+            "--range-loss",
+            type=range_loss,
+            default=None,
+            metavar="START[:EXPONENT]",
             help="loss rising with distance: 0 up to START x range, 1 at the range's edge, "
-            "((d/range - START)/(1 - START))^EXPONENT between (default: off)"),
+            "((d/range - START)/(1 - START))^EXPONENT between (default: off)",
+        ),
     ]
     camera = parser.add_argument_group("camera")
     add = camera.add_argument
     actions += [
-        add("--camera-noise", type=cliargs.float_range(0.0, 255.0), default=0.0,
-            metavar="SIGMA", help="Gaussian pixel noise, std-dev on the 0..255 scale "
-            "(default: 0)"),
-        add("--lighting", type=cliargs.float_range(0.0, 1.0, high_open=True), default=0.0,
+        add(
+            "--camera-noise",
+            type=cliargs.float_range(0.0, 255.0),
+            default=0.0,
+            metavar="SIGMA",
+            help="Gaussian pixel noise, std-dev on the 0..255 scale (default: 0)",
+        ),
+        add(
+            "--lighting",
+            type=cliargs.float_range(0.0, 1.0, high_open=True),
+            default=0.0,
             help="per-site lighting variation amplitude in [0, 1): biases each site's "
-            "colour for the whole run (default: 0)"),
+            "colour for the whole run (default: 0)",
+        ),
     ]
     return actions
 
@@ -132,8 +199,13 @@ def world_config(
         if exponent:
             radio["range_loss_exponent"] = float(exponent)
     return WorldConfig(
-        run=run, seed=seed, num_sites=sites, num_robots=robots, dt=args.dt,
-        clock=args.clock, radio=RadioConfig(**radio),  # type: ignore[arg-type]
+        run=run,
+        seed=seed,
+        num_sites=sites,
+        num_robots=robots,
+        dt=args.dt,
+        clock=args.clock,
+        radio=RadioConfig(**radio),  # type: ignore[arg-type]
         beacon_range=args.beacon_range,
         camera=DEFAULT_CAMERA,
         camera_noise=CameraNoise(pixel_sigma=args.camera_noise, lighting=args.lighting),

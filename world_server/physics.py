@@ -132,8 +132,10 @@ class Physics:
         # Vertices sit far enough out that each chord's inner face touches the circle.
         vertex_radius = (self.arena_radius + WALL_THICKNESS) / math.cos(math.pi / segments)
         corners = [
-            (vertex_radius * math.cos(2 * math.pi * k / segments),
-             vertex_radius * math.sin(2 * math.pi * k / segments))
+            (
+                vertex_radius * math.cos(2 * math.pi * k / segments),
+                vertex_radius * math.sin(2 * math.pi * k / segments),
+            )
             for k in range(segments)
         ]
         wall = []
@@ -199,8 +201,9 @@ class Physics:
         if self._poses is None:
             state = self._state
             theta = np.arctan2(np.sin(state[:, 2]), np.cos(state[:, 2]))
-            self._poses = list(zip(state[:, 0].tolist(), state[:, 1].tolist(), theta.tolist(),
-                                   strict=True))
+            self._poses = list(
+                zip(state[:, 0].tolist(), state[:, 1].tolist(), theta.tolist(), strict=True)
+            )
         return self._poses
 
     def wheels(self, robot_id: int) -> tuple[float, float]:
@@ -310,9 +313,9 @@ class Physics:
             offset = centres[others] - centres[owners]  # (pairs, 2)
             along = offset[:, :1] * ray_x[owners] + offset[:, 1:2] * ray_y[owners]
             # Ray meets the other disc where s^2 - 2 b s + |c|^2 - r^2 = 0.
-            discriminant = along * along - (np.einsum("ij,ij->i", offset, offset) - radius**2)[
-                :, None
-            ]
+            discriminant = (
+                along * along - (np.einsum("ij,ij->i", offset, offset) - radius**2)[:, None]
+            )
             root = np.sqrt(np.maximum(discriminant, 0.0))
             near = along - root
             far = along + root

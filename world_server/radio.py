@@ -111,8 +111,15 @@ class RadioConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive distance, got {value!r}")
-        for name in ("drop", "duplicate", "burst_enter", "burst_exit", "burst_loss_good",
-                     "burst_loss_bad", "range_loss_start"):
+        for name in (
+            "drop",
+            "duplicate",
+            "burst_enter",
+            "burst_exit",
+            "burst_loss_good",
+            "burst_loss_bad",
+            "range_loss_start",
+        ):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:  # also refuses NaN
                 raise ValueError(f"{name} must be a probability in [0, 1], got {value!r}")
@@ -203,7 +210,9 @@ class RadioMedium:
     def counters(self) -> protocol.RadioCounters:
         """sent: messages; delivered and dropped: copies; rejected: invalid tx messages."""
         return protocol.RadioCounters(
-            sent=self.sent, delivered=self.delivered, dropped=self.dropped,
+            sent=self.sent,
+            delivered=self.delivered,
+            dropped=self.dropped,
             rejected=self.rejected,
         )
 
@@ -251,8 +260,7 @@ class RadioMedium:
         nearby, distances = index.within(x, y, reach)
         sender_key = sender_order(sender)
         base_due = tick + 1 + config.latency
-        for position_in_order, distance in zip(nearby.tolist(), distances.tolist(),
-                                               strict=True):
+        for position_in_order, distance in zip(nearby.tolist(), distances.tolist(), strict=True):
             receiver = index.names[position_in_order]
             if receiver == sender:
                 continue

@@ -49,8 +49,9 @@ from typing import IO, Any, NamedTuple
 import msgspec
 from mcap.writer import CompressionType, Writer
 
-from robot_agent import cliargs, protocol
-from robot_agent.lifecycle import die_with_launcher
+from plumbing import cliargs
+from plumbing.lifecycle import die_with_launcher
+from robot_agent import protocol
 from world_server import foxglove
 from world_server.layout import Layout, make_layout
 
@@ -176,15 +177,25 @@ def versions() -> dict[str, str]:
         "python": platform.python_version(),
         "platform": platform.platform(),
     }
-    for package in ("bestofn-swarm", "eclipse-zenoh", "mcap", "msgspec", "numpy", "pymunk",
-                    "opencv-python-headless"):
+    for package in (
+        "bestofn-swarm",
+        "eclipse-zenoh",
+        "mcap",
+        "msgspec",
+        "numpy",
+        "pymunk",
+        "opencv-python-headless",
+    ):
         with contextlib.suppress(importlib.metadata.PackageNotFoundError):
             found[package] = importlib.metadata.version(package)
     source = Path(__file__).resolve().parent.parent
     with contextlib.suppress(OSError, subprocess.SubprocessError):
         commit = subprocess.run(
             ["git", "-C", str(source), "describe", "--always", "--dirty", "--abbrev=12"],
-            capture_output=True, text=True, timeout=5, check=True,
+            capture_output=True,
+            text=True,
+            timeout=5,
+            check=True,
         ).stdout.strip()
         if commit:
             found["git"] = commit
@@ -197,8 +208,14 @@ def layout_description(layout: Layout) -> dict[str, Any]:
         "nest_radius": layout.nest_radius,
         "best_site": layout.best_site,
         "sites": [
-            {"id": site.id, "x": site.x, "y": site.y, "angle": site.angle,
-             "quality": site.quality, "rank": site.rank}
+            {
+                "id": site.id,
+                "x": site.x,
+                "y": site.y,
+                "angle": site.angle,
+                "quality": site.quality,
+                "rank": site.rank,
+            }
             for site in layout.sites
         ],
     }
@@ -263,11 +280,17 @@ class McapRecorder:
         self._decoders: dict[str, msgspec.json.Decoder[Any]] = {
             name: msgspec.json.Decoder(kind_type)
             for name, kind_type in (
-                ("clock", protocol.Clock), ("state", protocol.WorldState),
-                ("sense", protocol.Sense), ("act", protocol.Act), ("ack", protocol.Ack),
-                ("status", protocol.Status), ("log", protocol.LogLine),
-                ("camera meta", protocol.CameraMeta), ("radio_tx meta", protocol.RadioTxMeta),
-                ("radio_rx meta", protocol.RadioRxMeta), ("radio payload", protocol.RadioPayload),
+                ("clock", protocol.Clock),
+                ("state", protocol.WorldState),
+                ("sense", protocol.Sense),
+                ("act", protocol.Act),
+                ("ack", protocol.Ack),
+                ("status", protocol.Status),
+                ("log", protocol.LogLine),
+                ("camera meta", protocol.CameraMeta),
+                ("radio_tx meta", protocol.RadioTxMeta),
+                ("radio_rx meta", protocol.RadioRxMeta),
+                ("radio payload", protocol.RadioPayload),
             )
         }
         self._encoder = msgspec.json.Encoder()
@@ -328,8 +351,9 @@ class McapRecorder:
         channel.sequence += 1
         self.counts[channel.kind] = self.counts.get(channel.kind, 0) + 1
 
-    def _write_derived(self, leaf: str, schema: str, log_ns: int, message: Any,
-                       wall_ns: int) -> None:
+    def _write_derived(
+        self, leaf: str, schema: str, log_ns: int, message: Any, wall_ns: int
+    ) -> None:
         channel = self._channel(f"{self.keys.prefix}/foxglove/{leaf}", schema)
         self._write(channel, log_ns, self._encoder.encode(message), wall_ns)
 
@@ -368,7 +392,8 @@ class McapRecorder:
             payload=base64.b64encode(sample.payload).decode("ascii"),
             attachment=(
                 base64.b64encode(sample.attachment).decode("ascii")
-                if sample.attachment is not None else None
+                if sample.attachment is not None
+                else None
             ),
         )
         channel = self._channel(f"{self.keys.prefix}/recorder/rejected", "rejected")
@@ -441,9 +466,7 @@ class McapRecorder:
         robot = channel.robot
         assert robot is not None
         previous = self.views.get(robot, foxglove.RobotView())
-        view = foxglove.RobotView(
-            status.phase, status.decided_site, status.trips, status.poolings
-        )
+        view = foxglove.RobotView(status.phase, status.decided_site, status.trips, status.poolings)
         self.views[robot] = view
         if status.phase == "at_nest" and previous.phase != "at_nest":
             self._heard[robot] = set()
@@ -538,11 +561,13 @@ class McapRecorder:
         self._flush_poses(time.time_ns())
         record = self._description()
         record["finished_by"] = finished_by
-        record["recorder"] = json.dumps({
-            "messages": dict(sorted(self.counts.items())),
-            "rejected": self.rejected,
-            "channels": len(self._channels),
-        })
+        record["recorder"] = json.dumps(
+            {
+                "messages": dict(sorted(self.counts.items())),
+                "rejected": self.rejected,
+                "channels": len(self._channels),
+            }
+        )
         if summary is not None:
             record["summary"] = summary if isinstance(summary, str) else json.dumps(summary)
         self._writer.add_metadata(RUN_METADATA, record)
@@ -570,19 +595,39 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--out", required=True, metavar="PATH", help="the MCAP file to write")
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
-    parser.add_argument("--robots", type=cliargs.int_range(1, protocol.MAX_ROBOTS), default=10,
-                        help="swarm size of the run, for its layout (default: 10)")
-    parser.add_argument("--sites", type=cliargs.int_range(2, protocol.MAX_OPTIONS), default=10,
-                        help="number of sites of the run (default: 10)")
-    parser.add_argument("--config-json", default="{}", metavar="JSON",
-                        help="the run's full configuration, kept in the metadata record")
-    parser.add_argument("--info-timeout", type=cliargs.positive_float, default=10.0,
-                        help="wall seconds to wait for world/info (default: 10)")
-    parser.add_argument("--niceness", type=cliargs.int_range(0, 19), default=DEFAULT_NICENESS,
-                        help="how much to lower this process's CPU priority, 0 to 19: "
-                        "recording is off the barrier's critical path, so on a busy "
-                        f"machine it yields to the swarm and catches up (default: "
-                        f"{DEFAULT_NICENESS})")
+    parser.add_argument(
+        "--robots",
+        type=cliargs.int_range(1, protocol.MAX_ROBOTS),
+        default=10,
+        help="swarm size of the run, for its layout (default: 10)",
+    )
+    parser.add_argument(
+        "--sites",
+        type=cliargs.int_range(2, protocol.MAX_OPTIONS),
+        default=10,
+        help="number of sites of the run (default: 10)",
+    )
+    parser.add_argument(
+        "--config-json",
+        default="{}",
+        metavar="JSON",
+        help="the run's full configuration, kept in the metadata record",
+    )
+    parser.add_argument(
+        "--info-timeout",
+        type=cliargs.positive_float,
+        default=10.0,
+        help="wall seconds to wait for world/info (default: 10)",
+    )
+    parser.add_argument(
+        "--niceness",
+        type=cliargs.int_range(0, 19),
+        default=DEFAULT_NICENESS,
+        help="how much to lower this process's CPU priority, 0 to 19: "
+        "recording is off the barrier's critical path, so on a busy "
+        f"machine it yields to the swarm and catches up (default: "
+        f"{DEFAULT_NICENESS})",
+    )
     cliargs.add_zenoh_options(parser)
     cliargs.add_log_level(parser)
     return parser
@@ -598,7 +643,7 @@ def _lower_priority(niceness: int) -> None:
 
 def _world_info(session: Any, keys: protocol.Keys, timeout: float) -> protocol.WorldInfo | None:
     """The world's info if a world server answers in time (it gives dt and robot size)."""
-    from robot_agent.node import fetch_world_info
+    from plumbing.world_info import fetch_world_info
 
     try:
         return fetch_world_info(session, keys, timeout)
@@ -607,8 +652,12 @@ def _world_info(session: Any, keys: protocol.Keys, timeout: float) -> protocol.W
         return None
 
 
-def _write_loop(recorder: McapRecorder, inbox: queue.SimpleQueue[Any], keys: protocol.Keys,
-                done: threading.Event) -> None:
+def _write_loop(
+    recorder: McapRecorder,
+    inbox: queue.SimpleQueue[Any],
+    keys: protocol.Keys,
+    done: threading.Event,
+) -> None:
     """The writer thread: record samples in arrival order until a finish query or a stop."""
     try:
         while True:
@@ -628,8 +677,9 @@ def _write_loop(recorder: McapRecorder, inbox: queue.SimpleQueue[Any], keys: pro
         done.set()
 
 
-def _drain(recorder: McapRecorder, inbox: queue.SimpleQueue[Any], quiet: float,
-           limit: float) -> None:
+def _drain(
+    recorder: McapRecorder, inbox: queue.SimpleQueue[Any], quiet: float, limit: float
+) -> None:
     """Record what still arrives until the inbox stays empty for ``quiet`` seconds.
 
     Zenoh keeps order per publisher, not between a query and other publishers' samples:
@@ -674,7 +724,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _lower_priority(args.niceness)
     import zenoh
 
-    from robot_agent.zenoh_session import open_from_args
+    from plumbing.zenoh_session import open_from_args
 
     keys = protocol.Keys(args.run_id, args.root)
     out = Path(args.out)
@@ -689,12 +739,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     def on_sample(sample: zenoh.Sample) -> None:
         attachment = sample.attachment
-        inbox.put(Sample(
-            str(sample.key_expr),
-            sample.payload.to_bytes(),
-            attachment.to_bytes() if attachment is not None else None,
-            time.time_ns(),
-        ))
+        inbox.put(
+            Sample(
+                str(sample.key_expr),
+                sample.payload.to_bytes(),
+                attachment.to_bytes() if attachment is not None else None,
+                time.time_ns(),
+            )
+        )
 
     try:
         session = open_from_args(args)
@@ -712,7 +764,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         recorder = McapRecorder(stream, keys, run, info)
         done = threading.Event()
         writer = threading.Thread(
-            target=_write_loop, args=(recorder, inbox, keys, done), name="mcap-writer",
+            target=_write_loop,
+            args=(recorder, inbox, keys, done),
+            name="mcap-writer",
             daemon=True,
         )
         writer.start()

@@ -21,14 +21,15 @@ from typing import Any
 import msgspec
 import zenoh
 
-from robot_agent import cliargs, protocol
-from robot_agent.lifecycle import die_with_launcher
-from robot_agent.zenoh_session import (
+from plumbing import cliargs
+from plumbing.lifecycle import die_with_launcher
+from plumbing.zenoh_session import (
     open_from_args,
     reliable_publisher,
     reliable_put,
     session_mode,
 )
+from robot_agent import protocol
 from world_server.clock import Barrier, Pacer
 from world_server.options import add_world_options, world_config
 from world_server.world import Transmission, World, WorldConfig
@@ -206,7 +207,10 @@ class WorldServer:
             if remaining <= 0 and robots > 0:
                 log.warning(
                     "start timeout: starting with %d of %d robot(s), %d of %d beacon(s)",
-                    robots, self.expect_robots, beacons, self.expect_beacons,
+                    robots,
+                    self.expect_robots,
+                    beacons,
+                    self.expect_beacons,
                 )
                 return True
             try:
@@ -321,8 +325,11 @@ class WorldServer:
         else (a replacement container) the smallest whose robot is not running."""
         live = set(self.world.live_robots())
         free = next(
-            (robot for robot in range(protocol.MAX_ROBOTS)
-             if robot not in self.assigned and robot not in live),
+            (
+                robot
+                for robot in range(protocol.MAX_ROBOTS)
+                if robot not in self.assigned and robot not in live
+            ),
             None,
         )
         if free is None or free >= self.expect_robots:
@@ -358,12 +365,16 @@ class WorldServer:
             if self.counters.missed[who] == SUSPEND_AFTER:
                 log.warning(
                     "%s missed %d ticks in a row: not waiting for it until it answers again",
-                    who, SUSPEND_AFTER,
+                    who,
+                    SUSPEND_AFTER,
                 )
         if self.counters.stalls <= 5 or self.counters.stalls % 100 == 0:
             log.warning(
                 "tick %d stalled for %.1fs waiting for %s (stall #%d)",
-                self.world.tick, self.stall_timeout, ", ".join(missing[:10]), self.counters.stalls,
+                self.world.tick,
+                self.stall_timeout,
+                ", ".join(missing[:10]),
+                self.counters.stalls,
             )
 
     def _close_tick(self) -> None:
@@ -391,13 +402,14 @@ class WorldServer:
                 reliable_put(self.session, key, delivery.payload, protocol.encode(meta))
         self._open_tick(result.tick, rx_counts, result.frames)
 
-    def _open_tick(
-        self, tick: int, rx_counts: dict[str, int], frames: dict[int, bytes]
-    ) -> None:
+    def _open_tick(self, tick: int, rx_counts: dict[str, int], frames: dict[int, bytes]) -> None:
         spec = self.world.config.camera
         for robot, frame in frames.items():
             meta = protocol.CameraMeta(
-                v=protocol.VERSION, tick=tick, width=spec.width, height=spec.height,
+                v=protocol.VERSION,
+                tick=tick,
+                width=spec.width,
+                height=spec.height,
                 encoding="png",
             )
             reliable_put(self.session, self.keys.camera(robot), frame, protocol.encode(meta))
@@ -440,16 +452,32 @@ def build_parser() -> argparse.ArgumentParser:
         "By default it is the Zenoh router of a local run.",
     )
     world = parser.add_argument_group("world")
-    world.add_argument("--sites", type=cliargs.int_range(2, protocol.MAX_OPTIONS), default=10,
-                       help="number of sites n (default: 10)")
-    world.add_argument("--robots", type=cliargs.int_range(1, protocol.MAX_ROBOTS), default=10,
-                       help="expected swarm size: sizes the arena; the run starts when "
-                       "this many robots are live (default: 10)")
-    world.add_argument("--beacons", type=cliargs.non_negative_int, default=1,
-                       help="nest beacons to wait for before starting (default: 1)")
+    world.add_argument(
+        "--sites",
+        type=cliargs.int_range(2, protocol.MAX_OPTIONS),
+        default=10,
+        help="number of sites n (default: 10)",
+    )
+    world.add_argument(
+        "--robots",
+        type=cliargs.int_range(1, protocol.MAX_ROBOTS),
+        default=10,
+        help="expected swarm size: sizes the arena; the run starts when "
+        "this many robots are live (default: 10)",
+    )
+    world.add_argument(
+        "--beacons",
+        type=cliargs.non_negative_int,
+        default=1,
+        help="nest beacons to wait for before starting (default: 1)",
+    )
     world.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
-    world.add_argument("--start-timeout", type=cliargs.positive_float, default=60.0,
-                       help="wall seconds to wait for the expected robots (default: 60)")
+    world.add_argument(
+        "--start-timeout",
+        type=cliargs.positive_float,
+        default=60.0,
+        help="wall seconds to wait for the expected robots (default: 60)",
+    )
     add_world_options(parser)
     cliargs.add_zenoh_options(parser, default_mode="router")
     cliargs.add_log_level(parser)
@@ -457,8 +485,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def config_from_args(args: argparse.Namespace) -> WorldConfig:
-    return world_config(args, run=args.run_id, seed=args.seed, sites=args.sites,
-                        robots=args.robots)
+    return world_config(args, run=args.run_id, seed=args.seed, sites=args.sites, robots=args.robots)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -476,16 +503,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     with session:
         server = WorldServer(
-            session, world, keys,
-            speed=args.speed, stall_timeout=args.stall_timeout,
-            start_timeout=args.start_timeout, expect_robots=args.robots,
-            expect_beacons=args.beacons, state_every=args.state_every,
+            session,
+            world,
+            keys,
+            speed=args.speed,
+            stall_timeout=args.stall_timeout,
+            start_timeout=args.start_timeout,
+            expect_robots=args.robots,
+            expect_beacons=args.beacons,
+            state_every=args.state_every,
         )
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: server.stop())
         log.info(
             "run %s: %d sites, arena radius %.2f m, best site %d, listening on %s",
-            args.run_id, args.sites, world.layout.arena_radius, world.layout.best_site,
+            args.run_id,
+            args.sites,
+            world.layout.arena_radius,
+            world.layout.best_site,
             ", ".join(args.listen) or "(client)",
         )
         thread_result: list[int] = []

@@ -105,26 +105,39 @@ def add_zenoh_options(parser: argparse.ArgumentParser, *, default_mode: str = "c
     """--connect/--listen/--mode/--zenoh-config, --root and --run-id, shared by all processes."""
     group = parser.add_argument_group("Zenoh")
     group.add_argument(
-        "--connect", type=endpoint, action="append", default=[], metavar="ENDPOINT",
+        "--connect",
+        type=endpoint,
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
         help="router endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)",
     )
     group.add_argument(
-        "--listen", type=endpoint, action="append", default=[], metavar="ENDPOINT",
+        "--listen",
+        type=endpoint,
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
         help="endpoint to listen on (repeatable)",
     )
     group.add_argument(
-        "--mode", choices=["client", "peer", "router"], default=None,
+        "--mode",
+        choices=["client", "peer", "router"],
+        default=None,
         help=f"Zenoh session mode (default: the --zenoh-config file's, else {default_mode})",
     )
     group.add_argument(
-        "--zenoh-config", metavar="FILE",
+        "--zenoh-config",
+        metavar="FILE",
         help="a Zenoh JSON5 configuration file (TLS, access control); "
         "--connect/--listen/--mode override it; '{id}' in the name is replaced by the "
         "robot id, so each hosted robot can have its own certificate",
     )
     parser.set_defaults(default_zenoh_mode=default_mode)
     group.add_argument(
-        "--root", type=name, default=protocol.DEFAULT_ROOT,
+        "--root",
+        type=name,
+        default=protocol.DEFAULT_ROOT,
         help=f"key expression root (default: {protocol.DEFAULT_ROOT})",
     )
     group.add_argument(
@@ -159,9 +172,12 @@ def forward_argv(
 
 
 def add_log_level(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--log-level", default="INFO",
-                        choices=["DEBUG", "INFO", "WARNING", "ERROR"],
-                        help="how much to log on stderr (default: INFO)")
+    parser.add_argument(
+        "--log-level",
+        default="INFO",
+        choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+        help="how much to log on stderr (default: INFO)",
+    )
 
 
 def configure_logging(program: str, level: str) -> None:

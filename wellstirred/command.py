@@ -19,9 +19,9 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from deploy.cli import UsageError
-from robot_agent import cliargs
-from robot_agent.wellstirred import (
+from plumbing import cliargs
+from plumbing.cliargs import UsageError
+from wellstirred.model import (
     FIGURE1_OPTIONS,
     FIGURE1_POOLS,
     Cell,
@@ -40,42 +40,64 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     # A one-line usage, so that a bad value gives two short lines rather than a screenful.
     parser.usage = "%(prog)s [options]  (see --help)"
     parser.add_argument(
-        "--options", type=cliargs.int_range(2), nargs="+", default=list(FIGURE1_OPTIONS),
-        metavar="N", help="numbers of options n (default: %(default)s)",
+        "--options",
+        type=cliargs.int_range(2),
+        nargs="+",
+        default=list(FIGURE1_OPTIONS),
+        metavar="N",
+        help="numbers of options n (default: %(default)s)",
     )
     parser.add_argument(
-        "--pool", type=cliargs.positive_int, nargs="+", default=list(FIGURE1_POOLS),
-        metavar="K", help="pool sizes k (default: %(default)s)",
+        "--pool",
+        type=cliargs.positive_int,
+        nargs="+",
+        default=list(FIGURE1_POOLS),
+        metavar="K",
+        help="pool sizes k (default: %(default)s)",
     )
     parser.add_argument(
-        "--runs", type=cliargs.positive_int, default=1000,
+        "--runs",
+        type=cliargs.positive_int,
+        default=1000,
         help="independent runs per (n, k) (default: %(default)s)",
     )
     parser.add_argument(
-        "--steps", type=cliargs.positive_int, default=100,
+        "--steps",
+        type=cliargs.positive_int,
+        default=100,
         help="step limit; a run that fails counts as this (default: %(default)s)",
     )
     parser.add_argument(
-        "--alpha", type=cliargs.alpha, default=0.0,
+        "--alpha",
+        type=cliargs.alpha,
+        default=0.0,
         help="evidence unreliability alpha in [0, 0.5] (default: %(default)s)",
     )
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="(default: %(default)s)")
     parser.add_argument(
-        "--population", type=cliargs.positive_int, default=None, metavar="N",
+        "--population",
+        type=cliargs.positive_int,
+        default=None,
+        metavar="N",
         help="agents, shuffled into pools of k each step (default: the pool size, "
         "one pool as in the paper); must be at least every k",
     )
     parser.add_argument(
-        "--threshold", type=cliargs.threshold, default=1.0,
+        "--threshold",
+        type=cliargs.threshold,
+        default=1.0,
         help="an agent has decided when an option reaches this probability, in (0, 1] "
         "(default: %(default)s, certainty)",
     )
     parser.add_argument(
-        "--exact", action="store_true",
+        "--exact",
+        action="store_true",
         help="add the exact expected time (alpha = 0; defined where population = pool)",
     )
     parser.add_argument(
-        "--method", choices=["auto", "opinions"], default="auto",
+        "--method",
+        choices=["auto", "opinions"],
+        default="auto",
         help="auto: fastest exact way; opinions: simulate every agent's full opinion "
         "(the slow reference) (default: %(default)s)",
     )
@@ -84,7 +106,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--plot", type=Path, metavar="PNG", help="write Figure 1 (box plots) to this file"
     )
     parser.add_argument(
-        "--plot-opinion", type=Path, metavar="PNG",
+        "--plot-opinion",
+        type=Path,
+        metavar="PNG",
         help="write Figure 2 (one agent's opinion, k = 2 and 3, n = first --options) here",
     )
 
@@ -110,9 +134,7 @@ def run(args: argparse.Namespace) -> int:
 def _check(args: argparse.Namespace, pools: Sequence[int]) -> None:
     """Checks that need more than one argument: one line, exit code 2."""
     if args.population is not None and args.population < pools[-1]:
-        raise UsageError(
-            f"--population {args.population} is smaller than --pool {pools[-1]}"
-        )
+        raise UsageError(f"--population {args.population} is smaller than --pool {pools[-1]}")
     if args.exact and args.alpha != 0.0:
         raise UsageError("--exact needs --alpha 0: with alpha > 0 there is no exact chain")
     for flag, path in (("--plot", args.plot), ("--plot-opinion", args.plot_opinion)):
@@ -139,9 +161,17 @@ def _run_sweep(args: argparse.Namespace, options: list[int], pools: list[int]) -
             progress.update(task, advance=1, description=f"well-stirred sweep ({done})")
 
         return sweep(
-            options, pools, runs=args.runs, seed=args.seed, population=args.population,
-            alpha=args.alpha, steps=args.steps, threshold=args.threshold, exact=args.exact,
-            method=args.method, on_cell=advance,
+            options,
+            pools,
+            runs=args.runs,
+            seed=args.seed,
+            population=args.population,
+            alpha=args.alpha,
+            steps=args.steps,
+            threshold=args.threshold,
+            exact=args.exact,
+            method=args.method,
+            on_cell=advance,
         )
 
 
@@ -241,7 +271,11 @@ def _plot_figure2(args: argparse.Namespace, n: int, path: Path) -> None:
     colours = plt.get_cmap("viridis")
     for index, k in enumerate(FIGURE2_POOLS):
         model = Model(
-            n, k, max(k, args.population or k), alpha=args.alpha, steps=args.steps,
+            n,
+            k,
+            max(k, args.population or k),
+            alpha=args.alpha,
+            steps=args.steps,
             threshold=args.threshold,
         )
         trace = opinion_trace(model, cell_rng(args.seed, model))
@@ -249,8 +283,12 @@ def _plot_figure2(args: argparse.Namespace, n: int, path: Path) -> None:
         for option in range(n):
             label = f"option {option + 1}" if n <= 10 or option == 0 else None
             axis.plot(
-                range(len(trace)), trace[:, option], marker=".", color=colours(option / (n - 1)),
-                linewidth=2.5 if option == 0 else 1.0, label=label,
+                range(len(trace)),
+                trace[:, option],
+                marker=".",
+                color=colours(option / (n - 1)),
+                linewidth=2.5 if option == 0 else 1.0,
+                label=label,
             )
         axis.set_title(f"({chr(ord('a') + index)}) k = {k}, n = {n}")
         axis.set_xlabel("time step")

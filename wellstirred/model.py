@@ -213,9 +213,7 @@ def simulate(
         method = "survivors" if model.survivors_exact else "opinions"
     if method == "survivors":
         if not model.survivors_exact:
-            raise ValueError(
-                "the survivors path is exact only for alpha = 0 and population = pool"
-            )
+            raise ValueError("the survivors path is exact only for alpha = 0 and population = pool")
         times, success = _simulate_survivors(model, runs, rng)
     elif method == "opinions":
         times, success = _simulate_opinions(model, runs, rng)
@@ -354,7 +352,7 @@ def survivor_transitions(n: int, k: int) -> np.ndarray:
         h *= ((m - 2) / m) ** draws  # old ranks' probabilities shrink from 1/C(m-1,2) scale
         p_new = (m - 1) / pairs
         added = np.where(later, binomial * p_new ** np.where(later, gap, 0), 0.0)
-        h[1:] += (h[:-1] @ added)
+        h[1:] += h[:-1] @ added
         distinct = h[:, k]
         for d in range(1, min(k, m - 1) + 1):
             transitions[m, m - d] = distinct[d]
@@ -420,9 +418,7 @@ def _simulate_opinions(
     success = np.zeros(runs, dtype=bool)
     for start in range(0, runs, chunk):
         stop = min(runs, start + chunk)
-        times[start:stop], success[start:stop] = _simulate_opinion_chunk(
-            model, stop - start, rng
-        )
+        times[start:stop], success[start:stop] = _simulate_opinion_chunk(model, stop - start, rng)
     return times, success
 
 

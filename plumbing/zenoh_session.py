@@ -38,9 +38,10 @@ def make_config(
         # Machines of a swarm come up in any order: keep trying the router for a while
         # (Zenoh's client default is a single attempt), then fail with a clear error.
         config.insert_json5("connect/timeout_ms", str(CONNECT_TIMEOUT_MS))
-        config.insert_json5("connect/retry", json.dumps(
-            {"period_init_ms": 200, "period_max_ms": 1000, "period_increase_factor": 2}
-        ))
+        config.insert_json5(
+            "connect/retry",
+            json.dumps({"period_init_ms": 200, "period_max_ms": 1000, "period_increase_factor": 2}),
+        )
     if mode == "router":
         # Room for big swarms: every robot is its own session (Zenoh's default is 1000).
         config.insert_json5("transport/unicast/max_sessions", "100000")
