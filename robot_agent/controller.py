@@ -72,6 +72,7 @@ class ControllerConfig:
     park_clearance: float = 0.06  # metres from the wall to the centre of a parking slot
     park_spacing: float = 0.1  # metres between parking slots along the wall
     park_corridor: float = 0.11  # metres either side of each site kept free of parking
+    park_lane: float = 0.2  # metres kept free between parked robots beyond the wall row
 
     def __post_init__(self) -> None:
         decision.validate_alpha(self.alpha)
@@ -111,8 +112,9 @@ class ControllerConfig:
         ):
             if not _finite(value) or value < 0.0:
                 raise ValueError(f"{name} must be zero or positive, got {value!r}")
-        if not _finite(self.park_spacing) or self.park_spacing <= 0.0:
-            raise ValueError(f"park_spacing must be a positive distance, got {self.park_spacing!r}")
+        for name, value in (("park_spacing", self.park_spacing), ("park_lane", self.park_lane)):
+            if not _finite(value) or value <= 0.0:
+                raise ValueError(f"{name} must be a positive distance, got {value!r}")
         if self.wiggle > math.pi / 2:
             raise ValueError(f"wiggle must be at most pi/2 radians, got {self.wiggle!r}")
         if isinstance(self.capture_attempts, bool) or not isinstance(self.capture_attempts, int):
@@ -451,9 +453,11 @@ class Controller:
                 self.robot_id,
                 arena_radius=self.world.arena_radius,
                 inner_radius=self.world.nest.radius + 3 * self.world.robot_radius,
+                robot_radius=self.world.robot_radius,
                 clearance=self.config.park_clearance,
                 spacing=self.config.park_spacing,
                 corridor=self.config.park_corridor,
+                lane=self.config.park_lane,
             )
         goal = self._park_goal
         if self._t - self._leg_start > self.config.travel_timeout:
@@ -604,32 +608,26 @@ def parking_slot(
     *,
     arena_radius: float,
     inner_radius: float,
+    robot_radius: float,
     clearance: float,
     spacing: float,
     corridor: float,
+    lane: float,
 ) -> tuple[float, float]:
     """Robot ``robot_id``'s parking slot for ``site``: the ``robot_id``-th slot nearest the
-    site. Ring j lies ``clearance + j * spacing`` in from the wall with slots ``(j + 1) *
-    spacing`` apart, so a robot can always pass between the parked robots of the rings
-    further in; a corridor of ``corridor`` metres either side of every site stays free."""
-    rings: list[tuple[float, list[float]]] = []
-    ring = 0
-    while arena_radius - clearance - ring * spacing >= inner_radius or not rings:
-        radius = arena_radius - clearance - ring * spacing
-        step = (ring + 1) * spacing / radius  # radians between slots on this ring
-        slots = [
-            index * step
-            for index in range(int(2 * math.pi / step))
-            if all(
-                abs(math.remainder(index * step - other, 2 * math.pi)) * radius >= corridor
-                for other in site_angles
-            )
-        ]
-        home = site_angles[site]
-        slots.sort(key=lambda angle: abs(math.remainder(angle - home, 2 * math.pi)))
-        rings.append((radius, slots))
-        ring += 1
-    # More robots than slots: the count starts again at the wall (best effort).
+    site (see ``parking_rings``)."""
+    rings = parking_rings(
+        site_angles,
+        site,
+        arena_radius=arena_radius,
+        inner_radius=inner_radius,
+        robot_radius=robot_radius,
+        clearance=clearance,
+        spacing=spacing,
+        corridor=corridor,
+        lane=lane,
+    )
+    # More robots than slots down to the nest: the count starts again at the wall.
     remaining = robot_id % max(1, sum(len(slots) for _, slots in rings))
     for radius, slots in rings:
         if remaining < len(slots):
@@ -638,6 +636,54 @@ def parking_slot(
     radius, slots = rings[0]
     angle = slots[0] if slots else site_angles[site]
     return radius * math.cos(angle), radius * math.sin(angle)
+
+
+def parking_rings(
+    site_angles: Sequence[float],
+    site: int,
+    *,
+    arena_radius: float,
+    inner_radius: float,
+    robot_radius: float,
+    clearance: float,
+    spacing: float,
+    corridor: float,
+    lane: float,
+) -> list[tuple[float, list[float]]]:
+    """Every parking slot for robots that chose ``site``: (radius, slot angles nearest the
+    site first) for each ring, from the wall inwards.
+
+    Ring 0 lies ``clearance`` in from the wall with slots ``spacing`` apart, outside a
+    corridor of ``corridor`` metres either side of every site. Each further ring lies a
+    free ``lane`` in from the bodies parked on the previous one, with ``lane`` free between
+    its own slots and a corridor of ``corridor + lane / 2`` either side of every site. So
+    whichever slots are taken, every slot and every point among them is joined to the
+    arena's interior by paths at least ``lane`` wide: no parked robot stands in front of
+    another's slot, and nobody, parking or passing, can be walled in.
+    """
+    pitch = 2 * robot_radius + lane  # centre to centre, across a lane
+    rings: list[tuple[float, list[float]]] = []
+    ring = 0
+    radius = arena_radius - clearance
+    while radius >= inner_radius or not rings:
+        if ring == 0:
+            step, keep_clear = spacing / radius, corridor
+        else:
+            step, keep_clear = pitch / radius, corridor + lane / 2
+        slots = [
+            index * step
+            for index in range(int(2 * math.pi / step))
+            if all(
+                abs(math.remainder(index * step - other, 2 * math.pi)) * radius >= keep_clear
+                for other in site_angles
+            )
+        ]
+        home = site_angles[site]
+        slots.sort(key=lambda angle: abs(math.remainder(angle - home, 2 * math.pi)))
+        rings.append((radius, slots))
+        ring += 1
+        radius = arena_radius - clearance - ring * pitch
+    return rings
 
 
 def _along_radius(x: float, y: float, radius: float) -> tuple[float, float]:

@@ -59,6 +59,7 @@ def one_hot(n: int, option: int) -> list[float]:
         ("park_clearance", -0.1),
         ("park_spacing", 0.0),
         ("park_corridor", math.nan),
+        ("park_lane", 0.0),
     ],
 )
 def test_config_rejects_bad_values(field: str, value: object) -> None:
@@ -456,9 +457,11 @@ def test_parking_slots_are_distinct_clear_of_every_site_and_inside_the_arena(
             robot,
             arena_radius=layout.arena_radius,
             inner_radius=inner,
+            robot_radius=0.037,
             clearance=config.park_clearance,
             spacing=config.park_spacing,
             corridor=config.park_corridor,
+            lane=config.park_lane,
         )
         for robot in range(robots)
     ]
