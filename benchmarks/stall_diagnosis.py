@@ -6,7 +6,7 @@ it samples every robot's pose and phase. At the end (``--until`` sim seconds, or
 consensus) it prints, for every robot still undecided: its phase, trips, position, what
 its navigator is doing (goal, escapes, last progress), and every robot within 0.25 m
 (phase, decided site, when it stopped there); and it plots the arena at that moment:
-robots by phase, the parking slots, the viewpoints, the sites, the trail of each
+robots by phase, the slots decided robots park in, the viewpoints, the sites, the trail of each
 undecided robot, and a close-up of each.
 
     .venv/bin/python benchmarks/stall_diagnosis.py --robots 200 --seed 0 --until 1500 \
@@ -28,7 +28,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from deploy.inmemory import run_in_memory  # noqa: E402
-from robot_agent.controller import Controller, ControllerConfig, parking_slot  # noqa: E402
+from robot_agent.controller import Controller, ControllerConfig  # noqa: E402
 from world_server.world import World, WorldConfig  # noqa: E402
 
 NEIGHBOUR_RANGE = 0.25  # metres: who counts as "around" a stuck robot
@@ -163,27 +163,14 @@ def plot(watch: Watch, stuck: list[int], path: Path) -> None:
     fig, axes = plt.subplots(
         1, 1 + len(close_ups), figsize=(7 + 5 * len(close_ups), 7), squeeze=False
     )
-    site_angles = [math.atan2(site.y, site.x) for site in info.sites]
-    slots = [
-        parking_slot(
-            site_angles,
-            world.layout.best_site,
-            k,
-            arena_radius=info.arena_radius,
-            inner_radius=info.nest.radius + 3 * info.robot_radius,
-            robot_radius=info.robot_radius,
-            clearance=config.park_clearance,
-            spacing=config.park_spacing,
-            corridor=config.park_corridor,
-            lane=config.park_lane,
-        )
-        for k in range(len(poses))
-    ]
+    # The slots decided robots drive to (the controller's own choice, whatever the rule).
+    slots = [c._park_goal for c in watch.controllers.values() if c._park_goal is not None]
     view_radius = info.arena_radius - config.view_distance
     for index, ax in enumerate(axes[0]):
         ax.add_patch(Circle((0, 0), info.arena_radius, fill=False, color="k"))
         ax.add_patch(Circle((0, 0), info.nest.radius, fill=False, color="g", ls="--"))
-        ax.plot(*zip(*slots, strict=True), "x", color="0.8", ms=3, label="parking slots")
+        if slots:
+            ax.plot(*zip(*slots, strict=True), "x", color="0.5", ms=3, label="parking slots")
         for site in info.sites:
             angle = math.atan2(site.y, site.x)
             best = site.id == world.layout.best_site

@@ -27,8 +27,11 @@ would wall them in (with a hundred robots it did, and the swarm never finished).
 are ``park_spacing`` apart along the wall, outside a corridor of ``park_corridor`` either
 side of every site; robot k takes the k-th slot nearest its site, so no two robots ever
 want the same slot and none has to pass another to reach its own. When the wall is
-full, further slots lie on rings further in, spaced wider so the outer ones stay
-reachable.
+full (about 180 robots with 10 sites), further slots lie on rings further in, each a
+free lane of ``park_lane`` in from the robots parked on the previous one and with that
+lane between its own robots: whichever slots are taken, every slot and every free spot
+among them stays joined to the interior by paths wide enough for the navigator, so no
+robot, parking or passing, can be walled in (``parking_rings``).
 """
 
 from __future__ import annotations
