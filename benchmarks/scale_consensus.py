@@ -10,11 +10,13 @@ same world, controllers and beacon as ``swarm run``, and the same per-robot resu
 through real processes instead: ``swarm run --json --no-record --quiet`` (hosting
 ``--robots-per-process`` robots per process above 50 robots).
 
-``--doc`` writes docs/scale.md with the table and a box plot of sim time to consensus
-against swarm size (docs/scale.png); ``--before FILE`` adds a before/after table from a
-``--save``d result of another checkout (e.g. main's code, run with this script).
+``--save FILE`` keeps the results (JSON), ``--load FILE...`` adds earlier ones, and
+``--doc`` writes docs/scale.md with the tables and a box plot of sim time to consensus
+against swarm size (docs/scale.png); ``--before FILE`` adds a before/after table from the
+results of another checkout (main's code before the fix of issue 10, run with this
+script). The commands that made docs/scale.md are listed there (``COMMANDS``).
 
-    .venv/bin/python benchmarks/scale_consensus.py --parallel 2 --save /tmp/after.json --doc
+    .venv/bin/python benchmarks/scale_consensus.py --parallel 2          # the whole plan
     .venv/bin/python benchmarks/scale_consensus.py --sizes 200 --seeds 8 --zenoh
 
 Sim times are exact (lockstep is deterministic); wall times depend on the machine and on
@@ -43,7 +45,7 @@ sys.path.insert(0, str(REPO))
 SITES = 10
 # The plan of issue 10: ten seeds of every size up to 200 robots, three of 500.
 DEFAULT_PLAN = {10: range(10), 50: range(10), 100: range(10), 200: range(10), 500: range(3)}
-DEFAULT_TIMEOUT = 6000.0  # sim seconds; the slowest 500-robot run decides in about ...
+DEFAULT_TIMEOUT = 6000.0  # sim seconds: well beyond the slowest run of the plan
 ROBOTS_PER_PROCESS = 50  # --zenoh: hosted robots per process above this swarm size
 
 
