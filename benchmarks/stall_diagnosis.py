@@ -21,6 +21,7 @@ import argparse
 import math
 import sys
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -90,8 +91,57 @@ def watch_run(robots: int, sites: int, seed: int, until: float) -> tuple[Watch, 
     return watch, summary
 
 
-def describe_stuck(watch: Watch) -> list[int]:
-    """Print what holds each undecided robot; return their ids."""
+def describe_swarm(watch: Watch) -> None:
+    """Print the swarm as a whole: decisions, what undecided robots still believe, who
+    stands at each viewpoint, and decided robots that stopped short of their slot."""
+    assert watch.world is not None
+    world = watch.world
+    poses = world.physics.poses()
+    controllers = watch.controllers
+    decided = Counter(c.decided_site for c in controllers.values() if c.decided_site is not None)
+    undecided = [c for c in controllers.values() if c.decided_site is None]
+    print(f"decided, by site: {dict(sorted(decided.items()))}; undecided: {len(undecided)}")
+    print(f"  undecided by phase: {dict(Counter(c.phase for c in undecided))}")
+    supports = Counter(
+        tuple(site for site, p in enumerate(c.opinion) if p > 0.0) for c in undecided
+    )
+    print(f"  undecided by the sites they still hold possible: {dict(supports.most_common(8))}")
+    config = ControllerConfig()
+    view_radius = world.info.arena_radius - config.view_distance
+    for site in world.info.sites:
+        angle = math.atan2(site.y, site.x)
+        view = (view_radius * math.cos(angle), view_radius * math.sin(angle))
+        near = sorted(
+            (math.dist(view, pose[:2]), robot)
+            for robot, pose in poses.items()
+            if math.dist(view, pose[:2]) < NEIGHBOUR_RANGE
+        )
+        print(
+            f"  viewpoint of site {site.id}"
+            + (" (best)" if site.id == world.layout.best_site else "")
+            + ": "
+            + ", ".join(
+                f"{robot} {distance:.2f} m {controllers[robot].phase}" for distance, robot in near
+            )
+        )
+    short = [
+        (robot, math.dist(poses[robot][:2], c._park_goal))
+        for robot, c in controllers.items()
+        if c.phase == "stopped"
+        and c._park_goal is not None
+        and math.dist(poses[robot][:2], c._park_goal) > 2 * world.info.robot_radius
+    ]
+    print(f"  decided robots stopped more than a body width from their slot: {len(short)}")
+    for robot, distance in sorted(short, key=lambda item: -item[1])[:10]:
+        x, y, _ = poses[robot]
+        print(
+            f"    {robot}: {distance:.2f} m short, at r = {math.hypot(x, y):.2f}, "
+            f"{math.degrees(math.atan2(y, x)):.0f} deg"
+        )
+
+
+def describe_stuck(watch: Watch, show: int) -> list[int]:
+    """Print what holds the first ``show`` undecided robots; return all their ids."""
     assert watch.world is not None
     world = watch.world
     poses = world.physics.poses()
@@ -103,7 +153,7 @@ def describe_stuck(watch: Watch) -> list[int]:
             f"{i}: {math.degrees(s.angle):.0f} deg" for i, s in enumerate(world.layout.sites)
         )
     )
-    for robot_id in stuck:
+    for robot_id in stuck[:show]:
         controller = watch.controllers[robot_id]
         x, y, _ = poses[robot_id]
         trail = watch.trails[robot_id]
@@ -114,7 +164,8 @@ def describe_stuck(watch: Watch) -> list[int]:
                 moved_at = t
                 break
         print(
-            f"\nrobot {robot_id}: phase {controller.phase}, trips {controller.trips}, at "
+            f"\nrobot {robot_id}: phase {controller.phase}, trips {controller.trips}, opinion "
+            f"{[round(p, 3) for p in controller.opinion]}, at "
             f"({x:.3f}, {y:.3f}) r = {math.hypot(x, y):.3f} m, "
             f"{math.degrees(math.atan2(y, x)):.1f} deg; leg since "
             f"{controller._leg_start:.1f} s, pair left {controller._pair}, "
@@ -214,6 +265,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--until", type=float, default=3000.0, help="sim seconds")
     parser.add_argument("--plot", type=Path, help="write the arena at the end here (PNG)")
+    parser.add_argument("--show", type=int, default=5, help="undecided robots to detail")
     args = parser.parse_args()
     started = time.monotonic()
     watch, summary = watch_run(args.robots, args.sites, args.seed, args.until)
@@ -221,7 +273,8 @@ def main() -> None:
         f"consensus {summary['consensus']}, correct {summary['correct']}, sim time "
         f"{summary['sim_time_s']} s, wall {time.monotonic() - started:.0f} s"
     )
-    stuck = describe_stuck(watch)
+    describe_swarm(watch)
+    stuck = describe_stuck(watch, args.show)
     if args.plot:
         plot(watch, stuck, args.plot)
 
