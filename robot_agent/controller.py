@@ -72,6 +72,7 @@ class ControllerConfig:
     stall_timeout: float = 4.0  # seconds without progress near a goal -> take it as reached
     near_distance: float = 0.2  # metres: how near a stalled robot must be to sense from there
     travel_timeout: float = 120.0  # seconds for a leg to a site (or parking) before giving up
+    travel_crawl: float = 1 / 30  # m/s: a longer leg gets the time to cover its length at this
     park_clearance: float = 0.06  # metres from the wall to the centre of a parking slot
     park_spacing: float = 0.1  # metres between parking slots along the wall
     park_corridor: float = 0.11  # metres either side of each site kept free of parking
@@ -103,6 +104,7 @@ class ControllerConfig:
             "stall_timeout": self.stall_timeout,
             "near_distance": self.near_distance,
             "travel_timeout": self.travel_timeout,
+            "travel_crawl": self.travel_crawl,
         }
         for name, value in positive.items():
             if not _finite(value) or value <= 0.0:
@@ -199,6 +201,7 @@ class Controller:
         self._pair: list[int] = []
         self._qualities: dict[int, float] = {}
         self._leg_start = 0.0
+        self._leg_allowance: float | None = None  # seconds this leg may take
         self._best_distance = math.inf
         self._last_progress = 0.0
         self._aim = 0.0
@@ -367,7 +370,7 @@ class Controller:
         if arrived or self._stalled_near(reading, goal, self.config.near_distance):
             self._start_sensing(reading, site)
             return self._sensing(reading)
-        if self._t - self._leg_start > self.config.travel_timeout:
+        if self._leg_timed_out(reading, goal):
             self._head_home()  # the site is out of reach: no update this trip
             return _stop()
         return ports.Command(left, right)
@@ -463,7 +466,7 @@ class Controller:
                 lane=self.config.park_lane,
             )
         goal = self._park_goal
-        if self._t - self._leg_start > self.config.travel_timeout:
+        if self._leg_timed_out(reading, goal):
             self._set_phase("stopped")
             return _stop()
         # The last stretch into the slot goes straight in: the wall and the neighbouring
@@ -497,6 +500,7 @@ class Controller:
     def _start_leg(self, phase: protocol.Phase) -> None:
         self._navigator.reset()
         self._leg_start = self._t
+        self._leg_allowance = None
         self._best_distance = math.inf
         self._last_progress = self._t
         self._set_phase(phase)
@@ -583,6 +587,15 @@ class Controller:
         """Facing the site's panel from where the robot stands (radially at the viewpoint)."""
         site_x, site_y = self._site_xy[site]
         return math.atan2(site_y - reading.y, site_x - reading.x)
+
+    def _leg_timed_out(self, reading: ports.BodyReading, goal: tuple[float, float]) -> bool:
+        """Whether the current leg has taken longer than it may: ``travel_timeout``, or for
+        a long leg (the arena grows with the swarm) the time to cover its length at a crawl,
+        so a crowd on the way slows a robot down without making it give up."""
+        if self._leg_allowance is None:
+            length = _distance(reading, goal)
+            self._leg_allowance = max(self.config.travel_timeout, length / self.config.travel_crawl)
+        return self._t - self._leg_start > self._leg_allowance
 
     def _stalled_near(
         self, reading: ports.BodyReading, goal: tuple[float, float], near: float
