@@ -40,6 +40,7 @@ DEFAULT_PORT = 8765
 INBOX_LIMIT = 50_000  # samples waiting for the writer thread
 BACKLOG = 4096  # messages the SDK buffers per connected app
 DEFAULT_NICENESS = 10
+DRAIN_SECONDS, SEND_SECONDS = 1.5, 0.3  # at a stop: to pass on what is queued, to send it
 
 
 class FoxgloveSink:
@@ -195,8 +196,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             pass
         token.undeclare()
         subscriber.undeclare()
+        # What arrived before the stop still reaches the app: a niced process on a busy
+        # machine may lag the run, and the end of a run is what a person wants to see.
         inbox.put(None)
-        writer.join(timeout=2.0)
+        writer.join(timeout=DRAIN_SECONDS)
+        time.sleep(SEND_SECONDS)
     server.stop()
     if dropped[0]:
         log.info("dropped %d samples while falling behind", dropped[0])

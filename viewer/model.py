@@ -37,7 +37,7 @@ PHASES: tuple[tuple[str, str], ...] = (
 PHASE_INDEX = {name: index for index, (name, _) in enumerate(PHASES)}
 UNKNOWN_PHASE = -1
 LINK_SECONDS = 3.0  # sim seconds a pooling stays drawn
-HEARD_SECONDS = 60.0  # opinions heard longer ago than this are not part of a pooling
+ARRIVAL_SLACK = 1e-6  # sim seconds: an opinion delivered in the tick of arrival counts
 
 # Target kinds in a frame: none, a site the status names, a site inferred from the
 # robot's heading (the status does not say which site of its pair it is going to), nest.
@@ -138,11 +138,13 @@ class Pooling:
 class PoolingTracker:
     """Finds poolings in status messages, and whom they joined from radio deliveries.
 
-    A robot pools every opinion it heard at the nest (the controller's ``_heard``): here,
-    the robot senders whose messages the medium delivered to it since it came home.
+    A robot pools its own opinion with the latest opinion of every robot it heard since it
+    arrived at the nest (``Controller._pool_and_decide``): here, the robot senders whose
+    messages the medium delivered to it since its first ``at_nest`` status of the visit.
     """
 
     heard: dict[int, dict[int, float]] = field(default_factory=dict)  # robot -> sender -> t
+    arrived: dict[int, float] = field(default_factory=dict)  # robot -> sim time at the nest
     poolings_seen: dict[int, int] = field(default_factory=dict)
     decided: set[int] = field(default_factory=set)
 
@@ -154,14 +156,16 @@ class PoolingTracker:
         """Take in one status: the pooling it reports (if any) and whether the robot just
         decided."""
         robot = status.id
-        if status.phase in ("to_site", "sensing"):
-            self.heard.pop(robot, None)  # a new trip: what it heard before is pooled
         pooling = None
         if status.poolings > self.poolings_seen.get(robot, 0):
-            recent = status.t - HEARD_SECONDS
+            since = self.arrived.pop(robot, -math.inf) - ARRIVAL_SLACK
             heard = self.heard.pop(robot, {})
-            members = tuple(sorted(s for s, t in heard.items() if t >= recent and s != robot))
+            members = tuple(
+                sorted(s for s, t in heard.items() if since <= t <= status.t and s != robot)
+            )
             pooling = Pooling(status.t, robot, status.pool_size, members)
+        elif status.phase == "at_nest":
+            self.arrived.setdefault(robot, status.t)
         self.poolings_seen[robot] = status.poolings
         just_decided = status.decided_site is not None and robot not in self.decided
         if just_decided:
