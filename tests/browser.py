@@ -91,7 +91,9 @@ class Browser:
             if self.process.poll() is not None:
                 raise RuntimeError(f"Chromium exited with code {self.process.returncode}")
             with contextlib.suppress(OSError, ValueError):
-                with urllib.request.urlopen(f"http://127.0.0.1:{self.port}/json/list", timeout=1) as r:
+                with urllib.request.urlopen(
+                    f"http://127.0.0.1:{self.port}/json/list", timeout=1
+                ) as r:
                     pages = [t for t in json.load(r) if t.get("type") == "page"]
                 if pages:
                     return str(pages[0]["webSocketDebuggerUrl"])
@@ -104,7 +106,9 @@ class Browser:
         self.connection.send(json.dumps({"id": ident, "method": method, "params": params}))
         deadline = time.monotonic() + timeout
         while True:
-            message = json.loads(self.connection.recv(timeout=max(0.01, deadline - time.monotonic())))
+            message = json.loads(
+                self.connection.recv(timeout=max(0.01, deadline - time.monotonic()))
+            )
             if message.get("id") == ident:
                 if "error" in message:
                     raise RuntimeError(f"{method}: {message['error']}")

@@ -26,7 +26,7 @@ from websockets.sync.client import connect
 from deploy.processes import free_port
 from robot_agent import protocol
 from viewer import model, replay
-from viewer.decode import Delivery, Rejected, decode_sample
+from viewer.decode import Delivery, InvalidSampleError, decode_sample
 from viewer.live import MAX_DELIVERIES, LiveSource
 from world_server.layout import make_layout
 from world_server.recorder import McapRecorder, RunDescription, Sample
@@ -338,8 +338,10 @@ def test_replay_of_a_finished_recording_knows_decisions_and_the_ending(tmp_path:
     # Interpolated halfway between two world states (x = 0.01 * tick, states every 10 ticks).
     assert replay.poses_at(timeline, 2.5)[0][0] == pytest.approx(0.25)
     source.command({"op": "seek", "t": timeline.end})
-    assert source.frame()["ended"] == {"reason": "consensus", "text": "consensus on site "
-                                       f"{make_layout(3, 2, 5).best_site}, the best"}
+    assert source.frame()["ended"] == {
+        "reason": "consensus",
+        "text": f"consensus on site {make_layout(3, 2, 5).best_site}, the best",
+    }
 
 
 # --- the live bridge's gate and its bounds (no network) --------------------------------------
@@ -350,7 +352,7 @@ def test_every_sample_passes_one_gate_that_rejects_what_is_not_a_valid_message()
     clock = protocol.encode(protocol.Clock(v=1, tick=3, t=0.3))
     assert decode_sample(keys, keys.world_clock, clock, None) == protocol.Clock(v=1, tick=3, t=0.3)
     assert decode_sample(keys, keys.sense(1), b"{}", None) is None  # a key the view does not use
-    with pytest.raises(Rejected, match="status of robot 4"):
+    with pytest.raises(InvalidSampleError, match="status of robot 4"):
         status = protocol.Status(
             v=1,
             id=4,
@@ -367,9 +369,9 @@ def test_every_sample_passes_one_gate_that_rejects_what_is_not_a_valid_message()
             comparison=None,
         )
         decode_sample(keys, keys.status(3), protocol.encode(status), None)
-    with pytest.raises(Rejected):
+    with pytest.raises(InvalidSampleError):
         decode_sample(keys, keys.world_state, b'{"v":1,"tick":-1}', None)
-    with pytest.raises(Rejected, match="without metadata"):
+    with pytest.raises(InvalidSampleError, match="without metadata"):
         decode_sample(keys, keys.radio_rx(2), b"{}", None)
     meta = protocol.encode(protocol.RadioRxMeta(v=1, tick=5, sender="7", seq=1, sent_tick=4))
     delivery = decode_sample(keys, keys.radio_rx(2), b"{}", meta)
@@ -441,7 +443,9 @@ def _watch_foxglove(port: int, seen: FoxgloveSeen, stop: threading.Event) -> Non
                     elif message["op"] == "advertise":
                         for channel in message["channels"]:
                             seen.channels[channel["id"]] = channel
-                            leaf = next((w for w in FOXGLOVE_WANTED if channel["topic"].endswith(w)), None)
+                            leaf = next(
+                                (w for w in FOXGLOVE_WANTED if channel["topic"].endswith(w)), None
+                            )
                             if leaf and leaf not in subscriptions.values():
                                 subscriptions[len(subscriptions) + 1] = leaf
                                 request = {"id": len(subscriptions), "channelId": channel["id"]}
@@ -505,9 +509,10 @@ def test_foxglove_live_serves_the_recording_channels(observed_pair: ObservedPair
     assert (status["schemaName"], status["encoding"]) == ("bestofn.Status", "json")
     assert status["schemaEncoding"] == "jsonschema"
     scene = seen.messages["foxglove/scene"]
-    assert any(entity["id"] in ("arena", "robot-0") or entity["id"].startswith("robot-")
-               for entity in scene["entities"])
+    assert any(
+        entity["id"] in ("arena", "robot-0") or entity["id"].startswith("robot-")
+        for entity in scene["entities"]
+    )
     transforms = seen.messages["foxglove/transforms"]["transforms"]
     assert transforms and all(t["parent_frame_id"] == "arena" for t in transforms)
     assert {t["child_frame_id"] for t in transforms} <= {f"robot-{i}" for i in range(ROBOTS)}
-

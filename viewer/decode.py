@@ -26,7 +26,7 @@ class Delivery:
 Decoded = protocol.Clock | protocol.WorldState | protocol.Status | Delivery
 
 
-class Rejected(Exception):
+class InvalidSampleError(Exception):
     """A sample on a key the view uses that is not a valid message of that key."""
 
 
@@ -35,7 +35,7 @@ def decode_sample(
 ) -> Decoded | None:
     """The message a sample carries, if the view uses its key.
 
-    Raises Rejected for a sample on a used key that does not decode or validate.
+    Raises InvalidSampleError for a sample on a used key that does not decode or validate.
     """
     try:
         if key == keys.world_state:
@@ -46,15 +46,15 @@ def decode_sample(
         if robot is not None and key == keys.status(robot):
             status = protocol.decode(payload, protocol.Status)
             if status.id != robot:
-                raise Rejected(f"status of robot {status.id} on {key}")
+                raise InvalidSampleError(f"status of robot {status.id} on {key}")
             return status
         if key.startswith(keys.radio_rx("")):
             receiver = keys.last_chunk(key)
             if not receiver.isdigit() or int(receiver) >= protocol.MAX_ROBOTS:
                 return None  # a receiver that is not a robot (none today): nothing to draw
             if attachment is None:
-                raise Rejected(f"radio delivery without metadata on {key}")
+                raise InvalidSampleError(f"radio delivery without metadata on {key}")
             return Delivery(int(receiver), protocol.decode(attachment, protocol.RadioRxMeta))
     except protocol.ProtocolError as error:
-        raise Rejected(f"{key}: {error}") from None
+        raise InvalidSampleError(f"{key}: {error}") from None
     return None

@@ -34,7 +34,7 @@ from plumbing import cliargs
 from plumbing.lifecycle import die_with_launcher
 from robot_agent import protocol
 from viewer import model
-from viewer.decode import Decoded, Delivery, Rejected, decode_sample
+from viewer.decode import Decoded, Delivery, InvalidSampleError, decode_sample
 from viewer.server import ViewServer
 from world_server.layout import make_layout
 
@@ -72,7 +72,7 @@ class LiveSource:
         """One sample from Zenoh (any thread)."""
         try:
             message = decode_sample(self.keys, key, payload, attachment)
-        except Rejected as error:
+        except InvalidSampleError as error:
             with self._lock:
                 self.rejected += 1
                 first = self.rejected == 1

@@ -295,7 +295,9 @@ def ending(summary: Mapping[str, Any] | None, fallback: str = "stopped") -> dict
             else "ended"
         )
     if summary.get("consensus"):
-        verdict = "the best" if summary.get("correct") else f"not the best ({summary.get('best_site')})"
+        verdict = (
+            "the best" if summary.get("correct") else f"not the best ({summary.get('best_site')})"
+        )
         text = f"consensus on site {summary.get('chosen_site')}, {verdict}"
     else:
         text = "no consensus"

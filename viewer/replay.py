@@ -329,7 +329,9 @@ class ReplaySource:
         high = bisect.bisect_right(timeline.deliveries, (t, "\uffff", 1 << 62))
         deliveries = [
             (sender, receiver)
-            for _, sender, receiver in timeline.deliveries[max(low, high - MAX_DELIVERIES_PER_FRAME) : high]
+            for _, sender, receiver in timeline.deliveries[
+                max(low, high - MAX_DELIVERIES_PER_FRAME) : high
+            ]
         ]
         recent = bisect.bisect_left([p.t for p in timeline.poolings], t - model.LINK_SECONDS)
         at_end = t >= timeline.end
