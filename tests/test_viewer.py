@@ -109,6 +109,7 @@ def live_run(chromium: Browser, tmp_path_factory: pytest.TempPathFactory) -> Liv
     recording = tmp_path_factory.mktemp("view") / "run.mcap"
     process = _start(run_id, "--view", str(port), "--record", str(recording))
     seen: list[dict[str, str]] = []
+    midrun: list[bytes] = []
     try:
         _wait_for_port(port, process)
         chromium.navigate(f"http://127.0.0.1:{port}/")
@@ -117,6 +118,8 @@ def live_run(chromium: Browser, tmp_path_factory: pytest.TempPathFactory) -> Liv
             data = chromium.canvas_data()
             if data:
                 seen.append(data)
+                if SCREENSHOTS and float(data.get("simTime", 0)) > 25 and not midrun:
+                    midrun.append(chromium.screenshot())  # for docs/viewer.md
             time.sleep(0.1)
     finally:
         summary = _finish(process, run_id)
@@ -126,7 +129,8 @@ def live_run(chromium: Browser, tmp_path_factory: pytest.TempPathFactory) -> Liv
     run.header = str(chromium.evaluate("document.getElementById('header').innerText"))
     run.screenshot = chromium.screenshot()
     if SCREENSHOTS:
-        save(run.screenshot, Path(SCREENSHOTS) / "viewer-live.png")
+        save(midrun[0] if midrun else run.screenshot, Path(SCREENSHOTS) / "viewer-live.png")
+        save(run.screenshot, Path(SCREENSHOTS) / "viewer-live-ended.png")
     return run
 
 
@@ -211,6 +215,8 @@ def test_the_replay_page_plays_seeks_and_jumps(chromium: Browser, live_run: Live
         assert float(jumped["simTime"]) == pytest.approx(first_decision, abs=0.11)
         header = str(chromium.evaluate("document.getElementById('header').innerText"))
         assert "decided 1/" in header and "(replay)" in header
+        chromium.evaluate("selected = 4; send({op: 'select', robot: 4})")  # the detail panel
+        time.sleep(0.5)
         png = chromium.screenshot()
         assert pixel_statistics(png)["std"] > 20
         if SCREENSHOTS:
@@ -447,18 +453,30 @@ def _watch_foxglove(port: int, seen: FoxgloveSeen, stop: threading.Event) -> Non
                                 (w for w in FOXGLOVE_WANTED if channel["topic"].endswith(w)), None
                             )
                             if leaf and leaf not in subscriptions.values():
-                                subscriptions[len(subscriptions) + 1] = leaf
-                                request = {"id": len(subscriptions), "channelId": channel["id"]}
-                                connection.send(
-                                    json.dumps({"op": "subscribe", "subscriptions": [request]})
-                                )
+                                _subscribe(connection, subscriptions, leaf, channel["id"])
+                    elif message["op"] == "status" and "Unknown channel" in message["message"]:
+                        # foxglove-sdk 0.30 can refuse a subscription sent the instant a
+                        # channel is advertised; the app subscribes later. Ask again.
+                        channel_id = int(message["message"].rsplit(":", 1)[-1])
+                        topic = seen.channels[channel_id]["topic"]
+                        leaf = next(w for w in FOXGLOVE_WANTED if topic.endswith(w))
+                        time.sleep(0.05)
+                        _subscribe(connection, subscriptions, leaf, channel_id)
                 elif data[0] == 1:  # message data: opcode, subscription id, log time, payload
                     _, subscription, _ = struct.unpack_from("<BIQ", data)
                     leaf = subscriptions.get(subscription)
                     if leaf is not None and leaf not in seen.messages:
                         seen.messages[leaf] = json.loads(data[13:])
     except Exception as error:
-        seen.error = repr(error)
+        topics = sorted(channel["topic"].split("/", 2)[-1] for channel in seen.channels.values())
+        seen.error = f"{error!r}; advertised {topics}; decoded {sorted(seen.messages)}"
+
+
+def _subscribe(connection: Any, subscriptions: dict[int, str], leaf: str, channel: int) -> None:
+    subscription = len(subscriptions) + 1
+    subscriptions[subscription] = leaf
+    request = {"id": subscription, "channelId": channel}
+    connection.send(json.dumps({"op": "subscribe", "subscriptions": [request]}))
 
 
 @dataclass
