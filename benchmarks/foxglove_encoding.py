@@ -34,8 +34,8 @@ from foxglove.messages import (
     Vector3,
 )
 
-from world_server import foxglove
 from robot_agent import protocol
+from world_server import foxglove
 from world_server.camera import CameraRenderer
 from world_server.layout import make_layout
 
