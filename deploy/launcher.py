@@ -36,6 +36,7 @@ from plumbing.world_info import fetch_world_info
 from plumbing.zenoh_session import open_session
 from robot_agent import protocol
 from robot_agent.options import add_controller_options, controller_config
+from viewer.options import VIEW_OPTIONS, Observer, add_view_options, observers
 from world_server.layout import make_layout
 from world_server.options import add_world_options
 
@@ -45,6 +46,8 @@ STATS_ATTEMPTS, STATS_RETRY_PAUSE = 5, 0.2
 EXIT_OK, EXIT_CRASH = 0, 1  # usage errors exit 2 through argparse and UsageError
 ROBOT_PROCESSES_PER_CORE = 25
 RUN_ID_ENV = "BESTOFN_RUN_ID"
+# Processes that only watch: they stay to the end, and their crash does not end the run.
+OBSERVERS = ("viewer", "foxglove")
 
 
 def robot_at_time(text: str) -> tuple[int, float]:
@@ -177,6 +180,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     output.add_argument("--quiet", action="store_true", help="no progress display")
     output.add_argument("--verbose", action="store_true", help="echo the processes' logs on stderr")
+    add_view_options(parser.add_argument_group("watching"))
     parser.set_defaults(forwarded=switches)
 
 
@@ -207,9 +211,10 @@ class RunPlan:
     robots_per_process: int = 1
     spawn: str = "fork"
     config: dict[str, Any] = field(default_factory=dict)
+    observers: list[Observer] = field(default_factory=list)  # the page, Foxglove live
 
 
-NOT_CONFIG = {"module", "command", "json", "quiet", "verbose", "forwarded"}
+NOT_CONFIG = {"module", "command", "json", "quiet", "verbose", "forwarded", *VIEW_OPTIONS}
 
 
 def plan_from_args(args: argparse.Namespace) -> RunPlan:
@@ -289,6 +294,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         config=config,
         robots_per_process=per_process,
         spawn=args.spawn,
+        observers=observers(args, common, client, free_port(), free_port()),
     )
 
 
@@ -386,6 +392,7 @@ class Swarm:
             if not self._wait_alive("recorder", 0, 30.0, self.recorder):
                 raise StartError("the recorder did not start", self.recorder)
             self._release_held_logs()
+        self._start_observers()
         self.group.start("beacon", python_module("nest_beacon", *plan.beacon_args))
         hosts = range(0, plan.robots, plan.robots_per_process)
         for first in hosts:
@@ -393,6 +400,24 @@ class Swarm:
             child = self._start_robots(robots)
             for robot in robots:
                 self.robot_children[robot] = child
+
+    def _start_observers(self) -> None:
+        """The page and Foxglove live: listening before the robots start, like the recorder."""
+        for observer in self.plan.observers:
+            child = self.group.start(observer.name, python_module(observer.module, *observer.argv))
+            if not self._wait_alive(observer.role, 0, 30.0, child):
+                raise StartError(f"the {observer.name} did not start", child)
+            print(f"swarm run: {observer.name} at {observer.url}", file=sys.stderr, flush=True)
+
+    def finish_observers(self, summary: dict[str, Any]) -> None:
+        """Tell the page how the run ended; it answers once every page was sent that."""
+        if self.session is None or not any(o.name == "viewer" for o in self.plan.observers):
+            return
+        with contextlib.suppress(zenoh.ZError):
+            for _ in self.session.get(
+                self.keys.viewer_finish, payload=json.dumps(summary).encode(), timeout=5.0
+            ):
+                pass
 
     def _on(self, kind: str) -> Callable[[zenoh.Sample], None]:
         def callback(sample: zenoh.Sample) -> None:
@@ -472,7 +497,7 @@ class Swarm:
 
     def infrastructure_crash(self) -> Child | None:
         for child in self.group.crashed():
-            if not child.name.startswith("robot-"):
+            if not child.name.startswith("robot-") and child.name not in OBSERVERS:
                 return child
         return None
 
@@ -501,7 +526,11 @@ class Swarm:
         if self.ended_at is not None:
             return self.final_stats
         self.ended_at = time.monotonic()
-        swarm = [child for child in self.group.children if child.name not in ("world", "recorder")]
+        swarm = [
+            child
+            for child in self.group.children
+            if child.name not in ("world", "recorder", *OBSERVERS)
+        ]
         self.group.stop(swarm)
         self.poll()
         self.final_stats = self._world_stats() or self.last_state
@@ -619,6 +648,7 @@ def _run_swarm(swarm: Swarm, args: argparse.Namespace, console: Console) -> int:
     )
     summary["faults"] = swarm.fault_log
     summary["recording"] = str(plan.record) if plan.record else None
+    swarm.finish_observers(summary)
     if plan.record is not None and not swarm.finish_recording(summary):
         print(f"swarm run: the recorder did not confirm {plan.record}", file=sys.stderr)
         summary["recording"] = None

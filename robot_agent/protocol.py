@@ -340,6 +340,12 @@ class Keys:
         the recording is complete on disk."""
         return f"{self.prefix}/recorder/finish"
 
+    @property
+    def viewer_finish(self) -> str:
+        """Queryable of the live view: the payload is the run summary (JSON); it replies once
+        every connected page was sent how the run ended."""
+        return f"{self.prefix}/viewer/finish"
+
     def alive(self, role: str, ident: int | str) -> str:
         return f"{self.prefix}/alive/{role}/{ident}"
 

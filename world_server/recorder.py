@@ -258,7 +258,11 @@ class McapRecorder:
         info: protocol.WorldInfo | None = None,
         *,
         chunk_size: int = CHUNK_BYTES,
+        writer: Any = None,
     ) -> None:
+        """``writer``: where records go instead of an MCAP file in ``stream``; any object
+        with ``mcap.writer.Writer``'s methods (Foxglove live passes one; viewer/foxglove_live.py).
+        """
         self.keys = keys
         self.run = run
         self.info = info
@@ -272,7 +276,9 @@ class McapRecorder:
         self.rejected = 0
         self.closed = False
         self._versions = versions()
-        self._writer = Writer(stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        self._writer = writer or Writer(
+            stream, chunk_size=chunk_size, compression=CompressionType.ZSTD
+        )
         self._writer.start(library=f"bestofn-swarm recorder, {self._writer_library()}")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, _Channel] = {}
