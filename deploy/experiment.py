@@ -349,10 +349,9 @@ def run_all(
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
 
     from deploy.processes import ProcessGroup, free_port, python_module, wait_for_port
-    from deploy.report import print_report, write_report
+    from deploy.report import print_report, report_console, write_report
 
     if args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} exists and is not a directory")
@@ -404,7 +403,7 @@ def run(args: argparse.Namespace) -> int:
         )
         output.update(report.as_json())
         if not args.json:
-            print_report(report, Console())
+            print_report(report, report_console())
     if args.json:
         print(json.dumps(output))
     return 1 if failed else 0

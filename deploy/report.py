@@ -928,7 +928,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
 
     from deploy.cli import UsageError
 
@@ -954,8 +953,19 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(report.as_json()))
     else:
-        print_report(report, Console())
+        print_report(report, report_console())
     return 0 if report.runs else 1
+
+
+REPORT_WIDTH = 200  # characters, when stdout is not a terminal (a log file, a pipe)
+
+
+def report_console() -> Any:
+    """A console for the report: the terminal's width, or wide enough for whole run ids
+    and every column when written to a file (rich would assume 80 columns and cut them)."""
+    from rich.console import Console
+
+    return Console() if sys.stdout.isatty() else Console(width=REPORT_WIDTH)
 
 
 def print_report(report: Report, console: Any) -> None:
@@ -988,16 +998,19 @@ def print_report(report: Report, console: Any) -> None:
     console.print(table)
     for group in report.groups:
         endings = ", ".join(f"{count} {name}" for name, count in group["endings"].items())
-        apart = (
-            f"of the {group['aggregated_runs']} that ended in consensus: "
-            if group["aggregated_runs"] != group["runs"]
-            else ""
-        )
+        aggregated = group["aggregated_runs"]
+        if aggregated == 0:
+            times = "none ended in consensus: no steps or pool sizes to aggregate"
+        else:
+            apart = f"of the {aggregated} that ended in consensus: "
+            times = (
+                f"{apart if aggregated != group['runs'] else ''}"
+                f"{group['runs_within_half_n']} within n/2 = {group['half_n']:g} steps, "
+                f"mean pool size {group['pool_size']['mean']}"
+            )
         console.print(
             f"N = {group['robots']}, n = {group['sites']}: {group['runs']} runs ({endings}); "
-            f"{group['correct_runs']}/{group['runs']} correct; {apart}"
-            f"{group['runs_within_half_n']} within n/2 = {group['half_n']:g} steps, "
-            f"mean pool size {group['pool_size']['mean']}",
+            f"{group['correct_runs']}/{group['runs']} correct; {times}",
             highlight=False,
         )
     for path in report.files:
