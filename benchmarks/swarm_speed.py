@@ -33,6 +33,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from deploy.launcher import RESULT_CODES  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
 
@@ -118,7 +119,7 @@ def swarm_run(
     started = time.perf_counter()
     done = subprocess.run(command, capture_output=True, cwd=REPO, timeout=7200)
     total = time.perf_counter() - started
-    if done.returncode != 0:
+    if done.returncode not in RESULT_CODES:  # a timeout (exit 5) is a result here
         raise RuntimeError(f"swarm run failed: {done.stderr.decode()[-2000:]}")
     summary = json.loads(done.stdout)
     wall = summary["wall_time_s"]

@@ -6,12 +6,19 @@ For every swarm size N and number of sites n, ``--runs`` runs with seeds ``--see
 free loopback port, ``--parallel`` at a time. A progress bar follows the runs; at the end
 ``swarm report`` turns the recordings into the figures and the summary table in DIR.
 Each run's stderr and JSON summary are kept in ``DIR/logs/``.
+
+Every run ends in a stated way (its summary's ``ended``): each gets ``--wall-timeout``
+(the experiment's ``--run-timeout``) and its own stall watchdog, and the report counts
+the endings per group. A run that outlives its wall limit by BACKSTOP seconds anyway is
+stopped from here. The runs die with the experiment (plumbing/lifecycle.py): each then
+stops in order, as on Ctrl-C.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -24,9 +31,12 @@ from typing import IO, Any
 from deploy.cli import UsageError
 from deploy.launcher import add_swarm_switches
 from plumbing import cliargs
+from plumbing.lifecycle import PARENT_ENV
 from robot_agent import protocol
 
-STOP_GRACE = 10.0  # wall seconds a run has to stop after SIGINT before SIGKILL
+STOP_GRACE = 30.0  # wall seconds a run has to stop after SIGINT before SIGKILL
+BACKSTOP = 60.0  # wall seconds past --run-timeout before a run is stopped from here
+FAILED_ENDINGS = ("crashed", "interrupted")  # endings that are not results of the run
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -88,11 +98,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="per-run sim time limit, forwarded",
     )
     parser.add_argument(
+        "--stall-window",
+        type=cliargs.positive_float,
+        default=None,
+        metavar="SIM_SECONDS",
+        help="per-run stall window, forwarded (default: swarm run's)",
+    )
+    parser.add_argument(
         "--run-timeout",
+        "--wall-timeout",
         type=cliargs.positive_float,
         default=1800.0,
         metavar="WALL_SECONDS",
-        help="stop a run that takes longer than this in wall time (default: 1800)",
+        help="each run's wall time limit, forwarded as swarm run --wall-timeout: a run "
+        f"that reaches it ends as timeout (wall); one that still runs {BACKSTOP:g} s later "
+        "is stopped from here (default: 1800)",
     )
     parser.add_argument("--no-report", action="store_true", help="only record the runs")
     parser.add_argument(
@@ -130,8 +150,20 @@ class RunResult:
     note: str = ""
 
     @property
+    def ended(self) -> str | None:
+        """How the run ended, from its summary (None: it printed none)."""
+        ended = self.summary.get("ended") if self.summary else None
+        return ended if isinstance(ended, str) else None
+
+    @property
     def ok(self) -> bool:
-        return self.returncode == 0 and self.spec.recording.is_file()
+        """The run ended in a stated way that is a result (consensus, split, stalled,
+        timeout) and was recorded; crashed, interrupted or silent runs failed."""
+        return (
+            self.ended is not None
+            and self.ended not in FAILED_ENDINGS
+            and self.spec.recording.is_file()
+        )
 
 
 @dataclass
@@ -177,6 +209,9 @@ def _run_options(args: argparse.Namespace) -> list[str]:
     extra = cliargs.forward_argv(args.switches.all, args)
     if args.timeout is not None:
         extra += ["--timeout", str(args.timeout)]
+    if args.stall_window is not None:
+        extra += ["--stall-window", str(args.stall_window)]
+    extra += ["--wall-timeout", str(args.run_timeout)]
     options = list(args.run_options)
     if options and options[0] == "--":
         options = options[1:]
@@ -208,6 +243,7 @@ def _start(spec: RunSpec, logs: Path) -> _Running:
         stdin=subprocess.DEVNULL,
         stdout=stdout,
         stderr=stderr,
+        env={**os.environ, PARENT_ENV: str(os.getpid())},  # the run dies with us
     )
     return _Running(spec, process, time.monotonic(), [stdout, stderr])
 
@@ -244,14 +280,15 @@ def _stop(running: _Running) -> None:
 def _describe(result: RunResult) -> str:
     summary = result.summary
     if not result.ok or summary is None:
-        return f"{result.spec.run_id} FAILED ({result.note or f'exit {result.returncode}'})"
+        reason = result.note or (result.ended or f"exit {result.returncode}")
+        return f"{result.spec.run_id} FAILED ({reason})"
     steps = [robot["steps"] for robot in summary["per_robot"] if robot["steps"] is not None]
     verdict = (
         ("correct" if summary["correct"] else "wrong") if summary["consensus"] else "no consensus"
     )
     return (
-        f"{result.spec.run_id}: {verdict}, steps {max(steps) if steps else '-'}, "
-        f"{result.wall_s:.1f}s"
+        f"{result.spec.run_id}: {result.ended}, {verdict}, "
+        f"steps {max(steps) if steps else '-'}, {result.wall_s:.1f}s"
     )
 
 
@@ -291,13 +328,14 @@ def run_all(
                     running.append(_start(pending.pop(0), logs))
                 time.sleep(0.1)
                 for item in list(running):
-                    overdue = time.monotonic() - item.started > run_timeout
+                    # Each run stops itself at run_timeout (--wall-timeout); this is a backstop.
+                    overdue = time.monotonic() - item.started > run_timeout + BACKSTOP
                     if item.process.poll() is None and not overdue:
                         continue
                     note = ""
                     if overdue and item.process.poll() is None:
                         _stop(item)
-                        note = f"stopped after {run_timeout:g} wall seconds"
+                        note = f"stopped from outside after {run_timeout + BACKSTOP:g} wall seconds"
                     running.remove(item)
                     result = _reap(item, logs, note)
                     results.append(result)
@@ -311,10 +349,9 @@ def run_all(
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
 
     from deploy.processes import ProcessGroup, free_port, python_module, wait_for_port
-    from deploy.report import print_report, write_report
+    from deploy.report import print_report, report_console, write_report
 
     if args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} exists and is not a directory")
@@ -366,7 +403,7 @@ def run(args: argparse.Namespace) -> int:
         )
         output.update(report.as_json())
         if not args.json:
-            print_report(report, Console())
+            print_report(report, report_console())
     if args.json:
         print(json.dumps(output))
     return 1 if failed else 0

@@ -12,13 +12,18 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from deploy.summary import RobotRecord, RunOutcome, build_summary
+from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary
+from deploy.watchdog import Watchdog, default_stall_window
 from nest_beacon.beacon import Beacon, BeaconConfig
 from robot_agent import protocol
 from robot_agent.controller import Controller, ControllerConfig
 from robot_agent.lockstep import answer_tick
 from robot_agent.ports import RejectCounter
 from world_server.world import Transmission, World, WorldConfig
+
+# The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
+# world/state (the world server's default --state-every): both see the same samples.
+POSES_EVERY = 10
 
 
 @dataclass
@@ -35,11 +40,14 @@ def run_in_memory(
     beacon_config: BeaconConfig | None = None,
     *,
     timeout: float = 1800.0,
+    stall_window: float | None = None,
     on_tick: Callable[[World], None] | None = None,
     controller_factory: type[Controller] = Controller,
 ) -> dict[str, Any]:
-    """Run to consensus (every robot decided) or ``timeout`` sim seconds; the summary is
-    the ``swarm run --json`` object (wall-clock fields are zero).
+    """Run until every robot decided, the watchdog finds the run stalled (no undecided
+    robot made progress for ``stall_window`` sim seconds; default: ``default_stall_window``
+    for this arena and beacon) or ``timeout`` sim seconds; the summary is the
+    ``swarm run --json`` object (wall-clock fields are zero).
 
     ``controller_factory`` lets a study observe the controllers (a subclass of
     Controller); ``on_tick`` sees the world before each tick closes.
@@ -57,8 +65,17 @@ def run_in_memory(
         rng = random.Random(protocol.derive_seed(world_config.seed, "robot", robot_id))
         controller = controller_factory(robot_id, world.info, controller_config, rng)
         robots[robot_id] = _Robot(controller, RobotRecord(robot_id))
+    if stall_window is None:
+        stall_window = default_stall_window(
+            world.layout.arena_radius,
+            world_config.spec.max_wheel_speed,
+            controller_config.travel_timeout,
+            beacon_config.outages,
+        )
+    watchdog = Watchdog(robots, stall_window, body_length=2 * world_config.spec.radius)
     deliveries: dict[str, list[tuple[str, bytes]]] = {}
     frames: dict[int, bytes] = {}
+    stop: Stop = "decided"
     while True:
         acts: dict[int, protocol.Act] = {}
         transmissions: list[Transmission] = []
@@ -78,15 +95,24 @@ def run_in_memory(
             acts[robot_id] = answer.act
             transmissions += [Transmission(name, seq, data) for seq, data in answer.transmissions]
             if robot.controller.take_status_change():
-                robot.record.update(robot.controller.status(world.tick))
+                status = robot.controller.status(world.tick)
+                robot.record.update(status)
+                watchdog.status(status)
         for message in beacon.on_tick(world.t):
             transmissions.append(
                 Transmission(beacon_config.name, message.seq, protocol.encode(message))
             )
         if on_tick is not None:
             on_tick(world)
-        decided = all(robot.controller.decided_site is not None for robot in robots.values())
-        if decided or world.t >= timeout:
+        if world.tick % POSES_EVERY == 0:
+            watchdog.poses(world.t, _positions(world))
+        if all(robot.controller.decided_site is not None for robot in robots.values()):
+            break
+        if world.t >= timeout:
+            stop = "timeout"
+            break
+        if watchdog.stalled(world.t):
+            stop = "stalled"
             break
         result = world.advance(acts, transmissions)
         deliveries = {
@@ -95,7 +121,10 @@ def run_in_memory(
         }
         frames = result.frames
     for robot in robots.values():
-        robot.record.update(robot.controller.status(world.tick))
+        status = robot.controller.status(world.tick)
+        robot.record.update(status)
+        watchdog.status(status)
+    watchdog.poses(world.t, _positions(world))
     state = world.state()
     return build_summary(
         RunOutcome(
@@ -106,12 +135,19 @@ def run_in_memory(
             best_site=world.layout.best_site,
             sim_time_s=world.t,
             wall_time_s=0.0,
-            timed_out=not decided,
+            timed_out=stop == "timeout",
             radio=state.radio,
             world_rejected=0,
             stalls=0,
             observer_rejected=0,
             config={},
+            stop=stop,
+            timeout_kind="sim" if stop == "timeout" else None,
+            stuck=watchdog.stuck(),
         ),
         [robot.record for robot in robots.values()],
     )
+
+
+def _positions(world: World) -> list[tuple[int, float, float]]:
+    return [(robot, x, y) for robot, (x, y, _) in sorted(world.physics.poses().items())]

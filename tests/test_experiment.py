@@ -58,8 +58,10 @@ def test_a_small_experiment_records_every_run_and_reports(tmp_path: Path) -> Non
     for row in result["runs"]:
         assert (row["robots"], row["sites"]) == (3, 5) and row["complete"]
         assert row["source"] == "metadata" and row["consensus"]
+        assert row["ended"] == "consensus" and row["stuck"] == 0
         config = json.loads(report.read_recording(Path(row["recording"])).description["config"])
         assert config["stall_timeout"] == 5.0
+        assert config["wall_timeout"] == 1800.0  # --run-timeout, passed on to every run
     for run_id in run_ids:
         assert (out / f"{run_id}.mcap").is_file()
         summary = json.loads((out / "logs" / f"{run_id}.json").read_text())
@@ -70,6 +72,38 @@ def test_a_small_experiment_records_every_run_and_reports(tmp_path: Path) -> Non
         assert [line["run_id"] for line in csv.DictReader(stream)] == run_ids
     (group,) = result["groups"]
     assert group["runs"] == 2 and group["complete_runs"] == 2
+    assert group["endings"] == {"consensus": 2} and group["aggregated_runs"] == 2
+
+
+@pytest.mark.timeout(300)
+def test_runs_that_stall_are_results_labelled_with_their_ending(tmp_path: Path) -> None:
+    """A silent beacon: each lone robot waits at the nest until the watchdog ends its run."""
+    name = unique_run_id("exp-stall")
+    out = tmp_path / "experiment"
+    try:
+        done = subprocess.run(
+            swarm_command(
+                *("experiment", "--robots", "1", "--sites", "3", "--runs", "2"),
+                *("--stall-window", "20", "--beacon-outage", "0:1000000"),
+                *("--name", name, "--out", str(out), "--json", "--quiet"),
+            ),
+            capture_output=True,
+            timeout=280,
+            cwd=REPO,
+        )
+    finally:
+        left = kill_leftovers(name)
+    assert done.returncode == 0, done.stderr.decode()[-3000:]
+    assert left == []
+    result = json.loads(done.stdout)
+    assert result["failed"] == []
+    assert [(row["ended"], row["stuck"]) for row in result["runs"]] == [("stalled", 1)] * 2
+    (group,) = result["groups"]
+    assert group["endings"] == {"stalled": 2} and group["aggregated_runs"] == 0
+    assert group["swarm_steps"]["mean"] is None  # no consensus time to aggregate
+    for row in result["runs"]:
+        config = json.loads(report.read_recording(Path(row["recording"])).description["config"])
+        assert config["stall_window"] == 20.0
 
 
 @pytest.mark.parametrize(

@@ -285,7 +285,7 @@ def ending(summary: Mapping[str, Any] | None, fallback: str = "stopped") -> dict
     """How the run ended, in the page's words, from the launcher's summary (if any)."""
     if summary is None:
         return {"reason": fallback, "text": f"run {fallback}"}
-    reason = summary.get("end_reason") or summary.get("ended")
+    reason = summary.get("ended")
     if not isinstance(reason, str):
         reason = (
             "timeout"
