@@ -61,6 +61,7 @@ class RunOutcome:
     stalls: int
     observer_rejected: int
     config: dict[str, Any]
+    beacon_rejected: int = 0
 
 
 def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[str, Any]:
@@ -106,6 +107,7 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
             "world": outcome.world_rejected,
             "robots": sum(r.status.rejected for r in robots if r.status),
             "observer": outcome.observer_rejected,
+            "beacon": outcome.beacon_rejected,
         },
         "config": outcome.config,
         "per_robot": [robot_summary(record) for record in robots],

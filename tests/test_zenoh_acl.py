@@ -358,4 +358,4 @@ def test_routers_connect_to_each_other_by_name() -> None:
     plan = zenoh_acl.SwarmPlan(KEYS, robots=(0,), routers=("host-a", "10.0.0.2"), port=7450)
     config = zenoh_acl.router_config(plan, "host-a", PurePath("certs"))
     assert config["connect"]["endpoints"] == ["tls/10.0.0.2:7450"]
-    assert config["listen"]["endpoints"] == ["tls/0.0.0.0:7450"]
+    assert config["listen"]["endpoints"] == ["tls/127.0.0.1:7450", "tls/host-a:7450"]
