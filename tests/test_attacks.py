@@ -29,11 +29,15 @@ from swarm_helpers import (
     kill_leftovers,
     loopback_router,
     processes_of,
+    stop_processes,
     swarm_command,
     unique_run_id,
 )
 
-from robot_agent import protocol
+from deploy.processes import python_module
+from plumbing import run_keys
+from plumbing.world_info import ask
+from robot_agent import auth, protocol
 from world_server.layout import make_layout
 
 pytestmark = pytest.mark.timeout(180)
@@ -323,3 +327,101 @@ def test_junk_on_the_run_keys_does_not_blow_up_the_recording(tmp_path: Path) -> 
     with recording.open("rb") as stream:
         metadata = {record.name: record.metadata for record in make_reader(stream).iter_metadata()}
     assert json.loads(metadata["bestofn.run"]["recorder"])["rejected"] == 100
+
+
+# --- a sender that leaves ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("role", ["robot", "beacon"])
+def test_a_sender_that_leaves_with_its_transmission_queued_does_not_crash_the_world(
+    role: str, tmp_path: Path
+) -> None:
+    """Robot 2 (or a second beacon), played by the test with its own key, transmits in a
+    tick and leaves before answering it: the world drops the transmission and goes on."""
+    run_id = unique_run_id("leave")
+    keys = protocol.Keys(run_id)
+    assert run_keys.main(["--run-id", run_id, "--robots", "3", "--out", str(tmp_path)]) == 0
+    secret = run_keys.from_text((tmp_path / "secret.json").read_text(), run_id)
+    mine = run_keys.from_text((tmp_path / "robot-2.json").read_text(), run_id)
+    common = ["--run-id", run_id, "--seed", str(SEED), "--mode", "client"]
+    with loopback_router() as (session, endpoint):
+        connect = ["--connect", endpoint]
+        world_command = [
+            *python_module("world_server.server", *common, *connect),
+            # Robot 2 is the test's; in the beacon case the swarm is robots 0 and 1.
+            *["--robots", "3" if role == "robot" else "2", "--sites", str(SITES)],
+            *["--stall-timeout", "2"],
+            *["--key-file", str(tmp_path / "secret.json")],
+        ]
+        started = [subprocess.Popen(world_command, cwd=REPO, stderr=subprocess.PIPE)]
+        for module, options in [
+            ("nest_beacon", ["--key-file", str(tmp_path / "secret.json")]),
+            ("robot_agent.node", ["--id", "0", "--key-file", str(tmp_path / "robot-0.json")]),
+            ("robot_agent.node", ["--id", "1", "--key-file", str(tmp_path / "robot-1.json")]),
+        ]:
+            command = python_module(module, *common, *connect, *options)
+            started.append(subprocess.Popen(command, cwd=REPO, stderr=subprocess.PIPE))
+        ticks: list[int] = []
+        sent: list[int] = []  # the tick of the test's one transmission
+        if role == "robot":
+            name, keyring, identity = "2", mine, auth.robot_identity(2)
+        else:
+            name, keyring, identity = "spare", secret, auth.beacon_identity("spare")
+        joined_at: list[int] = []
+
+        def transmit(tick: int) -> None:
+            """One radio message in this tick, and no answer to it."""
+            key, payload = keys.radio_tx(name), b'{"kind":"beacon","v":1,"id":"x","seq":1}'
+            meta = protocol.encode(protocol.RadioTxMeta(v=1, tick=tick, seq=1))
+            session.put(key, payload, attachment=keyring.seal(identity, key, payload, meta))
+            sent.append(tick)
+
+        def on_sense(sample: zenoh.Sample) -> None:  # robot 2's first tick
+            if not sent:
+                transmit(protocol.decode(sample.payload.to_bytes(), protocol.Sense).tick)
+
+        def on_clock(sample: zenoh.Sample) -> None:
+            tick = protocol.decode(sample.payload.to_bytes(), protocol.Clock).tick
+            ticks.append(tick)
+            if role != "beacon" or not joined_at or sent:
+                return
+            if tick >= joined_at[0] + 10:  # by now in the world's barrier
+                transmit(tick)
+            else:  # a well-behaved beacon until then
+                key = keys.beacon_ack(name)
+                ack = protocol.encode(protocol.Ack(v=1, tick=tick, radio_tx=0))
+                session.put(key, ack, attachment=keyring.seal(identity, key, ack))
+
+        session.declare_subscriber(keys.world_clock, on_clock)
+        session.declare_subscriber(keys.sense(2), on_sense)
+        try:
+            if role == "beacon":
+                assert _wait_until(lambda: len(ticks) > 3, 60), "the run never started"
+                joined_at.append(ticks[-1])
+            token = session.liveliness().declare_token(keys.alive(role, name))
+            assert _wait_until(lambda: bool(sent), 60), "the test's sender never took part"
+            tick = sent[0]
+            time.sleep(0.5)  # the world has it queued, and waits for an answer that never comes
+            token.undeclare()  # ... and leaves
+            assert _wait_until(lambda: ticks[-1] >= tick + 20, 60), "the world stopped ticking"
+            assert started[0].poll() is None, "the world server exited"
+            answers, refused = ask(session, keys.world_stats, secret, auth.LAUNCHER, timeout=5.0)
+            assert answers, refused
+            stats = protocol.decode(answers[0], protocol.WorldState)
+        finally:
+            stop_processes(started)
+            kill_leftovers(run_id)
+    errors = b"".join(process.stderr.read() for process in started if process.stderr)
+    assert b"Traceback" not in errors, errors.decode()[-3000:]
+    assert stats.radio.rejected == 1  # the transmission of the sender that left
+    assert stats.rejected == 0
+    assert len(sent) == 1
+
+
+def _wait_until(condition: Callable[[], bool], timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
