@@ -191,6 +191,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         _rule("launcher-finished", "egress", ["reply"], [keys.recorder_finish]),
         # The recorder answers the finish query once its file is complete.
         _rule("recorder-serve", "ingress", ["declare_queryable", "reply"], [keys.recorder_finish]),
+        _rule("recorder-alive", "ingress", ["liveliness_token"], [keys.alive(RECORDER, "*")]),
         _rule("recorder-asked", "egress", ["query"], [keys.recorder_finish]),
         # Routers of the other hosts relay everyone's traffic; each checks its own clients.
         _rule("router-relay-in", "ingress", ALL_MESSAGES, everything),
@@ -271,7 +272,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         )
     grant_client(OBSERVER, reading)
     grant_client(LAUNCHER, [*reading, "launcher-log", "launcher-finish", "launcher-finished"])
-    grant_client(RECORDER, [*reading, "recorder-serve", "recorder-asked"])
+    grant_client(RECORDER, [*reading, "recorder-serve", "recorder-asked", "recorder-alive"])
     grant("routers", ["router-relay-in", "router-relay-out"], plan.routers)
     return {
         "enabled": True,
