@@ -487,7 +487,11 @@ class Swarm:
             status = protocol.decode(payload, protocol.Status)
             if status.id != robot:
                 raise protocol.ProtocolError(f"status of robot {status.id} on {key}")
-            self.records[robot].update(status)
+            record = self.records[robot]
+            if record.status and status.tick < record.status.tick and not record.restarting:
+                # Authentic but old: someone replaying what it heard, not the robot.
+                raise protocol.ProtocolError(f"status of tick {status.tick}, older than the last")
+            record.update(status)
         elif kind == "ack":
             name = key.rsplit("/", 2)[-2]
             auth.unseal(keyring, auth.beacon_identity(name), key, payload, attachment)

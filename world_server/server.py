@@ -100,6 +100,7 @@ class WorldServer:
         self.acts: dict[int, protocol.Act] = {}
         self.transmissions: list[Transmission] = []
         self.sent_this_tick: dict[str, int] = {}  # radio messages per sender in this tick
+        self.seqs_this_tick: set[tuple[str, int]] = set()  # (sender, seq): each once
         self.pending_joins: list[tuple[str, str]] = []
         self.assigned: set[int] = set()  # ids handed out on world/join
         self._info_bytes = protocol.encode(world.info)
@@ -351,6 +352,8 @@ class WorldServer:
                 raise protocol.ProtocolError(f"payload of {len(event.payload)} bytes")
             if self.sent_this_tick.get(sender, 0) >= MAX_TX_PER_TICK:
                 raise protocol.ProtocolError(f"more than {MAX_TX_PER_TICK} messages in a tick")
+            if (sender, meta.seq) in self.seqs_this_tick:
+                raise protocol.ProtocolError(f"message {meta.seq} again: a replay")
         except (auth.AuthError, protocol.ProtocolError) as error:
             self._reject_tx(event.key, error)
             return
@@ -359,6 +362,7 @@ class WorldServer:
             self.counters.late += 1
             return
         self.sent_this_tick[sender] = self.sent_this_tick.get(sender, 0) + 1
+        self.seqs_this_tick.add((sender, meta.seq))
         if self.lockstep:
             role = "beacon" if sender in self.world.beacons() else "robot"
             if not self.barrier.transmitted(meta.tick, f"{role}/{sender}"):
@@ -489,6 +493,7 @@ class WorldServer:
         result = self.world.advance(self.acts, self.transmissions)
         self.transmissions = []
         self.sent_this_tick = {}
+        self.seqs_this_tick = set()
         if self.lockstep:
             self.acts = {}
         else:  # real time: a command holds until replaced, but a capture happens once
