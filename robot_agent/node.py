@@ -7,6 +7,10 @@ wire from single-robot processes). Zenoh callbacks only copy bytes into the inbo
 Lockstep: the world's ``sense`` for tick t says how many radio messages and whether a
 camera frame belong to tick t; the robot steps only when all of them are in, so the
 order in which Zenoh delivers different keys cannot change a run.
+
+Trust: in a keyed run a robot holds only its own run key; it believes an input only with
+that key's tag (robot_agent/auth.py), only for a tick within reach of its last one, and
+holds at most PENDING_BYTES of inputs for ticks it has not reached (robot_agent/guard.py).
 """
 
 from __future__ import annotations

@@ -3,6 +3,11 @@
 Zenoh callbacks only copy bytes into one inbox; a single thread owns the World and does
 everything else, so there are no locks around the simulation. By default the server is
 the Zenoh router of a local run, listening on loopback.
+
+Trust: it takes a message only with its sender's run-key tag (in a keyed run), from a
+robot of its own swarm or a beacon, for the tick it is in; it answers queries only to
+identities of the run; it drops a departed sender's queued transmissions. Every
+rejection is counted (``WorldState.rejected``, the radio's ``rejected``).
 """
 
 from __future__ import annotations
