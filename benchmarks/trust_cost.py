@@ -11,9 +11,10 @@ ratios to the unkeyed run:
   access control (deploy/credentials.py).
 
 It checks that the three give the same per-robot results (lockstep is deterministic;
-keys must not change a decision). Then the transport alone: the bare lockstep exchange
-(benchmarks/swarm_speed.py's floor) through a router on loopback TCP and on a Unix
-socket, and what one tag costs in this process.
+keys must not change a decision). Then the transport: the same seeds (keyed) through a
+router process on loopback TCP and one on a Unix socket (``--connect``, so only the
+transport differs), the bare lockstep exchange (benchmarks/swarm_speed.py's floor) over
+each, and what one tag costs in this process.
 
     .venv/bin/python benchmarks/trust_cost.py                      # 10 and 100 robots
     .venv/bin/python benchmarks/trust_cost.py --robots 10 --seeds 0 1 2 --repeat 2
@@ -35,6 +36,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from deploy.processes import free_port  # noqa: E402
 from robot_agent import auth, protocol  # noqa: E402
 
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -92,8 +94,39 @@ def runs(args: argparse.Namespace) -> None:
 
 
 def transport(args: argparse.Namespace) -> None:
-    print("\nBare lockstep exchange (no tags), ticks per second through the router:")
     folder = Path(tempfile.mkdtemp(prefix="bestofn-"))
+    endpoints = {
+        "tcp": f"tcp/127.0.0.1:{free_port()}",
+        "unix": f"unixsock-stream/{folder / 'router.sock'}",
+    }
+    routers = [
+        subprocess.Popen([sys.executable, "-m", "deploy.router", "--listen", endpoint], cwd=REPO)
+        for endpoint in endpoints.values()
+    ]
+    try:
+        time.sleep(3.0)
+        print("\nThe same runs through a router process on each transport (--connect):")
+        for robots in args.robots:
+            timeout = ["--timeout", str(args.sim_timeout)] if robots > 50 else []
+            factors: dict[str, list[float]] = {name: [] for name in endpoints}
+            for seed in args.seeds:
+                for _ in range(args.repeat):
+                    for name, endpoint in endpoints.items():
+                        summary = swarm_run(
+                            robots, seed, args.sites, ["--connect", endpoint, *timeout]
+                        )
+                        factors[name].append(float(summary["real_time_factor"]))  # type: ignore[arg-type]
+            tcp, unix = statistics.fmean(factors["tcp"]), statistics.fmean(factors["unix"])
+            print(
+                f"{robots:>6} robots: tcp loopback {tcp:>6.1f}x, unix socket {unix:>6.1f}x "
+                f"({unix / tcp:.2f} of tcp)",
+                flush=True,
+            )
+    finally:
+        for router in routers:
+            router.terminate()
+            router.wait(timeout=10)
+    print("\nBare lockstep exchange (no tags), ticks per second through the router:")
     try:
         for robots in args.robots:
             tcp, unix = [], []

@@ -145,8 +145,12 @@ def repeat_every_tick(attacked: Attacked, attack: Callable[[int], None]) -> thre
 # --- crash ------------------------------------------------------------------------------
 
 
-def test_a_liveliness_token_of_a_robot_outside_the_swarm_is_refused() -> None:
-    with attacked_run(*SMALL, "--no-record") as run:
+KEYED = pytest.mark.parametrize("keys", [[], ["--no-keys"]], ids=["keyed", "no-keys"])
+
+
+@KEYED
+def test_a_liveliness_token_of_a_robot_outside_the_swarm_is_refused(keys: list[str]) -> None:
+    with attacked_run(*SMALL, "--no-record", *keys) as run:
         run.wait_for_tick(10)
         token = run.session.liveliness().declare_token(run.keys.alive("robot", 99999))
         code, summary, stderr = run.finish()
@@ -158,8 +162,10 @@ def test_a_liveliness_token_of_a_robot_outside_the_swarm_is_refused() -> None:
 # --- stall ------------------------------------------------------------------------------
 
 
-def test_a_forged_clock_far_in_the_future_does_not_silence_the_beacon() -> None:
-    with attacked_run(*SMALL, "--no-record") as run:
+@KEYED
+def test_a_forged_clock_far_in_the_future_does_not_silence_the_beacon(keys: list[str]) -> None:
+    """Keyed, the clock lacks the world's tag; without keys, its time is not its tick's."""
+    with attacked_run(*SMALL, "--no-record", *keys) as run:
         run.wait_for_tick(10)
         forged = protocol.Clock(v=1, tick=run.tick + 1, t=1e9)
         run.session.put(run.keys.world_clock, protocol.encode(forged))
@@ -168,16 +174,19 @@ def test_a_forged_clock_far_in_the_future_does_not_silence_the_beacon() -> None:
     assert summary is not None and summary["rejected"]["beacon"] == 1
 
 
-def test_a_forged_sense_for_the_last_tick_does_not_freeze_a_robot() -> None:
-    with attacked_run(*SMALL, "--no-record") as run:
+@KEYED
+def test_a_forged_sense_for_the_last_tick_does_not_freeze_a_robot(keys: list[str]) -> None:
+    """Keyed, the sense lacks robot 0's tag; without keys, its tick is out of reach."""
+    with attacked_run(*SMALL, "--no-record", *keys) as run:
         run.wait_for_tick(10)
-        forged = protocol.Sense(
-            v=1, tick=2**53, t=1.0, x=0, y=0, theta=0, prox=[0.0] * 8, rx=0, camera=False
-        )
-        run.session.put(run.keys.sense(0), protocol.encode(forged))
+        for tick, t in ((2**53, 1.0), (run.tick + 10_000, (run.tick + 10_000) * 0.1)):
+            forged = protocol.Sense(
+                v=1, tick=tick, t=t, x=0, y=0, theta=0, prox=[0.0] * 8, rx=0, camera=False
+            )
+            run.session.put(run.keys.sense(0), protocol.encode(forged))
         code, summary, stderr = run.finish()
     assert_right_consensus(code, summary, stderr)
-    assert summary is not None and summary["per_robot"][0]["rejected"] == 1
+    assert summary is not None and summary["per_robot"][0]["rejected"] == 2
 
 
 # --- mislead ----------------------------------------------------------------------------
