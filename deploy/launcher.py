@@ -493,8 +493,13 @@ class Swarm:
                 raise protocol.ProtocolError(f"status of tick {status.tick}, older than the last")
             record.update(status)
         elif kind == "ack":
-            name = key.rsplit("/", 2)[-2]
-            auth.unseal(keyring, auth.beacon_identity(name), key, payload, attachment)
+            identity = auth.beacon_identity(key.rsplit("/", 2)[-2])
+            try:
+                auth.check_identity(identity)
+            except ValueError as error:
+                raise protocol.ProtocolError(str(error)) from None
+            auth.unseal(keyring, identity, key, payload, attachment)
+            name = identity.partition("/")[2]
             ack = protocol.decode(payload, protocol.Ack)
             self.beacon_rejected[name] = max(self.beacon_rejected.get(name, 0), ack.rejected)
         else:

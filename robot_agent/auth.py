@@ -84,6 +84,7 @@ class Keyring:
                 raise ValueError(f"the key of {identity} has {len(key)} bytes, not {KEY_BYTES}")
         self.secret = secret
         self._keys: dict[str, bytes] = dict(keys or {})
+        self._derived: dict[str, bytes] = {}  # keys derived from the secret, kept
 
     @property
     def identities(self) -> list[str]:
@@ -92,9 +93,9 @@ class Keyring:
 
     def key(self, identity: str) -> bytes | None:
         """The key of ``identity``, or None if this keyring cannot speak or check for it."""
-        key = self._keys.get(identity)
+        key = self._keys.get(identity) or self._derived.get(identity)
         if key is None and self.secret is not None:
-            key = self._keys[identity] = derive_key(self.secret, identity)
+            key = self._derived[identity] = derive_key(self.secret, identity)
         return key
 
     def holds(self, identity: str) -> bool:

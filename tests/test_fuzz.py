@@ -266,7 +266,9 @@ def observer(request: pytest.FixtureRequest) -> Swarm:
     events=st.lists(
         st.tuples(
             st.sampled_from(["status", "clock", "state", "ack"]),
-            st.sampled_from(["robot/0/status", "robot/5/status", "beacon/nest/ack", "x"]),
+            st.sampled_from(
+                ["robot/0/status", "robot/5/status", "beacon/nest/ack", "beacon/a b/ack", "x"]
+            ),
             payloads(),
             st.one_of(st.none(), payloads()),
         ),

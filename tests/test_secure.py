@@ -186,12 +186,15 @@ def test_keys_never_show_on_a_command_line_and_the_default_listens_on_no_port(
         preexec_fn=_interruptible,  # noqa: PLW1509 (before any thread of this test)
     )
     try:
-        pids = _wait_for(lambda: len(processes_of(run_id)) >= 6 and processes_of(run_id), 60)
-        assert pids, "the run did not start"
-        pids = [*pids, process.pid]
+
+        def forked_processes() -> list[int]:
+            """The fork server, and the robots forked from it (they share its command line)."""
+            return [pid for pid in processes_of(run_id) if b"forkserver" in _cmdline(pid)]
+
+        assert _wait_for(lambda: len(forked_processes()) >= 4, 60), "the robots did not start"
+        pids = [*processes_of(run_id), process.pid]
         world = next(pid for pid in pids if b"world_server.server" in _cmdline(pid))
-        # The fork server, and the robots forked from it (they share its command line).
-        forked = [pid for pid in pids if b"forkserver" in _cmdline(pid)]
+        forked = forked_processes()
         for pid in pids:
             assert not HEX_KEY.search(_cmdline(pid)), _cmdline(pid)
             assert b"secret" not in _cmdline(pid)
