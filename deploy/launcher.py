@@ -327,6 +327,7 @@ class Swarm:
             EVENTS_BYTES, MAX_EVENT_BYTES
         )
         self.beacon_rejected: dict[str, int] = {}  # the beacons' own counts, from their acks
+        self._logged_rejections: set[str] = set()
         self.session: zenoh.Session | None = None
         self._declared: list[Any] = []
         self.sim_time = 0.0
@@ -469,8 +470,11 @@ class Swarm:
                 break
             try:
                 self._take(*event)
-            except (protocol.ProtocolError, auth.AuthError):
+            except (protocol.ProtocolError, auth.AuthError) as error:
                 self.rejected += 1
+                if event[0] not in self._logged_rejections:  # once per kind of message
+                    self._logged_rejections.add(event[0])
+                    log.warning("rejected a message on %s: %s", event[1], error)
         self.rejected += self.events.take_dropped(None)
         for robot, child in self.robot_children.items():
             if not child.alive() and not child.expected_exit:

@@ -20,9 +20,11 @@ the byte-exact rules and a test vector (tests/vectors/auth.json).
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import hmac
 import re
+import struct
 from collections.abc import Iterable, Mapping
 
 SECRET_BYTES = 32
@@ -62,9 +64,21 @@ def derive_key(secret: bytes, identity: str) -> bytes:
     return hmac.digest(secret, KEY_LABEL + check_identity(identity).encode(), hashlib.sha256)
 
 
+_U32 = struct.Struct(">I")
+
+
+@functools.lru_cache(maxsize=4096)
+def _framed_key(key_expr: str) -> bytes:
+    """``u32(len K) K``: a process tags on a few keys, over and over."""
+    encoded = key_expr.encode()
+    return _U32.pack(len(encoded)) + encoded
+
+
 def _framed(key_expr: str, metadata: bytes, payload: bytes) -> bytes:
-    parts = (key_expr.encode(), metadata, payload)
-    return b"".join(len(part).to_bytes(4, "big") + part for part in parts)
+    pack = _U32.pack
+    return b"".join(
+        (_framed_key(key_expr), pack(len(metadata)), metadata, pack(len(payload)), payload)
+    )
 
 
 def tag(key: bytes, key_expr: str, metadata: bytes, payload: bytes) -> bytes:
