@@ -52,9 +52,10 @@ while True:
 """
 
 
-def messaging_floor(robots: int, ticks: int) -> float:
-    """Ticks per second of a bare lockstep exchange with ``robots`` processes."""
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
+def messaging_floor(robots: int, ticks: int, endpoint: str | None = None) -> float:
+    """Ticks per second of a bare lockstep exchange with ``robots`` processes, through a
+    router on ``endpoint`` (default: a free loopback TCP port)."""
+    endpoint = endpoint or f"tcp/127.0.0.1:{free_port()}"
     session = open_session("router", listen=[endpoint])
     answered: dict[int, int] = {}
     done = threading.Condition()

@@ -3,9 +3,11 @@
 For every swarm size N and number of sites n, ``--runs`` runs with seeds ``--seed``,
 ``--seed + 1``, ...: each is a ``swarm run`` subprocess with its own run id, recorded to
 ``DIR/<run-id>.mcap``, and all of them share one Zenoh router (``deploy/router.py``) on a
-free loopback port, ``--parallel`` at a time. A progress bar follows the runs; at the end
-``swarm report`` turns the recordings into the figures and the summary table in DIR.
-Each run's stderr and JSON summary are kept in ``DIR/logs/``.
+Unix socket in a private directory, ``--parallel`` at a time. With ``--secure`` each run
+is its own TLS router with its own certificates and access control instead (a shared
+router would have to trust every run's certificate authority). A progress bar follows
+the runs; at the end ``swarm report`` turns the recordings into the figures and the
+summary table in DIR. Each run's stderr and JSON summary are kept in ``DIR/logs/``.
 
 Every run ends in a stated way (its summary's ``ended``): each gets ``--wall-timeout``
 (the experiment's ``--run-timeout``) and its own stall watchdog, and the report counts
@@ -19,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -114,6 +117,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         f"that reaches it ends as timeout (wall); one that still runs {BACKSTOP:g} s later "
         "is stopped from here (default: 1800)",
     )
+    parser.add_argument(
+        "--secure",
+        action="store_true",
+        help="every run with swarm run --secure: TLS, certificates and access control "
+        "made for it, on its own router (docs/security.md)",
+    )
     parser.add_argument("--no-report", action="store_true", help="only record the runs")
     parser.add_argument(
         "--json",
@@ -174,9 +183,13 @@ class _Running:
     streams: list[IO[bytes]] = field(default_factory=list)
 
 
-def plan_runs(args: argparse.Namespace, endpoint: str) -> list[RunSpec]:
-    """Every run of the experiment, in order: by N, then n, then run number."""
+def plan_runs(args: argparse.Namespace, endpoint: str | None) -> list[RunSpec]:
+    """Every run of the experiment, in order: by N, then n, then run number; each on the
+    shared router at ``endpoint``, or (None) on its own."""
     extra = _run_options(args)
+    network = ["--connect", endpoint] if endpoint is not None else []
+    if getattr(args, "secure", False):
+        network.append("--secure")
     specs = []
     for robots in args.robots:
         for sites in args.sites:
@@ -193,8 +206,7 @@ def plan_runs(args: argparse.Namespace, endpoint: str) -> list[RunSpec]:
                     str(seed),
                     "--run-id",
                     run_id,
-                    "--connect",
-                    endpoint,
+                    *network,
                     "--record",
                     str(recording),
                     "--json",
@@ -350,16 +362,21 @@ def run_all(
 
 def run(args: argparse.Namespace) -> int:
 
-    from deploy.processes import ProcessGroup, free_port, python_module, wait_for_port
+    from deploy.credentials import (
+        SOCKET_NAME,
+        private_directory,
+        socket_endpoint,
+        wait_for_socket,
+    )
+    from deploy.processes import ProcessGroup, python_module
     from deploy.report import print_report, report_console, write_report
 
     if args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} exists and is not a directory")
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    specs = plan_runs(args, endpoint)
-    validate_run_options(specs[0])
-    taken = sorted(str(spec.recording) for spec in specs if spec.recording.exists())
+    # The shared router's socket does not exist yet: check the runs with a stand-in.
+    planned = plan_runs(args, None if args.secure else "unixsock-stream/router.sock")
+    validate_run_options(planned[0])
+    taken = sorted(str(spec.recording) for spec in planned if spec.recording.exists())
     if taken:
         raise UsageError(
             f"{len(taken)} recording(s) already in {args.out}, e.g. {taken[0]}: "
@@ -368,16 +385,27 @@ def run(args: argparse.Namespace) -> int:
     logs = args.out / "logs"
     logs.mkdir(parents=True, exist_ok=True)
     group = ProcessGroup()
+    # The shared router listens on a socket only this user can reach (a secure run is
+    # its own router, on TLS).
+    directory = None if args.secure else private_directory()
     try:
-        router = group.start("router", python_module("deploy.router", "--listen", endpoint))
-        if not wait_for_port(port, 30.0, router.alive):
-            print(f"swarm experiment: the router did not start:\n{router.tail()}", file=sys.stderr)
-            return 1
+        endpoint = socket_endpoint(directory) if directory is not None else None
+        specs = plan_runs(args, endpoint)
+        if directory is not None and endpoint is not None:
+            router = group.start("router", python_module("deploy.router", "--listen", endpoint))
+            if not wait_for_socket(directory / SOCKET_NAME, 30.0, router.alive):
+                print(
+                    f"swarm experiment: the router did not start:\n{router.tail()}",
+                    file=sys.stderr,
+                )
+                return 1
         started = time.monotonic()
         results = run_all(specs, args.parallel, logs, args.run_timeout, args.quiet)
         elapsed = time.monotonic() - started
     finally:
         group.stop_all()
+        if directory is not None:
+            shutil.rmtree(directory, ignore_errors=True)
     failed = [result for result in results if not result.ok]
     for result in failed:
         print(

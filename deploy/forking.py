@@ -53,8 +53,14 @@ def _drop_fork_server_handles() -> None:
         tracker._fd = None
 
 
-def _child_main(module: str, argv: list[str], log: Connection) -> None:
-    """Runs in the forked child: stderr to the launcher's pipe, then the module's main."""
+def _child_main(
+    module: str, argv: list[str], log: Connection, env: dict[str, str] | None = None
+) -> None:
+    """Runs in the forked child: stderr to the launcher's pipe, then the module's main.
+
+    ``env`` (a robot's run keys) comes through the fork call, not the fork server's own
+    environment, so that no other child inherits it."""
+    os.environ.update(env or {})
     _drop_fork_server_handles()
     os.dup2(log.fileno(), 2)
     log.close()
@@ -110,10 +116,12 @@ class ForkServer:
         self._context = multiprocessing.get_context("forkserver")
         self._context.set_forkserver_preload(preload or PRELOAD)
 
-    def start(self, module: str, argv: list[str]) -> ForkedProcess:
+    def start(
+        self, module: str, argv: list[str], env: dict[str, str] | None = None
+    ) -> ForkedProcess:
         reader, writer = self._context.Pipe(duplex=False)
         process = self._context.Process(
-            target=_child_main, args=(module, list(argv), writer), daemon=False
+            target=_child_main, args=(module, list(argv), writer, env), daemon=False
         )
         process.start()
         writer.close()  # the child holds the only write end: EOF when it exits

@@ -30,6 +30,8 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from deploy import zenoh_acl
+from deploy.credentials import RunNetwork
 from deploy.processes import Child, ProcessGroup, free_port, python_module, wait_for_port
 from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary, describe
 from deploy.watchdog import Watchdog, default_stall_window
@@ -37,10 +39,11 @@ from nest_beacon.beacon import parse_outages
 from nest_beacon.options import add_beacon_options
 from plumbing import cliargs
 from plumbing.cliargs import UsageError
+from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
-from plumbing.world_info import fetch_world_info
+from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import open_session
-from robot_agent import protocol
+from robot_agent import auth, protocol
 from robot_agent.options import add_controller_options, controller_config
 from viewer.options import VIEW_OPTIONS, Observer, add_view_options, observers
 from world_server.layout import make_layout
@@ -73,6 +76,8 @@ ROBOT_PROCESSES_PER_CORE = 25
 RUN_ID_ENV = "BESTOFN_RUN_ID"
 # Processes that only watch: they stay to the end, and their crash does not end the run.
 OBSERVERS = ("viewer", "foxglove")
+# What the launcher takes in (status, clock, state, acks), at most: junk cannot grow it.
+EVENTS_BYTES, MAX_EVENT_BYTES = 64 * 2**20, protocol.MAX_PAYLOAD_BYTES + 1024
 
 
 def robot_at_time(text: str) -> tuple[int, float]:
@@ -211,6 +216,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="use this existing Zenoh router instead of making the world "
         "server the router of the run (several runs can share one router)",
     )
+    network.add_argument(
+        "--secure",
+        action="store_true",
+        help="TLS on loopback with certificates made for this run, and Zenoh access "
+        "control: each process may publish only on its own keys (docs/security.md)",
+    )
+    network.add_argument(
+        "--no-keys",
+        action="store_true",
+        help="do not tag and check messages with run keys (every message is believed, "
+        "as before run keys; for measuring what they cost)",
+    )
     output = parser.add_argument_group("output")
     recording = output.add_mutually_exclusive_group()
     recording.add_argument(
@@ -246,8 +263,7 @@ class RunPlan:
     seed: int
     timeout: float
     stall_window: float
-    endpoint: str
-    port: int | None  # the loopback port the world listens on, when it is the router
+    connect: str | None  # an existing router; None: the world server is the run's router
     record: Path | None
     world_args: list[str]
     robot_args: list[str]
@@ -259,6 +275,8 @@ class RunPlan:
     config: dict[str, Any] = field(default_factory=dict)
     observers: list[Observer] = field(default_factory=list)  # the page, Foxglove live
     wall_timeout: float | None = None
+    keyed: bool = True  # run keys: every message tagged and checked
+    secure: bool = False  # TLS and access control
 
 
 NOT_CONFIG = {"module", "command", "json", "quiet", "verbose", "forwarded", *VIEW_OPTIONS}
@@ -282,6 +300,10 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         raise ValueError(
             "--kill and --restart act on one robot's process: use them with --robots-per-process 1"
         )
+    if args.secure and args.connect:
+        raise ValueError("--secure makes the run's own TLS router: it cannot use --connect")
+    if args.secure and args.no_keys:
+        raise ValueError("--secure authenticates every message: it cannot go with --no-keys")
     run_id = args.run_id or f"run-{args.seed}-{int(time.time() * 1000) % 10**9}"
     record = None if args.no_record else Path(args.record or f"runs/{run_id}.mcap")
     if record is not None:
@@ -292,38 +314,26 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         controller.travel_timeout,
         parse_outages(args.beacon_outage),
     )
-    if args.connect:
-        port, endpoint = None, args.connect
-        world_network = ["--mode", "client", "--connect", endpoint]
-    else:
-        port = free_port()
-        endpoint = f"tcp/127.0.0.1:{port}"
-        world_network = ["--mode", "router", "--listen", endpoint]
     forwarded: ForwardedOptions = args.forwarded
+    # The network options of each process (where to connect, which certificate) are
+    # added when the run starts: its private directory does not exist before.
     common = ["--run-id", run_id, "--seed", str(args.seed)]
-    client = ["--mode", "client", "--connect", endpoint]
     world_args = [
         *common,
-        *world_network,
         "--robots",
         str(args.robots),
         "--sites",
         str(args.sites),
         *cliargs.forward_argv(forwarded.world, args),
     ]
-    robot_args = [*common, *client, *cliargs.forward_argv(forwarded.controller, args)]
-    beacon_args = [
-        *common,
-        *client,
-        *cliargs.forward_argv(forwarded.beacon, args, strip_prefix="beacon-"),
-    ]
+    robot_args = [*common, *cliargs.forward_argv(forwarded.controller, args)]
+    beacon_args = [*common, *cliargs.forward_argv(forwarded.beacon, args, strip_prefix="beacon-")]
     config = {key: value for key, value in vars(args).items() if key not in NOT_CONFIG}
     config["run_id"] = run_id
     config["threshold"] = controller.threshold  # the one in force, also when defaulted
     config["stall_window"] = stall_window  # likewise
     recorder_args = [
         *common,
-        *client,
         "--out",
         str(record),
         "--robots",
@@ -340,8 +350,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         seed=args.seed,
         timeout=args.timeout,
         stall_window=stall_window,
-        endpoint=endpoint,
-        port=port,
+        connect=args.connect,
         record=record,
         world_args=world_args,
         robot_args=robot_args,
@@ -351,8 +360,10 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         config=config,
         robots_per_process=per_process,
         spawn=args.spawn,
-        observers=observers(args, common, client, free_port(), free_port()),
+        observers=observers(args, common, free_port(), free_port()),
         wall_timeout=args.wall_timeout,
+        keyed=not args.no_keys,
+        secure=args.secure,
     )
 
 
@@ -398,7 +409,12 @@ class Swarm:
         self.robot_children: dict[int, Child] = {}
         self.world: Child | None = None
         self.recorder: Child | None = None
-        self.events: queue.SimpleQueue[tuple[str, str, bytes]] = queue.SimpleQueue()
+        self.network: RunNetwork | None = None  # made when the run starts
+        self.events: BoundedInbox[tuple[str, str, bytes, bytes | None]] = BoundedInbox(
+            EVENTS_BYTES, MAX_EVENT_BYTES
+        )
+        self.beacon_rejected: dict[str, int] = {}  # the beacons' own counts, from their acks
+        self._logged_rejections: set[str] = set()
         self.session: zenoh.Session | None = None
         self._declared: list[Any] = []
         self.sim_time = 0.0
@@ -433,8 +449,16 @@ class Swarm:
     def _publish_log(self, message: protocol.LogLine) -> None:
         session = self.session
         if session is not None:
+            key, payload = self.keys.log(message.process), protocol.encode(message)
             with contextlib.suppress(zenoh.ZError):
-                session.put(self.keys.log(message.process), protocol.encode(message))
+                session.put(key, payload, attachment=self._seal(auth.LAUNCHER, key, payload))
+
+    @property
+    def keyring(self) -> auth.Keyring | None:
+        return self.network.keyring if self.network is not None else None
+
+    def _seal(self, identity: str, key: str, payload: bytes) -> bytes | None:
+        return auth.seal(self.keyring, identity, key, payload)
 
     def _release_held_logs(self) -> None:
         """Publish the lines held back until the recorder listened, in their order."""
@@ -450,28 +474,39 @@ class Swarm:
         # Every process of the run carries its id in its environment (forked robots have
         # no command line of their own), so it can be found by run id, e.g. by tests.
         os.environ[RUN_ID_ENV] = plan.run_id
-        if plan.port is None:
-            wait_for_router(plan.endpoint)
-        world = self.group.start("world", python_module("world_server.server", *plan.world_args))
+        if plan.connect is not None:
+            wait_for_router(plan.connect)
+        self.network = network = RunNetwork.create(
+            plan.run_id, plan.robots, connect=plan.connect, keyed=plan.keyed, secure=plan.secure
+        )
+        world = self.group.start(
+            "world",
+            python_module("world_server.server", *plan.world_args, *network.world_args()),
+            env=network.env(),
+        )
         self.world = world
-        if plan.port is not None and not wait_for_port(plan.port, 30.0, world.alive):
+        if not network.wait_for_router(30.0, world.alive):
             raise StartError("the world server did not start", world)
+        config = network.config_of(zenoh_acl.LAUNCHER)
         opening = time.monotonic()
         try:
-            self.session = open_session("client", [plan.endpoint])
+            self.session = open_session(
+                "client", [network.endpoint], config_file=str(config) if config else None
+            )
         except zenoh.ZError as error:
             raise StartError(
-                f"could not connect to {plan.endpoint} (tried for "
+                f"could not connect to {network.endpoint} (tried for "
                 f"{time.monotonic() - opening:.0f} s): {str(error).split(' at ')[0]}"
             ) from None
         try:
-            fetch_world_info(self.session, self.keys, timeout=30.0)
+            fetch_world_info(self.session, self.keys, 30.0, self.keyring, auth.LAUNCHER)
         except TimeoutError as error:
             raise StartError(str(error), world) from None
         watched = {
             "status": self.keys.status("*"),
             "clock": self.keys.world_clock,
             "state": self.keys.world_state,
+            "ack": self.keys.beacon_ack("*"),
         }
         self._declared = [
             self.session.declare_subscriber(key, self._on(kind)) for kind, key in watched.items()
@@ -479,13 +514,24 @@ class Swarm:
         if plan.record is not None:
             plan.record.parent.mkdir(parents=True, exist_ok=True)
             self.recorder = self.group.start(
-                "recorder", python_module("world_server.recorder", *plan.recorder_args)
+                "recorder",
+                python_module(
+                    "world_server.recorder",
+                    *plan.recorder_args,
+                    *network.client_args(zenoh_acl.RECORDER),
+                ),
+                env=network.env(),
             )
             if not self._wait_alive("recorder", 0, 30.0, self.recorder):
                 raise StartError("the recorder did not start", self.recorder)
             self._release_held_logs()
         self._start_observers()
-        self.group.start("beacon", python_module("nest_beacon", *plan.beacon_args))
+        beacon = zenoh_acl.beacon_identity(zenoh_acl.DEFAULT_BEACON)
+        self.group.start(
+            "beacon",
+            python_module("nest_beacon", *plan.beacon_args, *network.client_args(beacon)),
+            env=network.env(),
+        )
         hosts = range(0, plan.robots, plan.robots_per_process)
         for first in hosts:
             robots = list(range(first, min(first + plan.robots_per_process, plan.robots)))
@@ -495,8 +541,13 @@ class Swarm:
 
     def _start_observers(self) -> None:
         """The page and Foxglove live: listening before the robots start, like the recorder."""
+        network = self.network
+        assert network is not None
         for observer in self.plan.observers:
-            child = self.group.start(observer.name, python_module(observer.module, *observer.argv))
+            argv = [*observer.argv, *network.client_args(zenoh_acl.OBSERVER)]
+            child = self.group.start(
+                observer.name, python_module(observer.module, *argv), env=network.env()
+            )
             if not self._wait_alive(observer.role, 0, 30.0, child):
                 raise StartError(f"the {observer.name} did not start", child)
             print(f"swarm run: {observer.name} at {observer.url}", file=sys.stderr, flush=True)
@@ -513,7 +564,10 @@ class Swarm:
 
     def _on(self, kind: str) -> Callable[[zenoh.Sample], None]:
         def callback(sample: zenoh.Sample) -> None:
-            self.events.put((kind, str(sample.key_expr), sample.payload.to_bytes()))
+            payload = sample.payload.to_bytes()
+            extra = sample.attachment.to_bytes() if sample.attachment is not None else None
+            size = len(payload) + len(extra or b"")
+            self.events.put((kind, str(sample.key_expr), payload, extra), size)
 
         return callback
 
@@ -533,33 +587,61 @@ class Swarm:
         """Take in everything that arrived; note crashed robots."""
         while True:
             try:
-                kind, key, payload = self.events.get_nowait()
+                event = self.events.get(timeout=0)
             except queue.Empty:
                 break
             try:
-                if kind == "status":
-                    status = protocol.decode(payload, protocol.Status)
-                    if status.id != self.keys.robot_of(key) or status.id not in self.records:
-                        raise protocol.ProtocolError(f"status of robot {status.id} on {key}")
-                    self.records[status.id].update(status)
-                    self.watchdog.status(status)
-                elif kind == "clock":
-                    clock = protocol.decode(payload, protocol.Clock)
-                    if self.started_at is None:
-                        self.started_at = time.monotonic()
-                    self.sim_time = clock.t
-                elif kind == "state":
-                    state = protocol.decode(payload, protocol.WorldState)
-                    self.last_state = state
-                    self.watchdog.poses(
-                        state.t, ((pose.id, pose.x, pose.y) for pose in state.robots)
-                    )
-            except protocol.ProtocolError:
+                self._take(*event)
+            except (protocol.ProtocolError, auth.AuthError) as error:
                 self.rejected += 1
+                if event[0] not in self._logged_rejections:  # once per kind of message
+                    self._logged_rejections.add(event[0])
+                    log.warning("rejected a message on %s: %s", event[1], error)
+        self.rejected += self.events.take_dropped(None)
         for robot, child in self.robot_children.items():
             if not child.alive() and not child.expected_exit:
                 self.records[robot].crashed = True
                 self.watchdog.retired(robot)
+
+    def _take(self, kind: str, key: str, payload: bytes, attachment: bytes | None) -> None:
+        """Believe one status, clock, state or beacon ack, if its sender's tag says so."""
+        keyring = self.keyring
+        if kind == "status":
+            robot = self.keys.robot_of(key)
+            if robot not in self.records:
+                raise protocol.ProtocolError(f"no robot {robot} in this run")
+            auth.unseal(keyring, auth.robot_identity(robot), key, payload, attachment)
+            status = protocol.decode(payload, protocol.Status)
+            if status.id != robot:
+                raise protocol.ProtocolError(f"status of robot {status.id} on {key}")
+            record = self.records[robot]
+            if record.status and status.tick < record.status.tick and not record.restarting:
+                # Authentic but old: someone replaying what it heard, not the robot.
+                raise protocol.ProtocolError(f"status of tick {status.tick}, older than the last")
+            record.update(status)
+            self.watchdog.status(status)
+            self.watchdog.status(status)
+        elif kind == "ack":
+            identity = auth.beacon_identity(key.rsplit("/", 2)[-2])
+            try:
+                auth.check_identity(identity)
+            except ValueError as error:
+                raise protocol.ProtocolError(str(error)) from None
+            auth.unseal(keyring, identity, key, payload, attachment)
+            name = identity.partition("/")[2]
+            ack = protocol.decode(payload, protocol.Ack)
+            self.beacon_rejected[name] = max(self.beacon_rejected.get(name, 0), ack.rejected)
+        else:
+            auth.unseal(keyring, auth.WORLD, key, payload, attachment)
+            if kind == "clock":
+                clock = protocol.decode(payload, protocol.Clock)
+                if self.started_at is None:
+                    self.started_at = time.monotonic()
+                self.sim_time = clock.t
+            else:
+                state = protocol.decode(payload, protocol.WorldState)
+                self.last_state = state
+                self.watchdog.poses(state.t, ((pose.id, pose.x, pose.y) for pose in state.robots))
 
     def apply_faults(self) -> None:
         """Kill and restart robots whose time has come (in sim time)."""
@@ -590,10 +672,15 @@ class Swarm:
         """One process for ``robots`` (each with its own Zenoh session inside it)."""
         name = f"robot-{robots[0]}" + (f"-{robots[-1]}" if len(robots) > 1 else "")
         argv = [arg for robot in robots for arg in ("--id", str(robot))]
-        argv += self.plan.robot_args
+        network = self.network
+        assert network is not None
+        # In secure mode each hosted robot's session presents its own certificate: '{id}'.
+        argv += [*self.plan.robot_args, *network.client_args("robot-{id}")]
+        # Only the keys of its own robots: whatever it says can only be in their names.
+        env = network.env(auth.robot_identity(robot) for robot in robots)
         if self.plan.spawn == "fork":
-            return self.group.fork(name, "robot_agent.node", argv)
-        return self.group.start(name, python_module("robot_agent.node", *argv))
+            return self.group.fork(name, "robot_agent.node", argv, env=env)
+        return self.group.start(name, python_module("robot_agent.node", *argv), env=env)
 
     def infrastructure_crash(self) -> Child | None:
         for child in self.group.crashed():
@@ -666,9 +753,11 @@ class Swarm:
         if self.session is None:
             return None
         try:
-            for reply in self.session.get(self.keys.world_stats, timeout=2.0):
-                if reply.ok is not None:
-                    return protocol.decode(reply.ok.payload.to_bytes(), protocol.WorldState)
+            answers, _ = ask(
+                self.session, self.keys.world_stats, self.keyring, auth.LAUNCHER, timeout=2.0
+            )
+            for answer in answers:
+                return protocol.decode(answer, protocol.WorldState)
         except (zenoh.ZError, protocol.ProtocolError):
             return None
         return None
@@ -678,10 +767,11 @@ class Swarm:
         if self.session is None or self.recorder is None or not self.recorder.alive():
             return False
         payload = json.dumps(summary).encode()
-        for reply in self.session.get(self.keys.recorder_finish, payload=payload, timeout=30.0):
-            if reply.ok is not None:
-                return True
-        return False
+        key = self.keys.recorder_finish
+        answers, _ = ask(
+            self.session, key, self.keyring, auth.LAUNCHER, payload=payload, timeout=30.0
+        )
+        return bool(answers)
 
     def close(self) -> None:
         """Stop every process still running and close the observer session."""
@@ -693,6 +783,8 @@ class Swarm:
             self.session.close()
             self.session = None
         self.group.stop_all()
+        if self.network is not None:
+            self.network.close()  # its socket, certificates and keys
 
 
 class StartError(Exception):
@@ -850,6 +942,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ending) -> int:
             world_rejected=stats.rejected if stats else 0,
             stalls=stats.stalls if stats else 0,
             observer_rejected=swarm.rejected,
+            beacon_rejected=sum(swarm.beacon_rejected.values()),
             config=plan.config,
             stop=stop,
             timeout_kind=ending.timeout_kind if stop == "timeout" else None,  # type: ignore[arg-type]

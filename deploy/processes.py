@@ -89,11 +89,13 @@ class ProcessGroup:
         )
         return self._adopt(Child(name, list(argv), process, on_line=self.on_line))
 
-    def fork(self, name: str, module: str, argv: Sequence[str]) -> Child:
-        """Like ``start(python -m module argv)``, but forked from a preloaded server."""
+    def fork(
+        self, name: str, module: str, argv: Sequence[str], env: dict[str, str] | None = None
+    ) -> Child:
+        """Like ``start(python -m module argv, env)``, but forked from a preloaded server."""
         if self._fork_server is None:
             self._fork_server = ForkServer()
-        process = self._fork_server.start(module, list(argv))
+        process = self._fork_server.start(module, list(argv), env)
         return self._adopt(Child(name, [module, *argv], process, on_line=self.on_line))
 
     def _adopt(self, child: Child) -> Child:

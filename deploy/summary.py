@@ -75,6 +75,7 @@ class RunOutcome:
     stop: Stop | None = None  # None: not known (a summary rebuilt from a recording)
     timeout_kind: Literal["sim", "wall"] | None = None
     stuck: list[dict[str, Any]] = field(default_factory=list)
+    beacon_rejected: int = 0
 
 
 def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[str, Any]:
@@ -122,6 +123,7 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
             "world": outcome.world_rejected,
             "robots": sum(r.status.rejected for r in robots if r.status),
             "observer": outcome.observer_rejected,
+            "beacon": outcome.beacon_rejected,
         },
         "config": outcome.config,
         "per_robot": [robot_summary(record) for record in robots],

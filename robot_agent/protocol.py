@@ -166,6 +166,7 @@ class Ack(Message):
 
     tick: _Tick
     radio_tx: Annotated[int, msgspec.Meta(ge=0, le=1000)]
+    rejected: _Count = 0  # invalid messages the beacon dropped so far
 
 
 class CameraMeta(Message):
@@ -355,9 +356,10 @@ class Keys:
     def robot_of(self, key: str) -> int | None:
         """The robot id in ``<prefix>/robot/<id>/<leaf>``, or None if it is not one."""
         parts = key[len(self.prefix) + 1 :].split("/") if key.startswith(self.prefix + "/") else []
-        if len(parts) == 3 and parts[0] == "robot" and parts[1].isdigit():
+        if len(parts) == 3 and parts[0] == "robot" and parts[1].isascii() and parts[1].isdigit():
             robot = int(parts[1])
-            return robot if robot < MAX_ROBOTS else None
+            # One spelling per robot ("7", never "07"): a key names one robot or none.
+            return robot if robot < MAX_ROBOTS and str(robot) == parts[1] else None
         return None
 
 

@@ -4,11 +4,19 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import subprocess
 from pathlib import Path
 
 import pytest
-from swarm_helpers import REPO, kill_leftovers, processes_of, swarm_command, unique_run_id
+from swarm_helpers import (
+    REPO,
+    kill_leftovers,
+    private_directories,
+    processes_of,
+    swarm_command,
+    unique_run_id,
+)
 
 from deploy import report
 from deploy.cli import main
@@ -114,6 +122,7 @@ def test_runs_that_stall_are_results_labelled_with_their_ending(tmp_path: Path) 
         (["--", "--no-such-option", "3"], "swarm run option"),
         (["--", "--drop", "2"], "swarm run option"),
         (["--alpha", "0.2", "--threshold", "1"], "swarm run option"),
+        (["--secure", "--", "--no-keys"], "swarm run option"),
     ],
 )
 def test_bad_arguments_exit_with_code_2_and_one_line(
@@ -125,3 +134,31 @@ def test_bad_arguments_exit_with_code_2_and_one_line(
     lines = capsys.readouterr().err.strip().splitlines()
     assert message in lines[-1] and sum("error" in line for line in lines) == 1
     assert not (tmp_path / "out").exists()  # nothing was started
+
+
+@pytest.mark.timeout(300)
+def test_a_secure_experiment_runs_each_swarm_on_its_own_tls_router(tmp_path: Path) -> None:
+    name = unique_run_id("sexp")
+    out, tmp = tmp_path / "experiment", tmp_path / "tmp"
+    tmp.mkdir()
+    try:
+        done = subprocess.run(
+            swarm_command(
+                *("experiment", "--robots", "3", "--sites", "4", "--runs", "1"),
+                *("--seed", "1", "--name", name, "--out", str(out), "--secure", "--json"),
+                "--quiet",
+            ),
+            capture_output=True,
+            timeout=240,
+            cwd=REPO,
+            env={**os.environ, "TMPDIR": str(tmp)},
+        )
+    finally:
+        left = kill_leftovers(name)
+    assert done.returncode == 0, done.stderr.decode()[-3000:]
+    assert left == []
+    (run_log,) = (out / "logs").glob("*.json")
+    summary = json.loads(run_log.read_text())
+    assert summary["correct"] and summary["config"]["secure"] is True
+    assert summary["config"]["connect"] is None  # its own router, not a shared one
+    assert private_directories(tmp) == []  # no certificates or sockets left behind

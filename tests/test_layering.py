@@ -19,6 +19,8 @@ PURE = [
     "robot_agent/protocol.py",
     "robot_agent/ports.py",
     "robot_agent/lockstep.py",
+    "robot_agent/auth.py",
+    "robot_agent/guard.py",
     "nest_beacon/beacon.py",
     "world_server/world.py",
     "world_server/physics.py",

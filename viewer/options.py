@@ -63,11 +63,11 @@ VIEW_OPTIONS = {"view", "view_host", "foxglove"}  # they shape no run: kept out 
 def observers(
     args: argparse.Namespace,
     common: list[str],
-    client: list[str],
     free_port: int,
     free_port_2: int,
 ) -> list[Observer]:
-    """The observers ``args`` ask for; port 0 becomes the free port given."""
+    """The observers ``args`` ask for; port 0 becomes the free port given. Their network
+    options (where to connect, which certificate) are added when the run starts."""
     host = args.view_host
     sizes = ["--robots", str(args.robots), "--sites", str(args.sites)]
     shown = "127.0.0.1" if host in ("0.0.0.0", "::", "") else host
@@ -78,7 +78,7 @@ def observers(
             Observer(
                 "viewer",
                 "viewer.live",
-                [*common, *client, *sizes, "--host", host, "--port", str(port)],
+                [*common, *sizes, "--host", host, "--port", str(port)],
                 f"http://{shown}:{port}/",
             )
         )
@@ -88,7 +88,7 @@ def observers(
             Observer(
                 "foxglove",
                 "viewer.foxglove_live",
-                [*common, *client, *sizes, "--host", host, "--port", str(port)],
+                [*common, *sizes, "--host", host, "--port", str(port)],
                 f"ws://{shown}:{port}",
             )
         )
