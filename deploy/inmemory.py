@@ -8,22 +8,22 @@ order, so a seed gives the same per-robot results here as over Zenoh.
 from __future__ import annotations
 
 import random
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from deploy.summary import RobotRecord, RunOutcome, build_summary
 from nest_beacon.beacon import Beacon, BeaconConfig
-from robot_agent import protocol
+from robot_agent import byzantine, protocol
 from robot_agent.controller import Controller, ControllerConfig
 from robot_agent.lockstep import answer_tick
-from robot_agent.ports import RejectCounter
+from robot_agent.ports import RejectCounter, RobotController
 from world_server.world import Transmission, World, WorldConfig
 
 
 @dataclass
 class _Robot:
-    controller: Controller
+    controller: RobotController
     record: RobotRecord
     rejects: RejectCounter = field(default_factory=RejectCounter)
     seq: int = 0
@@ -37,12 +37,16 @@ def run_in_memory(
     timeout: float = 1800.0,
     on_tick: Callable[[World], None] | None = None,
     controller_factory: type[Controller] = Controller,
+    byzantine_robots: Mapping[int, byzantine.Behaviour] | None = None,
 ) -> dict[str, Any]:
     """Run to consensus (every robot decided) or ``timeout`` sim seconds; the summary is
     the ``swarm run --json`` object (wall-clock fields are zero).
 
     ``controller_factory`` lets a study observe the controllers (a subclass of
     Controller); ``on_tick`` sees the world before each tick closes.
+    ``byzantine_robots`` makes those robots misbehave as ``swarm run --byzantine`` does (a
+    liar without a site claims ``byzantine.default_liar_site``); the run ends when every
+    honest robot has decided.
     """
     world = World(world_config)
     beacon_config = beacon_config or BeaconConfig()
@@ -51,12 +55,21 @@ def run_in_memory(
         random.Random(protocol.derive_seed(world_config.seed, "beacon", beacon_config.name)),
     )
     world.join_beacon(beacon_config.name)
+    behaviours = byzantine.resolve_liar_sites(
+        byzantine_robots or {}, world_config.num_sites, world.layout.best_site, world_config.seed
+    )
     robots: dict[int, _Robot] = {}
     for robot_id in range(world_config.num_robots):
         world.join_robot(robot_id)
         rng = random.Random(protocol.derive_seed(world_config.seed, "robot", robot_id))
-        controller = controller_factory(robot_id, world.info, controller_config, rng)
+        behaviour = behaviours.get(robot_id)
+        controller = (
+            controller_factory(robot_id, world.info, controller_config, rng)
+            if behaviour is None
+            else byzantine.build_controller(robot_id, world.info, controller_config, rng, behaviour)
+        )
         robots[robot_id] = _Robot(controller, RobotRecord(robot_id))
+    honest = [robot for robot_id, robot in robots.items() if robot_id not in behaviours]
     deliveries: dict[str, list[tuple[str, bytes]]] = {}
     frames: dict[int, bytes] = {}
     while True:
@@ -85,7 +98,7 @@ def run_in_memory(
             )
         if on_tick is not None:
             on_tick(world)
-        decided = all(robot.controller.decided_site is not None for robot in robots.values())
+        decided = all(robot.controller.decided_site is not None for robot in honest)
         if decided or world.t >= timeout:
             break
         result = world.advance(acts, transmissions)
@@ -112,6 +125,7 @@ def run_in_memory(
             stalls=0,
             observer_rejected=0,
             config={},
+            byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
         ),
         [robot.record for robot in robots.values()],
     )

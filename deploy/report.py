@@ -33,7 +33,7 @@ import msgspec
 from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from deploy.summary import RobotRecord, RunOutcome, build_summary
+from deploy.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from robot_agent import protocol
 from world_server.layout import make_layout
 
@@ -337,6 +337,7 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
             stalls=state.stalls if state else 0,
             observer_rejected=recording.undecodable,
             config=recording.config,
+            byzantine=byzantine_in_config(recording.config),
         ),
         records.values(),
     )

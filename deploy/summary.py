@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import statistics
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from robot_agent import protocol
+from robot_agent import byzantine, protocol
 
 
 @dataclass
@@ -61,14 +61,20 @@ class RunOutcome:
     stalls: int
     observer_rejected: int
     config: dict[str, Any]
+    byzantine: Mapping[int, str] = field(default_factory=dict)  # robot -> how it misbehaves
 
 
 def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[str, Any]:
     """The ``swarm run --json`` object."""
     robots = sorted(records, key=lambda record: record.id)
-    # Consensus is among the robots still running at the end: one killed on purpose or
-    # crashed cannot hold up or spoil the swarm's decision (it is reported separately).
-    survivors = [record for record in robots if not record.killed and not record.crashed]
+    # Consensus is among the honest robots still running at the end: one killed on purpose
+    # or crashed cannot hold up or spoil the swarm's decision (it is reported separately),
+    # and a Byzantine robot's own decision is not the swarm's (docs/byzantine.md).
+    survivors = [
+        record
+        for record in robots
+        if not record.killed and not record.crashed and record.id not in outcome.byzantine
+    ]
     decided = [record.decided_site for record in survivors]
     consensus = (
         bool(survivors) and all(site is not None for site in decided) and len(set(decided)) == 1
@@ -108,8 +114,25 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
             "observer": outcome.observer_rejected,
         },
         "config": outcome.config,
-        "per_robot": [robot_summary(record) for record in robots],
+        "per_robot": [
+            robot_summary(record) | {"byzantine": outcome.byzantine.get(record.id)}
+            for record in robots
+        ],
     }
+
+
+def byzantine_in_config(config: dict[str, Any]) -> dict[int, str]:
+    """Robot -> behaviour from a run's ``config["byzantine"]`` (``ROBOT:MODE`` texts, as
+    ``swarm run`` records them); entries that do not parse are left out."""
+    found: dict[int, str] = {}
+    entries = config.get("byzantine")
+    for text in entries if isinstance(entries, list) else []:
+        try:
+            switch = byzantine.ByzantineRobot.parse(str(text))
+        except ValueError:
+            continue
+        found[switch.robot] = str(switch.behaviour)
+    return found
 
 
 def robot_summary(record: RobotRecord) -> dict[str, Any]:

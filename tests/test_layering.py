@@ -19,6 +19,7 @@ PURE = [
     "robot_agent/protocol.py",
     "robot_agent/ports.py",
     "robot_agent/lockstep.py",
+    "robot_agent/byzantine.py",
     "nest_beacon/beacon.py",
     "world_server/world.py",
     "world_server/physics.py",
