@@ -303,7 +303,8 @@ def commit() -> str:
         return done.stdout.strip()
 
     head = git("rev-parse", "--short", "HEAD") or "unknown"
-    return head + (" with uncommitted changes" if git("status", "--porcelain") else "")
+    changed = sorted(line[3:] for line in git("status", "--porcelain").splitlines())
+    return head + (f" with uncommitted changes to {', '.join(changed)}" if changed else "")
 
 
 def results_section(
@@ -317,7 +318,7 @@ def results_section(
             "",
             f"Made by `.venv/bin/python {command}` at commit {commit()}: "
             f"{len(outcomes)} runs, {args.robots} robots, seeds 0..{args.seeds - 1}, "
-            f"timeout {args.timeout:g} sim s ({hit} runs hit it), "
+            f"timeout {args.timeout:g} sim s ({hit} run{'' if hit == 1 else 's'} hit it), "
             f"{wall / 60:.0f} min wall with {args.parallel} processes on a shared 2-core "
             "machine. The rows with 0 Byzantine robots are the same runs in every mode.",
             "",

@@ -17,7 +17,7 @@ from swarm_helpers import run_swarm, unique_run_id
 
 from deploy.cli import main as swarm_main
 from deploy.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
-from robot_agent import byzantine, node, options, ports, protocol
+from robot_agent import byzantine, decision, node, options, ports, protocol
 from robot_agent.byzantine import Behaviour, ByzantineRobot
 from robot_agent.controller import ControllerConfig
 from world_server.layout import make_layout
@@ -116,6 +116,18 @@ def test_the_default_liar_site_is_seeded_never_the_best_and_shared() -> None:
         assert site != best and 0 <= site < 6
         assert byzantine.default_liar_site(6, best, seed) == site
     assert len({byzantine.default_liar_site(6, 0, seed) for seed in range(30)}) == 5
+
+
+def test_a_one_hot_opinion_is_final_under_both_pooling_operators() -> None:
+    """The hole the liar uses (docs/byzantine.md): a certain opinion wins every pool that
+    has no exact zero on its site, with MProdOp and with the log-linear pool alike."""
+    claim = byzantine.one_hot(2, 4)
+    distrustful = [0.4, 0.3, 0.2, 0.1]  # alpha > 0: no option is ever exactly zero
+    for pool in (decision.mprodop, decision.loglinear_pool):
+        assert pool([distrustful, claim]) == claim
+        assert pool([distrustful, distrustful, distrustful, claim]) == claim
+        # alpha = 0: a robot that already eliminated site 2 keeps its own opinion.
+        assert pool([[0.5, 0.5, 0.0, 0.0], claim]) is None
 
 
 # --- parsing --------------------------------------------------------------------------
