@@ -8,17 +8,17 @@ order, so a seed gives the same per-robot results here as over Zenoh.
 from __future__ import annotations
 
 import random
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary
 from deploy.watchdog import Watchdog, default_stall_window
 from nest_beacon.beacon import Beacon, BeaconConfig
-from robot_agent import protocol
+from robot_agent import byzantine, protocol
 from robot_agent.controller import Controller, ControllerConfig
 from robot_agent.lockstep import answer_tick
-from robot_agent.ports import RejectCounter
+from robot_agent.ports import RejectCounter, RobotController
 from world_server.world import Transmission, World, WorldConfig
 
 # The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
@@ -28,7 +28,7 @@ POSES_EVERY = 10
 
 @dataclass
 class _Robot:
-    controller: Controller
+    controller: RobotController
     record: RobotRecord
     rejects: RejectCounter = field(default_factory=RejectCounter)
     seq: int = 0
@@ -43,6 +43,7 @@ def run_in_memory(
     stall_window: float | None = None,
     on_tick: Callable[[World], None] | None = None,
     controller_factory: type[Controller] = Controller,
+    byzantine_robots: Mapping[int, byzantine.Behaviour] | None = None,
 ) -> dict[str, Any]:
     """Run until every robot decided, the watchdog finds the run stalled (no undecided
     robot made progress for ``stall_window`` sim seconds; default: ``default_stall_window``
@@ -51,6 +52,9 @@ def run_in_memory(
 
     ``controller_factory`` lets a study observe the controllers (a subclass of
     Controller); ``on_tick`` sees the world before each tick closes.
+    ``byzantine_robots`` makes those robots misbehave as ``swarm run --byzantine`` does (a
+    liar without a site claims ``byzantine.default_liar_site``); the run ends when every
+    honest robot has decided.
     """
     world = World(world_config)
     beacon_config = beacon_config or BeaconConfig()
@@ -59,11 +63,19 @@ def run_in_memory(
         random.Random(protocol.derive_seed(world_config.seed, "beacon", beacon_config.name)),
     )
     world.join_beacon(beacon_config.name)
+    behaviours = byzantine.resolve_liar_sites(
+        byzantine_robots or {}, world_config.num_sites, world.layout.best_site, world_config.seed
+    )
     robots: dict[int, _Robot] = {}
     for robot_id in range(world_config.num_robots):
         world.join_robot(robot_id)
         rng = random.Random(protocol.derive_seed(world_config.seed, "robot", robot_id))
-        controller = controller_factory(robot_id, world.info, controller_config, rng)
+        behaviour = behaviours.get(robot_id)
+        controller = (
+            controller_factory(robot_id, world.info, controller_config, rng)
+            if behaviour is None
+            else byzantine.build_controller(robot_id, world.info, controller_config, rng, behaviour)
+        )
         robots[robot_id] = _Robot(controller, RobotRecord(robot_id))
     if stall_window is None:
         stall_window = default_stall_window(
@@ -73,6 +85,7 @@ def run_in_memory(
             beacon_config.outages,
         )
     watchdog = Watchdog(robots, stall_window, body_length=2 * world_config.spec.radius)
+    honest = [robot for robot_id, robot in robots.items() if robot_id not in behaviours]
     deliveries: dict[str, list[tuple[str, bytes]]] = {}
     frames: dict[int, bytes] = {}
     stop: Stop = "decided"
@@ -106,7 +119,7 @@ def run_in_memory(
             on_tick(world)
         if world.tick % POSES_EVERY == 0:
             watchdog.poses(world.t, _positions(world))
-        if all(robot.controller.decided_site is not None for robot in robots.values()):
+        if all(robot.controller.decided_site is not None for robot in honest):
             break
         if world.t >= timeout:
             stop = "timeout"
@@ -144,6 +157,7 @@ def run_in_memory(
             stop=stop,
             timeout_kind="sim" if stop == "timeout" else None,
             stuck=watchdog.stuck(),
+            byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
         ),
         [robot.record for robot in robots.values()],
     )

@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import zenoh
 from rich.console import Console
@@ -43,8 +43,8 @@ from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import open_session
-from robot_agent import auth, protocol
-from robot_agent.options import add_controller_options, controller_config
+from robot_agent import auth, byzantine, protocol
+from robot_agent.options import add_controller_options, byzantine_robot, controller_config
 from viewer.options import VIEW_OPTIONS, Observer, add_view_options, observers
 from world_server.layout import make_layout
 from world_server.options import add_world_options
@@ -80,7 +80,15 @@ OBSERVERS = ("viewer", "foxglove")
 EVENTS_BYTES, MAX_EVENT_BYTES = 64 * 2**20, protocol.MAX_PAYLOAD_BYTES + 1024
 
 
-def robot_at_time(text: str) -> tuple[int, float]:
+class RobotAtTime(NamedTuple):
+    robot: int
+    at: float  # sim seconds
+
+    def __str__(self) -> str:  # the switch's own form, so that it can be passed on
+        return f"{self.robot}@{self.at!r}"
+
+
+def robot_at_time(text: str) -> RobotAtTime:
     """``ROBOT@SIMTIME``, e.g. ``3@60``: robot 3 at 60 s of sim time."""
     robot, sep, when = text.partition("@")
     try:
@@ -93,7 +101,7 @@ def robot_at_time(text: str) -> tuple[int, float]:
         raise argparse.ArgumentTypeError(
             f"{text!r} is not ROBOT@SIMTIME, e.g. 3@60 (robot 3 at 60 sim seconds)"
         ) from None
-    return int(robot), at
+    return RobotAtTime(int(robot), at)
 
 
 @dataclass(frozen=True)
@@ -136,6 +144,17 @@ def add_swarm_switches(parser: argparse.ArgumentParser) -> ForwardedOptions:
             help="start a fresh process for robot ROBOT at SIMTIME "
             "(repeatable); it is killed first if still running, and rejoins "
             "with a new controller and its old body",
+        ),
+        faults.add_argument(
+            "--byzantine",
+            type=byzantine_robot,
+            action="append",
+            default=[],
+            metavar="ROBOT[:MODE]",
+            help="robot ROBOT misbehaves for the whole run (repeatable): liar[=SITE] "
+            "broadcasts certainty of SITE (default: a non-best site drawn from the seed), "
+            "inverted eliminates the better site of each pair, silent never broadcasts; "
+            "default mode liar. Consensus counts the honest robots (docs/byzantine.md)",
         ),
     ]
     return ForwardedOptions(world, beacon, controller, robot_faults)
@@ -271,6 +290,7 @@ class RunPlan:
     recorder_args: list[str] = field(default_factory=list)
     faults: list[Fault] = field(default_factory=list)
     robots_per_process: int = 1
+    byzantine_robots: dict[int, byzantine.Behaviour] = field(default_factory=dict)
     spawn: str = "fork"
     config: dict[str, Any] = field(default_factory=dict)
     observers: list[Observer] = field(default_factory=list)  # the page, Foxglove live
@@ -295,6 +315,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
                 f"--{fault.action} {fault.robot}@...: there is no robot "
                 f"{fault.robot} in a swarm of {args.robots}"
             )
+    byzantine_robots = byzantine_plan(args)
     per_process = args.robots_per_process or default_robots_per_process(args.robots)
     if faults and per_process > 1:
         raise ValueError(
@@ -332,6 +353,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     config["run_id"] = run_id
     config["threshold"] = controller.threshold  # the one in force, also when defaulted
     config["stall_window"] = stall_window  # likewise
+    config["byzantine"] = [f"{robot}:{how}" for robot, how in byzantine_robots.items()]
     recorder_args = [
         *common,
         "--out",
@@ -359,6 +381,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         faults=faults,
         config=config,
         robots_per_process=per_process,
+        byzantine_robots=byzantine_robots,
         spawn=args.spawn,
         observers=observers(args, common, free_port(), free_port()),
         wall_timeout=args.wall_timeout,
@@ -384,6 +407,26 @@ def check_recording_path(path: Path) -> None:
         raise ValueError(f"--record {path}: {existing} is not a directory")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise ValueError(f"--record {path}: no permission to write in {existing}")
+
+
+def byzantine_plan(args: argparse.Namespace) -> dict[int, byzantine.Behaviour]:
+    """The ``--byzantine`` robots with their liars' sites chosen; ValueError: usage."""
+    chosen: dict[int, byzantine.Behaviour] = {}
+    for switch in args.byzantine:
+        if switch.robot >= args.robots:
+            raise ValueError(
+                f"--byzantine {switch}: there is no robot {switch.robot} in a swarm of "
+                f"{args.robots}"
+            )
+        if switch.robot in chosen:
+            raise ValueError(f"--byzantine names robot {switch.robot} twice")
+        chosen[switch.robot] = switch.behaviour
+    best = make_layout(args.sites, args.robots, args.seed).best_site
+    try:
+        resolved = byzantine.resolve_liar_sites(chosen, args.sites, best, args.seed)
+    except ValueError as error:
+        raise ValueError(f"--byzantine: {error}") from None
+    return dict(sorted(resolved.items()))
 
 
 def default_robots_per_process(robots: int, cores: int | None = None) -> int:
@@ -672,6 +715,9 @@ class Swarm:
         """One process for ``robots`` (each with its own Zenoh session inside it)."""
         name = f"robot-{robots[0]}" + (f"-{robots[-1]}" if len(robots) > 1 else "")
         argv = [arg for robot in robots for arg in ("--id", str(robot))]
+        for robot in robots:
+            if robot in self.plan.byzantine_robots:
+                argv += ["--byzantine", f"{robot}:{self.plan.byzantine_robots[robot]}"]
         network = self.network
         assert network is not None
         # In secure mode each hosted robot's session presents its own certificate: '{id}'.
@@ -701,7 +747,11 @@ class Swarm:
         """Every running robot has decided, and no restart is still to come."""
         if self.restart_pending():
             return False
-        return all(self.records[robot].decided_site is not None for robot in self.live_robots())
+        return all(
+            self.records[robot].decided_site is not None
+            for robot in self.live_robots()
+            if robot not in self.plan.byzantine_robots
+        )
 
     def stalled(self) -> bool:
         """No undecided robot made progress for the stall window (a restart to come will)."""
@@ -947,6 +997,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ending) -> int:
             stop=stop,
             timeout_kind=ending.timeout_kind if stop == "timeout" else None,  # type: ignore[arg-type]
             stuck=swarm.watchdog.stuck(),
+            byzantine={robot: str(how) for robot, how in plan.byzantine_robots.items()},
         ),
         swarm.records.values(),
     )

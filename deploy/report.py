@@ -38,7 +38,7 @@ import msgspec
 from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from deploy.summary import ENDINGS, RobotRecord, RunOutcome, build_summary
+from deploy.summary import ENDINGS, RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from deploy.watchdog import Watchdog
 from robot_agent import protocol
 from world_server.layout import make_layout
@@ -426,6 +426,7 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
             observer_rejected=recording.undecodable,
             config=recording.config,
             stuck=watchdog.stuck(),
+            byzantine=byzantine_in_config(recording.config),
         ),
         records.values(),
     )

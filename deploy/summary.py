@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import statistics
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from robot_agent import protocol
+from robot_agent import byzantine, protocol
 
 
 @dataclass
@@ -76,14 +76,20 @@ class RunOutcome:
     timeout_kind: Literal["sim", "wall"] | None = None
     stuck: list[dict[str, Any]] = field(default_factory=list)
     beacon_rejected: int = 0
+    byzantine: Mapping[int, str] = field(default_factory=dict)  # robot -> how it misbehaves
 
 
 def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[str, Any]:
     """The ``swarm run --json`` object."""
     robots = sorted(records, key=lambda record: record.id)
-    # Consensus is among the robots still running at the end: one killed on purpose or
-    # crashed cannot hold up or spoil the swarm's decision (it is reported separately).
-    survivors = [record for record in robots if not record.killed and not record.crashed]
+    # Consensus is among the honest robots still running at the end: one killed on purpose
+    # or crashed cannot hold up or spoil the swarm's decision (it is reported separately),
+    # and a Byzantine robot's own decision is not the swarm's (docs/byzantine.md).
+    survivors = [
+        record
+        for record in robots
+        if not record.killed and not record.crashed and record.id not in outcome.byzantine
+    ]
     decided = [record.decided_site for record in survivors]
     consensus = (
         bool(survivors) and all(site is not None for site in decided) and len(set(decided)) == 1
@@ -126,7 +132,10 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
             "beacon": outcome.beacon_rejected,
         },
         "config": outcome.config,
-        "per_robot": [robot_summary(record) for record in robots],
+        "per_robot": [
+            robot_summary(record) | {"byzantine": outcome.byzantine.get(record.id)}
+            for record in robots
+        ],
     }
     if ended == "timeout":
         summary["timeout_kind"] = outcome.timeout_kind
@@ -146,6 +155,20 @@ def ending(stop: Stop | None, all_decided: bool, consensus: bool) -> Ending | No
             return "consensus"
         return "split" if all_decided else "stalled"  # stalled: no robot left running
     return stop
+
+
+def byzantine_in_config(config: dict[str, Any]) -> dict[int, str]:
+    """Robot -> behaviour from a run's ``config["byzantine"]`` (``ROBOT:MODE`` texts, as
+    ``swarm run`` records them); entries that do not parse are left out."""
+    found: dict[int, str] = {}
+    entries = config.get("byzantine")
+    for text in entries if isinstance(entries, list) else []:
+        try:
+            switch = byzantine.ByzantineRobot.parse(str(text))
+        except ValueError:
+            continue
+        found[switch.robot] = str(switch.behaviour)
+    return found
 
 
 def robot_summary(record: RobotRecord) -> dict[str, Any]:

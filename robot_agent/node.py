@@ -33,11 +33,15 @@ from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import certificate_name, open_from_args, reliable_publisher
-from robot_agent import auth, guard, protocol
-from robot_agent.controller import Controller
+from robot_agent import auth, byzantine, guard, protocol
 from robot_agent.lockstep import answer_tick
-from robot_agent.options import add_controller_options, controller_config
-from robot_agent.ports import RejectCounter
+from robot_agent.options import (
+    add_byzantine_option,
+    add_controller_options,
+    controller_config,
+    hosted_byzantine,
+)
+from robot_agent.ports import RejectCounter, RobotController
 
 log = logging.getLogger("robot_agent")
 Meta = TypeVar("Meta", protocol.RadioRxMeta, protocol.CameraMeta)
@@ -77,7 +81,7 @@ class RobotNode:
         *,
         session: zenoh.Session,
         keys: protocol.Keys,
-        controller: Controller,
+        controller: RobotController,
         inbox: BoundedInbox[Event],
         lockstep: bool,
         keyring: auth.Keyring | None = None,
@@ -423,6 +427,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="wall seconds to wait for the world server (default: 60)",
     )
     add_controller_options(parser)
+    add_byzantine_option(parser)
     cliargs.add_zenoh_options(parser)
     cliargs.add_log_level(parser)
     return parser
@@ -439,6 +444,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.exit(2, "robot-agent: error: --id auto cannot fill '{id}' in --zenoh-config\n")
     try:
         config = controller_config(args)
+        misbehaving = hosted_byzantine(args.byzantine, fixed)
     except ValueError as error:
         parser.exit(2, f"robot-agent: error: {error}\n")
     cliargs.configure_logging("robot-agent", args.log_level)
@@ -464,7 +470,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             identity = auth.robot_identity(robot)
             info = fetch_world_info(session, keys, args.info_timeout, keyring, identity)
             rng = random.Random(protocol.derive_seed(args.seed, "robot", robot))
-            controller = Controller(robot, info, config, rng)
+            try:
+                controller = byzantine.build_controller(
+                    robot, info, config, rng, misbehaving.get(robot)
+                )
+            except ValueError as error:  # e.g. a liar's site the world does not have
+                print(f"robot-agent: error: {error}", file=sys.stderr)
+                return 2
             node = RobotNode(
                 robot,
                 session=session,

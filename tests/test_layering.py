@@ -21,6 +21,7 @@ PURE = [
     "robot_agent/lockstep.py",
     "robot_agent/auth.py",
     "robot_agent/guard.py",
+    "robot_agent/byzantine.py",
     "nest_beacon/beacon.py",
     "world_server/world.py",
     "world_server/physics.py",
