@@ -83,7 +83,7 @@ class RobotNode:
         keys: protocol.Keys,
         controller: RobotController,
         inbox: BoundedInbox[Event],
-        lockstep: bool,
+        world: protocol.WorldInfo,
         keyring: auth.Keyring | None = None,
     ) -> None:
         self.robot_id = robot_id
@@ -92,9 +92,9 @@ class RobotNode:
         self.keys = keys
         self.controller = controller
         self.inbox = inbox
-        self.lockstep = lockstep
+        self.lockstep = world.clock == "lockstep"
         self.keyring = keyring  # None: an unauthenticated run
-        self.dt = controller.world.dt
+        self.dt = world.dt
         self.rejects = RejectCounter()
         self.pending: dict[int, _TickInputs] = {}
         self.pending_bytes = 0
@@ -483,7 +483,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 keys=keys,
                 controller=controller,
                 inbox=inbox,
-                lockstep=info.clock == "lockstep",
+                world=info,
                 keyring=keyring.only([identity]) if keyring is not None else None,
             )
             node.start()

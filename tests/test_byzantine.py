@@ -198,6 +198,7 @@ def test_robot_agent_refuses_bad_switches_with_code_2(
 
 def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot() -> None:
     from deploy.cli import build_parser
+    from deploy.credentials import RunNetwork
     from deploy.launcher import Swarm, plan_from_args
 
     parser = build_parser(["run"])
@@ -216,9 +217,13 @@ def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot() 
     json.dumps(plan.config)  # the recorder gets the configuration as JSON
     started: list[list[str]] = []
     swarm = Swarm(plan)
-    swarm.group.fork = lambda name, module, argv: started.append(argv)  # type: ignore[method-assign]
-    swarm._start_robots([0, 1])
-    swarm._start_robots([2, 3])
+    swarm.group.fork = lambda name, module, argv, env=None: started.append(argv)  # type: ignore[method-assign]
+    swarm.network = RunNetwork.create(plan.run_id, plan.robots, connect=None, keyed=True)
+    try:
+        swarm._start_robots([0, 1])
+        swarm._start_robots([2, 3])
+    finally:
+        swarm.network.close()
     hosts = [argv[: argv.index(plan.robot_args[0])] for argv in started]
     assert hosts == [
         ["--id", "0", "--id", "1", "--byzantine", f"1:liar={liar_site}"],

@@ -94,14 +94,15 @@ def _world_info() -> protocol.WorldInfo:
 
 
 def _node() -> RobotNode:
-    controller = Controller(1, _world_info(), ControllerConfig(), random.Random(1))
+    info = _world_info()
+    controller = Controller(1, info, ControllerConfig(), random.Random(1))
     node = RobotNode(
         1,
         session=None,
         keys=protocol.Keys("fuzz"),
         controller=controller,  # type: ignore[arg-type]
         inbox=BoundedInbox(),
-        lockstep=True,
+        world=info,
     )
     node._act, node._status, node._tx = _Publisher(), _Publisher(), _Publisher()
     return node

@@ -54,7 +54,7 @@ def _node(keyring: auth.Keyring | None) -> node.RobotNode:
         keys=protocol.Keys("guard"),
         controller=controller,
         inbox=BoundedInbox(),
-        lockstep=True,
+        world=info,
         keyring=keyring,
     )
 
