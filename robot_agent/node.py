@@ -51,7 +51,9 @@ Meta = TypeVar("Meta", protocol.RadioRxMeta, protocol.CameraMeta)
 # and what may wait in a process's inbox for its one thread.
 PENDING_BYTES = 4 * 2**20
 PENDING_MESSAGES = 4000
-INBOX_BYTES = 64 * 2**20
+# The inbox grows with the robots a process hosts; a tick's inputs are a few kilobytes
+# per robot, so this leaves room for a long stall, not for a flood.
+INBOX_BYTES, INBOX_BYTES_PER_ROBOT = 16 * 2**20, 2**20
 MAX_MESSAGE_BYTES = protocol.MAX_FRAME_BYTES + 1024  # a frame and its attachment
 
 
@@ -453,7 +455,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if keyring is not None and not keyring.holds(auth.robot_identity(robot)):
             parser.exit(2, f"robot-agent: error: the run keys hold no key for robot {robot}\n")
     keys = protocol.Keys(args.run_id, args.root)
-    inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
+    inbox: BoundedInbox[Event] = BoundedInbox(
+        INBOX_BYTES + INBOX_BYTES_PER_ROBOT * len(args.ids), MAX_MESSAGE_BYTES
+    )
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: inbox.put(Event(-1, "stop")))
     sessions: list[zenoh.Session] = []
