@@ -76,6 +76,9 @@ ROBOT_PROCESSES_PER_CORE = 25
 RUN_ID_ENV = "BESTOFN_RUN_ID"
 # Processes that only watch: they stay to the end, and their crash does not end the run.
 OBSERVERS = ("viewer", "foxglove")
+# Each observer's certificate in secure mode: a reader with its own token (and the page
+# its finish queryable), nothing else.
+OBSERVER_CERTIFICATES = {"viewer": zenoh_acl.VIEWER, "foxglove": zenoh_acl.FOXGLOVE}
 # What the launcher takes in (status, clock, state, acks), at most: junk cannot grow it.
 EVENTS_BYTES, MAX_EVENT_BYTES = 64 * 2**20, protocol.MAX_PAYLOAD_BYTES + 1024
 
@@ -587,7 +590,8 @@ class Swarm:
         network = self.network
         assert network is not None
         for observer in self.plan.observers:
-            argv = [*observer.argv, *network.client_args(zenoh_acl.OBSERVER)]
+            identity = OBSERVER_CERTIFICATES[observer.name]
+            argv = [*observer.argv, *network.client_args(identity)]
             child = self.group.start(
                 observer.name, python_module(observer.module, *argv), env=network.env()
             )
@@ -599,11 +603,16 @@ class Swarm:
         """Tell the page how the run ended; it answers once every page was sent that."""
         if self.session is None or not any(o.name == "viewer" for o in self.plan.observers):
             return
-        with contextlib.suppress(zenoh.ZError):
-            for _ in self.session.get(
-                self.keys.viewer_finish, payload=json.dumps(summary).encode(), timeout=5.0
-            ):
-                pass
+        payload = json.dumps(summary).encode()
+        with contextlib.suppress(zenoh.ZError):  # sealed: the view believes only the launcher
+            ask(
+                self.session,
+                self.keys.viewer_finish,
+                self.keyring,
+                auth.LAUNCHER,
+                payload=payload,
+                timeout=5.0,
+            )
 
     def _on(self, kind: str) -> Callable[[zenoh.Sample], None]:
         def callback(sample: zenoh.Sample) -> None:

@@ -2,7 +2,8 @@
 
 Every process of a secured swarm is a Zenoh client of its host's router over mutual TLS;
 the certificate's common name is its identity (``robot-3``, ``world``, ``beacon-nest``,
-``observer``, ``launcher``, ``recorder``; routers use their host name). The router's
+``observer``, ``launcher``, ``recorder``, ``viewer``, ``foxglove``; routers use their host
+name). The router's
 access control denies by default and allows each identity exactly its part of the
 protocol (robot_agent/protocol.py), so a robot can only publish its own ``act``,
 ``status`` and ``radio/tx/<id>`` and only the world server can publish ``sense``,
@@ -43,6 +44,9 @@ DEFAULT_ROUTER = "router"
 DEFAULT_BEACON = "nest"
 # Identities (certificate common names) of the processes that are neither robots nor beacons.
 OBSERVER, LAUNCHER, RECORDER, WORLD = "observer", "launcher", "recorder", "world"
+# The observers of swarm run --view and --foxglove: readers with a token (and the page a
+# queryable) of their own.
+VIEWER, FOXGLOVE = "viewer", "foxglove"
 # Zenoh 1.10's ACL message types (the config parser rejects any other name).
 ALL_MESSAGES = (
     "put",
@@ -112,6 +116,8 @@ class SwarmPlan:
             OBSERVER,
             LAUNCHER,
             RECORDER,
+            VIEWER,
+            FOXGLOVE,
         ]
 
 
@@ -141,6 +147,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
     keys = plan.keys
     everything = [keys.all]
     world_services = [keys.world_info, keys.world_stats]
+    finishes = [keys.recorder_finish, keys.viewer_finish]
     rules: list[dict[str, Any]] = [
         # Watching: subscribe to anything of the run, see who is alive, read world services.
         _rule(
@@ -185,14 +192,20 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         # Beacons hear the clock.
         _rule("beacon-subscribe-clock", "ingress", ["declare_subscriber"], [keys.world_clock]),
         _rule("beacon-receive-clock", "egress", ["put"], [keys.world_clock]),
-        # The launcher relays process logs and asks the recorder to finish.
+        # The launcher relays process logs and asks the recorder and the page to finish.
         _rule("launcher-log", "ingress", ["put"], [keys.log("*")]),
-        _rule("launcher-finish", "ingress", ["query"], [keys.recorder_finish]),
-        _rule("launcher-finished", "egress", ["reply"], [keys.recorder_finish]),
+        _rule("launcher-finish", "ingress", ["query"], finishes),
+        _rule("launcher-finished", "egress", ["reply"], finishes),
         # The recorder answers the finish query once its file is complete.
         _rule("recorder-serve", "ingress", ["declare_queryable", "reply"], [keys.recorder_finish]),
         _rule("recorder-alive", "ingress", ["liveliness_token"], [keys.alive(RECORDER, "*")]),
         _rule("recorder-asked", "egress", ["query"], [keys.recorder_finish]),
+        # The page answers its finish query once every page was sent how the run ended.
+        _rule("viewer-serve", "ingress", ["declare_queryable", "reply"], [keys.viewer_finish]),
+        _rule("viewer-alive", "ingress", ["liveliness_token"], [keys.alive(VIEWER, 0)]),
+        _rule("viewer-asked", "egress", ["query"], [keys.viewer_finish]),
+        # Foxglove live only listens, and says it serves.
+        _rule("foxglove-alive", "ingress", ["liveliness_token"], [keys.alive(FOXGLOVE, 0)]),
         # Routers of the other hosts relay everyone's traffic; each checks its own clients.
         _rule("router-relay-in", "ingress", ALL_MESSAGES, everything),
         _rule("router-relay-out", "egress", ALL_MESSAGES, everything),
@@ -273,6 +286,8 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
     grant_client(OBSERVER, reading)
     grant_client(LAUNCHER, [*reading, "launcher-log", "launcher-finish", "launcher-finished"])
     grant_client(RECORDER, [*reading, "recorder-serve", "recorder-asked", "recorder-alive"])
+    grant_client(VIEWER, [*reading, "viewer-serve", "viewer-asked", "viewer-alive"])
+    grant_client(FOXGLOVE, [*reading, "foxglove-alive"])
     grant("routers", ["router-relay-in", "router-relay-out"], plan.routers)
     return {
         "enabled": True,

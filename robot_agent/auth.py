@@ -2,9 +2,10 @@
 
 Every run has a random 32-byte secret. Each identity of the run has its own key derived
 from it, ``HMAC-SHA256(secret, b"bestofn-key:" + identity)``; identities are ``world``,
-``robot/<id>``, ``beacon/<name>``, ``launcher`` and ``recorder``. The processes that run
-the run (world server, launcher, recorder, beacon) hold the secret; a robot process holds
-only the keys of the robots it hosts, so whatever it says can only be in their names.
+``robot/<id>``, ``beacon/<name>``, ``launcher``, ``recorder``, and the observers ``viewer``
+and ``foxglove``. The processes that run or watch the run (world server, launcher,
+recorder, beacon, observers) hold the secret; a robot process holds only the keys of the
+robots it hosts, so whatever it says can only be in their names.
 
 Every message of a keyed run carries a 16-byte tag in front of its Zenoh attachment::
 
@@ -34,8 +35,10 @@ NONCE_BYTES = 16
 KEY_LABEL = b"bestofn-key:"
 
 WORLD, LAUNCHER, RECORDER = "world", "launcher", "recorder"
+VIEWER, FOXGLOVE = "viewer", "foxglove"  # the observers: they only ask, never publish
 _IDENTITY = re.compile(
-    r"^(world|launcher|recorder|robot/(0|[1-9][0-9]{0,4})|beacon/[A-Za-z0-9_.-]{1,64})$"
+    r"^(world|launcher|recorder|viewer|foxglove"
+    r"|robot/(0|[1-9][0-9]{0,4})|beacon/[A-Za-z0-9_.-]{1,64})$"
 )
 
 

@@ -202,6 +202,8 @@ def test_a_secure_run_has_a_certificate_per_process_and_no_ca_key_left() -> None
                 "observer",
                 "launcher",
                 "recorder",
+                "viewer",
+                "foxglove",
             )
         )
         assert not (directory / "ca.key").exists()

@@ -7,8 +7,10 @@ tests (``VIEWER_SCREENSHOTS=docs .venv/bin/python -m pytest tests/test_viewer.py
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import re
 import struct
 import subprocess
 import threading
@@ -19,12 +21,22 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import zenoh
 from browser import Browser, browser, pixel_statistics, save, share_of_colour
-from swarm_helpers import REPO, kill_leftovers, processes_of, swarm_command, unique_run_id
+from swarm_helpers import (
+    REPO,
+    kill_leftovers,
+    loopback_router,
+    private_directories,
+    processes_of,
+    swarm_command,
+    unique_run_id,
+)
 from websockets.sync.client import connect
 
 from deploy.processes import free_port
-from robot_agent import protocol
+from plumbing.world_info import ask
+from robot_agent import auth, protocol
 from viewer import model, replay
 from viewer.decode import Delivery, InvalidSampleError, decode_sample
 from viewer.live import MAX_DELIVERIES, LiveSource
@@ -153,6 +165,16 @@ def test_the_live_page_shows_how_the_run_ended(live_run: LiveRun) -> None:
     assert live_run.summary["run_id"] in header
     assert f"decided {ROBOTS}/{ROBOTS}" in header
     assert f"consensus on site {live_run.summary['chosen_site']}, the best" in header
+
+
+def test_the_live_page_draws_radio_deliveries_and_refuses_nothing_of_a_keyed_run(
+    live_run: LiveRun,
+) -> None:
+    """The default run is keyed: every sample carries a tag, and a delivery's metadata
+    follows it in the attachment."""
+    assert int(live_run.final["deliveries"]) > 0
+    assert live_run.final["rejected"] == "0"
+    assert "view refused" not in live_run.header
 
 
 def test_the_live_screenshot_shows_the_arena_not_a_blank_page(live_run: LiveRun) -> None:
@@ -353,41 +375,109 @@ def test_replay_of_a_finished_recording_knows_decisions_and_the_ending(tmp_path:
 # --- the live bridge's gate and its bounds (no network) --------------------------------------
 
 
+def _status(robot: int, *, tick: int = 1, trips: int = 0) -> protocol.Status:
+    return protocol.Status(
+        v=1,
+        id=robot,
+        tick=tick,
+        t=tick / 10,
+        phase="to_site",
+        trips=trips,
+        opinion=[0.5, 0.5],
+        pool_size=0,
+        poolings=0,
+        decided_site=None,
+        decision_time=None,
+        decision_trips=None,
+        comparison=None,
+    )
+
+
 def test_every_sample_passes_one_gate_that_rejects_what_is_not_a_valid_message() -> None:
     keys = protocol.Keys("gate")
+
+    def gate(key: str, payload: bytes, attachment: bytes | None) -> Any:
+        return decode_sample(keys, key, payload, attachment, keyring=None)
+
     clock = protocol.encode(protocol.Clock(v=1, tick=3, t=0.3))
-    assert decode_sample(keys, keys.world_clock, clock, None) == protocol.Clock(v=1, tick=3, t=0.3)
-    assert decode_sample(keys, keys.sense(1), b"{}", None) is None  # a key the view does not use
+    assert gate(keys.world_clock, clock, None) == protocol.Clock(v=1, tick=3, t=0.3)
+    assert gate(keys.sense(1), b"{}", None) is None  # a key the view does not use
     with pytest.raises(InvalidSampleError, match="status of robot 4"):
-        status = protocol.Status(
+        gate(keys.status(3), protocol.encode(_status(4)), None)
+    with pytest.raises(InvalidSampleError):
+        gate(keys.world_state, b'{"v":1,"tick":-1}', None)
+    with pytest.raises(InvalidSampleError, match="without metadata"):
+        gate(keys.radio_rx(2), b"{}", None)
+    meta = protocol.encode(protocol.RadioRxMeta(v=1, tick=5, sender="7", seq=1, sent_tick=4))
+    delivery = gate(keys.radio_rx(2), b"{}", meta)
+    assert isinstance(delivery, Delivery) and delivery.receiver == 2
+    assert gate(keys.radio_rx("07"), b"{}", meta) is None  # no robot is spelt "07"
+
+
+def test_in_a_keyed_run_the_gate_checks_each_tag_with_its_speakers_key() -> None:
+    """The world's key for its clock, a robot's for its status, the receiving robot's for
+    a delivery; the tag is stripped before the metadata is decoded."""
+    keys = protocol.Keys("gate")
+    keyring = auth.Keyring(secret=bytes(range(32)))
+    stranger = auth.Keyring(secret=bytes(32))  # another run's
+
+    def gate(key: str, payload: bytes, attachment: bytes | None) -> Any:
+        return decode_sample(keys, key, payload, attachment, keyring=keyring)
+
+    clock = protocol.encode(protocol.Clock(v=1, tick=3, t=0.3))
+    sealed = keyring.seal(auth.WORLD, keys.world_clock, clock)
+    assert gate(keys.world_clock, clock, sealed) == protocol.Clock(v=1, tick=3, t=0.3)
+    for attachment in (
+        None,
+        keyring.seal(auth.robot_identity(0), keys.world_clock, clock),
+        stranger.seal(auth.WORLD, keys.world_clock, clock),
+    ):
+        with pytest.raises(InvalidSampleError, match="world"):
+            gate(keys.world_clock, clock, attachment)
+    status = protocol.encode(_status(3))
+    assert gate(keys.status(3), status, keyring.seal("robot/3", keys.status(3), status)).id == 3
+    with pytest.raises(InvalidSampleError, match="not tagged by robot/3's key"):
+        gate(keys.status(3), status, keyring.seal("robot/4", keys.status(3), status))
+    meta = protocol.encode(protocol.RadioRxMeta(v=1, tick=5, sender="7", seq=1, sent_tick=4))
+    key, payload = keys.radio_rx(2), b"{}"
+    delivery = gate(key, payload, keyring.seal("robot/2", key, payload, meta))
+    assert isinstance(delivery, Delivery) and (delivery.receiver, delivery.meta.sender) == (2, "7")
+    with pytest.raises(InvalidSampleError, match="robot/2"):  # the sender's key is not it
+        gate(key, payload, keyring.seal("robot/7", key, payload, meta))
+    with pytest.raises(InvalidSampleError, match="without metadata"):
+        gate(key, payload, keyring.seal("robot/2", key, payload))
+    assert gate(keys.sense(1), b"{}", None) is None  # a key it does not use: not checked
+
+
+def test_a_forged_status_is_counted_and_never_reaches_the_page() -> None:
+    keys = protocol.Keys("forged")
+    keyring = auth.Keyring(secret=bytes(range(32)))
+    source = LiveSource(model.Scene("forged", 0, 2, make_layout(2, 2, 0)), keys, keyring)
+    state = protocol.encode(
+        protocol.WorldState(
             v=1,
-            id=4,
             tick=1,
             t=0.1,
-            phase="to_site",
-            trips=0,
-            opinion=[0.5, 0.5],
-            pool_size=0,
-            poolings=0,
-            decided_site=None,
-            decision_time=None,
-            decision_trips=None,
-            comparison=None,
+            robots=[protocol.Pose(1, 0.0, 0.0, 0.0)],
+            radio=protocol.RadioCounters(),
+            rejected=0,
+            stalls=0,
         )
-        decode_sample(keys, keys.status(3), protocol.encode(status), None)
-    with pytest.raises(InvalidSampleError):
-        decode_sample(keys, keys.world_state, b'{"v":1,"tick":-1}', None)
-    with pytest.raises(InvalidSampleError, match="without metadata"):
-        decode_sample(keys, keys.radio_rx(2), b"{}", None)
-    meta = protocol.encode(protocol.RadioRxMeta(v=1, tick=5, sender="7", seq=1, sent_tick=4))
-    delivery = decode_sample(keys, keys.radio_rx(2), b"{}", meta)
-    assert isinstance(delivery, Delivery) and delivery.receiver == 2
+    )
+    source.take(keys.world_state, state, keyring.seal(auth.WORLD, keys.world_state, state))
+    honest, forged = protocol.encode(_status(1, trips=2)), protocol.encode(_status(1, trips=999))
+    source.take(keys.status(1), honest, keyring.seal("robot/1", keys.status(1), honest))
+    source.take(keys.status(1), forged, bytes(16))
+    source.take(keys.status(1), forged, None)
+    frame = source.frame()
+    assert [row[10] for row in frame["robots"]] == [2]  # trips: the honest status's
+    assert frame["rejected"] == 2
 
 
 def test_the_bridge_keeps_the_newest_state_and_a_bounded_list_of_deliveries() -> None:
     keys = protocol.Keys("bounded")
     scene = model.Scene("bounded", 0, 3, make_layout(3, 3, 0))
-    source = LiveSource(scene, keys)
+    source = LiveSource(scene, keys, None)
     for tick in range(5000):
         state = protocol.WorldState(
             v=1,
@@ -418,15 +508,28 @@ class FoxgloveSeen:
     server_info: dict[str, Any] = field(default_factory=dict)
     channels: dict[int, dict[str, Any]] = field(default_factory=dict)
     messages: dict[str, Any] = field(default_factory=dict)  # topic leaf -> first decoded message
+    rejected: list[dict[str, Any]] = field(default_factory=list)  # recorder/rejected records
     error: str | None = None
 
+    def topics(self) -> list[str]:
+        return sorted(channel["topic"] for channel in self.channels.values())
 
-FOXGLOVE_WANTED = ("foxglove/scene", "foxglove/transforms")
+
+FOXGLOVE_WANTED = ("foxglove/scene", "foxglove/transforms", "radio/rx/0")
+REJECTED = "recorder/rejected"
 
 
-def _watch_foxglove(port: int, seen: FoxgloveSeen, stop: threading.Event) -> None:
-    """A Foxglove WebSocket client: server info, advertised channels, one message each of
-    the scene and the transforms (binary message data frames, JSON payload)."""
+def _watch_foxglove(
+    port: int, seen: FoxgloveSeen, stop: threading.Event, wanted: tuple[str, ...] = FOXGLOVE_WANTED
+) -> None:
+    """A Foxglove WebSocket client, until ``stop`` or the server closes: server info, every
+    advertised channel, the first message of each ``wanted`` topic leaf and every message
+    of ``recorder/rejected`` if wanted (binary message data frames, JSON payload)."""
+    from websockets.exceptions import ConnectionClosed
+
+    def leaf_of(topic: str) -> str | None:
+        return next((w for w in wanted if topic.endswith("/" + w)), None)
+
     try:
         deadline = time.monotonic() + 60
         while not _listening(port):
@@ -437,11 +540,13 @@ def _watch_foxglove(port: int, seen: FoxgloveSeen, stop: threading.Event) -> Non
         with connect(
             f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], open_timeout=5
         ) as connection:
-            while not stop.is_set() and len(seen.messages) < len(FOXGLOVE_WANTED):
+            while not stop.is_set():
                 try:
                     data = connection.recv(timeout=0.5)
                 except TimeoutError:
                     continue
+                except ConnectionClosed:
+                    break  # the run is over
                 if isinstance(data, str):
                     message = json.loads(data)
                     if message["op"] == "serverInfo":
@@ -449,24 +554,25 @@ def _watch_foxglove(port: int, seen: FoxgloveSeen, stop: threading.Event) -> Non
                     elif message["op"] == "advertise":
                         for channel in message["channels"]:
                             seen.channels[channel["id"]] = channel
-                            leaf = next(
-                                (w for w in FOXGLOVE_WANTED if channel["topic"].endswith(w)), None
-                            )
+                            leaf = leaf_of(channel["topic"])
                             if leaf and leaf not in subscriptions.values():
                                 _subscribe(connection, subscriptions, leaf, channel["id"])
                     elif message["op"] == "status" and "Unknown channel" in message["message"]:
                         # foxglove-sdk 0.30 can refuse a subscription sent the instant a
                         # channel is advertised; the app subscribes later. Ask again.
                         channel_id = int(message["message"].rsplit(":", 1)[-1])
-                        topic = seen.channels[channel_id]["topic"]
-                        leaf = next(w for w in FOXGLOVE_WANTED if topic.endswith(w))
+                        leaf = leaf_of(seen.channels[channel_id]["topic"])
                         time.sleep(0.05)
-                        _subscribe(connection, subscriptions, leaf, channel_id)
+                        if leaf is not None:
+                            _subscribe(connection, subscriptions, leaf, channel_id)
                 elif data[0] == 1:  # message data: opcode, subscription id, log time, payload
                     _, subscription, _ = struct.unpack_from("<BIQ", data)
                     leaf = subscriptions.get(subscription)
-                    if leaf is not None and leaf not in seen.messages:
-                        seen.messages[leaf] = json.loads(data[13:])
+                    if leaf is not None:
+                        decoded = json.loads(data[13:])
+                        seen.messages.setdefault(leaf, decoded)
+                        if leaf == REJECTED:
+                            seen.rejected.append(decoded)
     except Exception as error:
         topics = sorted(channel["topic"].split("/", 2)[-1] for channel in seen.channels.values())
         seen.error = f"{error!r}; advertised {topics}; decoded {sorted(seen.messages)}"
@@ -534,3 +640,219 @@ def test_foxglove_live_serves_the_recording_channels(observed_pair: ObservedPair
     transforms = seen.messages["foxglove/transforms"]["transforms"]
     assert transforms and all(t["parent_frame_id"] == "arena" for t in transforms)
     assert {t["child_frame_id"] for t in transforms} <= {f"robot-{i}" for i in range(ROBOTS)}
+    # A keyed run (the default): every tag checks out, so nothing goes to recorder/rejected,
+    # and a delivery's metadata reaches the app without its tag.
+    assert f"{prefix}/{REJECTED}" not in by_topic
+    delivery = seen.messages.get("radio/rx/0")
+    assert delivery is not None, seen.topics()
+    assert delivery["meta"]["tick"] >= delivery["meta"]["sent_tick"]
+
+
+# --- keys and certificates: what the observers believe --------------------------------------
+
+
+def _watch_to_the_end(chromium: Browser, url: str, process: subprocess.Popen[bytes]) -> None:
+    """Open the page and keep it open until the run's launcher exits."""
+    chromium.navigate(url)
+    deadline = time.monotonic() + 120
+    while process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.1)
+
+
+def _page_after_the_run(chromium: Browser) -> dict[str, str]:
+    time.sleep(0.3)  # the page notices the closed connection
+    return chromium.canvas_data()
+
+
+def _wait_until(condition: Any, timeout: float = 60.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
+
+
+FORGED_TRIPS = 999
+
+
+def test_a_forged_status_and_finish_are_neither_drawn_nor_believed_but_counted(
+    chromium: Browser,
+) -> None:
+    """A client of the run's router without the run's keys sends robots' statuses with a
+    wrong tag while the page watches, then asks the page to finish: the page draws none
+    of it and counts each; Foxglove live puts the statuses on recorder/rejected."""
+    run_id = unique_run_id("forged-view")
+    keys = protocol.Keys(run_id)
+    stranger = auth.Keyring(secret=bytes(32))  # another run's keys: tags that do not check
+    view_port, foxglove_port = free_port(), free_port()
+    seen, stop = FoxgloveSeen(), threading.Event()
+    ticks: list[int] = []
+    sent = [0]
+    drawn_trips: set[int] = set()
+
+    def on_clock(sample: zenoh.Sample) -> None:
+        with contextlib.suppress(protocol.ProtocolError):
+            ticks.append(protocol.decode(sample.payload.to_bytes(), protocol.Clock).tick)
+
+    with loopback_router() as (session, endpoint):
+        subscriber = session.declare_subscriber(keys.world_clock, on_clock)
+        process = _start(
+            run_id,
+            *["--connect", endpoint, "--no-record", "--clock", "realtime", "--speed", "10"],
+            *["--view", str(view_port), "--foxglove", str(foxglove_port)],
+        )
+        client = threading.Thread(
+            target=_watch_foxglove,
+            args=(foxglove_port, seen, stop, ("foxglove/scene", REJECTED)),
+        )
+        client.start()
+
+        def forge() -> None:
+            """Every robot's status with a wrong tag, 20 times a second for 2 s."""
+            deadline = time.monotonic() + 2.0
+            while time.monotonic() < deadline and process.poll() is None:
+                for robot in range(ROBOTS):
+                    key = keys.status(robot)
+                    payload = protocol.encode(_status(robot, tick=ticks[-1], trips=FORGED_TRIPS))
+                    session.put(
+                        key,
+                        payload,
+                        attachment=stranger.seal(auth.robot_identity(robot), key, payload),
+                        congestion_control=zenoh.CongestionControl.BLOCK,
+                    )
+                    sent[0] += 1
+                time.sleep(0.05)
+
+        try:
+            _wait_for_port(view_port, process)
+            chromium.navigate(f"http://127.0.0.1:{view_port}/")
+            _poll(chromium, lambda d: d.get("mode") == "live" and d["robots"] == str(ROBOTS))
+            assert _wait_until(lambda: bool(ticks) and ticks[-1] >= 10), "the run never ticked"
+            forger = threading.Thread(target=forge)
+            forger.start()
+            while forger.is_alive():  # what the page draws while the forgeries arrive
+                rows = chromium.evaluate("frame ? frame.robots.map((row) => row[10]) : []")
+                drawn_trips.update(rows)
+                time.sleep(0.05)
+            forger.join()
+            claim = json.dumps({"run_id": run_id, "consensus": True, "chosen_site": 0}).encode()
+            unsealed = list(session.get(keys.viewer_finish, payload=claim, timeout=5.0))
+            answers, refused = ask(
+                session, keys.viewer_finish, stranger, auth.LAUNCHER, payload=claim, timeout=5.0
+            )
+            time.sleep(0.5)
+            during = chromium.canvas_data()
+            running = process.poll() is None
+            summary = _finish(process, run_id)
+            final = _page_after_the_run(chromium)
+        finally:
+            stop.set()
+            client.join(timeout=10)
+            subscriber.undeclare()
+            if process.poll() is None:
+                process.kill()
+                process.communicate()
+            kill_leftovers(run_id)
+    assert sent[0] >= 5 * ROBOTS
+    assert FORGED_TRIPS not in drawn_trips
+    assert drawn_trips, "the page drew no robot while the forgeries arrived"
+    assert not [reply for reply in unsealed if reply.ok is not None]
+    assert answers == [] and refused == ["unauthenticated query"]
+    assert running and during["ended"] == "", during  # the page did not believe the claim
+    assert summary["consensus"] and final["ended"] == "consensus"
+    assert summary["rejected"]["observer"] == sent[0]  # the launcher got every forgery too
+    assert int(final["rejected"]) == sent[0] + 2  # and the page counted each, and the queries
+    assert seen.error is None, seen.error
+    assert seen.rejected, seen.topics()
+    reasons = {record["reason"].split(":", 1)[1].strip() for record in seen.rejected}
+    assert reasons <= {f"not tagged by robot/{robot}'s key" for robot in range(ROBOTS)}, reasons
+    assert {record["key"] for record in seen.rejected} <= {keys.status(r) for r in range(ROBOTS)}
+
+
+def test_a_secure_run_with_both_observers_reaches_consensus_on_the_page(
+    chromium: Browser, tmp_path: Path
+) -> None:
+    """``--secure --view 0 --foxglove 0``: each observer has its certificate and the
+    rights it needs (its token; the page's finish queryable, asked by the launcher)."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    run_id = unique_run_id("secure-view")
+    command = swarm_command(
+        *["run", "--run-id", run_id, "--json", "--quiet", *RUN, "--no-record", "--secure"],
+        *["--view", "0", "--foxglove", "0"],
+    )
+    process = subprocess.Popen(
+        command,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=REPO,
+        env={**os.environ, "TMPDIR": str(tmp)},
+    )
+    lines: list[str] = []
+    urls: dict[str, str] = {}
+
+    def read_stderr() -> None:
+        assert process.stderr is not None
+        for raw in process.stderr:
+            line = raw.decode(errors="replace")
+            lines.append(line)
+            found = re.match(r"swarm run: (viewer|foxglove) at (\S+)", line)
+            if found:
+                urls[found[1]] = found[2]
+
+    reader = threading.Thread(target=read_stderr, daemon=True)
+    reader.start()
+    seen, stop = FoxgloveSeen(), threading.Event()
+    client: threading.Thread | None = None
+    try:
+        assert _wait_until(lambda: len(urls) == 2, 90), "".join(lines)[-3000:]
+        foxglove_port = int(urls["foxglove"].rsplit(":", 1)[1])
+        client = threading.Thread(target=_watch_foxglove, args=(foxglove_port, seen, stop))
+        client.start()
+        _watch_to_the_end(chromium, urls["viewer"], process)
+        assert process.stdout is not None
+        stdout = process.stdout.read()
+        process.wait(timeout=30)
+        reader.join(timeout=10)
+        final = _page_after_the_run(chromium)
+    finally:
+        stop.set()
+        if client is not None:
+            client.join(timeout=10)
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+        kill_leftovers(run_id)
+    assert process.returncode == 0, "".join(lines)[-3000:]
+    summary = json.loads(stdout)
+    assert summary["config"]["secure"] is True
+    assert summary["correct"] and not summary["timed_out"]
+    assert summary["rejected"] == {"world": 0, "robots": 0, "observer": 0, "beacon": 0}
+    assert final["ended"] == "consensus"
+    assert final["robots"] == str(ROBOTS)
+    assert int(final["deliveries"]) > 0 and final["rejected"] == "0"
+    assert seen.error is None, seen.error
+    assert {"foxglove/scene", "foxglove/transforms", "radio/rx/0"} <= set(seen.messages)
+    assert not [topic for topic in seen.topics() if topic.endswith(REJECTED)]
+    assert private_directories(tmp) == []  # its certificates and keys are gone
+
+
+def test_an_unkeyed_run_is_still_watched(chromium: Browser) -> None:
+    """``--no-keys``: no tags to check, the attachments are the bare metadata as before."""
+    run_id = unique_run_id("no-keys-view")
+    port = free_port()
+    process = _start(run_id, "--no-keys", "--no-record", "--view", str(port))
+    try:
+        _wait_for_port(port, process)
+        _watch_to_the_end(chromium, f"http://127.0.0.1:{port}/", process)
+        summary = _finish(process, run_id)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+        kill_leftovers(run_id)
+    final = _page_after_the_run(chromium)
+    assert summary["config"]["no_keys"] is True and summary["consensus"]
+    assert final["ended"] == "consensus"
+    assert int(final["deliveries"]) > 0 and final["rejected"] == "0"

@@ -266,6 +266,52 @@ def test_an_observer_only_listens(swarm: Swarm) -> None:
         assert not [key for key, payload in heard.received if payload == b"spoofed"]
 
 
+@pytest.mark.timeout(30)
+def test_the_page_and_foxglove_live_declare_their_own_tokens_and_the_page_answers_the_launcher(
+    swarm: Swarm,
+) -> None:
+    """What ``swarm run --secure --view --foxglove`` needs, and no more: each observer its
+    token, the page its finish queryable, asked by the launcher alone."""
+    alive = Inbox()
+    with (
+        swarm.open("launcher") as launcher,
+        swarm.open("viewer") as viewer,
+        swarm.open("foxglove") as foxglove,
+        swarm.open("robot-0") as robot,
+    ):
+        launcher.liveliness().declare_subscriber(f"{KEYS.prefix}/alive/**", alive, history=True)
+        spoofed = [
+            foxglove.liveliness().declare_token(KEYS.alive("viewer", 0)),
+            foxglove.liveliness().declare_token(KEYS.alive("recorder", 0)),
+            viewer.liveliness().declare_token(KEYS.alive("viewer", 1)),
+        ]
+        tokens = [
+            foxglove.liveliness().declare_token(KEYS.alive("foxglove", 0)),
+            viewer.liveliness().declare_token(KEYS.alive("viewer", 0)),
+        ]
+        alive.wait_for(KEYS.alive("foxglove", 0))
+        alive.wait_for(KEYS.alive("viewer", 0))
+        impostor = foxglove.declare_queryable(  # only the page may answer
+            KEYS.viewer_finish, lambda query: query.reply(KEYS.viewer_finish, b"spoofed")
+        )
+        queryable = viewer.declare_queryable(
+            KEYS.viewer_finish, lambda query: query.reply(KEYS.viewer_finish, b"ended")
+        )
+
+        def answers(asker: zenoh.Session) -> list[bytes]:
+            replies = asker.get(KEYS.viewer_finish, timeout=1.0)
+            return [reply.ok.payload.to_bytes() for reply in replies if reply.ok]
+
+        assert until(lambda: answers(launcher) == [b"ended"])
+        assert answers(robot) == []  # a robot may not end the page
+        time.sleep(SETTLE)
+        assert alive.heard_keys() == {KEYS.alive("foxglove", 0), KEYS.alive("viewer", 0)}
+        queryable.undeclare()
+        impostor.undeclare()
+        for token in [*spoofed, *tokens]:
+            token.undeclare()
+
+
 # --- the world's keys ----------------------------------------------------------------
 
 

@@ -9,10 +9,13 @@ instead of an MCAP file. So the channels (one per key, plus the derived
 recording's, byte for byte, and a layout made for a recording works live.
 
 Like the recorder it subscribes to ``<root>/<run>/**`` and declares ``alive/foxglove/0``
-once it serves. Zenoh callbacks put samples into a bounded queue (a sample that finds it
-full is dropped and counted: the view must not grow without bound while the machine is
-busy); one thread passes them to the recorder's logic. The SDK keeps at most
-``BACKLOG`` messages per connected app and drops the oldest beyond that.
+once it serves, and like the recorder it holds the run secret: ``McapRecorder`` checks
+every sample's tag before it builds a record, so a forged sample goes to the
+``recorder/rejected`` channel, never to its key's. Zenoh callbacks put samples into a
+bounded queue (a sample that finds it full is dropped and counted: the view must not
+grow without bound while the machine is busy); one thread passes them to the recorder's
+logic. The SDK keeps at most ``BACKLOG`` messages per connected app and drops the oldest
+beyond that.
 """
 
 from __future__ import annotations
@@ -29,9 +32,9 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from plumbing import cliargs
+from plumbing import cliargs, run_keys
 from plumbing.lifecycle import die_with_launcher
-from robot_agent import protocol
+from robot_agent import auth, protocol
 from world_server.recorder import McapRecorder, RunDescription, Sample
 
 log = logging.getLogger("foxglove-live")
@@ -127,8 +130,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     die_with_launcher()
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     cliargs.configure_logging("foxglove-live", args.log_level)
+    keyring = run_keys.from_args(parser, args, "foxglove-live")
+    if keyring is not None and keyring.secret is None:
+        # Like the recorder, it checks every identity's tags: only the secret gives them all.
+        parser.exit(2, "foxglove-live: error: Foxglove live needs the run secret\n")
     if args.niceness:
         with contextlib.suppress(AttributeError, OSError):
             os.nice(args.niceness)
@@ -181,13 +189,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     with session:
         subscriber = session.declare_subscriber(keys.all, on_sample)
         try:
-            info: protocol.WorldInfo | None = fetch_world_info(session, keys, timeout=10.0)
+            info: protocol.WorldInfo | None = fetch_world_info(
+                session, keys, 10.0, keyring, auth.FOXGLOVE
+            )
         except TimeoutError as error:
             log.warning("%s; sim times will follow world/clock", error)
             info = None
         sink = FoxgloveSink(context)
         run = RunDescription(args.run_id, args.seed, args.robots, args.sites)
-        recorder = McapRecorder(None, keys, run, info, writer=sink)  # type: ignore[arg-type]
+        recorder = McapRecorder(
+            None,  # type: ignore[arg-type]
+            keys,
+            run,
+            info,
+            writer=sink,
+            keyring=keyring,
+        )
         writer = threading.Thread(target=_forward, args=(recorder, inbox), daemon=True)
         writer.start()
         token = session.liveliness().declare_token(keys.alive("foxglove", 0))
@@ -204,6 +221,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     server.stop()
     if dropped[0]:
         log.info("dropped %d samples while falling behind", dropped[0])
+    if recorder.rejected:
+        log.info("refused %d samples (the recorder/rejected channel)", recorder.rejected)
     return 0
 
 

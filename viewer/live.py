@@ -5,13 +5,16 @@ A process of the run like the recorder: it subscribes to the keys the page needs
 liveliness token ``alive/viewer/0`` once its server listens, and serves the page
 (``viewer.server``). At the end the launcher sends the run summary to the
 ``viewer/finish`` queryable; the bridge shows how the run ended, makes sure every page
-was sent that last frame, then answers. Stopped by a signal instead, it tells the pages
-that the run stopped.
+was sent that last frame, then answers. In a keyed run only the launcher's query counts
+(tagged with its key, as for the recorder's ``recorder/finish``); any other is refused and
+counted. Stopped by a signal instead, it tells the pages that the run stopped.
 
 It only listens: it publishes nothing the swarm reads, so it cannot change a decision.
-Zenoh callbacks pass every sample through ``viewer.decode.decode_sample`` and keep only
-the newest message per key (and a bounded list of radio deliveries): the page needs the
-current state, not a history, so a slow page or a busy machine never makes a queue grow.
+Zenoh callbacks pass every sample through ``viewer.decode.decode_sample``, which checks
+its tag against the run's keys (``swarm run`` hands the view the run secret, like the
+recorder) before it decodes anything, and keep only the newest message per key (and a
+bounded list of radio deliveries): the page needs the current state, not a history, so a
+slow page or a busy machine never makes a queue grow.
 """
 
 from __future__ import annotations
@@ -30,9 +33,9 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from plumbing import cliargs
+from plumbing import cliargs, run_keys
 from plumbing.lifecycle import die_with_launcher
-from robot_agent import protocol
+from robot_agent import auth, protocol
 from viewer import model
 from viewer.decode import Decoded, Delivery, InvalidSampleError, decode_sample
 from viewer.server import ViewServer
@@ -50,9 +53,12 @@ class LiveSource:
     """The run as the bridge sees it. Zenoh threads call ``take``; the server's loop calls
     ``frame``; one lock guards what they share."""
 
-    def __init__(self, scene: model.Scene, keys: protocol.Keys) -> None:
+    def __init__(
+        self, scene: model.Scene, keys: protocol.Keys, keyring: auth.Keyring | None
+    ) -> None:
         self.scene = scene
         self.keys = keys
+        self.keyring = keyring  # None: an unauthenticated run (no tags to check)
         self.robots: dict[int, model.RobotView] = {}
         self.poolings: collections.deque[model.Pooling] = collections.deque(maxlen=1000)
         self.tracker = model.PoolingTracker()
@@ -71,16 +77,20 @@ class LiveSource:
     def take(self, key: str, payload: bytes, attachment: bytes | None) -> None:
         """One sample from Zenoh (any thread)."""
         try:
-            message = decode_sample(self.keys, key, payload, attachment)
+            message = decode_sample(self.keys, key, payload, attachment, keyring=self.keyring)
         except InvalidSampleError as error:
-            with self._lock:
-                self.rejected += 1
-                first = self.rejected == 1
-            if first:
-                log.warning("dropped an invalid sample (logged once): %s", str(error)[:300])
+            self.refuse(str(error))
             return
         if message is not None:
             self._keep(message)
+
+    def refuse(self, reason: str) -> None:
+        """Count a sample or query that is not drawn; the first is logged."""
+        with self._lock:
+            self.rejected += 1
+            first = self.rejected == 1
+        if first:
+            log.warning("refused a sample or query (logged once): %s", reason[:300])
 
     def _keep(self, message: Decoded) -> None:
         with self._lock:
@@ -212,19 +222,24 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     die_with_launcher()
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     cliargs.configure_logging("viewer", args.log_level)
+    keyring = run_keys.from_args(parser, args, "viewer")
+    if keyring is not None and keyring.secret is None:
+        # It checks the world's and every robot's tags: only the secret gives all their keys.
+        parser.exit(2, "viewer: error: the view needs the run secret\n")
     if args.niceness:  # before Zenoh starts its threads, so that they inherit it
         with contextlib.suppress(AttributeError, OSError):
             os.nice(args.niceness)
     try:
-        return asyncio.run(_serve(args))
+        return asyncio.run(_serve(args, keyring))
     except OSError as error:  # the port is taken, or the host is not an address here
         print(f"viewer: cannot serve on {args.host}:{args.port}: {error}", file=sys.stderr)
         return 1
 
 
-async def _serve(args: argparse.Namespace) -> int:
+async def _serve(args: argparse.Namespace, keyring: auth.Keyring | None) -> int:
     import zenoh
 
     from plumbing.world_info import fetch_world_info
@@ -244,13 +259,13 @@ async def _serve(args: argparse.Namespace) -> int:
     finish_queries: asyncio.Queue[Any] = asyncio.Queue()
     with session:
         try:
-            info = fetch_world_info(session, keys, timeout=10.0)
+            info = fetch_world_info(session, keys, 10.0, keyring, auth.VIEWER)
             robot_radius = info.robot_radius
         except TimeoutError as error:
             log.warning("%s; drawing robots at the e-puck's size", error)
             robot_radius = 0.037
         scene = model.Scene(args.run_id, args.seed, args.robots, layout, robot_radius)
-        source = LiveSource(scene, keys)
+        source = LiveSource(scene, keys, keyring)
 
         def on_sample(sample: Any) -> None:
             attachment = sample.attachment
@@ -285,21 +300,38 @@ async def _serve(args: argparse.Namespace) -> int:
         for subscriber in subscribers:
             subscriber.undeclare()
         await server.close()
+    if source.rejected:
+        log.info("refused %d samples or queries in all", source.rejected)
     return 0
 
 
 async def _finish_on_query(
     queries: asyncio.Queue[Any], source: LiveSource, server: ViewServer, keys: protocol.Keys
 ) -> None:
-    query = await queries.get()
-    payload = query.payload.to_bytes() if query.payload is not None else b""
+    """Show how the run ended when the launcher says so; refuse (and count) anyone else."""
+    key = keys.viewer_finish
+    while True:
+        query = await queries.get()
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        attachment = query.attachment.to_bytes() if query.attachment is not None else None
+        try:
+            asker, nonce = auth.query_open(source.keyring, key, payload, attachment)
+            if source.keyring is not None and asker != auth.LAUNCHER:
+                raise auth.AuthError(f"{asker} may not end the view")
+        except auth.AuthError as error:
+            source.refuse(f"{key}: finish query refused: {error}")
+            query.reply_err(b"unauthenticated query")
+            query.drop()
+            continue
+        break
     summary: dict[str, Any] | None = None
     with contextlib.suppress(ValueError):
         value = json.loads(payload) if payload else None
         summary = value if isinstance(value, dict) else None
     source.finish(summary, fallback="ended")
     await server.flushed(server.publish(), FLUSH_TIMEOUT)
-    query.reply(keys.viewer_finish, b"ok")
+    answer = b"ok"
+    query.reply(key, answer, attachment=auth.reply_seal(source.keyring, asker, key, answer, nonce))
     query.drop()
 
 

@@ -1,7 +1,8 @@
 // The swarm's page: draws the frames the server sends over one WebSocket (/ws).
 // Plain JavaScript and a canvas; no build step, nothing fetched from the internet.
 // The canvas exposes what it drew, read-only, as data- attributes (robot count, sim time,
-// how the run ended, frames received) so that tests can check what a person sees.
+// how the run ended, frames and radio deliveries received, samples the live view refused)
+// so that tests can check what a person sees.
 "use strict";
 
 const ROW = { id: 0, x: 1, y: 2, theta: 3, phase: 4, targetKind: 5, target: 6, lead: 7,
@@ -18,6 +19,7 @@ let opinion = null;   // the selected robot's whole opinion
 let selected = null;  // the selected robot's id
 let socket = null;
 let framesReceived = 0;
+let deliveriesReceived = 0;
 let rxTrail = [];     // recent radio deliveries, to draw for a moment: [sender, receiver, time]
 
 function $(id) { return document.getElementById(id); }
@@ -54,6 +56,7 @@ function receive(message) {
   } else if (message.type === "frame") {
     frame = message;
     framesReceived += 1;
+    deliveriesReceived += message.rx.length;
     const now = performance.now();
     for (const [sender, receiver] of message.rx) rxTrail.push([sender, receiver, now]);
     rxTrail = rxTrail.filter((entry) => now - entry[2] < 400).slice(-3000);
@@ -76,10 +79,14 @@ function updateHeader() {
     $(`radio-${name}`).textContent = frame.radio[name];
   }
   $("ended").textContent = frame.ended ? `ended: ${frame.ended.text}` : "";
+  const refused = frame.rejected ?? 0;  // the live view's own count (a replay has none)
+  $("view-rejected").textContent = refused ? `view refused ${refused}` : "";
   canvas.dataset.robots = frame.robots.length;
   canvas.dataset.simTime = frame.t;
   canvas.dataset.ended = frame.ended ? frame.ended.reason : "";
   canvas.dataset.frames = framesReceived;
+  canvas.dataset.deliveries = deliveriesReceived;
+  canvas.dataset.rejected = refused;
   if (frame.replay) updateReplayControls(frame.replay);
 }
 
