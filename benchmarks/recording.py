@@ -35,6 +35,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from deploy import report  # noqa: E402
+from deploy.launcher import RESULT_CODES  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
 from robot_agent import protocol  # noqa: E402
@@ -69,7 +70,7 @@ def swarm_run(
     started = time.monotonic()
     done = subprocess.run(command, capture_output=True, timeout=3600, cwd=REPO)
     elapsed = time.monotonic() - started
-    if done.returncode != 0:
+    if done.returncode not in RESULT_CODES:  # a timeout (exit 5) is a result here
         raise RuntimeError(f"swarm run failed:\n{done.stderr.decode()[-2000:]}")
     summary = json.loads(done.stdout)
     return {"command_s": elapsed, "summary": summary}

@@ -51,6 +51,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from deploy.launcher import RESULT_CODES  # noqa: E402
 from robot_agent import ports  # noqa: E402
 from robot_agent.controller import Controller  # noqa: E402
 
@@ -455,7 +456,7 @@ def process_runs(
             started = time.perf_counter()
             result = subprocess.run(command, capture_output=True, text=True, cwd=REPO, check=False)
             wall = time.perf_counter() - started
-            if result.returncode != 0:
+            if result.returncode not in RESULT_CODES:  # split, stalled, timeout: results
                 print(
                     f"| {drop:g} | {seed} | failed (exit {result.returncode}): "
                     f"{result.stderr.strip()[-200:]} | | | | |"

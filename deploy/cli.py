@@ -22,6 +22,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "report": ("deploy.report", "the paper's Section 5 figures and a summary from recordings"),
     "experiment": ("deploy.experiment", "the paper's Section 5 protocol: many runs, one report"),
     "router": ("deploy.router", "a Zenoh router (a Python session; no zenohd needed)"),
+    "view": ("viewer.replay", "replay a recording in the browser, on the live view's page"),
 }
 
 

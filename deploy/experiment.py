@@ -3,15 +3,25 @@
 For every swarm size N and number of sites n, ``--runs`` runs with seeds ``--seed``,
 ``--seed + 1``, ...: each is a ``swarm run`` subprocess with its own run id, recorded to
 ``DIR/<run-id>.mcap``, and all of them share one Zenoh router (``deploy/router.py``) on a
-free loopback port, ``--parallel`` at a time. A progress bar follows the runs; at the end
-``swarm report`` turns the recordings into the figures and the summary table in DIR.
-Each run's stderr and JSON summary are kept in ``DIR/logs/``.
+Unix socket in a private directory, ``--parallel`` at a time. With ``--secure`` each run
+is its own TLS router with its own certificates and access control instead (a shared
+router would have to trust every run's certificate authority). A progress bar follows
+the runs; at the end ``swarm report`` turns the recordings into the figures and the
+summary table in DIR. Each run's stderr and JSON summary are kept in ``DIR/logs/``.
+
+Every run ends in a stated way (its summary's ``ended``): each gets ``--wall-timeout``
+(the experiment's ``--run-timeout``) and its own stall watchdog, and the report counts
+the endings per group. A run that outlives its wall limit by BACKSTOP seconds anyway is
+stopped from here. The runs die with the experiment (plumbing/lifecycle.py): each then
+stops in order, as on Ctrl-C.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -24,9 +34,12 @@ from typing import IO, Any
 from deploy.cli import UsageError
 from deploy.launcher import add_swarm_switches
 from plumbing import cliargs
+from plumbing.lifecycle import PARENT_ENV
 from robot_agent import protocol
 
-STOP_GRACE = 10.0  # wall seconds a run has to stop after SIGINT before SIGKILL
+STOP_GRACE = 30.0  # wall seconds a run has to stop after SIGINT before SIGKILL
+BACKSTOP = 60.0  # wall seconds past --run-timeout before a run is stopped from here
+FAILED_ENDINGS = ("crashed", "interrupted")  # endings that are not results of the run
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -88,11 +101,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="per-run sim time limit, forwarded",
     )
     parser.add_argument(
+        "--stall-window",
+        type=cliargs.positive_float,
+        default=None,
+        metavar="SIM_SECONDS",
+        help="per-run stall window, forwarded (default: swarm run's)",
+    )
+    parser.add_argument(
         "--run-timeout",
+        "--wall-timeout",
         type=cliargs.positive_float,
         default=1800.0,
         metavar="WALL_SECONDS",
-        help="stop a run that takes longer than this in wall time (default: 1800)",
+        help="each run's wall time limit, forwarded as swarm run --wall-timeout: a run "
+        f"that reaches it ends as timeout (wall); one that still runs {BACKSTOP:g} s later "
+        "is stopped from here (default: 1800)",
+    )
+    parser.add_argument(
+        "--secure",
+        action="store_true",
+        help="every run with swarm run --secure: TLS, certificates and access control "
+        "made for it, on its own router (docs/security.md)",
     )
     parser.add_argument("--no-report", action="store_true", help="only record the runs")
     parser.add_argument(
@@ -130,8 +159,20 @@ class RunResult:
     note: str = ""
 
     @property
+    def ended(self) -> str | None:
+        """How the run ended, from its summary (None: it printed none)."""
+        ended = self.summary.get("ended") if self.summary else None
+        return ended if isinstance(ended, str) else None
+
+    @property
     def ok(self) -> bool:
-        return self.returncode == 0 and self.spec.recording.is_file()
+        """The run ended in a stated way that is a result (consensus, split, stalled,
+        timeout) and was recorded; crashed, interrupted or silent runs failed."""
+        return (
+            self.ended is not None
+            and self.ended not in FAILED_ENDINGS
+            and self.spec.recording.is_file()
+        )
 
 
 @dataclass
@@ -142,9 +183,13 @@ class _Running:
     streams: list[IO[bytes]] = field(default_factory=list)
 
 
-def plan_runs(args: argparse.Namespace, endpoint: str) -> list[RunSpec]:
-    """Every run of the experiment, in order: by N, then n, then run number."""
+def plan_runs(args: argparse.Namespace, endpoint: str | None) -> list[RunSpec]:
+    """Every run of the experiment, in order: by N, then n, then run number; each on the
+    shared router at ``endpoint``, or (None) on its own."""
     extra = _run_options(args)
+    network = ["--connect", endpoint] if endpoint is not None else []
+    if getattr(args, "secure", False):
+        network.append("--secure")
     specs = []
     for robots in args.robots:
         for sites in args.sites:
@@ -161,8 +206,7 @@ def plan_runs(args: argparse.Namespace, endpoint: str) -> list[RunSpec]:
                     str(seed),
                     "--run-id",
                     run_id,
-                    "--connect",
-                    endpoint,
+                    *network,
                     "--record",
                     str(recording),
                     "--json",
@@ -177,6 +221,9 @@ def _run_options(args: argparse.Namespace) -> list[str]:
     extra = cliargs.forward_argv(args.switches.all, args)
     if args.timeout is not None:
         extra += ["--timeout", str(args.timeout)]
+    if args.stall_window is not None:
+        extra += ["--stall-window", str(args.stall_window)]
+    extra += ["--wall-timeout", str(args.run_timeout)]
     options = list(args.run_options)
     if options and options[0] == "--":
         options = options[1:]
@@ -208,6 +255,7 @@ def _start(spec: RunSpec, logs: Path) -> _Running:
         stdin=subprocess.DEVNULL,
         stdout=stdout,
         stderr=stderr,
+        env={**os.environ, PARENT_ENV: str(os.getpid())},  # the run dies with us
     )
     return _Running(spec, process, time.monotonic(), [stdout, stderr])
 
@@ -244,14 +292,15 @@ def _stop(running: _Running) -> None:
 def _describe(result: RunResult) -> str:
     summary = result.summary
     if not result.ok or summary is None:
-        return f"{result.spec.run_id} FAILED ({result.note or f'exit {result.returncode}'})"
+        reason = result.note or (result.ended or f"exit {result.returncode}")
+        return f"{result.spec.run_id} FAILED ({reason})"
     steps = [robot["steps"] for robot in summary["per_robot"] if robot["steps"] is not None]
     verdict = (
         ("correct" if summary["correct"] else "wrong") if summary["consensus"] else "no consensus"
     )
     return (
-        f"{result.spec.run_id}: {verdict}, steps {max(steps) if steps else '-'}, "
-        f"{result.wall_s:.1f}s"
+        f"{result.spec.run_id}: {result.ended}, {verdict}, "
+        f"steps {max(steps) if steps else '-'}, {result.wall_s:.1f}s"
     )
 
 
@@ -291,13 +340,14 @@ def run_all(
                     running.append(_start(pending.pop(0), logs))
                 time.sleep(0.1)
                 for item in list(running):
-                    overdue = time.monotonic() - item.started > run_timeout
+                    # Each run stops itself at run_timeout (--wall-timeout); this is a backstop.
+                    overdue = time.monotonic() - item.started > run_timeout + BACKSTOP
                     if item.process.poll() is None and not overdue:
                         continue
                     note = ""
                     if overdue and item.process.poll() is None:
                         _stop(item)
-                        note = f"stopped after {run_timeout:g} wall seconds"
+                        note = f"stopped from outside after {run_timeout + BACKSTOP:g} wall seconds"
                     running.remove(item)
                     result = _reap(item, logs, note)
                     results.append(result)
@@ -311,18 +361,22 @@ def run_all(
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
 
-    from deploy.processes import ProcessGroup, free_port, python_module, wait_for_port
-    from deploy.report import print_report, write_report
+    from deploy.credentials import (
+        SOCKET_NAME,
+        private_directory,
+        socket_endpoint,
+        wait_for_socket,
+    )
+    from deploy.processes import ProcessGroup, python_module
+    from deploy.report import print_report, report_console, write_report
 
     if args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} exists and is not a directory")
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    specs = plan_runs(args, endpoint)
-    validate_run_options(specs[0])
-    taken = sorted(str(spec.recording) for spec in specs if spec.recording.exists())
+    # The shared router's socket does not exist yet: check the runs with a stand-in.
+    planned = plan_runs(args, None if args.secure else "unixsock-stream/router.sock")
+    validate_run_options(planned[0])
+    taken = sorted(str(spec.recording) for spec in planned if spec.recording.exists())
     if taken:
         raise UsageError(
             f"{len(taken)} recording(s) already in {args.out}, e.g. {taken[0]}: "
@@ -331,16 +385,27 @@ def run(args: argparse.Namespace) -> int:
     logs = args.out / "logs"
     logs.mkdir(parents=True, exist_ok=True)
     group = ProcessGroup()
+    # The shared router listens on a socket only this user can reach (a secure run is
+    # its own router, on TLS).
+    directory = None if args.secure else private_directory()
     try:
-        router = group.start("router", python_module("deploy.router", "--listen", endpoint))
-        if not wait_for_port(port, 30.0, router.alive):
-            print(f"swarm experiment: the router did not start:\n{router.tail()}", file=sys.stderr)
-            return 1
+        endpoint = socket_endpoint(directory) if directory is not None else None
+        specs = plan_runs(args, endpoint)
+        if directory is not None and endpoint is not None:
+            router = group.start("router", python_module("deploy.router", "--listen", endpoint))
+            if not wait_for_socket(directory / SOCKET_NAME, 30.0, router.alive):
+                print(
+                    f"swarm experiment: the router did not start:\n{router.tail()}",
+                    file=sys.stderr,
+                )
+                return 1
         started = time.monotonic()
         results = run_all(specs, args.parallel, logs, args.run_timeout, args.quiet)
         elapsed = time.monotonic() - started
     finally:
         group.stop_all()
+        if directory is not None:
+            shutil.rmtree(directory, ignore_errors=True)
     failed = [result for result in results if not result.ok]
     for result in failed:
         print(
@@ -366,7 +431,7 @@ def run(args: argparse.Namespace) -> int:
         )
         output.update(report.as_json())
         if not args.json:
-            print_report(report, Console())
+            print_report(report, report_console())
     if args.json:
         print(json.dumps(output))
     return 1 if failed else 0

@@ -8,22 +8,27 @@ order, so a seed gives the same per-robot results here as over Zenoh.
 from __future__ import annotations
 
 import random
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from deploy.summary import RobotRecord, RunOutcome, build_summary
+from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary
+from deploy.watchdog import Watchdog, default_stall_window
 from nest_beacon.beacon import Beacon, BeaconConfig
-from robot_agent import protocol
+from robot_agent import byzantine, protocol
 from robot_agent.controller import Controller, ControllerConfig
 from robot_agent.lockstep import answer_tick
-from robot_agent.ports import RejectCounter
+from robot_agent.ports import RejectCounter, RobotController
 from world_server.world import Transmission, World, WorldConfig
+
+# The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
+# world/state (the world server's default --state-every): both see the same samples.
+POSES_EVERY = 10
 
 
 @dataclass
 class _Robot:
-    controller: Controller
+    controller: RobotController
     record: RobotRecord
     rejects: RejectCounter = field(default_factory=RejectCounter)
     seq: int = 0
@@ -35,14 +40,21 @@ def run_in_memory(
     beacon_config: BeaconConfig | None = None,
     *,
     timeout: float = 1800.0,
+    stall_window: float | None = None,
     on_tick: Callable[[World], None] | None = None,
     controller_factory: type[Controller] = Controller,
+    byzantine_robots: Mapping[int, byzantine.Behaviour] | None = None,
 ) -> dict[str, Any]:
-    """Run to consensus (every robot decided) or ``timeout`` sim seconds; the summary is
-    the ``swarm run --json`` object (wall-clock fields are zero).
+    """Run until every robot decided, the watchdog finds the run stalled (no undecided
+    robot made progress for ``stall_window`` sim seconds; default: ``default_stall_window``
+    for this arena and beacon) or ``timeout`` sim seconds; the summary is the
+    ``swarm run --json`` object (wall-clock fields are zero).
 
     ``controller_factory`` lets a study observe the controllers (a subclass of
     Controller); ``on_tick`` sees the world before each tick closes.
+    ``byzantine_robots`` makes those robots misbehave as ``swarm run --byzantine`` does (a
+    liar without a site claims ``byzantine.default_liar_site``); the run ends when every
+    honest robot has decided.
     """
     world = World(world_config)
     beacon_config = beacon_config or BeaconConfig()
@@ -51,14 +63,32 @@ def run_in_memory(
         random.Random(protocol.derive_seed(world_config.seed, "beacon", beacon_config.name)),
     )
     world.join_beacon(beacon_config.name)
+    behaviours = byzantine.resolve_liar_sites(
+        byzantine_robots or {}, world_config.num_sites, world.layout.best_site, world_config.seed
+    )
     robots: dict[int, _Robot] = {}
     for robot_id in range(world_config.num_robots):
         world.join_robot(robot_id)
         rng = random.Random(protocol.derive_seed(world_config.seed, "robot", robot_id))
-        controller = controller_factory(robot_id, world.info, controller_config, rng)
+        behaviour = behaviours.get(robot_id)
+        controller = (
+            controller_factory(robot_id, world.info, controller_config, rng)
+            if behaviour is None
+            else byzantine.build_controller(robot_id, world.info, controller_config, rng, behaviour)
+        )
         robots[robot_id] = _Robot(controller, RobotRecord(robot_id))
+    if stall_window is None:
+        stall_window = default_stall_window(
+            world.layout.arena_radius,
+            world_config.spec.max_wheel_speed,
+            controller_config.travel_timeout,
+            beacon_config.outages,
+        )
+    watchdog = Watchdog(robots, stall_window, body_length=2 * world_config.spec.radius)
+    honest = [robot for robot_id, robot in robots.items() if robot_id not in behaviours]
     deliveries: dict[str, list[tuple[str, bytes]]] = {}
     frames: dict[int, bytes] = {}
+    stop: Stop = "decided"
     while True:
         acts: dict[int, protocol.Act] = {}
         transmissions: list[Transmission] = []
@@ -78,15 +108,24 @@ def run_in_memory(
             acts[robot_id] = answer.act
             transmissions += [Transmission(name, seq, data) for seq, data in answer.transmissions]
             if robot.controller.take_status_change():
-                robot.record.update(robot.controller.status(world.tick))
+                status = robot.controller.status(world.tick)
+                robot.record.update(status)
+                watchdog.status(status)
         for message in beacon.on_tick(world.t):
             transmissions.append(
                 Transmission(beacon_config.name, message.seq, protocol.encode(message))
             )
         if on_tick is not None:
             on_tick(world)
-        decided = all(robot.controller.decided_site is not None for robot in robots.values())
-        if decided or world.t >= timeout:
+        if world.tick % POSES_EVERY == 0:
+            watchdog.poses(world.t, _positions(world))
+        if all(robot.controller.decided_site is not None for robot in honest):
+            break
+        if world.t >= timeout:
+            stop = "timeout"
+            break
+        if watchdog.stalled(world.t):
+            stop = "stalled"
             break
         result = world.advance(acts, transmissions)
         deliveries = {
@@ -95,7 +134,10 @@ def run_in_memory(
         }
         frames = result.frames
     for robot in robots.values():
-        robot.record.update(robot.controller.status(world.tick))
+        status = robot.controller.status(world.tick)
+        robot.record.update(status)
+        watchdog.status(status)
+    watchdog.poses(world.t, _positions(world))
     state = world.state()
     return build_summary(
         RunOutcome(
@@ -106,12 +148,20 @@ def run_in_memory(
             best_site=world.layout.best_site,
             sim_time_s=world.t,
             wall_time_s=0.0,
-            timed_out=not decided,
+            timed_out=stop == "timeout",
             radio=state.radio,
             world_rejected=0,
             stalls=0,
             observer_rejected=0,
             config={},
+            stop=stop,
+            timeout_kind="sim" if stop == "timeout" else None,
+            stuck=watchdog.stuck(),
+            byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
         ),
         [robot.record for robot in robots.values()],
     )
+
+
+def _positions(world: World) -> list[tuple[int, float, float]]:
+    return [(robot, x, y) for robot, (x, y, _) in sorted(world.physics.poses().items())]

@@ -1,8 +1,10 @@
-"""``swarm run``: a whole swarm on this machine, to consensus or timeout.
+"""``swarm run``: a whole swarm on this machine, to a stated ending.
 
 Starts the world server (the Zenoh router of the run, on a free loopback port), the nest
 beacon and the robot processes; watches their status over Zenoh; shows progress; stops
-every process it started, by pid, however the run ends; prints a summary.
+every process it started, by pid, however the run ends; prints a summary that says how
+it ended (``deploy/summary.py``: consensus, split, stalled, timeout, interrupted,
+crashed), and exits with that ending's code (``EXIT_CODES``).
 """
 
 from __future__ import annotations
@@ -14,40 +16,82 @@ import logging
 import math
 import os
 import queue
+import signal
 import sys
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import zenoh
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from deploy import zenoh_acl
+from deploy.credentials import RunNetwork
 from deploy.processes import Child, ProcessGroup, free_port, python_module, wait_for_port
-from deploy.summary import RobotRecord, RunOutcome, build_summary, describe
+from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary, describe
+from deploy.watchdog import Watchdog, default_stall_window
+from nest_beacon.beacon import parse_outages
 from nest_beacon.options import add_beacon_options
 from plumbing import cliargs
 from plumbing.cliargs import UsageError
-from plumbing.world_info import fetch_world_info
+from plumbing.inbox import BoundedInbox
+from plumbing.lifecycle import die_with_launcher
+from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import open_session
-from robot_agent import protocol
-from robot_agent.options import add_controller_options, controller_config
+from robot_agent import auth, byzantine, protocol
+from robot_agent.options import add_controller_options, byzantine_robot, controller_config
+from viewer.options import VIEW_OPTIONS, Observer, add_view_options, observers
 from world_server.layout import make_layout
 from world_server.options import add_world_options
+from world_server.physics import EpuckSpec
 
 log = logging.getLogger("swarm.run")
 STATS_ATTEMPTS, STATS_RETRY_PAUSE = 5, 0.2
 
 EXIT_OK, EXIT_CRASH = 0, 1  # usage errors exit 2 through argparse and UsageError
+# The exit code of each ending; an interrupted run exits 128 + the signal's number.
+EXIT_CODES = {"consensus": 0, "crashed": 1, "split": 3, "stalled": 4, "timeout": 5}
+# The codes of runs that ended with a result to read (all but crashed and interrupted).
+RESULT_CODES = frozenset(code for ended, code in EXIT_CODES.items() if ended != "crashed")
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+CONNECT_WAIT = 5.0  # wall seconds to wait for the router given by --connect
+EXIT_CODES_HELP = """\
+how a run ends (the summary's "ended"), and the exit code of each:
+  0    consensus    every running robot decided, all on the same site
+  1    crashed      a process of the run died on its own (or the run could not start)
+  2    -            usage error: nothing was started
+  3    split        every running robot decided, not all on the same site
+  4    stalled      no undecided robot made progress for --stall-window sim seconds
+  5    timeout      --timeout sim seconds or --wall-timeout wall seconds passed
+                    (the summary's "timeout_kind": sim or wall)
+  130  interrupted  by SIGINT (Ctrl-C); 143 by SIGTERM (e.g. timeout(1)); 129 by SIGHUP
+Unless it ended in consensus, the summary lists the undecided robots under "stuck".
+"""
 ROBOT_PROCESSES_PER_CORE = 25
 RUN_ID_ENV = "BESTOFN_RUN_ID"
+# Processes that only watch: they stay to the end, and their crash does not end the run.
+OBSERVERS = ("viewer", "foxglove")
+# Each observer's certificate in secure mode: a reader with its own token (and the page
+# its finish queryable), nothing else.
+OBSERVER_CERTIFICATES = {"viewer": zenoh_acl.VIEWER, "foxglove": zenoh_acl.FOXGLOVE}
+# What the launcher takes in (status, clock, state, acks), at most: junk cannot grow it.
+EVENTS_BYTES, MAX_EVENT_BYTES = 64 * 2**20, protocol.MAX_PAYLOAD_BYTES + 1024
 
 
-def robot_at_time(text: str) -> tuple[int, float]:
+class RobotAtTime(NamedTuple):
+    robot: int
+    at: float  # sim seconds
+
+    def __str__(self) -> str:  # the switch's own form, so that it can be passed on
+        return f"{self.robot}@{self.at!r}"
+
+
+def robot_at_time(text: str) -> RobotAtTime:
     """``ROBOT@SIMTIME``, e.g. ``3@60``: robot 3 at 60 s of sim time."""
     robot, sep, when = text.partition("@")
     try:
@@ -60,7 +104,7 @@ def robot_at_time(text: str) -> tuple[int, float]:
         raise argparse.ArgumentTypeError(
             f"{text!r} is not ROBOT@SIMTIME, e.g. 3@60 (robot 3 at 60 sim seconds)"
         ) from None
-    return int(robot), at
+    return RobotAtTime(int(robot), at)
 
 
 @dataclass(frozen=True)
@@ -104,11 +148,24 @@ def add_swarm_switches(parser: argparse.ArgumentParser) -> ForwardedOptions:
             "(repeatable); it is killed first if still running, and rejoins "
             "with a new controller and its old body",
         ),
+        faults.add_argument(
+            "--byzantine",
+            type=byzantine_robot,
+            action="append",
+            default=[],
+            metavar="ROBOT[:MODE]",
+            help="robot ROBOT misbehaves for the whole run (repeatable): liar[=SITE] "
+            "broadcasts certainty of SITE (default: a non-best site drawn from the seed), "
+            "inverted eliminates the better site of each pair, silent never broadcasts; "
+            "default mode liar. Consensus counts the honest robots (docs/byzantine.md)",
+        ),
     ]
     return ForwardedOptions(world, beacon, controller, robot_faults)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = EXIT_CODES_HELP
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
     swarm = parser.add_argument_group("swarm")
     swarm.add_argument(
         "--robots",
@@ -135,6 +192,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=1800.0,
         metavar="SIM_SECONDS",
         help="give up after this much sim time (default: 1800)",
+    )
+    swarm.add_argument(
+        "--wall-timeout",
+        type=cliargs.positive_float,
+        default=None,
+        metavar="SECONDS",
+        help="give up after this much wall time since the launch, so that an unattended "
+        "sweep cannot hang (default: no limit)",
+    )
+    swarm.add_argument(
+        "--stall-window",
+        type=cliargs.positive_float,
+        default=None,
+        metavar="SIM_SECONDS",
+        help="end the run as stalled when no undecided robot made progress (a leg, a "
+        "comparison, a pooling, or a body length of travel) for this much sim time "
+        "(default: twice the controller's travel timeout, plus two arena crossings at "
+        "full speed, plus any --beacon-outage)",
     )
     switches = add_swarm_switches(parser)
     processes = parser.add_argument_group("processes")
@@ -163,6 +238,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="use this existing Zenoh router instead of making the world "
         "server the router of the run (several runs can share one router)",
     )
+    network.add_argument(
+        "--secure",
+        action="store_true",
+        help="TLS on loopback with certificates made for this run, and Zenoh access "
+        "control: each process may publish only on its own keys (docs/security.md)",
+    )
+    network.add_argument(
+        "--no-keys",
+        action="store_true",
+        help="do not tag and check messages with run keys (every message is believed, "
+        "as before run keys; for measuring what they cost)",
+    )
     output = parser.add_argument_group("output")
     recording = output.add_mutually_exclusive_group()
     recording.add_argument(
@@ -177,6 +264,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     output.add_argument("--quiet", action="store_true", help="no progress display")
     output.add_argument("--verbose", action="store_true", help="echo the processes' logs on stderr")
+    add_view_options(parser.add_argument_group("watching"))
     parser.set_defaults(forwarded=switches)
 
 
@@ -196,8 +284,8 @@ class RunPlan:
     sites: int
     seed: int
     timeout: float
-    endpoint: str
-    port: int | None  # the loopback port the world listens on, when it is the router
+    stall_window: float
+    connect: str | None  # an existing router; None: the world server is the run's router
     record: Path | None
     world_args: list[str]
     robot_args: list[str]
@@ -205,11 +293,16 @@ class RunPlan:
     recorder_args: list[str] = field(default_factory=list)
     faults: list[Fault] = field(default_factory=list)
     robots_per_process: int = 1
+    byzantine_robots: dict[int, byzantine.Behaviour] = field(default_factory=dict)
     spawn: str = "fork"
     config: dict[str, Any] = field(default_factory=dict)
+    observers: list[Observer] = field(default_factory=list)  # the page, Foxglove live
+    wall_timeout: float | None = None
+    keyed: bool = True  # run keys: every message tagged and checked
+    secure: bool = False  # TLS and access control
 
 
-NOT_CONFIG = {"module", "command", "json", "quiet", "verbose", "forwarded"}
+NOT_CONFIG = {"module", "command", "json", "quiet", "verbose", "forwarded", *VIEW_OPTIONS}
 
 
 def plan_from_args(args: argparse.Namespace) -> RunPlan:
@@ -225,44 +318,47 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
                 f"--{fault.action} {fault.robot}@...: there is no robot "
                 f"{fault.robot} in a swarm of {args.robots}"
             )
+    byzantine_robots = byzantine_plan(args)
     per_process = args.robots_per_process or default_robots_per_process(args.robots)
     if faults and per_process > 1:
         raise ValueError(
             "--kill and --restart act on one robot's process: use them with --robots-per-process 1"
         )
+    if args.secure and args.connect:
+        raise ValueError("--secure makes the run's own TLS router: it cannot use --connect")
+    if args.secure and args.no_keys:
+        raise ValueError("--secure authenticates every message: it cannot go with --no-keys")
     run_id = args.run_id or f"run-{args.seed}-{int(time.time() * 1000) % 10**9}"
-    if args.connect:
-        port, endpoint = None, args.connect
-        world_network = ["--mode", "client", "--connect", endpoint]
-    else:
-        port = free_port()
-        endpoint = f"tcp/127.0.0.1:{port}"
-        world_network = ["--mode", "router", "--listen", endpoint]
+    record = None if args.no_record else Path(args.record or f"runs/{run_id}.mcap")
+    if record is not None:
+        check_recording_path(record)
+    stall_window = args.stall_window or default_stall_window(
+        make_layout(args.sites, args.robots, args.seed).arena_radius,
+        EpuckSpec().max_wheel_speed,
+        controller.travel_timeout,
+        parse_outages(args.beacon_outage),
+    )
     forwarded: ForwardedOptions = args.forwarded
+    # The network options of each process (where to connect, which certificate) are
+    # added when the run starts: its private directory does not exist before.
     common = ["--run-id", run_id, "--seed", str(args.seed)]
-    client = ["--mode", "client", "--connect", endpoint]
     world_args = [
         *common,
-        *world_network,
         "--robots",
         str(args.robots),
         "--sites",
         str(args.sites),
         *cliargs.forward_argv(forwarded.world, args),
     ]
-    robot_args = [*common, *client, *cliargs.forward_argv(forwarded.controller, args)]
-    beacon_args = [
-        *common,
-        *client,
-        *cliargs.forward_argv(forwarded.beacon, args, strip_prefix="beacon-"),
-    ]
+    robot_args = [*common, *cliargs.forward_argv(forwarded.controller, args)]
+    beacon_args = [*common, *cliargs.forward_argv(forwarded.beacon, args, strip_prefix="beacon-")]
     config = {key: value for key, value in vars(args).items() if key not in NOT_CONFIG}
     config["run_id"] = run_id
     config["threshold"] = controller.threshold  # the one in force, also when defaulted
-    record = None if args.no_record else Path(args.record or f"runs/{run_id}.mcap")
+    config["stall_window"] = stall_window  # likewise
+    config["byzantine"] = [f"{robot}:{how}" for robot, how in byzantine_robots.items()]
     recorder_args = [
         *common,
-        *client,
         "--out",
         str(record),
         "--robots",
@@ -278,8 +374,8 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         sites=args.sites,
         seed=args.seed,
         timeout=args.timeout,
-        endpoint=endpoint,
-        port=port,
+        stall_window=stall_window,
+        connect=args.connect,
         record=record,
         world_args=world_args,
         robot_args=robot_args,
@@ -288,8 +384,52 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         faults=faults,
         config=config,
         robots_per_process=per_process,
+        byzantine_robots=byzantine_robots,
         spawn=args.spawn,
+        observers=observers(args, common, free_port(), free_port()),
+        wall_timeout=args.wall_timeout,
+        keyed=not args.no_keys,
+        secure=args.secure,
     )
+
+
+def check_recording_path(path: Path) -> None:
+    """ValueError unless a recording can be written at ``path``: say so now, not after the
+    run (the recorder would fail to open it, and the launcher would report a crash)."""
+    target = path.absolute()
+    if target.is_dir():
+        raise ValueError(f"--record {path}: is a directory")
+    if target.exists():
+        if not os.access(target, os.W_OK):
+            raise ValueError(f"--record {path}: the file is not writable")
+        return
+    existing = target.parent
+    while not existing.exists():  # the launcher creates the missing directories
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"--record {path}: {existing} is not a directory")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"--record {path}: no permission to write in {existing}")
+
+
+def byzantine_plan(args: argparse.Namespace) -> dict[int, byzantine.Behaviour]:
+    """The ``--byzantine`` robots with their liars' sites chosen; ValueError: usage."""
+    chosen: dict[int, byzantine.Behaviour] = {}
+    for switch in args.byzantine:
+        if switch.robot >= args.robots:
+            raise ValueError(
+                f"--byzantine {switch}: there is no robot {switch.robot} in a swarm of "
+                f"{args.robots}"
+            )
+        if switch.robot in chosen:
+            raise ValueError(f"--byzantine names robot {switch.robot} twice")
+        chosen[switch.robot] = switch.behaviour
+    best = make_layout(args.sites, args.robots, args.seed).best_site
+    try:
+        resolved = byzantine.resolve_liar_sites(chosen, args.sites, best, args.seed)
+    except ValueError as error:
+        raise ValueError(f"--byzantine: {error}") from None
+    return dict(sorted(resolved.items()))
 
 
 def default_robots_per_process(robots: int, cores: int | None = None) -> int:
@@ -309,12 +449,22 @@ class Swarm:
         self.echo = echo
         self.group = ProcessGroup(self._on_log_line)
         self.records = {robot: RobotRecord(robot) for robot in range(plan.robots)}
+        self.watchdog = Watchdog(
+            range(plan.robots), plan.stall_window, body_length=2 * EpuckSpec().radius
+        )
         self.robot_children: dict[int, Child] = {}
+        self.world: Child | None = None
         self.recorder: Child | None = None
-        self.events: queue.SimpleQueue[tuple[str, str, bytes]] = queue.SimpleQueue()
+        self.network: RunNetwork | None = None  # made when the run starts
+        self.events: BoundedInbox[tuple[str, str, bytes, bytes | None]] = BoundedInbox(
+            EVENTS_BYTES, MAX_EVENT_BYTES
+        )
+        self.beacon_rejected: dict[str, int] = {}  # the beacons' own counts, from their acks
+        self._logged_rejections: set[str] = set()
         self.session: zenoh.Session | None = None
         self._declared: list[Any] = []
         self.sim_time = 0.0
+        self.launched_at = time.monotonic()
         self.started_at: float | None = None
         self.ended_at: float | None = None
         self.last_state: protocol.WorldState | None = None
@@ -345,8 +495,16 @@ class Swarm:
     def _publish_log(self, message: protocol.LogLine) -> None:
         session = self.session
         if session is not None:
+            key, payload = self.keys.log(message.process), protocol.encode(message)
             with contextlib.suppress(zenoh.ZError):
-                session.put(self.keys.log(message.process), protocol.encode(message))
+                session.put(key, payload, attachment=self._seal(auth.LAUNCHER, key, payload))
+
+    @property
+    def keyring(self) -> auth.Keyring | None:
+        return self.network.keyring if self.network is not None else None
+
+    def _seal(self, identity: str, key: str, payload: bytes) -> bytes | None:
+        return auth.seal(self.keyring, identity, key, payload)
 
     def _release_held_logs(self) -> None:
         """Publish the lines held back until the recorder listened, in their order."""
@@ -362,18 +520,39 @@ class Swarm:
         # Every process of the run carries its id in its environment (forked robots have
         # no command line of their own), so it can be found by run id, e.g. by tests.
         os.environ[RUN_ID_ENV] = plan.run_id
-        world = self.group.start("world", python_module("world_server.server", *plan.world_args))
-        if plan.port is not None and not wait_for_port(plan.port, 30.0, world.alive):
+        if plan.connect is not None:
+            wait_for_router(plan.connect)
+        self.network = network = RunNetwork.create(
+            plan.run_id, plan.robots, connect=plan.connect, keyed=plan.keyed, secure=plan.secure
+        )
+        world = self.group.start(
+            "world",
+            python_module("world_server.server", *plan.world_args, *network.world_args()),
+            env=network.env(),
+        )
+        self.world = world
+        if not network.wait_for_router(30.0, world.alive):
             raise StartError("the world server did not start", world)
-        self.session = open_session("client", [plan.endpoint])
+        config = network.config_of(zenoh_acl.LAUNCHER)
+        opening = time.monotonic()
         try:
-            fetch_world_info(self.session, self.keys, timeout=30.0)
+            self.session = open_session(
+                "client", [network.endpoint], config_file=str(config) if config else None
+            )
+        except zenoh.ZError as error:
+            raise StartError(
+                f"could not connect to {network.endpoint} (tried for "
+                f"{time.monotonic() - opening:.0f} s): {str(error).split(' at ')[0]}"
+            ) from None
+        try:
+            fetch_world_info(self.session, self.keys, 30.0, self.keyring, auth.LAUNCHER)
         except TimeoutError as error:
             raise StartError(str(error), world) from None
         watched = {
             "status": self.keys.status("*"),
             "clock": self.keys.world_clock,
             "state": self.keys.world_state,
+            "ack": self.keys.beacon_ack("*"),
         }
         self._declared = [
             self.session.declare_subscriber(key, self._on(kind)) for kind, key in watched.items()
@@ -381,12 +560,24 @@ class Swarm:
         if plan.record is not None:
             plan.record.parent.mkdir(parents=True, exist_ok=True)
             self.recorder = self.group.start(
-                "recorder", python_module("world_server.recorder", *plan.recorder_args)
+                "recorder",
+                python_module(
+                    "world_server.recorder",
+                    *plan.recorder_args,
+                    *network.client_args(zenoh_acl.RECORDER),
+                ),
+                env=network.env(),
             )
             if not self._wait_alive("recorder", 0, 30.0, self.recorder):
                 raise StartError("the recorder did not start", self.recorder)
             self._release_held_logs()
-        self.group.start("beacon", python_module("nest_beacon", *plan.beacon_args))
+        self._start_observers()
+        beacon = zenoh_acl.beacon_identity(zenoh_acl.DEFAULT_BEACON)
+        self.group.start(
+            "beacon",
+            python_module("nest_beacon", *plan.beacon_args, *network.client_args(beacon)),
+            env=network.env(),
+        )
         hosts = range(0, plan.robots, plan.robots_per_process)
         for first in hosts:
             robots = list(range(first, min(first + plan.robots_per_process, plan.robots)))
@@ -394,9 +585,41 @@ class Swarm:
             for robot in robots:
                 self.robot_children[robot] = child
 
+    def _start_observers(self) -> None:
+        """The page and Foxglove live: listening before the robots start, like the recorder."""
+        network = self.network
+        assert network is not None
+        for observer in self.plan.observers:
+            identity = OBSERVER_CERTIFICATES[observer.name]
+            argv = [*observer.argv, *network.client_args(identity)]
+            child = self.group.start(
+                observer.name, python_module(observer.module, *argv), env=network.env()
+            )
+            if not self._wait_alive(observer.role, 0, 30.0, child):
+                raise StartError(f"the {observer.name} did not start", child)
+            print(f"swarm run: {observer.name} at {observer.url}", file=sys.stderr, flush=True)
+
+    def finish_observers(self, summary: dict[str, Any]) -> None:
+        """Tell the page how the run ended; it answers once every page was sent that."""
+        if self.session is None or not any(o.name == "viewer" for o in self.plan.observers):
+            return
+        payload = json.dumps(summary).encode()
+        with contextlib.suppress(zenoh.ZError):  # sealed: the view believes only the launcher
+            ask(
+                self.session,
+                self.keys.viewer_finish,
+                self.keyring,
+                auth.LAUNCHER,
+                payload=payload,
+                timeout=5.0,
+            )
+
     def _on(self, kind: str) -> Callable[[zenoh.Sample], None]:
         def callback(sample: zenoh.Sample) -> None:
-            self.events.put((kind, str(sample.key_expr), sample.payload.to_bytes()))
+            payload = sample.payload.to_bytes()
+            extra = sample.attachment.to_bytes() if sample.attachment is not None else None
+            size = len(payload) + len(extra or b"")
+            self.events.put((kind, str(sample.key_expr), payload, extra), size)
 
         return callback
 
@@ -416,27 +639,61 @@ class Swarm:
         """Take in everything that arrived; note crashed robots."""
         while True:
             try:
-                kind, key, payload = self.events.get_nowait()
+                event = self.events.get(timeout=0)
             except queue.Empty:
                 break
             try:
-                if kind == "status":
-                    status = protocol.decode(payload, protocol.Status)
-                    if status.id != self.keys.robot_of(key) or status.id not in self.records:
-                        raise protocol.ProtocolError(f"status of robot {status.id} on {key}")
-                    self.records[status.id].update(status)
-                elif kind == "clock":
-                    clock = protocol.decode(payload, protocol.Clock)
-                    if self.started_at is None:
-                        self.started_at = time.monotonic()
-                    self.sim_time = clock.t
-                elif kind == "state":
-                    self.last_state = protocol.decode(payload, protocol.WorldState)
-            except protocol.ProtocolError:
+                self._take(*event)
+            except (protocol.ProtocolError, auth.AuthError) as error:
                 self.rejected += 1
+                if event[0] not in self._logged_rejections:  # once per kind of message
+                    self._logged_rejections.add(event[0])
+                    log.warning("rejected a message on %s: %s", event[1], error)
+        self.rejected += self.events.take_dropped(None)
         for robot, child in self.robot_children.items():
             if not child.alive() and not child.expected_exit:
                 self.records[robot].crashed = True
+                self.watchdog.retired(robot)
+
+    def _take(self, kind: str, key: str, payload: bytes, attachment: bytes | None) -> None:
+        """Believe one status, clock, state or beacon ack, if its sender's tag says so."""
+        keyring = self.keyring
+        if kind == "status":
+            robot = self.keys.robot_of(key)
+            if robot not in self.records:
+                raise protocol.ProtocolError(f"no robot {robot} in this run")
+            auth.unseal(keyring, auth.robot_identity(robot), key, payload, attachment)
+            status = protocol.decode(payload, protocol.Status)
+            if status.id != robot:
+                raise protocol.ProtocolError(f"status of robot {status.id} on {key}")
+            record = self.records[robot]
+            if record.status and status.tick < record.status.tick and not record.restarting:
+                # Authentic but old: someone replaying what it heard, not the robot.
+                raise protocol.ProtocolError(f"status of tick {status.tick}, older than the last")
+            record.update(status)
+            self.watchdog.status(status)
+            self.watchdog.status(status)
+        elif kind == "ack":
+            identity = auth.beacon_identity(key.rsplit("/", 2)[-2])
+            try:
+                auth.check_identity(identity)
+            except ValueError as error:
+                raise protocol.ProtocolError(str(error)) from None
+            auth.unseal(keyring, identity, key, payload, attachment)
+            name = identity.partition("/")[2]
+            ack = protocol.decode(payload, protocol.Ack)
+            self.beacon_rejected[name] = max(self.beacon_rejected.get(name, 0), ack.rejected)
+        else:
+            auth.unseal(keyring, auth.WORLD, key, payload, attachment)
+            if kind == "clock":
+                clock = protocol.decode(payload, protocol.Clock)
+                if self.started_at is None:
+                    self.started_at = time.monotonic()
+                self.sim_time = clock.t
+            else:
+                state = protocol.decode(payload, protocol.WorldState)
+                self.last_state = state
+                self.watchdog.poses(state.t, ((pose.id, pose.x, pose.y) for pose in state.robots))
 
     def apply_faults(self) -> None:
         """Kill and restart robots whose time has come (in sim time)."""
@@ -447,8 +704,10 @@ class Swarm:
             self.group.kill(child)
             record = self.records[fault.robot]
             record.killed = fault.action == "kill"
+            self.watchdog.retired(fault.robot)
             if fault.action == "restart":
                 record.restarted()
+                self.watchdog.restarted(fault.robot, self.sim_time)
                 self.robot_children[fault.robot] = self._start_robots([fault.robot])
             self.fault_log.append(
                 {
@@ -465,14 +724,22 @@ class Swarm:
         """One process for ``robots`` (each with its own Zenoh session inside it)."""
         name = f"robot-{robots[0]}" + (f"-{robots[-1]}" if len(robots) > 1 else "")
         argv = [arg for robot in robots for arg in ("--id", str(robot))]
-        argv += self.plan.robot_args
+        for robot in robots:
+            if robot in self.plan.byzantine_robots:
+                argv += ["--byzantine", f"{robot}:{self.plan.byzantine_robots[robot]}"]
+        network = self.network
+        assert network is not None
+        # In secure mode each hosted robot's session presents its own certificate: '{id}'.
+        argv += [*self.plan.robot_args, *network.client_args("robot-{id}")]
+        # Only the keys of its own robots: whatever it says can only be in their names.
+        env = network.env(auth.robot_identity(robot) for robot in robots)
         if self.plan.spawn == "fork":
-            return self.group.fork(name, "robot_agent.node", argv)
-        return self.group.start(name, python_module("robot_agent.node", *argv))
+            return self.group.fork(name, "robot_agent.node", argv, env=env)
+        return self.group.start(name, python_module("robot_agent.node", *argv), env=env)
 
     def infrastructure_crash(self) -> Child | None:
         for child in self.group.crashed():
-            if not child.name.startswith("robot-"):
+            if not child.name.startswith("robot-") and child.name not in OBSERVERS:
                 return child
         return None
 
@@ -482,11 +749,26 @@ class Swarm:
     def decided(self) -> int:
         return sum(1 for record in self.records.values() if record.decided_site is not None)
 
+    def restart_pending(self) -> bool:
+        return any(fault.action == "restart" for fault in self.pending_faults)
+
     def all_live_decided(self) -> bool:
         """Every running robot has decided, and no restart is still to come."""
-        if any(fault.action == "restart" for fault in self.pending_faults):
+        if self.restart_pending():
             return False
-        return all(self.records[robot].decided_site is not None for robot in self.live_robots())
+        return all(
+            self.records[robot].decided_site is not None
+            for robot in self.live_robots()
+            if robot not in self.plan.byzantine_robots
+        )
+
+    def stalled(self) -> bool:
+        """No undecided robot made progress for the stall window (a restart to come will)."""
+        return (
+            self.started_at is not None
+            and not self.restart_pending()
+            and self.watchdog.stalled(self.sim_time)
+        )
 
     def trips(self) -> int:
         return sum(record.status.trips for record in self.records.values() if record.status)
@@ -501,10 +783,15 @@ class Swarm:
         if self.ended_at is not None:
             return self.final_stats
         self.ended_at = time.monotonic()
-        swarm = [child for child in self.group.children if child.name not in ("world", "recorder")]
+        swarm = [
+            child
+            for child in self.group.children
+            if child.name not in ("world", "recorder", *OBSERVERS)
+        ]
         self.group.stop(swarm)
         self.poll()
-        self.final_stats = self._world_stats() or self.last_state
+        world_running = self.session is not None and self.world is not None and self.world.alive()
+        self.final_stats = (self._world_stats() if world_running else None) or self.last_state
         return self.final_stats
 
     def _world_stats(self) -> protocol.WorldState | None:
@@ -525,9 +812,11 @@ class Swarm:
         if self.session is None:
             return None
         try:
-            for reply in self.session.get(self.keys.world_stats, timeout=2.0):
-                if reply.ok is not None:
-                    return protocol.decode(reply.ok.payload.to_bytes(), protocol.WorldState)
+            answers, _ = ask(
+                self.session, self.keys.world_stats, self.keyring, auth.LAUNCHER, timeout=2.0
+            )
+            for answer in answers:
+                return protocol.decode(answer, protocol.WorldState)
         except (zenoh.ZError, protocol.ProtocolError):
             return None
         return None
@@ -537,26 +826,103 @@ class Swarm:
         if self.session is None or self.recorder is None or not self.recorder.alive():
             return False
         payload = json.dumps(summary).encode()
-        for reply in self.session.get(self.keys.recorder_finish, payload=payload, timeout=30.0):
-            if reply.ok is not None:
-                return True
-        return False
+        key = self.keys.recorder_finish
+        answers, _ = ask(
+            self.session, key, self.keyring, auth.LAUNCHER, payload=payload, timeout=30.0
+        )
+        return bool(answers)
 
     def close(self) -> None:
         """Stop every process still running and close the observer session."""
-        self.stop_swarm()
+        swarm = [child for child in self.group.children if child.name not in ("world", "recorder")]
+        self.group.stop(swarm)  # the robots first: the world stays their barrier meanwhile
         if self.session is not None:
             for entity in self._declared:
                 entity.undeclare()
             self.session.close()
             self.session = None
         self.group.stop_all()
+        if self.network is not None:
+            self.network.close()  # its socket, certificates and keys
 
 
 class StartError(Exception):
     def __init__(self, message: str, child: Child | None = None) -> None:
         super().__init__(message)
         self.child = child
+
+
+def wait_for_router(endpoint: str, timeout: float = CONNECT_WAIT) -> None:
+    """StartError unless the router of ``--connect`` accepts connections within ``timeout``.
+
+    Checked before anything starts: a Zenoh session would otherwise try for half a minute
+    and fail with an error that names no cause. Only TCP-based endpoints can be probed
+    this way; others are left to the session, which reports its own failure.
+    """
+    protocol_name, _, rest = endpoint.partition("/")
+    if protocol_name not in ("tcp", "tls"):
+        return
+    address = rest.split("#")[0].split("?")[0]
+    host, _, port = address.rpartition(":")
+    if not port.isdigit():
+        return
+    if not wait_for_port(int(port), timeout, lambda: True, host=host.strip("[]")):
+        raise StartError(f"no Zenoh router answers at {endpoint} (tried for {timeout:g} s)")
+
+
+class Interrupted(BaseException):
+    """A stop signal reached the launcher: raised in the main thread, like KeyboardInterrupt
+    (a BaseException, so that no ``except Exception`` swallows it)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+class StopSignals:
+    """SIGINT, SIGTERM and SIGHUP end a run in order, like Ctrl-C always did.
+
+    The first one raises Interrupted in the main thread. Any later one, and any after
+    ``hold()`` (the run is already ending), is only noted: the ending is bounded in time
+    (processes get a grace period, then SIGKILL), and cutting it short would lose the
+    summary and the recording's end. SIGKILL needs no handler: every child dies with the
+    launcher (plumbing/lifecycle.py).
+    """
+
+    def __init__(self) -> None:
+        self.received: int | None = None
+        self._raising = True
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> StopSignals:
+        for signum in STOP_SIGNALS:
+            self._previous[signum] = signal.signal(signum, self._on_signal)
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+
+    def hold(self) -> None:
+        self._raising = False
+
+    def _on_signal(self, signum: int, frame: object) -> None:
+        if self.received is not None:
+            return
+        self.received = signum
+        if self._raising:
+            self._raising = False
+            raise Interrupted(signum)
+
+
+@dataclass(frozen=True)
+class Ending:
+    """Why the launcher stopped following the run."""
+
+    stop: Stop
+    timeout_kind: str | None = None  # sim | wall
+    signum: int | None = None  # the signal that interrupted the run
+    crashed: Child | None = None  # the infrastructure process that died
 
 
 def run(args: argparse.Namespace) -> int:
@@ -570,34 +936,56 @@ def run(args: argparse.Namespace) -> int:
         if args.verbose
         else None
     )
+    # Started by `swarm experiment`: end in order if it dies (a SIGTERM then, see above).
+    die_with_launcher()
     swarm = Swarm(plan, echo)
-    try:
-        return _run_swarm(swarm, args, console)
-    except KeyboardInterrupt:
-        print("swarm run: interrupted; stopping every process", file=sys.stderr)
-        return 130
-    finally:
-        swarm.close()
+    with StopSignals() as signals:
+        try:
+            return _run_swarm(swarm, args, console, signals)
+        except Interrupted as interrupt:  # between the steps that handle it themselves
+            return 128 + interrupt.signum
+        finally:
+            signals.hold()
+            swarm.close()
 
 
-def _run_swarm(swarm: Swarm, args: argparse.Namespace, console: Console) -> int:
-    plan = swarm.plan
+def _run_swarm(
+    swarm: Swarm, args: argparse.Namespace, console: Console, signals: StopSignals
+) -> int:
     try:
         swarm.start()
+        ending = _watch(swarm, console, quiet=args.quiet)
     except StartError as error:
+        signals.hold()
         print(f"swarm run: could not start: {error}", file=sys.stderr)
-        if error.child is not None:
+        if error.child is not None and error.child.tail():
             print(error.child.tail(), file=sys.stderr)
         return EXIT_CRASH
-    timed_out, crashed = _watch(swarm, console, quiet=args.quiet)
-    if crashed is not None:
+    except Interrupted as interrupt:
+        ending = Ending("interrupted", signum=interrupt.signum)
+    signals.hold()
+    return _finish(swarm, args, ending)
+
+
+def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ending) -> int:
+    """Stop the swarm, build and print the summary, finish the recording; the exit code."""
+    plan = swarm.plan
+    if ending.signum is not None:
         print(
-            f"swarm run: the {crashed.name} process crashed (exit code "
-            f"{crashed.process.returncode}):\n{crashed.tail()}",
+            f"swarm run: {signal.Signals(ending.signum).name}: stopping every process",
             file=sys.stderr,
         )
-        return EXIT_CRASH
+    if ending.crashed is not None:
+        print(
+            f"swarm run: the {ending.crashed.name} process crashed (exit code "
+            f"{ending.crashed.process.returncode}):\n{ending.crashed.tail()}",
+            file=sys.stderr,
+        )
     stats = swarm.stop_swarm()
+    robot_crashes = [record.id for record in swarm.records.values() if record.crashed]
+    stop = ending.stop
+    if robot_crashes and stop != "interrupted":
+        stop = "crashed"
     wall = (swarm.ended_at or 0.0) - swarm.started_at if swarm.started_at else 0.0
     summary = build_summary(
         RunOutcome(
@@ -608,17 +996,27 @@ def _run_swarm(swarm: Swarm, args: argparse.Namespace, console: Console) -> int:
             best_site=make_layout(plan.sites, plan.robots, plan.seed).best_site,
             sim_time_s=swarm.sim_time,
             wall_time_s=wall,
-            timed_out=timed_out,
+            timed_out=stop == "timeout",
             radio=stats.radio if stats else protocol.RadioCounters(),
             world_rejected=stats.rejected if stats else 0,
             stalls=stats.stalls if stats else 0,
             observer_rejected=swarm.rejected,
+            beacon_rejected=sum(swarm.beacon_rejected.values()),
             config=plan.config,
+            stop=stop,
+            timeout_kind=ending.timeout_kind if stop == "timeout" else None,  # type: ignore[arg-type]
+            stuck=swarm.watchdog.stuck(),
+            byzantine={robot: str(how) for robot, how in plan.byzantine_robots.items()},
         ),
         swarm.records.values(),
     )
+    if ending.signum is not None:
+        summary["signal"] = signal.Signals(ending.signum).name
     summary["faults"] = swarm.fault_log
     summary["recording"] = str(plan.record) if plan.record else None
+    swarm.finish_observers(summary)
+    if not args.quiet:
+        print(f"swarm run: {describe_ending(summary)}", file=sys.stderr)
     if plan.record is not None and not swarm.finish_recording(summary):
         print(f"swarm run: the recorder did not confirm {plan.record}", file=sys.stderr)
         summary["recording"] = None
@@ -626,15 +1024,45 @@ def _run_swarm(swarm: Swarm, args: argparse.Namespace, console: Console) -> int:
         print(json.dumps(summary))
     else:
         print_summary(summary, Console())
-    robot_crashes = [record.id for record in swarm.records.values() if record.crashed]
     if robot_crashes:
         print(f"swarm run: robot process(es) {robot_crashes} crashed", file=sys.stderr)
-        return EXIT_CRASH
-    return EXIT_OK
+    return exit_code(summary["ended"], ending.signum)
 
 
-def _watch(swarm: Swarm, console: Console, quiet: bool) -> tuple[bool, Child | None]:
-    """Follow the run until every live robot decided, the timeout, or a crash."""
+def exit_code(ended: str, signum: int | None = None) -> int:
+    """The exit code of an ending (see EXIT_CODES_HELP)."""
+    if ended == "interrupted":
+        return 128 + (signum or signal.SIGINT)
+    return EXIT_CODES[ended]
+
+
+def describe_ending(summary: dict[str, Any]) -> str:
+    """One line: how the run ended, and what held it up."""
+    ended = summary["ended"]
+    at = f"at sim {summary['sim_time_s']:.0f} s"
+    stuck = summary.get("stuck") or []
+    undecided = f"; {len(stuck)} robot(s) undecided" if stuck else ""
+    if ended == "consensus":
+        return f"ended in consensus on site {summary['chosen_site']} {at}"
+    if ended == "split":
+        sites = sorted({r["decided_site"] for r in summary["per_robot"]} - {None})
+        return f"ended split: the robots decided on different sites ({sites}) {at}"
+    if ended == "stalled":
+        window = summary["config"].get("stall_window")
+        quiet = f" for {window:g} s of sim time" if window else ""
+        return f"ended stalled {at}: no undecided robot made progress{quiet}{undecided}"
+    if ended == "timeout":
+        limit = "wall time limit (--wall-timeout)"
+        if summary.get("timeout_kind") != "wall":
+            limit = "sim time limit (--timeout)"
+        return f"ended at the {limit} {at}{undecided}"
+    if ended == "interrupted":
+        return f"interrupted by {summary.get('signal', 'a signal')} {at}{undecided}"
+    return f"ended crashed {at}: a process of the run died{undecided}"
+
+
+def _watch(swarm: Swarm, console: Console, quiet: bool) -> Ending:
+    """Follow the run until every live robot decided, it stalls, a time limit, or a crash."""
     plan = swarm.plan
     progress = Progress(
         TextColumn("[bold]{task.description}"),
@@ -654,7 +1082,7 @@ def _watch(swarm: Swarm, console: Console, quiet: bool) -> tuple[bool, Child | N
             swarm.apply_faults()
             crashed = swarm.infrastructure_crash()
             if crashed is not None:
-                return False, crashed
+                return Ending("crashed", crashed=crashed)
             elapsed = time.monotonic() - swarm.started_at if swarm.started_at else 0.0
             factor = swarm.sim_time / elapsed if elapsed > 0 else 0.0
             progress.update(
@@ -666,9 +1094,14 @@ def _watch(swarm: Swarm, console: Console, quiet: bool) -> tuple[bool, Child | N
                 else "waiting for the robots to join",
             )
             if swarm.started_at is not None and swarm.all_live_decided():
-                return False, None
+                return Ending("decided")
             if swarm.sim_time >= plan.timeout:
-                return True, None
+                return Ending("timeout", timeout_kind="sim")
+            wall = time.monotonic() - swarm.launched_at
+            if plan.wall_timeout is not None and wall >= plan.wall_timeout:
+                return Ending("timeout", timeout_kind="wall")
+            if swarm.stalled():
+                return Ending("stalled")
 
 
 def print_summary(summary: dict[str, Any], console: Console) -> None:
@@ -688,6 +1121,7 @@ def print_summary(summary: dict[str, Any], console: Console) -> None:
             " ".join(map(str, robot["pool_sizes"])) or "-",
         )
     console.print(table)
+    print_stuck(summary.get("stuck") or [], console)
     steps = [robot["steps"] for robot in robots if robot["steps"] is not None]
     pools = [size for robot in robots for size in robot["pool_sizes"]]
     verdict = (
@@ -698,7 +1132,7 @@ def print_summary(summary: dict[str, Any], console: Console) -> None:
         else "no consensus"
     )
     console.print(
-        f"{verdict}{' (timed out)' if summary['timed_out'] else ''}; "
+        f"ended: {summary['ended']}; {verdict}{' (timed out)' if summary['timed_out'] else ''}; "
         f"steps to decision {describe(steps)}; pool size {describe(pools)}; "
         f"sim {summary['sim_time_s']:.1f}s in {summary['wall_time_s']:.1f}s wall "
         f"({summary['real_time_factor']:.0f}x); radio sent {summary['radio']['sent']}, "
@@ -707,3 +1141,27 @@ def print_summary(summary: dict[str, Any], console: Console) -> None:
     )
     if summary.get("recording"):
         console.print(f"recording: {summary['recording']} (swarm report, or open in Foxglove)")
+
+
+STUCK_ROWS_SHOWN = 20
+
+
+def print_stuck(stuck: list[dict[str, Any]], console: Console) -> None:
+    """The undecided robots: where each is, in what phase, since when without progress."""
+    if not stuck:
+        return
+    table = Table(title=f"undecided robots ({len(stuck)})")
+    for column in ("robot", "phase", "position (m)", "trips", "last progress (sim s)"):
+        table.add_column(column, justify="right")
+    for robot in stuck[:STUCK_ROWS_SHOWN]:
+        position = "-" if robot["x"] is None else f"({robot['x']:.2f}, {robot['y']:.2f})"
+        table.add_row(
+            str(robot["id"]),
+            robot["phase"] or "-",
+            position,
+            str(robot["trips"]),
+            f"{robot['last_progress_s']:.1f}",
+        )
+    if len(stuck) > STUCK_ROWS_SHOWN:
+        table.caption = f"and {len(stuck) - STUCK_ROWS_SHOWN} more (see --json)"
+    console.print(table)

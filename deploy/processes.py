@@ -2,7 +2,9 @@
 
 Children die with the launcher (plumbing.lifecycle), their stderr is kept in a
 ring buffer so a crash can be explained, and ``stop_all`` ends each by pid: SIGTERM, a
-grace period, then SIGKILL.
+grace period, then SIGKILL. Each child runs in a process group of its own: a Ctrl-C in
+the terminal, a closing terminal or ``timeout(1)`` signal the launcher's whole group, and
+only the launcher should get that signal, so that it stops the run in order.
 """
 
 from __future__ import annotations
@@ -31,14 +33,17 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-def wait_for_port(port: int, timeout: float, alive: Callable[[], bool]) -> bool:
-    """Wait until something accepts connections on 127.0.0.1:port."""
+def wait_for_port(
+    port: int, timeout: float, alive: Callable[[], bool], host: str = "127.0.0.1"
+) -> bool:
+    """Wait until something accepts connections on host:port."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline and alive():
-        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-            sock.settimeout(0.2)
-            if sock.connect_ex(("127.0.0.1", port)) == 0:
+        try:
+            with socket.create_connection((host, port), timeout=0.2):
                 return True
+        except OSError:
+            pass
         time.sleep(0.05)
     return False
 
@@ -80,14 +85,17 @@ class ProcessGroup:
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,
             env={**os.environ, **QUIET_THREADS, PARENT_ENV: str(os.getpid()), **(env or {})},
+            process_group=0,
         )
         return self._adopt(Child(name, list(argv), process, on_line=self.on_line))
 
-    def fork(self, name: str, module: str, argv: Sequence[str]) -> Child:
-        """Like ``start(python -m module argv)``, but forked from a preloaded server."""
+    def fork(
+        self, name: str, module: str, argv: Sequence[str], env: dict[str, str] | None = None
+    ) -> Child:
+        """Like ``start(python -m module argv, env)``, but forked from a preloaded server."""
         if self._fork_server is None:
             self._fork_server = ForkServer()
-        process = self._fork_server.start(module, list(argv))
+        process = self._fork_server.start(module, list(argv), env)
         return self._adopt(Child(name, [module, *argv], process, on_line=self.on_line))
 
     def _adopt(self, child: Child) -> Child:
@@ -129,6 +137,9 @@ class ProcessGroup:
 
     def stop_all(self, grace: float = 3.0) -> None:
         self.stop(self.children, grace)
+        if self._fork_server is not None:
+            self._fork_server.stop()
+            self._fork_server = None
 
 
 def python_module(module: str, *args: str) -> list[str]:

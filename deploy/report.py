@@ -4,7 +4,12 @@ Reads MCAP recordings made by the recorder (``world_server/recorder.py``) with `
 stream reader, so a file cut short by a crash is read up to its last complete record.
 The run summary comes from the recording's ``bestofn.run`` metadata record when there is
 one, else it is rebuilt from the robots' status messages (the same code that
-``swarm run`` uses). Writes, into ``--out``:
+``swarm run`` uses); a recorded summary that lacks a field the report needs gets it from
+the rebuilt one, with a warning. Each run is labelled with how it ended (``ended``: see
+``deploy/summary.py``); one whose recording says nothing of its end, and whose robots
+did not all decide, is labelled ``aborted``. Aggregates over runs (steps, pool sizes)
+take only the runs that ended in consensus; the others are counted by ending.
+Writes, into ``--out``:
 
 * ``fig4.png``: per run, a box plot of the robots' steps (trips) to decision, one panel
   per (robots, sites), with the n/2 line (the paper's Figure 4);
@@ -33,9 +38,11 @@ import msgspec
 from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from deploy.summary import RobotRecord, RunOutcome, build_summary
+from deploy.summary import ENDINGS, RobotRecord, RunOutcome, build_summary, byzantine_in_config
+from deploy.watchdog import Watchdog
 from robot_agent import protocol
 from world_server.layout import make_layout
+from world_server.physics import EpuckSpec
 
 START_METADATA = "bestofn.start"  # the names the recorder writes (world_server/recorder.py)
 RUN_METADATA = "bestofn.run"
@@ -50,6 +57,9 @@ CSV_COLUMNS = (
     "best_site",
     "correct",
     "timed_out",
+    "ended",
+    "timeout_kind",
+    "stuck",
     "complete",
     "source",
     "sim_time_s",
@@ -289,16 +299,93 @@ def read_recording(path: Path) -> Recording:
 # --- summaries ---------------------------------------------------------------------------
 
 
-def run_summary(recording: Recording) -> dict[str, Any]:
-    """The run's summary: the launcher's if recorded, else rebuilt from status messages."""
-    summary = recording.summary
-    if summary is not None:
-        return {**summary, "source": "metadata", "complete": recording.complete}
-    return {
-        **rebuild_summary(recording),
-        "source": "status messages",
-        "complete": recording.complete,
-    }
+ABORTED = "aborted"  # the label of a run whose recording does not say how it ended
+
+# The fields of a recorded summary this report reads, and the types it needs them in.
+SUMMARY_FIELDS: dict[str, tuple[type, ...]] = {
+    "run_id": (str,),
+    "num_robots": (int,),
+    "num_sites": (int,),
+    "seed": (int,),
+    "best_site": (int,),
+    "consensus": (bool,),
+    "chosen_site": (int, type(None)),
+    "correct": (bool,),
+    "timed_out": (bool,),
+    "sim_time_s": (int, float),
+    "wall_time_s": (int, float),
+    "per_robot": (list,),
+}
+ROBOT_FIELDS: dict[str, tuple[type, ...]] = {
+    "steps": (int, type(None)),
+    "pool_sizes": (list,),
+    "decided_site": (int, type(None)),
+}
+
+
+def run_summary(recording: Recording, warn: Any = None) -> dict[str, Any]:
+    """The run's summary: the launcher's if recorded, else rebuilt from status messages.
+
+    A recorded summary missing a field the report needs (or holding it in the wrong
+    type) gets that field from the rebuilt summary, and ``warn`` is told which.
+    """
+    recorded = recording.summary
+    if recorded is None:
+        return {
+            **rebuild_summary(recording),
+            "source": "status messages",
+            "complete": recording.complete,
+        }
+    unusable = unusable_fields(recorded)
+    summary = dict(recorded)
+    if unusable:
+        rebuilt = rebuild_summary(recording)
+        summary.update({name: rebuilt[name] for name in unusable})
+        if warn is not None:
+            warn(
+                f"{recording.path}: the recorded summary lacks a usable "
+                f"{', '.join(unusable)}; taken from the status messages instead"
+            )
+    summary["ended"] = recorded_ending(summary)
+    return {**summary, "source": "metadata", "complete": recording.complete}
+
+
+def unusable_fields(summary: dict[str, Any]) -> list[str]:
+    """The fields of SUMMARY_FIELDS that ``summary`` lacks or holds in another type."""
+    unusable = [
+        name
+        for name, types in SUMMARY_FIELDS.items()
+        if not isinstance(summary.get(name, _MISSING), types)
+    ]
+    robots = summary.get("per_robot")
+    if "per_robot" not in unusable and not all(
+        isinstance(robot, dict)
+        and all(
+            isinstance(robot.get(name, _MISSING), types) for name, types in ROBOT_FIELDS.items()
+        )
+        for robot in robots  # type: ignore[union-attr]
+    ):
+        unusable.append("per_robot")
+    return unusable
+
+
+_MISSING = object()
+
+
+def recorded_ending(summary: dict[str, Any]) -> str | None:
+    """How a recorded run ended; None if its summary does not say (an aborted run).
+
+    Summaries written before runs stated their ending still tell a consensus (every
+    robot decided alike) and a timeout apart from the rest.
+    """
+    if "ended" in summary:
+        ended = summary["ended"]
+        return ended if ended in ENDINGS else None
+    if summary.get("consensus") is True:
+        return "consensus"
+    if summary.get("timed_out") is True:
+        return "timeout"
+    return None
 
 
 def rebuild_summary(recording: Recording) -> dict[str, Any]:
@@ -319,6 +406,7 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
     )
     state = recording.last_state
     clock = recording.last_clock
+    watchdog = _replay_progress(recording, records)
     wall = 0.0
     if recording.first_clock_wall_ns is not None and recording.last_clock_wall_ns is not None:
         wall = (recording.last_clock_wall_ns - recording.first_clock_wall_ns) / 1e9
@@ -337,9 +425,34 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
             stalls=state.stalls if state else 0,
             observer_rejected=recording.undecodable,
             config=recording.config,
+            stuck=watchdog.stuck(),
+            byzantine=byzantine_in_config(recording.config),
         ),
         records.values(),
     )
+
+
+def _replay_progress(recording: Recording, records: dict[int, RobotRecord]) -> Watchdog:
+    """The stall watchdog fed with each undecided robot's statuses and poses, in time order
+    (robots are independent, so one at a time): where each is stuck, and since when."""
+    window = float(recording.config.get("stall_window") or 1.0)
+    watchdog = Watchdog(records, window, body_length=2 * EpuckSpec().radius)
+    for robot, record in records.items():
+        statuses = recording.statuses.get(robot, [])
+        if record.decided_site is not None:
+            watchdog.status(statuses[-1])  # decided: holds nothing up
+            continue
+        events = sorted(
+            [(status.t, 1, index) for index, status in enumerate(statuses)]
+            + [(t, 0, index) for index, (t, _, _) in enumerate(recording.paths.get(robot, []))]
+        )
+        for _, kind, index in events:
+            if kind:
+                watchdog.status(statuses[index])
+            else:
+                t, x, y = recording.paths[robot][index]
+                watchdog.poses(t, [(robot, x, y)])
+    return watchdog
 
 
 def _sites_from_statuses(recording: Recording) -> int | None:
@@ -385,6 +498,9 @@ def report_row(summary: dict[str, Any], recording: Path | str) -> dict[str, Any]
         "best_site": summary["best_site"],
         "correct": summary["correct"],
         "timed_out": summary["timed_out"],
+        "ended": summary.get("ended") or ABORTED,
+        "timeout_kind": summary.get("timeout_kind"),
+        "stuck": len(summary.get("stuck") or []),
         "complete": summary["complete"],
         "source": summary["source"],
         "sim_time_s": summary["sim_time_s"],
@@ -409,26 +525,36 @@ def report_row(summary: dict[str, Any], recording: Path | str) -> dict[str, Any]
 def group_rows(
     runs: Sequence[dict[str, Any]], summaries: Sequence[dict[str, Any]]
 ) -> list[dict[str, Any]]:
-    """Aggregates per (robots, sites): what the paper's Section 5 text reports."""
+    """Aggregates per (robots, sites): what the paper's Section 5 text reports.
+
+    Every run is counted by its ending; steps and pool sizes are aggregated over the runs
+    that ended in consensus only (``aggregated_runs``), so that a stalled, timed-out or
+    aborted run neither shortens nor lengthens the times to consensus.
+    """
     groups: dict[tuple[int, int], list[int]] = {}
     for index, row in enumerate(runs):
         groups.setdefault((row["robots"], row["sites"]), []).append(index)
     result = []
-    for (robots, sites), members in sorted(groups.items()):
+    for (robots, sites), all_members in sorted(groups.items()):
+        every_row = [runs[i] for i in all_members]
+        members = [i for i in all_members if runs[i]["ended"] == "consensus"]
         rows = [runs[i] for i in members]
         swarm = [row["swarm_steps"] for row in rows if row["swarm_steps"] is not None]
         steps = [value for i in members for value in steps_of(summaries[i])]
         pools = [value for i in members for value in pools_of(summaries[i])]
         run_pool_means = [row["pool_mean"] for row in rows if row["pool_mean"] is not None]
+        endings = Counter(row["ended"] for row in every_row)
         result.append(
             {
                 "robots": robots,
                 "sites": sites,
                 "half_n": sites / 2,
-                "runs": len(rows),
-                "complete_runs": sum(1 for row in rows if row["complete"]),
-                "consensus_runs": sum(1 for row in rows if row["consensus"]),
-                "correct_runs": sum(1 for row in rows if row["correct"]),
+                "runs": len(every_row),
+                "endings": {name: endings[name] for name in (*ENDINGS, ABORTED) if endings[name]},
+                "aggregated_runs": len(rows),
+                "complete_runs": sum(1 for row in every_row if row["complete"]),
+                "consensus_runs": sum(1 for row in every_row if row["consensus"]),
+                "correct_runs": sum(1 for row in every_row if row["correct"]),
                 "runs_within_half_n": sum(1 for value in swarm if value <= sites / 2),
                 "runs_below_half_n": sum(1 for value in swarm if value < sites / 2),
                 "swarm_steps": _stats(swarm),
@@ -519,7 +645,7 @@ def plot_boxes(summaries: Sequence[dict[str, Any]], path: Path, *, pools: bool) 
         axis = axes[0][index]
         data = [pools_of(run) if pools else steps_of(run) for run in runs]
         labels = [
-            f"{number}" + ("" if run["consensus"] and run["complete"] else "*")
+            f"{number}" + ("" if run.get("ended") == "consensus" and run["complete"] else "*")
             for number, run in enumerate(runs, start=1)
         ]
         axis.boxplot(
@@ -535,7 +661,8 @@ def plot_boxes(summaries: Sequence[dict[str, Any]], path: Path, *, pools: bool) 
             axis.legend(loc="upper right")
         axis.set_title(f"({chr(ord('a') + index)}) n = {sites}, N = {robots}")
         axis.set_xlabel(
-            "run" + ("  (* no consensus, or cut short)" if "*" in "".join(labels) else "")
+            "run"
+            + ("  (* did not end in consensus, or cut short)" if "*" in "".join(labels) else "")
         )
         axis.set_ylim(bottom=0)
         axis.yaxis.get_major_locator().set_params(integer=True)
@@ -704,7 +831,7 @@ def write_report(
         if recording.problem and warn is not None:
             warn(f"{path}: {recording.problem}; reporting what was recorded")
         recordings.append(recording)
-    summaries = [run_summary(recording) for recording in recordings]
+    summaries = [run_summary(recording, warn) for recording in recordings]
     order = sorted(
         range(len(recordings)),
         key=lambda i: (
@@ -802,7 +929,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
 
     from deploy.cli import UsageError
 
@@ -828,8 +954,19 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(report.as_json()))
     else:
-        print_report(report, Console())
+        print_report(report, report_console())
     return 0 if report.runs else 1
+
+
+REPORT_WIDTH = 200  # characters, when stdout is not a terminal (a log file, a pipe)
+
+
+def report_console() -> Any:
+    """A console for the report: the terminal's width, or wide enough for whole run ids
+    and every column when written to a file (rich would assume 80 columns and cut them)."""
+    from rich.console import Console
+
+    return Console() if sys.stdout.isatty() else Console(width=REPORT_WIDTH)
 
 
 def print_report(report: Report, console: Any) -> None:
@@ -837,13 +974,19 @@ def print_report(report: Report, console: Any) -> None:
 
     table = Table(title="runs (steps and pool sizes: mean, min-max)")
     table.add_column("run", no_wrap=True)
-    for column in ("N", "n", "consensus", "swarm steps", "robot steps", "pool size"):
+    for column in ("N", "n", "ended", "consensus", "swarm steps", "robot steps", "pool size"):
         table.add_column(column, justify="right", no_wrap=True)
     for row in report.runs:
+        ended = row["ended"]
+        if ended == "timeout" and row.get("timeout_kind"):
+            ended += f" ({row['timeout_kind']})"
+        if row.get("stuck"):
+            ended += f", {row['stuck']} stuck"
         table.add_row(
             row["run_id"] + ("" if row["complete"] else " (cut short)"),
             str(row["robots"]),
             str(row["sites"]),
+            ended,
             ("correct" if row["correct"] else "wrong") if row["consensus"] else "none",
             "-" if row["swarm_steps"] is None else str(row["swarm_steps"]),
             "-"
@@ -855,10 +998,20 @@ def print_report(report: Report, console: Any) -> None:
         )
     console.print(table)
     for group in report.groups:
+        endings = ", ".join(f"{count} {name}" for name, count in group["endings"].items())
+        aggregated = group["aggregated_runs"]
+        if aggregated == 0:
+            times = "none ended in consensus: no steps or pool sizes to aggregate"
+        else:
+            apart = f"of the {aggregated} that ended in consensus: "
+            times = (
+                f"{apart if aggregated != group['runs'] else ''}"
+                f"{group['runs_within_half_n']} within n/2 = {group['half_n']:g} steps, "
+                f"mean pool size {group['pool_size']['mean']}"
+            )
         console.print(
-            f"N = {group['robots']}, n = {group['sites']}: {group['correct_runs']}/"
-            f"{group['runs']} runs correct, {group['runs_within_half_n']} within n/2 = "
-            f"{group['half_n']:g} steps, mean pool size {group['pool_size']['mean']}",
+            f"N = {group['robots']}, n = {group['sites']}: {group['runs']} runs ({endings}); "
+            f"{group['correct_runs']}/{group['runs']} correct; {times}",
             highlight=False,
         )
     for path in report.files:

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import statistics
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
-from robot_agent import protocol
+from robot_agent import byzantine, protocol
 
 
 @dataclass
@@ -46,6 +46,17 @@ class RobotRecord:
         return self.status.decided_site
 
 
+# How a run ended. ``consensus``: every running robot decided, all on the same site;
+# ``split``: every running robot decided, not all on the same site; ``stalled``: the
+# watchdog saw no undecided robot make progress for its window; ``timeout``: the sim or
+# wall time limit; ``interrupted``: SIGINT, SIGTERM or SIGHUP; ``crashed``: a process of
+# the run died on its own.
+ENDINGS = ("consensus", "split", "stalled", "timeout", "interrupted", "crashed")
+Ending = Literal["consensus", "split", "stalled", "timeout", "interrupted", "crashed"]
+# Why the launcher (or the in-process engine) stopped: ``decided`` becomes consensus or split.
+Stop = Literal["decided", "stalled", "timeout", "interrupted", "crashed"]
+
+
 @dataclass(frozen=True)
 class RunOutcome:
     run_id: str
@@ -61,14 +72,24 @@ class RunOutcome:
     stalls: int
     observer_rejected: int
     config: dict[str, Any]
+    stop: Stop | None = None  # None: not known (a summary rebuilt from a recording)
+    timeout_kind: Literal["sim", "wall"] | None = None
+    stuck: list[dict[str, Any]] = field(default_factory=list)
+    beacon_rejected: int = 0
+    byzantine: Mapping[int, str] = field(default_factory=dict)  # robot -> how it misbehaves
 
 
 def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[str, Any]:
     """The ``swarm run --json`` object."""
     robots = sorted(records, key=lambda record: record.id)
-    # Consensus is among the robots still running at the end: one killed on purpose or
-    # crashed cannot hold up or spoil the swarm's decision (it is reported separately).
-    survivors = [record for record in robots if not record.killed and not record.crashed]
+    # Consensus is among the honest robots still running at the end: one killed on purpose
+    # or crashed cannot hold up or spoil the swarm's decision (it is reported separately),
+    # and a Byzantine robot's own decision is not the swarm's (docs/byzantine.md).
+    survivors = [
+        record
+        for record in robots
+        if not record.killed and not record.crashed and record.id not in outcome.byzantine
+    ]
     decided = [record.decided_site for record in survivors]
     consensus = (
         bool(survivors) and all(site is not None for site in decided) and len(set(decided)) == 1
@@ -82,7 +103,8 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
     # lockstep); the launcher notices a little later, which only the speed figure uses.
     all_decided = bool(survivors) and all(site is not None for site in decided)
     sim_time = max(decision_times) if all_decided and decision_times else outcome.sim_time_s
-    return {
+    ended = ending(outcome.stop, all_decided, consensus)
+    summary: dict[str, Any] = {
         "run_id": outcome.run_id,
         "num_robots": outcome.num_robots,
         "num_sites": outcome.num_sites,
@@ -92,6 +114,7 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
         "chosen_site": chosen,
         "correct": consensus and chosen == outcome.best_site,
         "timed_out": outcome.timed_out,
+        "ended": ended,
         "sim_time_s": round(sim_time, 3),
         "wall_time_s": round(outcome.wall_time_s, 3),
         "real_time_factor": round(outcome.sim_time_s / wall, 2),
@@ -106,10 +129,46 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
             "world": outcome.world_rejected,
             "robots": sum(r.status.rejected for r in robots if r.status),
             "observer": outcome.observer_rejected,
+            "beacon": outcome.beacon_rejected,
         },
         "config": outcome.config,
-        "per_robot": [robot_summary(record) for record in robots],
+        "per_robot": [
+            robot_summary(record) | {"byzantine": outcome.byzantine.get(record.id)}
+            for record in robots
+        ],
     }
+    if ended == "timeout":
+        summary["timeout_kind"] = outcome.timeout_kind
+    if ended != "consensus":
+        summary["stuck"] = list(outcome.stuck)
+    return summary
+
+
+def ending(stop: Stop | None, all_decided: bool, consensus: bool) -> Ending | None:
+    """How the run ended, from why it stopped and what the robots decided.
+
+    With no stop reason (a run rebuilt from its recording), what the robots decided is
+    all there is: consensus or split if every running robot decided, else not known.
+    """
+    if stop == "decided" or (stop is None and all_decided):
+        if consensus:
+            return "consensus"
+        return "split" if all_decided else "stalled"  # stalled: no robot left running
+    return stop
+
+
+def byzantine_in_config(config: dict[str, Any]) -> dict[int, str]:
+    """Robot -> behaviour from a run's ``config["byzantine"]`` (``ROBOT:MODE`` texts, as
+    ``swarm run`` records them); entries that do not parse are left out."""
+    found: dict[int, str] = {}
+    entries = config.get("byzantine")
+    for text in entries if isinstance(entries, list) else []:
+        try:
+            switch = byzantine.ByzantineRobot.parse(str(text))
+        except ValueError:
+            continue
+        found[switch.robot] = str(switch.behaviour)
+    return found
 
 
 def robot_summary(record: RobotRecord) -> dict[str, Any]:

@@ -2,7 +2,8 @@
 
 Every process of a secured swarm is a Zenoh client of its host's router over mutual TLS;
 the certificate's common name is its identity (``robot-3``, ``world``, ``beacon-nest``,
-``observer``, ``launcher``, ``recorder``; routers use their host name). The router's
+``observer``, ``launcher``, ``recorder``, ``viewer``, ``foxglove``; routers use their host
+name). The router's
 access control denies by default and allows each identity exactly its part of the
 protocol (robot_agent/protocol.py), so a robot can only publish its own ``act``,
 ``status`` and ``radio/tx/<id>`` and only the world server can publish ``sense``,
@@ -12,24 +13,28 @@ protocol (robot_agent/protocol.py), so a robot can only publish its own ``act``,
         --new-ca --out swarm-zenoh
 
 writes ``routers/<router>.json5``, ``clients/<identity>.json5`` and, when the CA key is
-given, a key and certificate per identity in ``certs/`` (issued with the openssl CLI).
+given, a key and certificate per identity in ``certs/`` (made with the cryptography package).
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
 import ipaddress
 import json
 import os
 import re
 import shutil
-import subprocess
 import sys
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path, PurePath
 from typing import Any
+
+from cryptography import x509
+from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.hazmat.primitives.asymmetric import ec
+from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from plumbing import cliargs
 from robot_agent import protocol
@@ -39,6 +44,9 @@ DEFAULT_ROUTER = "router"
 DEFAULT_BEACON = "nest"
 # Identities (certificate common names) of the processes that are neither robots nor beacons.
 OBSERVER, LAUNCHER, RECORDER, WORLD = "observer", "launcher", "recorder", "world"
+# The observers of swarm run --view and --foxglove: readers with a token (and the page a
+# queryable) of their own.
+VIEWER, FOXGLOVE = "viewer", "foxglove"
 # Zenoh 1.10's ACL message types (the config parser rejects any other name).
 ALL_MESSAGES = (
     "put",
@@ -108,6 +116,8 @@ class SwarmPlan:
             OBSERVER,
             LAUNCHER,
             RECORDER,
+            VIEWER,
+            FOXGLOVE,
         ]
 
 
@@ -137,6 +147,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
     keys = plan.keys
     everything = [keys.all]
     world_services = [keys.world_info, keys.world_stats]
+    finishes = [keys.recorder_finish, keys.viewer_finish]
     rules: list[dict[str, Any]] = [
         # Watching: subscribe to anything of the run, see who is alive, read world services.
         _rule(
@@ -151,9 +162,17 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         _rule("discover-subscribers", "egress", ["declare_subscriber"], everything),
         _rule("read-query", "ingress", ["query"], world_services),
         _rule("read-answer", "egress", ["reply"], world_services),
-        # A robot asks for the map.
+        # A robot (and the beacon) asks for the map ...
         _rule("robot-query-info", "ingress", ["query"], [keys.world_info]),
         _rule("robot-answer-info", "egress", ["reply"], [keys.world_info]),
+        # ... and follows the world server's liveliness, to notice a restarted world.
+        _rule(
+            "follow-world",
+            "ingress",
+            ["declare_liveliness_subscriber", "liveliness_query"],
+            [keys.alive(WORLD, "*")],
+        ),
+        _rule("follow-world-token", "egress", ["liveliness_token"], [keys.alive(WORLD, "*")]),
         # The world server: the robots' bodies, the radio medium, the clock.
         _rule(
             "world-speak",
@@ -173,13 +192,20 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         # Beacons hear the clock.
         _rule("beacon-subscribe-clock", "ingress", ["declare_subscriber"], [keys.world_clock]),
         _rule("beacon-receive-clock", "egress", ["put"], [keys.world_clock]),
-        # The launcher relays process logs and asks the recorder to finish.
+        # The launcher relays process logs and asks the recorder and the page to finish.
         _rule("launcher-log", "ingress", ["put"], [keys.log("*")]),
-        _rule("launcher-finish", "ingress", ["query"], [keys.recorder_finish]),
-        _rule("launcher-finished", "egress", ["reply"], [keys.recorder_finish]),
+        _rule("launcher-finish", "ingress", ["query"], finishes),
+        _rule("launcher-finished", "egress", ["reply"], finishes),
         # The recorder answers the finish query once its file is complete.
         _rule("recorder-serve", "ingress", ["declare_queryable", "reply"], [keys.recorder_finish]),
+        _rule("recorder-alive", "ingress", ["liveliness_token"], [keys.alive(RECORDER, "*")]),
         _rule("recorder-asked", "egress", ["query"], [keys.recorder_finish]),
+        # The page answers its finish query once every page was sent how the run ended.
+        _rule("viewer-serve", "ingress", ["declare_queryable", "reply"], [keys.viewer_finish]),
+        _rule("viewer-alive", "ingress", ["liveliness_token"], [keys.alive(VIEWER, 0)]),
+        _rule("viewer-asked", "egress", ["query"], [keys.viewer_finish]),
+        # Foxglove live only listens, and says it serves.
+        _rule("foxglove-alive", "ingress", ["liveliness_token"], [keys.alive(FOXGLOVE, 0)]),
         # Routers of the other hosts relay everyone's traffic; each checks its own clients.
         _rule("router-relay-in", "ingress", ALL_MESSAGES, everything),
         _rule("router-relay-out", "egress", ALL_MESSAGES, everything),
@@ -227,6 +253,8 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 f"{identity}-receive",
                 "robot-query-info",
                 "robot-answer-info",
+                "follow-world",
+                "follow-world-token",
             ],
         )
     for beacon in plan.beacons:
@@ -249,11 +277,17 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 f"{identity}-alive",
                 "beacon-subscribe-clock",
                 "beacon-receive-clock",
+                "robot-query-info",
+                "robot-answer-info",
+                "follow-world",
+                "follow-world-token",
             ],
         )
     grant_client(OBSERVER, reading)
     grant_client(LAUNCHER, [*reading, "launcher-log", "launcher-finish", "launcher-finished"])
-    grant_client(RECORDER, [*reading, "recorder-serve", "recorder-asked"])
+    grant_client(RECORDER, [*reading, "recorder-serve", "recorder-asked", "recorder-alive"])
+    grant_client(VIEWER, [*reading, "viewer-serve", "viewer-asked", "viewer-alive"])
+    grant_client(FOXGLOVE, [*reading, "foxglove-alive"])
     grant("routers", ["router-relay-in", "router-relay-out"], plan.routers)
     return {
         "enabled": True,
@@ -279,9 +313,14 @@ def router_config(plan: SwarmPlan, router: str, cert_dir: PurePath) -> dict[str,
     others = [
         f"tls/{_host_in_endpoint(other)}:{plan.port}" for other in plan.routers if other != router
     ]
+    # Its own host's clients come on loopback; only with other routers does it also
+    # listen on the address they reach it by (never on every interface).
+    listen = [f"tls/127.0.0.1:{plan.port}"]
+    if others:
+        listen.append(f"tls/{_host_in_endpoint(router)}:{plan.port}")
     return {
         "mode": "router",
-        "listen": {"endpoints": [f"tls/0.0.0.0:{plan.port}"]},
+        "listen": {"endpoints": listen},
         "connect": {"endpoints": others},
         "scouting": {"multicast": {"enabled": False}},
         "transport": {
@@ -382,21 +421,34 @@ def write_configs(plan: SwarmPlan, out: Path, cert_dir: PurePath) -> list[Path]:
     return written
 
 
-# --- certificates (openssl CLI) ------------------------------------------------------
+# --- certificates (the cryptography package) -----------------------------------------
 
 # P-256 keys: small, fast to make, accepted by rustls (Zenoh's TLS) and zenoh-pico's mbedTLS.
-_NEW_KEY = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:P-256", "-nodes"]
+_CURVE = ec.SECP256R1()
+# A little slack before "now", so that a certificate made this instant is already valid
+# for a peer whose clock is slightly behind.
+_BACKDATE = datetime.timedelta(minutes=5)
 
 
-def _openssl(*arguments: str) -> None:
-    executable = shutil.which("openssl")
-    if executable is None:
-        raise RuntimeError("the openssl command is needed to make certificates")
-    result = subprocess.run(
-        [executable, *arguments], capture_output=True, text=True, check=False, timeout=60
+def _write_private(path: Path, data: bytes) -> None:
+    """A file only its owner can read, created that way (never readable for a moment)."""
+    descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(descriptor, "wb") as file:
+        file.write(data)
+    path.chmod(0o600)
+
+
+def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
+    return key.private_bytes(
+        serialization.Encoding.PEM,
+        serialization.PrivateFormat.PKCS8,
+        serialization.NoEncryption(),
     )
-    if result.returncode != 0:
-        raise RuntimeError(f"openssl {arguments[0]} failed: {result.stderr.strip()}")
+
+
+def _validity(days: int) -> tuple[datetime.datetime, datetime.datetime]:
+    now = datetime.datetime.now(datetime.UTC)
+    return now - _BACKDATE, now + datetime.timedelta(days=days)
 
 
 def create_ca(
@@ -407,25 +459,37 @@ def create_ca(
         if path.exists():
             raise FileExistsError(f"{path} exists; not replacing a certificate authority")
         path.parent.mkdir(parents=True, exist_ok=True)
-    _openssl(
-        "req",
-        "-x509",
-        "-new",
-        *_NEW_KEY,
-        "-keyout",
-        str(key),
-        "-out",
-        str(certificate),
-        "-days",
-        str(days),
-        "-subj",
-        f"/CN={common_name}",
-        "-addext",
-        "basicConstraints=critical,CA:TRUE",
-        "-addext",
-        "keyUsage=critical,keyCertSign,cRLSign",
+    private = ec.generate_private_key(_CURVE)
+    name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, common_name)])
+    start, end = _validity(days)
+    ca = (
+        x509.CertificateBuilder()
+        .subject_name(name)
+        .issuer_name(name)
+        .public_key(private.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(start)
+        .not_valid_after(end)
+        .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+        .add_extension(
+            x509.KeyUsage(
+                digital_signature=False,
+                content_commitment=False,
+                key_encipherment=False,
+                data_encipherment=False,
+                key_agreement=False,
+                key_cert_sign=True,
+                crl_sign=True,
+                encipher_only=False,
+                decipher_only=False,
+            ),
+            critical=True,
+        )
+        .add_extension(x509.SubjectKeyIdentifier.from_public_key(private.public_key()), False)
+        .sign(private, hashes.SHA256())
     )
-    key.chmod(0o600)
+    _write_private(key, _key_pem(private))
+    certificate.write_bytes(ca.public_bytes(serialization.Encoding.PEM))
 
 
 def issue_certificate(
@@ -444,49 +508,52 @@ def issue_certificate(
     """
     out_dir.mkdir(parents=True, exist_ok=True)
     key, certificate = out_dir / f"{common_name}.key", out_dir / f"{common_name}.pem"
-    usages = "serverAuth,clientAuth" if server_names else "clientAuth"
-    extensions = [
-        "basicConstraints=critical,CA:FALSE",
-        "keyUsage=critical,digitalSignature",
-        f"extendedKeyUsage={usages}",
-    ]
+    authority = x509.load_pem_x509_certificate(ca_certificate.read_bytes())
+    signer = serialization.load_pem_private_key(ca_key.read_bytes(), password=None)
+    if not isinstance(signer, ec.EllipticCurvePrivateKey):
+        raise RuntimeError(f"{ca_key} is not an elliptic-curve key")
+    private = ec.generate_private_key(_CURVE)
+    usages = [ExtendedKeyUsageOID.CLIENT_AUTH]
     if server_names:
-        alt_names = [f"IP:{name}" if _is_ip(name) else f"DNS:{name}" for name in server_names]
-        extensions.append(f"subjectAltName={','.join(alt_names)}")
-    with tempfile.TemporaryDirectory() as scratch:
-        request, extension_file = Path(scratch) / "request.csr", Path(scratch) / "ext.cnf"
-        extension_file.write_text("\n".join(extensions) + "\n")
-        _openssl(
-            "req",
-            "-new",
-            *_NEW_KEY,
-            "-keyout",
-            str(key),
-            "-out",
-            str(request),
-            "-subj",
-            f"/CN={common_name}",
+        usages.insert(0, ExtendedKeyUsageOID.SERVER_AUTH)
+    start, end = _validity(days)
+    builder = (
+        x509.CertificateBuilder()
+        .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, common_name)]))
+        .issuer_name(authority.subject)
+        .public_key(private.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(start)
+        .not_valid_after(min(end, authority.not_valid_after_utc))
+        .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+        .add_extension(
+            x509.KeyUsage(
+                digital_signature=True,
+                content_commitment=False,
+                key_encipherment=False,
+                data_encipherment=False,
+                key_agreement=False,
+                key_cert_sign=False,
+                crl_sign=False,
+                encipher_only=False,
+                decipher_only=False,
+            ),
+            critical=True,
         )
-        key.chmod(0o600)
-        _openssl(
-            "x509",
-            "-req",
-            "-in",
-            str(request),
-            "-CA",
-            str(ca_certificate),
-            "-CAkey",
-            str(ca_key),
-            "-CAserial",
-            str(out_dir / "ca.srl"),
-            "-CAcreateserial",
-            "-out",
-            str(certificate),
-            "-days",
-            str(days),
-            "-extfile",
-            str(extension_file),
+        .add_extension(x509.ExtendedKeyUsage(usages), critical=False)
+        .add_extension(
+            x509.AuthorityKeyIdentifier.from_issuer_public_key(signer.public_key()), False
         )
+    )
+    if server_names:
+        alternatives: list[x509.GeneralName] = [
+            x509.IPAddress(ipaddress.ip_address(name)) if _is_ip(name) else x509.DNSName(name)
+            for name in server_names
+        ]
+        builder = builder.add_extension(x509.SubjectAlternativeName(alternatives), False)
+    issued = builder.sign(signer, hashes.SHA256())
+    _write_private(key, _key_pem(private))
+    certificate.write_bytes(issued.public_bytes(serialization.Encoding.PEM))
     return key, certificate
 
 
@@ -625,7 +692,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             local_certs.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(args.ca, local_certs / "ca.pem")
-    except (OSError, RuntimeError, subprocess.TimeoutExpired) as error:
+    except (OSError, RuntimeError, ValueError) as error:
         print(f"zenoh_acl: error: {error}", file=sys.stderr)
         return 1
     cert_dir = args.cert_dir or PurePath(os.path.abspath(local_certs))

@@ -13,18 +13,23 @@ import queue
 import random
 import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import zenoh
 
 from nest_beacon.beacon import Beacon
 from nest_beacon.options import add_beacon_options, beacon_config
-from plumbing import cliargs
+from plumbing import cliargs, run_keys
+from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
+from plumbing.world_info import fetch_world_info
 from plumbing.zenoh_session import open_from_args, reliable_publisher
-from robot_agent import protocol
+from robot_agent import auth, guard, protocol
 
 log = logging.getLogger("nest_beacon")
+INBOX_BYTES = 16 * 2**20
+MAX_MESSAGE_BYTES = 1024  # a clock and its tag are under 100 bytes
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -40,9 +45,97 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_beacon_options(parser)
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
+    parser.add_argument(
+        "--info-timeout",
+        type=cliargs.positive_float,
+        default=60.0,
+        help="wall seconds to wait for the world server (default: 60)",
+    )
     cliargs.add_zenoh_options(parser)
     cliargs.add_log_level(parser)
     return parser
+
+
+@dataclass(frozen=True)
+class _Input:
+    kind: str  # clock | world | no-world | stop
+    payload: bytes = b""
+    attachment: bytes | None = None
+
+
+class BeaconNode:
+    """The beacon on Zenoh: believes a clock only if it is the followed world's next tick."""
+
+    def __init__(
+        self,
+        beacon: Beacon,
+        keys: protocol.Keys,
+        dt: float,
+        keyring: auth.Keyring | None,
+        *,
+        transmit: Callable[[bytes, bytes | None], None],
+        acknowledge: Callable[[bytes, bytes | None], None],
+    ) -> None:
+        self.beacon = beacon
+        self.name = beacon.config.name
+        self.keys = keys
+        self.dt = dt
+        self.keyring = keyring
+        self.transmit = transmit
+        self.acknowledge = acknowledge
+        self.ticks = guard.TickWindow()
+        self.worlds = guard.WorldFollower()
+        self.rejected = 0
+
+    def handle(self, item: _Input) -> None:
+        if item.kind in ("world", "no-world"):
+            instance = item.payload.decode(errors="replace")
+            present = item.kind == "world"
+            if present and self.worlds.appeared(instance):
+                log.warning("beacon %s: a new world server appeared; following it", self.name)
+                self.ticks = guard.TickWindow()
+                self.beacon.follow_new_world()
+            elif not present:
+                self.worlds.vanished(instance)
+            return
+        try:
+            auth.unseal(
+                self.keyring, auth.WORLD, self.keys.world_clock, item.payload, item.attachment
+            )
+            clock = protocol.decode(item.payload, protocol.Clock)
+            refused = guard.time_refused(clock.tick, clock.t, self.dt) or self.ticks.refuses(
+                clock.tick
+            )
+            if refused:
+                raise protocol.ProtocolError(refused)
+        except (auth.AuthError, protocol.ProtocolError) as error:
+            self._reject(error)
+            return
+        if not self.ticks.ahead(clock.tick):
+            return  # a tick already answered
+        self.ticks.last = clock.tick
+        sent = 0
+        for message in self.beacon.on_tick(clock.t):
+            payload = protocol.encode(message)
+            meta = protocol.encode(
+                protocol.RadioTxMeta(v=protocol.VERSION, tick=clock.tick, seq=message.seq)
+            )
+            self.transmit(payload, self._seal(self.keys.radio_tx(self.name), payload, meta))
+            sent += 1
+        ack = protocol.encode(
+            protocol.Ack(v=protocol.VERSION, tick=clock.tick, radio_tx=sent, rejected=self.rejected)
+        )
+        self.acknowledge(ack, self._seal(self.keys.beacon_ack(self.name), ack))
+
+    def _reject(self, error: Exception) -> None:
+        self.rejected += 1
+        if self.rejected == 1:
+            log.warning(
+                "rejected message on %s: %s (further ones not logged)", self.keys.world_clock, error
+            )
+
+    def _seal(self, key: str, payload: bytes, metadata: bytes = b"") -> bytes | None:
+        return auth.seal(self.keyring, auth.beacon_identity(self.name), key, payload, metadata)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -54,49 +147,63 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as error:
         parser.exit(2, f"nest-beacon: error: {error}\n")
     cliargs.configure_logging("nest-beacon", args.log_level)
+    keyring = run_keys.from_args(parser, args, "nest-beacon")
+    identity = auth.beacon_identity(args.name)
+    if keyring is not None and not (keyring.holds(identity) and keyring.holds(auth.WORLD)):
+        parser.exit(2, "nest-beacon: error: the beacon needs its own key and the world's\n")
     beacon = Beacon(config, random.Random(protocol.derive_seed(args.seed, "beacon", args.name)))
     keys = protocol.Keys(args.run_id, args.root)
-    clocks: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
+    inbox: BoundedInbox[_Input] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
     for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: clocks.put(None))
+        signal.signal(signum, lambda *_: inbox.put(_Input("stop")))
     try:
         session = open_from_args(args)
     except zenoh.ZError as error:
         print(f"nest-beacon: cannot open Zenoh session: {error}", file=sys.stderr)
         return 1
-    rejected = 0
     with session:
+        try:
+            info = fetch_world_info(session, keys, args.info_timeout, keyring, identity)
+        except TimeoutError as error:
+            print(f"nest-beacon: {error}", file=sys.stderr)
+            return 1
         transmitter = reliable_publisher(session, keys.radio_tx(args.name))
         acknowledger = reliable_publisher(session, keys.beacon_ack(args.name))
-        session.declare_subscriber(
-            keys.world_clock, lambda sample: clocks.put(sample.payload.to_bytes())
+        node = BeaconNode(
+            beacon,
+            keys,
+            info.dt,
+            keyring,
+            transmit=lambda payload, attachment: transmitter.put(payload, attachment=attachment),
+            acknowledge=lambda payload, attachment: acknowledger.put(
+                payload, attachment=attachment
+            ),
         )
+
+        def on_clock(sample: zenoh.Sample) -> None:
+            payload = sample.payload.to_bytes()
+            extra = sample.attachment.to_bytes() if sample.attachment is not None else None
+            inbox.put(_Input("clock", payload, extra), len(payload) + len(extra or b""))
+
+        def on_world(sample: zenoh.Sample) -> None:
+            kind = "world" if sample.kind == zenoh.SampleKind.PUT else "no-world"
+            inbox.put(_Input(kind, keys.last_chunk(str(sample.key_expr)).encode()))
+
+        session.liveliness().declare_subscriber(keys.alive("world", "*"), on_world, history=True)
+        session.declare_subscriber(keys.world_clock, on_clock)
         token = session.liveliness().declare_token(keys.alive("beacon", args.name))
         log.info("beacon %s transmitting every %.2fs of sim time", args.name, config.period)
         while True:
             try:
-                payload = clocks.get(timeout=0.5)
+                item = inbox.get(timeout=0.5)
             except queue.Empty:
                 continue
-            if payload is None:
+            if item.kind == "stop":
                 break
-            try:
-                clock = protocol.decode(payload, protocol.Clock)
-            except protocol.ProtocolError as error:
-                rejected += 1
-                if rejected == 1:
-                    log.warning("rejected message on %s: %s", keys.world_clock, error)
-                continue
-            sent = 0
-            for message in beacon.on_tick(clock.t):
-                meta = protocol.RadioTxMeta(v=protocol.VERSION, tick=clock.tick, seq=message.seq)
-                transmitter.put(protocol.encode(message), attachment=protocol.encode(meta))
-                sent += 1
-            acknowledger.put(
-                protocol.encode(protocol.Ack(v=protocol.VERSION, tick=clock.tick, radio_tx=sent))
-            )
+            node.handle(item)
+            node.rejected += inbox.take_dropped(None)
         token.undeclare()
-    log.info("beacon %s stopped (%d rejected clock messages)", args.name, rejected)
+    log.info("beacon %s stopped (%d rejected clock messages)", args.name, node.rejected)
     return 0
 
 

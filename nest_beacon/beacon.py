@@ -52,6 +52,10 @@ class Beacon:
         self.seq += 1
         return [protocol.BeaconPayload(v=protocol.VERSION, id=self.config.name, seq=self.seq)]
 
+    def follow_new_world(self) -> None:
+        """A restarted world counts sim time from zero again: transmit on its next tick."""
+        self.next_due = 0.0
+
     def silenced(self, t: float) -> bool:
         return any(start <= t < end for start, end in self.config.outages)
 

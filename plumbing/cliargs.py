@@ -143,6 +143,13 @@ def add_zenoh_options(parser: argparse.ArgumentParser, *, default_mode: str = "c
     group.add_argument(
         "--run-id", type=name, default="run", help="names one swarm on the network (default: run)"
     )
+    group.add_argument(
+        "--key-file",
+        metavar="FILE",
+        help="this process's run keys (python -m plumbing.run_keys writes them); every "
+        "message is then tagged and checked. Without one (and not started by swarm run) "
+        "the process runs unauthenticated",
+    )
 
 
 def forward_argv(

@@ -1,27 +1,69 @@
-"""Finding the world server of a run: every process asks ``world/info`` before it starts."""
+"""Asking the run's queryables (``world/info`` first of all) and believing only true answers.
+
+In a keyed run a query carries a fresh nonce and the asker's tag, and only a reply tagged
+for that nonce with the asker's key counts (robot_agent/auth.py): anyone else on the
+router can answer too, but cannot make an answer that passes.
+"""
 
 from __future__ import annotations
 
+import os
 import time
 
 import zenoh
 
-from robot_agent import protocol
+from robot_agent import auth, protocol
+
+
+def ask(
+    session: zenoh.Session,
+    key: str,
+    keyring: auth.Keyring | None,
+    identity: str,
+    *,
+    payload: bytes = b"",
+    timeout: float = 1.0,
+) -> tuple[list[bytes], list[str]]:
+    """Query ``key`` once as ``identity``: the payloads of the replies that answer it, and
+    what was wrong with the others (error replies, replies that fail their check)."""
+    nonce = os.urandom(auth.NONCE_BYTES) if keyring is not None else b""
+    attachment = auth.query_seal(keyring, identity, key, payload, nonce)
+    answers: list[bytes] = []
+    refused: list[str] = []
+    for reply in session.get(key, payload=payload or None, attachment=attachment, timeout=timeout):
+        if reply.ok is None:
+            refused.append(reply.err.payload.to_bytes().decode("utf-8", "replace")[:200])
+            continue
+        data = reply.ok.payload.to_bytes()
+        extra = reply.ok.attachment
+        try:
+            auth.reply_open(
+                keyring, identity, key, data, extra.to_bytes() if extra else None, nonce=nonce
+            )
+        except auth.AuthError as error:
+            refused.append(f"a reply that does not check out ({error})")
+            continue
+        answers.append(data)
+    return answers, refused
 
 
 def fetch_world_info(
-    session: zenoh.Session, keys: protocol.Keys, timeout: float
+    session: zenoh.Session,
+    keys: protocol.Keys,
+    timeout: float,
+    keyring: auth.Keyring | None = None,
+    identity: str = auth.LAUNCHER,
 ) -> protocol.WorldInfo:
     """Ask ``world/info`` until a world server answers, or raise TimeoutError."""
     deadline = time.monotonic() + timeout
     last_error = "no reply"
     while time.monotonic() < deadline:
-        for reply in session.get(keys.world_info, timeout=1.0):
-            if reply.ok is None:
-                last_error = str(reply.err.payload.to_bytes()) if reply.err else "error reply"
-                continue
+        answers, refused = ask(session, keys.world_info, keyring, identity)
+        if refused:
+            last_error = refused[-1]
+        for answer in answers:
             try:
-                return protocol.decode(reply.ok.payload.to_bytes(), protocol.WorldInfo)
+                return protocol.decode(answer, protocol.WorldInfo)
             except protocol.ProtocolError as error:
                 last_error = f"invalid world/info: {error}"
         time.sleep(0.1)

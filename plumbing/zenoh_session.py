@@ -10,6 +10,7 @@ import argparse
 import json
 import os
 from collections.abc import Sequence
+from pathlib import Path
 
 import zenoh
 
@@ -98,3 +99,25 @@ def reliable_put(
     session.put(
         key, payload, attachment=attachment, congestion_control=zenoh.CongestionControl.BLOCK
     )
+
+
+def certificate_name(config_file: str) -> str | None:
+    """The common name of the client certificate a Zenoh configuration file presents
+    (``transport/link/tls/connect_certificate``), or None if it presents none."""
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    try:
+        config = zenoh.Config.from_file(config_file)
+        value = config.get_json("transport/link/tls/connect_certificate")
+    except zenoh.ZError:
+        return None
+    path = json.loads(value) if value else None
+    if not isinstance(path, str):
+        return None
+    try:
+        certificate = x509.load_pem_x509_certificate(Path(path).read_bytes())
+    except (OSError, ValueError):
+        return None
+    names = certificate.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+    return str(names[0].value) if names else None

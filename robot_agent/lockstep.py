@@ -10,8 +10,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from robot_agent import protocol, vision
-from robot_agent.controller import Controller
-from robot_agent.ports import BodyReading, RejectCounter, decode_received
+from robot_agent.ports import BodyReading, RejectCounter, RobotController, decode_received
 
 
 @dataclass(frozen=True)
@@ -22,7 +21,7 @@ class TickAnswer:
 
 
 def answer_tick(
-    controller: Controller,
+    controller: RobotController,
     sense: protocol.Sense,
     radio: Sequence[tuple[str, bytes]],
     frame: bytes | None,

@@ -7,13 +7,16 @@ wire from single-robot processes). Zenoh callbacks only copy bytes into the inbo
 Lockstep: the world's ``sense`` for tick t says how many radio messages and whether a
 camera frame belong to tick t; the robot steps only when all of them are in, so the
 order in which Zenoh delivers different keys cannot change a run.
+
+Trust: in a keyed run a robot holds only its own run key; it believes an input only with
+that key's tag (robot_agent/auth.py), only for a tick within reach of its last one, and
+holds at most PENDING_BYTES of inputs for ticks it has not reached (robot_agent/guard.py).
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
-import queue
 import random
 import signal
 import sys
@@ -25,24 +28,39 @@ from typing import TypeVar
 import msgspec
 import zenoh
 
-from plumbing import cliargs
+from plumbing import cliargs, run_keys
+from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
-from plumbing.world_info import fetch_world_info
-from plumbing.zenoh_session import open_from_args, reliable_publisher
-from robot_agent import protocol
-from robot_agent.controller import Controller
+from plumbing.world_info import ask, fetch_world_info
+from plumbing.zenoh_session import certificate_name, open_from_args, reliable_publisher
+from robot_agent import auth, byzantine, guard, protocol
 from robot_agent.lockstep import answer_tick
-from robot_agent.options import add_controller_options, controller_config
-from robot_agent.ports import RejectCounter
+from robot_agent.options import (
+    add_byzantine_option,
+    add_controller_options,
+    controller_config,
+    hosted_byzantine,
+)
+from robot_agent.ports import RejectCounter, RobotController
 
 log = logging.getLogger("robot_agent")
 Meta = TypeVar("Meta", protocol.RadioRxMeta, protocol.CameraMeta)
+
+# What may wait for one robot: the inputs of ticks it has not reached (a lockstep robot
+# needs one tick's; a camera frame and the radio of a crowded nest are well under this),
+# and what may wait in a process's inbox for its one thread.
+PENDING_BYTES = 4 * 2**20
+PENDING_MESSAGES = 4000
+# The inbox grows with the robots a process hosts; a tick's inputs are a few kilobytes
+# per robot, so this leaves room for a long stall, not for a flood.
+INBOX_BYTES, INBOX_BYTES_PER_ROBOT = 16 * 2**20, 2**20
+MAX_MESSAGE_BYTES = protocol.MAX_FRAME_BYTES + 1024  # a frame and its attachment
 
 
 @dataclass(frozen=True)
 class Event:
     robot: int
-    kind: str  # sense | camera | rx | stop
+    kind: str  # sense | camera | rx | world | no-world | stop
     payload: bytes = b""
     attachment: bytes | None = None
 
@@ -52,6 +70,8 @@ class _TickInputs:
     sense: protocol.Sense | None = None
     rx: list[tuple[str, bytes]] = field(default_factory=list)
     frame: bytes | None = None
+    size: int = 0  # bytes held for this tick
+    messages: int = 0
 
 
 class RobotNode:
@@ -63,25 +83,35 @@ class RobotNode:
         *,
         session: zenoh.Session,
         keys: protocol.Keys,
-        controller: Controller,
-        inbox: queue.SimpleQueue[Event],
-        lockstep: bool,
+        controller: RobotController,
+        inbox: BoundedInbox[Event],
+        world: protocol.WorldInfo,
+        keyring: auth.Keyring | None = None,
     ) -> None:
         self.robot_id = robot_id
+        self.identity = auth.robot_identity(robot_id)
         self.session = session
         self.keys = keys
         self.controller = controller
         self.inbox = inbox
-        self.lockstep = lockstep
+        self.lockstep = world.clock == "lockstep"
+        self.keyring = keyring  # None: an unauthenticated run
+        self.dt = world.dt
         self.rejects = RejectCounter()
         self.pending: dict[int, _TickInputs] = {}
+        self.pending_bytes = 0
+        self.pending_messages = 0
         self.seq = 0
         self.skipped_ticks = 0
-        self.last_tick = -1
+        self.ticks = guard.TickWindow()
         self.time_offset = 0.0  # keeps the controller's clock monotonic across world restarts
         self.last_t = 0.0
-        self.world: str | None = None  # the world server's instance id (its Zenoh id)
+        self.worlds = guard.WorldFollower()  # the world server's instance (its Zenoh id)
         self._declared: list[object] = []
+
+    @property
+    def last_tick(self) -> int:
+        return self.ticks.last
 
     def start(self) -> None:
         """Subscribe first, then announce liveliness, so no tick is missed."""
@@ -90,14 +120,10 @@ class RobotNode:
         def forward(kind: str) -> Callable[[zenoh.Sample], None]:
             def callback(sample: zenoh.Sample) -> None:
                 attachment = sample.attachment
-                self.inbox.put(
-                    Event(
-                        robot,
-                        kind,
-                        sample.payload.to_bytes(),
-                        attachment.to_bytes() if attachment is not None else None,
-                    )
-                )
+                payload = sample.payload.to_bytes()
+                extra = attachment.to_bytes() if attachment is not None else None
+                size = len(payload) + len(extra or b"")
+                self.inbox.put(Event(robot, kind, payload, extra), size, robot)
 
             return callback
 
@@ -133,36 +159,76 @@ class RobotNode:
     def handle(self, event: Event) -> None:
         if event.kind in ("world", "no-world"):
             self._world_presence(event.payload.decode(errors="replace"), event.kind == "world")
-        elif event.kind == "sense":
-            try:
-                sense = protocol.decode(event.payload, protocol.Sense)
-            except protocol.ProtocolError as error:
-                self._reject("sense", error)
-                return
-            if sense.tick <= self.last_tick:
-                return  # a repeat of a tick already answered
-            self.pending.setdefault(sense.tick, _TickInputs()).sense = sense
-            self._advance(sense.tick)
+            return
+        key = {"sense": "sense", "rx": "radio/rx", "camera": "camera"}.get(event.kind)
+        if key is None:
+            return
+        key_expr = {
+            "sense": self.keys.sense,
+            "rx": self.keys.radio_rx,
+            "camera": self.keys.camera,
+        }[event.kind](self.robot_id)
+        try:
+            metadata = auth.unseal(
+                self.keyring, self.identity, key_expr, event.payload, event.attachment
+            )
+        except auth.AuthError as error:
+            self._reject(key, error)
+            return
+        if event.kind == "sense":
+            self._take_sense(event.payload)
         elif event.kind == "rx":
-            meta = self._attachment(event, protocol.RadioRxMeta, "radio/rx")
-            if meta is not None and meta.tick > self.last_tick:
-                self.pending.setdefault(meta.tick, _TickInputs()).rx.append(
-                    (meta.sender, event.payload)
-                )
+            meta = self._metadata(metadata, protocol.RadioRxMeta, key)
+            if meta is not None and self._admit(meta.tick, key, len(event.payload)):
+                self.pending[meta.tick].rx.append((meta.sender, event.payload))
                 self._advance(meta.tick)
-        elif event.kind == "camera":
-            meta = self._attachment(event, protocol.CameraMeta, "camera")
-            if meta is not None and meta.tick > self.last_tick:
-                inputs = self.pending.setdefault(meta.tick, _TickInputs())
-                inputs.frame = event.payload
+        else:
+            meta = self._metadata(metadata, protocol.CameraMeta, key)
+            if meta is not None and self._admit(meta.tick, key, len(event.payload)):
+                self.pending[meta.tick].frame = event.payload
                 self._advance(meta.tick)
 
-    def _attachment(self, event: Event, kind: type[Meta], key: str) -> Meta | None:
-        """The event's metadata (its Zenoh attachment) as ``kind``, or None, rejected."""
+    def _take_sense(self, payload: bytes) -> None:
         try:
-            if event.attachment is None:
+            sense = protocol.decode(payload, protocol.Sense)
+            refused = guard.time_refused(sense.tick, sense.t, self.dt)
+            if refused:
+                raise protocol.ProtocolError(refused)
+        except protocol.ProtocolError as error:
+            self._reject("sense", error)
+            return
+        if not self.ticks.ahead(sense.tick):
+            return  # a repeat of a tick already answered
+        if self._admit(sense.tick, "sense", 0):
+            self.pending[sense.tick].sense = sense
+            self._advance(sense.tick)
+
+    def _admit(self, tick: int, key: str, size: int) -> bool:
+        """Make room for one input of ``tick``, if it is believable and fits this robot's
+        budget; a stale one is dropped quietly, anything else rejected (counted)."""
+        if not self.ticks.ahead(tick):
+            return False  # for a tick already answered: late, not wrong
+        refused = self.ticks.refuses(tick)
+        if refused is None and (
+            self.pending_bytes + size > PENDING_BYTES or self.pending_messages >= PENDING_MESSAGES
+        ):
+            refused = f"more than {PENDING_BYTES} bytes or {PENDING_MESSAGES} messages waiting"
+        if refused is not None:
+            self._reject(key, protocol.ProtocolError(refused))
+            return False
+        inputs = self.pending.setdefault(tick, _TickInputs())
+        inputs.size += size
+        inputs.messages += 1
+        self.pending_bytes += size
+        self.pending_messages += 1
+        return True
+
+    def _metadata(self, metadata: bytes | None, kind: type[Meta], key: str) -> Meta | None:
+        """The event's metadata (in its Zenoh attachment) as ``kind``, or None, rejected."""
+        try:
+            if metadata is None:
                 raise protocol.ProtocolError("missing attachment")
-            return protocol.decode(event.attachment, kind)
+            return protocol.decode(metadata, kind)
         except protocol.ProtocolError as error:
             self._reject(key, error)
             return None
@@ -171,21 +237,34 @@ class RobotNode:
         """Wait while the world server is gone; when another one appears, follow its ticks.
 
         A new world counts ticks from zero again: forget the old tick numbers, and shift
-        its time so that the controller's clock never runs backwards.
+        its time so that the controller's clock never runs backwards. A second world token
+        while the followed world is still alive is not a restart: ignored.
         """
         if not present:
-            if instance == self.world:
+            if self.worlds.vanished(instance):
                 log.warning("robot %d lost the world server; waiting", self.robot_id)
             return
-        if self.world is not None and instance != self.world:
+        if self.worlds.appeared(instance):
             log.warning("robot %d: a new world server appeared; resuming", self.robot_id)
-            self.pending.clear()
-            self.last_tick = -1
+            self._drop_pending(list(self.pending))
+            self.ticks = guard.TickWindow()
             self.time_offset = self.last_t
-        self.world = instance
+        elif instance != self.worlds.followed:
+            log.warning(
+                "robot %d: ignoring a second world token %s while following %s",
+                self.robot_id,
+                instance,
+                self.worlds.followed,
+            )
 
     def _reject(self, key: str, error: Exception) -> None:
         self.rejects.reject(f"robot {self.robot_id} {key}", error)
+
+    def _drop_pending(self, ticks: list[int]) -> None:
+        for tick in ticks:
+            inputs = self.pending.pop(tick)
+            self.pending_bytes -= inputs.size
+            self.pending_messages -= inputs.messages
 
     def _advance(self, tick: int) -> None:
         inputs = self.pending.get(tick)
@@ -198,13 +277,13 @@ class RobotNode:
                 return
             stale = [old for old in self.pending if old < tick]
             self.skipped_ticks += len(stale)
-            for old in stale:
-                del self.pending[old]
+            self._drop_pending(stale)
         else:
             # Real time: use whatever has arrived, including earlier ticks' radio.
-            for old in sorted(t for t in self.pending if t < tick):
-                inputs.rx[:0] = self.pending.pop(old).rx
-        del self.pending[tick]
+            earlier = sorted(t for t in self.pending if t < tick)
+            inputs.rx[:0] = [item for old in earlier for item in self.pending[old].rx]
+            self._drop_pending(earlier)
+        self._drop_pending([tick])
         self._step(sense, inputs)
 
     # --- one control step ----------------------------------------------------------
@@ -217,21 +296,40 @@ class RobotNode:
             self.controller, sense, inputs.rx, inputs.frame, self.rejects, seq=self.seq
         )
         for seq, payload in answer.transmissions:
-            meta = protocol.RadioTxMeta(v=protocol.VERSION, tick=sense.tick, seq=seq)
-            self._tx.put(payload, attachment=protocol.encode(meta))
-        self._act.put(protocol.encode(answer.act))
+            meta = protocol.encode(
+                protocol.RadioTxMeta(v=protocol.VERSION, tick=sense.tick, seq=seq)
+            )
+            self._tx.put(payload, attachment=self._seal(self._tx_key, payload, meta))
+        act = protocol.encode(answer.act)
+        self._act.put(act, attachment=self._seal(self._act_key, act))
         self.seq = answer.next_seq
-        self.last_tick = sense.tick
+        self.ticks.last = sense.tick
         if self.controller.take_status_change():
             self._publish_status(sense.tick)
 
     def _publish_status(self, tick: int) -> None:
+        dropped = self.inbox.take_dropped(self.robot_id)
+        if dropped:  # dropped on arrival: too big, or the process's inbox was full
+            for _ in range(dropped):
+                self._reject("inbox", protocol.ProtocolError("dropped on arrival"))
         status = self.controller.status(tick)
         status = msgspec.structs.replace(status, rejected=status.rejected + self.rejects.count)
-        self._status.put(protocol.encode(status))
+        payload = protocol.encode(status)
+        self._status.put(payload, attachment=self._seal(self.keys.status(self.robot_id), payload))
+
+    @property
+    def _tx_key(self) -> str:
+        return self.keys.radio_tx(protocol.radio_name(self.robot_id))
+
+    @property
+    def _act_key(self) -> str:
+        return self.keys.act(self.robot_id)
+
+    def _seal(self, key: str, payload: bytes, metadata: bytes = b"") -> bytes | None:
+        return auth.seal(self.keyring, self.identity, key, payload, metadata)
 
 
-def serve(nodes: Sequence[RobotNode], inbox: queue.SimpleQueue[Event]) -> None:
+def serve(nodes: Sequence[RobotNode], inbox: BoundedInbox[Event]) -> None:
     """Feed every node its events until a stop event arrives."""
     by_id = {node.robot_id: node for node in nodes}
     while True:
@@ -251,20 +349,55 @@ def robot_id(text: str) -> int | None:
     return cliargs.int_range(0, protocol.MAX_ROBOTS - 1)(text)
 
 
-def ask_for_id(session: zenoh.Session, keys: protocol.Keys, timeout: float) -> int:
-    """Ask the world server for a free robot id (``--id auto``)."""
+class NoKeyError(Exception):
+    """The world assigned an id whose key this process does not hold."""
+
+
+def ask_for_id(
+    session: zenoh.Session,
+    keys: protocol.Keys,
+    timeout: float,
+    keyring: auth.Keyring | None = None,
+) -> int:
+    """Ask the world server for a free robot id (``--id auto``).
+
+    In a keyed run the question is asked in the name of a robot whose key this process
+    holds (robot 0 with the run secret), and the id is only taken if its key is held too.
+    """
+    asker = ""
+    if keyring is not None:
+        robots = [name for name in keyring.identities if name.startswith("robot/")]
+        asker = robots[0] if robots else auth.robot_identity(0)
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        for reply in session.get(keys.world_join, timeout=1.0):
-            if reply.ok is not None:
-                try:
-                    return protocol.decode(reply.ok.payload.to_bytes(), protocol.JoinReply).id
-                except protocol.ProtocolError as error:
-                    raise TimeoutError(f"invalid answer on {keys.world_join}: {error}") from None
-            if reply.err is not None:
-                raise TimeoutError(f"the world server gave no id: {reply.err.payload.to_bytes()!r}")
+        answers, refused = ask(session, keys.world_join, keyring, asker)
+        for answer in answers:
+            try:
+                robot = protocol.decode(answer, protocol.JoinReply).id
+            except protocol.ProtocolError as error:
+                raise TimeoutError(f"invalid answer on {keys.world_join}: {error}") from None
+            if keyring is not None and not keyring.holds(auth.robot_identity(robot)):
+                raise NoKeyError(f"the world server gave id {robot}, whose key this process lacks")
+            return robot
+        if refused and not answers:
+            raise TimeoutError(f"the world server gave no id: {refused[-1]}")
         time.sleep(0.2)
     raise TimeoutError(f"no world server answered on {keys.world_join}")
+
+
+def certificate_robot(config_file: str | None) -> int | None:
+    """The robot a Zenoh configuration's client certificate names (``CN=robot-<id>``).
+
+    Under the access control a robot may speak only as the robot of its certificate, so
+    ``--id auto`` takes that id rather than ask the world for one it could not use."""
+    if not config_file:
+        return None
+    name = certificate_name(config_file)
+    prefix = "robot-"
+    if name is None or not name.startswith(prefix) or not name[len(prefix) :].isdigit():
+        return None
+    robot = int(name[len(prefix) :])
+    return robot if robot < protocol.MAX_ROBOTS else None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -296,6 +429,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="wall seconds to wait for the world server (default: 60)",
     )
     add_controller_options(parser)
+    add_byzantine_option(parser)
     cliargs.add_zenoh_options(parser)
     cliargs.add_log_level(parser)
     return parser
@@ -308,13 +442,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     fixed = [robot for robot in args.ids if robot is not None]
     if len(set(fixed)) != len(fixed):
         parser.exit(2, "robot-agent: error: the same --id is given twice\n")
+    if None in args.ids and "{id}" in (args.zenoh_config or ""):
+        parser.exit(2, "robot-agent: error: --id auto cannot fill '{id}' in --zenoh-config\n")
     try:
         config = controller_config(args)
+        misbehaving = hosted_byzantine(args.byzantine, fixed)
     except ValueError as error:
         parser.exit(2, f"robot-agent: error: {error}\n")
     cliargs.configure_logging("robot-agent", args.log_level)
+    keyring = run_keys.from_args(parser, args, "robot-agent")
+    for robot in fixed:
+        if keyring is not None and not keyring.holds(auth.robot_identity(robot)):
+            parser.exit(2, f"robot-agent: error: the run keys hold no key for robot {robot}\n")
     keys = protocol.Keys(args.run_id, args.root)
-    inbox: queue.SimpleQueue[Event] = queue.SimpleQueue()
+    inbox: BoundedInbox[Event] = BoundedInbox(
+        INBOX_BYTES + INBOX_BYTES_PER_ROBOT * len(args.ids), MAX_MESSAGE_BYTES
+    )
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: inbox.put(Event(-1, "stop")))
     sessions: list[zenoh.Session] = []
@@ -323,25 +466,35 @@ def main(argv: Sequence[str] | None = None) -> int:
         for requested in args.ids:
             session = open_from_args(args, requested)
             sessions.append(session)
-            info = fetch_world_info(session, keys, args.info_timeout)
-            robot = (
-                requested if requested is not None else ask_for_id(session, keys, args.info_timeout)
-            )
+            robot = requested
+            if robot is None:
+                robot = certificate_robot(args.zenoh_config)
+            if robot is None:
+                robot = ask_for_id(session, keys, args.info_timeout, keyring)
+            identity = auth.robot_identity(robot)
+            info = fetch_world_info(session, keys, args.info_timeout, keyring, identity)
             rng = random.Random(protocol.derive_seed(args.seed, "robot", robot))
-            controller = Controller(robot, info, config, rng)
+            try:
+                controller = byzantine.build_controller(
+                    robot, info, config, rng, misbehaving.get(robot)
+                )
+            except ValueError as error:  # e.g. a liar's site the world does not have
+                print(f"robot-agent: error: {error}", file=sys.stderr)
+                return 2
             node = RobotNode(
                 robot,
                 session=session,
                 keys=keys,
                 controller=controller,
                 inbox=inbox,
-                lockstep=info.clock == "lockstep",
+                world=info,
+                keyring=keyring.only([identity]) if keyring is not None else None,
             )
             node.start()
             nodes.append(node)
         log.info("robot(s) %s running", ", ".join(str(node.robot_id) for node in nodes))
         serve(nodes, inbox)
-    except (zenoh.ZError, TimeoutError) as error:
+    except (zenoh.ZError, TimeoutError, NoKeyError) as error:
         print(f"robot-agent: {error}", file=sys.stderr)
         return 1
     finally:

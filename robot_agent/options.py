@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 
 from plumbing import cliargs
-from robot_agent import decision
+from robot_agent import byzantine, decision
 from robot_agent.controller import ControllerConfig
 
 
@@ -70,3 +71,41 @@ def controller_config(args: argparse.Namespace) -> ControllerConfig:
         broadcast_period=args.broadcast_period,
         linger=args.linger,
     )
+
+
+def byzantine_robot(text: str) -> byzantine.ByzantineRobot:
+    """``--byzantine ROBOT[:MODE]``, e.g. ``3``, ``3:liar=0``, ``3:inverted``."""
+    try:
+        return byzantine.ByzantineRobot.parse(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def add_byzantine_option(parser: argparse.ArgumentParser) -> None:
+    """``robot-agent --byzantine ROBOT:MODE``: which hosted robots misbehave, and how."""
+    parser.add_argument(
+        "--byzantine",
+        type=byzantine_robot,
+        action="append",
+        default=[],
+        metavar="ROBOT:MODE",
+        help="hosted robot ROBOT misbehaves (repeatable): liar=SITE, inverted or silent "
+        "(a fault experiment; swarm run --byzantine chooses a liar's site itself)",
+    )
+
+
+def hosted_byzantine(
+    switches: Sequence[byzantine.ByzantineRobot], hosted: Sequence[int]
+) -> dict[int, byzantine.Behaviour]:
+    """The ``--byzantine`` switches by robot; ValueError unless each names a robot hosted
+    here (by a fixed --id) once, and each liar names its site."""
+    chosen: dict[int, byzantine.Behaviour] = {}
+    for switch in switches:
+        if switch.robot not in hosted:
+            raise ValueError(f"--byzantine {switch}: robot {switch.robot} is not hosted here")
+        if switch.robot in chosen:
+            raise ValueError(f"--byzantine names robot {switch.robot} twice")
+        if switch.behaviour.mode == "liar" and switch.behaviour.site is None:
+            raise ValueError(f"--byzantine {switch}: name the site it claims, e.g. liar=0")
+        chosen[switch.robot] = switch.behaviour
+    return chosen

@@ -52,6 +52,20 @@ class Command:
     broadcasts: tuple[protocol.OpinionPayload, ...] = ()
 
 
+class RobotController(Protocol):
+    """What a transport drives each control period: the honest ``Controller``, or one
+    wrapped to misbehave (``robot_agent.byzantine``)."""
+
+    def step(self, reading: BodyReading, received: Sequence[Received]) -> Command: ...
+
+    def status(self, tick: int) -> protocol.Status: ...
+
+    def take_status_change(self) -> bool: ...
+
+    @property
+    def decided_site(self) -> int | None: ...
+
+
 class Body(Protocol):
     def read(self) -> BodyReading: ...
 

@@ -166,6 +166,7 @@ class Ack(Message):
 
     tick: _Tick
     radio_tx: Annotated[int, msgspec.Meta(ge=0, le=1000)]
+    rejected: _Count = 0  # invalid messages the beacon dropped so far
 
 
 class CameraMeta(Message):
@@ -340,6 +341,12 @@ class Keys:
         the recording is complete on disk."""
         return f"{self.prefix}/recorder/finish"
 
+    @property
+    def viewer_finish(self) -> str:
+        """Queryable of the live view: the payload is the run summary (JSON); it replies once
+        every connected page was sent how the run ended."""
+        return f"{self.prefix}/viewer/finish"
+
     def alive(self, role: str, ident: int | str) -> str:
         return f"{self.prefix}/alive/{role}/{ident}"
 
@@ -349,9 +356,10 @@ class Keys:
     def robot_of(self, key: str) -> int | None:
         """The robot id in ``<prefix>/robot/<id>/<leaf>``, or None if it is not one."""
         parts = key[len(self.prefix) + 1 :].split("/") if key.startswith(self.prefix + "/") else []
-        if len(parts) == 3 and parts[0] == "robot" and parts[1].isdigit():
+        if len(parts) == 3 and parts[0] == "robot" and parts[1].isascii() and parts[1].isdigit():
             robot = int(parts[1])
-            return robot if robot < MAX_ROBOTS else None
+            # One spelling per robot ("7", never "07"): a key names one robot or none.
+            return robot if robot < MAX_ROBOTS and str(robot) == parts[1] else None
         return None
 
 

@@ -4,7 +4,8 @@
     python tests/make_vectors.py --check   # exit 1 if a file differs from what it would write
 
 One file per message type of ``robot_agent/protocol.py``, plus ``udp_frame.json`` for the
-UDP radio's framing (``robot_agent/udp_radio.py``). Each file holds:
+UDP radio's framing (``robot_agent/udp_radio.py``) and ``auth.json`` for run keys and
+message tags (``robot_agent/auth.py``). Each message file holds:
 
 * ``valid``: messages with the exact bytes ``protocol.encode`` produces for them (as a
   UTF-8 string and as hex). A decoder must accept them; an encoder that wants to be
@@ -33,7 +34,7 @@ from typing import Any
 
 import msgspec
 
-from robot_agent import protocol
+from robot_agent import auth, protocol
 from robot_agent.udp_radio import MAX_PAYLOAD_BYTES, encode_frame
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
@@ -886,6 +887,60 @@ def udp_frame_vectors() -> dict[str, Any]:
     }
 
 
+AUTH_SECRET = bytes(range(32))  # 00 01 02 ... 1f: a test secret, never a real one
+
+
+def auth_vectors() -> dict[str, Any]:
+    """Run keys derived from a fixed secret, and tags of typical messages (docs/protocol.md)."""
+    keyring = auth.Keyring(secret=AUTH_SECRET)
+    sense = protocol.encode(
+        protocol.Sense(
+            v=1, tick=42, t=4.2, x=0.31, y=-0.12, theta=1.5708, prox=[0.0] * 8, rx=0, camera=False
+        )
+    )
+    rx_meta = protocol.encode(protocol.RadioRxMeta(v=1, tick=43, sender="3", seq=7, sent_tick=42))
+    opinion = protocol.encode(
+        protocol.OpinionPayload(v=1, id=3, trip=2, decided=False, opinion=[0.5, 0.5])
+    )
+    clock = protocol.encode(protocol.Clock(v=1, tick=42, t=4.2))
+    cases = [
+        ("sense_to_robot_3", "robot/3", "bestofn/demo/robot/3/sense", b"", sense),
+        ("radio_rx_to_robot_5", "robot/5", "bestofn/demo/radio/rx/5", rx_meta, opinion),
+        ("world_clock", "world", "bestofn/demo/world/clock", b"", clock),
+    ]
+    tags = []
+    for name, identity, key_expr, metadata, payload in cases:
+        key = keyring.key(identity)
+        assert key is not None
+        framed = b"".join(
+            len(part).to_bytes(4, "big") + part for part in (key_expr.encode(), metadata, payload)
+        )
+        tags.append(
+            {
+                "name": name,
+                "identity": identity,
+                "key_expr": key_expr,
+                "metadata_utf8": metadata.decode(),
+                "payload_utf8": payload.decode(),
+                "framed_hex": framed.hex(),
+                "tag_hex": auth.tag(key, key_expr, metadata, payload).hex(),
+                "attachment_hex": keyring.seal(identity, key_expr, payload, metadata).hex(),
+            }
+        )
+    return {
+        "type": "RunKeys",
+        "decoder": "auth",
+        "secret_hex": AUTH_SECRET.hex(),
+        "key_label_utf8": auth.KEY_LABEL.decode(),
+        "tag_bytes": auth.TAG_BYTES,
+        "keys": [
+            {"identity": identity, "key_hex": (keyring.key(identity) or b"").hex()}
+            for identity in ("world", "robot/3", "robot/5", "beacon/nest", "launcher", "recorder")
+        ],
+        "tags": tags,
+    }
+
+
 def _compact(value: Any) -> bytes:
     return json.dumps(value, separators=(",", ":"), ensure_ascii=False).encode()
 
@@ -912,6 +967,7 @@ def build() -> dict[str, str]:
     """File name -> the text of that vector file."""
     files = {vectors.file: vectors.content() for vectors in (make() for make in BUILDERS)}
     files["udp_frame.json"] = udp_frame_vectors()
+    files["auth.json"] = auth_vectors()
     return {
         name: json.dumps(content, indent=1, ensure_ascii=False) + "\n"
         for name, content in files.items()

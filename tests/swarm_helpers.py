@@ -72,6 +72,11 @@ def _cmdline(pid: int) -> str:
         return ""
 
 
+def private_directories(tmp: Path) -> list[str]:
+    """The runs' private directories (sockets, keys, certificates) left in ``tmp``."""
+    return sorted(path.name for path in tmp.iterdir() if path.name.startswith("bestofn-"))
+
+
 def kill_leftovers(run_id: str) -> list[int]:
     """SIGKILL anything of the run still alive; return the pids that were left."""
     left = processes_of(run_id)

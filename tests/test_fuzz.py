@@ -4,7 +4,6 @@ an exception escaping a process, never a corrupted opinion."""
 from __future__ import annotations
 
 import math
-import queue
 import random
 from typing import Any
 
@@ -12,8 +11,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from deploy.credentials import RunNetwork
 from deploy.launcher import Swarm, plan_from_args
-from robot_agent import protocol
+from plumbing.inbox import BoundedInbox
+from robot_agent import auth, protocol
 from robot_agent.controller import Controller, ControllerConfig
 from robot_agent.node import Event, RobotNode
 from world_server.server import Event as WorldEvent
@@ -93,14 +94,15 @@ def _world_info() -> protocol.WorldInfo:
 
 
 def _node() -> RobotNode:
-    controller = Controller(1, _world_info(), ControllerConfig(), random.Random(1))
+    info = _world_info()
+    controller = Controller(1, info, ControllerConfig(), random.Random(1))
     node = RobotNode(
         1,
         session=None,
         keys=protocol.Keys("fuzz"),
         controller=controller,  # type: ignore[arg-type]
-        inbox=queue.SimpleQueue(),
-        lockstep=True,
+        inbox=BoundedInbox(),
+        world=info,
     )
     node._act, node._status, node._tx = _Publisher(), _Publisher(), _Publisher()
     return node
@@ -140,65 +142,149 @@ def _world_server() -> WorldServer:
     return server
 
 
+class _Query:
+    """What the world server uses of a Zenoh query: its payload, attachment and replies."""
+
+    def __init__(self, attachment: bytes | None) -> None:
+        self.payload = None
+        self.attachment = None if attachment is None else _Bytes(attachment)
+        self.replies: list[tuple[str, bytes]] = []
+        self.errors: list[bytes] = []
+
+    def reply(self, key: str, payload: bytes, attachment: bytes | None = None) -> None:
+        self.replies.append((key, payload))
+
+    def reply_err(self, payload: bytes) -> None:
+        self.errors.append(payload)
+
+
+class _Bytes:
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+
+    def to_bytes(self) -> bytes:
+        return self.data
+
+
+TOKEN_KEYS = [
+    "bestofn/fuzz/alive/robot/0",
+    "bestofn/fuzz/alive/robot/1",
+    "bestofn/fuzz/alive/robot/2",  # outside a swarm of two
+    "bestofn/fuzz/alive/robot/99999",
+    "bestofn/fuzz/alive/robot/01",
+    "bestofn/fuzz/alive/robot/-1",
+    "bestofn/fuzz/alive/beacon/nest",
+    "bestofn/fuzz/alive/beacon/7",
+    "bestofn/fuzz/alive/beacon/other",
+    "bestofn/fuzz/alive/world/abc",
+    "bestofn/fuzz/alive/robot",
+    "bogus",
+]
+
+
 @FUZZ
 @given(
     events=st.lists(
-        st.tuples(
-            st.sampled_from(["act", "ack", "tx"]),
-            st.sampled_from(
-                [
-                    "bestofn/fuzz/robot/0/act",
-                    "bestofn/fuzz/robot/7/act",
-                    "bestofn/fuzz/x",
-                    "bestofn/fuzz/beacon/nest/ack",
-                    "bestofn/fuzz/radio/tx/1",
-                    "bestofn/fuzz/radio/tx/nest",
-                    "bestofn/fuzz/radio/tx/99",
-                    "bogus",
-                ]
+        st.one_of(
+            st.tuples(
+                st.sampled_from(["act", "ack", "tx"]),
+                st.sampled_from(
+                    [
+                        "bestofn/fuzz/robot/0/act",
+                        "bestofn/fuzz/robot/7/act",
+                        "bestofn/fuzz/x",
+                        "bestofn/fuzz/beacon/nest/ack",
+                        "bestofn/fuzz/radio/tx/1",
+                        "bestofn/fuzz/radio/tx/nest",
+                        "bestofn/fuzz/radio/tx/99",
+                        "bogus",
+                    ]
+                ),
+                payloads(),
+                st.one_of(st.none(), payloads()),
             ),
-            payloads(),
-            st.one_of(st.none(), payloads()),
+            st.tuples(
+                st.sampled_from(["alive", "gone"]),
+                st.sampled_from(TOKEN_KEYS),
+                st.just(b""),
+                st.none(),
+            ),
+            st.tuples(st.sampled_from(["join", "stats"]), st.just(""), st.just(b""), payloads()),
+            st.tuples(st.just("close"), st.just(""), st.just(b""), st.none()),
         ),
-        max_size=12,
+        max_size=16,
     )
 )
 def test_the_world_server_survives_any_sequence_of_inputs(
     events: list[tuple[str, str, bytes, bytes | None]],
 ) -> None:
+    """Any messages, liveliness changes, id requests and tick closes, in any order: the
+    world never fails, takes only its swarm's members, and answers every query."""
     server = _world_server()
+    server.session = _Session()  # type: ignore[assignment]
+    server._clock_publisher = server._state_publisher = _Session()  # type: ignore[assignment]
     for kind, key, payload, attachment in events:
-        server._handle(WorldEvent(kind, key, payload, attachment))
-    accepted = len(server.acts) + len(server.transmissions)
-    assert server.counters.rejected + server.counters.late + accepted >= 0
+        if kind == "close":
+            server._apply_joins()
+            server._close_tick()
+            continue
+        query = _Query(attachment) if kind in ("join", "stats") else None
+        server._handle(WorldEvent(kind, key, payload, attachment, query=query))
+        if query is not None:
+            assert len(query.replies) + len(query.errors) == 1
+        server._apply_joins()
     for transmission in server.transmissions:
         assert server.world.is_sender(transmission.sender)
+    assert set(server.world.live_robots()) <= {0, 1}
+    assert set(server.world.beacons()) <= {"nest", "other"}
+    assert server.assigned <= {0, 1}
 
 
-@pytest.fixture(scope="module")
-def observer() -> Swarm:
+class _Session:
+    """Takes the world's publications (a closed tick publishes senses, radio, the clock)."""
+
+    def put(self, *args: object, **kwargs: object) -> None:
+        pass
+
+    def declare_publisher(self, *args: object, **kwargs: object) -> _Session:
+        return self
+
+
+@pytest.fixture(scope="module", params=[False, True], ids=["unkeyed", "keyed"])
+def observer(request: pytest.FixtureRequest) -> Swarm:
     from deploy.cli import build_parser
 
     args = build_parser(["run"]).parse_args(["run", "--robots", "2", "--no-record"])
-    return Swarm(plan_from_args(args))
+    swarm = Swarm(plan_from_args(args))
+    if request.param:  # what start() would make, without starting anything
+        keyring = auth.Keyring(secret=bytes(range(32)))
+        swarm.network = RunNetwork(swarm.plan.run_id, "tcp/127.0.0.1:1", False, keyring)
+    return swarm
 
 
 @FUZZ
 @given(
     events=st.lists(
         st.tuples(
-            st.sampled_from(["status", "clock", "state"]),
-            st.sampled_from(["bestofn/r/robot/0/status", "bestofn/r/robot/5/status", "x"]),
+            st.sampled_from(["status", "clock", "state", "ack"]),
+            st.sampled_from(
+                ["robot/0/status", "robot/5/status", "beacon/nest/ack", "beacon/a b/ack", "x"]
+            ),
             payloads(),
+            st.one_of(st.none(), payloads()),
         ),
         max_size=10,
     )
 )
 def test_the_launcher_survives_any_status_clock_or_state(
-    observer: Swarm, events: list[tuple[str, str, bytes]]
+    observer: Swarm, events: list[tuple[str, str, bytes, bytes | None]]
 ) -> None:
+    """Nothing it is sent breaks the launcher; in a keyed run nothing untagged counts."""
     before = observer.rejected
-    for event in events:
-        observer.events.put(event)
+    for kind, leaf, payload, attachment in events:
+        observer.events.put((kind, f"{observer.keys.prefix}/{leaf}", payload, attachment))
     observer.poll()
-    assert observer.rejected >= before
+    if observer.keyring is not None:
+        assert observer.rejected == before + len(events)
+    else:
+        assert observer.rejected >= before

@@ -10,11 +10,13 @@ from __future__ import annotations
 import csv
 import io
 import json
+import subprocess
 import time
 from pathlib import Path
 from typing import Any
 
 import pytest
+from swarm_helpers import REPO, swarm_command
 
 from deploy import report
 from deploy.cli import main
@@ -255,3 +257,68 @@ def test_bad_arguments_exit_with_code_2_and_one_line(
     assert exit_info.value.code == 2
     error = capsys.readouterr().err.strip().splitlines()
     assert message in error[-1] and len([line for line in error if "error" in line]) == 1
+
+
+def _report_command(tmp_path: Path, *paths: Path) -> tuple[subprocess.CompletedProcess[bytes], Any]:
+    """The real ``swarm report ... --json``: the process, and its JSON output."""
+    done = subprocess.run(
+        swarm_command("report", *map(str, paths), "--out", str(tmp_path / "out"), "--json"),
+        capture_output=True,
+        timeout=120,
+        cwd=REPO,
+    )
+    return done, json.loads(done.stdout) if done.stdout.strip() else None
+
+
+def test_a_recorded_summary_that_lacks_fields_is_reported_from_the_status_messages(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "lacking.mcap"
+    make_recording(path, "made-f")
+    summary = report.rebuild_summary(report.read_recording(path))
+    del summary["per_robot"], summary["num_sites"]
+    summary["wall_time_s"] = "soon"  # a field of the wrong type
+    make_recording(path, "made-f", summary=summary)
+    done, result = _report_command(tmp_path, path)
+    errors = done.stderr.decode()
+    assert done.returncode == 0, errors
+    assert "Traceback" not in errors
+    (warning,) = errors.strip().splitlines()
+    assert warning == (
+        f"swarm report: {path}: the recorded summary lacks a usable num_sites, wall_time_s, "
+        "per_robot; taken from the status messages instead"
+    )
+    (row,) = result["runs"]
+    assert row["source"] == "metadata" and row["sites"] == SITES
+    assert (row["swarm_steps"], row["poolings"]) == (3, 7)
+    assert row["ended"] == "consensus"
+
+
+def test_aborted_and_interrupted_runs_are_labelled_and_kept_out_of_the_aggregates(
+    tmp_path: Path,
+) -> None:
+    finished = tmp_path / "finished.mcap"
+    make_recording(finished, "made-g1")
+    interrupted = tmp_path / "interrupted.mcap"
+    make_recording(interrupted, "made-g2")
+    summary = report.rebuild_summary(report.read_recording(interrupted))
+    summary.update(ended="interrupted", signal="SIGTERM", wall_time_s=1.0)
+    make_recording(interrupted, "made-g2", summary=summary)
+    # Cut short before its last robot decided, and never finished: nobody said how it ended.
+    before_last, _ = make_recording(tmp_path / "whole.mcap", "made-g3", finish=False)
+    aborted = tmp_path / "aborted.mcap"
+    aborted.write_bytes((tmp_path / "whole.mcap").read_bytes()[:before_last])
+    done, result = _report_command(tmp_path, finished, interrupted, aborted)
+    assert done.returncode == 0, done.stderr.decode()
+    assert [(row["run_id"], row["ended"]) for row in result["runs"]] == [
+        ("made-g1", "consensus"),
+        ("made-g2", "interrupted"),
+        ("made-g3", "aborted"),
+    ]
+    (group,) = result["groups"]
+    assert group["runs"] == 3 and group["aggregated_runs"] == 1
+    assert group["endings"] == {"consensus": 1, "interrupted": 1, "aborted": 1}
+    # Only the finished run's steps: 3 for the swarm, 2-3 per robot over its 3 robots.
+    assert group["swarm_steps"] == {"mean": 3, "median": 3, "min": 3, "max": 3}
+    assert (group["robot_steps"]["min"], group["robot_steps"]["max"]) == (2, 3)
+    assert group["runs_within_half_n"] == 0

@@ -153,6 +153,7 @@ def test_figures_are_written(tmp_path: Path, capsys: pytest.CaptureFixture[str])
         (["--pool", "5", "--population", "3"], "--population 3 is smaller than --pool 5"),
         (["--exact", "--alpha", "0.1"], "--exact needs --alpha 0"),
         (["--plot", "/no/such/dir/fig.png"], "--plot: directory /no/such/dir does not exist"),
+        (["--pool", "1001", "--exact"], "--exact supports pools up to 1000, got --pool 1001"),
     ],
 )
 def test_bad_arguments_exit_2_with_one_line(
@@ -204,3 +205,21 @@ def test_installed_command(tmp_path: Path) -> None:
     assert bad.stderr.splitlines()[-1] == (
         "swarm wellstirred: error: argument --alpha: 0.7 is outside [0.0, 0.5]"
     )
+
+
+@pytest.mark.timeout(60)
+def test_an_exact_chain_too_large_for_memory_is_refused_up_front() -> None:
+    """n = 100000 would ask numpy for a 74.5 GiB transition matrix."""
+    done = subprocess.run(
+        [*swarm_command(), "wellstirred", "--options", "100000", "--pool", "3", "--exact"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert done.returncode == 2
+    assert done.stdout == ""
+    assert done.stderr.splitlines() == [
+        "swarm wellstirred: error: --exact supports up to 5000 options, got --options 100000: "
+        "its transition matrix of (n + 1)^2 numbers would take 74.5 GiB"
+    ]

@@ -1,6 +1,6 @@
 """Who may speak: a TLS router with the generated access control, and clients against it.
 
-Certificates are made in a temporary directory with the openssl CLI; the router is a
+Certificates are made in a temporary directory (the cryptography package); the router is a
 Python Zenoh session in router mode in a subprocess on a free loopback TLS port, killed
 by pid; every client opens through ``plumbing.zenoh_session`` with ``--zenoh-config``'s
 code path (multicast scouting off).
@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import select
-import shutil
 import socket
 import subprocess
 import sys
@@ -24,8 +23,10 @@ import pytest
 import zenoh
 
 from deploy import zenoh_acl
-from plumbing import zenoh_session
+from deploy.processes import python_module
+from plumbing import run_keys, zenoh_session
 from robot_agent import protocol
+from world_server.layout import make_layout
 
 REPO = Path(__file__).resolve().parent.parent
 TEMPLATES = REPO / "deploy" / "zenoh"
@@ -71,8 +72,6 @@ def free_loopback_port() -> int:
 
 @pytest.fixture(scope="module")
 def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
-    if shutil.which("openssl") is None:
-        pytest.skip("needs the openssl command")
     base = tmp_path_factory.mktemp("zenoh-acl")
     out, ca = base / "out", base / "ca"
     assert (
@@ -267,6 +266,52 @@ def test_an_observer_only_listens(swarm: Swarm) -> None:
         assert not [key for key, payload in heard.received if payload == b"spoofed"]
 
 
+@pytest.mark.timeout(30)
+def test_the_page_and_foxglove_live_declare_their_own_tokens_and_the_page_answers_the_launcher(
+    swarm: Swarm,
+) -> None:
+    """What ``swarm run --secure --view --foxglove`` needs, and no more: each observer its
+    token, the page its finish queryable, asked by the launcher alone."""
+    alive = Inbox()
+    with (
+        swarm.open("launcher") as launcher,
+        swarm.open("viewer") as viewer,
+        swarm.open("foxglove") as foxglove,
+        swarm.open("robot-0") as robot,
+    ):
+        launcher.liveliness().declare_subscriber(f"{KEYS.prefix}/alive/**", alive, history=True)
+        spoofed = [
+            foxglove.liveliness().declare_token(KEYS.alive("viewer", 0)),
+            foxglove.liveliness().declare_token(KEYS.alive("recorder", 0)),
+            viewer.liveliness().declare_token(KEYS.alive("viewer", 1)),
+        ]
+        tokens = [
+            foxglove.liveliness().declare_token(KEYS.alive("foxglove", 0)),
+            viewer.liveliness().declare_token(KEYS.alive("viewer", 0)),
+        ]
+        alive.wait_for(KEYS.alive("foxglove", 0))
+        alive.wait_for(KEYS.alive("viewer", 0))
+        impostor = foxglove.declare_queryable(  # only the page may answer
+            KEYS.viewer_finish, lambda query: query.reply(KEYS.viewer_finish, b"spoofed")
+        )
+        queryable = viewer.declare_queryable(
+            KEYS.viewer_finish, lambda query: query.reply(KEYS.viewer_finish, b"ended")
+        )
+
+        def answers(asker: zenoh.Session) -> list[bytes]:
+            replies = asker.get(KEYS.viewer_finish, timeout=1.0)
+            return [reply.ok.payload.to_bytes() for reply in replies if reply.ok]
+
+        assert until(lambda: answers(launcher) == [b"ended"])
+        assert answers(robot) == []  # a robot may not end the page
+        time.sleep(SETTLE)
+        assert alive.heard_keys() == {KEYS.alive("foxglove", 0), KEYS.alive("viewer", 0)}
+        queryable.undeclare()
+        impostor.undeclare()
+        for token in [*spoofed, *tokens]:
+            token.undeclare()
+
+
 # --- the world's keys ----------------------------------------------------------------
 
 
@@ -358,4 +403,83 @@ def test_routers_connect_to_each_other_by_name() -> None:
     plan = zenoh_acl.SwarmPlan(KEYS, robots=(0,), routers=("host-a", "10.0.0.2"), port=7450)
     config = zenoh_acl.router_config(plan, "host-a", PurePath("certs"))
     assert config["connect"]["endpoints"] == ["tls/10.0.0.2:7450"]
-    assert config["listen"]["endpoints"] == ["tls/0.0.0.0:7450"]
+    assert config["listen"]["endpoints"] == ["tls/127.0.0.1:7450", "tls/host-a:7450"]
+
+
+# --- a swarm under the access control ------------------------------------------------
+
+
+@pytest.mark.timeout(180)
+def test_a_swarm_started_by_hand_takes_its_id_from_its_certificate_and_follows_a_new_world(
+    swarm: Swarm, tmp_path: Path
+) -> None:
+    """World, beacon and two robots, each with its own certificate and run keys: robot 1
+    is started with ``--id auto`` and takes its id from its certificate (the world would
+    hand out ids the access control then refuses), and both robots follow a restarted
+    world server, whose liveliness the access control must let them see."""
+    assert run_keys.main(["--run-id", RUN, "--robots", "2", "--out", str(tmp_path)]) == 0
+    seed, sites, robots = 4, 4, 2
+    connect = ["--mode", "client", "--connect", swarm.endpoint, "--run-id", RUN]
+
+    def command(module: str, identity: str, key_file: str, *options: str) -> list[str]:
+        config = str(swarm.client_config(identity))
+        keys_file = str(tmp_path / key_file)
+        options = (*options, "--seed", str(seed), "--key-file", keys_file)
+        return python_module(module, *connect, "--zenoh-config", config, *options)
+
+    world_command = command(
+        "world_server.server", "world", "secret.json", "--robots", str(robots), "--sites", "4"
+    )
+    statuses: dict[int, protocol.Status] = {}
+
+    def on_status(sample: zenoh.Sample) -> None:
+        status = protocol.decode(sample.payload.to_bytes(), protocol.Status)
+        statuses[status.id] = status
+
+    started: list[subprocess.Popen[bytes]] = []
+
+    def start(argv: list[str]) -> subprocess.Popen[bytes]:
+        process = subprocess.Popen(argv, cwd=REPO, stderr=subprocess.PIPE)
+        started.append(process)
+        return process
+
+    with swarm.open("observer") as observer:
+        observer.declare_subscriber(KEYS.status("*"), on_status)
+        try:
+            world = start(world_command)
+            start(command("nest_beacon", "beacon-nest", "secret.json"))
+            start(command("robot_agent.node", "robot-0", "robot-0.json", "--id", "0"))
+            robot_1 = start(command("robot_agent.node", "robot-1", "robot-1.json", "--id", "auto"))
+            assert until_within(60, lambda: any(s.trips >= 1 for s in statuses.values()))
+            world.kill()
+            world.wait()
+            time.sleep(2.0)
+            assert robot_1.poll() is None, "robot 1 exited"
+            start(world_command)
+            assert until_within(
+                120,
+                lambda: (
+                    len(statuses) == robots
+                    and all(status.decided_site is not None for status in statuses.values())
+                ),
+            )
+        finally:
+            for process in started:
+                if process.poll() is None:
+                    process.kill()
+                process.wait()
+    errors = b"".join(process.stderr.read() for process in started if process.stderr)
+    best = make_layout(sites, robots, seed).best_site
+    assert {status.decided_site for status in statuses.values()} == {best}
+    assert sorted(statuses) == [0, 1]
+    assert errors.count(b"a new world server appeared; resuming") == robots, errors.decode()[-3000:]
+    assert b"Traceback" not in errors
+
+
+def until_within(seconds: float, condition: Callable[[], bool]) -> bool:
+    deadline = time.monotonic() + seconds
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True

@@ -24,6 +24,8 @@ from plumbing.cliargs import UsageError
 from wellstirred.model import (
     FIGURE1_OPTIONS,
     FIGURE1_POOLS,
+    MAX_EXACT_OPTIONS,
+    MAX_EXACT_POOL,
     Cell,
     Model,
     cell_rng,
@@ -137,6 +139,19 @@ def _check(args: argparse.Namespace, pools: Sequence[int]) -> None:
         raise UsageError(f"--population {args.population} is smaller than --pool {pools[-1]}")
     if args.exact and args.alpha != 0.0:
         raise UsageError("--exact needs --alpha 0: with alpha > 0 there is no exact chain")
+    # The exact chain exists where the population is the pool; refuse what it cannot do
+    # before numpy is asked for its (n + 1)^2 transition matrix.
+    exact_pools = [k for k in pools if args.population in (None, k)] if args.exact else []
+    if exact_pools and max(args.options) > MAX_EXACT_OPTIONS:
+        n = max(args.options)
+        raise UsageError(
+            f"--exact supports up to {MAX_EXACT_OPTIONS} options, got --options {n}: its "
+            f"transition matrix of (n + 1)^2 numbers would take {8 * (n + 1) ** 2 / 2**30:.1f} GiB"
+        )
+    if exact_pools and exact_pools[-1] > MAX_EXACT_POOL:
+        raise UsageError(
+            f"--exact supports pools up to {MAX_EXACT_POOL}, got --pool {exact_pools[-1]}"
+        )
     for flag, path in (("--plot", args.plot), ("--plot-opinion", args.plot_opinion)):
         if path is not None and not path.resolve().parent.is_dir():
             raise UsageError(f"{flag}: directory {path.parent} does not exist")

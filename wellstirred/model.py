@@ -54,6 +54,7 @@ from robot_agent.decision import validate_alpha
 __all__ = [
     "FIGURE1_OPTIONS",
     "FIGURE1_POOLS",
+    "MAX_EXACT_OPTIONS",
     "MAX_EXACT_POOL",
     "Cell",
     "ExactTime",
@@ -78,6 +79,9 @@ FIGURE1_POOLS: tuple[int, ...] = (1, 2, 3, 4, 5, 6, 7, 8, 10, 15, 20, 30, 50)
 # The exact chain convolves k draws per step: its cost grows as n * k^3, and binomial
 # coefficients C(k, c) p^c stay finite in float64 only up to about k = 1000.
 MAX_EXACT_POOL = 1000
+# It also holds an (n + 1) x (n + 1) transition matrix of float64: n = 5000 is 200 MB
+# (and seconds); n = 100000 would be 74 GiB.
+MAX_EXACT_OPTIONS = 5000
 
 # Opinion arrays are processed in chunks of runs holding about this many numbers each,
 # so memory stays near 100 MB whatever the number of runs.
@@ -289,7 +293,8 @@ def exact_consensus_time(model: Model) -> ExactTime:
     Exact because with alpha = 0 and one pool every agent holds the pooled opinion,
     uniform over the m surviving options, so m is a Markov chain (see
     ``survivor_transitions``); consensus is m at or below the largest m with
-    1/m >= threshold. Raises ValueError for alpha > 0, N > k or k > MAX_EXACT_POOL.
+    1/m >= threshold. Raises ValueError for alpha > 0, N > k, k > MAX_EXACT_POOL or
+    n > MAX_EXACT_OPTIONS.
     """
     if not model.survivors_exact:
         raise ValueError(
@@ -336,6 +341,11 @@ def survivor_transitions(n: int, k: int) -> np.ndarray:
     _require_int(k, "pool", low=1)
     if k > MAX_EXACT_POOL:
         raise ValueError(f"the exact chain supports pools up to {MAX_EXACT_POOL}, got {k}")
+    if n > MAX_EXACT_OPTIONS:
+        raise ValueError(
+            f"the exact chain supports up to {MAX_EXACT_OPTIONS} options, got {n}: its "
+            f"transition matrix would take {8 * (n + 1) ** 2 / 2**30:.1f} GiB"
+        )
     draws = np.arange(k + 1)
     binomial = np.array(
         [[float(math.comb(j, i)) for j in range(k + 1)] for i in range(k + 1)]

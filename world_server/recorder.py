@@ -17,8 +17,10 @@ What a recording holds (see docs/recording.md):
 * derived Foxglove topics ``<prefix>/foxglove/{scene,transforms,log}``: the arena as a
   ``foxglove.SceneUpdate`` at every ``world/state``, robot poses as
   ``foxglove.FrameTransforms`` every tick, process logs as ``foxglove.Log``;
-* a sample that fails to decode or validate is not lost: it goes, base64-encoded with its
-  key and the reason, to the ``<prefix>/recorder/rejected`` channel, and is counted;
+* a sample that fails its tag (in a keyed run), or to decode or validate, is counted;
+  the first ``REJECTED_KEPT`` of them go, base64-encoded with their key, the reason and
+  their first ``REJECTED_SAMPLE_BYTES`` bytes, to the ``<prefix>/recorder/rejected``
+  channel. Junk costs a recording a few hundred kilobytes at most, however much is sent;
 * metadata records: ``bestofn.start`` when recording begins (configuration, versions,
   seed, layout, world info) and ``bestofn.run`` at the end (the same, the recorder's
   counts, and the run summary when the launcher sent one).
@@ -49,9 +51,10 @@ from typing import IO, Any, NamedTuple
 import msgspec
 from mcap.writer import CompressionType, Writer
 
-from plumbing import cliargs
+from plumbing import cliargs, run_keys
+from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
-from robot_agent import protocol
+from robot_agent import auth, protocol
 from world_server import foxglove
 from world_server.layout import Layout, make_layout
 
@@ -66,6 +69,10 @@ CHUNK_BYTES = 256 * 1024  # a crash loses at most the chunk being filled
 # seconds, but no longer than LIMIT: within the launcher's 30 s reply and 3 s stop grace.
 FINISH_QUIET, FINISH_DRAIN_LIMIT = 0.2, 10.0
 STOP_QUIET, STOP_DRAIN_LIMIT = 0.1, 1.0
+# Rejected samples: every one counted, the first REJECTED_KEPT kept, each cut to this size.
+REJECTED_KEPT, REJECTED_SAMPLE_BYTES = 100, 1024
+INBOX_BYTES = 256 * 2**20  # what may wait for the writer thread, at most
+MAX_SAMPLE_BYTES = protocol.MAX_FRAME_BYTES + 1024  # a frame and its attachment
 # Nothing waits for the recorder, so it yields the CPU to the swarm: at nice 10 recording
 # costs a 10-robot run 8% of its real-time factor instead of 21% (docs/recording.md).
 DEFAULT_NICENESS = 10
@@ -86,12 +93,14 @@ class RadioRxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
 
 
 class RejectedSample(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
-    """A sample that did not decode as its key's message: kept raw, with the reason."""
+    """A sample that did not decode as its key's message (or failed its tag): its first
+    bytes, raw, with the reason."""
 
     key: str
     reason: str
-    payload: str  # base64
-    attachment: str | None  # base64
+    payload: str  # base64 of at most REJECTED_SAMPLE_BYTES
+    attachment: str | None  # base64 of at most REJECTED_SAMPLE_BYTES
+    payload_bytes: int  # the whole payload's size
 
 
 # Key leaf -> message type. ``camera`` is recorded as foxglove.CompressedImage.
@@ -258,8 +267,14 @@ class McapRecorder:
         info: protocol.WorldInfo | None = None,
         *,
         chunk_size: int = CHUNK_BYTES,
+        writer: Any = None,
+        keyring: auth.Keyring | None = None,
     ) -> None:
+        """``writer``: where records go instead of an MCAP file in ``stream``; any object
+        with ``mcap.writer.Writer``'s methods (Foxglove live passes one; viewer/foxglove_live.py).
+        """
         self.keys = keys
+        self.keyring = keyring  # None: an unauthenticated run, every tag-less sample taken
         self.run = run
         self.info = info
         self.layout = make_layout(run.sites, run.robots, run.seed)
@@ -272,11 +287,13 @@ class McapRecorder:
         self.rejected = 0
         self.closed = False
         self._versions = versions()
-        self._writer = Writer(stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        self._writer = writer or Writer(
+            stream, chunk_size=chunk_size, compression=CompressionType.ZSTD
+        )
         self._writer.start(library=f"bestofn-swarm recorder, {self._writer_library()}")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, _Channel] = {}
-        self._routes: dict[str, Callable[[Sample], None]] = {}
+        self._routes: dict[str, tuple[Callable[[Sample], None], str | None]] = {}
         self._decoders: dict[str, msgspec.json.Decoder[Any]] = {
             name: msgspec.json.Decoder(kind_type)
             for name, kind_type in (
@@ -364,37 +381,71 @@ class McapRecorder:
         route = self._routes.get(sample.key)
         if route is None:
             route = self._routes[sample.key] = self._route(sample.key)
+        handler, speaker = route
         try:
-            route(sample)
+            if self.keyring is not None and speaker is not None:
+                try:
+                    metadata = self.keyring.open(
+                        speaker, sample.key, sample.payload, sample.attachment
+                    )
+                except auth.AuthError as error:
+                    self._reject(sample, f"{speaker}: {error}")
+                    return
+                sample = sample._replace(attachment=metadata or None)
+            handler(sample)
         except Exception as error:  # a recorder bug must not cost the rest of the run
             log.exception("failed to record a sample on %s", sample.key)
             self._reject(sample, f"recorder error: {error!r}")
 
-    def _route(self, key: str) -> Callable[[Sample], None]:
+    def _speaker(self, key: str) -> str:
+        """The identity whose key tags a sample on ``key`` (a key of the protocol)."""
+        parts = key[len(self.keys.prefix) + 1 :].split("/")
+        match parts:
+            case ["world", _]:
+                return auth.WORLD
+            case ["robot", robot, _]:
+                return auth.robot_identity(int(robot))  # classify() checked it is a number
+            case ["beacon", name, _]:
+                return auth.beacon_identity(name)
+            case ["radio", _, name] if name.isascii() and name.isdigit():
+                return auth.robot_identity(int(name))
+            case ["radio", _, name]:
+                return auth.beacon_identity(name)
+        return auth.LAUNCHER  # log/<process>
+
+    def _route(self, key: str) -> tuple[Callable[[Sample], None], str | None]:
+        """How to record a sample on ``key``, and whose tag it must carry."""
         kind = classify(self.keys, key)
         if kind is None:
-            return functools.partial(self._reject, reason="not a key of the protocol")
+            return functools.partial(self._reject, reason="not a key of the protocol"), None
+        speaker = self._speaker(key)
+        if not _is_identity(speaker):
+            return functools.partial(self._reject, reason="no identity of the run"), None
         channel = self._channel(key, kind, self.keys.robot_of(key))
         handler = getattr(self, f"_on_{kind}")
-        return functools.partial(handler, channel)
+        return functools.partial(handler, channel), speaker
 
     def _tick_ns(self, tick: int) -> int:
         return tick * self.dt_ns if self.dt_ns else self.sim_ns
 
     def _reject(self, sample: Sample, reason: str) -> None:
-        """Keep a sample that is not a valid message, raw, on the rejected channel."""
+        """Count a sample that is not a valid message; keep the first few, cut short, raw,
+        on the rejected channel."""
         self.rejected += 1
         if self.rejected <= 10:
             log.warning("recording a sample on %s as rejected: %s", sample.key, reason[:200])
+        if self.rejected > REJECTED_KEPT:
+            return
+
+        def head(data: bytes) -> str:
+            return base64.b64encode(data[:REJECTED_SAMPLE_BYTES]).decode("ascii")
+
         record = RejectedSample(
-            key=sample.key,
+            key=sample.key[:1000],
             reason=reason[:1000],
-            payload=base64.b64encode(sample.payload).decode("ascii"),
-            attachment=(
-                base64.b64encode(sample.attachment).decode("ascii")
-                if sample.attachment is not None
-                else None
-            ),
+            payload=head(sample.payload),
+            attachment=head(sample.attachment) if sample.attachment is not None else None,
+            payload_bytes=len(sample.payload),
         )
         channel = self._channel(f"{self.keys.prefix}/recorder/rejected", "rejected")
         self._write(channel, self.sim_ns, self._encoder.encode(record), sample.wall_ns)
@@ -575,6 +626,14 @@ class McapRecorder:
         self.closed = True
 
 
+def _is_identity(identity: str) -> bool:
+    try:
+        auth.check_identity(identity)
+    except ValueError:
+        return False
+    return True
+
+
 # --- the process ---------------------------------------------------------------------------
 
 
@@ -641,12 +700,14 @@ def _lower_priority(niceness: int) -> None:
         log.info("could not lower the recorder's priority: %s", error)
 
 
-def _world_info(session: Any, keys: protocol.Keys, timeout: float) -> protocol.WorldInfo | None:
+def _world_info(
+    session: Any, keys: protocol.Keys, timeout: float, keyring: auth.Keyring | None
+) -> protocol.WorldInfo | None:
     """The world's info if a world server answers in time (it gives dt and robot size)."""
     from plumbing.world_info import fetch_world_info
 
     try:
-        return fetch_world_info(session, keys, timeout)
+        return fetch_world_info(session, keys, timeout, keyring, auth.RECORDER)
     except TimeoutError as error:
         log.warning("%s; sim times will follow world/clock", error)
         return None
@@ -654,7 +715,7 @@ def _world_info(session: Any, keys: protocol.Keys, timeout: float) -> protocol.W
 
 def _write_loop(
     recorder: McapRecorder,
-    inbox: queue.SimpleQueue[Any],
+    inbox: BoundedInbox[Any],
     keys: protocol.Keys,
     done: threading.Event,
 ) -> None:
@@ -665,11 +726,14 @@ def _write_loop(
             if isinstance(item, Sample):
                 recorder.record(item)
             elif isinstance(item, _Finish):
+                if _refused(recorder, item.query, keys):
+                    continue
                 _drain(recorder, inbox, FINISH_QUIET, FINISH_DRAIN_LIMIT)
                 _finish_on_query(recorder, item.query, keys)
                 return
             elif item is _STOP:
                 _drain(recorder, inbox, STOP_QUIET, STOP_DRAIN_LIMIT)
+                recorder.rejected += inbox.take_dropped(None)
                 recorder.finish(finished_by="signal")
                 log.info("recording closed on a signal, without a run summary")
                 return
@@ -677,9 +741,7 @@ def _write_loop(
         done.set()
 
 
-def _drain(
-    recorder: McapRecorder, inbox: queue.SimpleQueue[Any], quiet: float, limit: float
-) -> None:
+def _drain(recorder: McapRecorder, inbox: BoundedInbox[Any], quiet: float, limit: float) -> None:
     """Record what still arrives until the inbox stays empty for ``quiet`` seconds.
 
     Zenoh keeps order per publisher, not between a query and other publishers' samples:
@@ -690,13 +752,40 @@ def _drain(
         try:
             item = inbox.get(timeout=quiet)
         except queue.Empty:
-            return
+            break
         if isinstance(item, Sample):
             recorder.record(item)
+    recorder.rejected += inbox.take_dropped(None)
+
+
+def _query_parts(query: Any) -> tuple[bytes, bytes | None]:
+    payload = query.payload.to_bytes() if query.payload is not None else b""
+    attachment = query.attachment.to_bytes() if query.attachment is not None else None
+    return payload, attachment
+
+
+def _refused(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> bool:
+    """Whether a finish query is someone's but the launcher's (then counted and refused).
+
+    In a keyed run only the launcher that started the recorder holds the key to finish it.
+    """
+    payload, attachment = _query_parts(query)
+    try:
+        asker, _ = auth.query_open(recorder.keyring, keys.recorder_finish, payload, attachment)
+        if recorder.keyring is not None and asker != auth.LAUNCHER:
+            raise auth.AuthError(f"{asker} may not finish the recording")
+    except auth.AuthError as error:
+        sample = Sample(keys.recorder_finish, payload, attachment, time.time_ns())
+        recorder._reject(sample, f"finish query refused: {error}")
+        query.reply_err(b"unauthenticated query")
+        query.drop()
+        return True
+    return False
 
 
 def _finish_on_query(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> None:
-    payload = query.payload.to_bytes() if query.payload is not None else b""
+    payload, attachment = _query_parts(query)
+    asker, nonce = auth.query_open(recorder.keyring, keys.recorder_finish, payload, attachment)
     summary: Any = None
     if payload:
         try:
@@ -704,7 +793,9 @@ def _finish_on_query(recorder: McapRecorder, query: Any, keys: protocol.Keys) ->
         except ValueError:
             summary = payload.decode("utf-8", "replace")
     recorder.finish(summary, finished_by="finish query")
-    query.reply(keys.recorder_finish, b"ok")
+    answer = b"ok"
+    sealed = auth.reply_seal(recorder.keyring, asker, keys.recorder_finish, answer, nonce)
+    query.reply(keys.recorder_finish, answer, attachment=sealed)
     query.drop()  # sends the final reply now, not when the object is collected
     log.info("recording complete: %s", dict(sorted(recorder.counts.items())))
 
@@ -720,6 +811,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as error:
         parser.exit(2, f"recorder: error: --config-json: {error}\n")
     cliargs.configure_logging("recorder", args.log_level)
+    keyring = run_keys.from_args(parser, args, "recorder")
+    if keyring is not None and keyring.secret is None:
+        parser.exit(2, "recorder: error: the recorder needs the run secret\n")
     if args.niceness:  # before Zenoh starts its threads, so that they inherit it
         _lower_priority(args.niceness)
     import zenoh
@@ -733,20 +827,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as error:
         print(f"recorder: cannot write {out}: {error}", file=sys.stderr)
         return 1
-    inbox: queue.SimpleQueue[Any] = queue.SimpleQueue()
+    # Anything bigger than a camera frame is junk: dropped on arrival, counted.
+    inbox: BoundedInbox[Any] = BoundedInbox(INBOX_BYTES, MAX_SAMPLE_BYTES)
     for signum in (signal.SIGINT, signal.SIGTERM):  # the writer thread sees the stop later
         signal.signal(signum, lambda *_: inbox.put(_STOP))
 
     def on_sample(sample: zenoh.Sample) -> None:
         attachment = sample.attachment
-        inbox.put(
-            Sample(
-                str(sample.key_expr),
-                sample.payload.to_bytes(),
-                attachment.to_bytes() if attachment is not None else None,
-                time.time_ns(),
-            )
-        )
+        payload = sample.payload.to_bytes()
+        extra = attachment.to_bytes() if attachment is not None else None
+        size = len(payload) + len(extra or b"")
+        inbox.put(Sample(str(sample.key_expr), payload, extra, time.time_ns()), size)
 
     try:
         session = open_from_args(args)
@@ -759,9 +850,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         queryable = session.declare_queryable(
             keys.recorder_finish, lambda query: inbox.put(_Finish(query))
         )
-        info = _world_info(session, keys, args.info_timeout)
+        info = _world_info(session, keys, args.info_timeout, keyring)
         run = RunDescription(args.run_id, args.seed, args.robots, args.sites, config)
-        recorder = McapRecorder(stream, keys, run, info)
+        recorder = McapRecorder(stream, keys, run, info, keyring=keyring)
         done = threading.Event()
         writer = threading.Thread(
             target=_write_loop,

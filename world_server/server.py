@@ -3,6 +3,11 @@
 Zenoh callbacks only copy bytes into one inbox; a single thread owns the World and does
 everything else, so there are no locks around the simulation. By default the server is
 the Zenoh router of a local run, listening on loopback.
+
+Trust: it takes a message only with its sender's run-key tag (in a keyed run), from a
+robot of its own swarm or a beacon, for the tick it is in; it answers queries only to
+identities of the run; it drops a departed sender's queued transmissions. Every
+rejection is counted (``WorldState.rejected``, the radio's ``rejected``).
 """
 
 from __future__ import annotations
@@ -21,7 +26,8 @@ from typing import Any
 import msgspec
 import zenoh
 
-from plumbing import cliargs
+from plumbing import cliargs, run_keys
+from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.zenoh_session import (
     open_from_args,
@@ -29,7 +35,7 @@ from plumbing.zenoh_session import (
     reliable_put,
     session_mode,
 )
-from robot_agent import protocol
+from robot_agent import auth, protocol
 from world_server.clock import Barrier, Pacer
 from world_server.options import add_world_options, world_config
 from world_server.world import Transmission, World, WorldConfig
@@ -38,6 +44,12 @@ log = logging.getLogger("world_server")
 
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 SUSPEND_AFTER = 3  # consecutive stalled ticks before the barrier stops waiting
+MAX_BEACONS = 16  # beacon tokens the world takes part in its barrier
+MAX_TX_PER_TICK = 1000  # radio messages one sender may send in one tick (Act.radio_tx's bound)
+MAX_LOGGED_KEYS = 1000  # keys whose first rejection is logged; then one line says so
+INBOX_BYTES = 256 * 2**20  # what may wait for the world's thread, at most
+# The largest valid message: a radio payload and its attachment (tag and metadata).
+MAX_MESSAGE_BYTES = protocol.MAX_PAYLOAD_BYTES + 1024
 
 
 @dataclass(frozen=True)
@@ -56,6 +68,7 @@ class Counters:
     stalls: int = 0
     missed: dict[str, int] = field(default_factory=dict)  # consecutive stalled ticks
     logged_keys: set[str] = field(default_factory=set)
+    by_reason: dict[str, int] = field(default_factory=dict)  # rejections by kind, for logs
 
 
 class WorldServer:
@@ -73,10 +86,12 @@ class WorldServer:
         expect_robots: int = 0,
         expect_beacons: int = 0,
         state_every: int = 10,
+        keyring: auth.Keyring | None = None,
     ) -> None:
         self.session = session
         self.world = world
         self.keys = keys
+        self.keyring = keyring  # None: an unauthenticated run
         self.lockstep = world.config.clock == "lockstep"
         self.pacer = Pacer(world.config.dt, speed)
         self.stall_timeout = stall_timeout
@@ -84,11 +99,13 @@ class WorldServer:
         self.expect_robots = expect_robots
         self.expect_beacons = expect_beacons
         self.state_every = max(1, state_every)
-        self.inbox: queue.SimpleQueue[Event] = queue.SimpleQueue()
+        self.inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
         self.counters = Counters()
         self.barrier = Barrier()
         self.acts: dict[int, protocol.Act] = {}
         self.transmissions: list[Transmission] = []
+        self.sent_this_tick: dict[str, int] = {}  # radio messages per sender in this tick
+        self.seqs_this_tick: set[tuple[str, int]] = set()  # (sender, seq): each once
         self.pending_joins: list[tuple[str, str]] = []
         self.assigned: set[int] = set()  # ids handed out on world/join
         self._info_bytes = protocol.encode(world.info)
@@ -103,6 +120,7 @@ class WorldServer:
             "gone": self._handle_gone,
             "stats": self._handle_stats,
             "join": self._handle_join,
+            "refused": lambda event: self._reject(event.key, event.payload.decode()),
         }
 
     # --- Zenoh side: callbacks copy bytes and return ----------------------------------
@@ -110,14 +128,10 @@ class WorldServer:
     def _on_sample(self, kind: str) -> Any:
         def callback(sample: zenoh.Sample) -> None:
             attachment = sample.attachment
-            self.inbox.put(
-                Event(
-                    kind,
-                    str(sample.key_expr),
-                    sample.payload.to_bytes(),
-                    attachment.to_bytes() if attachment is not None else None,
-                )
-            )
+            payload = sample.payload.to_bytes()
+            extra = attachment.to_bytes() if attachment is not None else None
+            size = len(payload) + len(extra or b"")
+            self.inbox.put(Event(kind, str(sample.key_expr), payload, extra), size, "arrival")
 
         return callback
 
@@ -126,7 +140,22 @@ class WorldServer:
         self.inbox.put(Event(kind, str(sample.key_expr)))
 
     def _on_info(self, query: zenoh.Query) -> None:
-        query.reply(self.keys.world_info, self._info_bytes)
+        """Answer ``world/info`` at once (on Zenoh's thread: it needs nothing of the tick)."""
+        key = self.keys.world_info
+        try:
+            identity, nonce = self._asker(query, key)
+        except auth.AuthError as error:
+            self.inbox.put(Event("refused", key, str(error).encode()))
+            query.reply_err(b"unauthenticated query")
+            return
+        attachment = auth.reply_seal(self.keyring, identity, key, self._info_bytes, nonce)
+        query.reply(key, self._info_bytes, attachment=attachment)
+
+    def _asker(self, query: zenoh.Query, key: str) -> tuple[str, bytes]:
+        """Who asked (identity, nonce); AuthError for a query without its asker's tag."""
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        attachment = query.attachment.to_bytes() if query.attachment is not None else None
+        return auth.query_open(self.keyring, key, payload, attachment)
 
     def declare(self) -> None:
         keys, session = self.keys, self.session
@@ -226,16 +255,46 @@ class WorldServer:
 
     def _reject(self, key: str, reason: object) -> None:
         self.counters.rejected += 1
-        if key not in self.counters.logged_keys:
-            self.counters.logged_keys.add(key)
+        logged = self.counters.logged_keys
+        if key in logged or len(logged) > MAX_LOGGED_KEYS:
+            return
+        logged.add(key)
+        if len(logged) > MAX_LOGGED_KEYS:
+            log.warning("rejected messages on more than %d keys: no longer logged", MAX_LOGGED_KEYS)
+        else:
             log.warning(
                 "rejected message on %s: %s (further ones on this key not logged)", key, reason
             )
 
+    def _take_dropped(self) -> None:
+        """Count what the inbox dropped on arrival (too big, or over its memory cap)."""
+        dropped = self.inbox.take_dropped("arrival")
+        if dropped:
+            self.counters.rejected += dropped - 1
+            self._reject("(arrival)", f"{dropped} message(s) too big or over the inbox's cap")
+
+    def _authentic(self, event: Event, identity: str) -> bool:
+        """Whether the event carries ``identity``'s tag (always, in an unkeyed run)."""
+        try:
+            auth.unseal(self.keyring, identity, event.key, event.payload, event.attachment)
+        except auth.AuthError as error:
+            self._reject(event.key, error)
+            return False
+        return True
+
+    def _robot_sender(self, name: str) -> int | None:
+        """The robot id a radio name or key chunk stands for, if one of the swarm's."""
+        if not (name.isascii() and name.isdigit()) or str(int(name)) != name:
+            return None
+        robot = int(name)
+        return robot if self.world.is_member(robot) else None
+
     def _handle_act(self, event: Event) -> None:
         robot = self.keys.robot_of(event.key)
-        if robot is None:
-            self._reject(event.key, "not a robot key")
+        if robot is None or not self.world.is_member(robot):
+            self._reject(event.key, "not a robot of the swarm")
+            return
+        if not self._authentic(event, auth.robot_identity(robot)):
             return
         try:
             act = protocol.decode(event.payload, protocol.Act)
@@ -254,6 +313,15 @@ class WorldServer:
 
     def _handle_ack(self, event: Event) -> None:
         name = self.keys.last_chunk(event.key.rsplit("/", 1)[0])
+        identity = auth.beacon_identity(name)
+        if name.isdigit() or not _is_identity(identity):
+            self._reject(event.key, f"no beacon of this run is called {name!r}")
+            return
+        if not self._authentic(event, identity):
+            return
+        if name not in self.world.beacons():
+            self.counters.late += 1  # its own, but it has left (or not joined yet)
+            return
         try:
             ack = protocol.decode(event.payload, protocol.Ack)
         except protocol.ProtocolError as error:
@@ -273,49 +341,84 @@ class WorldServer:
 
     def _handle_tx(self, event: Event) -> None:
         sender = self.keys.last_chunk(event.key)
-        if not self.world.is_sender(sender):
-            self._reject(event.key, f"{sender!r} is not a live robot or beacon")
-            self.world.radio.reject()
+        robot = self._robot_sender(sender)
+        identity = auth.beacon_identity(sender) if robot is None else auth.robot_identity(robot)
+        if robot is None and (sender.isdigit() or not _is_identity(identity)):
+            self._reject_tx(event.key, f"no robot or beacon of this run is called {sender!r}")
             return
         try:
-            if event.attachment is None:
+            metadata = auth.unseal(
+                self.keyring, identity, event.key, event.payload, event.attachment
+            )
+            if metadata is None:
                 raise protocol.ProtocolError("missing attachment")
-            meta = protocol.decode(event.attachment, protocol.RadioTxMeta)
+            meta = protocol.decode(metadata, protocol.RadioTxMeta)
             if len(event.payload) > protocol.MAX_PAYLOAD_BYTES:
                 raise protocol.ProtocolError(f"payload of {len(event.payload)} bytes")
-        except protocol.ProtocolError as error:
-            self._reject(event.key, error)
-            self.world.radio.reject()
+            if self.sent_this_tick.get(sender, 0) >= MAX_TX_PER_TICK:
+                raise protocol.ProtocolError(f"more than {MAX_TX_PER_TICK} messages in a tick")
+            if (sender, meta.seq) in self.seqs_this_tick:
+                raise protocol.ProtocolError(f"message {meta.seq} again: a replay")
+        except (auth.AuthError, protocol.ProtocolError) as error:
+            self._reject_tx(event.key, error)
             return
+        if not self.world.is_sender(sender):
+            # Its own, but it has left (or not joined yet): late, like an act after a tick.
+            self.counters.late += 1
+            return
+        self.sent_this_tick[sender] = self.sent_this_tick.get(sender, 0) + 1
+        self.seqs_this_tick.add((sender, meta.seq))
         if self.lockstep:
             role = "beacon" if sender in self.world.beacons() else "robot"
             if not self.barrier.transmitted(meta.tick, f"{role}/{sender}"):
                 if meta.tick < self.barrier.tick:
                     self.counters.late += 1
                 else:
-                    self._reject(event.key, f"tx for tick {meta.tick} at tick {self.barrier.tick}")
-                    self.world.radio.reject()
+                    reason = f"tx for tick {meta.tick} at tick {self.barrier.tick}"
+                    self._reject_tx(event.key, reason)
                 return
         self.transmissions.append(Transmission(sender, meta.seq, event.payload))
 
-    def _handle_alive(self, event: Event) -> None:
+    def _reject_tx(self, key: str, reason: object) -> None:
+        """A radio message the medium refuses: counted by the world and by the radio."""
+        self._reject(key, reason)
+        self.world.radio.reject()
+
+    def _token(self, event: Event, count: bool) -> tuple[str, str] | None:
+        """(role, id) of a robot's or beacon's liveliness token; None for other roles (the
+        world, the recorder), which the barrier does not involve, and for a robot outside
+        the swarm or a beacon name no beacon can have (rejected if ``count``)."""
         parts = event.key[len(self.keys.prefix) + 1 :].split("/")
-        if len(parts) != 3 or parts[0] != "alive":
-            return
-        self.pending_joins.append((parts[1], parts[2]))
+        if len(parts) != 3 or parts[0] != "alive" or parts[1] not in ("robot", "beacon"):
+            return None
+        role, ident = parts[1], parts[2]
+        if role == "robot":
+            valid = self._robot_sender(ident) is not None
+        else:
+            valid = not ident.isdigit() and _is_identity(auth.beacon_identity(ident))
+        if not valid:
+            if count:
+                self._reject(event.key, f"no {role} of this run is called {ident!r}")
+            return None
+        return role, ident
+
+    def _handle_alive(self, event: Event) -> None:
+        token = self._token(event, count=True)
+        if token is not None:
+            self.pending_joins.append(token)
 
     def _handle_gone(self, event: Event) -> None:
-        parts = event.key[len(self.keys.prefix) + 1 :].split("/")
-        if len(parts) != 3 or parts[0] != "alive":
+        token = self._token(event, count=False)
+        if token is None:
             return
-        role, ident = parts[1], parts[2]
-        self.pending_joins = [join for join in self.pending_joins if join != (role, ident)]
-        if role == "robot" and ident.isdigit():
+        role, ident = token
+        self.pending_joins = [join for join in self.pending_joins if join != token]
+        if role == "robot":
             log.warning("robot %s left (liveliness lost); its body stays as an obstacle", ident)
             self.world.leave_robot(int(ident))
             self.acts.pop(int(ident), None)
             self.barrier.leave(f"robot/{ident}")
-        elif role == "beacon":
+        elif ident in self.world.beacons():
             log.warning("beacon %s left", ident)
             self.world.leave_beacon(ident)
             self.barrier.leave(f"beacon/{ident}")
@@ -323,37 +426,51 @@ class WorldServer:
     def _handle_join(self, event: Event) -> None:
         """Give a robot started with ``--id auto`` an id: the smallest never handed out,
         else (a replacement container) the smallest whose robot is not running."""
+        key = self.keys.world_join
+        try:
+            identity, nonce = self._asker(event.query, key)
+        except auth.AuthError as error:
+            self._reject(key, error)
+            event.query.reply_err(b"unauthenticated query")
+            return
         live = set(self.world.live_robots())
-        free = next(
-            (
-                robot
-                for robot in range(protocol.MAX_ROBOTS)
-                if robot not in self.assigned and robot not in live
-            ),
-            None,
-        )
-        if free is None or free >= self.expect_robots:
-            free = next((robot for robot in sorted(self.assigned) if robot not in live), free)
+        members = range(self.world.config.num_robots)
+        free = next((robot for robot in members if robot not in self.assigned | live), None)
+        if free is None:
+            free = next((robot for robot in sorted(self.assigned) if robot not in live), None)
         if free is None:
             event.query.reply_err(b"no robot id left")
             return
         self.assigned.add(free)
         log.info("assigned id %d to a robot that asked for one", free)
-        reply = protocol.JoinReply(v=protocol.VERSION, id=free)
-        event.query.reply(self.keys.world_join, protocol.encode(reply))
+        payload = protocol.encode(protocol.JoinReply(v=protocol.VERSION, id=free))
+        attachment = auth.reply_seal(self.keyring, identity, key, payload, nonce)
+        event.query.reply(key, payload, attachment=attachment)
 
     def _handle_stats(self, event: Event) -> None:
-        state = self.world.state(self.counters.rejected, self.counters.stalls)
-        event.query.reply(self.keys.world_stats, protocol.encode(state))
+        key = self.keys.world_stats
+        try:
+            identity, nonce = self._asker(event.query, key)
+        except auth.AuthError as error:
+            self._reject(key, error)
+            event.query.reply_err(b"unauthenticated query")
+            return
+        self._take_dropped()
+        payload = protocol.encode(self.world.state(self.counters.rejected, self.counters.stalls))
+        attachment = auth.reply_seal(self.keyring, identity, key, payload, nonce)
+        event.query.reply(key, payload, attachment=attachment)
 
     def _apply_joins(self) -> None:
         for role, ident in self.pending_joins:
-            if role == "robot" and ident.isdigit() and int(ident) < protocol.MAX_ROBOTS:
-                self.assigned.add(int(ident))
-                if int(ident) not in self.world.live_robots():
+            if role == "robot":
+                robot = int(ident)
+                self.assigned.add(robot)
+                if robot not in self.world.live_robots():
                     log.info("robot %s joined at tick %d", ident, self.world.tick)
-                self.world.join_robot(int(ident))
-            elif role == "beacon" and not ident.isdigit():
+                self.world.join_robot(robot)
+            elif ident not in self.world.beacons() and len(self.world.beacons()) >= MAX_BEACONS:
+                self._reject(self.keys.alive("beacon", ident), f"more than {MAX_BEACONS} beacons")
+            else:
                 self.world.join_beacon(ident)
         self.pending_joins.clear()
 
@@ -380,6 +497,8 @@ class WorldServer:
     def _close_tick(self) -> None:
         result = self.world.advance(self.acts, self.transmissions)
         self.transmissions = []
+        self.sent_this_tick = {}
+        self.seqs_this_tick = set()
         if self.lockstep:
             self.acts = {}
         else:  # real time: a command holds until replaced, but a capture happens once
@@ -391,6 +510,7 @@ class WorldServer:
         rx_counts = {name: len(items) for name, items in result.deliveries.items()}
         for name, deliveries in result.deliveries.items():
             key = self.keys.radio_rx(name)
+            receiver = auth.robot_identity(int(name))  # only robots receive
             for delivery in deliveries:
                 meta = protocol.RadioRxMeta(
                     v=protocol.VERSION,
@@ -399,7 +519,8 @@ class WorldServer:
                     seq=delivery.seq,
                     sent_tick=delivery.sent_tick,
                 )
-                reliable_put(self.session, key, delivery.payload, protocol.encode(meta))
+                attachment = self._seal(receiver, key, delivery.payload, protocol.encode(meta))
+                reliable_put(self.session, key, delivery.payload, attachment)
         self._open_tick(result.tick, rx_counts, result.frames)
 
     def _open_tick(self, tick: int, rx_counts: dict[str, int], frames: dict[int, bytes]) -> None:
@@ -412,7 +533,9 @@ class WorldServer:
                 height=spec.height,
                 encoding="png",
             )
-            reliable_put(self.session, self.keys.camera(robot), frame, protocol.encode(meta))
+            key = self.keys.camera(robot)
+            attachment = self._seal(auth.robot_identity(robot), key, frame, protocol.encode(meta))
+            reliable_put(self.session, key, frame, attachment)
         robots = self.world.live_robots()
         for robot in robots:
             sense = self.world.sense(
@@ -422,7 +545,11 @@ class WorldServer:
             if publisher is None:
                 publisher = reliable_publisher(self.session, self.keys.sense(robot))
                 self._sense_publishers[robot] = publisher
-            publisher.put(protocol.encode(sense))
+            payload = protocol.encode(sense)
+            publisher.put(
+                payload,
+                attachment=self._seal(auth.robot_identity(robot), self.keys.sense(robot), payload),
+            )
         participants = [f"robot/{robot}" for robot in robots]
         participants += [f"beacon/{name}" for name in self.world.beacons()]
         # A controller that went silent (hung, not gone) is not waited for until it
@@ -431,15 +558,30 @@ class WorldServer:
             tick,
             [who for who in participants if self.counters.missed.get(who, 0) < SUSPEND_AFTER],
         )
+        clock = protocol.encode(protocol.Clock(v=protocol.VERSION, tick=tick, t=self.world.t))
         self._clock_publisher.put(
-            protocol.encode(protocol.Clock(v=protocol.VERSION, tick=tick, t=self.world.t))
+            clock, attachment=self._seal(auth.WORLD, self.keys.world_clock, clock)
         )
         if tick % self.state_every == 0:
             self._publish_state()
 
     def _publish_state(self) -> None:
-        state = self.world.state(self.counters.rejected, self.counters.stalls)
-        self._state_publisher.put(protocol.encode(state))
+        self._take_dropped()
+        state = protocol.encode(self.world.state(self.counters.rejected, self.counters.stalls))
+        self._state_publisher.put(
+            state, attachment=self._seal(auth.WORLD, self.keys.world_state, state)
+        )
+
+    def _seal(self, identity: str, key: str, payload: bytes, metadata: bytes = b"") -> bytes | None:
+        return auth.seal(self.keyring, identity, key, payload, metadata)
+
+
+def _is_identity(identity: str) -> bool:
+    try:
+        auth.check_identity(identity)
+    except ValueError:
+        return False
+    return True
 
 
 # --- command line ------------------------------------------------------------------------
@@ -490,10 +632,14 @@ def config_from_args(args: argparse.Namespace) -> WorldConfig:
 
 def main(argv: Sequence[str] | None = None) -> int:
     die_with_launcher()
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     if session_mode(args) == "router" and not args.listen and not args.zenoh_config:
         args.listen = [DEFAULT_LISTEN]
     cliargs.configure_logging("world-server", args.log_level)
+    keyring = run_keys.from_args(parser, args, "world-server")
+    if keyring is not None and keyring.secret is None:
+        parser.exit(2, "world-server: error: the world server needs the run secret\n")
     world = World(config_from_args(args))
     keys = protocol.Keys(args.run_id, args.root)
     try:
@@ -512,6 +658,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             expect_robots=args.robots,
             expect_beacons=args.beacons,
             state_every=args.state_every,
+            keyring=keyring,
         )
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: server.stop())

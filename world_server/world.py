@@ -16,7 +16,7 @@ import numpy as np
 
 from robot_agent import protocol
 from world_server.camera import CameraNoise, CameraRenderer
-from world_server.layout import Layout, make_layout, start_poses
+from world_server.layout import Layout, make_layout
 from world_server.physics import EpuckSpec, Physics
 from world_server.radio import Delivery, RadioConfig, RadioMedium
 
@@ -80,8 +80,8 @@ class World:
         # Bodies of the expected swarm are created now, in id order: pymunk's contact
         # solving depends on the order bodies were added, and the order in which robot
         # processes happen to join must not change a run.
-        for robot_id in range(config.num_robots):
-            self.physics.add_robot(robot_id, *self.start_pose(robot_id))
+        for robot_id, pose in enumerate(self.layout.start_poses):
+            self.physics.add_robot(robot_id, *pose)
         self._live_robots: set[int] = set()
         self._beacons: set[str] = set()
         self.info = protocol.WorldInfo(
@@ -105,12 +105,17 @@ class World:
 
     # --- membership ----------------------------------------------------------------
 
+    def is_member(self, robot_id: int) -> bool:
+        """Whether ``robot_id`` is one of the swarm's robots (ids 0 to num_robots - 1)."""
+        return 0 <= robot_id < self.config.num_robots
+
     def join_robot(self, robot_id: int) -> None:
-        """A controller for ``robot_id`` is live; beyond the expected swarm, a body appears
-        at its start pose."""
-        if not self.physics.has_robot(robot_id):
-            x, y, theta = self.start_pose(robot_id)
-            self.physics.add_robot(robot_id, x, y, theta)
+        """A controller for ``robot_id`` is live: its body, made at the start, answers to it.
+
+        Only the swarm's own ids have a body (an arena sized for N robots has no room
+        for a robot 99999); ValueError for any other."""
+        if not self.is_member(robot_id):
+            raise ValueError(f"robot {robot_id} is not one of the {self.config.num_robots}")
         self._live_robots.add(robot_id)
 
     def leave_robot(self, robot_id: int) -> None:
@@ -130,12 +135,6 @@ class World:
 
     def beacons(self) -> list[str]:
         return sorted(self._beacons)
-
-    def start_pose(self, robot_id: int) -> tuple[float, float, float]:
-        if robot_id < len(self.layout.start_poses):
-            return self.layout.start_poses[robot_id]
-        extra = start_poses(robot_id + 1, self.layout.nest_radius, self.config.spec.radius)
-        return extra[robot_id]
 
     # --- one tick ------------------------------------------------------------------
 
@@ -164,8 +163,11 @@ class World:
         for message in sorted(transmissions, key=_transmission_order):
             if message.sender in self._beacons:
                 position, kind = (self.info.nest.x, self.info.nest.y), "beacon"
-            else:
+            elif message.sender in receivers:
                 position, kind = receivers[message.sender], "robot"
+            else:  # its sender left after sending it: there is no transmitter any more
+                self.radio.reject()
+                continue
             self.radio.transmit(
                 self.tick, message.sender, message.seq, message.payload, position, kind, receivers
             )
@@ -188,7 +190,12 @@ class World:
         """Whether ``name`` may transmit now (a live robot or a known beacon)."""
         if name in self._beacons:
             return True
-        return name.isdigit() and int(name) in self._live_robots
+        return (
+            name.isascii()
+            and name.isdigit()
+            and protocol.radio_name(int(name)) == name  # one spelling per robot: "7", not "07"
+            and int(name) in self._live_robots
+        )
 
     def _render(self, robot_id: int) -> np.ndarray:
         x, y, theta = self.physics.pose(robot_id)

@@ -1,0 +1,74 @@
+"""What a receiver checks before it believes a message that decoded (no I/O).
+
+A tag says who sent a message; these checks say whether it fits what the receiver
+already knows: ticks move forward by a bounded step, sim time is the tick's, and only
+one world server is followed at a time. They hold with or without run keys, so an
+unauthenticated run is not frozen by one absurd but well-formed message either.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+TICK_WINDOW = 100  # how far ahead of the last tick a message may be (10 s at dt = 0.1)
+
+
+@dataclass
+class TickWindow:
+    """Ticks a receiver accepts: any to begin with, then only a bounded step ahead."""
+
+    window: int = TICK_WINDOW
+    last: int = -1  # the last tick acted on; -1 before the first
+
+    def refuses(self, tick: int) -> str | None:
+        """Why ``tick`` is not believable now, or None."""
+        if self.last >= 0 and tick > self.last + self.window:
+            return f"tick {tick} is more than {self.window} ahead of tick {self.last}"
+        return None
+
+    def ahead(self, tick: int) -> bool:
+        """Whether ``tick`` is still to come (not acted on yet)."""
+        return tick > self.last
+
+
+def time_refused(tick: int, t: float, dt: float) -> str | None:
+    """Why sim time ``t`` cannot be that of ``tick`` in a world of step ``dt``, or None."""
+    expected = tick * dt
+    if not math.isclose(t, expected, rel_tol=1e-9, abs_tol=1e-6):
+        return f"sim time {t!r} is not tick {tick} x {dt}"
+    return None
+
+
+@dataclass
+class WorldFollower:
+    """Which world server to follow, from the liveliness tokens ``alive/world/<instance>``.
+
+    A run has one world server. A second instance that appears while the followed one is
+    still alive is someone else's token, not a restart: it is ignored. Only once the
+    followed instance is gone does a new one count as the world restarted.
+    """
+
+    followed: str | None = None
+    present: set[str] = field(default_factory=set)
+
+    def appeared(self, instance: str) -> bool:
+        """Note a token; True when it is a new world to follow after the old one left."""
+        self.present.add(instance)
+        if self.followed is None:
+            self.followed = instance
+            return False
+        if instance == self.followed or self.followed in self.present:
+            return False
+        self.followed = instance
+        return True
+
+    def vanished(self, instance: str) -> bool:
+        """Note a token gone; True when it was the followed world."""
+        self.present.discard(instance)
+        return instance == self.followed
+
+    @property
+    def impostors(self) -> list[str]:
+        """Instances with a token that are not the followed world."""
+        return sorted(self.present - {self.followed} if self.followed else self.present)

@@ -1,0 +1,152 @@
+"""What each receiver checks before it believes a message (robot_agent/guard.py and its
+users), without processes: tick windows, one world at a time, a robot's memory budget, the
+world's handling of replays, foreign ids and senders that leave."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+
+from plumbing.inbox import BoundedInbox
+from robot_agent import auth, guard, node, protocol
+from robot_agent.controller import Controller, ControllerConfig
+from world_server.server import Event as WorldEvent
+from world_server.server import WorldServer
+from world_server.world import Transmission, World, WorldConfig
+
+SECRET = bytes(range(32))
+
+
+def test_a_tick_window_takes_any_first_tick_then_only_a_bounded_step() -> None:
+    window = guard.TickWindow(window=10)
+    assert window.refuses(2**53) is None  # nothing known yet
+    window.last = 50
+    assert window.refuses(60) is None and window.refuses(61) is not None
+    assert window.ahead(51) and not window.ahead(50)
+
+
+def test_sim_time_must_be_the_ticks() -> None:
+    assert guard.time_refused(42, 42 * 0.1, 0.1) is None
+    assert guard.time_refused(42, 1e9, 0.1) is not None
+
+
+def test_a_second_world_token_is_no_restart_while_the_followed_world_lives() -> None:
+    follower = guard.WorldFollower()
+    assert not follower.appeared("real")  # the first one is followed
+    assert not follower.appeared("fake")  # a forged token beside it: ignored
+    assert follower.followed == "real" and follower.impostors == ["fake"]
+    assert not follower.vanished("fake")
+    assert follower.vanished("real")  # the world died
+    assert follower.appeared("new")  # and a new one is a restart
+    assert follower.followed == "new"
+
+
+# --- a robot's budget -------------------------------------------------------------------
+
+
+def _node(keyring: auth.Keyring | None) -> node.RobotNode:
+    info = World(WorldConfig(num_sites=4, num_robots=2)).info
+    controller = Controller(1, info, ControllerConfig(), random.Random(1))
+    return node.RobotNode(
+        1,
+        session=None,  # type: ignore[arg-type]
+        keys=protocol.Keys("guard"),
+        controller=controller,
+        inbox=BoundedInbox(),
+        world=info,
+        keyring=keyring,
+    )
+
+
+def _rx(robot: node.RobotNode, tick: int, size: int, keyring: auth.Keyring | None) -> node.Event:
+    payload = b'{"kind":"opinion"' + b" " * (size - 17)
+    meta = protocol.encode(
+        protocol.RadioRxMeta(v=1, tick=tick, sender="0", seq=tick, sent_tick=tick - 1)
+    )
+    key = robot.keys.radio_rx(1)
+    attachment = auth.seal(keyring, "robot/1", key, payload, meta)
+    return node.Event(1, "rx", payload, attachment)
+
+
+@pytest.mark.parametrize("keyed", [False, True])
+def test_radio_for_future_ticks_is_held_only_within_the_robots_budget(keyed: bool) -> None:
+    """What the world would send (tagged with the robot's key when keyed) for the coming
+    ticks is held, within a bound; the rest is rejected and counted."""
+    keyring = auth.Keyring(secret=SECRET).only(["robot/1"]) if keyed else None
+    robot = _node(keyring)
+    robot.ticks.last = 10
+    size, count = 20_000, 400
+    for index in range(count):
+        robot.handle(_rx(robot, 11 + index % 100, size, keyring))
+    held = node.PENDING_BYTES // size
+    assert robot.pending_bytes == held * size <= node.PENDING_BYTES
+    assert robot.rejects.count == count - held
+    robot.handle(_rx(robot, 10 + guard.TICK_WINDOW + 1, 10, keyring))  # too far ahead
+    assert robot.rejects.count == count - held + 1
+
+
+def test_a_keyed_robot_holds_nothing_without_its_key() -> None:
+    robot = _node(auth.Keyring(secret=SECRET).only(["robot/1"]))
+    forged = auth.Keyring(secret=bytes(32)).only(["robot/1"])  # another run's key
+    for tick in range(1, 50):
+        robot.handle(_rx(robot, tick, 1000, None))
+        robot.handle(_rx(robot, tick, 1000, forged))
+    assert robot.pending == {} and robot.pending_bytes == 0
+    assert robot.rejects.count == 98
+
+
+# --- the world --------------------------------------------------------------------------
+
+
+def _world_server(keyring: auth.Keyring | None = None) -> WorldServer:
+    world = World(WorldConfig(run="guard", num_sites=4, num_robots=2))
+    server = WorldServer(None, world, protocol.Keys("guard"), keyring=keyring)  # type: ignore[arg-type]
+    world.join_robot(0)
+    world.join_robot(1)
+    server.barrier.open(0, ["robot/0", "robot/1"])
+    return server
+
+
+def _tx(server: WorldServer, sender: int, seq: int, keyring: auth.Keyring) -> WorldEvent:
+    key = server.keys.radio_tx(sender)
+    payload = b'{"kind":"opinion"}'
+    meta = protocol.encode(protocol.RadioTxMeta(v=1, tick=0, seq=seq))
+    return WorldEvent("tx", key, payload, keyring.seal(f"robot/{sender}", key, payload, meta))
+
+
+def test_the_world_takes_a_robots_transmission_once_per_tick() -> None:
+    keyring = auth.Keyring(secret=SECRET)
+    server = _world_server(keyring)
+    server._handle(_tx(server, 0, 1, keyring))
+    server._handle(_tx(server, 0, 1, keyring))  # the same message again: a replay
+    server._handle(_tx(server, 0, 2, keyring))
+    assert [(t.sender, t.seq) for t in server.transmissions] == [("0", 1), ("0", 2)]
+    assert server.counters.rejected == 1 and server.world.radio.rejected == 1
+
+
+@pytest.mark.parametrize("ident", ["2", "99999", "01", "-1", "x"])
+def test_the_world_refuses_a_robot_token_outside_its_swarm(ident: str) -> None:
+    server = _world_server()
+    server._handle(WorldEvent("alive", f"{server.keys.prefix}/alive/robot/{ident}"))
+    server._apply_joins()
+    assert server.world.live_robots() == [0, 1]
+    assert server.counters.rejected == 1
+
+
+def test_a_transmission_whose_sender_left_is_dropped_when_the_tick_closes() -> None:
+    world = World(WorldConfig(num_sites=4, num_robots=2))
+    world.join_robot(0)
+    world.join_robot(1)
+    world.join_beacon("nest")
+    queued = [Transmission("0", 1, b"{}"), Transmission("nest", 1, b"{}")]
+    world.leave_robot(0)
+    world.leave_beacon("nest")
+    world.advance({}, queued)  # no KeyError: nobody transmits for a sender that is gone
+    assert world.radio.rejected == 2 and world.radio.sent == 0
+
+
+def test_a_robot_outside_the_swarm_has_no_body() -> None:
+    world = World(WorldConfig(num_sites=4, num_robots=2))
+    with pytest.raises(ValueError, match="not one of the 2"):
+        world.join_robot(99999)

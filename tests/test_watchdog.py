@@ -1,0 +1,179 @@
+"""The stall watchdog on its own, and the endings of in-process runs that use it."""
+
+from __future__ import annotations
+
+import pytest
+
+from deploy.inmemory import run_in_memory
+from deploy.summary import ENDINGS, ending
+from deploy.watchdog import Watchdog, default_stall_window
+from nest_beacon.beacon import BeaconConfig
+from robot_agent import protocol
+from robot_agent.controller import ControllerConfig
+from world_server.world import WorldConfig
+
+BODY = 0.074  # two e-puck radii
+WINDOW = 100.0
+
+
+def _status(
+    robot: int,
+    t: float,
+    phase: protocol.Phase = "to_site",
+    trips: int = 0,
+    decided: int | None = None,
+) -> protocol.Status:
+    return protocol.Status(
+        v=1,
+        id=robot,
+        tick=round(t * 10),
+        t=t,
+        phase=phase,
+        trips=trips,
+        opinion=[0.5, 0.5],
+        pool_size=0,
+        poolings=trips,
+        decided_site=decided,
+        decision_time=t if decided is not None else None,
+        decision_trips=trips if decided is not None else None,
+        comparison=None,
+    )
+
+
+def test_robots_that_never_progress_stall_exactly_at_the_window() -> None:
+    watchdog = Watchdog(range(2), WINDOW, BODY)
+    for robot in range(2):
+        watchdog.status(_status(robot, 0.0))
+    t = 0.0
+    while t < WINDOW - 1.0:
+        t += 1.0
+        # Jiggling on the spot, less than a body length from where they stood: no progress.
+        watchdog.poses(t, [(0, 0.03 * (t % 2), 0.0), (1, 1.0, 0.02 * (t % 3))])
+        assert not watchdog.stalled(t)
+    assert not watchdog.stalled(WINDOW - 0.01)
+    assert watchdog.stalled(WINDOW)
+
+
+def test_robots_slowly_making_progress_never_stall() -> None:
+    """Each robot moves a little over a body length, or changes phase, just inside the
+    window: slow, but progress, for ten windows of sim time."""
+    watchdog = Watchdog(range(3), WINDOW, BODY)
+    step = 0.9 * WINDOW
+    t = 0.0
+    phases: list[protocol.Phase] = ["to_site", "sensing", "to_nest", "waiting"]
+    while t < 10 * WINDOW:
+        t += step
+        moves = int(t / step)
+        watchdog.poses(t, [(0, 1.1 * BODY * moves, 0.0)])  # a crawl along x
+        watchdog.status(_status(1, t, phases[moves % len(phases)]))  # a leg done, slowly
+        watchdog.status(_status(2, t, "to_site", trips=moves))  # a pooling, slowly
+        for now in (t, t + step - 0.01):
+            assert not watchdog.stalled(now), now
+    # Only robot 2 keeps going from here; the others fall silent, and it still holds.
+    quiet_from = t
+    for _ in range(5):
+        t += step
+        watchdog.status(_status(2, t, "to_site", trips=int(t)))
+        assert not watchdog.stalled(t)
+    assert watchdog.last_progress() == t
+    assert [entry["last_progress_s"] for entry in watchdog.stuck()[:2]] == [
+        pytest.approx(quiet_from),
+        pytest.approx(quiet_from),
+    ]
+
+
+def test_the_same_status_again_is_no_progress() -> None:
+    watchdog = Watchdog([0], WINDOW, BODY)
+    watchdog.status(_status(0, 5.0, "to_nest", trips=1))
+    watchdog.status(_status(0, 50.0, "to_nest", trips=1))  # e.g. only its reject count grew
+    assert watchdog.last_progress() == 5.0
+    assert watchdog.stalled(105.0)
+
+
+def test_decided_and_departed_robots_hold_nothing_up() -> None:
+    watchdog = Watchdog(range(3), WINDOW, BODY)
+    watchdog.status(_status(0, 10.0, "to_decision", trips=2, decided=1))
+    watchdog.status(_status(1, 20.0, "to_nest"))
+    watchdog.status(_status(2, 30.0, "to_site"))
+    watchdog.retired(2)  # killed or crashed, last seen at 30 s
+    assert watchdog.undecided() == [1]
+    assert not watchdog.stalled(119.9) and watchdog.stalled(120.0)
+    watchdog.status(_status(1, 125.0, "to_decision", trips=3, decided=1))
+    assert watchdog.undecided() == [] and watchdog.last_progress() is None
+    assert not watchdog.stalled(10_000.0)  # nobody left to wait for: not a stall
+    assert watchdog.stuck() == []
+
+
+def test_a_restarted_robot_starts_undecided_from_its_restart() -> None:
+    watchdog = Watchdog([0], WINDOW, BODY)
+    watchdog.status(_status(0, 10.0, "stopped", trips=3, decided=0))
+    watchdog.retired(0)
+    watchdog.restarted(0, 400.0)
+    assert watchdog.undecided() == [0]
+    assert not watchdog.stalled(499.0) and watchdog.stalled(500.0)
+
+
+def test_each_stuck_robot_says_where_and_since_when() -> None:
+    watchdog = Watchdog(range(2), WINDOW, BODY)
+    watchdog.status(_status(0, 3.0, "waiting", trips=1))
+    watchdog.status(_status(1, 4.0, "to_decision", trips=2, decided=0))
+    watchdog.poses(10.0, [(0, 0.0123, -0.0456), (1, 1.0, 1.0)])
+    assert watchdog.stuck() == [
+        {"id": 0, "phase": "waiting", "x": 0.012, "y": -0.046, "trips": 1, "last_progress_s": 3.0}
+    ]
+
+
+def test_the_default_window_grows_with_the_arena_and_the_beacons_outages() -> None:
+    small = default_stall_window(0.75, 0.13, 120.0)
+    assert small == pytest.approx(240.0 + 2 * 1.5 / 0.13)
+    assert default_stall_window(3.3, 0.13, 120.0) > small
+    assert default_stall_window(0.75, 0.13, 120.0, [(0.0, 60.0), (100.0, 400.0)]) == (
+        pytest.approx(small + 360.0)
+    )
+    with pytest.raises(ValueError):
+        Watchdog([0], 0.0, BODY)
+
+
+def test_endings_from_why_the_run_stopped_and_what_the_robots_decided() -> None:
+    assert ending("decided", all_decided=True, consensus=True) == "consensus"
+    assert ending("decided", all_decided=True, consensus=False) == "split"
+    assert ending("stalled", all_decided=False, consensus=False) == "stalled"
+    assert ending(None, all_decided=True, consensus=True) == "consensus"  # from a recording
+    assert ending(None, all_decided=False, consensus=False) is None  # not known
+    assert set(ENDINGS) == {"consensus", "split", "stalled", "timeout", "interrupted", "crashed"}
+
+
+# --- the in-process engine ------------------------------------------------------------
+
+
+def _world(seed: int, robots: int, sites: int = 3) -> WorldConfig:
+    return WorldConfig(run="memory", seed=seed, num_sites=sites, num_robots=robots)
+
+
+@pytest.mark.timeout(120)
+def test_an_in_process_run_that_stalls_ends_stalled_with_its_stuck_robot() -> None:
+    """The beacon is silent all run: the lone robot comes home and waits at the nest."""
+    silent = BeaconConfig(outages=((0.0, 1e6),))
+    summary = run_in_memory(
+        _world(0, robots=1), ControllerConfig(), silent, timeout=1800, stall_window=20.0
+    )
+    assert summary["ended"] == "stalled" and not summary["timed_out"]
+    assert not summary["consensus"]
+    (stuck,) = summary["stuck"]
+    assert stuck["id"] == 0 and stuck["phase"] == "waiting" and stuck["trips"] == 0
+    assert summary["sim_time_s"] - stuck["last_progress_s"] == pytest.approx(20.0, abs=0.11)
+    assert summary["sim_time_s"] < 200.0  # not ticking on to the timeout
+
+
+@pytest.mark.timeout(120)
+def test_in_process_endings_consensus_split_and_timeout() -> None:
+    agreed = run_in_memory(_world(0, robots=4), ControllerConfig(threshold=0.5), timeout=600)
+    assert agreed["ended"] == "consensus" and "stuck" not in agreed
+    # Deciding at 0.5 with three sites: one comparison each, and the robots disagree.
+    split = run_in_memory(_world(2, robots=4), ControllerConfig(threshold=0.5), timeout=600)
+    assert split["ended"] == "split" and split["stuck"] == []
+    assert not split["consensus"] and not split["timed_out"]
+    assert len({robot["decided_site"] for robot in split["per_robot"]}) == 2
+    short = run_in_memory(_world(0, robots=4), ControllerConfig(), timeout=5.0)
+    assert short["ended"] == "timeout" and short["timeout_kind"] == "sim"
+    assert short["timed_out"] and [entry["id"] for entry in short["stuck"]] == [0, 1, 2, 3]

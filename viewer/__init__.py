@@ -1,0 +1,1 @@
+"""Watching a swarm: the live page in the browser, replay of recordings, Foxglove live."""
