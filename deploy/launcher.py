@@ -332,10 +332,12 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     record = None if args.no_record else Path(args.record or f"runs/{run_id}.mcap")
     if record is not None:
         check_recording_path(record)
+    arena_radius = make_layout(args.sites, args.robots, args.seed).arena_radius
     stall_window = args.stall_window or default_stall_window(
-        make_layout(args.sites, args.robots, args.seed).arena_radius,
+        arena_radius,
         EpuckSpec().max_wheel_speed,
-        controller.travel_timeout,
+        # The longest leg a robot may take before it gives up: across the arena.
+        controller.leg_allowance(2 * arena_radius),
         parse_outages(args.beacon_outage),
     )
     forwarded: ForwardedOptions = args.forwarded

@@ -21,20 +21,20 @@ from robot_agent import protocol
 def default_stall_window(
     arena_radius: float,
     max_speed: float,
-    travel_timeout: float,
+    give_up_after: float,
     beacon_outages: Sequence[tuple[float, float]] = (),
 ) -> float:
     """Sim seconds without progress after which a run counts as stalled.
 
     The longest legitimate progress-free spell: a robot blocked on its way to a site gives
-    up after ``travel_timeout`` (a phase change), so two of those, plus two crossings of
-    the arena at full speed (legs, detours and queues grow with the arena), plus every
-    configured beacon outage, during which robots at the nest legitimately wait without
-    moving.
+    up after ``give_up_after`` (a phase change; ``ControllerConfig.leg_allowance`` of the
+    longest leg), so two of those, plus two crossings of the arena at full speed (legs,
+    detours and queues grow with the arena), plus every configured beacon outage, during
+    which robots at the nest legitimately wait without moving.
     """
     crossing = 2.0 * arena_radius / max_speed
     outage = sum(max(end - start, 0.0) for start, end in beacon_outages)
-    return 2.0 * travel_timeout + 2.0 * crossing + outage
+    return 2.0 * give_up_after + 2.0 * crossing + outage
 
 
 @dataclass

@@ -127,6 +127,13 @@ class ControllerConfig:
         if self.capture_attempts < 1:
             raise ValueError(f"capture_attempts must be at least 1, got {self.capture_attempts}")
 
+    def leg_allowance(self, length: float) -> float:
+        """Sim seconds a leg of ``length`` metres may take before the robot gives it up:
+        ``travel_timeout``, or for a long leg (the arena grows with the swarm) the time to
+        cover it at ``travel_crawl``, so a crowd on the way slows a robot without making
+        it give up."""
+        return max(self.travel_timeout, length / self.travel_crawl)
+
 
 class Controller:
     """One robot's Section 5 behaviour; see the module docstring."""
@@ -589,12 +596,10 @@ class Controller:
         return math.atan2(site_y - reading.y, site_x - reading.x)
 
     def _leg_timed_out(self, reading: ports.BodyReading, goal: tuple[float, float]) -> bool:
-        """Whether the current leg has taken longer than it may: ``travel_timeout``, or for
-        a long leg (the arena grows with the swarm) the time to cover its length at a crawl,
-        so a crowd on the way slows a robot down without making it give up."""
+        """Whether the current leg has taken longer than ``leg_allowance`` of its length,
+        measured when the leg's first step saw where it starts."""
         if self._leg_allowance is None:
-            length = _distance(reading, goal)
-            self._leg_allowance = max(self.config.travel_timeout, length / self.config.travel_crawl)
+            self._leg_allowance = self.config.leg_allowance(_distance(reading, goal))
         return self._t - self._leg_start > self._leg_allowance
 
     def _stalled_near(
