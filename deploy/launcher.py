@@ -207,9 +207,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="SIM_SECONDS",
         help="end the run as stalled when no undecided robot made progress (a leg, a "
-        "comparison, a pooling, or a body length of travel) for this much sim time "
-        "(default: twice the controller's travel timeout, plus two arena crossings at "
-        "full speed, plus any --beacon-outage)",
+        "comparison, a pooling, or two body lengths of travel) for this much sim time "
+        "(default: twice the time a robot may take for a leg across the arena, plus two "
+        "arena crossings at full speed, plus any --beacon-outage)",
     )
     switches = add_swarm_switches(parser)
     processes = parser.add_argument_group("processes")
