@@ -93,6 +93,7 @@ def analyse_run(record: dict[str, Any]) -> dict[str, Any]:
         "last": last,
         "last_pools": [pooling[3] for pooling in last_pools],
         "other_pools": [pooling[3] for pooling in other_pools],
+        "last_pools_by_trip": [(pooling[2], pooling[3]) for pooling in last_pools],
         "other_pools_by_trip": [(pooling[2], pooling[3]) for pooling in other_pools],
         "last_phases": dict(phases),
         "last_distances": distances,
@@ -129,6 +130,8 @@ def summarise(runs: Sequence[dict[str, Any]], n: int) -> dict[str, Any]:
             own_by_decided.setdefault(order, []).append(missing)
     late = [run for run in mine if run["late"]]
     return {
+        "last_pool_by_trip": _by_trip(mine, "last_pools_by_trip"),
+        "other_pool_by_trip": _by_trip(mine, "other_pools_by_trip"),
         "n": n,
         "runs": len(mine),
         "late_runs": len(late),
@@ -150,6 +153,15 @@ def summarise(runs: Sequence[dict[str, Any]], n: int) -> dict[str, Any]:
     }
 
 
+def _by_trip(runs: Sequence[dict[str, Any]], key: str) -> dict[int, float | None]:
+    """Mean pool size by trip (pool sizes over time), trips with at least 20 poolings."""
+    sizes: dict[int, list[int]] = {}
+    for run in runs:
+        for trip, size in run[key]:
+            sizes.setdefault(trip, []).append(size)
+    return {trip: _mean(values) for trip, values in sorted(sizes.items()) if len(values) >= 20}
+
+
 def _mean(values: Sequence[float]) -> float | None:
     return round(statistics.fmean(values), 3) if values else None
 
@@ -165,17 +177,20 @@ def plot(summaries: Sequence[dict[str, Any]], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     figure, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for summary in summaries:
+    for index, summary in enumerate(summaries):
         orders = sorted(summary["undecided_missing"])
+        colour = f"C{index}"  # one colour per n: solid together, dashed alone
         left.plot(
             orders,
             [summary["undecided_missing"][order] for order in orders],
+            color=colour,
             marker="o",
             label=f"n = {summary['n']}: all undecided together",
         )
         left.plot(
             orders,
             [summary["own_missing"][order] for order in orders],
+            color=colour,
             linestyle="--",
             marker=".",
             label=f"n = {summary['n']}: an undecided robot alone",
@@ -193,6 +208,7 @@ def plot(summaries: Sequence[dict[str, Any]], path: Path) -> None:
             [position + (index - 1) * width for position in range(len(groups))],
             shares,
             width,
+            color=f"C{index}",
             label=f"n = {summary['n']}",
         )
     right.set_xticks(range(len(groups)), groups)
@@ -218,6 +234,14 @@ def print_tables(summaries: Sequence[dict[str, Any]]) -> None:
             f"{s['last_phases'].get('at the nest', 0.0):.0%} | {s['runs_with_lone_finish']} | "
             f"{s['trips_after_others_mean']:.2f} |"
         )
+    print()
+    print("Mean pool size by trip, the last robot (the others):")
+    for s in summaries:
+        cells = ", ".join(
+            f"{trip}: {size:.2f} ({s['other_pool_by_trip'].get(trip, float('nan')):.2f})"
+            for trip, size in s["last_pool_by_trip"].items()
+        )
+        print(f"n = {s['n']}: {cells}")
     print()
     print("Non-best sites the undecided robots still hold possible, all together (alone):")
     for s in summaries:

@@ -66,7 +66,7 @@ def test_check_finds_an_edited_table_and_missing_data(tmp_path: Path) -> None:
     _, runs = _published()
     fresh = _paper_seeds(runs)
     readme = root / "README.md"
-    readme.write_text(readme.read_text().replace("seeds 0-9: runs within n/2", "seeds 0-9: ok"))
+    readme.write_text(readme.read_text().replace("seeds 0-9: within n/2", "seeds 0-9: ok"))
     (root / "docs" / "fig5-linger.json").unlink()
     problems = section5.check_all(root, fresh)
     assert len(problems) == 2
