@@ -14,11 +14,12 @@ decision a snapshot of all robots) and measures, per n:
   robot has eliminated every non-best site; a site the undecided robots cannot rule out
   between them is evidence that left with the decided ones and must be found again.
 
-Writes docs/section5-lag.png and docs/section5-lag.json (the numbers behind it) and
-prints the tables docs/section5.md quotes:
+Prints the tables; with ``--write`` also writes docs/section5-lag.png, docs/section5-lag.json
+(the numbers behind both) and the tables into docs/section5.md, between markers naming
+this command:
 
     .venv/bin/python benchmarks/section5_study.py --settings default --seeds 100
-    .venv/bin/python benchmarks/section5_lag.py --setting default
+    .venv/bin/python benchmarks/section5_lag.py --setting default --write
 """
 
 from __future__ import annotations
@@ -220,36 +221,45 @@ def plot(summaries: Sequence[dict[str, Any]], path: Path) -> None:
     plt.close(figure)
 
 
-def print_tables(summaries: Sequence[dict[str, Any]]) -> None:
-    print(
-        "| n | runs | runs over n/2 | last robot: pool mean, alone | others: pool mean, alone "
-        "| last robot at the nest when another decided | runs the last robot finished alone "
-        "| its trips after all others decided (mean) |"
-    )
-    print("|---|---:|---:|---|---|---:|---:|---:|")
+def tables(summaries: Sequence[dict[str, Any]]) -> str:
+    """The Markdown that docs/section5.md shows, from the summaries."""
+    lines = [
+        "| n | runs | runs over n/2 | last robot: mean pool, pooled alone "
+        "| the others: mean pool, pooled alone | last robot at the nest when another decided "
+        "| runs the last robot finished alone | its trips after all others decided (mean) |",
+        "|---|---:|---:|---|---|---:|---:|---:|",
+    ]
     for s in summaries:
-        print(
+        lines.append(
             f"| {s['n']} | {s['runs']} | {s['late_runs']} | {s['last_pool_mean']:.2f}, "
             f"{s['last_alone']:.0%} | {s['other_pool_mean']:.2f}, {s['other_alone']:.0%} | "
             f"{s['last_phases'].get('at the nest', 0.0):.0%} | {s['runs_with_lone_finish']} | "
             f"{s['trips_after_others_mean']:.2f} |"
         )
-    print()
-    print("Mean pool size by trip, the last robot (the others):")
+    lines += ["", "Mean pool size by trip (pool sizes over time), the last robot (the others):", ""]
     for s in summaries:
         cells = ", ".join(
-            f"{trip}: {size:.2f} ({s['other_pool_by_trip'].get(trip, float('nan')):.2f})"
+            f"{trip}: {size:.2f} ({_format(s['other_pool_by_trip'].get(trip))})"
             for trip, size in s["last_pool_by_trip"].items()
         )
-        print(f"n = {s['n']}: {cells}")
-    print()
-    print("Non-best sites the undecided robots still hold possible, all together (alone):")
+        lines.append(f"* n = {s['n']}, trip {cells}")
+    lines += [
+        "",
+        "Non-best sites that no undecided robot has ruled out (the undecided robots all "
+        "together; in brackets, one undecided robot on its own), after the k-th decision:",
+        "",
+    ]
     for s in summaries:
         cells = ", ".join(
             f"{order}: {s['undecided_missing'][order]:.2f} ({s['own_missing'][order]:.2f})"
             for order in sorted(s["undecided_missing"])
         )
-        print(f"n = {s['n']}: {cells}")
+        lines.append(f"* n = {s['n']}, k = {cells}")
+    return "\n".join(lines)
+
+
+def _format(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f}"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -259,6 +269,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--results", type=Path, default=DEFAULT_OUT)
     parser.add_argument("--figure", type=Path, default=REPO / "docs" / "section5-lag.png")
     parser.add_argument("--json", type=Path, default=REPO / "docs" / "section5-lag.json")
+    parser.add_argument(
+        "--write",
+        action="store_true",
+        help="write the figure, the JSON and the tables' block in docs/section5.md "
+        "(otherwise only print the tables)",
+    )
     return parser
 
 
@@ -270,10 +286,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"no finished runs for {args.setting} in {args.results}", file=sys.stderr)
         return 1
     summaries = [summarise(runs, n) for n in sorted({run["n"] for run in runs})]
-    print_tables(summaries)
-    plot(summaries, args.figure)
-    args.json.write_text(json.dumps(summaries, indent=1) + "\n")
-    print(f"wrote {args.figure} and {args.json}", file=sys.stderr)
+    text = tables(summaries)
+    print(text)
+    if args.write:
+        from deploy.section5 import replace_block
+
+        plot(summaries, args.figure)
+        args.json.write_text(json.dumps(summaries, indent=1) + "\n")
+        command = f"benchmarks/section5_lag.py --setting {args.setting} --write"
+        doc = REPO / "docs" / "section5.md"
+        doc.write_text(replace_block(doc.read_text(), "lag", text, command, command))
+        print(f"wrote {args.figure}, {args.json} and the 'lag' block of {doc}", file=sys.stderr)
     return 0
 
 

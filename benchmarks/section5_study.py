@@ -16,6 +16,9 @@ read the files without rerunning anything.
 
     .venv/bin/python benchmarks/section5_study.py --settings default dwell=5 --seeds 100
     .venv/bin/python benchmarks/section5_study.py --report --settings default dwell=5
+    .venv/bin/python benchmarks/section5_study.py --write --settings default dwell=5
+
+``--write`` puts the table into docs/section5.md between markers naming this script.
 """
 
 from __future__ import annotations
@@ -332,6 +335,51 @@ def report(settings: Sequence[str], robots: int, out: Path) -> None:
             )
 
 
+STUDY_BLOCK = "study"
+STUDY_DOC = REPO / "docs" / "section5.md"
+
+
+def describe(setting: str) -> str:
+    """A setting as the table shows it: the override, or ``defaults``."""
+    return "defaults" if setting == "default" else f"`{setting}`"
+
+
+def markdown(settings: Sequence[str], robots: int, out: Path) -> str:
+    """The study table: one line per setting and n, from the runs in ``out``."""
+    lines = [
+        "| setting | n | runs | right | swarm steps median (IQR) | mean | within n/2 "
+        "| strictly below | mean pool | runs with mean pool > 3 | pooled alone "
+        "| sim s to consensus |",
+        "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for setting in settings:
+        records = load(result_path(out, setting, robots))
+        for n in sorted({record["n"] for record in records}):
+            r = row(records, n)
+            lines.append(
+                f"| {describe(setting)} | {n} | {r['runs']} | {r['correct']} "
+                f"| {r['median']:g} ({r['q1']:g}-{r['q3']:g}) | {r['mean_swarm']:.2f} "
+                f"| {r['within']:.0%} | {r['below']:.0%} | {r['pool_mean']:.2f} "
+                f"| {r['run_pool_over3']} | {r['alone']:.0%} | {r['time']:.0f} |"
+            )
+    return "\n".join(lines)
+
+
+def write_markdown(settings: Sequence[str], robots: int, out: Path, doc: Path) -> None:
+    """Put the study table into ``doc`` between the markers naming this script."""
+    from deploy.section5 import replace_block
+
+    command = "benchmarks/section5_study.py --write"
+    table = markdown(settings, robots, out)
+    words = " ".join(settings)
+    table += (
+        f"\n\nMade by `.venv/bin/python benchmarks/section5_study.py --write --settings "
+        f"{words}` from the runs that the same command without `--write` made "
+        f"(in-process lockstep runs, {robots} robots, seeds from 0)."
+    )
+    doc.write_text(replace_block(doc.read_text(), STUDY_BLOCK, table, command, command))
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--settings", nargs="+", default=["default"], metavar="SETTING")
@@ -342,6 +390,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     parser.add_argument("--report", action="store_true", help="only print the table")
+    parser.add_argument(
+        "--write",
+        action="store_true",
+        help="no runs: put the table of the given settings into docs/section5.md",
+    )
     return parser
 
 
@@ -350,6 +403,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     for setting in args.settings:
         parse_setting(setting)  # fail on a typo before any run
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.write:
+        write_markdown(args.settings, args.robots, args.out, STUDY_DOC)
+        print(f"wrote the {STUDY_BLOCK!r} block of {STUDY_DOC}", file=sys.stderr)
+        return 0
     if not args.report:
         seeds = range(args.first_seed, args.first_seed + args.seeds)
         for setting in args.settings:

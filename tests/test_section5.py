@@ -109,3 +109,15 @@ def test_cli_needs_the_repository(tmp_path: Path, capsys: pytest.CaptureFixture[
         main(["section5", "--check", "--root", str(tmp_path)])
     assert raised.value.code == 2
     assert "has no README.md and docs/section5.md" in capsys.readouterr().err
+
+
+def test_render_rewrites_the_blocks_from_the_published_runs(tmp_path: Path) -> None:
+    """``--render`` runs nothing: it puts back what the runs file says."""
+    root = _copy_published(tmp_path)
+    readme = root / "README.md"
+    published = readme.read_text()
+    readme.write_text(published.replace("seeds 0-9: within n/2", "seeds 0-9: ok"))
+    assert main(["section5", "--render", "--root", str(root)]) == 0
+    assert readme.read_text() == published
+    _, runs = _published()
+    assert section5.check_all(root, _paper_seeds(runs)) == []
