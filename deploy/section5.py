@@ -338,8 +338,13 @@ def _render(root: Path) -> int:
 # --- provenance ----------------------------------------------------------------------------
 
 
+# Changes here cannot change a run, so they do not make the code that ran "uncommitted".
+NOT_RUN = ("docs/", "benchmarks/", "tests/", "README.md")
+
+
 def git_state(root: Path, ignore: Iterable[str]) -> tuple[str | None, bool]:
-    """HEAD's short hash and whether tracked files other than ``ignore`` have changes."""
+    """HEAD's short hash and whether tracked files other than ``ignore`` (and ``NOT_RUN``)
+    have changes."""
     try:
         head = subprocess.run(
             ["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True
@@ -355,7 +360,11 @@ def git_state(root: Path, ignore: Iterable[str]) -> tuple[str | None, bool]:
     if head.returncode != 0:
         return None, False
     skipped = set(ignore)
-    changed = [line[3:] for line in status.stdout.splitlines() if line[3:] not in skipped]
+    changed = [
+        path
+        for line in status.stdout.splitlines()
+        if (path := line[3:]) not in skipped and not path.startswith(NOT_RUN)
+    ]
     return head.stdout.strip(), bool(changed)
 
 
