@@ -295,7 +295,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.json.write_text(json.dumps(summaries, indent=1) + "\n")
         command = f"benchmarks/section5_lag.py --setting {args.setting} --write"
         doc = REPO / "docs" / "section5.md"
-        doc.write_text(replace_block(doc.read_text(), "lag", text, command, command))
+        edit = "benchmarks/section5_lag.py"
+        doc.write_text(replace_block(doc.read_text(), "lag", text, command, edit))
         print(f"wrote {args.figure}, {args.json} and the 'lag' block of {doc}", file=sys.stderr)
     return 0
 

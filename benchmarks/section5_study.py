@@ -377,7 +377,8 @@ def write_markdown(settings: Sequence[str], robots: int, out: Path, doc: Path) -
         f"{words}` from the runs that the same command without `--write` made "
         f"(in-process lockstep runs, {robots} robots, seeds from 0)."
     )
-    doc.write_text(replace_block(doc.read_text(), STUDY_BLOCK, table, command, command))
+    edit = "benchmarks/section5_study.py"
+    doc.write_text(replace_block(doc.read_text(), STUDY_BLOCK, table, command, edit))
 
 
 def build_parser() -> argparse.ArgumentParser:

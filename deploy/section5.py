@@ -36,7 +36,7 @@ from deploy import section5_tables as tables
 from plumbing import cliargs
 
 RUNS_FILE = "docs/section5-runs.json"
-MARKDOWN = {"README.md": ("summary",), "docs/section5.md": ("summary", "runs")}
+MARKDOWN = {"README.md": ("summary",), "docs/section5.md": ("summary", "detail", "runs")}
 FIGURE_DATA = {
     ("default", 4): "docs/fig4.json",
     ("default", 5): "docs/fig5.json",

@@ -213,6 +213,35 @@ def provenance(meta: dict[str, Any]) -> str:
     )
 
 
+# --- robots and time, per variant ----------------------------------------------------------
+
+
+def detail_table(records: Sequence[dict[str, Any]]) -> str:
+    """Per variant and n over every seed: the typical robot, time, the largest pool."""
+    lines = [
+        "| variant | n | runs | robots within n/2 | robot steps median | swarm steps mean "
+        "| sim s to consensus, mean | largest pool |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for variant in VARIANTS:
+        label = "default" if variant == "default" else f"`--linger {LINGER:g}`"
+        for n in SITES:
+            chosen = select(records, variant, n)
+            steps = [step for record in chosen for step in decided_steps(record)]
+            swarm = [value for record in chosen if (value := swarm_steps(record)) is not None]
+            times = [record["sim_time_s"] for record in chosen if swarm_steps(record) is not None]
+            sizes = [size for record in chosen for size in pools(record)]
+            if not chosen or not steps or not swarm:
+                continue
+            lines.append(
+                f"| {label} | {n} | {len(chosen)} "
+                f"| {sum(1 for step in steps if step <= n / 2) / len(steps):.1%} "
+                f"| {_number(statistics.median(steps))} | {statistics.fmean(swarm):.2f} "
+                f"| {statistics.fmean(times):.0f} | {max(sizes) if sizes else '-'} |"
+            )
+    return "\n".join(lines)
+
+
 # --- the per-run table ---------------------------------------------------------------------
 
 
@@ -287,5 +316,6 @@ def blocks(records: Sequence[dict[str, Any]], meta: dict[str, Any]) -> dict[str,
     """Every generated Markdown block by name."""
     return {
         "summary": summary_table(records, meta),
+        "detail": detail_table(records),
         "runs": runs_table(records, "default"),
     }
