@@ -356,8 +356,10 @@ def markdown(settings: Sequence[str], robots: int, out: Path) -> str:
         records = load(result_path(out, setting, robots))
         for n in sorted({record["n"] for record in records}):
             r = row(records, n)
+            missing = r["runs"] - r["consensus"]
+            right = f"{r['correct']}" + (f" ({missing} without consensus)" if missing else "")
             lines.append(
-                f"| {describe(setting)} | {n} | {r['runs']} | {r['correct']} "
+                f"| {describe(setting)} | {n} | {r['runs']} | {right} "
                 f"| {r['median']:g} ({r['q1']:g}-{r['q3']:g}) | {r['mean_swarm']:.2f} "
                 f"| {r['within']:.0%} | {r['below']:.0%} | {r['pool_mean']:.2f} "
                 f"| {r['run_pool_over3']} | {r['alone']:.0%} | {r['time']:.0f} |"
