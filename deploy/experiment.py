@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from deploy.cli import UsageError
+from deploy.inprocess import add_engine_option
 from deploy.launcher import add_swarm_switches
 from plumbing import cliargs
 from plumbing.lifecycle import PARENT_ENV
@@ -117,6 +118,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         f"that reaches it ends as timeout (wall); one that still runs {BACKSTOP:g} s later "
         "is stopped from here (default: 1800)",
     )
+    add_engine_option(parser)
     parser.add_argument(
         "--secure",
         action="store_true",
@@ -190,6 +192,8 @@ def plan_runs(args: argparse.Namespace, endpoint: str | None) -> list[RunSpec]:
     network = ["--connect", endpoint] if endpoint is not None else []
     if getattr(args, "secure", False):
         network.append("--secure")
+    if getattr(args, "engine", "zenoh") != "zenoh":
+        network += ["--engine", args.engine]
     specs = []
     for robots in args.robots:
         for sites in args.sites:
@@ -373,8 +377,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} exists and is not a directory")
+    # In-process runs need no network; a secure run is its own TLS router.
+    shared_router = args.engine == "zenoh" and not args.secure
     # The shared router's socket does not exist yet: check the runs with a stand-in.
-    planned = plan_runs(args, None if args.secure else "unixsock-stream/router.sock")
+    planned = plan_runs(args, "unixsock-stream/router.sock" if shared_router else None)
     validate_run_options(planned[0])
     taken = sorted(str(spec.recording) for spec in planned if spec.recording.exists())
     if taken:
@@ -385,9 +391,8 @@ def run(args: argparse.Namespace) -> int:
     logs = args.out / "logs"
     logs.mkdir(parents=True, exist_ok=True)
     group = ProcessGroup()
-    # The shared router listens on a socket only this user can reach (a secure run is
-    # its own router, on TLS).
-    directory = None if args.secure else private_directory()
+    # The shared router listens on a socket only this user can reach.
+    directory = private_directory() if shared_router else None
     try:
         endpoint = socket_endpoint(directory) if directory is not None else None
         specs = plan_runs(args, endpoint)

@@ -32,6 +32,7 @@ from rich.table import Table
 
 from deploy import zenoh_acl
 from deploy.credentials import RunNetwork
+from deploy.inprocess import add_engine_option, refuse_unsupported, run_inprocess
 from deploy.processes import Child, ProcessGroup, free_port, python_module, wait_for_port
 from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary, describe
 from deploy.watchdog import Watchdog, default_stall_window
@@ -180,6 +181,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="number of sites n (default: 10)",
     )
     swarm.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
+    add_engine_option(swarm)
     swarm.add_argument(
         "--run-id",
         type=cliargs.name,
@@ -329,6 +331,8 @@ NOT_CONFIG = {
 
 
 def plan_from_args(args: argparse.Namespace) -> RunPlan:
+    if args.engine == "inprocess":
+        refuse_unsupported(args)
     controller = controller_config(args)  # alpha and threshold together; ValueError: usage
     faults = sorted(
         [Fault(robot, "kill", at) for robot, at in args.kill]
@@ -961,6 +965,8 @@ class Ending:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.engine == "inprocess":
+        return run_inprocess(args)
     try:
         plan = plan_from_args(args)
     except ValueError as error:
