@@ -7,7 +7,9 @@ Unix socket in a private directory, ``--parallel`` at a time. With ``--secure`` 
 is its own TLS router with its own certificates and access control instead (a shared
 router would have to trust every run's certificate authority). A progress bar follows
 the runs; at the end ``swarm report`` turns the recordings into the figures and the
-summary table in DIR. Each run's stderr and JSON summary are kept in ``DIR/logs/``.
+summary table in DIR. With ``--engine inprocess`` each run is ``swarm run --engine
+inprocess`` (one process, no router), ``--parallel`` of them at a time. Each run's stderr
+and JSON summary are kept in ``DIR/logs/``.
 
 Every run ends in a stated way (its summary's ``ended``): each gets ``--wall-timeout``
 (the experiment's ``--run-timeout``) and its own stall watchdog, and the report counts

@@ -452,8 +452,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--trace",
         metavar="PATH",
         default=None,
-        help="write a timeline of every control step to PATH as JSON lines "
-        "(docs/performance.md)",
+        help="write a timeline of every control step to PATH as JSON lines (docs/performance.md)",
     )
     cliargs.add_zenoh_options(parser)
     cliargs.add_log_level(parser)
