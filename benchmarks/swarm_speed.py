@@ -33,6 +33,7 @@ import argparse
 import json
 import os
 import platform
+import shlex
 import statistics
 import subprocess
 import sys
@@ -236,6 +237,7 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
         f"{'floor':>7} {'dist/floor':>10} {'same results':>12}"
     )
     rows = []
+    loads = [os.getloadavg()[0]]  # how busy the machine was: said under the table
     for robots in args.engines:
         limit = [] if robots <= args.consensus_max else ["--timeout", str(args.scale_sim)]
         options = [*limit, *extra]
@@ -256,11 +258,13 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
             f"{ratio:>6.2f} {floor_text:>7} {to_floor:>10} {'yes' if same else 'NO':>12}",
             flush=True,
         )
+        loads.append(os.getloadavg()[0])
         rows.append(
             f"| {robots} robots, seed {seed}, {ended} ({distributed['sim_time_s']:.0f} s) "
             f"| {fast:.1f}x | {slow:.1f}x | **{ratio:.2f}** | {floor_text} | {to_floor} | "
             f"{'yes' if same else 'no'} |"
         )
+    args.loads = (min(loads), max(loads))
     return rows
 
 
@@ -277,11 +281,13 @@ def write_readme(path: Path, rows: list[str], command: str, args: argparse.Names
         "|---|---|---|---|---|---|---|",
         *rows,
     ]
-    cores = os.cpu_count()
+    low, high = args.loads
     note = (
-        f"Written by `{command}` on {platform.machine()} Linux with {cores} cores, "
-        f"{time.strftime('%Y-%m-%d')}; absolute real-time factors depend on the machine "
-        f"and its load, the ratios were measured in the same run. {args.machine_note}"
+        f"Written by `{command}` on {platform.machine()} Linux with {os.cpu_count()} cores, "
+        f"{time.strftime('%Y-%m-%d')}, its 1-minute load average between {low:.0f} and "
+        f"{high:.0f} while the table was measured (other jobs shared the machine). "
+        "Absolute real-time factors depend on the machine and its load; each row's ratio "
+        f"was measured in the same run. {args.machine_note}"
     ).strip()
     path.write_text(f"{head}{README_BEGIN}\n{chr(10).join(table)}\n\n{note}\n{README_END}{tail}")
     print(f"wrote the engines table into {path}")
@@ -359,7 +365,9 @@ def main() -> None:
     if args.engines:
         rows = engines(args, extra)
         if args.readme is not None:
-            command = "benchmarks/swarm_speed.py " + " ".join(sys.argv[1:])
+            shown = [arg for arg in sys.argv[1:] if arg != args.machine_note]
+            shown = [arg for arg in shown if arg != "--machine-note"]
+            command = "benchmarks/swarm_speed.py " + shlex.join(shown)
             write_readme(args.readme, rows, command, args)
 
 
