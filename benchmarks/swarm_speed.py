@@ -17,13 +17,13 @@ logic costs on top of the messaging.
         --no-floor --with-recording
     .venv/bin/python benchmarks/swarm_speed.py --robots --scale 200 500 --modes hosted
 
-The engines table (``--engines``) runs each swarm size once with ``swarm run --engine
-inprocess`` and once over Zenoh (``swarm run``), the same seed, one after the other, and
-prints both real-time factors, their ratio and the messaging floor, and whether the two
-agree robot for robot; ``--readme README.md`` also writes that table into README between
-its ``swarm_speed:engines`` markers:
+The engines table (``--engines``) runs each swarm size with ``swarm run --engine
+inprocess`` and over Zenoh (``swarm run``), the same seed, one after the other
+(``--pairs`` such pairs, alternating), and prints both real-time factors, their ratio and
+the messaging floor, and whether the two agree robot for robot; ``--readme README.md``
+also writes that table into README between its ``swarm_speed:engines`` markers:
 
-    .venv/bin/python benchmarks/swarm_speed.py --robots --scale --engines 10 100 \
+    .venv/bin/python benchmarks/swarm_speed.py --robots --scale --engines 10 100 --pairs 3 \
         --readme README.md
 """
 
@@ -94,6 +94,8 @@ def messaging_floor(robots: int, ticks: int, endpoint: str | None = None) -> flo
         deadline = time.monotonic() + 120
         while len(alive) < robots and time.monotonic() < deadline:
             time.sleep(0.05)
+        if len(alive) < robots:  # a busy machine: some never connected; no floor then
+            return 0.0
         time.sleep(0.5)
         start = time.perf_counter()
         for tick in range(ticks):
@@ -101,7 +103,8 @@ def messaging_floor(robots: int, ticks: int, endpoint: str | None = None) -> flo
             for sender in senders:
                 sender.put(payload)
             with done:
-                done.wait_for(lambda t=tick: answered.get(t, 0) >= robots, timeout=5)
+                if not done.wait_for(lambda t=tick: answered.get(t, 0) >= robots, timeout=5):
+                    return 0.0  # an echo process is gone: no floor rather than a wrong one
         return ticks / (time.perf_counter() - start)
     finally:
         for child in children:
@@ -242,27 +245,38 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
         limit = [] if robots <= args.consensus_max else ["--timeout", str(args.scale_sim)]
         options = [*limit, *extra]
         seed = args.seeds[0]
-        in_process = swarm_summary(robots, seed, args.sites, ["--engine", "inprocess", *options])
-        distributed = swarm_summary(robots, seed, args.sites, options)
-        same = results_of(in_process) == results_of(distributed)
-        fast, slow = in_process["real_time_factor"], distributed["real_time_factor"]
+        # Alternating pairs, each pair's ratio measured back to back: on a shared machine
+        # the load changes between pairs more than within one.
+        fast_runs, slow_runs, ratios, same = [], [], [], True
+        for _ in range(args.pairs):
+            in_process = swarm_summary(
+                robots, seed, args.sites, ["--engine", "inprocess", *options]
+            )
+            distributed = swarm_summary(robots, seed, args.sites, options)
+            same = same and results_of(in_process) == results_of(distributed)
+            fast_runs.append(in_process["real_time_factor"])
+            slow_runs.append(distributed["real_time_factor"])
+            ratios.append(slow_runs[-1] / fast_runs[-1])
+            loads.append(os.getloadavg()[0])
+        fast, slow = statistics.median(fast_runs), statistics.median(slow_runs)
+        ratio = statistics.median(ratios)
+        spread = f" ({min(ratios):.2f}-{max(ratios):.2f})" if len(ratios) > 1 else ""
         floor = 0.0
         if robots <= args.floor_max and not args.no_floor:
             floor = messaging_floor(robots, args.floor_ticks) * 0.1
-        ratio = slow / fast
         floor_text = f"{floor:.1f}x" if floor else "-"
         to_floor = f"{slow / floor:.2f}" if floor else "-"
         ended = "to consensus" if not limit else f"{args.scale_sim:g} s of sim time"
         print(
             f"{robots:>6} {distributed['sim_time_s']:>7.1f} {fast:>9.1f}x {slow:>10.1f}x "
-            f"{ratio:>6.2f} {floor_text:>7} {to_floor:>10} {'yes' if same else 'NO':>12}",
+            f"{ratio:>6.2f}{spread} {floor_text:>7} {to_floor:>10} "
+            f"{'yes' if same else 'NO':>12}",
             flush=True,
         )
-        loads.append(os.getloadavg()[0])
         rows.append(
             f"| {robots} robots, seed {seed}, {ended} ({distributed['sim_time_s']:.0f} s) "
-            f"| {fast:.1f}x | {slow:.1f}x | **{ratio:.2f}** | {floor_text} | {to_floor} | "
-            f"{'yes' if same else 'no'} |"
+            f"| {fast:.1f}x | {slow:.1f}x | **{ratio:.2f}**{spread} | {floor_text} | "
+            f"{to_floor} | {'yes' if same else 'no'} |"
         )
     args.loads = (min(loads), max(loads))
     return rows
@@ -286,8 +300,9 @@ def write_readme(path: Path, rows: list[str], command: str, args: argparse.Names
         f"Written by `{command}` on {platform.machine()} Linux with {os.cpu_count()} cores, "
         f"{time.strftime('%Y-%m-%d')}, its 1-minute load average between {low:.0f} and "
         f"{high:.0f} while the table was measured (other jobs shared the machine). "
-        "Absolute real-time factors depend on the machine and its load; each row's ratio "
-        f"was measured in the same run. {args.machine_note}"
+        "Absolute real-time factors depend on the machine and its load; each ratio is of "
+        "two runs measured back to back (with --pairs, the median of the pairs and their "
+        f"range). {args.machine_note}"
     ).strip()
     path.write_text(f"{head}{README_BEGIN}\n{chr(10).join(table)}\n\n{note}\n{README_END}{tail}")
     print(f"wrote the engines table into {path}")
@@ -334,6 +349,13 @@ def main() -> None:
         nargs="*",
         default=[10, 100],
         help="swarm sizes to run both in one process and over Zenoh (default: 10 100)",
+    )
+    parser.add_argument(
+        "--pairs",
+        type=int,
+        default=1,
+        help="engines: in-process and distributed runs of each size, alternating; the "
+        "table shows the medians and the range of the pairs' ratios (default: 1)",
     )
     parser.add_argument(
         "--consensus-max",
