@@ -16,12 +16,24 @@ logic costs on top of the messaging.
     .venv/bin/python benchmarks/swarm_speed.py --robots 10 --seeds 0 1 2 3 4 --scale \
         --no-floor --with-recording
     .venv/bin/python benchmarks/swarm_speed.py --robots --scale 200 500 --modes hosted
+
+The engines table (``--engines``) runs each swarm size with ``swarm run --engine
+inprocess`` and over Zenoh (``swarm run``), the same seed, one after the other
+(``--pairs`` such pairs, alternating), and prints both real-time factors, their ratio and
+the messaging floor, and whether the two agree robot for robot; ``--readme README.md``
+also writes that table into README between its ``swarm_speed:engines`` markers:
+
+    .venv/bin/python benchmarks/swarm_speed.py --robots --scale --engines 10 100 --pairs 3 \
+        --readme README.md
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import platform
+import shlex
 import statistics
 import subprocess
 import sys
@@ -29,6 +41,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -81,6 +94,8 @@ def messaging_floor(robots: int, ticks: int, endpoint: str | None = None) -> flo
         deadline = time.monotonic() + 120
         while len(alive) < robots and time.monotonic() < deadline:
             time.sleep(0.05)
+        if len(alive) < robots:  # a busy machine: some never connected; no floor then
+            return 0.0
         time.sleep(0.5)
         start = time.perf_counter()
         for tick in range(ticks):
@@ -88,13 +103,27 @@ def messaging_floor(robots: int, ticks: int, endpoint: str | None = None) -> flo
             for sender in senders:
                 sender.put(payload)
             with done:
-                done.wait_for(lambda t=tick: answered.get(t, 0) >= robots, timeout=5)
+                if not done.wait_for(lambda t=tick: answered.get(t, 0) >= robots, timeout=5):
+                    return 0.0  # an echo process is gone: no floor rather than a wrong one
         return ticks / (time.perf_counter() - start)
     finally:
         for child in children:
             child.kill()
             child.wait()
         session.close()
+
+
+def swarm_summary(robots: int, seed: int, sites: int, extra: list[str]) -> dict[str, Any]:
+    """The ``--json`` summary of one unrecorded ``swarm run`` (a result ending, or an error)."""
+    command = [
+        *(sys.executable, "-m", "deploy.cli", "run", "--robots", str(robots)),
+        *("--sites", str(sites), "--seed", str(seed), "--json", "--quiet", "--no-record"),
+        *extra,
+    ]
+    done = subprocess.run(command, capture_output=True, cwd=REPO, timeout=7200)
+    if done.returncode not in RESULT_CODES:
+        raise RuntimeError(f"swarm run failed: {done.stderr.decode()[-2000:]}")
+    return dict(json.loads(done.stdout))
 
 
 def swarm_run(
@@ -189,6 +218,99 @@ def scale_curve(args: argparse.Namespace, extra: list[str]) -> None:
             )
 
 
+README_BEGIN = "<!-- swarm_speed:engines -->"
+README_END = "<!-- /swarm_speed:engines -->"
+
+
+def results_of(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """Each robot's results, without where it was when the run stopped (over Zenoh the
+    launcher notices the last decision a few ticks late, and the robots move on)."""
+    return [{**robot, "phase": None} for robot in summary["per_robot"]]
+
+
+def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
+    """In one process against over Zenoh, per swarm size: the markdown rows."""
+    print(
+        "\nIn-process engine against the distributed swarm (lockstep, the same seed; "
+        f"sizes of {args.consensus_max} robots and fewer to consensus, larger ones for "
+        f"{args.scale_sim:g} s of sim time):"
+    )
+    print(
+        f"{'robots':>6} {'sim s':>7} {'in-process':>10} {'distributed':>11} {'ratio':>6} "
+        f"{'floor':>7} {'dist/floor':>10} {'same results':>12}"
+    )
+    rows = []
+    loads = [os.getloadavg()[0]]  # how busy the machine was: said under the table
+    for robots in args.engines:
+        limit = [] if robots <= args.consensus_max else ["--timeout", str(args.scale_sim)]
+        options = [*limit, *extra]
+        seed = args.seeds[0]
+        # Alternating pairs, each pair's ratio measured back to back: on a shared machine
+        # the load changes between pairs more than within one.
+        fast_runs, slow_runs, ratios, same, stalls = [], [], [], True, 0
+        for _ in range(args.pairs):
+            in_process = swarm_summary(
+                robots, seed, args.sites, ["--engine", "inprocess", *options]
+            )
+            distributed = swarm_summary(robots, seed, args.sites, options)
+            same = same and results_of(in_process) == results_of(distributed)
+            # A tick the world closed without a silent controller (--stall-timeout) breaks
+            # lockstep's determinism: say so when the results differ.
+            stalls += distributed["world"]["stalls"]
+            fast_runs.append(in_process["real_time_factor"])
+            slow_runs.append(distributed["real_time_factor"])
+            ratios.append(slow_runs[-1] / fast_runs[-1])
+            loads.append(os.getloadavg()[0])
+        fast, slow = statistics.median(fast_runs), statistics.median(slow_runs)
+        ratio = statistics.median(ratios)
+        spread = f" ({min(ratios):.2f}-{max(ratios):.2f})" if len(ratios) > 1 else ""
+        floor = 0.0
+        if robots <= args.floor_max and not args.no_floor:
+            floor = messaging_floor(robots, args.floor_ticks) * 0.1
+        floor_text = f"{floor:.1f}x" if floor else "-"
+        to_floor = f"{slow / floor:.2f}" if floor else "-"
+        ended = "to consensus" if not limit else f"{args.scale_sim:g} s of sim time"
+        agree = "yes" if same else f"no ({stalls} stalled ticks)"
+        print(
+            f"{robots:>6} {distributed['sim_time_s']:>7.1f} {fast:>9.1f}x {slow:>10.1f}x "
+            f"{ratio:>6.2f}{spread} {floor_text:>7} {to_floor:>10} {agree:>12}",
+            flush=True,
+        )
+        rows.append(
+            f"| {robots} robots, seed {seed}, {ended} ({distributed['sim_time_s']:.0f} s) "
+            f"| {fast:.1f}x | {slow:.1f}x | **{ratio:.2f}**{spread} | {floor_text} | "
+            f"{to_floor} | {agree} |"
+        )
+    args.loads = (min(loads), max(loads))
+    return rows
+
+
+def write_readme(path: Path, rows: list[str], command: str, args: argparse.Namespace) -> None:
+    """Replace the table between README's markers with this run's."""
+    text = path.read_text()
+    if README_BEGIN not in text or README_END not in text:
+        raise SystemExit(f"{path}: no {README_BEGIN} ... {README_END} markers")
+    head, rest = text.split(README_BEGIN, 1)
+    _, tail = rest.split(README_END, 1)
+    table = [
+        f"| swarm (lockstep, {args.sites} sites) | in one process | over Zenoh | ratio "
+        "| messaging floor | over Zenoh / floor | same per-robot results |",
+        "|---|---|---|---|---|---|---|",
+        *rows,
+    ]
+    low, high = args.loads
+    note = (
+        f"Written by `{command}` on {platform.machine()} Linux with {os.cpu_count()} cores, "
+        f"{time.strftime('%Y-%m-%d')}, its 1-minute load average between {low:.0f} and "
+        f"{high:.0f} while the table was measured (other jobs shared the machine). "
+        "Absolute real-time factors depend on the machine and its load; each ratio is of "
+        "two runs measured back to back (with --pairs, the median of the pairs and their "
+        f"range). {args.machine_note}"
+    ).strip()
+    path.write_text(f"{head}{README_BEGIN}\n{chr(10).join(table)}\n\n{note}\n{README_END}{tail}")
+    print(f"wrote the engines table into {path}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
@@ -225,6 +347,38 @@ def main() -> None:
         help="robots per process in the scale curve: 1, or the default",
     )
     parser.add_argument(
+        "--engines",
+        type=int,
+        nargs="*",
+        default=[10, 100],
+        help="swarm sizes to run both in one process and over Zenoh (default: 10 100)",
+    )
+    parser.add_argument(
+        "--pairs",
+        type=int,
+        default=1,
+        help="engines: in-process and distributed runs of each size, alternating; the "
+        "table shows the medians and the range of the pairs' ratios (default: 1)",
+    )
+    parser.add_argument(
+        "--consensus-max",
+        type=int,
+        default=100,
+        help="engines: larger swarms run for --scale-sim seconds, not to consensus",
+    )
+    parser.add_argument(
+        "--floor-max",
+        type=int,
+        default=100,
+        help="engines: no messaging floor above this many processes (default: 100)",
+    )
+    parser.add_argument(
+        "--readme", type=Path, default=None, help="write the engines table into this README"
+    )
+    parser.add_argument(
+        "--machine-note", default="", help="said of the machine under the README table"
+    )
+    parser.add_argument(
         "swarm_args", nargs=argparse.REMAINDER, help="extra `swarm run` options after --"
     )
     args = parser.parse_args()
@@ -233,6 +387,13 @@ def main() -> None:
         to_consensus(args, extra)
     if args.scale:
         scale_curve(args, extra)
+    if args.engines:
+        rows = engines(args, extra)
+        if args.readme is not None:
+            shown = [arg for arg in sys.argv[1:] if arg != args.machine_note]
+            shown = [arg for arg in shown if arg != "--machine-note"]
+            command = "benchmarks/swarm_speed.py " + shlex.join(shown)
+            write_readme(args.readme, rows, command, args)
 
 
 if __name__ == "__main__":

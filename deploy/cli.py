@@ -21,6 +21,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "run": ("deploy.launcher", "run a swarm of robot processes to consensus"),
     "report": ("deploy.report", "the paper's Section 5 figures and a summary from recordings"),
     "experiment": ("deploy.experiment", "the paper's Section 5 protocol: many runs, one report"),
+    "section5": (
+        "deploy.section5",
+        "the paper's Section 5 numbers and figures, from in-process runs (README, docs)",
+    ),
     "router": ("deploy.router", "a Zenoh router (a Python session; no zenohd needed)"),
     "view": ("viewer.replay", "replay a recording in the browser, on the live view's page"),
 }

@@ -7,7 +7,9 @@ Unix socket in a private directory, ``--parallel`` at a time. With ``--secure`` 
 is its own TLS router with its own certificates and access control instead (a shared
 router would have to trust every run's certificate authority). A progress bar follows
 the runs; at the end ``swarm report`` turns the recordings into the figures and the
-summary table in DIR. Each run's stderr and JSON summary are kept in ``DIR/logs/``.
+summary table in DIR. With ``--engine inprocess`` each run is ``swarm run --engine
+inprocess`` (one process, no router), ``--parallel`` of them at a time. Each run's stderr
+and JSON summary are kept in ``DIR/logs/``.
 
 Every run ends in a stated way (its summary's ``ended``): each gets ``--wall-timeout``
 (the experiment's ``--run-timeout``) and its own stall watchdog, and the report counts
@@ -32,6 +34,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from deploy.cli import UsageError
+from deploy.inprocess import add_engine_option
 from deploy.launcher import add_swarm_switches
 from plumbing import cliargs
 from plumbing.lifecycle import PARENT_ENV
@@ -117,6 +120,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         f"that reaches it ends as timeout (wall); one that still runs {BACKSTOP:g} s later "
         "is stopped from here (default: 1800)",
     )
+    add_engine_option(parser)
     parser.add_argument(
         "--secure",
         action="store_true",
@@ -190,6 +194,8 @@ def plan_runs(args: argparse.Namespace, endpoint: str | None) -> list[RunSpec]:
     network = ["--connect", endpoint] if endpoint is not None else []
     if getattr(args, "secure", False):
         network.append("--secure")
+    if getattr(args, "engine", "zenoh") != "zenoh":
+        network += ["--engine", args.engine]
     specs = []
     for robots in args.robots:
         for sites in args.sites:
@@ -373,8 +379,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} exists and is not a directory")
+    # In-process runs need no network; a secure run is its own TLS router.
+    shared_router = args.engine == "zenoh" and not args.secure
     # The shared router's socket does not exist yet: check the runs with a stand-in.
-    planned = plan_runs(args, None if args.secure else "unixsock-stream/router.sock")
+    planned = plan_runs(args, "unixsock-stream/router.sock" if shared_router else None)
     validate_run_options(planned[0])
     taken = sorted(str(spec.recording) for spec in planned if spec.recording.exists())
     if taken:
@@ -385,9 +393,8 @@ def run(args: argparse.Namespace) -> int:
     logs = args.out / "logs"
     logs.mkdir(parents=True, exist_ok=True)
     group = ProcessGroup()
-    # The shared router listens on a socket only this user can reach (a secure run is
-    # its own router, on TLS).
-    directory = None if args.secure else private_directory()
+    # The shared router listens on a socket only this user can reach.
+    directory = private_directory() if shared_router else None
     try:
         endpoint = socket_endpoint(directory) if directory is not None else None
         specs = plan_runs(args, endpoint)

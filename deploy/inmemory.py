@@ -10,10 +10,11 @@ from __future__ import annotations
 import random
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary
 from deploy.watchdog import Watchdog, default_stall_window
+from deploy.wire_tap import WireTap, with_rejects
 from nest_beacon.beacon import Beacon, BeaconConfig
 from robot_agent import byzantine, protocol
 from robot_agent.controller import Controller, ControllerConfig
@@ -24,6 +25,28 @@ from world_server.world import Transmission, World, WorldConfig
 # The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
 # world/state (the world server's default --state-every): both see the same samples.
 POSES_EVERY = 10
+
+# Why a run was stopped from outside, and for a timeout which limit: ("timeout", "wall").
+Halt = tuple[Stop, Literal["sim", "wall"] | None]
+
+
+@dataclass(frozen=True)
+class Progress:
+    sim_time: float
+    decided: int
+    trips: int
+
+
+@dataclass
+class EngineHooks:
+    """What ``swarm run --engine inprocess`` adds to a bare run (every part optional)."""
+
+    halt: Callable[[], Halt | None] | None = None  # asked every tick: stop now?
+    progress: Callable[[Progress], None] | None = None  # told every ``poses_every`` ticks
+    wire: WireTap | None = None  # every message as the processes would publish it
+    wall_clock: Callable[[], float] | None = None  # measures wall_time_s when given
+    config: dict[str, Any] = field(default_factory=dict)  # the summary's "config"
+    poses_every: int = POSES_EVERY  # swarm run's --state-every: how often the watchdog looks
 
 
 @dataclass
@@ -44,6 +67,7 @@ def run_in_memory(
     on_tick: Callable[[World], None] | None = None,
     controller_factory: type[Controller] = Controller,
     byzantine_robots: Mapping[int, byzantine.Behaviour] | None = None,
+    hooks: EngineHooks | None = None,
 ) -> dict[str, Any]:
     """Run until every robot decided, the watchdog finds the run stalled (no undecided
     robot made progress for ``stall_window`` sim seconds; default: ``default_stall_window``
@@ -54,8 +78,11 @@ def run_in_memory(
     Controller); ``on_tick`` sees the world before each tick closes.
     ``byzantine_robots`` makes those robots misbehave as ``swarm run --byzantine`` does (a
     liar without a site claims ``byzantine.default_liar_site``); the run ends when every
-    honest robot has decided.
+    honest robot has decided. ``hooks``: progress, an outside stop, recording, wall time.
     """
+    hooks = hooks or EngineHooks()
+    wire = hooks.wire
+    started = hooks.wall_clock() if hooks.wall_clock is not None else 0.0
     world = World(world_config)
     beacon_config = beacon_config or BeaconConfig()
     beacon = Beacon(
@@ -90,13 +117,20 @@ def run_in_memory(
     deliveries: dict[str, list[tuple[str, bytes]]] = {}
     frames: dict[int, bytes] = {}
     stop: Stop = "decided"
+    timeout_kind: Literal["sim", "wall"] | None = None
     while True:
         acts: dict[int, protocol.Act] = {}
         transmissions: list[Transmission] = []
-        for robot_id, robot in robots.items():
+        senses = []  # the world's readings of the tick, taken before any robot answers
+        for robot_id in robots:
+            rx = len(deliveries.get(protocol.radio_name(robot_id), []))
+            senses.append((robot_id, world.sense(robot_id, rx, robot_id in frames)))
+        if wire is not None:
+            wire.tick_opened(world, senses, frames)
+        for robot_id, sense in senses:
+            robot = robots[robot_id]
             name = protocol.radio_name(robot_id)
             radio = deliveries.get(name, [])
-            sense = world.sense(robot_id, len(radio), robot_id in frames)
             answer = answer_tick(
                 robot.controller,
                 sense,
@@ -108,37 +142,54 @@ def run_in_memory(
             robot.seq = answer.next_seq
             acts[robot_id] = answer.act
             transmissions += [Transmission(name, seq, data) for seq, data in answer.transmissions]
+            status = None
             if robot.controller.take_status_change():
-                status = robot.controller.status(world.tick)
+                status = with_rejects(robot.controller.status(world.tick), robot.rejects.count)
                 robot.record.update(status)
                 watchdog.status(status)
-        for message in beacon.on_tick(world.t):
+            if wire is not None:
+                wire.robot_answered(robot_id, world.tick, answer, status)
+        beacon_messages = beacon.on_tick(world.t)
+        for message in beacon_messages:
             transmissions.append(
                 Transmission(beacon_config.name, message.seq, protocol.encode(message))
             )
+        if wire is not None:
+            wire.beacon_answered(beacon_config.name, world.tick, beacon_messages)
         if on_tick is not None:
             on_tick(world)
-        if world.tick % POSES_EVERY == 0:
+        if world.tick % hooks.poses_every == 0:
             watchdog.poses(world.t, _positions(world))
+            if hooks.progress is not None:
+                hooks.progress(_progress(world, robots))
         if all(robot.controller.decided_site is not None for robot in honest):
             break
         if world.t >= timeout:
-            stop = "timeout"
+            stop, timeout_kind = "timeout", "sim"
             break
         if watchdog.stalled(world.t):
             stop = "stalled"
             break
+        halted = hooks.halt() if hooks.halt is not None else None
+        if halted is not None:
+            stop, timeout_kind = halted
+            break
         result = world.advance(acts, transmissions)
+        if wire is not None:
+            wire.delivered(result.tick, result.deliveries)
         deliveries = {
             receiver: [(item.sender, item.payload) for item in items]
             for receiver, items in result.deliveries.items()
         }
         frames = result.frames
     for robot in robots.values():
-        status = robot.controller.status(world.tick)
+        status = with_rejects(robot.controller.status(world.tick), robot.rejects.count)
         robot.record.update(status)
         watchdog.status(status)
     watchdog.poses(world.t, _positions(world))
+    if wire is not None:
+        wire.state(world)  # as the world server does when it stops
+    wall = hooks.wall_clock() - started if hooks.wall_clock is not None else 0.0
     state = world.state()
     return build_summary(
         RunOutcome(
@@ -148,20 +199,26 @@ def run_in_memory(
             seed=world_config.seed,
             best_site=world.layout.best_site,
             sim_time_s=world.t,
-            wall_time_s=0.0,
+            wall_time_s=wall,
             timed_out=stop == "timeout",
             radio=state.radio,
             world_rejected=0,
             stalls=0,
             observer_rejected=0,
-            config={},
+            config=hooks.config,
             stop=stop,
-            timeout_kind="sim" if stop == "timeout" else None,
+            timeout_kind=timeout_kind if stop == "timeout" else None,
             stuck=watchdog.stuck(),
             byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
         ),
         [robot.record for robot in robots.values()],
     )
+
+
+def _progress(world: World, robots: Mapping[int, _Robot]) -> Progress:
+    decided = sum(1 for robot in robots.values() if robot.record.decided_site is not None)
+    trips = sum(robot.record.status.trips for robot in robots.values() if robot.record.status)
+    return Progress(world.t, decided, trips)
 
 
 def _positions(world: World) -> list[tuple[int, float, float]]:

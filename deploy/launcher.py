@@ -32,6 +32,7 @@ from rich.table import Table
 
 from deploy import zenoh_acl
 from deploy.credentials import RunNetwork
+from deploy.inprocess import add_engine_option, refuse_unsupported, run_inprocess
 from deploy.processes import Child, ProcessGroup, free_port, python_module, wait_for_port
 from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary, describe
 from deploy.watchdog import Watchdog, default_stall_window
@@ -180,6 +181,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="number of sites n (default: 10)",
     )
     swarm.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
+    add_engine_option(swarm)
     swarm.add_argument(
         "--run-id",
         type=cliargs.name,
@@ -264,6 +266,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     output.add_argument("--quiet", action="store_true", help="no progress display")
     output.add_argument("--verbose", action="store_true", help="echo the processes' logs on stderr")
+    output.add_argument(
+        "--trace",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="write each tick's timeline to DIR: world.jsonl from the world server, "
+        "robot-<ids>.jsonl from each robot process (benchmarks/tick_timeline.py reads them; "
+        "docs/performance.md)",
+    )
     add_view_options(parser.add_argument_group("watching"))
     parser.set_defaults(forwarded=switches)
 
@@ -300,12 +311,28 @@ class RunPlan:
     wall_timeout: float | None = None
     keyed: bool = True  # run keys: every message tagged and checked
     secure: bool = False  # TLS and access control
+    trace: Path | None = None  # --trace DIR: the world's and robot hosts' tick timelines
+
+    def trace_args(self, process: str) -> list[str]:
+        """``--trace DIR/<process>.jsonl`` for a process, when tracing."""
+        return [] if self.trace is None else ["--trace", str(self.trace / f"{process}.jsonl")]
 
 
-NOT_CONFIG = {"module", "command", "json", "quiet", "verbose", "forwarded", *VIEW_OPTIONS}
+NOT_CONFIG = {
+    "module",
+    "command",
+    "json",
+    "quiet",
+    "verbose",
+    "trace",
+    "forwarded",
+    *VIEW_OPTIONS,
+}
 
 
 def plan_from_args(args: argparse.Namespace) -> RunPlan:
+    if args.engine == "inprocess":
+        refuse_unsupported(args)
     controller = controller_config(args)  # alpha and threshold together; ValueError: usage
     faults = sorted(
         [Fault(robot, "kill", at) for robot, at in args.kill]
@@ -332,6 +359,11 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     record = None if args.no_record else Path(args.record or f"runs/{run_id}.mcap")
     if record is not None:
         check_recording_path(record)
+    if args.trace is not None:
+        try:  # now, so that a bad --trace is a usage error, not a crashed world server
+            args.trace.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise ValueError(f"--trace {args.trace}: {error.strerror}") from None
     arena_radius = make_layout(args.sites, args.robots, args.seed).arena_radius
     stall_window = args.stall_window or default_stall_window(
         arena_radius,
@@ -392,6 +424,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         wall_timeout=args.wall_timeout,
         keyed=not args.no_keys,
         secure=args.secure,
+        trace=args.trace,
     )
 
 
@@ -529,7 +562,12 @@ class Swarm:
         )
         world = self.group.start(
             "world",
-            python_module("world_server.server", *plan.world_args, *network.world_args()),
+            python_module(
+                "world_server.server",
+                *plan.world_args,
+                *network.world_args(),
+                *plan.trace_args("world"),
+            ),
             env=network.env(),
         )
         self.world = world
@@ -733,6 +771,7 @@ class Swarm:
         assert network is not None
         # In secure mode each hosted robot's session presents its own certificate: '{id}'.
         argv += [*self.plan.robot_args, *network.client_args("robot-{id}")]
+        argv += self.plan.trace_args(name)
         # Only the keys of its own robots: whatever it says can only be in their names.
         env = network.env(auth.robot_identity(robot) for robot in robots)
         if self.plan.spawn == "fork":
@@ -928,6 +967,8 @@ class Ending:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.engine == "inprocess":
+        return run_inprocess(args)
     try:
         plan = plan_from_args(args)
     except ValueError as error:

@@ -31,6 +31,7 @@ import zenoh
 from plumbing import cliargs, run_keys
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
+from plumbing.trace import TraceWriter, now, open_trace
 from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import certificate_name, open_from_args, reliable_publisher
 from robot_agent import auth, byzantine, guard, protocol
@@ -63,6 +64,7 @@ class Event:
     kind: str  # sense | camera | rx | world | no-world | stop
     payload: bytes = b""
     attachment: bytes | None = None
+    arrived: float = 0.0  # monotonic time the callback took it (only when tracing)
 
 
 @dataclass
@@ -72,6 +74,7 @@ class _TickInputs:
     frame: bytes | None = None
     size: int = 0  # bytes held for this tick
     messages: int = 0
+    arrived: float = 0.0  # when its last input reached the callback (only when tracing)
 
 
 class RobotNode:
@@ -87,6 +90,7 @@ class RobotNode:
         inbox: BoundedInbox[Event],
         world: protocol.WorldInfo,
         keyring: auth.Keyring | None = None,
+        trace: TraceWriter | None = None,
     ) -> None:
         self.robot_id = robot_id
         self.identity = auth.robot_identity(robot_id)
@@ -108,6 +112,8 @@ class RobotNode:
         self.last_t = 0.0
         self.worlds = guard.WorldFollower()  # the world server's instance (its Zenoh id)
         self._declared: list[object] = []
+        self.trace = trace  # --trace: one line per step (plumbing/trace.py)
+        self._arrived = 0.0  # the arrival time of the event being handled
 
     @property
     def last_tick(self) -> int:
@@ -123,7 +129,8 @@ class RobotNode:
                 payload = sample.payload.to_bytes()
                 extra = attachment.to_bytes() if attachment is not None else None
                 size = len(payload) + len(extra or b"")
-                self.inbox.put(Event(robot, kind, payload, extra), size, robot)
+                arrived = now() if self.trace is not None else 0.0
+                self.inbox.put(Event(robot, kind, payload, extra, arrived), size, robot)
 
             return callback
 
@@ -163,6 +170,7 @@ class RobotNode:
         key = {"sense": "sense", "rx": "radio/rx", "camera": "camera"}.get(event.kind)
         if key is None:
             return
+        self._arrived = event.arrived
         key_expr = {
             "sense": self.keys.sense,
             "rx": self.keys.radio_rx,
@@ -217,6 +225,7 @@ class RobotNode:
             self._reject(key, protocol.ProtocolError(refused))
             return False
         inputs = self.pending.setdefault(tick, _TickInputs())
+        inputs.arrived = max(inputs.arrived, self._arrived)
         inputs.size += size
         inputs.messages += 1
         self.pending_bytes += size
@@ -289,6 +298,7 @@ class RobotNode:
     # --- one control step ----------------------------------------------------------
 
     def _step(self, sense: protocol.Sense, inputs: _TickInputs) -> None:
+        handled = now() if self.trace is not None else 0.0
         if self.time_offset:
             sense = msgspec.structs.replace(sense, t=sense.t + self.time_offset)
         self.last_t = sense.t
@@ -304,6 +314,14 @@ class RobotNode:
         self._act.put(act, attachment=self._seal(self._act_key, act))
         self.seq = answer.next_seq
         self.ticks.last = sense.tick
+        if self.trace is not None:
+            self.trace.write(
+                robot=self.robot_id,
+                tick=sense.tick,
+                arrived=round(inputs.arrived, 6),
+                handled=round(handled, 6),
+                answered=round(now(), 6),
+            )
         if self.controller.take_status_change():
             self._publish_status(sense.tick)
 
@@ -430,6 +448,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_controller_options(parser)
     add_byzantine_option(parser)
+    parser.add_argument(
+        "--trace",
+        metavar="PATH",
+        default=None,
+        help="write a timeline of every control step to PATH as JSON lines (docs/performance.md)",
+    )
     cliargs.add_zenoh_options(parser)
     cliargs.add_log_level(parser)
     return parser
@@ -462,6 +486,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         signal.signal(signum, lambda *_: inbox.put(Event(-1, "stop")))
     sessions: list[zenoh.Session] = []
     nodes: list[RobotNode] = []
+    trace = open_trace(args.trace)
     try:
         for requested in args.ids:
             session = open_from_args(args, requested)
@@ -489,6 +514,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 inbox=inbox,
                 world=info,
                 keyring=keyring.only([identity]) if keyring is not None else None,
+                trace=trace,
             )
             node.start()
             nodes.append(node)
@@ -502,6 +528,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             node.close()
         for session in sessions:
             session.close()
+        if trace is not None:
+            trace.close()
     return 0
 
 

@@ -29,6 +29,7 @@ import zenoh
 from plumbing import cliargs, run_keys
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
+from plumbing.trace import TraceWriter, now, open_trace
 from plumbing.zenoh_session import (
     open_from_args,
     reliable_publisher,
@@ -59,6 +60,7 @@ class Event:
     payload: bytes = b""
     attachment: bytes | None = None
     query: Any = None
+    arrived: float = 0.0  # monotonic time the callback took it (only when tracing)
 
 
 @dataclass
@@ -87,6 +89,7 @@ class WorldServer:
         expect_beacons: int = 0,
         state_every: int = 10,
         keyring: auth.Keyring | None = None,
+        trace: TraceWriter | None = None,
     ) -> None:
         self.session = session
         self.world = world
@@ -111,6 +114,8 @@ class WorldServer:
         self._info_bytes = protocol.encode(world.info)
         self._sense_publishers: dict[int, zenoh.Publisher] = {}
         self._declared: list[Any] = []
+        self.trace = trace  # --trace: one line per tick (plumbing/trace.py)
+        self._tick_trace: dict[str, Any] = {}
         # Built once: every act and radio message of every tick goes through it.
         self._handlers: dict[str, Callable[[Event], None]] = {
             "act": self._handle_act,
@@ -131,7 +136,9 @@ class WorldServer:
             payload = sample.payload.to_bytes()
             extra = attachment.to_bytes() if attachment is not None else None
             size = len(payload) + len(extra or b"")
-            self.inbox.put(Event(kind, str(sample.key_expr), payload, extra), size, "arrival")
+            arrived = now() if self.trace is not None else 0.0
+            event = Event(kind, str(sample.key_expr), payload, extra, arrived=arrived)
+            self.inbox.put(event, size, "arrival")
 
         return callback
 
@@ -308,6 +315,8 @@ class WorldServer:
         self.counters.missed.pop(f"robot/{robot}", None)  # it is alive: wait for it again
         if self.barrier.answer(act.tick, f"robot/{robot}", act.radio_tx):
             self.acts[robot] = act
+            if self.trace is not None:
+                self._trace_answer(event, f"robot/{robot}")
         else:
             self._unexpected_answer(event.key, act.tick)
 
@@ -330,6 +339,13 @@ class WorldServer:
         self.counters.missed.pop(f"beacon/{name}", None)
         if self.lockstep and not self.barrier.answer(ack.tick, f"beacon/{name}", ack.radio_tx):
             self._unexpected_answer(event.key, ack.tick)
+        elif self.trace is not None:
+            self._trace_answer(event, f"beacon/{name}")
+
+    def _trace_answer(self, event: Event, who: str) -> None:
+        """Note when an answer reached the callback and this thread (``--trace``)."""
+        answers = self._tick_trace.setdefault("answers", [])
+        answers.append([who, round(event.arrived, 6), round(now(), 6)])
 
     def _unexpected_answer(self, key: str, tick: int) -> None:
         """An answer the barrier did not take: stale, repeated, or from a newcomer (late),
@@ -495,7 +511,9 @@ class WorldServer:
             )
 
     def _close_tick(self) -> None:
+        started = now() if self.trace is not None else 0.0
         result = self.world.advance(self.acts, self.transmissions)
+        advanced = now() if self.trace is not None else 0.0
         self.transmissions = []
         self.sent_this_tick = {}
         self.seqs_this_tick = set()
@@ -521,9 +539,17 @@ class WorldServer:
                 )
                 attachment = self._seal(receiver, key, delivery.payload, protocol.encode(meta))
                 reliable_put(self.session, key, delivery.payload, attachment)
+        if self.trace is not None:
+            self.trace.write(
+                **self._tick_trace,
+                close_start=round(started, 6),
+                advanced=round(advanced, 6),
+                delivered=round(now(), 6),
+            )
         self._open_tick(result.tick, rx_counts, result.frames)
 
     def _open_tick(self, tick: int, rx_counts: dict[str, int], frames: dict[int, bytes]) -> None:
+        opening = now() if self.trace is not None else 0.0
         spec = self.world.config.camera
         for robot, frame in frames.items():
             meta = protocol.CameraMeta(
@@ -564,6 +590,15 @@ class WorldServer:
         )
         if tick % self.state_every == 0:
             self._publish_state()
+        if self.trace is not None:
+            self._tick_trace = {
+                "tick": tick,
+                "robots": len(robots),
+                "frames": len(frames),
+                "rx": sum(rx_counts.values()),
+                "open_start": round(opening, 6),
+                "opened": round(now(), 6),
+            }
 
     def _publish_state(self) -> None:
         self._take_dropped()
@@ -621,6 +656,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="wall seconds to wait for the expected robots (default: 60)",
     )
     add_world_options(parser)
+    parser.add_argument(
+        "--trace",
+        metavar="PATH",
+        default=None,
+        help="write a timeline of every tick to PATH as JSON lines: when it opened, when "
+        "each answer arrived, how long the world's own work took (docs/performance.md)",
+    )
     cliargs.add_zenoh_options(parser, default_mode="router")
     cliargs.add_log_level(parser)
     return parser
@@ -659,6 +701,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             expect_beacons=args.beacons,
             state_every=args.state_every,
             keyring=keyring,
+            trace=open_trace(args.trace),
         )
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: server.stop())
@@ -675,6 +718,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         worker.start()
         while worker.is_alive():
             worker.join(0.2)
+        if server.trace is not None:
+            server.trace.close()
         return thread_result[0] if thread_result else 1
 
 

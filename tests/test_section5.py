@@ -1,0 +1,126 @@
+"""The published Section 5 (README.md, docs/section5.md, the figures' data) is what the
+code gives: ``swarm section5 --check`` in a test, and the checks it is made of."""
+
+from __future__ import annotations
+
+import copy
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import pytest
+from swarm_helpers import REPO
+
+from deploy import section5
+from deploy import section5_tables as tables
+from deploy.cli import main
+
+
+def _published() -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    data = json.loads((REPO / section5.RUNS_FILE).read_text())
+    return data["meta"], data["runs"]
+
+
+def _paper_seeds(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    return [record for record in runs if record["seed"] < tables.PAPER_SEEDS]
+
+
+def _copy_published(into: Path) -> Path:
+    """The published files in a scratch repository, to be spoiled by a test."""
+    for relative in section5.published_paths():
+        source = REPO / relative
+        if source.exists() and source.suffix in (".json", ".md"):
+            (into / relative).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy(source, into / relative)
+    return into
+
+
+@pytest.mark.timeout(900)
+def test_published_section5_is_what_the_code_gives() -> None:
+    """Seeds 0-9 of both variants (60 in-process runs) against everything published."""
+    fresh = section5.simulate(section5.tasks_for(tables.PAPER_SEEDS), parallel=2)
+    assert len(fresh) == 2 * len(tables.SITES) * tables.PAPER_SEEDS
+    assert section5.check_all(REPO, fresh) == []
+
+
+def test_check_finds_a_run_that_changed(tmp_path: Path) -> None:
+    root = _copy_published(tmp_path)
+    _, runs = _published()
+    fresh = copy.deepcopy(_paper_seeds(runs))
+    assert section5.check_all(root, fresh) == []
+    changed = next(r for r in fresh if r["variant"] == "default" and r["n"] == 10)
+    changed["steps"] = [step + 1 for step in changed["steps"]]
+    problems = section5.check_all(root, fresh)
+    # The run itself, both figures' data (fig5 only through nothing: pools are unchanged),
+    # and the tables that show its steps.
+    assert any(problem.startswith("run ('default', 10, 0)") for problem in problems)
+    assert "docs/fig4.json differs from the runs (or is missing)" in problems
+    assert "docs/fig5.json differs from the runs (or is missing)" not in problems
+    assert any("README.md: block 'summary' differs" in problem for problem in problems)
+    assert any("docs/section5.md: block 'runs' differs" in problem for problem in problems)
+
+
+def test_check_finds_an_edited_table_and_missing_data(tmp_path: Path) -> None:
+    root = _copy_published(tmp_path)
+    _, runs = _published()
+    fresh = _paper_seeds(runs)
+    readme = root / "README.md"
+    readme.write_text(readme.read_text().replace("seeds 0-9: within n/2", "seeds 0-9: ok"))
+    (root / "docs" / "fig5-linger.json").unlink()
+    problems = section5.check_all(root, fresh)
+    assert len(problems) == 2
+    assert problems[0] == "docs/fig5-linger.json differs from the runs (or is missing)"
+    assert problems[1].startswith("README.md: block 'summary' differs")
+
+
+def test_blocks_are_replaced_between_their_markers() -> None:
+    text = (
+        "before\n" + section5.begin_marker("x") + "\nold\n" + section5.end_marker("x") + "\nafter"
+    )
+    replaced = section5.replace_block(text, "x", "new\nlines")
+    assert section5.read_block(replaced, "x") == "new\nlines"
+    assert replaced.startswith("before\n") and replaced.endswith("\nafter")
+    with pytest.raises(ValueError, match="no block 'y'"):
+        section5.replace_block(text, "y", "new")
+
+
+def test_figure_data_is_what_the_tables_count() -> None:
+    meta, runs = _published()
+    data = tables.figure_data(runs, "default", 4)
+    assert [panel["n"] for panel in data["panels"]] == list(tables.SITES)
+    for panel in data["panels"]:
+        assert [run["seed"] for run in panel["runs"]] == list(range(tables.PAPER_SEEDS))
+        within = sum(1 for run in panel["runs"] if max(run["values"]) <= panel["n"] / 2)
+        chosen = tables.select(runs, "default", panel["n"], tables.PAPER_SEEDS)
+        assert within == tables._within(chosen, panel["n"])[0]
+    assert meta["robots"] == tables.ROBOTS
+
+
+def test_swarm_steps_is_the_last_robot_and_only_for_consensus() -> None:
+    record = {"ended": "consensus", "steps": [2, 5, 3], "pools": [[1], [2], [3]]}
+    assert tables.swarm_steps(record) == 5
+    assert tables.swarm_steps(record | {"ended": "stalled"}) is None
+    assert tables.swarm_steps(record | {"steps": [2, None, 3]}) is None
+
+
+def test_cli_needs_the_repository(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as raised:
+        main(["section5", "--check", "--root", str(tmp_path)])
+    assert raised.value.code == 2
+    assert "has no README.md and docs/section5.md" in capsys.readouterr().err
+
+
+def test_render_rewrites_the_blocks_from_the_published_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--render`` runs nothing: it puts back what the runs file says."""
+    monkeypatch.setattr(section5, "plot_all", lambda root, records: [])  # PNGs: not compared
+    root = _copy_published(tmp_path)
+    readme = root / "README.md"
+    published = readme.read_text()
+    readme.write_text(published.replace("seeds 0-9: within n/2", "seeds 0-9: ok"))
+    assert main(["section5", "--render", "--root", str(root)]) == 0
+    assert readme.read_text() == published
+    _, runs = _published()
+    assert section5.check_all(root, _paper_seeds(runs)) == []
