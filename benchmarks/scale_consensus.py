@@ -266,7 +266,14 @@ def plot(runs: Sequence[Run], path: Path) -> None:
         ax.plot([index] * len(times), times, "o", color="tab:blue", alpha=0.5, ms=4)
         failed = [run for run in runs if run.robots == size and not run.consensus]
         if failed:
-            ax.annotate(f"{len(failed)} without consensus", (index, 0), ha="center", color="red")
+            ax.annotate(
+                f"{len(failed)} without\nconsensus",
+                (index, 0),
+                ha="center",
+                va="bottom",
+                color="red",
+                fontsize=8,
+            )
     ax.set_xlabel("robots (10 sites; arena and nest grow with the swarm)")
     ax.set_ylabel("sim time to consensus (s)")
     ax.set_title("When the last robot decided, per seed (box: quartiles, whiskers: range)")
@@ -375,19 +382,32 @@ def render_readme_block(runs: Sequence[Run]) -> str:
     in_process = [run for run in runs if run.mode == "in-process"]
     zenoh = [run for run in runs if run.mode == "zenoh"]
     twins = {(run.robots, run.seed): run for run in in_process}
-    same = [
-        run
-        for run in zenoh
-        if (twin := twins.get((run.robots, run.seed))) is not None
-        and (twin.sim_time_s, twin.slowest_steps) == (run.sim_time_s, run.slowest_steps)
+    same, different = [], []
+    for run in zenoh:
+        twin = twins.get((run.robots, run.seed))
+        if twin is not None:
+            agree = (twin.sim_time_s, twin.slowest_steps) == (run.sim_time_s, run.slowest_steps)
+            (same if agree else different).append(f"{run.robots} robots seed {run.seed}")
+    unfinished = [
+        f"{run.robots} robots seed {run.seed} ({run.ended or 'gave up'}, {run.undecided} undecided)"
+        for run in in_process
+        if not run.consensus
     ]
-    checked = ", ".join(f"{run.robots} robots seed {run.seed}" for run in same) or "none"
-    return (
-        per_size(in_process)
-        + "\n\nIn one process, 10 sites, default settings, lockstep; wall times on a shared "
-        "2-core machine. Over Zenoh (`swarm run`), the same sim time and steps as in one "
-        f"process: {checked}. Every run: [docs/scale.md](docs/scale.md)."
+    lines = [
+        per_size(in_process),
+        "",
+        "In one process, 10 sites, default settings, lockstep; wall times on a shared 2-core "
+        "machine.",
+    ]
+    if unfinished:
+        lines.append(f"Not in consensus: {', '.join(unfinished)}.")
+    lines.append(
+        "Over Zenoh (`swarm run`), the same sim time and steps as in one process: "
+        f"{', '.join(same) or 'none'}"
+        + (f"; different: {', '.join(different)}" if different else "")
+        + ". Every run: [docs/scale.md](docs/scale.md)."
     )
+    return "\n".join(lines)
 
 
 def write_doc(runs: Sequence[Run], before: Sequence[Run], path: Path) -> None:
