@@ -108,7 +108,8 @@ def run_in_memory(
         stall_window = default_stall_window(
             world.layout.arena_radius,
             world_config.spec.max_wheel_speed,
-            controller_config.travel_timeout,
+            # The longest leg a robot may take before it gives up: across the arena.
+            controller_config.leg_allowance(2 * world.layout.arena_radius),
             beacon_config.outages,
         )
     watchdog = Watchdog(robots, stall_window, body_length=2 * world_config.spec.radius)

@@ -209,9 +209,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="SIM_SECONDS",
         help="end the run as stalled when no undecided robot made progress (a leg, a "
-        "comparison, a pooling, or a body length of travel) for this much sim time "
-        "(default: twice the controller's travel timeout, plus two arena crossings at "
-        "full speed, plus any --beacon-outage)",
+        "comparison, a pooling, or two body lengths of travel) for this much sim time "
+        "(default: twice the time a robot may take for a leg across the arena, plus two "
+        "arena crossings at full speed, plus any --beacon-outage)",
     )
     switches = add_swarm_switches(parser)
     processes = parser.add_argument_group("processes")
@@ -364,10 +364,12 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
             args.trace.mkdir(parents=True, exist_ok=True)
         except OSError as error:
             raise ValueError(f"--trace {args.trace}: {error.strerror}") from None
+    arena_radius = make_layout(args.sites, args.robots, args.seed).arena_radius
     stall_window = args.stall_window or default_stall_window(
-        make_layout(args.sites, args.robots, args.seed).arena_radius,
+        arena_radius,
         EpuckSpec().max_wheel_speed,
-        controller.travel_timeout,
+        # The longest leg a robot may take before it gives up: across the arena.
+        controller.leg_allowance(2 * arena_radius),
         parse_outages(args.beacon_outage),
     )
     forwarded: ForwardedOptions = args.forwarded

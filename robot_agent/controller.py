@@ -27,8 +27,11 @@ would wall them in (with a hundred robots it did, and the swarm never finished).
 are ``park_spacing`` apart along the wall, outside a corridor of ``park_corridor`` either
 side of every site; robot k takes the k-th slot nearest its site, so no two robots ever
 want the same slot and none has to pass another to reach its own. When the wall is
-full, further slots lie on rings further in, spaced wider so the outer ones stay
-reachable.
+full (about 180 robots with 10 sites), further slots lie on rings further in, each a
+free lane of ``park_lane`` in from the robots parked on the previous one and with that
+lane between its own robots: whichever slots are taken, every slot and every free spot
+among them stays joined to the interior by paths wide enough for the navigator, so no
+robot, parking or passing, can be walled in (``parking_rings``).
 """
 
 from __future__ import annotations
@@ -69,9 +72,11 @@ class ControllerConfig:
     stall_timeout: float = 4.0  # seconds without progress near a goal -> take it as reached
     near_distance: float = 0.2  # metres: how near a stalled robot must be to sense from there
     travel_timeout: float = 120.0  # seconds for a leg to a site (or parking) before giving up
+    travel_crawl: float = 1 / 30  # m/s: a longer leg gets the time to cover its length at this
     park_clearance: float = 0.06  # metres from the wall to the centre of a parking slot
     park_spacing: float = 0.1  # metres between parking slots along the wall
     park_corridor: float = 0.11  # metres either side of each site kept free of parking
+    park_lane: float = 0.2  # metres kept free between parked robots beyond the wall row
 
     def __post_init__(self) -> None:
         decision.validate_alpha(self.alpha)
@@ -99,6 +104,7 @@ class ControllerConfig:
             "stall_timeout": self.stall_timeout,
             "near_distance": self.near_distance,
             "travel_timeout": self.travel_timeout,
+            "travel_crawl": self.travel_crawl,
         }
         for name, value in positive.items():
             if not _finite(value) or value <= 0.0:
@@ -111,14 +117,22 @@ class ControllerConfig:
         ):
             if not _finite(value) or value < 0.0:
                 raise ValueError(f"{name} must be zero or positive, got {value!r}")
-        if not _finite(self.park_spacing) or self.park_spacing <= 0.0:
-            raise ValueError(f"park_spacing must be a positive distance, got {self.park_spacing!r}")
+        for name, value in (("park_spacing", self.park_spacing), ("park_lane", self.park_lane)):
+            if not _finite(value) or value <= 0.0:
+                raise ValueError(f"{name} must be a positive distance, got {value!r}")
         if self.wiggle > math.pi / 2:
             raise ValueError(f"wiggle must be at most pi/2 radians, got {self.wiggle!r}")
         if isinstance(self.capture_attempts, bool) or not isinstance(self.capture_attempts, int):
             raise ValueError(f"capture_attempts must be an int, got {self.capture_attempts!r}")
         if self.capture_attempts < 1:
             raise ValueError(f"capture_attempts must be at least 1, got {self.capture_attempts}")
+
+    def leg_allowance(self, length: float) -> float:
+        """Sim seconds a leg of ``length`` metres may take before the robot gives it up:
+        ``travel_timeout``, or for a long leg (the arena grows with the swarm) the time to
+        cover it at ``travel_crawl``, so a crowd on the way slows a robot without making
+        it give up."""
+        return max(self.travel_timeout, length / self.travel_crawl)
 
 
 class Controller:
@@ -194,6 +208,7 @@ class Controller:
         self._pair: list[int] = []
         self._qualities: dict[int, float] = {}
         self._leg_start = 0.0
+        self._leg_allowance: float | None = None  # seconds this leg may take
         self._best_distance = math.inf
         self._last_progress = 0.0
         self._aim = 0.0
@@ -362,7 +377,7 @@ class Controller:
         if arrived or self._stalled_near(reading, goal, self.config.near_distance):
             self._start_sensing(reading, site)
             return self._sensing(reading)
-        if self._t - self._leg_start > self.config.travel_timeout:
+        if self._leg_timed_out(reading, goal):
             self._head_home()  # the site is out of reach: no update this trip
             return _stop()
         return ports.Command(left, right)
@@ -451,12 +466,14 @@ class Controller:
                 self.robot_id,
                 arena_radius=self.world.arena_radius,
                 inner_radius=self.world.nest.radius + 3 * self.world.robot_radius,
+                robot_radius=self.world.robot_radius,
                 clearance=self.config.park_clearance,
                 spacing=self.config.park_spacing,
                 corridor=self.config.park_corridor,
+                lane=self.config.park_lane,
             )
         goal = self._park_goal
-        if self._t - self._leg_start > self.config.travel_timeout:
+        if self._leg_timed_out(reading, goal):
             self._set_phase("stopped")
             return _stop()
         # The last stretch into the slot goes straight in: the wall and the neighbouring
@@ -490,6 +507,7 @@ class Controller:
     def _start_leg(self, phase: protocol.Phase) -> None:
         self._navigator.reset()
         self._leg_start = self._t
+        self._leg_allowance = None
         self._best_distance = math.inf
         self._last_progress = self._t
         self._set_phase(phase)
@@ -577,6 +595,13 @@ class Controller:
         site_x, site_y = self._site_xy[site]
         return math.atan2(site_y - reading.y, site_x - reading.x)
 
+    def _leg_timed_out(self, reading: ports.BodyReading, goal: tuple[float, float]) -> bool:
+        """Whether the current leg has taken longer than ``leg_allowance`` of its length,
+        measured when the leg's first step saw where it starts."""
+        if self._leg_allowance is None:
+            self._leg_allowance = self.config.leg_allowance(_distance(reading, goal))
+        return self._t - self._leg_start > self._leg_allowance
+
     def _stalled_near(
         self, reading: ports.BodyReading, goal: tuple[float, float], near: float
     ) -> bool:
@@ -604,32 +629,26 @@ def parking_slot(
     *,
     arena_radius: float,
     inner_radius: float,
+    robot_radius: float,
     clearance: float,
     spacing: float,
     corridor: float,
+    lane: float,
 ) -> tuple[float, float]:
     """Robot ``robot_id``'s parking slot for ``site``: the ``robot_id``-th slot nearest the
-    site. Ring j lies ``clearance + j * spacing`` in from the wall with slots ``(j + 1) *
-    spacing`` apart, so a robot can always pass between the parked robots of the rings
-    further in; a corridor of ``corridor`` metres either side of every site stays free."""
-    rings: list[tuple[float, list[float]]] = []
-    ring = 0
-    while arena_radius - clearance - ring * spacing >= inner_radius or not rings:
-        radius = arena_radius - clearance - ring * spacing
-        step = (ring + 1) * spacing / radius  # radians between slots on this ring
-        slots = [
-            index * step
-            for index in range(int(2 * math.pi / step))
-            if all(
-                abs(math.remainder(index * step - other, 2 * math.pi)) * radius >= corridor
-                for other in site_angles
-            )
-        ]
-        home = site_angles[site]
-        slots.sort(key=lambda angle: abs(math.remainder(angle - home, 2 * math.pi)))
-        rings.append((radius, slots))
-        ring += 1
-    # More robots than slots: the count starts again at the wall (best effort).
+    site (see ``parking_rings``)."""
+    rings = parking_rings(
+        site_angles,
+        site,
+        arena_radius=arena_radius,
+        inner_radius=inner_radius,
+        robot_radius=robot_radius,
+        clearance=clearance,
+        spacing=spacing,
+        corridor=corridor,
+        lane=lane,
+    )
+    # More robots than slots down to the nest: the count starts again at the wall.
     remaining = robot_id % max(1, sum(len(slots) for _, slots in rings))
     for radius, slots in rings:
         if remaining < len(slots):
@@ -638,6 +657,54 @@ def parking_slot(
     radius, slots = rings[0]
     angle = slots[0] if slots else site_angles[site]
     return radius * math.cos(angle), radius * math.sin(angle)
+
+
+def parking_rings(
+    site_angles: Sequence[float],
+    site: int,
+    *,
+    arena_radius: float,
+    inner_radius: float,
+    robot_radius: float,
+    clearance: float,
+    spacing: float,
+    corridor: float,
+    lane: float,
+) -> list[tuple[float, list[float]]]:
+    """Every parking slot for robots that chose ``site``: (radius, slot angles nearest the
+    site first) for each ring, from the wall inwards.
+
+    Ring 0 lies ``clearance`` in from the wall with slots ``spacing`` apart, outside a
+    corridor of ``corridor`` metres either side of every site. Each further ring lies a
+    free ``lane`` in from the bodies parked on the previous one, with ``lane`` free between
+    its own slots and a corridor of ``corridor + lane / 2`` either side of every site. So
+    whichever slots are taken, every slot and every point among them is joined to the
+    arena's interior by paths at least ``lane`` wide: no parked robot stands in front of
+    another's slot, and nobody, parking or passing, can be walled in.
+    """
+    pitch = 2 * robot_radius + lane  # centre to centre, across a lane
+    rings: list[tuple[float, list[float]]] = []
+    ring = 0
+    radius = arena_radius - clearance
+    while radius >= inner_radius or not rings:
+        if ring == 0:
+            step, keep_clear = spacing / radius, corridor
+        else:
+            step, keep_clear = pitch / radius, corridor + lane / 2
+        slots = [
+            index * step
+            for index in range(int(2 * math.pi / step))
+            if all(
+                abs(math.remainder(index * step - other, 2 * math.pi)) * radius >= keep_clear
+                for other in site_angles
+            )
+        ]
+        home = site_angles[site]
+        slots.sort(key=lambda angle: abs(math.remainder(angle - home, 2 * math.pi)))
+        rings.append((radius, slots))
+        ring += 1
+        radius = arena_radius - clearance - ring * pitch
+    return rings
 
 
 def _along_radius(x: float, y: float, radius: float) -> tuple[float, float]:

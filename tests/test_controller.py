@@ -59,6 +59,7 @@ def one_hot(n: int, option: int) -> list[float]:
         ("park_clearance", -0.1),
         ("park_spacing", 0.0),
         ("park_corridor", math.nan),
+        ("park_lane", 0.0),
     ],
 )
 def test_config_rejects_bad_values(field: str, value: object) -> None:
@@ -456,9 +457,11 @@ def test_parking_slots_are_distinct_clear_of_every_site_and_inside_the_arena(
             robot,
             arena_radius=layout.arena_radius,
             inner_radius=inner,
+            robot_radius=0.037,
             clearance=config.park_clearance,
             spacing=config.park_spacing,
             corridor=config.park_corridor,
+            lane=config.park_lane,
         )
         for robot in range(robots)
     ]
@@ -483,3 +486,29 @@ def test_a_hundred_robots_all_park_and_decide_in_one_process() -> None:
         WorldConfig(seed=0, num_sites=10, num_robots=100), ControllerConfig(), timeout=1800
     )
     assert summary["correct"], [r["phase"] for r in summary["per_robot"]]
+
+
+# --- long legs -------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", [21, 22])
+def test_a_slowed_robot_on_a_long_leg_keeps_going_instead_of_giving_up(seed: int) -> None:
+    """In a 500-robot arena (5.3 m) the sites of a pair are 6 m or more apart, and a crowd
+    on the way slows a robot down. A fixed ``travel_timeout`` made such robots give up
+    every pair before reaching its second site, so they never compared anything and the
+    swarm never finished (issue 10); a long leg now gets the time to cover its length at
+    ``travel_crawl``."""
+    swarm = make_swarm(1, 5, seed=seed, arena_radius=5.3, nest_radius=1.41)
+    body = swarm.bodies[0]
+    full_speed = body.drive
+
+    def through_a_crowd(left: float, right: float) -> None:
+        full_speed(0.35 * left, 0.35 * right)  # 4.5 cm/s at most, above the crawl
+
+    body.drive = through_a_crowd  # type: ignore[method-assign]
+    robot = swarm.controllers[0]
+    while robot.trips < 2 and swarm.world.t < 2000:
+        swarm.step()
+    assert robot.trips == 2
+    assert robot.comparison is not None
+    assert robot.opinion.count(0.0) == 2  # one site ruled out per trip

@@ -47,15 +47,16 @@ def test_robots_that_never_progress_stall_exactly_at_the_window() -> None:
     t = 0.0
     while t < WINDOW - 1.0:
         t += 1.0
-        # Jiggling on the spot, less than a body length from where they stood: no progress.
-        watchdog.poses(t, [(0, 0.03 * (t % 2), 0.0), (1, 1.0, 0.02 * (t % 3))])
+        # Wriggling on the spot, up to a little over a body length from where they stood
+        # (as a robot walled in by parked ones does): no progress.
+        watchdog.poses(t, [(0, 1.2 * BODY * (t % 2), 0.0), (1, 1.0, 0.02 * (t % 3))])
         assert not watchdog.stalled(t)
     assert not watchdog.stalled(WINDOW - 0.01)
     assert watchdog.stalled(WINDOW)
 
 
 def test_robots_slowly_making_progress_never_stall() -> None:
-    """Each robot moves a little over a body length, or changes phase, just inside the
+    """Each robot moves a little over two body lengths, or changes phase, just inside the
     window: slow, but progress, for ten windows of sim time."""
     watchdog = Watchdog(range(3), WINDOW, BODY)
     step = 0.9 * WINDOW
@@ -64,7 +65,7 @@ def test_robots_slowly_making_progress_never_stall() -> None:
     while t < 10 * WINDOW:
         t += step
         moves = int(t / step)
-        watchdog.poses(t, [(0, 1.1 * BODY * moves, 0.0)])  # a crawl along x
+        watchdog.poses(t, [(0, 2.1 * BODY * moves, 0.0)])  # a crawl along x
         watchdog.status(_status(1, t, phases[moves % len(phases)]))  # a leg done, slowly
         watchdog.status(_status(2, t, "to_site", trips=moves))  # a pooling, slowly
         for now in (t, t + step - 0.01):
