@@ -21,9 +21,9 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from deploy import inmemory
+from deploy.run_progress import decided_progress
 from deploy.wire_tap import WireTap
 from nest_beacon.options import beacon_config
 from plumbing.cliargs import UsageError
@@ -117,15 +117,7 @@ def run_inprocess(args: argparse.Namespace) -> int:
         return None
 
     console = Console(stderr=True)
-    progress = Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        TextColumn("{task.fields[info]}"),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-        disable=args.quiet,
-    )
+    progress = decided_progress(console, args.quiet)
     task = progress.add_task("decided", total=plan.robots, info="starting")
     started = time.monotonic()
 

@@ -27,13 +27,13 @@ from typing import Any, NamedTuple
 
 import zenoh
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from deploy import zenoh_acl
 from deploy.credentials import RunNetwork
 from deploy.inprocess import add_engine_option, refuse_unsupported, run_inprocess
 from deploy.processes import Child, ProcessGroup, free_port, python_module, wait_for_port
+from deploy.run_progress import decided_progress
 from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary, describe
 from deploy.watchdog import Watchdog, default_stall_window
 from nest_beacon.beacon import parse_outages
@@ -1107,15 +1107,7 @@ def describe_ending(summary: dict[str, Any]) -> str:
 def _watch(swarm: Swarm, console: Console, quiet: bool) -> Ending:
     """Follow the run until every live robot decided, it stalls, a time limit, or a crash."""
     plan = swarm.plan
-    progress = Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        TextColumn("{task.fields[info]}"),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-        disable=quiet,
-    )
+    progress = decided_progress(console, quiet)
     with progress:
         task = progress.add_task("decided", total=plan.robots, info="starting")
         while True:
