@@ -37,7 +37,7 @@ from swarm_helpers import (
 from deploy.processes import python_module
 from plumbing import run_keys
 from plumbing.world_info import ask
-from robot_agent import auth, protocol
+from robot_agent import auth, node, protocol
 from world_server.layout import make_layout
 
 pytestmark = pytest.mark.timeout(180)
@@ -292,7 +292,11 @@ def _robot_pid(run_id: str, robot: int) -> int:
 
 @pytest.mark.parametrize("keyed", [True, False], ids=["keyed", "no-keys"])
 def test_a_flood_of_radio_messages_for_future_ticks_does_not_grow_a_robot(keyed: bool) -> None:
-    flood, size = 4000, 20_000
+    flood, size = 12_000, 20_000  # 229 MiB, ten times what robot 0 may hold
+    # What one robot process may hold: its inbox and the robot's pending inputs. The
+    # allocator and Zenoh's buffers add to that, so allow twice it, far below the flood.
+    held = node.INBOX_BYTES + node.INBOX_BYTES_PER_ROBOT + node.PENDING_BYTES
+    allowed = 2 * held / 2**20
     # Paced by the wall clock, so that the run outlasts the flood.
     options = [*SMALL, "--no-record", "--spawn", "exec", "--clock", "realtime", "--speed", "5"]
     with attacked_run(*options, *([] if keyed else ["--no-keys"])) as run:
@@ -314,7 +318,7 @@ def test_a_flood_of_radio_messages_for_future_ticks_does_not_grow_a_robot(keyed:
         grown = _rss_mib(pid) - before
         code, summary, stderr = run.finish()
     assert_right_consensus(code, summary, stderr)
-    assert grown < 30, f"robot 0 grew by {grown:.0f} MiB"  # the flood is 76 MiB
+    assert grown < allowed, f"robot 0 grew by {grown:.0f} MiB (allowed {allowed:.0f})"
     assert summary is not None and summary["per_robot"][0]["rejected"] == flood
 
 
