@@ -59,7 +59,6 @@ ALL_MESSAGES = (
     "declare_liveliness_subscriber",
     "liveliness_query",
 )
-_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")  # a key chunk and a certificate name
 _HOST_NAME = re.compile(r"[A-Za-z0-9]([A-Za-z0-9.-]{0,62}[A-Za-z0-9])?")
 
 
@@ -87,10 +86,7 @@ class SwarmPlan:
         ):
             raise ValueError(f"robot ids must be distinct and in [0, {protocol.MAX_ROBOTS})")
         for beacon in self.beacons:
-            if not _NAME.fullmatch(beacon):
-                raise ValueError(
-                    f"invalid beacon name {beacon!r}: use up to 64 letters, digits, '-', '_', '.'"
-                )
+            protocol.check_name(beacon, "beacon name")
             # The world server tells beacons from robots by a non-numeric radio name.
             if beacon.isdigit():
                 raise ValueError(f"beacon name {beacon!r} is a number: it would be a robot's")

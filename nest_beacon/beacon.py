@@ -22,8 +22,9 @@ class BeaconConfig:
     flaky: float = 0.0  # probability that a due transmission is skipped
 
     def __post_init__(self) -> None:
-        if not self.name or self.name.isdigit():
-            raise ValueError(f"beacon name {self.name!r} must not be empty or all digits")
+        protocol.check_name(self.name, "beacon name")
+        if self.name.isdigit():  # robots' radio names are their ids
+            raise ValueError(f"beacon name {self.name!r} must not be all digits")
         if not self.period > 0:
             raise ValueError(f"beacon period must be positive, got {self.period}")
         if not 0.0 <= self.flaky <= 1.0:

@@ -69,16 +69,11 @@ def _bounds(low: object, high: object, low_open: bool = False, high_open: bool =
 
 
 def name(text: str) -> str:
-    """A key-safe name (run id, key root): letters, digits, '-', '_', '.'."""
+    """A name (run id, key root, beacon): the one rule of ``protocol.check_name``."""
     try:
-        protocol.Keys(text)
+        return protocol.check_name(text)
     except ValueError as error:
         raise argparse.ArgumentTypeError(str(error)) from None
-    if len(text) > 64 or not all(c.isalnum() or c in "-_." for c in text):
-        raise argparse.ArgumentTypeError(
-            f"invalid name {text!r}: use up to 64 letters, digits, '-', '_', '.'"
-        )
-    return text
 
 
 def endpoint(text: str) -> str:

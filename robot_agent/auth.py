@@ -28,6 +28,8 @@ import re
 import struct
 from collections.abc import Iterable, Mapping
 
+from robot_agent import protocol
+
 SECRET_BYTES = 32
 KEY_BYTES = 32
 TAG_BYTES = 16
@@ -37,8 +39,8 @@ KEY_LABEL = b"bestofn-key:"
 WORLD, LAUNCHER, RECORDER = "world", "launcher", "recorder"
 VIEWER, FOXGLOVE = "viewer", "foxglove"  # the observers: they only ask, never publish
 _IDENTITY = re.compile(
-    r"^(world|launcher|recorder|viewer|foxglove"
-    r"|robot/(0|[1-9][0-9]{0,4})|beacon/[A-Za-z0-9_.-]{1,64})$"
+    r"(world|launcher|recorder|viewer|foxglove"
+    rf"|robot/(0|[1-9][0-9]{{0,4}})|beacon/{protocol.NAME_RE.pattern})"
 )
 
 
@@ -55,7 +57,7 @@ def beacon_identity(name: str) -> str:
 
 
 def check_identity(identity: str) -> str:
-    if not _IDENTITY.match(identity):
+    if not _IDENTITY.fullmatch(identity):
         raise ValueError(f"{identity!r} is not an identity of a run")
     return identity
 

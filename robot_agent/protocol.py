@@ -12,6 +12,7 @@ negative counts and over-long vectors are rejected at the edge, never passed on.
 from __future__ import annotations
 
 import hashlib
+import re
 from typing import Annotated, Any, Literal, TypeVar
 
 import msgspec
@@ -39,7 +40,33 @@ _RobotId = Annotated[int, msgspec.Meta(ge=0, lt=MAX_ROBOTS)]
 _SiteId = Annotated[int, msgspec.Meta(ge=0, lt=MAX_OPTIONS)]
 _Positive = Annotated[float, msgspec.Meta(gt=0.0, le=1e6)]
 _Opinion = Annotated[list[_Unit], msgspec.Meta(min_length=2, max_length=MAX_OPTIONS)]
-_Name = Annotated[str, msgspec.Meta(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")]
+
+# What a name (run id, key root, beacon, process, radio sender) may be: one chunk of a key
+# expression, a certificate's common name and an HMAC identity at once. The one rule: up
+# to 64 ASCII letters, digits, '_', '.', '-'. ``str.isalnum`` is not it (it takes 'é').
+NAME_CHARACTERS = "A-Za-z0-9_.-"
+MAX_NAME_LENGTH = 64
+NAME_RE = re.compile(f"[{NAME_CHARACTERS}]{{1,{MAX_NAME_LENGTH}}}")
+# For msgspec and JSON Schema: '$' must not let a final newline through (Python's would).
+_NAME_PATTERN = rf"^[{NAME_CHARACTERS}]+$(?!\n)"
+_Name = Annotated[
+    str, msgspec.Meta(min_length=1, max_length=MAX_NAME_LENGTH, pattern=_NAME_PATTERN)
+]
+
+
+def is_name(text: object) -> bool:
+    """Whether ``text`` is a valid name (see NAME_CHARACTERS)."""
+    return isinstance(text, str) and NAME_RE.fullmatch(text) is not None
+
+
+def check_name(text: str, what: str = "name") -> str:
+    """``text`` if it is a valid name; ValueError saying what a name may be otherwise."""
+    if not is_name(text):
+        raise ValueError(
+            f"invalid {what} {text!r}: use 1 to {MAX_NAME_LENGTH} ASCII letters, digits, "
+            "'-', '_', '.'"
+        )
+    return text
 
 
 class Message(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
@@ -280,9 +307,8 @@ class Keys:
     """Key expressions of one swarm: ``<root>/<run>/...`` (see docs/protocol.md)."""
 
     def __init__(self, run: str, root: str = DEFAULT_ROOT) -> None:
-        for part, what in ((root, "root"), (run, "run id")):
-            if not part or any(c in part for c in "/*$?#") or part != part.strip():
-                raise ValueError(f"invalid {what} {part!r}: use letters, digits, '-', '_', '.'")
+        check_name(root, "root")
+        check_name(run, "run id")
         self.root = root
         self.run = run
         self.prefix = f"{root}/{run}"

@@ -32,6 +32,8 @@ import sys
 from dataclasses import dataclass, replace
 from types import TracebackType
 
+from robot_agent import protocol
+
 log = logging.getLogger(__name__)
 
 DEFAULT_GROUP = "239.255.77.77"
@@ -46,7 +48,7 @@ DEFAULT_MAX_PER_POLL = 1024  # bounds one poll under a flood; the rest waits for
 RECEIVE_BUFFER_BYTES = 256 * 1024  # a burst of ~100 full datagrams at one poll
 _MAX_LOGGED_SOURCES = 1000  # memory bound for "log the first bad datagram per source"
 
-_SENDER = re.compile(rb"[A-Za-z0-9_.-]{1,64}")
+_SENDER = re.compile(protocol.NAME_RE.pattern.encode())  # a name, as protocol.py says
 
 
 class FrameError(ValueError):
