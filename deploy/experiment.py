@@ -35,7 +35,7 @@ from typing import IO, Any
 
 from deploy.cli import UsageError
 from deploy.inprocess import add_engine_option
-from deploy.launcher import add_swarm_switches
+from deploy.run_switches import add_swarm_switches, switches_argv
 from plumbing import cliargs
 from plumbing.lifecycle import PARENT_ENV
 from robot_agent import protocol
@@ -136,7 +136,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     # Every switch of `swarm run` (decision, radio faults, camera noise, beacon, robot
     # faults) is a switch here too, passed on to every run.
-    parser.set_defaults(switches=add_swarm_switches(parser))
+    add_swarm_switches(parser)
     parser.add_argument(
         "run_options",
         nargs=argparse.REMAINDER,
@@ -224,7 +224,7 @@ def plan_runs(args: argparse.Namespace, endpoint: str | None) -> list[RunSpec]:
 
 
 def _run_options(args: argparse.Namespace) -> list[str]:
-    extra = cliargs.forward_argv(args.switches.all, args)
+    extra = switches_argv(args)
     if args.timeout is not None:
         extra += ["--timeout", str(args.timeout)]
     if args.stall_window is not None:

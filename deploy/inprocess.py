@@ -25,12 +25,9 @@ from rich.console import Console
 from deploy import inmemory
 from deploy.run_progress import decided_progress
 from deploy.wire_tap import WireTap
-from nest_beacon.options import beacon_config
 from plumbing.cliargs import UsageError
 from plumbing.lifecycle import die_with_launcher
 from robot_agent import protocol
-from robot_agent.options import controller_config
-from world_server.options import world_config
 from world_server.recorder import McapRecorder, RunDescription, Sample
 from world_server.world import World, WorldConfig
 
@@ -103,9 +100,9 @@ def run_inprocess(args: argparse.Namespace) -> int:
     except ValueError as error:
         raise UsageError(str(error)) from None
     die_with_launcher()  # started by `swarm experiment`: end in order if it dies
-    config = world_config(
-        args, run=plan.run_id, seed=plan.seed, sites=plan.sites, robots=plan.robots
-    )
+    switches = plan.switches
+    config = switches.world.world
+    state_every = switches.world.state_every
     recording = _Recording.open(plan.record, config, plan) if plan.record is not None else None
     signals = _Signals()
 
@@ -134,17 +131,17 @@ def run_inprocess(args: argparse.Namespace) -> int:
     hooks = inmemory.EngineHooks(
         halt=halt,
         progress=None if args.quiet else show,
-        wire=recording.tap(protocol.Keys(plan.run_id), args.state_every) if recording else None,
+        wire=recording.tap(protocol.Keys(plan.run_id), state_every) if recording else None,
         wall_clock=time.monotonic,
         config=plan.config,
-        poses_every=args.state_every,
+        poses_every=state_every,
     )
     try:
         with signals.installed(), progress:
             summary = inmemory.run_in_memory(
                 config,
-                controller_config(args),
-                beacon_config(args),
+                switches.controller,
+                switches.beacon,
                 timeout=plan.timeout,
                 stall_window=plan.stall_window,
                 byzantine_robots=plan.byzantine_robots,

@@ -20,10 +20,10 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import zenoh
 from rich.console import Console
@@ -34,21 +34,20 @@ from deploy.credentials import RunNetwork
 from deploy.inprocess import add_engine_option, refuse_unsupported, run_inprocess
 from deploy.processes import Child, ProcessGroup, free_port, python_module, wait_for_port
 from deploy.run_progress import decided_progress
+from deploy.run_switches import SWITCHES, RunSwitches, add_swarm_switches, run_switches
 from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary, describe
 from deploy.watchdog import Watchdog, default_stall_window
-from nest_beacon.beacon import parse_outages
-from nest_beacon.options import add_beacon_options
+from nest_beacon.options import NestBeaconConfig
 from plumbing import cliargs
 from plumbing.cliargs import UsageError
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import open_session
-from robot_agent import auth, byzantine, protocol
-from robot_agent.options import add_controller_options, byzantine_robot, controller_config
+from robot_agent import auth, byzantine, protocol, settings
+from robot_agent.options import RobotAgentConfig
 from viewer.options import VIEW_OPTIONS, Observer, add_view_options, observers
 from world_server.layout import make_layout
-from world_server.options import add_world_options
 from world_server.physics import EpuckSpec
 
 log = logging.getLogger("swarm.run")
@@ -82,86 +81,6 @@ OBSERVERS = ("viewer", "foxglove")
 OBSERVER_CERTIFICATES = {"viewer": zenoh_acl.VIEWER, "foxglove": zenoh_acl.FOXGLOVE}
 # What the launcher takes in (status, clock, state, acks), at most: junk cannot grow it.
 EVENTS_BYTES, MAX_EVENT_BYTES = 64 * 2**20, protocol.MAX_PAYLOAD_BYTES + 1024
-
-
-class RobotAtTime(NamedTuple):
-    robot: int
-    at: float  # sim seconds
-
-    def __str__(self) -> str:  # the switch's own form, so that it can be passed on
-        return f"{self.robot}@{self.at!r}"
-
-
-def robot_at_time(text: str) -> RobotAtTime:
-    """``ROBOT@SIMTIME``, e.g. ``3@60``: robot 3 at 60 s of sim time."""
-    robot, sep, when = text.partition("@")
-    try:
-        if not sep or not robot.isdigit():
-            raise ValueError
-        at = float(when)
-        if not 0.0 <= at < 1e9:
-            raise ValueError
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is not ROBOT@SIMTIME, e.g. 3@60 (robot 3 at 60 sim seconds)"
-        ) from None
-    return RobotAtTime(int(robot), at)
-
-
-@dataclass(frozen=True)
-class ForwardedOptions:
-    """The run-shaping options, by the process they are passed on to."""
-
-    world: list[argparse.Action]
-    beacon: list[argparse.Action]
-    controller: list[argparse.Action]
-    robot_faults: list[argparse.Action]
-
-    @property
-    def all(self) -> list[argparse.Action]:
-        return [*self.controller, *self.world, *self.beacon, *self.robot_faults]
-
-
-def add_swarm_switches(parser: argparse.ArgumentParser) -> ForwardedOptions:
-    """The options that shape a run: decision, world, radio faults, camera, beacon and
-    robot faults. ``swarm run`` and ``swarm experiment`` both take all of them."""
-    controller = add_controller_options(parser)
-    world = add_world_options(parser)
-    beacon = add_beacon_options(parser, prefix="beacon-")
-    faults = parser.add_argument_group("robot faults")
-    robot_faults = [
-        faults.add_argument(
-            "--kill",
-            type=robot_at_time,
-            action="append",
-            default=[],
-            metavar="ROBOT@SIMTIME",
-            help="SIGKILL robot ROBOT's process at SIMTIME sim seconds "
-            "(repeatable); the swarm goes on without it",
-        ),
-        faults.add_argument(
-            "--restart",
-            type=robot_at_time,
-            action="append",
-            default=[],
-            metavar="ROBOT@SIMTIME",
-            help="start a fresh process for robot ROBOT at SIMTIME "
-            "(repeatable); it is killed first if still running, and rejoins "
-            "with a new controller and its old body",
-        ),
-        faults.add_argument(
-            "--byzantine",
-            type=byzantine_robot,
-            action="append",
-            default=[],
-            metavar="ROBOT[:MODE]",
-            help="robot ROBOT misbehaves for the whole run (repeatable): liar[=SITE] "
-            "broadcasts certainty of SITE (default: a non-best site drawn from the seed), "
-            "inverted eliminates the better site of each pair, silent never broadcasts; "
-            "default mode liar. Consensus counts the honest robots (docs/byzantine.md)",
-        ),
-    ]
-    return ForwardedOptions(world, beacon, controller, robot_faults)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -213,7 +132,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(default: twice the time a robot may take for a leg across the arena, plus two "
         "arena crossings at full speed, plus any --beacon-outage)",
     )
-    switches = add_swarm_switches(parser)
+    add_swarm_switches(parser)
     processes = parser.add_argument_group("processes")
     processes.add_argument(
         "--robots-per-process",
@@ -276,7 +195,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "docs/performance.md)",
     )
     add_view_options(parser.add_argument_group("watching"))
-    parser.set_defaults(forwarded=switches)
 
 
 @dataclass(frozen=True)
@@ -298,9 +216,7 @@ class RunPlan:
     stall_window: float
     connect: str | None  # an existing router; None: the world server is the run's router
     record: Path | None
-    world_args: list[str]
-    robot_args: list[str]
-    beacon_args: list[str]
+    switches: RunSwitches  # the world's, the robots' and the beacon's configs
     recorder_args: list[str] = field(default_factory=list)
     faults: list[Fault] = field(default_factory=list)
     robots_per_process: int = 1
@@ -313,30 +229,47 @@ class RunPlan:
     secure: bool = False  # TLS and access control
     trace: Path | None = None  # --trace DIR: the world's and robot hosts' tick timelines
 
+    def world_argv(self) -> list[str]:
+        """The world server's run and configuration (its network options come later)."""
+        return ["--run-id", self.run_id, "--config", settings.encode(self.switches.world)]
+
+    def beacon_argv(self) -> list[str]:
+        beacon = NestBeaconConfig(seed=self.seed, beacon=self.switches.beacon)
+        return ["--run-id", self.run_id, "--config", settings.encode(beacon)]
+
+    def robot_argv(self, robots: Sequence[int]) -> list[str]:
+        """A robot process's: the robots it hosts, and its configuration, which names only
+        its own robots' Byzantine behaviour."""
+        hosted = tuple(
+            byzantine.ByzantineRobot(robot, self.byzantine_robots[robot])
+            for robot in robots
+            if robot in self.byzantine_robots
+        )
+        agent = RobotAgentConfig(self.seed, self.switches.controller, hosted)
+        ids = [arg for robot in robots for arg in ("--id", str(robot))]
+        return [*ids, "--run-id", self.run_id, "--config", settings.encode(agent)]
+
     def trace_args(self, process: str) -> list[str]:
         """``--trace DIR/<process>.jsonl`` for a process, when tracing."""
         return [] if self.trace is None else ["--trace", str(self.trace / f"{process}.jsonl")]
 
 
-NOT_CONFIG = {
-    "module",
-    "command",
-    "json",
-    "quiet",
-    "verbose",
-    "trace",
-    "forwarded",
-    *VIEW_OPTIONS,
-}
+# Launcher options that shape no run: kept out of its recorded configuration.
+NOT_CONFIG = {"module", "command", "json", "quiet", "verbose", "trace", *VIEW_OPTIONS}
 
 
 def plan_from_args(args: argparse.Namespace) -> RunPlan:
+    """The run the options ask for; ValueError (a usage error) if they do not fit."""
     if args.engine == "inprocess":
         refuse_unsupported(args)
-    controller = controller_config(args)  # alpha and threshold together; ValueError: usage
+    run_id = args.run_id or f"run-{args.seed}-{int(time.time() * 1000) % 10**9}"
+    switches = run_switches(
+        args, run_id=run_id, seed=args.seed, sites=args.sites, robots=args.robots
+    )
+    robot_faults = switches.faults
     faults = sorted(
-        [Fault(robot, "kill", at) for robot, at in args.kill]
-        + [Fault(robot, "restart", at) for robot, at in args.restart],
+        [Fault(robot, "kill", at) for robot, at in robot_faults.kill]
+        + [Fault(robot, "restart", at) for robot, at in robot_faults.restart],
         key=lambda fault: fault.at,
     )
     for fault in faults:
@@ -345,7 +278,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
                 f"--{fault.action} {fault.robot}@...: there is no robot "
                 f"{fault.robot} in a swarm of {args.robots}"
             )
-    byzantine_robots = byzantine_plan(args)
+    byzantine_robots = byzantine_plan(robot_faults.byzantine, args.robots, args.sites, args.seed)
     per_process = args.robots_per_process or default_robots_per_process(args.robots)
     if faults and per_process > 1:
         raise ValueError(
@@ -355,7 +288,6 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         raise ValueError("--secure makes the run's own TLS router: it cannot use --connect")
     if args.secure and args.no_keys:
         raise ValueError("--secure authenticates every message: it cannot go with --no-keys")
-    run_id = args.run_id or f"run-{args.seed}-{int(time.time() * 1000) % 10**9}"
     record = None if args.no_record else Path(args.record or f"runs/{run_id}.mcap")
     if record is not None:
         check_recording_path(record)
@@ -369,28 +301,21 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         arena_radius,
         EpuckSpec().max_wheel_speed,
         # The longest leg a robot may take before it gives up: across the arena.
-        controller.leg_allowance(2 * arena_radius),
-        parse_outages(args.beacon_outage),
+        switches.controller.leg_allowance(2 * arena_radius),
+        switches.beacon.outages,
     )
-    forwarded: ForwardedOptions = args.forwarded
-    # The network options of each process (where to connect, which certificate) are
-    # added when the run starts: its private directory does not exist before.
-    common = ["--run-id", run_id, "--seed", str(args.seed)]
-    world_args = [
-        *common,
-        "--robots",
-        str(args.robots),
-        "--sites",
-        str(args.sites),
-        *cliargs.forward_argv(forwarded.world, args),
-    ]
-    robot_args = [*common, *cliargs.forward_argv(forwarded.controller, args)]
-    beacon_args = [*common, *cliargs.forward_argv(forwarded.beacon, args, strip_prefix="beacon-")]
-    config = {key: value for key, value in vars(args).items() if key not in NOT_CONFIG}
+    # The run's configuration as its summary and recording keep it: the launcher's own
+    # options and every setting in force, keyed like the options.
+    launcher_options = {
+        key: value
+        for key, value in vars(args).items()
+        if key not in NOT_CONFIG and not any(key in options.dests for options in SWITCHES)
+    }
+    config = {**launcher_options, **switches.record()}
     config["run_id"] = run_id
-    config["threshold"] = controller.threshold  # the one in force, also when defaulted
-    config["stall_window"] = stall_window  # likewise
+    config["stall_window"] = stall_window  # the one in force, also when defaulted
     config["byzantine"] = [f"{robot}:{how}" for robot, how in byzantine_robots.items()]
+    common = ["--run-id", run_id, "--seed", str(args.seed)]
     recorder_args = [
         *common,
         "--out",
@@ -411,9 +336,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         stall_window=stall_window,
         connect=args.connect,
         record=record,
-        world_args=world_args,
-        robot_args=robot_args,
-        beacon_args=beacon_args,
+        switches=switches,
         recorder_args=recorder_args,
         faults=faults,
         config=config,
@@ -447,21 +370,22 @@ def check_recording_path(path: Path) -> None:
         raise ValueError(f"--record {path}: no permission to write in {existing}")
 
 
-def byzantine_plan(args: argparse.Namespace) -> dict[int, byzantine.Behaviour]:
+def byzantine_plan(
+    switches: Sequence[byzantine.ByzantineRobot], robots: int, sites: int, seed: int
+) -> dict[int, byzantine.Behaviour]:
     """The ``--byzantine`` robots with their liars' sites chosen; ValueError: usage."""
     chosen: dict[int, byzantine.Behaviour] = {}
-    for switch in args.byzantine:
-        if switch.robot >= args.robots:
+    for switch in switches:
+        if switch.robot >= robots:
             raise ValueError(
-                f"--byzantine {switch}: there is no robot {switch.robot} in a swarm of "
-                f"{args.robots}"
+                f"--byzantine {switch}: there is no robot {switch.robot} in a swarm of {robots}"
             )
         if switch.robot in chosen:
             raise ValueError(f"--byzantine names robot {switch.robot} twice")
         chosen[switch.robot] = switch.behaviour
-    best = make_layout(args.sites, args.robots, args.seed).best_site
+    best = make_layout(sites, robots, seed).best_site
     try:
-        resolved = byzantine.resolve_liar_sites(chosen, args.sites, best, args.seed)
+        resolved = byzantine.resolve_liar_sites(chosen, sites, best, seed)
     except ValueError as error:
         raise ValueError(f"--byzantine: {error}") from None
     return dict(sorted(resolved.items()))
@@ -564,7 +488,7 @@ class Swarm:
             "world",
             python_module(
                 "world_server.server",
-                *plan.world_args,
+                *plan.world_argv(),
                 *network.world_args(),
                 *plan.trace_args("world"),
             ),
@@ -615,7 +539,7 @@ class Swarm:
         beacon = zenoh_acl.beacon_identity(zenoh_acl.DEFAULT_BEACON)
         self.group.start(
             "beacon",
-            python_module("nest_beacon", *plan.beacon_args, *network.client_args(beacon)),
+            python_module("nest_beacon", *plan.beacon_argv(), *network.client_args(beacon)),
             env=network.env(),
         )
         hosts = range(0, plan.robots, plan.robots_per_process)
@@ -763,14 +687,10 @@ class Swarm:
     def _start_robots(self, robots: list[int]) -> Child:
         """One process for ``robots`` (each with its own Zenoh session inside it)."""
         name = f"robot-{robots[0]}" + (f"-{robots[-1]}" if len(robots) > 1 else "")
-        argv = [arg for robot in robots for arg in ("--id", str(robot))]
-        for robot in robots:
-            if robot in self.plan.byzantine_robots:
-                argv += ["--byzantine", f"{robot}:{self.plan.byzantine_robots[robot]}"]
         network = self.network
         assert network is not None
         # In secure mode each hosted robot's session presents its own certificate: '{id}'.
-        argv += [*self.plan.robot_args, *network.client_args("robot-{id}")]
+        argv = [*self.plan.robot_argv(robots), *network.client_args("robot-{id}")]
         argv += self.plan.trace_args(name)
         # Only the keys of its own robots: whatever it says can only be in their names.
         env = network.env(auth.robot_identity(robot) for robot in robots)

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import zenoh
 
 from nest_beacon.beacon import Beacon
-from nest_beacon.options import add_beacon_options, beacon_config
-from plumbing import cliargs, run_keys
+from nest_beacon.options import NEST_BEACON_OPTIONS, NestBeaconConfig
+from plumbing import cliargs, run_keys, settings_cli
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.world_info import fetch_world_info
@@ -37,14 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="nest-beacon",
         description="The nest beacon: robots that hear it know they are at the nest.",
     )
-    parser.add_argument(
-        "--name",
-        type=cliargs.name,
-        default="nest",
-        help="beacon id on the radio; not all digits (default: nest)",
-    )
-    add_beacon_options(parser)
-    parser.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
+    NEST_BEACON_OPTIONS.add_to(parser)
+    settings_cli.add_config_option(parser, NestBeaconConfig)
     parser.add_argument(
         "--info-timeout",
         type=cliargs.positive_float,
@@ -142,16 +136,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     die_with_launcher()
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        config = beacon_config(args, args.name)
-    except ValueError as error:
-        parser.exit(2, f"nest-beacon: error: {error}\n")
+    process_config: NestBeaconConfig = settings_cli.config_from(parser, args, NEST_BEACON_OPTIONS)
+    config = process_config.beacon
+    name = config.name
     cliargs.configure_logging("nest-beacon", args.log_level)
     keyring = run_keys.from_args(parser, args, "nest-beacon")
-    identity = auth.beacon_identity(args.name)
+    identity = auth.beacon_identity(name)
     if keyring is not None and not (keyring.holds(identity) and keyring.holds(auth.WORLD)):
         parser.exit(2, "nest-beacon: error: the beacon needs its own key and the world's\n")
-    beacon = Beacon(config, random.Random(protocol.derive_seed(args.seed, "beacon", args.name)))
+    rng = random.Random(protocol.derive_seed(process_config.seed, "beacon", name))
+    beacon = Beacon(config, rng)
     keys = protocol.Keys(args.run_id, args.root)
     inbox: BoundedInbox[_Input] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -167,8 +161,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         except TimeoutError as error:
             print(f"nest-beacon: {error}", file=sys.stderr)
             return 1
-        transmitter = reliable_publisher(session, keys.radio_tx(args.name))
-        acknowledger = reliable_publisher(session, keys.beacon_ack(args.name))
+        transmitter = reliable_publisher(session, keys.radio_tx(name))
+        acknowledger = reliable_publisher(session, keys.beacon_ack(name))
         node = BeaconNode(
             beacon,
             keys,
@@ -191,8 +185,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         session.liveliness().declare_subscriber(keys.alive("world", "*"), on_world, history=True)
         session.declare_subscriber(keys.world_clock, on_clock)
-        token = session.liveliness().declare_token(keys.alive("beacon", args.name))
-        log.info("beacon %s transmitting every %.2fs of sim time", args.name, config.period)
+        token = session.liveliness().declare_token(keys.alive("beacon", name))
+        log.info("beacon %s transmitting every %.2fs of sim time", name, config.period)
         while True:
             try:
                 item = inbox.get(timeout=0.5)
@@ -203,7 +197,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             node.handle(item)
             node.rejected += inbox.take_dropped(None)
         token.undeclare()
-    log.info("beacon %s stopped (%d rejected clock messages)", args.name, node.rejected)
+    log.info("beacon %s stopped (%d rejected clock messages)", name, node.rejected)
     return 0
 
 

@@ -8,30 +8,63 @@ so users can test robots against a beacon that comes and goes.
 from __future__ import annotations
 
 import random
-from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Annotated, ClassVar
 
-from robot_agent import protocol
+from msgspec import Meta
+
+from robot_agent import protocol, settings
+from robot_agent.settings import Flag
+
+SimTime = Annotated[float, Meta(ge=0.0)]
+
+
+def check_beacon_name(text: str) -> str:
+    return protocol.check_name(text, "beacon name")
+
+
+Outage = tuple[SimTime, SimTime]  # [start, end) in sim seconds
 
 
 @dataclass(frozen=True)
 class BeaconConfig:
-    name: str = "nest"
-    period: float = 0.5  # seconds of sim time between transmissions
-    outages: tuple[tuple[float, float], ...] = ()  # [start, end) sim-time windows
-    flaky: float = 0.0  # probability that a due transmission is skipped
+    """The beacon's settings; its flagged ones are options of nest-beacon and (as
+    --beacon-*) of swarm run."""
+
+    FLAG_GROUP: ClassVar[str] = "nest beacon"
+
+    name: Annotated[
+        protocol.Name,
+        Meta(description="beacon id on the radio; not all digits"),
+        Flag(parse=check_beacon_name),
+    ] = "nest"
+    period: Annotated[
+        float,
+        Meta(gt=0.0, description="sim seconds between beacon transmissions"),
+        Flag(),
+    ] = 0.5
+    outages: Annotated[
+        tuple[Outage, ...],
+        Meta(description="the beacon is silent from START to END sim seconds"),
+        Flag(name="outage", metavar="START:END"),
+    ] = ()
+    flaky: Annotated[
+        float,
+        Meta(
+            ge=0.0,
+            le=1.0,
+            description="probability that a due beacon transmission is skipped",
+        ),
+        Flag(),
+    ] = 0.0
 
     def __post_init__(self) -> None:
-        protocol.check_name(self.name, "beacon name")
+        settings.check(self)
         if self.name.isdigit():  # robots' radio names are their ids
             raise ValueError(f"beacon name {self.name!r} must not be all digits")
-        if not self.period > 0:
-            raise ValueError(f"beacon period must be positive, got {self.period}")
-        if not 0.0 <= self.flaky <= 1.0:
-            raise ValueError(f"flaky must be in [0, 1], got {self.flaky}")
         for start, end in self.outages:
-            if not 0 <= start < end:
-                raise ValueError(f"outage window [{start}, {end}) is empty or negative")
+            if not start < end:
+                raise ValueError(f"outage {start:g}:{end:g} must have START < END")
 
 
 @dataclass
@@ -59,17 +92,3 @@ class Beacon:
 
     def silenced(self, t: float) -> bool:
         return any(start <= t < end for start, end in self.config.outages)
-
-
-def parse_outages(windows: Sequence[str]) -> tuple[tuple[float, float], ...]:
-    """Parse ``START:END`` sim-second windows; ValueError says which one is wrong."""
-    parsed = []
-    for window in windows:
-        start, sep, end = window.partition(":")
-        try:
-            if not sep:
-                raise ValueError
-            parsed.append((float(start), float(end)))
-        except ValueError:
-            raise ValueError(f"outage {window!r} is not START:END in sim seconds") from None
-    return tuple(parsed)

@@ -1,58 +1,29 @@
-"""The beacon's options, shared by ``nest-beacon`` and ``swarm run`` (as --beacon-*)."""
+"""What a ``nest-beacon`` process is configured with, as one object (``NestBeaconConfig``):
+``swarm run`` hands it over as ``--config JSON``; by hand, its options are made from the
+settings' own definitions (``BeaconConfig``'s flagged settings and the seed)."""
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass, field
+from typing import Annotated
 
-from nest_beacon.beacon import BeaconConfig, parse_outages
-from plumbing import cliargs
+from msgspec import Meta
 
-
-def outage(text: str) -> str:
-    try:
-        parse_outages([text])
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
-    start, _, end = text.partition(":")
-    if not 0 <= float(start) < float(end):
-        raise argparse.ArgumentTypeError(f"outage {text!r} must have 0 <= START < END")
-    return text
+from nest_beacon.beacon import BeaconConfig
+from plumbing.settings_cli import Options
+from robot_agent import protocol, settings
+from robot_agent.settings import Flag
 
 
-def add_beacon_options(parser: argparse.ArgumentParser, prefix: str = "") -> list[argparse.Action]:
-    group = parser.add_argument_group("nest beacon")
-    add = group.add_argument
-    return [
-        add(
-            f"--{prefix}period",
-            dest="beacon_period",
-            type=cliargs.positive_float,
-            default=0.5,
-            help="sim seconds between beacon transmissions (default: 0.5)",
-        ),
-        add(
-            f"--{prefix}outage",
-            dest="beacon_outage",
-            type=outage,
-            action="append",
-            default=[],
-            metavar="START:END",
-            help="the beacon is silent from START to END sim seconds (repeatable)",
-        ),
-        add(
-            f"--{prefix}flaky",
-            dest="beacon_flaky",
-            type=cliargs.probability,
-            default=0.0,
-            help="probability that a due beacon transmission is skipped (default: 0)",
-        ),
-    ]
+@dataclass(frozen=True)
+class NestBeaconConfig:
+    """The beacon and the run seed its flakiness draws from."""
+
+    seed: Annotated[protocol.Seed, Meta(description="run seed"), Flag()] = 0
+    beacon: BeaconConfig = field(default_factory=BeaconConfig)
+
+    def __post_init__(self) -> None:
+        settings.check(self)
 
 
-def beacon_config(args: argparse.Namespace, name: str = "nest") -> BeaconConfig:
-    return BeaconConfig(
-        name=name,
-        period=args.beacon_period,
-        outages=parse_outages(args.beacon_outage),
-        flaky=args.beacon_flaky,
-    )
+NEST_BEACON_OPTIONS = Options(NestBeaconConfig)

@@ -1,7 +1,8 @@
 """Argument types and shared options for every command-line entry point.
 
 Each type raises ``argparse.ArgumentTypeError`` with a message that says what was
-wrong, so argparse prints one line and exits with code 2.
+wrong, so argparse prints one line and exits with code 2. The options of a run's
+settings are not written here but made from their definitions (``plumbing/settings_cli.py``).
 """
 
 from __future__ import annotations
@@ -91,9 +92,7 @@ probability = float_range(0.0, 1.0)
 threshold = float_range(0.0, 1.0, low_open=True)
 seed = int_range(0, 2**63 - 1)
 positive_int = int_range(1)
-non_negative_int = int_range(0)
 positive_float = float_range(0.0, low_open=True)
-non_negative_float = float_range(0.0)
 
 
 def add_zenoh_options(parser: argparse.ArgumentParser, *, default_mode: str = "client") -> None:
@@ -145,32 +144,6 @@ def add_zenoh_options(parser: argparse.ArgumentParser, *, default_mode: str = "c
         "message is then tagged and checked. Without one (and not started by swarm run) "
         "the process runs unauthenticated",
     )
-
-
-def forward_argv(
-    actions: list[argparse.Action], args: argparse.Namespace, *, strip_prefix: str = ""
-) -> list[str]:
-    """The command-line options that reproduce ``args`` for ``actions`` in a child process.
-
-    Only values that differ from the defaults are forwarded. ``strip_prefix`` turns a
-    launcher's ``--beacon-period`` into the child's ``--period``.
-    """
-    argv: list[str] = []
-    for action in actions:
-        value = getattr(args, action.dest, None)
-        if value is None or value == action.default:
-            continue
-        flag = max(action.option_strings, key=len).replace(f"--{strip_prefix}", "--", 1)
-        if isinstance(action, argparse._StoreTrueAction):
-            argv.append(flag)
-        elif isinstance(action, argparse._AppendAction):
-            for item in value:
-                argv += [flag, str(item)]
-        elif isinstance(value, list):
-            argv += [flag, *map(str, value)]
-        else:
-            argv += [flag, str(value)]
-    return argv
 
 
 def add_log_level(parser: argparse.ArgumentParser) -> None:

@@ -39,100 +39,16 @@ from __future__ import annotations
 import math
 import random
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
 from robot_agent import decision, ports, protocol, vision
+from robot_agent.controller_config import ControllerConfig
 from robot_agent.navigation import Navigator, NavParams
 
 QualityEstimator = Callable[[np.ndarray], "float | None"]
 
 _TIME_EPSILON = 1e-9  # seconds: sums of control periods are not exact in binary
-
-
-@dataclass(frozen=True)
-class ControllerConfig:
-    """Parameters of the Section 5 behaviour (seconds, metres, radians)."""
-
-    alpha: float = 0.0  # Definition 1 reliability parameter, in [0, 0.5]
-    threshold: float = 1.0  # decide when an option reaches it (use < 1 with alpha > 0)
-    pooling: decision.PoolingName = "mprodop"  # operator at the nest (decision.POOLING_OPERATORS)
-    dwell: float = 3.0  # seconds at the nest broadcasting + listening before pooling
-    broadcast_period: float = 0.5  # seconds between opinion broadcasts at the nest
-    linger: float = 0.0  # seconds broadcasting at the nest after deciding (the paper's fix)
-    view_distance: float = 0.15  # metres from the wall to the robot centre when sensing
-    beacon_timeout: float = 1.5  # heard the beacon within this -> at the nest
-    capture_timeout: float = 1.0  # seconds to wait for a requested frame
-    capture_attempts: int = 3  # frames tried at one site before giving up the pair
-    view_tolerance: float = 0.015  # metres from the viewpoint that count as there
-    heading_tolerance: float = 0.05  # radians off the site's direction when capturing
-    wiggle: float = 0.12  # radians: a retry aims up to this far either side of the site
-    nest_tolerance: float = 0.05  # metres from the nest centre where a deaf robot waits
-    stall_timeout: float = 4.0  # seconds without progress near a goal -> take it as reached
-    near_distance: float = 0.2  # metres: how near a stalled robot must be to sense from there
-    travel_timeout: float = 120.0  # seconds for a leg to a site (or parking) before giving up
-    travel_crawl: float = 1 / 30  # m/s: a longer leg gets the time to cover its length at this
-    park_clearance: float = 0.06  # metres from the wall to the centre of a parking slot
-    park_spacing: float = 0.1  # metres between parking slots along the wall
-    park_corridor: float = 0.11  # metres either side of each site kept free of parking
-    park_lane: float = 0.2  # metres kept free between parked robots beyond the wall row
-
-    def __post_init__(self) -> None:
-        decision.validate_alpha(self.alpha)
-        if not isinstance(self.pooling, str) or self.pooling not in decision.POOLING_OPERATORS:
-            raise ValueError(
-                f"pooling must be one of {', '.join(decision.POOLING_OPERATORS)}, "
-                f"got {self.pooling!r}"
-            )
-        if not (isinstance(self.threshold, (int, float)) and 0.0 < self.threshold <= 1.0):
-            raise ValueError(f"threshold must be in (0, 1], got {self.threshold!r}")
-        if self.alpha > 0.0 and self.threshold >= 1.0:
-            raise ValueError(
-                f"with alpha = {self.alpha} > 0 no option ever reaches probability 1: "
-                "set threshold below 1 (e.g. 0.99)"
-            )
-        positive = {
-            "dwell": self.dwell,
-            "broadcast_period": self.broadcast_period,
-            "view_distance": self.view_distance,
-            "beacon_timeout": self.beacon_timeout,
-            "capture_timeout": self.capture_timeout,
-            "view_tolerance": self.view_tolerance,
-            "heading_tolerance": self.heading_tolerance,
-            "nest_tolerance": self.nest_tolerance,
-            "stall_timeout": self.stall_timeout,
-            "near_distance": self.near_distance,
-            "travel_timeout": self.travel_timeout,
-            "travel_crawl": self.travel_crawl,
-        }
-        for name, value in positive.items():
-            if not _finite(value) or value <= 0.0:
-                raise ValueError(f"{name} must be a positive number of its unit, got {value!r}")
-        for name, value in (
-            ("linger", self.linger),
-            ("wiggle", self.wiggle),
-            ("park_clearance", self.park_clearance),
-            ("park_corridor", self.park_corridor),
-        ):
-            if not _finite(value) or value < 0.0:
-                raise ValueError(f"{name} must be zero or positive, got {value!r}")
-        for name, value in (("park_spacing", self.park_spacing), ("park_lane", self.park_lane)):
-            if not _finite(value) or value <= 0.0:
-                raise ValueError(f"{name} must be a positive distance, got {value!r}")
-        if self.wiggle > math.pi / 2:
-            raise ValueError(f"wiggle must be at most pi/2 radians, got {self.wiggle!r}")
-        if isinstance(self.capture_attempts, bool) or not isinstance(self.capture_attempts, int):
-            raise ValueError(f"capture_attempts must be an int, got {self.capture_attempts!r}")
-        if self.capture_attempts < 1:
-            raise ValueError(f"capture_attempts must be at least 1, got {self.capture_attempts}")
-
-    def leg_allowance(self, length: float) -> float:
-        """Sim seconds a leg of ``length`` metres may take before the robot gives it up:
-        ``travel_timeout``, or for a long leg (the arena grows with the swarm) the time to
-        cover it at ``travel_crawl``, so a crowd on the way slows a robot without making
-        it give up."""
-        return max(self.travel_timeout, length / self.travel_crawl)
 
 
 class Controller:
@@ -616,10 +532,6 @@ class Controller:
 
 def _stop() -> ports.Command:
     return ports.Command(0.0, 0.0)
-
-
-def _finite(value: object) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def parking_slot(

@@ -28,7 +28,7 @@ from typing import TypeVar
 import msgspec
 import zenoh
 
-from plumbing import cliargs, run_keys
+from plumbing import cliargs, run_keys, settings_cli
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.trace import TraceWriter, now, open_trace
@@ -36,12 +36,7 @@ from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import certificate_name, open_from_args, reliable_publisher
 from robot_agent import auth, byzantine, guard, protocol
 from robot_agent.lockstep import answer_tick
-from robot_agent.options import (
-    add_byzantine_option,
-    add_controller_options,
-    controller_config,
-    hosted_byzantine,
-)
+from robot_agent.options import AGENT_OPTIONS, RobotAgentConfig, hosted_byzantine
 from robot_agent.ports import RejectCounter, RobotController
 
 log = logging.getLogger("robot_agent")
@@ -435,19 +430,13 @@ def build_parser() -> argparse.ArgumentParser:
         "(repeatable to host several robots)",
     )
     parser.add_argument(
-        "--seed",
-        type=cliargs.seed,
-        default=0,
-        help="run seed; each robot's RNG derives from it and its id (default: 0)",
-    )
-    parser.add_argument(
         "--info-timeout",
         type=cliargs.positive_float,
         default=60.0,
         help="wall seconds to wait for the world server (default: 60)",
     )
-    add_controller_options(parser)
-    add_byzantine_option(parser)
+    AGENT_OPTIONS.add_to(parser)
+    settings_cli.add_config_option(parser, RobotAgentConfig)
     parser.add_argument(
         "--trace",
         metavar="PATH",
@@ -468,9 +457,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.exit(2, "robot-agent: error: the same --id is given twice\n")
     if None in args.ids and "{id}" in (args.zenoh_config or ""):
         parser.exit(2, "robot-agent: error: --id auto cannot fill '{id}' in --zenoh-config\n")
+    agent: RobotAgentConfig = settings_cli.config_from(parser, args, AGENT_OPTIONS)
+    config = agent.controller
     try:
-        config = controller_config(args)
-        misbehaving = hosted_byzantine(args.byzantine, fixed)
+        misbehaving = hosted_byzantine(agent.byzantine, fixed)
     except ValueError as error:
         parser.exit(2, f"robot-agent: error: {error}\n")
     cliargs.configure_logging("robot-agent", args.log_level)
@@ -498,7 +488,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 robot = ask_for_id(session, keys, args.info_timeout, keyring)
             identity = auth.robot_identity(robot)
             info = fetch_world_info(session, keys, args.info_timeout, keyring, identity)
-            rng = random.Random(protocol.derive_seed(args.seed, "robot", robot))
+            rng = random.Random(protocol.derive_seed(agent.seed, "robot", robot))
             try:
                 controller = byzantine.build_controller(
                     robot, info, config, rng, misbehaving.get(robot)

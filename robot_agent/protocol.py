@@ -49,9 +49,11 @@ MAX_NAME_LENGTH = 64
 NAME_RE = re.compile(f"[{NAME_CHARACTERS}]{{1,{MAX_NAME_LENGTH}}}")
 # For msgspec and JSON Schema: '$' must not let a final newline through (Python's would).
 _NAME_PATTERN = rf"^[{NAME_CHARACTERS}]+$(?!\n)"
-_Name = Annotated[
-    str, msgspec.Meta(min_length=1, max_length=MAX_NAME_LENGTH, pattern=_NAME_PATTERN)
-]
+Name = Annotated[str, msgspec.Meta(min_length=1, max_length=MAX_NAME_LENGTH, pattern=_NAME_PATTERN)]
+_Name = Name
+
+
+Seed = Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)]  # a run seed
 
 
 def is_name(text: object) -> bool:
@@ -103,7 +105,7 @@ class WorldInfo(Message):
     """Answer of the ``world/info`` queryable: the map a robot is given (never qualities)."""
 
     run: _Name
-    seed: Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)]
+    seed: Seed
     dt: _Positive
     arena_radius: _Positive
     nest: Nest

@@ -17,9 +17,10 @@ from swarm_helpers import run_swarm, unique_run_id
 
 from deploy.cli import main as swarm_main
 from deploy.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
-from robot_agent import byzantine, decision, node, options, ports, protocol
+from robot_agent import byzantine, decision, node, options, ports, protocol, settings
 from robot_agent.byzantine import Behaviour, ByzantineRobot
 from robot_agent.controller import ControllerConfig
+from robot_agent.options import RobotAgentConfig
 from world_server.layout import make_layout
 
 # --- the wrappers, on a lone robot in the fake world -----------------------------------
@@ -213,7 +214,6 @@ def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot() 
     liar_site = byzantine.default_liar_site(sites, make_layout(sites, 4, seed).best_site, seed)
     assert plan.byzantine_robots == {1: Behaviour("liar", liar_site), 2: Behaviour("inverted")}
     assert plan.config["byzantine"] == [f"1:liar={liar_site}", "2:inverted"]
-    assert "--byzantine" not in plan.robot_args  # not for every robot process
     json.dumps(plan.config)  # the recorder gets the configuration as JSON
     started: list[list[str]] = []
     swarm = Swarm(plan)
@@ -224,10 +224,14 @@ def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot() 
         swarm._start_robots([2, 3])
     finally:
         swarm.network.close()
-    hosts = [argv[: argv.index(plan.robot_args[0])] for argv in started]
-    assert hosts == [
-        ["--id", "0", "--id", "1", "--byzantine", f"1:liar={liar_site}"],
-        ["--id", "2", "--id", "3", "--byzantine", "2:inverted"],
+    hosts = [argv[: argv.index("--run-id")] for argv in started]
+    assert hosts == [["--id", "0", "--id", "1"], ["--id", "2", "--id", "3"]]
+    handed = [
+        settings.decode(argv[argv.index("--config") + 1], RobotAgentConfig) for argv in started
+    ]
+    assert [config.byzantine for config in handed] == [
+        (ByzantineRobot(1, Behaviour("liar", liar_site)),),
+        (ByzantineRobot(2, Behaviour("inverted")),),
     ]
 
 

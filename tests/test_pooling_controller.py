@@ -44,15 +44,21 @@ def test_robot_agent_takes_pooling_from_its_command_line() -> None:
 def test_swarm_run_forwards_pooling_to_every_robot_and_records_it() -> None:
     from deploy.cli import build_parser
     from deploy.launcher import plan_from_args
+    from robot_agent import settings
+    from robot_agent.options import RobotAgentConfig
 
     parser = build_parser(["run"])
     plan = plan_from_args(parser.parse_args(["run", "--pooling", "loglinear", "--no-record"]))
-    flag = plan.robot_args.index("--pooling")
-    assert plan.robot_args[flag + 1] == "loglinear"
+    argv = plan.robot_argv([0])
+    handed = settings.decode(argv[argv.index("--config") + 1], RobotAgentConfig)
+    assert handed.controller.pooling == "loglinear"
     assert plan.config["pooling"] == "loglinear"
-    # The paper's operator is the default: nothing to forward, but still in the config.
+    # The paper's operator is the default, and in the config too.
     plan = plan_from_args(parser.parse_args(["run", "--no-record"]))
-    assert "--pooling" not in plan.robot_args
+    argv = plan.robot_argv([0])
+    assert settings.decode(argv[argv.index("--config") + 1], RobotAgentConfig).controller == (
+        ControllerConfig()
+    )
     assert plan.config["pooling"] == "mprodop"
 
 

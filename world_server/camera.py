@@ -22,11 +22,14 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Annotated, ClassVar
 
 import cv2
 import numpy as np
+from msgspec import Meta
 
-from robot_agent import protocol
+from robot_agent import protocol, settings
+from robot_agent.settings import Flag
 from world_server.layout import Layout
 
 WALL_HEIGHT = 0.10  # metres; panels cover the wall's full height
@@ -82,14 +85,26 @@ class CameraNoise:
         Walls, floor and robots are not affected. Must be in [0, 1).
     """
 
-    pixel_sigma: float = 0.0
-    lighting: float = 0.0
+    FLAG_GROUP: ClassVar[str] = "camera"
+
+    pixel_sigma: Annotated[
+        float,
+        Meta(ge=0.0, le=255.0, description="Gaussian pixel noise, std-dev on the 0..255 scale"),
+        Flag(name="camera-noise", metavar="SIGMA"),
+    ] = 0.0
+    lighting: Annotated[
+        float,
+        Meta(
+            ge=0.0,
+            lt=1.0,
+            description="per-site lighting variation amplitude in [0, 1): biases each "
+            "site's colour for the whole run",
+        ),
+        Flag(),
+    ] = 0.0
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.pixel_sigma <= 255.0:
-            raise ValueError(f"pixel_sigma must be in [0, 255], got {self.pixel_sigma!r}")
-        if not 0.0 <= self.lighting < 1.0:
-            raise ValueError(f"lighting must be in [0, 1), got {self.lighting!r}")
+        settings.check(self)
 
 
 def _lit_panel_colours(

@@ -32,13 +32,18 @@ import math
 import random
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal
+from typing import Annotated, ClassVar, Literal
 
 import numpy as np
+from msgspec import Meta
 
-from robot_agent import protocol
+from robot_agent import protocol, settings
+from robot_agent.settings import Flag
 
 SenderKind = Literal["robot", "beacon"]
+Metres = Annotated[float, Meta(gt=0.0)]
+Probability = Annotated[float, Meta(ge=0.0, le=1.0)]
+Ticks = Annotated[int, Meta(ge=0)]
 _KINDS = ("robot", "beacon")
 
 
@@ -58,79 +63,106 @@ class RadioConfig:
     delays are whole control ticks. A copy is lost if any enabled loss cause says so.
     """
 
-    robot_range: float = 0.5
-    """How far a robot's broadcast carries."""
-    beacon_range: float = 0.2
-    """How far the nest beacon's broadcast carries."""
+    FLAG_GROUP: ClassVar[str] = "radio medium (all faults off by default)"
 
-    drop: float = 0.0
-    """iid loss: each copy (message, receiver) is lost with this probability."""
+    robot_range: Annotated[
+        Metres, Meta(description="robot radio range in metres"), Flag(name="radio-range")
+    ] = 0.5
+    beacon_range: Annotated[
+        Metres, Meta(description="how far the nest beacon's broadcast carries, in metres")
+    ] = 0.2
 
-    latency: int = 0
-    """Extra ticks before delivery: a copy sent at tick t arrives at t + 1 + latency."""
-    jitter: int = 0
-    """Each copy waits a further uniform 0..jitter ticks; copies overtake each other."""
+    drop: Annotated[
+        Probability, Meta(description="iid loss probability per message and receiver"), Flag()
+    ] = 0.0
 
-    duplicate: float = 0.0
-    """Probability that a copy that survived is delivered twice."""
-    duplicate_delay: int = 1
-    """The duplicate arrives a uniform 0..duplicate_delay ticks after the original."""
+    latency: Annotated[
+        Ticks,
+        Meta(
+            description="extra delivery latency in ticks: a copy sent at tick t arrives at "
+            "t + 1 + latency"
+        ),
+        Flag(metavar="TICKS"),
+    ] = 0
+    jitter: Annotated[
+        Ticks,
+        Meta(description="a further uniform 0..TICKS delay per copy; copies overtake"),
+        Flag(metavar="TICKS"),
+    ] = 0
 
-    reorder: bool = False
-    """Shuffle each tick's deliveries (seeded) instead of sorting them."""
+    duplicate: Annotated[
+        Probability,
+        Meta(description="probability that a delivered copy arrives twice"),
+        Flag(),
+    ] = 0.0
+    duplicate_delay: Annotated[
+        Ticks, Meta(description="the duplicate arrives 0..this many ticks after the original")
+    ] = 1
 
-    burst_enter: float = 0.0
-    """Gilbert-Elliott burst loss: P(good -> bad) per copy on a directed link.
+    reorder: Annotated[
+        bool,
+        Meta(description="shuffle each tick's deliveries (seeded) instead of sorting them"),
+        Flag(),
+    ] = False
 
-    Each (sender, receiver) link is a two-state Markov chain that starts good and
+    burst_enter: Annotated[
+        Probability,
+        Meta(description="Gilbert-Elliott burst loss: P(good -> bad) per copy on a link"),
+        Flag(
+            name="burst-loss",
+            joined=("burst_exit", "burst_loss_good", "burst_loss_bad"),
+            least=2,
+            metavar="ENTER:EXIT[:LG:LB]",
+            help="Gilbert-Elliott burst loss per link: P(good->bad), P(bad->good), and loss "
+            "probability in the good and bad states (LG 0 and LB 1 when not given)",
+            default_text="off",
+        ),
+    ] = 0.0
+    """Each (sender, receiver) link is a two-state Markov chain that starts good and
     advances once per copy sent on that link (transition first, then the loss draw in
     the new state). Burst loss is on when ``burst_enter`` or ``burst_loss_good`` > 0.
     The long-run loss rate is (e * lb + x * lg) / (e + x) with e = burst_enter,
     x = burst_exit, lb = burst_loss_bad, lg = burst_loss_good; a bad spell lasts 1/x
     copies on average.
     """
-    burst_exit: float = 1.0
-    """Gilbert-Elliott: P(bad -> good) per copy on the link."""
-    burst_loss_good: float = 0.0
-    """Gilbert-Elliott: loss probability in the good state."""
-    burst_loss_bad: float = 1.0
-    """Gilbert-Elliott: loss probability in the bad state."""
+    burst_exit: Annotated[
+        Probability, Meta(description="Gilbert-Elliott: P(bad -> good) per copy on the link")
+    ] = 1.0
+    burst_loss_good: Annotated[
+        Probability, Meta(description="Gilbert-Elliott: loss probability in the good state")
+    ] = 0.0
+    burst_loss_bad: Annotated[
+        Probability, Meta(description="Gilbert-Elliott: loss probability in the bad state")
+    ] = 1.0
 
-    range_loss_start: float = 1.0
-    """Range-dependent loss starts at this fraction of the range (1.0 = off).
-
-    With f = distance / range and s = range_loss_start < 1, a copy is lost with
+    range_loss_start: Annotated[
+        Probability,
+        Meta(description="range-dependent loss starts at this fraction of the range (1: off)"),
+        Flag(
+            name="range-loss",
+            joined=("range_loss_exponent",),
+            least=1,
+            metavar="START[:EXPONENT]",
+            help="loss rising with distance: 0 up to START x range, 1 at the range's edge, "
+            "((d/range - START)/(1 - START))^EXPONENT between",
+            default_text="off",
+        ),
+    ] = 1.0
+    """With f = distance / range and s = range_loss_start < 1, a copy is lost with
     probability 0 for f <= s and ((f - s) / (1 - s)) ** range_loss_exponent for
     s < f <= 1: rising from 0 to 1 at the range's edge (linear for exponent 1).
     """
-    range_loss_exponent: float = 1.0
-    """Shape of the range-dependent loss curve (> 1: loss stays low until nearer the edge)."""
+    range_loss_exponent: Annotated[
+        float,
+        Meta(
+            gt=0.0,
+            description="shape of the range-dependent loss curve (> 1: loss stays "
+            "low until nearer the edge)",
+        ),
+    ] = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("robot_range", "beacon_range"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive distance, got {value!r}")
-        for name in (
-            "drop",
-            "duplicate",
-            "burst_enter",
-            "burst_exit",
-            "burst_loss_good",
-            "burst_loss_bad",
-            "range_loss_start",
-        ):
-            value = getattr(self, name)
-            if not 0.0 <= value <= 1.0:  # also refuses NaN
-                raise ValueError(f"{name} must be a probability in [0, 1], got {value!r}")
-        for name in ("latency", "jitter", "duplicate_delay"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 0:
-                raise ValueError(f"{name} must be a whole number of ticks >= 0, got {value!r}")
-        if not (math.isfinite(self.range_loss_exponent) and self.range_loss_exponent > 0):
-            raise ValueError(
-                f"range_loss_exponent must be positive, got {self.range_loss_exponent!r}"
-            )
+        settings.check(self)
 
     @property
     def burst_loss(self) -> bool:

@@ -26,7 +26,7 @@ from typing import Any
 import msgspec
 import zenoh
 
-from plumbing import cliargs, run_keys
+from plumbing import cliargs, run_keys, settings_cli
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.trace import TraceWriter, now, open_trace
@@ -38,7 +38,7 @@ from plumbing.zenoh_session import (
 )
 from robot_agent import auth, protocol
 from world_server.clock import Barrier, Pacer
-from world_server.options import add_world_options, world_config
+from world_server.options import WORLD_SERVER_OPTIONS, WorldServerConfig, world_server_config
 from world_server.world import Transmission, World, WorldConfig
 
 log = logging.getLogger("world_server")
@@ -82,26 +82,27 @@ class WorldServer:
         world: World,
         keys: protocol.Keys,
         *,
-        speed: float = 1.0,
-        stall_timeout: float = 5.0,
-        start_timeout: float = 60.0,
+        config: WorldServerConfig | None = None,
         expect_robots: int = 0,
         expect_beacons: int = 0,
-        state_every: int = 10,
         keyring: auth.Keyring | None = None,
         trace: TraceWriter | None = None,
     ) -> None:
+        """``config`` says how to pace and publish ``world`` (its own world is not used);
+        the run starts once ``expect_robots`` robots and ``expect_beacons`` beacons are live
+        (0: at once)."""
+        config = config or WorldServerConfig()
         self.session = session
         self.world = world
         self.keys = keys
         self.keyring = keyring  # None: an unauthenticated run
         self.lockstep = world.config.clock == "lockstep"
-        self.pacer = Pacer(world.config.dt, speed)
-        self.stall_timeout = stall_timeout
-        self.start_timeout = start_timeout
+        self.pacer = Pacer(world.config.dt, config.speed)
+        self.stall_timeout = config.stall_timeout
+        self.start_timeout = config.start_timeout
         self.expect_robots = expect_robots
         self.expect_beacons = expect_beacons
-        self.state_every = max(1, state_every)
+        self.state_every = config.state_every
         self.inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
         self.counters = Counters()
         self.barrier = Barrier()
@@ -628,34 +629,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="The world of one swarm: physics, cameras, the radio medium and the clock. "
         "By default it is the Zenoh router of a local run.",
     )
-    world = parser.add_argument_group("world")
-    world.add_argument(
-        "--sites",
-        type=cliargs.int_range(2, protocol.MAX_OPTIONS),
-        default=10,
-        help="number of sites n (default: 10)",
-    )
-    world.add_argument(
-        "--robots",
-        type=cliargs.int_range(1, protocol.MAX_ROBOTS),
-        default=10,
-        help="expected swarm size: sizes the arena; the run starts when "
-        "this many robots are live (default: 10)",
-    )
-    world.add_argument(
-        "--beacons",
-        type=cliargs.non_negative_int,
-        default=1,
-        help="nest beacons to wait for before starting (default: 1)",
-    )
-    world.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
-    world.add_argument(
-        "--start-timeout",
-        type=cliargs.positive_float,
-        default=60.0,
-        help="wall seconds to wait for the expected robots (default: 60)",
-    )
-    add_world_options(parser)
+    WORLD_SERVER_OPTIONS.add_to(parser)
+    settings_cli.add_config_option(parser, WorldServerConfig)
     parser.add_argument(
         "--trace",
         metavar="PATH",
@@ -669,20 +644,30 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def config_from_args(args: argparse.Namespace) -> WorldConfig:
-    return world_config(args, run=args.run_id, seed=args.seed, sites=args.sites, robots=args.robots)
+    """The WorldConfig of ``world-server``'s options."""
+    return world_server_config(args).world
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     die_with_launcher()
     parser = build_parser()
     args = parser.parse_args(argv)
+    config: WorldServerConfig = settings_cli.config_from(
+        parser, args, WORLD_SERVER_OPTIONS, {"world.run": args.run_id}
+    )
+    if config.world.run != args.run_id:
+        parser.exit(
+            2,
+            f"world-server: error: --config is of run {config.world.run!r}, "
+            f"not --run-id {args.run_id!r}\n",
+        )
     if session_mode(args) == "router" and not args.listen and not args.zenoh_config:
         args.listen = [DEFAULT_LISTEN]
     cliargs.configure_logging("world-server", args.log_level)
     keyring = run_keys.from_args(parser, args, "world-server")
     if keyring is not None and keyring.secret is None:
         parser.exit(2, "world-server: error: the world server needs the run secret\n")
-    world = World(config_from_args(args))
+    world = World(config.world)
     keys = protocol.Keys(args.run_id, args.root)
     try:
         session = open_from_args(args)
@@ -694,12 +679,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             session,
             world,
             keys,
-            speed=args.speed,
-            stall_timeout=args.stall_timeout,
-            start_timeout=args.start_timeout,
-            expect_robots=args.robots,
-            expect_beacons=args.beacons,
-            state_every=args.state_every,
+            config=config,
+            expect_robots=config.world.num_robots,
+            expect_beacons=config.beacons,
             keyring=keyring,
             trace=open_trace(args.trace),
         )
@@ -708,7 +690,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         log.info(
             "run %s: %d sites, arena radius %.2f m, best site %d, listening on %s",
             args.run_id,
-            args.sites,
+            config.world.num_sites,
             world.layout.arena_radius,
             world.layout.best_site,
             ", ".join(args.listen) or "(client)",

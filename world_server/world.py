@@ -10,11 +10,13 @@ import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Annotated, ClassVar, Literal
 
 import numpy as np
+from msgspec import Meta
 
-from robot_agent import protocol
+from robot_agent import protocol, settings
+from robot_agent.settings import Flag
 from world_server.camera import CameraNoise, CameraRenderer
 from world_server.layout import Layout, make_layout
 from world_server.physics import EpuckSpec, Physics
@@ -26,18 +28,53 @@ OCCLUSION_RANGE = 1.0  # metres: robots further away are too small to hide a sit
 
 @dataclass(frozen=True)
 class WorldConfig:
-    run: str = "run"
-    seed: int = 0
-    num_sites: int = 10
-    num_robots: int = 10  # expected swarm size: sizes the arena and the nest
-    dt: float = 0.1  # control tick, seconds of sim time
-    substeps: int = 2
-    clock: Literal["lockstep", "realtime"] = "lockstep"
+    """The world of one run; its flagged settings are options of world-server and swarm run."""
+
+    FLAG_GROUP: ClassVar[str] = "world"
+
+    run: Annotated[protocol.Name, Meta(description="the run id")] = "run"
+    seed: Annotated[protocol.Seed, Meta(description="run seed"), Flag()] = 0
+    num_sites: Annotated[
+        int,
+        Meta(ge=2, le=protocol.MAX_OPTIONS, description="number of sites n"),
+        Flag(name="sites"),
+    ] = 10
+    num_robots: Annotated[
+        int,
+        Meta(
+            ge=1,
+            le=protocol.MAX_ROBOTS,
+            description="expected swarm size: sizes the arena and the nest; the run starts "
+            "when this many robots are live",
+        ),
+        Flag(name="robots"),
+    ] = 10
+    dt: Annotated[
+        float,
+        Meta(ge=0.001, le=1.0, description="control tick in sim seconds"),
+        Flag(group="clock"),
+    ] = 0.1
+    substeps: Annotated[int, Meta(ge=1, description="physics steps per control tick")] = 2
+    clock: Annotated[
+        Literal["lockstep", "realtime"],
+        Meta(
+            description="lockstep: deterministic, waits for every controller each tick, as "
+            "fast as the processes go; realtime: follows the wall clock"
+        ),
+        Flag(group="clock"),
+    ] = "lockstep"
     radio: RadioConfig = field(default_factory=RadioConfig)  # its beacon_range is replaced:
-    beacon_range: float | None = None  # metres the beacon reaches; None: the nest radius
+    beacon_range: Annotated[
+        Annotated[float, Meta(gt=0.0)] | None,
+        Meta(description="beacon range in metres"),
+        Flag(group=RadioConfig.FLAG_GROUP, default_text="the nest radius"),
+    ] = None
     camera: protocol.CameraSpec = DEFAULT_CAMERA
     camera_noise: CameraNoise = field(default_factory=CameraNoise)
     spec: EpuckSpec = field(default_factory=EpuckSpec)
+
+    def __post_init__(self) -> None:
+        settings.check(self)
 
 
 @dataclass(frozen=True)
