@@ -52,6 +52,11 @@ class _Option:
         return typing.get_origin(self.setting.kind) is tuple and args[-1:] == (Ellipsis,)
 
     @property
+    def element(self) -> Any:
+        """The type of one item of a repeatable option."""
+        return typing.get_args(self.setting.kind)[0]
+
+    @property
     def switch(self) -> bool:
         return self.setting.kind is bool
 
@@ -80,7 +85,7 @@ class Options:
     # --- declaring -------------------------------------------------------------------
 
     def add_to(self, parser: argparse.ArgumentParser) -> None:
-        groups: dict[str, argparse._ArgumentGroup] = {}
+        groups: dict[str, Any] = {}  # argparse's argument groups, by title
         for option in self.options:
             title = option.spec.group or getattr(option.owner, "FLAG_GROUP", None)
             if title is None:
@@ -106,7 +111,7 @@ class Options:
             if value is None:
                 continue
             fields = given.setdefault(option.path, {})
-            if option.setting.flag and option.spec.joined:
+            if option.spec.joined:
                 for setting, part in zip(option.settings, value, strict=False):
                     fields[setting.name] = part
             elif option.repeatable:
@@ -129,7 +134,7 @@ class Options:
                 argv += [option.flag] if value else []
             elif option.repeatable:
                 for item in value:
-                    argv += [option.flag, _text(option.setting.kind.__args__[0], item)]
+                    argv += [option.flag, _text(option.element, item)]
             elif option.spec.joined:
                 texts = [
                     _text(s.hint, part) for s, part in zip(option.settings, value, strict=False)
@@ -151,8 +156,7 @@ class Options:
             if option.spec.joined:
                 record[option.dest] = _joined_text(option, values)
             elif option.repeatable:
-                element = typing.get_args(option.setting.kind)[0]
-                record[option.dest] = [_text(element, item) for item in values[0]]
+                record[option.dest] = [_text(option.element, item) for item in values[0]]
             elif isinstance(values[0], bool | int | float | str) or values[0] is None:
                 record[option.dest] = values[0]
             else:
@@ -215,8 +219,7 @@ def _declare(option: _Option) -> dict[str, Any]:
         return keywords
     if option.repeatable:
         keywords["action"] = "append"
-        element = typing.get_args(option.setting.kind)[0]
-        keywords["type"] = _reader(element, spec, option.flag)
+        keywords["type"] = _reader(option.element, spec, option.flag)
         return keywords
     if spec.joined:
         keywords["type"] = _joined_reader(option)

@@ -290,7 +290,7 @@ def _refuse_unknown(raw: Any, hint: Any, path: str) -> None:
         known = {setting.name: setting for setting in settings_of(kind)}  # type: ignore[arg-type]
         for name, value in raw.items():
             if name not in known:
-                raise ValueError(f"unknown setting {path}{name!r}")
+                raise ValueError(f"unknown setting '{path}{name}'")
             _refuse_unknown(value, known[name].hint, f"{path}{name}.")
     elif origin is dict and isinstance(raw, dict):
         for key, value in raw.items():

@@ -14,6 +14,8 @@ REPO = Path(__file__).resolve().parent.parent
 PURE = [
     "robot_agent/decision.py",
     "robot_agent/controller.py",
+    "robot_agent/controller_config.py",
+    "robot_agent/settings.py",
     "robot_agent/navigation.py",
     "robot_agent/vision.py",
     "robot_agent/protocol.py",

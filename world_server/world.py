@@ -69,7 +69,9 @@ class WorldConfig:
         Meta(description="beacon range in metres"),
         Flag(group=RadioConfig.FLAG_GROUP, default_text="the nest radius"),
     ] = None
-    camera: protocol.CameraSpec = DEFAULT_CAMERA
+    camera: Annotated[
+        protocol.CameraSpec, Meta(description="the robots' camera: frame size, field of view")
+    ] = DEFAULT_CAMERA
     camera_noise: CameraNoise = field(default_factory=CameraNoise)
     spec: EpuckSpec = field(default_factory=EpuckSpec)
 
