@@ -49,6 +49,7 @@ from robot_agent.options import RobotAgentConfig
 from viewer.options import VIEW_OPTIONS, Observer, add_view_options, observers
 from world_server.layout import make_layout
 from world_server.physics import EpuckSpec
+from world_server.recorder import RunDescription
 
 log = logging.getLogger("swarm.run")
 STATS_ATTEMPTS, STATS_RETRY_PAUSE = 5, 0.2
@@ -315,18 +316,16 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     config["run_id"] = run_id
     config["stall_window"] = stall_window  # the one in force, also when defaulted
     config["byzantine"] = [f"{robot}:{how}" for robot, how in byzantine_robots.items()]
-    common = ["--run-id", run_id, "--seed", str(args.seed)]
+    recorded = RunDescription(run_id, args.seed, args.robots, args.sites, config)
     recorder_args = [
-        *common,
+        "--run-id",
+        run_id,
         "--out",
         str(record),
-        "--robots",
-        str(args.robots),
-        "--sites",
-        str(args.sites),
-        "--config-json",
-        json.dumps(config),
+        "--config",
+        settings.encode(recorded),
     ]
+    common = ["--run-id", run_id, "--seed", str(args.seed)]
     return RunPlan(
         run_id=run_id,
         robots=args.robots,

@@ -23,7 +23,7 @@ from robot_agent import node, settings
 from robot_agent.byzantine import Behaviour, ByzantineRobot
 from robot_agent.controller_config import ControllerConfig
 from robot_agent.options import AGENT_OPTIONS, RobotAgentConfig
-from world_server import server
+from world_server import recorder, server
 from world_server.camera import CameraNoise
 from world_server.options import WORLD_SERVER_OPTIONS, WorldServerConfig
 from world_server.radio import RadioConfig
@@ -39,6 +39,7 @@ CONFIGS = [
     RobotAgentConfig,
     NestBeaconConfig,
     run_switches.RobotFaults,
+    recorder.RunDescription,
 ]
 # Many switches at once, in every form an option takes: a number, a choice, a switch, a
 # joined A:B[:C:D], a repeated START:END, ROBOT@SIMTIME and ROBOT:MODE.
@@ -162,6 +163,7 @@ def test_a_config_goes_to_a_child_and_back_unchanged(config_type: type) -> None:
         RobotAgentConfig: RobotAgentConfig(3, switches.controller, switches.faults.byzantine),
         NestBeaconConfig: NestBeaconConfig(3, switches.beacon),
         run_switches.RobotFaults: switches.faults,
+        recorder.RunDescription: recorder.RunDescription("r", 3, 8, 6, switches.record()),
     }
     config = examples[config_type]
     assert settings.decode(settings.encode(config), config_type) == config
@@ -241,6 +243,8 @@ def test_a_config_made_in_python_is_checked_by_the_same_definitions(
         (server.main, ["--config", '{"world": {"run": "a"}}'], "not --run-id 'run'"),
         (beacon_main.main, ["--config", "{}", "--outage", "1:2"], "--outage cannot be given"),
         (beacon_main.main, ["--outage", "5:1"], "outage 5:1 must have START < END"),
+        (recorder.main, ["--out", "x", "--config", "{}", "--seed", "1"], "--seed cannot be"),
+        (recorder.main, ["--out", "x", "--config-json", "[]"], "not a JSON object"),
     ],
 )
 def test_a_child_refuses_options_beside_its_config_in_one_line(
@@ -250,7 +254,8 @@ def test_a_child_refuses_options_beside_its_config_in_one_line(
         main(argv)
     assert exit_info.value.code == 2
     lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and message in lines[0] and lines[0].count("error") == 1
+    assert [line for line in lines if "error" in line] == [lines[-1]]
+    assert message in lines[-1]
 
 
 def test_swarm_run_hands_each_process_the_configs_its_options_make() -> None:
@@ -268,4 +273,7 @@ def test_swarm_run_hands_each_process_the_configs_its_options_make() -> None:
     assert handed(plan.beacon_argv(), NestBeaconConfig) == NestBeaconConfig(3, switches.beacon)
     assert handed(plan.robot_argv([0, 1]), RobotAgentConfig) == RobotAgentConfig(
         3, switches.controller, ()
+    )
+    assert handed(plan.recorder_args, recorder.RunDescription) == recorder.RunDescription(
+        plan.run_id, 3, 8, 6, plan.config
     )

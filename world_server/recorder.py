@@ -46,15 +46,18 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any, NamedTuple
+from typing import IO, Annotated, Any, ClassVar, NamedTuple
 
 import msgspec
 from mcap.writer import CompressionType, Writer
+from msgspec import Meta
 
-from plumbing import cliargs, run_keys
+from plumbing import cliargs, run_keys, settings_cli
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
-from robot_agent import auth, protocol
+from plumbing.settings_cli import Options
+from robot_agent import auth, protocol, settings
+from robot_agent.settings import Flag
 from world_server import foxglove
 from world_server.layout import Layout, make_layout
 
@@ -230,13 +233,44 @@ def layout_description(layout: Layout) -> dict[str, Any]:
     }
 
 
+def json_object(text: str) -> dict[str, Any]:
+    """``--config-json``: a JSON object, or ValueError."""
+    try:
+        value = json.loads(text)
+    except ValueError as error:
+        raise ValueError(f"not JSON: {error}") from None
+    if not isinstance(value, dict):
+        raise ValueError("not a JSON object")
+    return value
+
+
 @dataclass(frozen=True)
 class RunDescription:
-    run_id: str
-    seed: int
-    robots: int
-    sites: int
-    config: dict[str, Any] = field(default_factory=dict)
+    """The run a recording is of: what the recorder is configured with (its options, or
+    ``--config``, which is how ``swarm run`` hands it over)."""
+
+    FLAG_GROUP: ClassVar[str] = "run"
+
+    run_id: Annotated[protocol.Name, Meta(description="the run id")] = "run"
+    seed: Annotated[protocol.Seed, Meta(description="run seed"), Flag()] = 0
+    robots: Annotated[
+        int,
+        Meta(ge=1, le=protocol.MAX_ROBOTS, description="swarm size of the run, for its layout"),
+        Flag(),
+    ] = 10
+    sites: Annotated[
+        int,
+        Meta(ge=2, le=protocol.MAX_OPTIONS, description="number of sites of the run"),
+        Flag(),
+    ] = 10
+    config: Annotated[
+        dict[str, Any],
+        Meta(description="the run's full configuration, kept in the metadata record"),
+        Flag(name="config-json", metavar="JSON", parse=json_object, default_text="{}"),
+    ] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        settings.check(self)
 
 
 @dataclass
@@ -647,31 +681,17 @@ class _Finish:
 _STOP = object()
 
 
+RECORDER_OPTIONS = Options(RunDescription)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="recorder",
         description="Record every message of one run to an MCAP file (opens in Foxglove).",
     )
     parser.add_argument("--out", required=True, metavar="PATH", help="the MCAP file to write")
-    parser.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
-    parser.add_argument(
-        "--robots",
-        type=cliargs.int_range(1, protocol.MAX_ROBOTS),
-        default=10,
-        help="swarm size of the run, for its layout (default: 10)",
-    )
-    parser.add_argument(
-        "--sites",
-        type=cliargs.int_range(2, protocol.MAX_OPTIONS),
-        default=10,
-        help="number of sites of the run (default: 10)",
-    )
-    parser.add_argument(
-        "--config-json",
-        default="{}",
-        metavar="JSON",
-        help="the run's full configuration, kept in the metadata record",
-    )
+    RECORDER_OPTIONS.add_to(parser)
+    settings_cli.add_config_option(parser, RunDescription)
     parser.add_argument(
         "--info-timeout",
         type=cliargs.positive_float,
@@ -804,12 +824,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     die_with_launcher()
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        config = json.loads(args.config_json)
-        if not isinstance(config, dict):
-            raise ValueError("not a JSON object")
-    except ValueError as error:
-        parser.exit(2, f"recorder: error: --config-json: {error}\n")
+    run: RunDescription = settings_cli.config_from(
+        parser, args, RECORDER_OPTIONS, {"run_id": args.run_id}
+    )
+    if run.run_id != args.run_id:
+        parser.exit(
+            2, f"recorder: error: --config is of run {run.run_id!r}, not --run-id {args.run_id!r}\n"
+        )
     cliargs.configure_logging("recorder", args.log_level)
     keyring = run_keys.from_args(parser, args, "recorder")
     if keyring is not None and keyring.secret is None:
@@ -851,7 +872,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             keys.recorder_finish, lambda query: inbox.put(_Finish(query))
         )
         info = _world_info(session, keys, args.info_timeout, keyring)
-        run = RunDescription(args.run_id, args.seed, args.robots, args.sites, config)
         recorder = McapRecorder(stream, keys, run, info, keyring=keyring)
         done = threading.Event()
         writer = threading.Thread(
