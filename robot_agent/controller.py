@@ -31,7 +31,10 @@ full (about 180 robots with 10 sites), further slots lie on rings further in, ea
 free lane of ``park_lane`` in from the robots parked on the previous one and with that
 lane between its own robots: whichever slots are taken, every slot and every free spot
 among them stays joined to the interior by paths wide enough for the navigator, so no
-robot, parking or passing, can be walled in (``parking_rings``).
+robot, parking or passing, can be walled in (``parking_rings``). That holds only while
+every decided robot ends in its slot, so a robot never parks short of it: when its
+parking leg runs out of time, or it stalls more than a body radius away, it backs off
+towards the nest for ``stall_timeout`` seconds and tries again.
 """
 
 from __future__ import annotations
@@ -182,6 +185,9 @@ class Controller:
         self._viewpoints = [_along_radius(site.x, site.y, sensing_radius) for site in sites]
         self._site_angles = [math.atan2(site.y, site.x) for site in sites]
         self._park_goal: tuple[float, float] | None = None
+        self._park_retries = 0
+        # While backing off from a parking attempt: where to, and until when.
+        self._backoff: tuple[tuple[float, float], float] | None = None
         params = nav_params or NavParams(
             max_speed=world.max_wheel_speed,
             wheel_base=world.wheel_base,
@@ -268,6 +274,11 @@ class Controller:
     @property
     def comparison(self) -> protocol.Comparison | None:
         return self._comparison
+
+    @property
+    def park_retries(self) -> int:
+        """How often parking had to back off and try again (a diagnostic)."""
+        return self._park_retries
 
     @property
     def escapes(self) -> int:
@@ -473,9 +484,22 @@ class Controller:
                 lane=self.config.park_lane,
             )
         goal = self._park_goal
+        if self._backoff is not None:
+            waypoint, until = self._backoff
+            if self._t + _TIME_EPSILON < until:
+                left, right, _ = self._navigator.drive_to(
+                    reading.x,
+                    reading.y,
+                    reading.theta,
+                    reading.proximity,
+                    waypoint,
+                    self.config.view_tolerance,
+                )
+                return ports.Command(left, right)
+            self._backoff = None
+            self._start_leg("to_decision")
         if self._leg_timed_out(reading, goal):
-            self._set_phase("stopped")
-            return _stop()
+            return self._back_off(reading)
         # The last stretch into the slot goes straight in: the wall and the neighbouring
         # parked robots are expected there, not obstacles to steer round.
         near = _distance(reading, goal) <= self.config.near_distance
@@ -483,10 +507,27 @@ class Controller:
         left, right, arrived = self._navigator.drive_to(
             reading.x, reading.y, reading.theta, sensed, goal, self.config.view_tolerance
         )
-        if arrived or self._stalled_near(reading, goal, self.config.near_distance):
+        if arrived:
+            self._set_phase("stopped")
+            return _stop()
+        if self._stalled_near(reading, goal, self.config.near_distance):
+            # Someone is in the way. Stopping here, in a lane, could wall a robot in.
+            if _distance(reading, goal) > self.world.robot_radius:
+                return self._back_off(reading)
             self._set_phase("stopped")
             return _stop()
         return ports.Command(left, right)
+
+    def _back_off(self, reading: ports.BodyReading) -> ports.Command:
+        """Give up this parking attempt: head towards the nest, clear of the parking rows,
+        for ``stall_timeout`` seconds, then try the slot again with a fresh leg."""
+        self._park_retries += 1
+        inner = self.world.nest.radius + 3 * self.world.robot_radius
+        radius = max(inner, math.hypot(reading.x, reading.y) - self.config.near_distance)
+        waypoint = _along_radius(reading.x, reading.y, radius)
+        self._backoff = (waypoint, self._t + self.config.stall_timeout)
+        self._navigator.reset()
+        return _stop()
 
     def _stopped(self, reading: ports.BodyReading) -> ports.Command:
         return _stop()

@@ -512,3 +512,53 @@ def test_a_slowed_robot_on_a_long_leg_keeps_going_instead_of_giving_up(seed: int
     assert robot.trips == 2
     assert robot.comparison is not None
     assert robot.opinion.count(0.0) == 2  # one site ruled out per trip
+
+
+# --- parking ---------------------------------------------------------------------------
+
+
+def test_a_robot_kept_from_its_slot_backs_off_and_parks_later_instead_of_stopping_short() -> None:
+    """A decided robot that stopped wherever its parking stalled stood in the lanes the
+    parking rings keep free, and with 500 robots walled undecided ones in (issue 10). Now
+    it backs off and tries again until it is in its slot."""
+    from robot_agent.controller import parking_slot
+
+    swarm = make_swarm(1, 5, seed=3)
+    robot, body, world = swarm.controllers[0], swarm.bodies[0], swarm.world
+    while robot.phase != "to_decision" and world.t < 1500:
+        swarm.step()
+    assert robot.decided_site is not None
+    config, info = ControllerConfig(), world.info
+    slot = parking_slot(
+        [math.atan2(site.y, site.x) for site in info.sites],
+        robot.decided_site,
+        0,
+        arena_radius=info.arena_radius,
+        inner_radius=info.nest.radius + 3 * info.robot_radius,
+        robot_radius=info.robot_radius,
+        clearance=config.park_clearance,
+        spacing=config.park_spacing,
+        corridor=config.park_corridor,
+        lane=config.park_lane,
+    )
+    # Another robot's body stands in the slot: nobody gets within a body width of it.
+    advance, blocked = world.advance, True
+
+    def advance_round_a_robot_in_the_slot() -> None:
+        before = body.pose
+        advance()
+        if blocked and math.dist(body.pose[:2], slot) < 2 * info.robot_radius:
+            body.pose = before
+
+    world.advance = advance_round_a_robot_in_the_slot  # type: ignore[method-assign]
+    closest = math.inf
+    for _ in range(round(300 / info.dt)):
+        swarm.step()
+        assert robot.phase == "to_decision", f"{robot.phase} at {body.pose} by {world.t:.1f} s"
+        closest = min(closest, math.dist(body.pose[:2], slot))
+    assert closest < 2 * info.robot_radius + 0.01  # it did get up to the body in its slot
+    assert robot.park_retries >= 10  # and tried again every few seconds
+    blocked = False
+    swarm.run(300)
+    assert robot.phase == "stopped"
+    assert math.dist(body.pose[:2], slot) <= info.robot_radius
