@@ -54,7 +54,7 @@ from world_server.physics import EpuckSpec
 log = logging.getLogger("swarm.run")
 STATS_ATTEMPTS, STATS_RETRY_PAUSE = 5, 0.2
 
-EXIT_OK, EXIT_CRASH = 0, 1  # usage errors exit 2 through argparse and UsageError
+EXIT_CRASH = 1  # usage errors exit 2 through argparse and UsageError
 # The exit code of each ending; an interrupted run exits 128 + the signal's number.
 EXIT_CODES = {"consensus": 0, "crashed": 1, "split": 3, "stalled": 4, "timeout": 5}
 # The codes of runs that ended with a result to read (all but crashed and interrupted).

@@ -22,6 +22,8 @@ from fakes import (
 from robot_agent import ports, protocol, vision
 from robot_agent.controller import Controller, ControllerConfig
 from robot_agent.navigation import wrap_angle
+from world_server.camera import CameraRenderer
+from world_server.layout import make_layout
 
 N_ROBOTS = 10
 
@@ -417,16 +419,14 @@ def test_fake_frames_read_as_their_quality() -> None:
 
 @pytest.mark.timeout(60)
 def test_swarm_decides_on_real_physics_camera_and_vision() -> None:
-    camera_module = pytest.importorskip("world_server.camera")
-    layout_module = pytest.importorskip("world_server.layout")
     num_sites, seed = 8, 21
-    layout = layout_module.make_layout(num_sites, N_ROBOTS, seed)
+    layout = make_layout(num_sites, N_ROBOTS, seed)
     swarm: FakeSwarm = make_swarm(N_ROBOTS, num_sites, seed=seed, physics=True, drop=0.2)
     assert [c for s in swarm.world.info.sites for c in (s.x, s.y)] == pytest.approx(
         [c for s in layout.sites for c in (s.x, s.y)]
     )
     swarm.world.qualities = [site.quality for site in layout.sites]
-    renderer = camera_module.CameraRenderer(layout, swarm.world.info.camera)
+    renderer = CameraRenderer(layout, swarm.world.info.camera)
 
     def render(body: FakeBody) -> np.ndarray:
         others = [other.pose[:2] for other in swarm.bodies if other is not body]

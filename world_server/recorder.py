@@ -126,9 +126,6 @@ def schema_name(kind: str) -> str:
     return SCHEMA_PREFIX + MESSAGE_TYPES[kind].__name__
 
 
-KIND_OF_SCHEMA = {schema_name(kind): kind for kind in MESSAGE_TYPES}
-
-
 def inline_refs(schema: dict[str, Any]) -> dict[str, Any]:
     """A self-contained copy of a msgspec JSON Schema: every ``$ref`` replaced by its
     definition, as in Foxglove's own schemas (viewers need not resolve references)."""
