@@ -25,6 +25,7 @@ import argparse
 import csv
 import itertools
 import json
+import math
 import re
 import statistics
 import sys
@@ -649,7 +650,7 @@ def plot_boxes(summaries: Sequence[dict[str, Any]], path: Path, *, pools: bool) 
             for number, run in enumerate(runs, start=1)
         ]
         axis.boxplot(
-            [values or [float("nan")] for values in data],
+            [[float(value) for value in values] or [math.nan] for values in data],
             tick_labels=labels,
             flierprops={"markersize": 3},
         )

@@ -308,7 +308,7 @@ class Physics:
         along = centres[:, :1] * ray_x + centres[:, 1:2] * ray_y
         inside = (self.arena_radius**2 - np.einsum("ij,ij->i", centres, centres))[:, None]
         to_wall = -along + np.sqrt(np.maximum(along * along + inside, 0.0))
-        readings = np.clip(1.0 - (to_wall - radius) / reach, 0.0, 1.0)
+        readings: np.ndarray = np.clip(1.0 - (to_wall - radius) / reach, 0.0, 1.0)
 
         owners, others = self._neighbour_pairs(2.0 * radius + reach)
         if owners.size:

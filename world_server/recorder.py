@@ -82,14 +82,14 @@ class RadioTxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     """A ``radio/tx/<sender>`` sample as recorded: its attachment and its payload."""
 
     meta: protocol.RadioTxMeta
-    payload: protocol.RadioPayload  # type: ignore[valid-type]
+    payload: protocol.RadioPayload
 
 
 class RadioRxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     """A ``radio/rx/<receiver>`` sample as recorded: its attachment and its payload."""
 
     meta: protocol.RadioRxMeta
-    payload: protocol.RadioPayload  # type: ignore[valid-type]
+    payload: protocol.RadioPayload
 
 
 class RejectedSample(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
