@@ -104,10 +104,12 @@ def test_every_site_is_read_within_half_a_quality_step_from_perturbed_viewpoints
 def test_estimates_order_every_pair_of_sites_like_their_qualities(num_sites: int) -> None:
     layout = layout_for(num_sites, seed=11)
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS)
-    estimates = {}
+    estimates: dict[int, float] = {}
     for site in layout.sites:
         frame = decode_frame(renderer.encode(renderer.render(*layout.sensing_pose(site.id))))
-        estimates[site.id] = estimate_quality(frame)
+        estimate = estimate_quality(frame)
+        assert estimate is not None
+        estimates[site.id] = estimate
     for first, second in itertools.combinations(layout.sites, 2):
         better_by_estimate = estimates[first.id] > estimates[second.id]
         assert better_by_estimate == (first.quality > second.quality)
@@ -115,13 +117,14 @@ def test_estimates_order_every_pair_of_sites_like_their_qualities(num_sites: int
 
 def test_estimate_is_smooth_in_quality_not_a_threshold() -> None:
     qualities = [i / 20 for i in range(21)]
-    estimates = []
+    estimates: list[float] = []
     for quality in qualities:
         frame = np.empty((48, 64, 3), np.uint8)
         frame[:] = WALL_BGR
         frame[:, 16:48] = site_colour_bgr(quality)
-        estimates.append(estimate_quality(frame))
-    assert all(e is not None for e in estimates)
+        estimate = estimate_quality(frame)
+        assert estimate is not None
+        estimates.append(estimate)
     assert np.all(np.diff(estimates) > 0)
     assert np.allclose(estimates, qualities, atol=1 / 255)
 

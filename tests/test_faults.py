@@ -83,7 +83,9 @@ class Recording:
             self.statuses.setdefault(status.id, []).append(status)
         elif schema == "foxglove.CompressedImage":
             png = np.frombuffer(base64.b64decode(json.loads(data)["data"]), np.uint8)
-            self.frames.append(cv2.imdecode(png, cv2.IMREAD_COLOR))
+            frame = cv2.imdecode(png, cv2.IMREAD_COLOR)
+            assert frame is not None, f"{topic}: not a PNG frame"
+            self.frames.append(frame)
 
 
 @dataclass

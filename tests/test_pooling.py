@@ -36,7 +36,10 @@ def pools(draw: st.DrawFn, entries: st.SearchStrategy[float] = weights) -> list[
     return pool
 
 
-def assert_close(actual: list[float], expected: list[float], tolerance: float = 1e-9) -> None:
+def assert_close(
+    actual: list[float] | None, expected: list[float], tolerance: float = 1e-9
+) -> None:
+    assert actual is not None
     assert len(actual) == len(expected)
     for a, b in zip(actual, expected, strict=True):
         assert a == pytest.approx(b, abs=tolerance)
@@ -252,8 +255,9 @@ def test_repeated_pooling_of_the_same_evidence_is_bounded_by_dilution() -> None:
     for pool, growth in ((mprodop, 2.0), (loglinear_pool, 1.0 + LOGLINEAR_NEIGHBOUR_WEIGHT)):
         a, b = start, [0.5, 0.5]
         for _ in range(3):
-            a, b = pool([a, b]), pool([b, a])
-            assert a is not None and b is not None
+            pooled_a, pooled_b = pool([a, b]), pool([b, a])
+            assert pooled_a is not None and pooled_b is not None
+            a, b = pooled_a, pooled_b
         # The odds in favour of option 0, as a power of the evidence's odds.
         exponent = math.log(a[0] / a[1]) / math.log(odds_of_evidence)
         # Linear recurrence (a, b) -> (a + w b, b + w a): the sum grows by 1 + w a round.

@@ -214,7 +214,7 @@ def test_step_limit_counts_failures_as_the_limit() -> None:
 
 def test_a_low_threshold_can_be_met_at_the_start() -> None:
     for method in ("survivors", "opinions"):
-        outcome = simulate(Model(4, 2, threshold=0.25), 5, rng(), method=method)  # type: ignore[arg-type]
+        outcome = simulate(Model(4, 2, threshold=0.25), 5, rng(), method=method)
         assert (outcome.times == 0).all() and outcome.success.all()
 
 
@@ -252,7 +252,7 @@ def test_population_larger_than_the_pool() -> None:
 def test_pools_get_shuffled_members_and_a_smaller_last_pool() -> None:
     """5 agents in pools of 2: two pairs adopt their pair's product, one agent is alone."""
     updated = rng(4).dirichlet(np.ones(4), size=(1, 5))
-    pairs_seen = set()
+    pairs_seen: set[frozenset[int]] = set()
     for seed in range(20):
         pooled = wellstirred._pool(updated, 2, rng(seed))[0]
         own = updated[0] / updated[0].sum(axis=-1, keepdims=True)
