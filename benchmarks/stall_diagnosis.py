@@ -244,8 +244,8 @@ def plot(watch: Watch, stuck: list[int], path: Path) -> None:
         ax.set_aspect("equal")
         if index == 0:
             ax.set_title(f"t = {world.t:.0f} s: {len(stuck)} undecided")
-            for phase, colour in PHASE_COLOURS.items():
-                ax.plot([], [], "o", color=colour, label=phase)
+            for name, colour in PHASE_COLOURS.items():
+                ax.plot([], [], "o", color=colour, label=name)
             ax.legend(fontsize=6, loc="upper right")
         else:
             robot_id = close_ups[index - 1]

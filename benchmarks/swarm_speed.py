@@ -109,8 +109,12 @@ def messaging_floor(robots: int, ticks: int, endpoint: str | None = None) -> flo
             payload = str(tick).encode() + b" " * 100  # about the size of a Sense
             for sender in senders:
                 sender.put(payload)
+
+            def everyone_answered(tick: int = tick) -> bool:
+                return answered.get(tick, 0) >= robots
+
             with done:
-                if not done.wait_for(lambda t=tick: answered.get(t, 0) >= robots, timeout=5):
+                if not done.wait_for(everyone_answered, timeout=5):
                     return 0.0  # an echo process is gone: no floor rather than a wrong one
         return ticks / (time.perf_counter() - start)
     finally:

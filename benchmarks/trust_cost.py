@@ -36,11 +36,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from benchmarks.swarm_speed import messaging_floor  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
 from robot_agent import auth, protocol  # noqa: E402
-
-sys.path.insert(0, str(REPO / "benchmarks"))
-from swarm_speed import messaging_floor  # noqa: E402
 
 MODES = {"unkeyed": ["--no-keys"], "keyed": [], "secure": ["--secure"]}
 
@@ -129,15 +127,16 @@ def transport(args: argparse.Namespace) -> None:
     print("\nBare lockstep exchange (no tags), ticks per second through the router:")
     try:
         for robots in args.robots:
-            tcp, unix = [], []
+            tcp_rates: list[float] = []
+            unix_rates: list[float] = []
             for _ in range(args.repeat):
-                tcp.append(messaging_floor(robots, args.floor_ticks))
-                unix.append(
+                tcp_rates.append(messaging_floor(robots, args.floor_ticks))
+                unix_rates.append(
                     messaging_floor(
                         robots, args.floor_ticks, f"unixsock-stream/{folder / 'floor.sock'}"
                     )
                 )
-            over_tcp, over_unix = statistics.fmean(tcp), statistics.fmean(unix)
+            over_tcp, over_unix = statistics.fmean(tcp_rates), statistics.fmean(unix_rates)
             print(
                 f"{robots:>6} robots: tcp loopback {over_tcp:>7.0f}/s, unix socket "
                 f"{over_unix:>7.0f}/s ({over_unix / over_tcp:.2f} of tcp)",
