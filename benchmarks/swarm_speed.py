@@ -53,6 +53,8 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+import zenoh  # noqa: E402
+
 from deploy.launcher import RESULT_CODES  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
@@ -80,8 +82,8 @@ def messaging_floor(robots: int, ticks: int, endpoint: str | None = None) -> flo
     answered: dict[int, int] = {}
     done = threading.Condition()
 
-    def on_act(sample: object) -> None:
-        tick = int(sample.payload.to_bytes())  # type: ignore[attr-defined]
+    def on_act(sample: zenoh.Sample) -> None:
+        tick = int(sample.payload.to_bytes())
         with done:
             answered[tick] = answered.get(tick, 0) + 1
             if answered[tick] == robots:

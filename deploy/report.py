@@ -359,12 +359,12 @@ def unusable_fields(summary: dict[str, Any]) -> list[str]:
         if not isinstance(summary.get(name, _MISSING), types)
     ]
     robots = summary.get("per_robot")
-    if "per_robot" not in unusable and not all(
+    if isinstance(robots, list) and not all(
         isinstance(robot, dict)
         and all(
             isinstance(robot.get(name, _MISSING), types) for name, types in ROBOT_FIELDS.items()
         )
-        for robot in robots  # type: ignore[union-attr]
+        for robot in robots
     ):
         unusable.append("per_robot")
     return unusable

@@ -503,7 +503,7 @@ def test_a_slowed_robot_on_a_long_leg_keeps_going_instead_of_giving_up(seed: int
     def through_a_crowd(left: float, right: float) -> None:
         full_speed(0.35 * left, 0.35 * right)  # 4.5 cm/s at most, above the crawl
 
-    body.drive = through_a_crowd  # type: ignore[method-assign]
+    body.drive = through_a_crowd  # type: ignore[method-assign]  # a slower body, same fake
     robot = swarm.controllers[0]
     while robot.trips < 2 and swarm.world.t < 2000:
         swarm.step()

@@ -139,6 +139,7 @@ def test_a_robot_survives_any_sequence_of_inputs(
 
 def _world_server() -> WorldServer:
     world = World(WorldConfig(run="fuzz", num_sites=5, num_robots=2))
+    # No Zenoh: the test sets stand-ins for the session and publishers it uses.
     server = WorldServer(None, world, protocol.Keys("fuzz"))  # type: ignore[arg-type]
     world.join_robot(0)
     world.join_robot(1)
@@ -287,6 +288,7 @@ def test_the_world_server_survives_any_sequence_of_inputs(
     world never fails, takes only its swarm's members, answers every query, and accounts
     for every message exactly once (taken, late or rejected)."""
     server = _world_server()
+    # Stand-ins that take the world's publications, in place of Zenoh's.
     server.session = _Session()  # type: ignore[assignment]
     server._clock_publisher = server._state_publisher = _Session()  # type: ignore[assignment]
     for kind, key, payload, attachment in events:

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from typing import Any
 
 import pytest
 from swarm_helpers import (
@@ -279,10 +280,10 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run() -> None:
     )
     assert code == 0, stderr
 
-    def decisions(summary: dict[str, object]) -> list[tuple[object, ...]]:
+    def decisions(summary: dict[str, Any]) -> list[tuple[object, ...]]:
         return [
             (r["id"], r["decided_site"], r["steps"], r["decision_time_s"], r["pool_sizes"])
-            for r in summary["per_robot"]  # type: ignore[attr-defined]
+            for r in summary["per_robot"]
         ]
 
     assert decisions(over_zenoh) == decisions(in_memory)

@@ -258,7 +258,7 @@ class McapRecorder:
 
     def __init__(
         self,
-        stream: IO[bytes],
+        stream: IO[bytes] | None,
         keys: protocol.Keys,
         run: RunDescription,
         info: protocol.WorldInfo | None = None,
@@ -284,9 +284,11 @@ class McapRecorder:
         self.rejected = 0
         self.closed = False
         self._versions = versions()
-        self._writer = writer or Writer(
-            stream, chunk_size=chunk_size, compression=CompressionType.ZSTD
-        )
+        if writer is None:
+            if stream is None:
+                raise ValueError("a recorder needs a stream to write to, or a writer")
+            writer = Writer(stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        self._writer = writer
         self._writer.start(library=f"bestofn-swarm recorder, {self._writer_library()}")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, _Channel] = {}
