@@ -382,7 +382,8 @@ def render_readme_block(runs: Sequence[Run]) -> str:
     in_process = [run for run in runs if run.mode == "in-process"]
     zenoh = [run for run in runs if run.mode == "zenoh"]
     twins = {(run.robots, run.seed): run for run in in_process}
-    same, different = [], []
+    same: list[str] = []
+    different: list[str] = []
     for run in zenoh:
         twin = twins.get((run.robots, run.seed))
         if twin is not None:

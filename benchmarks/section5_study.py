@@ -51,7 +51,7 @@ SITES = (5, 8, 10)
 # --- settings --------------------------------------------------------------------------
 
 
-def _fields(cls: type) -> dict[str, type]:
+def _fields(cls: type) -> dict[str, object]:
     return {field.name: field.type for field in dataclasses.fields(cls)}
 
 

@@ -24,6 +24,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -62,8 +63,8 @@ def watch_run(robots: int, sites: int, seed: int, until: float) -> tuple[Watch, 
     watch = Watch()
 
     class Observed(Controller):
-        def __init__(self, robot_id: int, *args: object, **kwargs: object) -> None:
-            super().__init__(robot_id, *args, **kwargs)  # type: ignore[arg-type]
+        def __init__(self, robot_id: int, *args: Any, **kwargs: Any) -> None:
+            super().__init__(robot_id, *args, **kwargs)
             watch.controllers[robot_id] = self
 
     def on_tick(world: World) -> None:
@@ -244,8 +245,8 @@ def plot(watch: Watch, stuck: list[int], path: Path) -> None:
         ax.set_aspect("equal")
         if index == 0:
             ax.set_title(f"t = {world.t:.0f} s: {len(stuck)} undecided")
-            for phase, colour in PHASE_COLOURS.items():
-                ax.plot([], [], "o", color=colour, label=phase)
+            for name, colour in PHASE_COLOURS.items():
+                ax.plot([], [], "o", color=colour, label=name)
             ax.legend(fontsize=6, loc="upper right")
         else:
             robot_id = close_ups[index - 1]

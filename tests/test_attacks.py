@@ -243,6 +243,7 @@ def test_forged_opinions_on_the_radio_are_not_believed(path: str) -> None:
         def forge(tick: int) -> None:
             for robot in range(ROBOTS):
                 other = (robot + 1) % ROBOTS
+                meta: protocol.RadioRxMeta | protocol.RadioTxMeta
                 if path == "rx":  # straight to the receiver, past the medium
                     meta = protocol.RadioRxMeta(
                         v=1, tick=tick + 1, sender=str(other), seq=10_000 + tick, sent_tick=tick
@@ -250,7 +251,7 @@ def test_forged_opinions_on_the_radio_are_not_believed(path: str) -> None:
                     key = run.keys.radio_rx(robot)
                     payload = one_hot(wrong_site(), other)
                 else:  # to the medium, in the robot's own name
-                    meta = protocol.RadioTxMeta(v=1, tick=tick, seq=10_000 + tick)  # type: ignore[assignment]
+                    meta = protocol.RadioTxMeta(v=1, tick=tick, seq=10_000 + tick)
                     key = run.keys.radio_tx(robot)
                     payload = one_hot(wrong_site(), robot)
                 run.session.put(key, payload, attachment=protocol.encode(meta))

@@ -39,6 +39,8 @@ import numpy as np
 from robot_agent import protocol
 
 SenderKind = Literal["robot", "beacon"]
+# Where a copy goes in a tick's deliveries: receiver, sender, sequence number, sent tick.
+_OrderKey = tuple[tuple[int, int, str], tuple[int, int, str], int, int]
 _KINDS = ("robot", "beacon")
 
 
@@ -145,7 +147,7 @@ class RadioConfig:
         fraction = distance / reach
         if start >= 1.0 or fraction <= start:
             return 0.0
-        return min(1.0, (fraction - start) / (1.0 - start)) ** self.range_loss_exponent
+        return math.pow(min(1.0, (fraction - start) / (1.0 - start)), self.range_loss_exponent)
 
 
 @dataclass(frozen=True)
@@ -193,7 +195,7 @@ class RadioMedium:
             for name in ("drop", "burst", "range", "jitter", "duplicate", "reorder")
         }
         self._link_bad: dict[tuple[str, str], bool] = {}
-        self._pending: dict[int, list[tuple[tuple, int, Delivery]]] = {}
+        self._pending: dict[int, list[tuple[_OrderKey, int, Delivery]]] = {}
         self._scheduled = 0  # tie-breaker that keeps sorting stable for duplicates
         self._index: _ReceiverIndex | None = None
         self._index_key: tuple[int, int] | None = None
@@ -301,7 +303,7 @@ class RadioMedium:
             self._index_source = receivers  # held, so its id cannot be reused meanwhile
         return self._index
 
-    def _schedule(self, due: int, order_key: tuple, delivery: Delivery) -> None:
+    def _schedule(self, due: int, order_key: _OrderKey, delivery: Delivery) -> None:
         self._pending.setdefault(due, []).append((order_key, self._scheduled, delivery))
         self._scheduled += 1
 
