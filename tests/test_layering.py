@@ -14,6 +14,11 @@ REPO = Path(__file__).resolve().parent.parent
 PURE = [
     "robot_agent/decision.py",
     "robot_agent/controller.py",
+    "robot_agent/phases.py",
+    "robot_agent/beliefs.py",
+    "robot_agent/motion.py",
+    "robot_agent/sensing.py",
+    "robot_agent/parking.py",
     "robot_agent/navigation.py",
     "robot_agent/vision.py",
     "robot_agent/protocol.py",
