@@ -476,6 +476,7 @@ def test_parking_slots_are_distinct_clear_of_every_site_and_inside_the_arena(
     assert max(distances) < 0.6
 
 
+@pytest.mark.timeout(600)  # 30 s of CPU; far longer on a loaded machine
 def test_a_hundred_robots_all_park_and_decide_in_one_process() -> None:
     from deploy.inmemory import run_in_memory
     from world_server.world import WorldConfig

@@ -157,7 +157,7 @@ def _ticks(swarm: FakeSwarm, seconds: float) -> Iterator[None]:
 def test_a_transition_missing_from_the_table_stops_the_controller(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.delitem(TRANSITIONS["sensing"], "compared")  # type: ignore[attr-defined]
+    monkeypatch.delitem(TRANSITIONS["sensing"], "compared")
     swarm = make_swarm(1, 4, seed=2)
     with pytest.raises(IllegalTransitionError, match="'compared' cannot happen in phase 'sensing'"):
         swarm.run(300)
