@@ -12,7 +12,6 @@ bytes, in and out (docs/porting.md).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 from robot_agent import ports, protocol, vision
@@ -87,9 +86,9 @@ class SimulatedRadio:
         self._delivered: list[tuple[str, bytes]] = []
         self._sent: list[tuple[int, bytes]] = []
 
-    def arrive(self, delivered: Sequence[tuple[str, bytes]]) -> None:
+    def arrive(self, delivered: list[tuple[str, bytes]]) -> None:
         """The tick's deliveries, in the medium's order (by sender, then sequence)."""
-        self._delivered = list(delivered)
+        self._delivered = delivered
         self._sent = []
 
     def poll(self) -> list[tuple[str, bytes]]:
@@ -100,8 +99,8 @@ class SimulatedRadio:
         self.seq += 1
         self._sent.append((self.seq, payload))
 
-    def take_sent(self) -> tuple[tuple[int, bytes], ...]:
-        sent, self._sent = tuple(self._sent), []
+    def take_sent(self) -> list[tuple[int, bytes]]:
+        sent, self._sent = self._sent, []
         return sent
 
 
@@ -117,20 +116,27 @@ class SimulatedPorts:
         self,
         controller: RobotController,
         sense: protocol.Sense,
-        delivered: Sequence[tuple[str, bytes]],
+        delivered: list[tuple[str, bytes]],
         frame: bytes | None,
     ) -> TickAnswer:
         """Run the contract's control step on tick ``sense.tick``'s inputs."""
         self.body.arrive(sense, frame)
         self.radio.arrive(delivered)
         ports.control_step(controller, self.body, self.radio, self.rejects)
-        transmissions = tuple(
-            Broadcast(
-                seq,
-                payload,
-                protocol.encode(protocol.RadioTxMeta(v=protocol.VERSION, tick=sense.tick, seq=seq)),
+        sent = self.radio.take_sent()
+        transmissions = (
+            tuple(
+                Broadcast(
+                    seq,
+                    payload,
+                    protocol.encode(
+                        protocol.RadioTxMeta(v=protocol.VERSION, tick=sense.tick, seq=seq)
+                    ),
+                )
+                for seq, payload in sent
             )
-            for seq, payload in self.radio.take_sent()
+            if sent  # most ticks send nothing: skip building an empty tuple
+            else ()
         )
         act = protocol.Act(
             v=protocol.VERSION,
