@@ -38,6 +38,8 @@ class TickAnswer:
 class SimulatedBody:
     """``ports.Body`` over the world's messages of one tick."""
 
+    __slots__ = ("_frame", "_rejects", "_sense", "capture", "left", "right")  # stepped per tick
+
     def __init__(self, rejects: RejectCounter) -> None:
         self._rejects = rejects
         self._sense: protocol.Sense | None = None
@@ -81,6 +83,8 @@ class SimulatedBody:
 class SimulatedRadio:
     """``ports.Radio`` over the medium's deliveries of one tick."""
 
+    __slots__ = ("_delivered", "_sent", "seq")
+
     def __init__(self) -> None:
         self.seq = 0  # the last broadcast's number
         self._delivered: list[tuple[str, bytes]] = []
@@ -89,7 +93,6 @@ class SimulatedRadio:
     def arrive(self, delivered: list[tuple[str, bytes]]) -> None:
         """The tick's deliveries, in the medium's order (by sender, then sequence)."""
         self._delivered = delivered
-        self._sent = []
 
     def poll(self) -> list[tuple[str, bytes]]:
         delivered, self._delivered = self._delivered, []
@@ -100,7 +103,10 @@ class SimulatedRadio:
         self._sent.append((self.seq, payload))
 
     def take_sent(self) -> list[tuple[int, bytes]]:
-        sent, self._sent = self._sent, []
+        """What was sent since the last call, in sending order."""
+        sent = self._sent
+        if sent:  # most ticks send nothing: keep the empty list
+            self._sent = []
         return sent
 
 
@@ -135,7 +141,7 @@ class SimulatedPorts:
                 )
                 for seq, payload in sent
             )
-            if sent  # most ticks send nothing: skip building an empty tuple
+            if sent
             else ()
         )
         act = protocol.Act(
