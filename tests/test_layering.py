@@ -23,7 +23,7 @@ PURE = [
     "robot_agent/vision.py",
     "robot_agent/protocol.py",
     "robot_agent/ports.py",
-    "robot_agent/lockstep.py",
+    "robot_agent/simulated.py",
     "robot_agent/auth.py",
     "robot_agent/guard.py",
     "robot_agent/byzantine.py",

@@ -35,7 +35,7 @@ def load(path: Path) -> dict[str, Any]:
 MESSAGE_FILES = {
     path.name: load(path)
     for path in sorted(VECTORS.glob("*.json"))
-    if path.name not in ("udp_frame.json", "auth.json")
+    if path.name not in ("udp_frame.json", "auth.json", "tick.json")
 }
 
 
