@@ -190,10 +190,10 @@ class RobotNode:
                 self.pending[meta.tick].rx.append((meta.sender, event.payload))
                 self._advance(meta.tick)
         else:
-            meta = self._metadata(metadata, protocol.CameraMeta, key)
-            if meta is not None and self._admit(meta.tick, key, len(event.payload)):
-                self.pending[meta.tick].frame = event.payload
-                self._advance(meta.tick)
+            camera = self._metadata(metadata, protocol.CameraMeta, key)
+            if camera is not None and self._admit(camera.tick, key, len(event.payload)):
+                self.pending[camera.tick].frame = event.payload
+                self._advance(camera.tick)
 
     def _take_sense(self, payload: bytes) -> None:
         try:

@@ -999,8 +999,8 @@ class Tick:
         ]
         camera = None
         if self.frame is not None:
-            meta = protocol.CameraMeta(v=1, tick=tick, width=4, height=3, encoding="png")
-            camera = {"meta_hex": protocol.encode(meta).hex(), "hex": self.frame.hex()}
+            camera_meta = protocol.CameraMeta(v=1, tick=tick, width=4, height=3, encoding="png")
+            camera = {"meta_hex": protocol.encode(camera_meta).hex(), "hex": self.frame.hex()}
         frame = None
         if self.frame_seen is not None:
             width, height, bgr = self.frame_seen

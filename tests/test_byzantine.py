@@ -47,9 +47,7 @@ def _drive(
             return sent
         if inject is not None:
             radio.inbox.append(("5", inject))
-        # control_step is typed for the Controller; a Byzantine robot wraps one behind the
-        # same RobotController protocol.
-        command = ports.control_step(robot, body, radio, swarm.rejects[0])  # type: ignore[arg-type]
+        command = ports.control_step(robot, body, radio, swarm.rejects[0])
         sent += command.broadcasts
         swarm.world.advance()
     raise AssertionError("the robot never got there")
