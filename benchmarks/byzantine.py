@@ -115,7 +115,7 @@ def run_task(task: Task) -> Outcome:
         node.build_parser().parse_args(["--id", "0", *defence.options])
     )
     chosen = {
-        robot: byzantine.Behaviour(task.mode)  # type: ignore[arg-type]
+        robot: byzantine.Behaviour.parse(task.mode)
         for robot in byzantine_ids(task.seed, task.robots, task.count)
     }
     started = time.perf_counter()

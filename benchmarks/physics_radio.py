@@ -164,7 +164,7 @@ def main(argv: list[str] | None = None) -> None:
 
     print(f"physics: step({args.dt}) + proximity_all(), {args.ticks} ticks after warm-up")
     print(f"{'robots':>7} {'index':>12} {'substeps':>9} {'median ms':>10} {'p95 ms':>8}")
-    variants = [(True, MAX_SUBSTEP)]
+    variants: list[tuple[bool, float | None]] = [(True, MAX_SUBSTEP)]
     if not args.no_compare:
         variants += [(False, MAX_SUBSTEP), (True, None)]
     for num_robots in (10, 100, 200, 500):

@@ -330,7 +330,7 @@ def claim_report(outcomes: Sequence[Outcome]) -> dict[str, Any]:
         return {}
     clean_times = [clean[seed].sim_time_s for seed in seeds]
     lossy_times = [lossy[seed].sim_time_s for seed in seeds]
-    report = {
+    report: dict[str, Any] = {
         "seeds": seeds,
         "all_correct_drop_0": all(clean[seed].correct for seed in seeds),
         "all_correct_drop_0.3": all(lossy[seed].correct for seed in seeds),

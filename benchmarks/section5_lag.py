@@ -39,7 +39,6 @@ sys.path.insert(0, str(REPO))
 from benchmarks.section5_study import DEFAULT_OUT, load, result_path  # noqa: E402
 
 AT_NEST = ("at_nest", "waiting")
-TRIP_PHASES = ("to_site", "sensing", "to_nest")
 
 
 def popcount(mask: int) -> int:

@@ -51,7 +51,7 @@ SITES = (5, 8, 10)
 # --- settings --------------------------------------------------------------------------
 
 
-def _fields(cls: type) -> dict[str, type]:
+def _fields(cls: type) -> dict[str, object]:
     return {field.name: field.type for field in dataclasses.fields(cls)}
 
 
@@ -131,24 +131,25 @@ class Observed(Controller):
 
     def _pool_and_decide(self, reading: ports.BodyReading) -> None:
         since = self._nest_arrival - 1e-9
-        partners = sorted(robot for robot, (heard, _) in self._heard.items() if heard >= since)
-        partner_masks = [support_mask(self._heard[robot][1]) for robot in partners]
-        before = support_mask(self._opinion)
+        heard = self._beliefs.heard
+        partners = sorted(robot for robot, (when, _) in heard.items() if when >= since)
+        partner_masks = [support_mask(heard[robot][1]) for robot in partners]
+        before = support_mask(self.opinion)
         super()._pool_and_decide(reading)
         self.registry["poolings"].append(
             [
                 self.robot_id,
                 round(self._t, 2),
-                self._trips,
+                self.trips,
                 len(partners) + 1,
                 partners,
                 before,
                 partner_masks,
-                support_mask(self._opinion),
+                support_mask(self.opinion),
                 round(self._nest_arrival, 2),
             ]
         )
-        if self._decided_site is not None:
+        if self.decided_site is not None:
             snapshot = [
                 [
                     other.robot_id,
@@ -160,7 +161,7 @@ class Observed(Controller):
                 for other in self.registry["controllers"]
             ]
             self.registry["decisions"].append(
-                [self.robot_id, round(self._t, 2), self._trips, snapshot]
+                [self.robot_id, round(self._t, 2), self.trips, snapshot]
             )
 
 

@@ -24,6 +24,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -62,8 +63,8 @@ def watch_run(robots: int, sites: int, seed: int, until: float) -> tuple[Watch, 
     watch = Watch()
 
     class Observed(Controller):
-        def __init__(self, robot_id: int, *args: object, **kwargs: object) -> None:
-            super().__init__(robot_id, *args, **kwargs)  # type: ignore[arg-type]
+        def __init__(self, robot_id: int, *args: Any, **kwargs: Any) -> None:
+            super().__init__(robot_id, *args, **kwargs)
             watch.controllers[robot_id] = self
 
     def on_tick(world: World) -> None:
@@ -125,11 +126,11 @@ def describe_swarm(watch: Watch) -> None:
             )
         )
     short = [
-        (robot, math.dist(poses[robot][:2], c._park_goal))
+        (robot, math.dist(poses[robot][:2], c._parking.slot))
         for robot, c in controllers.items()
         if c.phase == "stopped"
-        and c._park_goal is not None
-        and math.dist(poses[robot][:2], c._park_goal) > 2 * world.info.robot_radius
+        and c._parking.slot is not None
+        and math.dist(poses[robot][:2], c._parking.slot) > 2 * world.info.robot_radius
     ]
     print(f"  decided robots stopped more than a body width from their slot: {len(short)}")
     for robot, distance in sorted(short, key=lambda item: -item[1])[:10]:
@@ -168,8 +169,8 @@ def describe_stuck(watch: Watch, show: int) -> list[int]:
             f"{[round(p, 3) for p in controller.opinion]}, at "
             f"({x:.3f}, {y:.3f}) r = {math.hypot(x, y):.3f} m, "
             f"{math.degrees(math.atan2(y, x)):.1f} deg; leg since "
-            f"{controller._leg_start:.1f} s, pair left {controller._pair}, "
-            f"navigator escapes {controller.escapes}; within a body length of here since "
+            f"{controller._motion.leg_start:.1f} s, pair left {controller._pair}, "
+            f"navigator escapes {controller._motion.escapes}; within a body length of here since "
             f"{moved_at:.0f} s"
         )
         around = []
@@ -187,7 +188,7 @@ def describe_stuck(watch: Watch, show: int) -> list[int]:
                 f"{watch.stopped_at.get(other, float('nan')):.0f} s"
             )
         # How it got here: the trail from before this leg began, with each phase change.
-        before = [p for p in trail if p[0] >= controller._leg_start - LOOK_BACK]
+        before = [p for p in trail if p[0] >= controller._motion.leg_start - LOOK_BACK]
         print("  trail (sim s: x, y, phase):", end="")
         previous = ""
         for number, (t, tx, ty, phase) in enumerate(before):
@@ -215,7 +216,7 @@ def plot(watch: Watch, stuck: list[int], path: Path) -> None:
         1, 1 + len(close_ups), figsize=(7 + 5 * len(close_ups), 7), squeeze=False
     )
     # The slots decided robots drive to (the controller's own choice, whatever the rule).
-    slots = [c._park_goal for c in watch.controllers.values() if c._park_goal is not None]
+    slots = [c._parking.slot for c in watch.controllers.values() if c._parking.slot is not None]
     view_radius = info.arena_radius - config.view_distance
     for index, ax in enumerate(axes[0]):
         ax.add_patch(Circle((0, 0), info.arena_radius, fill=False, color="k"))
@@ -238,14 +239,14 @@ def plot(watch: Watch, stuck: list[int], path: Path) -> None:
                 ax.annotate(str(robot_id), (x, y), fontsize=5, ha="center", va="center")
         for robot_id in stuck:
             # Its trail since the current leg began.
-            since = watch.controllers[robot_id]._leg_start
+            since = watch.controllers[robot_id]._motion.leg_start
             trail = [p for p in watch.trails[robot_id] if p[0] >= since]
             ax.plot([p[1] for p in trail], [p[2] for p in trail], "-", lw=0.6)
         ax.set_aspect("equal")
         if index == 0:
             ax.set_title(f"t = {world.t:.0f} s: {len(stuck)} undecided")
-            for phase, colour in PHASE_COLOURS.items():
-                ax.plot([], [], "o", color=colour, label=phase)
+            for name, colour in PHASE_COLOURS.items():
+                ax.plot([], [], "o", color=colour, label=name)
             ax.legend(fontsize=6, loc="upper right")
         else:
             robot_id = close_ups[index - 1]

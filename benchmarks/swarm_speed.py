@@ -17,6 +17,13 @@ logic costs on top of the messaging.
         --no-floor --with-recording
     .venv/bin/python benchmarks/swarm_speed.py --robots --scale 200 500 --modes hosted
 
+The real-time clock (``--realtime``): for each asked speed, one `swarm run --clock
+realtime --speed X` to consensus, and the real-time factor it reached. The world is paced
+by the wall clock, so the factor should come close to the asked speed and never pass it
+(a busy machine may fall behind it):
+
+    .venv/bin/python benchmarks/swarm_speed.py --robots --scale --engines --realtime 5 25
+
 The engines table (``--engines``) runs each swarm size with ``swarm run --engine
 inprocess`` and over Zenoh (``swarm run``), the same seed, one after the other
 (``--pairs`` such pairs, alternating), and prints both real-time factors, their ratio and
@@ -46,6 +53,8 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+import zenoh  # noqa: E402
+
 from deploy.launcher import RESULT_CODES  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
@@ -73,8 +82,8 @@ def messaging_floor(robots: int, ticks: int, endpoint: str | None = None) -> flo
     answered: dict[int, int] = {}
     done = threading.Condition()
 
-    def on_act(sample: object) -> None:
-        tick = int(sample.payload.to_bytes())  # type: ignore[attr-defined]
+    def on_act(sample: zenoh.Sample) -> None:
+        tick = int(sample.payload.to_bytes())
         with done:
             answered[tick] = answered.get(tick, 0) + 1
             if answered[tick] == robots:
@@ -102,8 +111,12 @@ def messaging_floor(robots: int, ticks: int, endpoint: str | None = None) -> flo
             payload = str(tick).encode() + b" " * 100  # about the size of a Sense
             for sender in senders:
                 sender.put(payload)
+
+            def everyone_answered(tick: int = tick) -> bool:
+                return answered.get(tick, 0) >= robots
+
             with done:
-                if not done.wait_for(lambda t=tick: answered.get(t, 0) >= robots, timeout=5):
+                if not done.wait_for(everyone_answered, timeout=5):
                     return 0.0  # an echo process is gone: no floor rather than a wrong one
         return ticks / (time.perf_counter() - start)
     finally:
@@ -216,6 +229,25 @@ def scale_curve(args: argparse.Namespace, extra: list[str]) -> None:
                 f"{run['overhead']:>12.1f}",
                 flush=True,
             )
+
+
+def realtime_pacing(args: argparse.Namespace, extra: list[str]) -> None:
+    """The real-time factor a wall-clock-paced run reaches against the speed asked."""
+    robots = args.realtime_robots
+    print(f"\nReal-time clock ({robots} robots, seed {args.seeds[0]}, to consensus):")
+    print(f"{'asked':>7} {'RTF':>7} {'RTF/asked':>9} {'wall s':>8} {'sim s':>8}")
+    for speed in args.realtime:
+        run = swarm_run(
+            robots,
+            args.seeds[0],
+            args.sites,
+            ["--clock", "realtime", "--speed", f"{speed:g}", *extra],
+        )
+        print(
+            f"{speed:>6g}x {run['rtf']:>6.2f}x {run['rtf'] / speed:>9.2f} "
+            f"{run['wall']:>8.1f} {run['sim']:>8.1f}",
+            flush=True,
+        )
 
 
 README_BEGIN = "<!-- swarm_speed:engines -->"
@@ -373,6 +405,19 @@ def main() -> None:
         help="engines: no messaging floor above this many processes (default: 100)",
     )
     parser.add_argument(
+        "--realtime",
+        type=float,
+        nargs="*",
+        default=[25.0],
+        help="speeds to run with the real-time clock (--clock realtime --speed X)",
+    )
+    parser.add_argument(
+        "--realtime-robots",
+        type=int,
+        default=4,
+        help="swarm size of the real-time clock runs (default: 4)",
+    )
+    parser.add_argument(
         "--readme", type=Path, default=None, help="write the engines table into this README"
     )
     parser.add_argument(
@@ -387,6 +432,8 @@ def main() -> None:
         to_consensus(args, extra)
     if args.scale:
         scale_curve(args, extra)
+    if args.realtime:
+        realtime_pacing(args, extra)
     if args.engines:
         rows = engines(args, extra)
         if args.readme is not None:

@@ -58,7 +58,12 @@ def timeline(folder: Path, skip: int) -> list[str]:
             if line.get("tick", 0) >= skip and "robot" in line:
                 steps[line["tick"]].append(line)
     # The world's own work between the last answer of tick t and the inputs of t + 1.
-    advance, deliver, publish, wait, answer_trip, handoff = [], [], [], [], [], []
+    advance: list[float] = []
+    deliver: list[float] = []
+    publish: list[float] = []
+    wait: list[float] = []
+    answer_trip: list[float] = []
+    handoff: list[float] = []
     for tick, line in by_tick.items():
         following = by_tick.get(tick + 1)
         if following is None or "close_start" not in line:

@@ -32,20 +32,19 @@ import tempfile
 import time
 import timeit
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from benchmarks.swarm_speed import messaging_floor  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
 from robot_agent import auth, protocol  # noqa: E402
-
-sys.path.insert(0, str(REPO / "benchmarks"))
-from swarm_speed import messaging_floor  # noqa: E402
 
 MODES = {"unkeyed": ["--no-keys"], "keyed": [], "secure": ["--secure"]}
 
 
-def swarm_run(robots: int, seed: int, sites: int, options: list[str]) -> dict[str, object]:
+def swarm_run(robots: int, seed: int, sites: int, options: list[str]) -> dict[str, Any]:
     command = [
         *(sys.executable, "-m", "deploy.cli", "run"),
         *("--robots", str(robots), "--sites", str(sites), "--seed", str(seed)),
@@ -57,10 +56,10 @@ def swarm_run(robots: int, seed: int, sites: int, options: list[str]) -> dict[st
     return json.loads(done.stdout)
 
 
-def decisions(summary: dict[str, object]) -> list[tuple[object, ...]]:
+def decisions(summary: dict[str, Any]) -> list[tuple[object, ...]]:
     return [
         (r["id"], r["decided_site"], r["steps"], r["decision_time_s"], r["pool_sizes"])
-        for r in summary["per_robot"]  # type: ignore[attr-defined]
+        for r in summary["per_robot"]
     ]
 
 
@@ -78,9 +77,9 @@ def runs(args: argparse.Namespace) -> None:
                     mode: swarm_run(robots, seed, args.sites, [*extra, *timeout])
                     for mode, extra in MODES.items()
                 }
-                base = float(results["unkeyed"]["real_time_factor"])  # type: ignore[arg-type]
+                base = float(results["unkeyed"]["real_time_factor"])
                 for mode, summary in results.items():
-                    factor = float(summary["real_time_factor"])  # type: ignore[arg-type]
+                    factor = float(summary["real_time_factor"])
                     factors[mode].append(factor)
                     ratios[mode].append(factor / base)
                     same &= decisions(summary) == decisions(results["unkeyed"])
@@ -115,7 +114,7 @@ def transport(args: argparse.Namespace) -> None:
                         summary = swarm_run(
                             robots, seed, args.sites, ["--connect", endpoint, *timeout]
                         )
-                        factors[name].append(float(summary["real_time_factor"]))  # type: ignore[arg-type]
+                        factors[name].append(float(summary["real_time_factor"]))
             tcp, unix = statistics.fmean(factors["tcp"]), statistics.fmean(factors["unix"])
             print(
                 f"{robots:>6} robots: tcp loopback {tcp:>6.1f}x, unix socket {unix:>6.1f}x "
@@ -129,15 +128,16 @@ def transport(args: argparse.Namespace) -> None:
     print("\nBare lockstep exchange (no tags), ticks per second through the router:")
     try:
         for robots in args.robots:
-            tcp, unix = [], []
+            tcp_rates: list[float] = []
+            unix_rates: list[float] = []
             for _ in range(args.repeat):
-                tcp.append(messaging_floor(robots, args.floor_ticks))
-                unix.append(
+                tcp_rates.append(messaging_floor(robots, args.floor_ticks))
+                unix_rates.append(
                     messaging_floor(
                         robots, args.floor_ticks, f"unixsock-stream/{folder / 'floor.sock'}"
                     )
                 )
-            over_tcp, over_unix = statistics.fmean(tcp), statistics.fmean(unix)
+            over_tcp, over_unix = statistics.fmean(tcp_rates), statistics.fmean(unix_rates)
             print(
                 f"{robots:>6} robots: tcp loopback {over_tcp:>7.0f}/s, unix socket "
                 f"{over_unix:>7.0f}/s ({over_unix / over_tcp:.2f} of tcp)",

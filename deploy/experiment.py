@@ -31,7 +31,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, NoReturn
 
 from deploy.cli import UsageError
 from deploy.inprocess import add_engine_option
@@ -241,7 +241,7 @@ def validate_run_options(spec: RunSpec) -> None:
     from deploy import launcher
 
     class Probe(argparse.ArgumentParser):
-        def error(self, message: str) -> Any:  # type: ignore[override]
+        def error(self, message: str) -> NoReturn:
             raise UsageError(f"swarm run option: {message}")
 
     probe = Probe(prog="swarm run")

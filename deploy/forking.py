@@ -27,7 +27,7 @@ import subprocess
 import sys
 from multiprocessing import forkserver, resource_tracker
 from multiprocessing.connection import Connection
-from typing import IO
+from typing import IO, Any
 
 from plumbing.lifecycle import PARENT_ENV, die_with_launcher
 
@@ -43,11 +43,12 @@ def _drop_fork_server_handles() -> None:
     """Close the write ends of the fork server's liveness pipe and of the resource
     tracker's pipe that multiprocessing gave this child (see the module's docstring)."""
     # Private attributes of multiprocessing: where its _serve_one puts the two handles.
-    server = forkserver._forkserver
+    # typeshed does not describe them, hence Any.
+    server: Any = forkserver._forkserver
     if server._forkserver_alive_fd is not None:
         os.close(server._forkserver_alive_fd)
         server._forkserver_alive_fd = None
-    tracker = resource_tracker._resource_tracker
+    tracker: Any = resource_tracker._resource_tracker
     if tracker._fd is not None:
         os.close(tracker._fd)
         tracker._fd = None
@@ -134,5 +135,7 @@ class ForkServer:
         rather than when the launcher exits: a run leaves nothing behind when it returns.
         (Each closes its pipe's write end and waits for the process: multiprocessing's own
         private way, which its tests use.)"""
-        forkserver._forkserver._stop()
-        resource_tracker._resource_tracker._stop()
+        server: Any = forkserver._forkserver  # private, so not in typeshed: Any
+        tracker: Any = resource_tracker._resource_tracker
+        server._stop()
+        tracker._stop()

@@ -1,8 +1,9 @@
 """A whole lockstep run in one process, without Zenoh: for tests, sweeps and benchmarks.
 
-It drives the same World, the same controllers (through ``robot_agent.lockstep``, as
-``node.py`` does) and the same beacon logic as ``swarm run``, tick by tick in the same
-order, so a seed gives the same per-robot results here as over Zenoh.
+It drives the same World, the same controllers (through the port contract's
+``control_step`` on ``robot_agent.simulated``'s body and radio, as ``node.py`` does) and
+the same beacon logic as ``swarm run``, tick by tick in the same order, so a seed gives the
+same per-robot results here as over Zenoh.
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ from deploy.wire_tap import WireTap, with_rejects
 from nest_beacon.beacon import Beacon, BeaconConfig
 from robot_agent import byzantine, protocol
 from robot_agent.controller import Controller, ControllerConfig
-from robot_agent.lockstep import answer_tick
 from robot_agent.ports import RejectCounter, RobotController
+from robot_agent.simulated import SimulatedPorts
 from world_server.world import Transmission, World, WorldConfig
 
 # The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
@@ -54,7 +55,10 @@ class _Robot:
     controller: RobotController
     record: RobotRecord
     rejects: RejectCounter = field(default_factory=RejectCounter)
-    seq: int = 0
+    ports: SimulatedPorts = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.ports = SimulatedPorts(self.rejects)
 
 
 def run_in_memory(
@@ -131,24 +135,18 @@ def run_in_memory(
             robot = robots[robot_id]
             name = protocol.radio_name(robot_id)
             radio = deliveries.get(name, [])
-            answer = answer_tick(
-                robot.controller,
-                sense,
-                radio,
-                frames.get(robot_id),
-                robot.rejects,
-                seq=robot.seq,
-            )
-            robot.seq = answer.next_seq
+            answer = robot.ports.answer(robot.controller, sense, radio, frames.get(robot_id))
             acts[robot_id] = answer.act
-            transmissions += [Transmission(name, seq, data) for seq, data in answer.transmissions]
+            transmissions += [
+                Transmission(name, sent.seq, sent.payload) for sent in answer.transmissions
+            ]
             status = None
             if robot.controller.take_status_change():
                 status = with_rejects(robot.controller.status(world.tick), robot.rejects.count)
                 robot.record.update(status)
                 watchdog.status(status)
             if wire is not None:
-                wire.robot_answered(robot_id, world.tick, answer, status)
+                wire.robot_answered(robot_id, answer, status)
         beacon_messages = beacon.on_tick(world.t)
         for message in beacon_messages:
             transmissions.append(

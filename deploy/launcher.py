@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import zenoh
 from rich.console import Console
@@ -54,7 +54,7 @@ from world_server.recorder import RunDescription
 log = logging.getLogger("swarm.run")
 STATS_ATTEMPTS, STATS_RETRY_PAUSE = 5, 0.2
 
-EXIT_OK, EXIT_CRASH = 0, 1  # usage errors exit 2 through argparse and UsageError
+EXIT_CRASH = 1  # usage errors exit 2 through argparse and UsageError
 # The exit code of each ending; an interrupted run exits 128 + the signal's number.
 EXIT_CODES = {"consensus": 0, "crashed": 1, "split": 3, "stalled": 4, "timeout": 5}
 # The codes of runs that ended with a result to read (all but crashed and interrupted).
@@ -880,7 +880,7 @@ class Ending:
     """Why the launcher stopped following the run."""
 
     stop: Stop
-    timeout_kind: str | None = None  # sim | wall
+    timeout_kind: Literal["sim", "wall"] | None = None
     signum: int | None = None  # the signal that interrupted the run
     crashed: Child | None = None  # the infrastructure process that died
 
@@ -966,7 +966,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ending) -> int:
             beacon_rejected=sum(swarm.beacon_rejected.values()),
             config=plan.config,
             stop=stop,
-            timeout_kind=ending.timeout_kind if stop == "timeout" else None,  # type: ignore[arg-type]
+            timeout_kind=ending.timeout_kind if stop == "timeout" else None,
             stuck=swarm.watchdog.stuck(),
             byzantine={robot: str(how) for robot, how in plan.byzantine_robots.items()},
         ),

@@ -25,6 +25,7 @@ import argparse
 import csv
 import itertools
 import json
+import math
 import re
 import statistics
 import sys
@@ -358,12 +359,12 @@ def unusable_fields(summary: dict[str, Any]) -> list[str]:
         if not isinstance(summary.get(name, _MISSING), types)
     ]
     robots = summary.get("per_robot")
-    if "per_robot" not in unusable and not all(
+    if isinstance(robots, list) and not all(
         isinstance(robot, dict)
         and all(
             isinstance(robot.get(name, _MISSING), types) for name, types in ROBOT_FIELDS.items()
         )
-        for robot in robots  # type: ignore[union-attr]
+        for robot in robots
     ):
         unusable.append("per_robot")
     return unusable
@@ -649,7 +650,7 @@ def plot_boxes(summaries: Sequence[dict[str, Any]], path: Path, *, pools: bool) 
             for number, run in enumerate(runs, start=1)
         ]
         axis.boxplot(
-            [values or [float("nan")] for values in data],
+            [[float(value) for value in values] or [math.nan] for values in data],
             tick_labels=labels,
             flierprops={"markersize": 3},
         )

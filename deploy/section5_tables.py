@@ -17,7 +17,8 @@ PAPER_SEEDS = 10  # the paper ran each n ten times: seeds 0..9 are "the paper's 
 SITES = (5, 8, 10)
 ROBOTS = 10
 LINGER = 10.0  # sim seconds of the linger variant (the paper's suggested fix)
-VARIANTS: dict[str, dict[str, float]] = {"default": {}, "linger": {"linger": LINGER}}
+# Each variant: keyword arguments of ControllerConfig.
+VARIANTS: dict[str, dict[str, Any]] = {"default": {}, "linger": {"linger": LINGER}}
 
 # What the paper says about its ten runs per n (Section 5 text and Figures 4 and 5).
 PAPER_WITHIN = {5: '"many"', 8: '"many"; worst run 6 steps', 10: "all 10; 60% strictly below"}

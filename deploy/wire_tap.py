@@ -16,7 +16,7 @@ from collections.abc import Callable, Iterable, Sequence
 import msgspec
 
 from robot_agent import protocol
-from robot_agent.lockstep import TickAnswer
+from robot_agent.simulated import TickAnswer
 from world_server.radio import Delivery
 from world_server.world import World
 
@@ -57,13 +57,12 @@ class WireTap:
         self.put(self.keys.world_state, protocol.encode(world.state()), None)
 
     def robot_answered(
-        self, robot: int, tick: int, answer: TickAnswer, status: protocol.Status | None
+        self, robot: int, answer: TickAnswer, status: protocol.Status | None
     ) -> None:
         """A robot's answer: its radio messages, its act, and its status if it changed."""
         name = protocol.radio_name(robot)
-        for seq, payload in answer.transmissions:
-            meta = protocol.RadioTxMeta(v=protocol.VERSION, tick=tick, seq=seq)
-            self.put(self.keys.radio_tx(name), payload, protocol.encode(meta))
+        for sent in answer.transmissions:
+            self.put(self.keys.radio_tx(name), sent.payload, sent.meta)
         self.put(self.keys.act(robot), protocol.encode(answer.act), None)
         if status is not None:
             self.put(self.keys.status(robot), protocol.encode(status), None)

@@ -19,9 +19,9 @@ class UsageError(Exception):
     """A bad argument found after parsing: printed as one line, exit code 2."""
 
 
-def _number(kind: type, text: str) -> float:
+def _number(kind: type[int] | type[float], text: str) -> float:
     try:
-        value = kind(text)
+        value: float = kind(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a valid {kind.__name__}") from None
     if isinstance(value, float) and not math.isfinite(value):

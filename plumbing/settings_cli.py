@@ -34,11 +34,11 @@ class _Option:
     dest: str  # e.g. radio_range
     path: tuple[str, ...]  # fields from the root config to the dataclass holding them
     owner: type  # that dataclass
-    settings: tuple[Setting, ...]
+    members: tuple[Setting, ...]  # the option's settings: one, or the joined ones
 
     @property
     def setting(self) -> Setting:
-        return self.settings[0]
+        return self.members[0]
 
     @property
     def spec(self) -> settings.Flag:
@@ -112,7 +112,7 @@ class Options:
                 continue
             fields = given.setdefault(option.path, {})
             if option.spec.joined:
-                for setting, part in zip(option.settings, value, strict=False):
+                for setting, part in zip(option.members, value, strict=False):
                     fields[setting.name] = part
             elif option.repeatable:
                 fields[option.setting.name] = tuple(value)
@@ -137,7 +137,7 @@ class Options:
                     argv += [option.flag, _text(option.element, item)]
             elif option.spec.joined:
                 texts = [
-                    _text(s.hint, part) for s, part in zip(option.settings, value, strict=False)
+                    _text(s.hint, part) for s, part in zip(option.members, value, strict=False)
                 ]
                 argv += [option.flag, ":".join(texts)]
             else:
@@ -152,7 +152,7 @@ class Options:
             holder = config
             for name in option.path:
                 holder = getattr(holder, name)
-            values = [getattr(holder, setting.name) for setting in option.settings]
+            values = [getattr(holder, setting.name) for setting in option.members]
             if option.spec.joined:
                 record[option.dest] = _joined_text(option, values)
             elif option.repeatable:
@@ -264,15 +264,15 @@ def _reader(hint: Any, spec: settings.Flag, flag: str) -> Any:
 def _joined_reader(option: _Option) -> Any:
     """``A:B[:C:D]``: the values of the joined settings, each read and checked by its own."""
     spec = option.spec
-    counts = {spec.least or len(option.settings), len(option.settings)}
-    shape = spec.metavar or ":".join(setting.name.upper() for setting in option.settings)
+    counts = {spec.least or len(option.members), len(option.members)}
+    shape = spec.metavar or ":".join(setting.name.upper() for setting in option.members)
 
     def read(text: str) -> tuple[Any, ...]:
         parts = text.split(":")
         if len(parts) not in counts:
             raise argparse.ArgumentTypeError(f"{text!r} is not {shape}")
         values = []
-        for setting, part in zip(option.settings, parts, strict=False):
+        for setting, part in zip(option.members, parts, strict=False):
             try:
                 value = _read(setting.hint, part, settings.Flag())
                 _check_number(setting.hint, value)
@@ -348,12 +348,12 @@ def _text(hint: Any, value: Any) -> str:
 
 def _joined_text(option: _Option, values: list[Any]) -> str | None:
     """``A:B`` or ``A:B:C:D`` of joined settings; None when all are at their defaults."""
-    defaults = [setting.default for setting in option.settings]
+    defaults = [setting.default for setting in option.members]
     if values == defaults:
         return None
     least = option.spec.least or len(values)
     shown = values if values[least:] != defaults[least:] else values[:least]
-    return ":".join(_text(s.hint, v) for s, v in zip(option.settings, shown, strict=False))
+    return ":".join(_text(s.hint, v) for s, v in zip(option.members, shown, strict=False))
 
 
 def _plain(error: ValueError, flag: str) -> str:

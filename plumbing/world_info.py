@@ -31,11 +31,13 @@ def ask(
     answers: list[bytes] = []
     refused: list[str] = []
     for reply in session.get(key, payload=payload or None, attachment=attachment, timeout=timeout):
-        if reply.ok is None:
-            refused.append(reply.err.payload.to_bytes().decode("utf-8", "replace")[:200])
+        ok, err = reply.ok, reply.err
+        if ok is None:
+            said = err.payload.to_bytes() if err is not None else b"neither an answer nor an error"
+            refused.append(said.decode("utf-8", "replace")[:200])
             continue
-        data = reply.ok.payload.to_bytes()
-        extra = reply.ok.attachment
+        data = ok.payload.to_bytes()
+        extra = ok.attachment
         try:
             auth.reply_open(
                 keyring, identity, key, data, extra.to_bytes() if extra else None, nonce=nonce

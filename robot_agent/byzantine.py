@@ -24,7 +24,7 @@ import dataclasses
 import random
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Literal, get_args
+from typing import Literal, cast, get_args
 
 import msgspec
 import numpy as np
@@ -63,7 +63,7 @@ class Behaviour:
         if mode not in MODES:
             raise ValueError(f"unknown Byzantine mode {mode!r}: use one of {', '.join(MODES)}")
         if not sep:
-            return cls(mode)  # type: ignore[arg-type]
+            return cls(cast(Mode, mode))  # one of MODES: checked above
         if mode != "liar":
             raise ValueError(f"only a liar claims a site: {text!r}")
         if not site.isdigit():

@@ -16,22 +16,25 @@ One cycle ("trip"):
     pool (MProdOp, or config.pooling) with every neighbour heard; trips += 1; decision test
     -> next pair (to_site), or lingering -> to_decision -> stopped once decided.
 
-Where the paper leaves the robot to its path planner, this controller adds the guards a
-crowded arena needs: a viewpoint taken by another robot counts as reached once the robot
-has been stalled close to it; a site that cannot be seen after ``capture_attempts`` tries
-is given up (no update that trip); a leg to a site that takes longer than
-``travel_timeout`` is abandoned. A decided robot parks in a slot of its own against the
-wall, as near its site as its slot allows, never on a viewpoint: robots still sensing
-need the viewpoints, the views and the paths to them, and a crowd parked round a site
-would wall them in (with a hundred robots it did, and the swarm never finished). Slots
-are ``park_spacing`` apart along the wall, outside a corridor of ``park_corridor`` either
-side of every site; robot k takes the k-th slot nearest its site, so no two robots ever
-want the same slot and none has to pass another to reach its own. When the wall is
-full (about 180 robots with 10 sites), further slots lie on rings further in, each a
-free lane of ``park_lane`` in from the robots parked on the previous one and with that
-lane between its own robots: whichever slots are taken, every slot and every free spot
-among them stays joined to the interior by paths wide enough for the navigator, so no
-robot, parking or passing, can be walled in (``parking_rings``).
+That overview is defined in one place, the table ``phases.TRANSITIONS``: every phase,
+the events that leave it and the phase each leads to. The controller changes phase only
+by firing an event through it (``_fire``; an event the table does not list for the
+current phase raises ``phases.IllegalTransitionError``). ``_behaviour`` says, for each
+phase, what the robot does on entering it and each control period in it; a phase's
+handler senses, then fires at most the events its phase has. The rest is done by parts
+the controller uses:
+
+* ``beliefs.Beliefs``: the opinion, its negative updates and pooling, the decision;
+* ``motion.Motion``: legs of travel on the navigator, with the guards a crowded arena
+  needs (a viewpoint taken by another robot counts as reached once the robot has been
+  stalled close to it; a leg that takes longer than ``leg_allowance`` is given up);
+* ``sensing.Sensing``: facing a site, requesting frames, retrying to either side, and
+  giving the site up after ``capture_attempts`` failures;
+* ``parking.Parking``: the decided robot's slot against the wall (or on a ring further in),
+  never on a viewpoint, and backing off to try again when it is kept from its slot.
+
+The radio stays here: opinions are checked before they are heard, the beacon's last
+arrival is noted, and broadcasts at the nest are paced by ``broadcast_period``.
 """
 
 from __future__ import annotations
@@ -40,15 +43,13 @@ import math
 import random
 from collections.abc import Callable, Sequence
 
-import numpy as np
-
-from robot_agent import decision, ports, protocol, vision
+from robot_agent import decision, phases, ports, protocol, vision
+from robot_agent.beliefs import Beliefs
 from robot_agent.controller_config import ControllerConfig
+from robot_agent.motion import STOP, TIME_EPSILON, Motion, along_radius, distance
 from robot_agent.navigation import Navigator, NavParams
-
-QualityEstimator = Callable[[np.ndarray], "float | None"]
-
-_TIME_EPSILON = 1e-9  # seconds: sums of control periods are not exact in binary
+from robot_agent.parking import Parking, parking_rings, parking_slot
+from robot_agent.sensing import QualityEstimator, Sensing
 
 
 class Controller:
@@ -89,15 +90,13 @@ class Controller:
         self.world = world
         self.config = config
         self._rng = rng
-        self._estimate_quality = estimate_quality
         self._name = protocol.radio_name(robot_id)
         self._n = len(site_ids)
         # The arena is centred on the origin; sites lie on its wall.
         sites = sorted(world.sites, key=lambda site: site.id)
         self._site_xy = [(site.x, site.y) for site in sites]
-        self._viewpoints = [_along_radius(site.x, site.y, sensing_radius) for site in sites]
-        self._site_angles = [math.atan2(site.y, site.x) for site in sites]
-        self._park_goal: tuple[float, float] | None = None
+        self._viewpoints = [along_radius(site.x, site.y, sensing_radius) for site in sites]
+        self._nest = (world.nest.x, world.nest.y)
         params = nav_params or NavParams(
             max_speed=world.max_wheel_speed,
             wheel_base=world.wheel_base,
@@ -105,77 +104,77 @@ class Controller:
             control_period=world.dt,
         )
         # Its own stream, so obstacle encounters do not shift the pair choices.
-        self._navigator = Navigator(params, random.Random(rng.getrandbits(64)))
-
-        # Decision state.
-        self._opinion = decision.uniform_opinion(self._n)
-        self._trips = 0
-        self._pool_sizes: list[int] = []
-        self._decided_site: int | None = None
-        self._decision_time: float | None = None
-        self._decision_trips: int | None = None
-        self._comparison: protocol.Comparison | None = None
+        self._motion = Motion(Navigator(params, random.Random(rng.getrandbits(64))), config)
+        self._sensing = Sensing(self._motion, config, rng, estimate_quality)
+        self._parking = Parking(
+            self._motion,
+            world,
+            config,
+            robot_id,
+            [math.atan2(site.y, site.x) for site in sites],
+        )
+        self._beliefs = Beliefs(self._n, config)
         self._rejected = 0
 
         # Trip state.
+        self._phases = phases.PhaseMachine()
+        self._started = False
         self._t = 0.0
-        self._phase: protocol.Phase = "to_site"
         self._changed = True  # the initial state is news to whoever reports it
-        self._pair: list[int] = []
-        self._qualities: dict[int, float] = {}
-        self._leg_start = 0.0
-        self._leg_allowance: float | None = None  # seconds this leg may take
-        self._best_distance = math.inf
-        self._last_progress = 0.0
-        self._aim = 0.0
-        self._attempts = 0
-        self._capture_time: float | None = None
+        self._pair: list[int] = []  # sites of this trip's pair still to visit, next first
+        self._qualities: dict[int, float] = {}  # sites seen this trip, in visiting order
         self._last_beacon: float | None = None
         self._nest_arrival = 0.0
         self._next_broadcast = 0.0
         self._linger_end = 0.0
-        self._heard: dict[int, tuple[float, list[float]]] = {}
-        self._started = False
-        self._handlers: dict[str, Callable[[ports.BodyReading], ports.Command]] = {
-            "to_site": self._to_site,
-            "sensing": self._sensing,
-            "to_nest": self._to_nest,
-            "waiting": self._waiting,
-            "at_nest": self._at_nest,
-            "lingering": self._lingering,
-            "to_decision": self._to_decision,
-            "stopped": self._stopped,
+        # For each phase of the table: what the robot does on entering it, and each
+        # control period while in it.
+        self._behaviour: dict[
+            protocol.Phase,
+            tuple[
+                Callable[[ports.BodyReading], None],
+                Callable[[ports.BodyReading], ports.Command],
+            ],
+        ] = {
+            "to_site": (self._start_leg, self._drive_to_site),
+            "sensing": (self._start_sensing, self._sense),
+            "to_nest": (self._head_home, self._drive_home),
+            "waiting": (_nothing, self._wait_for_beacon),
+            "at_nest": (self._arrive_at_nest, self._dwell),
+            "lingering": (self._start_lingering, self._linger),
+            "to_decision": (self._start_parking, self._park),
+            "stopped": (_nothing, self._stay),
         }
 
     # --- read-only state -----------------------------------------------------------
 
     @property
     def phase(self) -> protocol.Phase:
-        return self._phase
+        return self._phases.phase
 
     @property
     def opinion(self) -> list[float]:
-        return list(self._opinion)
+        return list(self._beliefs.opinion)
 
     @property
     def trips(self) -> int:
-        return self._trips
+        return self._beliefs.trips
 
     @property
     def pool_sizes(self) -> list[int]:
-        return list(self._pool_sizes)
+        return list(self._beliefs.pool_sizes)
 
     @property
     def decided_site(self) -> int | None:
-        return self._decided_site
+        return self._beliefs.decided_site
 
     @property
     def decision_time(self) -> float | None:
-        return self._decision_time
+        return self._beliefs.decision_time
 
     @property
     def decision_trips(self) -> int | None:
-        return self._decision_trips
+        return self._beliefs.decision_trips
 
     @property
     def rejected(self) -> int:
@@ -183,28 +182,29 @@ class Controller:
 
     @property
     def comparison(self) -> protocol.Comparison | None:
-        return self._comparison
+        return self._beliefs.comparison
 
     @property
-    def escapes(self) -> int:
-        """How often navigation had to break out of a stall (a diagnostic)."""
-        return self._navigator.escapes
+    def park_retries(self) -> int:
+        """How often parking had to back off and try again (a diagnostic)."""
+        return self._parking.retries
 
     def status(self, tick: int) -> protocol.Status:
+        beliefs = self._beliefs
         return protocol.Status(
             v=protocol.VERSION,
             id=self.robot_id,
             tick=tick,
             t=self._t,
-            phase=self._phase,
-            trips=self._trips,
-            opinion=protocol.wire_opinion(self._opinion),
-            pool_size=self._pool_sizes[-1] if self._pool_sizes else 0,
-            poolings=len(self._pool_sizes),
-            decided_site=self._decided_site,
-            decision_time=self._decision_time,
-            decision_trips=self._decision_trips,
-            comparison=self._comparison,
+            phase=self._phases.phase,
+            trips=beliefs.trips,
+            opinion=protocol.wire_opinion(beliefs.opinion),
+            pool_size=beliefs.pool_sizes[-1] if beliefs.pool_sizes else 0,
+            poolings=len(beliefs.pool_sizes),
+            decided_site=beliefs.decided_site,
+            decision_time=beliefs.decision_time,
+            decision_trips=beliefs.decision_trips,
+            comparison=beliefs.comparison,
             rejected=self._rejected,
         )
 
@@ -217,17 +217,29 @@ class Controller:
 
     def step(self, reading: ports.BodyReading, received: Sequence[ports.Received]) -> ports.Command:
         """Advance the state machine by one control period."""
-        if len(reading.proximity) != len(self._navigator.params.prox_angles):
+        expected = len(self._motion.navigator.params.prox_angles)
+        if len(reading.proximity) != expected:
             raise ValueError(
-                f"expected {len(self._navigator.params.prox_angles)} proximity readings, "
-                f"got {len(reading.proximity)}"
+                f"expected {expected} proximity readings, got {len(reading.proximity)}"
             )
         self._t = reading.t
         self._listen(received)
         if not self._started:
             self._started = True
-            self._start_trip(reading)
-        return self._handlers[self._phase](reading)
+            self._choose_pair(reading)
+            self._fire("start", reading)
+        _, act = self._behaviour[self._phases.phase]
+        return act(reading)
+
+    def _fire(self, event: phases.Event, reading: ports.BodyReading) -> None:
+        """Take the table's transition for ``event`` (``phases.IllegalTransitionError`` if the
+        current phase has none) and do what entering the new phase involves."""
+        leaving = self._phases.phase
+        entering = self._phases.fire(event)
+        if entering != leaving:
+            self._changed = True
+        enter, _ = self._behaviour[entering]
+        enter(reading)
 
     # --- radio ---------------------------------------------------------------------
 
@@ -236,10 +248,8 @@ class Controller:
             payload = message.payload
             if isinstance(payload, protocol.BeaconPayload):
                 self._last_beacon = self._t
-            elif isinstance(payload, protocol.OpinionPayload):
-                self._hear_opinion(message.sender, payload)
             else:
-                self._rejected += 1
+                self._hear_opinion(message.sender, payload)
 
     def _hear_opinion(self, sender: str, payload: protocol.OpinionPayload) -> None:
         if sender == self._name and payload.id == self.robot_id:
@@ -252,381 +262,154 @@ class Controller:
         except ValueError:
             self._rejected += 1  # wrong length, negative, NaN: not an opinion over our sites
             return
-        # The latest opinion of each robot, with when it was heard; pooling takes those
-        # heard since arriving at the nest.
-        self._heard[payload.id] = (self._t, opinion)
+        self._beliefs.hear(payload.id, self._t, opinion)
 
     def _hears_beacon(self, since: float) -> bool:
         heard = self._last_beacon
         return (
             heard is not None
-            and heard + _TIME_EPSILON >= since
-            and self._t - heard <= self.config.beacon_timeout + _TIME_EPSILON
+            and heard + TIME_EPSILON >= since
+            and self._t - heard <= self.config.beacon_timeout + TIME_EPSILON
         )
 
     def _broadcasts(self) -> tuple[protocol.OpinionPayload, ...]:
-        if self._t + _TIME_EPSILON < self._next_broadcast:
+        if self._t + TIME_EPSILON < self._next_broadcast:
             return ()
         self._next_broadcast = self._t + self.config.broadcast_period
         payload = protocol.OpinionPayload(
             v=protocol.VERSION,
             id=self.robot_id,
-            trip=self._trips,
-            decided=self._decided_site is not None,
-            opinion=protocol.wire_opinion(self._opinion),
+            trip=self._beliefs.trips,
+            decided=self._beliefs.decided_site is not None,
+            opinion=protocol.wire_opinion(self._beliefs.opinion),
         )
         return (payload,)
 
-    # --- phases --------------------------------------------------------------------
+    # --- each control period in a phase: sense, then fire what happened -------------
 
-    def _to_site(self, reading: ports.BodyReading) -> ports.Command:
-        site = self._pair[0]
-        goal = self._viewpoints[site]
-        left, right, arrived = self._navigator.drive_to(
-            reading.x,
-            reading.y,
-            reading.theta,
-            reading.proximity,
-            goal,
-            self.config.view_tolerance,
-        )
-        if arrived or self._stalled_near(reading, goal, self.config.near_distance):
-            self._start_sensing(reading, site)
-            return self._sensing(reading)
-        if self._leg_timed_out(reading, goal):
-            self._head_home()  # the site is out of reach: no update this trip
-            return _stop()
+    def _drive_to_site(self, reading: ports.BodyReading) -> ports.Command:
+        goal = self._viewpoints[self._pair[0]]
+        left, right, arrived = self._motion.drive_to(reading, goal, self.config.view_tolerance)
+        if arrived or self._motion.stalled_near(reading, goal, self.config.near_distance):
+            self._fire("reached_viewpoint", reading)
+            return self._sense(reading)
+        if self._motion.timed_out(reading, goal):
+            self._fire("leg_timed_out", reading)
+            return STOP
         return ports.Command(left, right)
 
-    def _sensing(self, reading: ports.BodyReading) -> ports.Command:
-        site = self._pair[0]
-        failed = False
-        if self._capture_time is not None:
-            if reading.frame is not None:
-                self._capture_time = None
-                quality = self._estimate(reading.frame)
-                if quality is not None:
-                    self._sensed(site, quality)
-                    return _stop()
-                failed = True
-            elif self._t - self._capture_time > self.config.capture_timeout + _TIME_EPSILON:
-                self._capture_time = None
-                failed = True
+    def _sense(self, reading: ports.BodyReading) -> ports.Command:
+        look = self._sensing.step(reading)
+        if look.quality is not None:
+            self._qualities[self._pair.pop(0)] = look.quality
+            if self._pair:
+                self._fire("sensed_first_site", reading)
             else:
-                return _stop()  # the frame is on its way
-        if failed:
-            self._attempts += 1
-            if self._attempts >= self.config.capture_attempts:
-                self._head_home()  # cannot see the site: give up the pair
-                return _stop()
-            # Look slightly to one side: an occluder or a pose error may hide the panel.
-            self._aim = self._site_heading(reading, site) + self._rng.uniform(
-                -self.config.wiggle, self.config.wiggle
-            )
-        left, right, facing = self._navigator.turn_to(
-            reading.theta, self._aim, self.config.heading_tolerance
-        )
-        if facing:
-            self._capture_time = self._t
-            return ports.Command(0.0, 0.0, capture=True)
-        return ports.Command(left, right)
+                if self._beliefs.compare(self._qualities):
+                    self._changed = True
+                self._fire("compared", reading)
+        elif look.gave_up:
+            self._fire("site_unseen", reading)
+        return look.command
 
-    def _to_nest(self, reading: ports.BodyReading) -> ports.Command:
-        if self._hears_beacon(self._leg_start):
-            return self._arrive_at_nest()
-        left, right, arrived = self._drive_to_nest(reading)
+    def _drive_home(self, reading: ports.BodyReading) -> ports.Command:
+        if self._hears_beacon(self._motion.leg_start):
+            self._fire("heard_beacon", reading)
+            return ports.Command(0.0, 0.0, broadcasts=self._broadcasts())
+        left, right, arrived = self._motion.drive_to(
+            reading, self._nest, self.config.nest_tolerance
+        )
         if arrived:
-            self._set_phase("waiting")
-            return _stop()
+            self._fire("reached_nest_centre", reading)
+            return STOP
         return ports.Command(left, right)
 
-    def _waiting(self, reading: ports.BodyReading) -> ports.Command:
+    def _wait_for_beacon(self, reading: ports.BodyReading) -> ports.Command:
         """At the nest centre without hearing the beacon: stay there until it is heard."""
-        if self._hears_beacon(self._leg_start):
-            return self._arrive_at_nest()
-        nest = (self.world.nest.x, self.world.nest.y)
-        if math.hypot(reading.x - nest[0], reading.y - nest[1]) <= 2 * self.config.nest_tolerance:
-            return _stop()  # pushed a little: not worth driving back yet
-        left, right, _ = self._drive_to_nest(reading)
+        if self._hears_beacon(self._motion.leg_start):
+            self._fire("heard_beacon", reading)
+            return ports.Command(0.0, 0.0, broadcasts=self._broadcasts())
+        if distance(reading, self._nest) <= 2 * self.config.nest_tolerance:
+            return STOP  # pushed a little: not worth driving back yet
+        left, right, _ = self._motion.drive_to(reading, self._nest, self.config.nest_tolerance)
         return ports.Command(left, right)
 
-    def _drive_to_nest(self, reading: ports.BodyReading) -> tuple[float, float, bool]:
-        nest = (self.world.nest.x, self.world.nest.y)
-        return self._navigator.drive_to(
-            reading.x,
-            reading.y,
-            reading.theta,
-            reading.proximity,
-            nest,
-            self.config.nest_tolerance,
-        )
-
-    def _at_nest(self, reading: ports.BodyReading) -> ports.Command:
-        broadcasts = self._broadcasts()
-        if self._t + _TIME_EPSILON >= self._nest_arrival + self.config.dwell:
+    def _dwell(self, reading: ports.BodyReading) -> ports.Command:
+        broadcasts = self._broadcasts()  # the opinion as it was before pooling
+        if self._t + TIME_EPSILON >= self._nest_arrival + self.config.dwell:
             self._pool_and_decide(reading)
         return ports.Command(0.0, 0.0, broadcasts=broadcasts)
 
-    def _lingering(self, reading: ports.BodyReading) -> ports.Command:
+    def _pool_and_decide(self, reading: ports.BodyReading) -> None:
+        self._beliefs.pool(self._nest_arrival - TIME_EPSILON, self._t)
+        self._changed = True
+        if self._beliefs.decided_site is None:
+            self._choose_pair(reading)
+            self._fire("pooled_undecided", reading)
+        elif self.config.linger > 0.0:
+            self._fire("decided_to_linger", reading)
+        else:
+            self._fire("decided", reading)
+
+    def _linger(self, reading: ports.BodyReading) -> ports.Command:
         broadcasts = self._broadcasts()
-        if self._t + _TIME_EPSILON >= self._linger_end:
-            self._start_leg("to_decision")
+        if self._t + TIME_EPSILON >= self._linger_end:
+            self._fire("lingered", reading)
         return ports.Command(0.0, 0.0, broadcasts=broadcasts)
 
-    def _to_decision(self, reading: ports.BodyReading) -> ports.Command:
-        assert self._decided_site is not None
-        if self._park_goal is None:
-            self._park_goal = parking_slot(
-                self._site_angles,
-                self._decided_site,
-                self.robot_id,
-                arena_radius=self.world.arena_radius,
-                inner_radius=self.world.nest.radius + 3 * self.world.robot_radius,
-                robot_radius=self.world.robot_radius,
-                clearance=self.config.park_clearance,
-                spacing=self.config.park_spacing,
-                corridor=self.config.park_corridor,
-                lane=self.config.park_lane,
-            )
-        goal = self._park_goal
-        if self._leg_timed_out(reading, goal):
-            self._set_phase("stopped")
-            return _stop()
-        # The last stretch into the slot goes straight in: the wall and the neighbouring
-        # parked robots are expected there, not obstacles to steer round.
-        near = _distance(reading, goal) <= self.config.near_distance
-        sensed = (0.0,) * len(reading.proximity) if near else reading.proximity
-        left, right, arrived = self._navigator.drive_to(
-            reading.x, reading.y, reading.theta, sensed, goal, self.config.view_tolerance
-        )
-        if arrived or self._stalled_near(reading, goal, self.config.near_distance):
-            self._set_phase("stopped")
-            return _stop()
-        return ports.Command(left, right)
+    def _park(self, reading: ports.BodyReading) -> ports.Command:
+        command = self._parking.step(reading)
+        if command is None:
+            self._fire("parked", reading)
+            return STOP
+        return command
 
-    def _stopped(self, reading: ports.BodyReading) -> ports.Command:
-        return _stop()
+    def _stay(self, reading: ports.BodyReading) -> ports.Command:
+        return STOP
 
-    # --- transitions ---------------------------------------------------------------
+    # --- on entering a phase -------------------------------------------------------
 
-    def _start_trip(self, reading: ports.BodyReading) -> None:
-        first, second = decision.choose_pair(self._opinion, self._rng)
+    def _choose_pair(self, reading: ports.BodyReading) -> None:
+        """The pair of sites of the next trip, drawn by weight from the opinion."""
+        first, second = decision.choose_pair(self._beliefs.opinion, self._rng)
         # Visit the nearer viewpoint first; the pair itself is what the rng chose.
-        if _distance(reading, self._viewpoints[second]) < _distance(
-            reading, self._viewpoints[first]
-        ):
+        if distance(reading, self._viewpoints[second]) < distance(reading, self._viewpoints[first]):
             first, second = second, first
         self._pair = [first, second]
         self._qualities = {}
-        self._start_leg("to_site")
 
-    def _start_leg(self, phase: protocol.Phase) -> None:
-        self._navigator.reset()
-        self._leg_start = self._t
-        self._leg_allowance = None
-        self._best_distance = math.inf
-        self._last_progress = self._t
-        self._set_phase(phase)
+    def _start_leg(self, reading: ports.BodyReading) -> None:
+        self._motion.start_leg(self._t)
 
-    def _start_sensing(self, reading: ports.BodyReading, site: int) -> None:
-        self._attempts = 0
-        self._capture_time = None
-        self._aim = self._site_heading(reading, site)
-        self._set_phase("sensing")
+    def _start_sensing(self, reading: ports.BodyReading) -> None:
+        self._sensing.begin(reading, self._site_xy[self._pair[0]])
 
-    def _sensed(self, site: int, quality: float) -> None:
-        self._qualities[site] = quality
-        self._pair.pop(0)
-        if self._pair:
-            self._start_leg("to_site")
-            return
-        self._compare()
-        self._head_home()
+    def _head_home(self, reading: ports.BodyReading) -> None:
+        self._pair = []  # whatever is left of the pair is given up
+        self._motion.start_leg(self._t)
 
-    def _compare(self) -> None:
-        (site_a, quality_a), (site_b, quality_b) = self._qualities.items()
-        if quality_a == quality_b:
-            return  # no evidence either way; an update would be a coin toss
-        worse = site_a if quality_a < quality_b else site_b
-        self._comparison = protocol.Comparison(site_a, quality_a, site_b, quality_b, worse)
-        updated = decision.negative_update(self._opinion, worse, self.config.alpha)
-        if updated != self._opinion:
-            self._opinion = updated
-            self._changed = True
-
-    def _head_home(self) -> None:
-        self._pair = []
-        self._start_leg("to_nest")
-
-    def _arrive_at_nest(self) -> ports.Command:
+    def _arrive_at_nest(self, reading: ports.BodyReading) -> None:
         self._nest_arrival = self._t
         self._next_broadcast = self._t
-        self._set_phase("at_nest")
-        return ports.Command(0.0, 0.0, broadcasts=self._broadcasts())
 
-    def _pool_and_decide(self, reading: ports.BodyReading) -> None:
-        since = self._nest_arrival - _TIME_EPSILON
-        neighbours = [
-            opinion for _, (heard, opinion) in sorted(self._heard.items()) if heard >= since
-        ]
-        pool = [self._opinion, *neighbours]
-        pooled = decision.POOLING_OPERATORS[self.config.pooling](pool)
-        if pooled is not None:  # None: contradictory evidence, keep our own opinion
-            self._opinion = pooled
-        self._heard = {}
-        self._pool_sizes.append(len(pool))
-        self._trips += 1
-        self._changed = True
-        decided = decision.decided_option(self._opinion, self.config.threshold)
-        if decided is None:
-            self._start_trip(reading)
-            return
-        self._decided_site = decided
-        self._decision_time = self._t
-        self._decision_trips = self._trips
-        if self.config.linger > 0.0:
-            self._linger_end = self._t + self.config.linger
-            self._set_phase("lingering")
-        else:
-            self._start_leg("to_decision")
+    def _start_lingering(self, reading: ports.BodyReading) -> None:
+        self._linger_end = self._t + self.config.linger
 
-    def _set_phase(self, phase: protocol.Phase) -> None:
-        if phase != self._phase:
-            self._phase = phase
-            self._changed = True
-
-    # --- helpers -------------------------------------------------------------------
-
-    def _estimate(self, frame: np.ndarray) -> float | None:
-        try:
-            quality = self._estimate_quality(frame)
-        except ValueError:
-            return None  # a malformed frame is no view of the site
-        if quality is None or not math.isfinite(quality):
-            return None
-        return min(max(float(quality), 0.0), 1.0)
-
-    def _site_heading(self, reading: ports.BodyReading, site: int) -> float:
-        """Facing the site's panel from where the robot stands (radially at the viewpoint)."""
-        site_x, site_y = self._site_xy[site]
-        return math.atan2(site_y - reading.y, site_x - reading.x)
-
-    def _leg_timed_out(self, reading: ports.BodyReading, goal: tuple[float, float]) -> bool:
-        """Whether the current leg has taken longer than ``leg_allowance`` of its length,
-        measured when the leg's first step saw where it starts."""
-        if self._leg_allowance is None:
-            self._leg_allowance = self.config.leg_allowance(_distance(reading, goal))
-        return self._t - self._leg_start > self._leg_allowance
-
-    def _stalled_near(
-        self, reading: ports.BodyReading, goal: tuple[float, float], near: float
-    ) -> bool:
-        """Within ``near`` of ``goal`` but no closer for ``stall_timeout``: someone is there."""
-        distance = _distance(reading, goal)
-        if distance < self._best_distance - 0.01:
-            self._best_distance = distance
-            self._last_progress = self._t
-            return False
-        return distance <= near and self._t - self._last_progress >= self.config.stall_timeout
+    def _start_parking(self, reading: ports.BodyReading) -> None:
+        assert self._beliefs.decided_site is not None
+        self._parking.begin(self._beliefs.decided_site, self._t)
 
 
-def _stop() -> ports.Command:
-    return ports.Command(0.0, 0.0)
+def _nothing(reading: ports.BodyReading) -> None:
+    """Entering this phase involves nothing beyond the phase change."""
 
 
-def parking_slot(
-    site_angles: Sequence[float],
-    site: int,
-    robot_id: int,
-    *,
-    arena_radius: float,
-    inner_radius: float,
-    robot_radius: float,
-    clearance: float,
-    spacing: float,
-    corridor: float,
-    lane: float,
-) -> tuple[float, float]:
-    """Robot ``robot_id``'s parking slot for ``site``: the ``robot_id``-th slot nearest the
-    site (see ``parking_rings``)."""
-    rings = parking_rings(
-        site_angles,
-        site,
-        arena_radius=arena_radius,
-        inner_radius=inner_radius,
-        robot_radius=robot_radius,
-        clearance=clearance,
-        spacing=spacing,
-        corridor=corridor,
-        lane=lane,
-    )
-    # More robots than slots down to the nest: the count starts again at the wall.
-    remaining = robot_id % max(1, sum(len(slots) for _, slots in rings))
-    for radius, slots in rings:
-        if remaining < len(slots):
-            return radius * math.cos(slots[remaining]), radius * math.sin(slots[remaining])
-        remaining -= len(slots)
-    radius, slots = rings[0]
-    angle = slots[0] if slots else site_angles[site]
-    return radius * math.cos(angle), radius * math.sin(angle)
-
-
-def parking_rings(
-    site_angles: Sequence[float],
-    site: int,
-    *,
-    arena_radius: float,
-    inner_radius: float,
-    robot_radius: float,
-    clearance: float,
-    spacing: float,
-    corridor: float,
-    lane: float,
-) -> list[tuple[float, list[float]]]:
-    """Every parking slot for robots that chose ``site``: (radius, slot angles nearest the
-    site first) for each ring, from the wall inwards.
-
-    Ring 0 lies ``clearance`` in from the wall with slots ``spacing`` apart, outside a
-    corridor of ``corridor`` metres either side of every site. Each further ring lies a
-    free ``lane`` in from the bodies parked on the previous one, with ``lane`` free between
-    its own slots and a corridor of ``corridor + lane / 2`` either side of every site. So
-    whichever slots are taken, every slot and every point among them is joined to the
-    arena's interior by paths at least ``lane`` wide: no parked robot stands in front of
-    another's slot, and nobody, parking or passing, can be walled in.
-    """
-    pitch = 2 * robot_radius + lane  # centre to centre, across a lane
-    rings: list[tuple[float, list[float]]] = []
-    ring = 0
-    radius = arena_radius - clearance
-    while radius >= inner_radius or not rings:
-        if ring == 0:
-            step, keep_clear = spacing / radius, corridor
-        else:
-            step, keep_clear = pitch / radius, corridor + lane / 2
-        slots = [
-            index * step
-            for index in range(int(2 * math.pi / step))
-            if all(
-                abs(math.remainder(index * step - other, 2 * math.pi)) * radius >= keep_clear
-                for other in site_angles
-            )
-        ]
-        home = site_angles[site]
-        slots.sort(key=lambda angle: abs(math.remainder(angle - home, 2 * math.pi)))
-        rings.append((radius, slots))
-        ring += 1
-        radius = arena_radius - clearance - ring * pitch
-    return rings
-
-
-def _along_radius(x: float, y: float, radius: float) -> tuple[float, float]:
-    """The point at ``radius`` from the centre on the ray through (x, y)."""
-    angle = math.atan2(y, x)
-    return radius * math.cos(angle), radius * math.sin(angle)
-
-
-def _distance(reading: ports.BodyReading, point: tuple[float, float]) -> float:
-    return math.hypot(reading.x - point[0], reading.y - point[1])
-
-
-__all__ = ["Controller", "ControllerConfig", "QualityEstimator"]
+# parking_slot and parking_rings live in robot_agent/parking.py; they are exported here
+# too, where tests and benchmarks have always imported them from.
+__all__ = [
+    "Controller",
+    "ControllerConfig",
+    "QualityEstimator",
+    "parking_rings",
+    "parking_slot",
+]

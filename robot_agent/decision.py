@@ -20,7 +20,7 @@ import numbers
 import operator
 import random
 from collections.abc import Callable, Sequence
-from typing import Literal
+from typing import Literal, SupportsIndex
 
 __all__ = [
     "LOGLINEAR_NEIGHBOUR_WEIGHT",
@@ -250,11 +250,11 @@ def decided_option(opinion: Sequence[float], threshold: float = 1.0) -> int | No
 
 def as_count(value: object, what: str) -> int:
     """``value`` as an int (ValueError naming ``what`` unless it is an integer, not a bool)."""
-    if isinstance(value, bool):
+    if isinstance(value, bool) or not isinstance(value, SupportsIndex):
         raise ValueError(f"{what} must be an integer, got {value!r}")
     try:
-        return operator.index(value)  # type: ignore[arg-type]
-    except TypeError:
+        return operator.index(value)
+    except TypeError:  # an __index__ that does not return an int
         raise ValueError(f"{what} must be an integer, got {value!r}") from None
 
 

@@ -35,9 +35,9 @@ from plumbing.trace import TraceWriter, now, open_trace
 from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import certificate_name, open_from_args, reliable_publisher
 from robot_agent import auth, byzantine, guard, protocol
-from robot_agent.lockstep import answer_tick
 from robot_agent.options import AGENT_OPTIONS, RobotAgentConfig, hosted_byzantine
 from robot_agent.ports import RejectCounter, RobotController
+from robot_agent.simulated import SimulatedPorts
 
 log = logging.getLogger("robot_agent")
 Meta = TypeVar("Meta", protocol.RadioRxMeta, protocol.CameraMeta)
@@ -97,11 +97,10 @@ class RobotNode:
         self.keyring = keyring  # None: an unauthenticated run
         self.dt = world.dt
         self.rejects = RejectCounter()
+        self.ports = SimulatedPorts(self.rejects)  # the body and radio control_step drives
         self.pending: dict[int, _TickInputs] = {}
         self.pending_bytes = 0
         self.pending_messages = 0
-        self.seq = 0
-        self.skipped_ticks = 0
         self.ticks = guard.TickWindow()
         self.time_offset = 0.0  # keeps the controller's clock monotonic across world restarts
         self.last_t = 0.0
@@ -186,10 +185,10 @@ class RobotNode:
                 self.pending[meta.tick].rx.append((meta.sender, event.payload))
                 self._advance(meta.tick)
         else:
-            meta = self._metadata(metadata, protocol.CameraMeta, key)
-            if meta is not None and self._admit(meta.tick, key, len(event.payload)):
-                self.pending[meta.tick].frame = event.payload
-                self._advance(meta.tick)
+            camera = self._metadata(metadata, protocol.CameraMeta, key)
+            if camera is not None and self._admit(camera.tick, key, len(event.payload)):
+                self.pending[camera.tick].frame = event.payload
+                self._advance(camera.tick)
 
     def _take_sense(self, payload: bytes) -> None:
         try:
@@ -279,9 +278,10 @@ class RobotNode:
             complete = len(inputs.rx) >= sense.rx and (inputs.frame is not None or not sense.camera)
             if not complete:
                 return
-            stale = [old for old in self.pending if old < tick]
-            self.skipped_ticks += len(stale)
-            self._drop_pending(stale)
+            # Inputs of an earlier tick that never all arrived: one was dropped (counted in
+            # this robot's rejects), and the world went on without this robot's answer
+            # (counted in the world's stalls). Nothing more to report: forget them.
+            self._drop_pending([old for old in self.pending if old < tick])
         else:
             # Real time: use whatever has arrived, including earlier ticks' radio.
             earlier = sorted(t for t in self.pending if t < tick)
@@ -297,17 +297,12 @@ class RobotNode:
         if self.time_offset:
             sense = msgspec.structs.replace(sense, t=sense.t + self.time_offset)
         self.last_t = sense.t
-        answer = answer_tick(
-            self.controller, sense, inputs.rx, inputs.frame, self.rejects, seq=self.seq
-        )
-        for seq, payload in answer.transmissions:
-            meta = protocol.encode(
-                protocol.RadioTxMeta(v=protocol.VERSION, tick=sense.tick, seq=seq)
-            )
-            self._tx.put(payload, attachment=self._seal(self._tx_key, payload, meta))
+        answer = self.ports.answer(self.controller, sense, inputs.rx, inputs.frame)
+        for sent in answer.transmissions:
+            attachment = self._seal(self._tx_key, sent.payload, sent.meta)
+            self._tx.put(sent.payload, attachment=attachment)
         act = protocol.encode(answer.act)
         self._act.put(act, attachment=self._seal(self._act_key, act))
-        self.seq = answer.next_seq
         self.ticks.last = sense.tick
         if self.trace is not None:
             self.trace.write(

@@ -1,8 +1,11 @@
-"""The ports a robot's controller talks through, and the loop that drives it.
+"""The port contract: the ports a robot's controller talks through, and the one loop
+that drives it.
 
-A port to real hardware implements ``Body`` (the robot's own sensors and motors) and
-``Radio`` (a lossy broadcast medium), and calls ``control_step`` once per control
-period with its clock's time. The controller never sees Zenoh, sockets or clocks.
+A port implements ``Body`` (the robot's own sensors and motors) and ``Radio`` (a lossy
+broadcast medium), and calls ``control_step`` once per control period. Every transport
+does exactly that: a robot on hardware or UDP (examples/udp_robot.py), and, through
+``robot_agent/simulated.py``, the Zenoh robot process and the in-process engine. The
+controller never sees Zenoh, sockets or clocks.
 """
 
 from __future__ import annotations
@@ -16,8 +19,6 @@ from robot_agent import protocol
 
 if TYPE_CHECKING:
     import numpy as np
-
-    from robot_agent.controller import Controller
 
 log = logging.getLogger(__name__)
 
@@ -110,7 +111,7 @@ def decode_received(raw: Sequence[tuple[str, bytes]], rejects: RejectCounter) ->
 
 
 def control_step(
-    controller: Controller, body: Body, radio: Radio, rejects: RejectCounter
+    controller: RobotController, body: Body, radio: Radio, rejects: RejectCounter
 ) -> Command:
     """One control period on any transport: sense, receive, decide, act, transmit."""
     reading = body.read()

@@ -74,7 +74,9 @@ def check_name(text: str, what: str = "name") -> str:
 class Message(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     """Base of every message: a version field first, unknown fields refused.
 
-    Fields encode in declaration order, base class first, so ``v`` always leads.
+    Fields encode in declaration order, base class first, so ``v`` always leads. Every
+    subclass repeats ``frozen=True``: msgspec would inherit it anyway, but a type checker
+    reads a Struct as a dataclass and would take a subclass without it as mutable.
     """
 
     v: Literal[1]
@@ -101,7 +103,7 @@ class CameraSpec(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     fov: Annotated[float, msgspec.Meta(gt=0.0, lt=3.2)]
 
 
-class WorldInfo(Message):
+class WorldInfo(Message, frozen=True):
     """Answer of the ``world/info`` queryable: the map a robot is given (never qualities)."""
 
     run: _Name
@@ -117,13 +119,13 @@ class WorldInfo(Message):
     clock: Literal["lockstep", "realtime"]
 
 
-class JoinReply(Message):
+class JoinReply(Message, frozen=True):
     """Answer of the ``world/join`` queryable: an id for a robot started with ``--id auto``."""
 
     id: _RobotId
 
 
-class Clock(Message):
+class Clock(Message, frozen=True):
     tick: _Tick
     t: _SimTime
 
@@ -144,7 +146,7 @@ class RadioCounters(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     rejected: _Count = 0
 
 
-class WorldState(Message):
+class WorldState(Message, frozen=True):
     """All poses (decimated) plus the world's counters, for recorders and viewers."""
 
     tick: _Tick
@@ -158,7 +160,7 @@ class WorldState(Message):
 # --- world <-> robot body (reliable) -------------------------------------------------
 
 
-class Sense(Message):
+class Sense(Message, frozen=True):
     """World -> robot at the start of tick ``tick``: its body's readings.
 
     ``rx`` radio messages and, when ``camera`` is true, one frame are delivered for
@@ -176,7 +178,7 @@ class Sense(Message):
     camera: bool
 
 
-class Act(Message):
+class Act(Message, frozen=True):
     """Robot -> world: the answer to tick ``tick``.
 
     ``radio_tx`` says how many radio messages the robot sent during this tick, so the
@@ -190,7 +192,7 @@ class Act(Message):
     radio_tx: Annotated[int, msgspec.Meta(ge=0, le=1000)]
 
 
-class Ack(Message):
+class Ack(Message, frozen=True):
     """A body-less controller's (the nest beacon's) answer to tick ``tick``."""
 
     tick: _Tick
@@ -198,7 +200,7 @@ class Ack(Message):
     rejected: _Count = 0  # invalid messages the beacon dropped so far
 
 
-class CameraMeta(Message):
+class CameraMeta(Message, frozen=True):
     """Zenoh attachment of a camera frame; the payload is the encoded image."""
 
     tick: _Tick
@@ -210,14 +212,14 @@ class CameraMeta(Message):
 # --- radio ---------------------------------------------------------------------------
 
 
-class RadioTxMeta(Message):
+class RadioTxMeta(Message, frozen=True):
     """Zenoh attachment of ``radio/tx/<sender>``; the payload is opaque to the medium."""
 
     tick: _Tick
     seq: _Count
 
 
-class RadioRxMeta(Message):
+class RadioRxMeta(Message, frozen=True):
     """Zenoh attachment of ``radio/rx/<receiver>``: who sent it, and when."""
 
     tick: _Tick
@@ -278,7 +280,7 @@ class Comparison(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     eliminated: _SiteId
 
 
-class Status(Message):
+class Status(Message, frozen=True):
     id: _RobotId
     tick: _Tick
     t: _SimTime
@@ -294,7 +296,7 @@ class Status(Message):
     rejected: _Count = 0  # invalid messages this robot dropped so far
 
 
-class LogLine(Message):
+class LogLine(Message, frozen=True):
     """One line a process of the run wrote to its log (published by the launcher)."""
 
     process: _Name
@@ -413,19 +415,28 @@ def encode(message: msgspec.Struct) -> bytes:
 
 def decode(payload: bytes | bytearray | memoryview, kind: type[M]) -> M:
     """Decode and validate ``payload`` as ``kind``; raise ProtocolError if it is not one."""
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise ProtocolError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}")
-    decoder = _decoders.get(kind)
+    decoder: msgspec.json.Decoder[M] | None = _decoders.get(kind)
     if decoder is None:
         decoder = _decoders[kind] = msgspec.json.Decoder(kind)
+    return _decode(decoder, payload)
+
+
+def _decode(decoder: msgspec.json.Decoder[M], payload: bytes | bytearray | memoryview) -> M:
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise ProtocolError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}")
     try:
         return decoder.decode(payload)
     except (msgspec.DecodeError, msgspec.ValidationError, UnicodeDecodeError) as error:
         raise ProtocolError(str(error)) from None
 
 
+_radio_decoder: msgspec.json.Decoder[OpinionPayload | BeaconPayload] = msgspec.json.Decoder(
+    RadioPayload
+)
+
+
 def decode_radio(payload: bytes | bytearray | memoryview) -> OpinionPayload | BeaconPayload:
-    message = decode(payload, RadioPayload)  # type: ignore[arg-type]
+    message = _decode(_radio_decoder, payload)
     if isinstance(message, OpinionPayload) and abs(sum(message.opinion) - 1.0) > 1e-6:
         raise ProtocolError(f"opinion sums to {sum(message.opinion)!r}, not 1")
     return message

@@ -23,7 +23,6 @@ Pure: no I/O.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import re
 import sys
@@ -115,9 +114,18 @@ def resolved(hint: Any) -> tuple[Any, dict[str, Any]]:
     return kind, constraints
 
 
-@functools.cache
+_SETTINGS: dict[type, tuple[Setting, ...]] = {}
+
+
 def settings_of(config_type: type) -> tuple[Setting, ...]:
     """The settings of a config dataclass, in declaration order."""
+    known = _SETTINGS.get(config_type)
+    if known is None:
+        known = _SETTINGS[config_type] = _read_settings(config_type)
+    return known
+
+
+def _read_settings(config_type: type) -> tuple[Setting, ...]:
     # Annotations name the module's names, never the class's: a field called ``byzantine``
     # must not hide the module ``byzantine`` (and a lambda in one sees the module).
     module = vars(sys.modules[config_type.__module__])
@@ -232,16 +240,15 @@ def interval(constraints: Mapping[str, Any]) -> str:
 
 
 def in_range(value: float, constraints: Mapping[str, Any]) -> bool:
-    for name, inside in (
-        ("ge", lambda bound: value >= bound),
-        ("gt", lambda bound: value > bound),
-        ("le", lambda bound: value <= bound),
-        ("lt", lambda bound: value < bound),
-    ):
-        bound = constraints.get(name)
-        if bound is not None and not inside(bound):
-            return False
-    return True
+    """Whether ``value`` is within the bounds (ge, gt, le, lt) of ``constraints``."""
+    ge, gt = constraints.get("ge"), constraints.get("gt")
+    le, lt = constraints.get("le"), constraints.get("lt")
+    return (
+        (ge is None or value >= ge)
+        and (gt is None or value > gt)
+        and (le is None or value <= le)
+        and (lt is None or value < lt)
+    )
 
 
 def _check_bounds(value: float, constraints: Mapping[str, Any], label: str) -> None:

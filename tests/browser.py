@@ -182,7 +182,9 @@ def share_of_colour(png: bytes, hex_colour: str, tolerance: int = 12) -> float:
     import cv2
     import numpy as np
 
-    image = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR).astype(np.int32)
+    decoded = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
+    assert decoded is not None, "not an image"
+    image = decoded.astype(np.int32)
     red, green, blue = (int(hex_colour[i : i + 2], 16) for i in (1, 3, 5))
     target = np.array([blue, green, red])
     return float(np.all(np.abs(image - target) <= tolerance, axis=2).mean())

@@ -22,7 +22,7 @@ import math
 import random
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -384,7 +384,7 @@ def make_swarm(
     arena_radius: float = 0.75,
     nest_radius: float = 0.2,
     start_poses: Sequence[tuple[float, float, float]] | None = None,
-    **world_options: object,
+    **world_options: Any,
 ) -> FakeSwarm:
     """``num_robots`` controllers, by default on a ring just outside the nest, facing out."""
     info = make_world_info(num_sites, arena_radius, nest_radius)

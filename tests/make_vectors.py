@@ -4,8 +4,10 @@
     python tests/make_vectors.py --check   # exit 1 if a file differs from what it would write
 
 One file per message type of ``robot_agent/protocol.py``, plus ``udp_frame.json`` for the
-UDP radio's framing (``robot_agent/udp_radio.py``) and ``auth.json`` for run keys and
-message tags (``robot_agent/auth.py``). Each message file holds:
+UDP radio's framing (``robot_agent/udp_radio.py``), ``auth.json`` for run keys and
+message tags (``robot_agent/auth.py``) and ``tick.json`` for one lockstep tick of a robot
+on Zenoh: what arrives, what the port contract hands the controller, what goes out
+(``robot_agent/simulated.py``). Each message file holds:
 
 * ``valid``: messages with the exact bytes ``protocol.encode`` produces for them (as a
   UTF-8 string and as hex). A decoder must accept them; an encoder that wants to be
@@ -27,6 +29,7 @@ import argparse
 import json
 import math
 import sys
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -941,6 +944,196 @@ def auth_vectors() -> dict[str, Any]:
     }
 
 
+def uniform_png(width: int, height: int, bgr: tuple[int, int, int]) -> bytes:
+    """A one-colour 8-bit RGB PNG, its image data stored uncompressed (deflate level 0), so
+    its bytes depend on no image library's encoder."""
+    blue, green, red = bgr
+    rows = b"".join(b"\x00" + bytes((red, green, blue)) * width for _ in range(height))
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        crc = zlib.crc32(kind + data).to_bytes(4, "big")
+        return len(data).to_bytes(4, "big") + kind + data + crc
+
+    header = width.to_bytes(4, "big") + height.to_bytes(4, "big") + bytes((8, 2, 0, 0, 0))
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", header)
+        + chunk(b"IDAT", zlib.compress(rows, 0))
+        + chunk(b"IEND", b"")
+    )
+
+
+@dataclass
+class Tick:
+    """One tick's inputs and the controller's command; the expected outputs follow from
+    the rules of docs/porting.md, written out here, not computed by the code under test."""
+
+    name: str
+    note: str
+    sent_before: int  # broadcasts the robot sent in earlier ticks
+    sense: protocol.Sense
+    rx: list[tuple[str, bytes]]  # (sender, payload) in the medium's order
+    frame: bytes | None
+    frame_seen: tuple[int, int, tuple[int, int, int]] | None  # width, height, BGR; None: no image
+    received: list[int]  # which of rx reach the controller (the others are invalid)
+    rejected: int  # inputs dropped as invalid: payloads and frames
+    left: float
+    right: float
+    capture: bool
+    broadcasts: list[protocol.OpinionPayload]
+
+    def content(self) -> dict[str, Any]:
+        sense, tick = self.sense, self.sense.tick
+        rx = [
+            {
+                "sender": sender,
+                "meta_hex": protocol.encode(
+                    # seq: the sender's numbering, which the robot does not use
+                    protocol.RadioRxMeta(
+                        v=1, tick=tick, sender=sender, seq=index + 20, sent_tick=tick - 1
+                    )
+                ).hex(),
+                **_spelled(payload),
+            }
+            for index, (sender, payload) in enumerate(self.rx)
+        ]
+        camera = None
+        if self.frame is not None:
+            camera_meta = protocol.CameraMeta(v=1, tick=tick, width=4, height=3, encoding="png")
+            camera = {"meta_hex": protocol.encode(camera_meta).hex(), "hex": self.frame.hex()}
+        frame = None
+        if self.frame_seen is not None:
+            width, height, bgr = self.frame_seen
+            frame = {"width": width, "height": height, "bgr": list(bgr)}
+        radio_tx = []
+        for offset, payload in enumerate(self.broadcasts, start=1):
+            seq = self.sent_before + offset
+            meta = protocol.RadioTxMeta(v=1, tick=tick, seq=seq)
+            radio_tx.append(
+                {
+                    "seq": seq,
+                    "meta_hex": protocol.encode(meta).hex(),
+                    **_spelled(protocol.encode(payload)),
+                }
+            )
+        act = protocol.Act(
+            v=1,
+            tick=tick,
+            left=self.left,
+            right=self.right,
+            capture=self.capture,
+            radio_tx=len(self.broadcasts),
+        )
+        return {
+            "name": self.name,
+            "note": self.note,
+            "sent_before": self.sent_before,
+            "in": {"sense": _spelled(protocol.encode(sense)), "radio_rx": rx, "camera": camera},
+            "reading": {
+                "t": sense.t,
+                "x": sense.x,
+                "y": sense.y,
+                "theta": sense.theta,
+                "proximity": list(sense.prox),
+                "frame": frame,
+            },
+            "received": [
+                {"sender": self.rx[index][0], "message": json.loads(self.rx[index][1])}
+                for index in self.received
+            ],
+            "rejected": self.rejected,
+            "command": {
+                "left": self.left,
+                "right": self.right,
+                "capture": self.capture,
+                "broadcasts": [json.loads(protocol.encode(payload)) for payload in self.broadcasts],
+            },
+            "out": {"radio_tx": radio_tx, "act": _spelled(protocol.encode(act))},
+        }
+
+
+def tick_vectors() -> dict[str, Any]:
+    """One lockstep tick of a robot on Zenoh, in bytes (docs/porting.md)."""
+    heard = protocol.encode(
+        protocol.OpinionPayload(
+            v=1,
+            id=3,
+            trip=2,
+            decided=False,
+            opinion=[0.0, 0.333333333, 0.333333333, 0.0, 0.333333333],
+        )
+    )
+    beacon = protocol.encode(protocol.BeaconPayload(v=1, id="nest", seq=12))
+    own = protocol.OpinionPayload(
+        v=1, id=7, trip=3, decided=False, opinion=[0.1, 0.2, 0.3, 0.2, 0.2]
+    )
+    prox = [0.0, 0.0, 0.0, 0.000015, 1.5e-6, 0.0, 0.25, 1.0]
+    panel = (64, 0, 191)  # BGR of a site of quality 0.75: red 255 x 0.75, blue 255 x 0.25
+    ticks = [
+        Tick(
+            name="typical",
+            note="sense.json's tick 42 with its two deliveries and frame; act.json's act",
+            sent_before=4,
+            sense=protocol.Sense(
+                v=1, tick=42, t=4.2, x=0.31, y=-0.12, theta=1.5708, prox=prox, rx=2, camera=True
+            ),
+            rx=[("3", heard), ("nest", beacon)],
+            frame=uniform_png(4, 3, panel),
+            frame_seen=(4, 3, panel),
+            received=[0, 1],
+            rejected=0,
+            left=0.13,
+            right=-0.065,
+            capture=False,
+            broadcasts=[own],
+        ),
+        Tick(
+            name="invalid_inputs_are_counted",
+            note="an opinion that does not sum to 1 and a frame that is no image are dropped "
+            "and counted, never raised; broadcasts are numbered on from the last",
+            sent_before=5,
+            sense=protocol.Sense(
+                v=1, tick=43, t=4.3, x=0.31, y=-0.12, theta=1.5708, prox=prox, rx=2, camera=True
+            ),
+            rx=[
+                ("3", changed(heard, b"[0.0,0.333333333,", b"[0.5,0.333333333,")),
+                ("nest", beacon),
+            ],
+            frame=b"not an image",
+            frame_seen=None,
+            received=[1],
+            rejected=2,
+            left=0.0,
+            right=0.0,
+            capture=True,
+            broadcasts=[own, msgspec.structs.replace(own, decided=True)],
+        ),
+        Tick(
+            name="nothing_heard_nothing_said",
+            note="no deliveries, no frame, no broadcasts: the act alone, radio_tx 0",
+            sent_before=7,
+            sense=protocol.Sense(
+                v=1, tick=44, t=4.4, x=0.32, y=-0.12, theta=1.6, prox=[0.0] * 8, rx=0, camera=False
+            ),
+            rx=[],
+            frame=None,
+            frame_seen=None,
+            received=[],
+            rejected=0,
+            left=0.05,
+            right=0.05,
+            capture=False,
+            broadcasts=[],
+        ),
+    ]
+    return {
+        "type": "Tick",
+        "decoder": "tick",
+        "protocol_version": protocol.VERSION,
+        "ticks": [tick.content() for tick in ticks],
+    }
+
+
 def _compact(value: Any) -> bytes:
     return json.dumps(value, separators=(",", ":"), ensure_ascii=False).encode()
 
@@ -968,6 +1161,7 @@ def build() -> dict[str, str]:
     files = {vectors.file: vectors.content() for vectors in (make() for make in BUILDERS)}
     files["udp_frame.json"] = udp_frame_vectors()
     files["auth.json"] = auth_vectors()
+    files["tick.json"] = tick_vectors()
     return {
         name: json.dumps(content, indent=1, ensure_ascii=False) + "\n"
         for name, content in files.items()

@@ -17,7 +17,10 @@ def normalise(values: list[float]) -> list[float]:
     return [value / total for value in values]
 
 
-def assert_close(actual: list[float], expected: list[float], tolerance: float = 1e-9) -> None:
+def assert_close(
+    actual: list[float] | None, expected: list[float], tolerance: float = 1e-9
+) -> None:
+    assert actual is not None
     assert len(actual) == len(expected)
     for a, b in zip(actual, expected, strict=True):
         assert a == pytest.approx(b, abs=tolerance)

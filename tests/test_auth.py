@@ -95,6 +95,7 @@ def test_a_reply_answers_one_query_only() -> None:
     robot = keyring.only(["robot/3"])
     key, nonce, other = "bestofn/run/world/info", b"n" * 16, b"m" * 16
     query = auth.query_seal(robot, "robot/3", key, b"", nonce)
+    assert query is not None
     assert auth.query_open(keyring, key, b"", query) == ("robot/3", nonce)
     reply = auth.reply_seal(keyring, "robot/3", key, b"info", nonce)
     auth.reply_open(robot, "robot/3", key, b"info", reply, nonce=nonce)

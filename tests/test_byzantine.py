@@ -48,7 +48,8 @@ def _drive(
             return sent
         if inject is not None:
             radio.inbox.append(("5", inject))
-        sent += ports.control_step(robot, body, radio, swarm.rejects[0]).broadcasts
+        command = ports.control_step(robot, body, radio, swarm.rejects[0])
+        sent += command.broadcasts
         swarm.world.advance()
     raise AssertionError("the robot never got there")
 
@@ -197,7 +198,9 @@ def test_robot_agent_refuses_bad_switches_with_code_2(
     assert message in lines[-1] and sum("error" in line for line in lines) == 1
 
 
-def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot() -> None:
+def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     from deploy.cli import build_parser
     from deploy.credentials import RunNetwork
     from deploy.launcher import Swarm, plan_from_args
@@ -217,7 +220,9 @@ def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot() 
     json.dumps(plan.config)  # the recorder gets the configuration as JSON
     started: list[list[str]] = []
     swarm = Swarm(plan)
-    swarm.group.fork = lambda name, module, argv, env=None: started.append(argv)  # type: ignore[method-assign]
+    monkeypatch.setattr(
+        swarm.group, "fork", lambda name, module, argv, env=None: started.append(list(argv))
+    )
     swarm.network = RunNetwork.create(plan.run_id, plan.robots, connect=None, keyed=True)
     try:
         swarm._start_robots([0, 1])

@@ -11,6 +11,8 @@ import itertools
 import math
 import struct
 import zlib
+from collections.abc import Callable
+from typing import Any
 
 import cv2
 import numpy as np
@@ -104,10 +106,12 @@ def test_every_site_is_read_within_half_a_quality_step_from_perturbed_viewpoints
 def test_estimates_order_every_pair_of_sites_like_their_qualities(num_sites: int) -> None:
     layout = layout_for(num_sites, seed=11)
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS)
-    estimates = {}
+    estimates: dict[int, float] = {}
     for site in layout.sites:
         frame = decode_frame(renderer.encode(renderer.render(*layout.sensing_pose(site.id))))
-        estimates[site.id] = estimate_quality(frame)
+        estimate = estimate_quality(frame)
+        assert estimate is not None
+        estimates[site.id] = estimate
     for first, second in itertools.combinations(layout.sites, 2):
         better_by_estimate = estimates[first.id] > estimates[second.id]
         assert better_by_estimate == (first.quality > second.quality)
@@ -115,13 +119,14 @@ def test_estimates_order_every_pair_of_sites_like_their_qualities(num_sites: int
 
 def test_estimate_is_smooth_in_quality_not_a_threshold() -> None:
     qualities = [i / 20 for i in range(21)]
-    estimates = []
+    estimates: list[float] = []
     for quality in qualities:
         frame = np.empty((48, 64, 3), np.uint8)
         frame[:] = WALL_BGR
         frame[:, 16:48] = site_colour_bgr(quality)
-        estimates.append(estimate_quality(frame))
-    assert all(e is not None for e in estimates)
+        estimate = estimate_quality(frame)
+        assert estimate is not None
+        estimates.append(estimate)
     assert np.all(np.diff(estimates) > 0)
     assert np.allclose(estimates, qualities, atol=1 / 255)
 
@@ -407,8 +412,8 @@ def test_decode_rejects_garbage_with_value_error(data: bytes, message: str) -> N
 
 
 @pytest.mark.parametrize("make", [sample_png, sample_jpeg])
-def test_decode_rejects_every_truncation(make: object) -> None:
-    data = make()  # type: ignore[operator]
+def test_decode_rejects_every_truncation(make: Callable[[], bytes]) -> None:
+    data = make()
     for cut in range(0, len(data) - 1):
         with pytest.raises(ValueError):
             decode_frame(data[:cut])
@@ -433,7 +438,8 @@ def test_decode_rejects_other_image_formats_and_types() -> None:
     with pytest.raises(ValueError, match="neither PNG nor JPEG"):
         decode_frame(bmp.tobytes())
     with pytest.raises(ValueError, match="bytes"):
-        decode_frame("not bytes")  # type: ignore[arg-type]
+        not_bytes: Any = "not bytes"
+        decode_frame(not_bytes)
 
 
 def test_estimate_rejects_frames_of_the_wrong_shape_or_type() -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import random
 from collections import Counter
+from typing import Any
 
 import pytest
 from hypothesis import assume, given, settings
@@ -64,17 +65,17 @@ def pools(draw: st.DrawFn) -> list[list[float]]:
         (["0.5", 0.5], r"opinion\[0\] is '0.5'"),
     ],
 )
-def test_bad_opinions_say_what_is_wrong(opinion: list[object], message: str) -> None:
+def test_bad_opinions_say_what_is_wrong(opinion: Any, message: str) -> None:
     with pytest.raises(ValueError, match=message):
-        validate_opinion(opinion)  # type: ignore[arg-type]
+        validate_opinion(opinion)
     with pytest.raises(ValueError, match=message):
-        negative_update(opinion, 0, 0.0)  # type: ignore[arg-type]
+        negative_update(opinion, 0, 0.0)
     with pytest.raises(ValueError, match=message):
-        mprodop([opinion])  # type: ignore[list-item]
+        mprodop([opinion])
     with pytest.raises(ValueError, match=message):
-        choose_pair(opinion, random.Random(0))  # type: ignore[arg-type]
+        choose_pair(opinion, random.Random(0))
     with pytest.raises(ValueError, match=message):
-        decided_option(opinion)  # type: ignore[arg-type]
+        decided_option(opinion)
 
 
 def test_wrong_length_is_reported() -> None:
@@ -86,23 +87,23 @@ def test_wrong_length_is_reported() -> None:
 
 
 @pytest.mark.parametrize("alpha", [-0.01, 0.51, 1.0, float("nan"), float("inf"), "0.1", None, True])
-def test_alpha_outside_the_range_is_rejected(alpha: object) -> None:
+def test_alpha_outside_the_range_is_rejected(alpha: Any) -> None:
     with pytest.raises(ValueError, match=r"alpha must be a number in \[0, 0.5\]"):
-        validate_alpha(alpha)  # type: ignore[arg-type]
+        validate_alpha(alpha)
     with pytest.raises(ValueError, match="alpha"):
-        negative_update([0.5, 0.5], 0, alpha)  # type: ignore[arg-type]
+        negative_update([0.5, 0.5], 0, alpha)
 
 
 @pytest.mark.parametrize("eliminated", [-1, 3, 1.0, "1", None])
-def test_eliminated_must_be_an_option_index(eliminated: object) -> None:
+def test_eliminated_must_be_an_option_index(eliminated: Any) -> None:
     with pytest.raises(ValueError, match="option index"):
-        negative_update([0.2, 0.3, 0.5], eliminated, 0.0)  # type: ignore[arg-type]
+        negative_update([0.2, 0.3, 0.5], eliminated, 0.0)
 
 
 @pytest.mark.parametrize("threshold", [0.0, -0.5, 1.01, float("nan"), "1"])
-def test_threshold_outside_the_range_is_rejected(threshold: object) -> None:
+def test_threshold_outside_the_range_is_rejected(threshold: Any) -> None:
     with pytest.raises(ValueError, match=r"threshold must be a number in \(0, 1\]"):
-        decided_option([0.5, 0.5], threshold)  # type: ignore[arg-type]
+        decided_option([0.5, 0.5], threshold)
 
 
 def test_empty_pool_is_rejected() -> None:

@@ -2,15 +2,25 @@
 
 from __future__ import annotations
 
+import base64
+import json
 import os
+import random
 import signal
 import subprocess
 import sys
 import time
+from collections import Counter
 from collections.abc import Callable
+from dataclasses import dataclass, field
+from itertools import pairwise
+from pathlib import Path
 from typing import Any
 
+import cv2
+import numpy as np
 import pytest
+from mcap.reader import make_reader
 from swarm_helpers import (
     REPO,
     kill_leftovers,
@@ -20,61 +30,261 @@ from swarm_helpers import (
     unique_run_id,
 )
 
+from nest_beacon.beacon import Beacon, BeaconConfig
 from robot_agent import protocol
+from world_server.camera import CameraNoise
 from world_server.layout import make_layout
+from world_server.radio import sender_order
+from world_server.world import World, WorldConfig
 
 pytestmark = pytest.mark.timeout(240)
 
-BASE = ["--robots", "4", "--sites", "5", "--seed", "11", "--timeout", "1500", "--no-record"]
+SEED = 11
+BASE = ["--robots", "4", "--sites", "5", "--seed", str(SEED), "--timeout", "1500"]
 
 
-def _dropped(summary: dict[str, Any]) -> bool:
-    return summary["radio"]["dropped"] > 0
+@dataclass
+class Recording:
+    """What a switch's effect shows in: the messages the world, the beacon and the robots
+    published, as the recorder kept them (in the order they arrived)."""
+
+    rx: list[tuple[str, protocol.RadioRxMeta]] = field(default_factory=list)  # receiver, meta
+    beacon_tx: list[int] = field(default_factory=list)  # ticks the beacon transmitted in
+    beacon_answered: set[int] = field(default_factory=set)  # ticks the beacon acknowledged
+    clocks: list[protocol.Clock] = field(default_factory=list)
+    acts: dict[int, list[int]] = field(default_factory=dict)  # robot -> ticks it answered
+    statuses: dict[int, list[protocol.Status]] = field(default_factory=dict)
+    frames: list[np.ndarray] = field(default_factory=list)  # camera frames, decoded
+
+    @classmethod
+    def read(cls, path: Path) -> Recording:
+        recording = cls()
+        with open(path, "rb") as stream:
+            for schema, channel, message in make_reader(stream).iter_messages(log_time_order=False):
+                recording._take(schema.name if schema else "", channel.topic, message.data)
+        return recording
+
+    def _take(self, schema: str, topic: str, data: bytes) -> None:
+        name = topic.rsplit("/", 1)[-1]
+        if schema == "bestofn.RadioRxRecord":
+            meta = json.loads(data)["meta"]
+            self.rx.append((name, protocol.decode(json.dumps(meta).encode(), protocol.RadioRxMeta)))
+        elif schema == "bestofn.RadioTxRecord" and name == "nest":
+            self.beacon_tx.append(json.loads(data)["meta"]["tick"])
+        elif schema == "bestofn.Ack":
+            self.beacon_answered.add(protocol.decode(data, protocol.Ack).tick)
+        elif schema == "bestofn.Clock":
+            self.clocks.append(protocol.decode(data, protocol.Clock))
+        elif schema == "bestofn.Act":
+            robot = int(topic.rsplit("/", 2)[-2])
+            self.acts.setdefault(robot, []).append(protocol.decode(data, protocol.Act).tick)
+        elif schema == "bestofn.Status":
+            status = protocol.decode(data, protocol.Status)
+            self.statuses.setdefault(status.id, []).append(status)
+        elif schema == "foxglove.CompressedImage":
+            png = np.frombuffer(base64.b64decode(json.loads(data)["data"]), np.uint8)
+            frame = cv2.imdecode(png, cv2.IMREAD_COLOR)
+            assert frame is not None, f"{topic}: not a PNG frame"
+            self.frames.append(frame)
 
 
-def _nobody_pools_during_the_outage(summary: dict[str, Any]) -> bool:
-    return all(robot["decision_time_s"] > 60.0 for robot in summary["per_robot"])
+@dataclass
+class Run:
+    summary: dict[str, Any]
+    recording: Recording | None
 
 
-def _robot_1_was_killed(summary: dict[str, Any]) -> bool:
-    robot = summary["per_robot"][1]
-    return robot["killed"] and not robot["crashed"] and summary["faults"][0]["action"] == "kill"
+# --- what each switch must do, seen in what its process published -------------------
 
 
-def _robot_2_restarted(summary: dict[str, Any]) -> bool:
-    robot = summary["per_robot"][2]
-    return robot["restarts"] == 1 and robot["decided_site"] == summary["best_site"]
+def _world_drops(run: Run) -> None:
+    """The world's radio lost copies (a run without a loss switch loses none)."""
+    assert run.summary["radio"]["dropped"] > 0, run.summary["radio"]
 
 
-def _always(summary: dict[str, Any]) -> bool:
-    return True
+def _world_delays_by_3_to_6_ticks(run: Run) -> None:
+    """--latency 3 --jitter 3: every copy arrives 1 + 3 + (0..3) ticks after it was sent
+    (without them, 1), and each delay happens; jitter alone keeps each tick's order."""
+    recording = _recorded(run)
+    delays = Counter(meta.tick - meta.sent_tick for _, meta in recording.rx)
+    assert set(delays) == {4, 5, 6, 7}, delays
+    assert len(recording.rx) == run.summary["radio"]["delivered"]
+    assert _out_of_order_ticks(recording) == 0
 
 
-SWITCHES: dict[str, tuple[list[str], Callable[[dict[str, Any]], bool]]] = {
-    "iid-loss": (["--drop", "0.3"], _dropped),
-    "burst-loss": (["--burst-loss", "0.1:0.3"], _dropped),
-    "range-loss": (["--range-loss", "0.3:1"], _dropped),
-    "latency-jitter": (["--latency", "3", "--jitter", "3"], _always),
-    "duplication": (["--duplicate", "0.5"], _always),
-    "reordering": (["--reorder", "--jitter", "2"], _always),
-    "camera-noise": (["--camera-noise", "8", "--lighting", "0.05"], _always),
-    "beacon-outage": (["--beacon-outage", "0:60"], _nobody_pools_during_the_outage),
-    "beacon-flaky": (["--beacon-flaky", "0.5"], _always),
-    "kill": (["--kill", "1@15"], _robot_1_was_killed),
-    "restart": (["--restart", "2@15"], _robot_2_restarted),
+def _world_duplicates(run: Run) -> None:
+    """--duplicate 0.5: some copies arrive twice (none more), the second 0 or 1 tick
+    after the first; the world counts both as delivered."""
+    recording = _recorded(run)
+    copies = Counter((receiver, meta.sender, meta.seq) for receiver, meta in recording.rx)
+    assert max(copies.values()) == 2
+    twice = sum(count == 2 for count in copies.values())
+    sent = sum(copies.values()) - twice
+    assert 0.3 * sent < twice < 0.7 * sent, (twice, sent)
+    assert {meta.tick - meta.sent_tick for _, meta in recording.rx} == {1, 2}
+    assert len(recording.rx) == run.summary["radio"]["delivered"]
+
+
+def _world_reorders(run: Run) -> None:
+    """--reorder: some tick delivers a receiver's copies out of (sender, seq) order, which
+    jitter alone never does (see the latency check)."""
+    assert _out_of_order_ticks(_recorded(run)) > 0
+
+
+def _out_of_order_ticks(recording: Recording) -> int:
+    """(receiver, tick) pairs whose copies arrived out of (sender, sequence) order."""
+    by_tick: dict[tuple[str, int], list[tuple[tuple[int, int, str], int]]] = {}
+    for receiver, meta in recording.rx:
+        by_tick.setdefault((receiver, meta.tick), []).append((sender_order(meta.sender), meta.seq))
+    return sum(order != sorted(order) for order in by_tick.values())
+
+
+def _world_camera_is_noisy_and_lit(run: Run) -> None:
+    """--camera-noise 8: no frame is a clean render (one colour per surface, at most the
+    palette's); --lighting 0.05: the robots' quality estimates follow each site's lit
+    colour, not its clean one (the run's seed fixes the lighting)."""
+    recording = _recorded(run)
+    assert recording.frames
+    palette = 4 + SITES  # background, floor, wall, robots, one per site
+    for frame in recording.frames:
+        assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 10 * palette
+    lit = _red_shares(CameraNoise(pixel_sigma=8, lighting=0.05))
+    clean = _red_shares(CameraNoise())
+    telling = {site for site in lit if abs(lit[site] - clean[site]) >= 0.01}
+    estimates = [
+        (site, quality)
+        for statuses in recording.statuses.values()
+        for status in statuses
+        if status.comparison is not None
+        for site, quality in (
+            (status.comparison.site_a, status.comparison.quality_a),
+            (status.comparison.site_b, status.comparison.quality_b),
+        )
+        if site in telling
+    ]
+    assert estimates, "no robot estimated a site whose lighting changes its colour"
+    for site, quality in estimates:
+        assert abs(quality - lit[site]) < abs(quality - clean[site]), (site, quality, lit, clean)
+
+
+def _red_shares(noise: CameraNoise) -> dict[int, float]:
+    """Each site's red share red / (red + blue) as the world of this run paints it."""
+    world = World(WorldConfig(num_sites=SITES, num_robots=ROBOTS, seed=SEED, camera_noise=noise))
+    shares = {}
+    for site in range(SITES):
+        blue, _, red = world.camera.panel_colour_bgr(site)
+        shares[site] = red / (red + blue)
+    return shares
+
+
+def _beacon_ticks(recording: Recording, config: BeaconConfig) -> list[int]:
+    """The ticks a beacon of ``config`` transmits in, given the clocks the recorded one
+    answered (its seeded draws, replayed with nest_beacon's own logic)."""
+    beacon = Beacon(config, random.Random(protocol.derive_seed(SEED, "beacon", config.name)))
+    return [
+        clock.tick
+        for clock in recording.clocks
+        if clock.tick in recording.beacon_answered and beacon.on_tick(clock.t)
+    ]
+
+
+def _beacon_silent_for_60_s(run: Run) -> None:
+    """--beacon-outage 0:60: the beacon transmits exactly when a beacon with that outage
+    would, first at 60 s; so nobody pools, and nobody decides, before then."""
+    recording = _recorded(run)
+    assert recording.beacon_tx == _beacon_ticks(recording, BeaconConfig(outages=((0, 60),)))
+    assert recording.beacon_tx[0] == 600
+    assert all(robot["decision_time_s"] > 60.0 for robot in run.summary["per_robot"])
+
+
+def _beacon_skips_half(run: Run) -> None:
+    """--beacon-flaky 0.5: the beacon transmits exactly when a beacon with that flakiness
+    and the run's seed would, which is about half of the times it is due."""
+    recording = _recorded(run)
+    assert recording.beacon_tx == _beacon_ticks(recording, BeaconConfig(flaky=0.5))
+    due = len(_beacon_ticks(recording, BeaconConfig()))
+    assert 0.3 * due < len(recording.beacon_tx) < 0.7 * due, (len(recording.beacon_tx), due)
+
+
+def _robot_1_stops(run: Run) -> None:
+    """--kill 1@15: robot 1's process stops answering when it is killed, the others go on."""
+    assert [(f["robot"], f["action"]) for f in run.summary["faults"]] == [(1, "kill")]
+    fault = run.summary["faults"][0]
+    robot = run.summary["per_robot"][1]
+    assert robot["killed"] and not robot["crashed"]
+    killed_at = round(fault["applied_at_s"] / DT)
+    acts = _recorded(run).acts
+    assert killed_at - 1 <= acts[1][-1] <= killed_at + 10, (acts[1][-1], killed_at)
+    assert all(acts[other][-1] > killed_at + 100 for other in (0, 2, 3))
+
+
+def _robot_2_starts_afresh(run: Run) -> None:
+    """--restart 2@15: a new process takes over robot 2 (its controller starts from tick 0
+    again, once) and decides with the others."""
+    assert [(f["robot"], f["action"]) for f in run.summary["faults"]] == [(2, "restart")]
+    fault = run.summary["faults"][0]
+    robot = run.summary["per_robot"][2]
+    assert robot["restarts"] == 1 and robot["decided_site"] == run.summary["best_site"]
+    statuses = _recorded(run).statuses
+    for robot_id, history in statuses.items():
+        fresh = sum(later.tick < earlier.tick for earlier, later in pairwise(history))
+        assert fresh == (1 if robot_id == 2 else 0), (robot_id, fresh)
+    restarted_at = round(fault["applied_at_s"] / DT)
+    acts = _recorded(run).acts[2]
+    assert any(tick > restarted_at for tick in acts) and acts[-1] == max(acts)
+
+
+def _recorded(run: Run) -> Recording:
+    assert run.recording is not None, "this switch's check reads the recording"
+    return run.recording
+
+
+ROBOTS, SITES, DT = 4, 5, 0.1
+
+# Each switch: its options, the process it is for, what it must do, and whether that
+# shows only in the recording (a recorded run takes a little longer).
+SWITCHES: dict[str, tuple[list[str], str, Callable[[Run], None], bool]] = {
+    "iid-loss": (["--drop", "0.3"], "world", _world_drops, False),
+    "burst-loss": (["--burst-loss", "0.1:0.3"], "world", _world_drops, False),
+    "range-loss": (["--range-loss", "0.3:1"], "world", _world_drops, False),
+    "latency-jitter": (
+        ["--latency", "3", "--jitter", "3"],
+        "world",
+        _world_delays_by_3_to_6_ticks,
+        True,
+    ),
+    "duplication": (["--duplicate", "0.5"], "world", _world_duplicates, True),
+    "reordering": (["--reorder", "--jitter", "2"], "world", _world_reorders, True),
+    "camera-noise": (
+        ["--camera-noise", "8", "--lighting", "0.05"],
+        "world",
+        _world_camera_is_noisy_and_lit,
+        True,
+    ),
+    "beacon-outage": (["--beacon-outage", "0:60"], "beacon", _beacon_silent_for_60_s, True),
+    "beacon-flaky": (["--beacon-flaky", "0.5"], "beacon", _beacon_skips_half, True),
+    "kill": (["--kill", "1@15"], "robots", _robot_1_stops, True),
+    "restart": (["--restart", "2@15"], "robots", _robot_2_starts_afresh, True),
 }
 
 
 @pytest.mark.parametrize("switch", list(SWITCHES))
-def test_the_swarm_still_decides_right_with(switch: str) -> None:
-    options, check = SWITCHES[switch]
-    code, summary, stderr = run_swarm([*BASE, *options], unique_run_id(switch))
+def test_the_swarm_still_decides_right_with(switch: str, tmp_path: Path) -> None:
+    """Each switch reaches the process it is for (the world, the beacon, the robots) and
+    does there what it says, seen in what that process published; the swarm still
+    decides right."""
+    options, process, check, recorded = SWITCHES[switch]
+    path = tmp_path / "run.mcap"
+    output = ["--record", str(path)] if recorded else ["--no-record"]
+    code, summary, stderr = run_swarm([*BASE, *output, *options], unique_run_id(switch))
     assert code == 0, stderr
     assert summary["correct"], summary["per_robot"]
-    assert check(summary), summary
-    # The switch is on record in the summary's configuration.
-    flag = options[0].removeprefix("--").replace("-", "_")
-    assert summary["config"][flag] not in (None, 0, 0.0, False, [])
+    try:
+        check(Run(summary, Recording.read(path) if recorded else None))
+    except AssertionError as error:
+        raise AssertionError(f"--{switch}: no effect seen in the {process}: {error}") from None
+    if switch not in ("iid-loss", "burst-loss", "range-loss"):
+        assert summary["radio"]["dropped"] == 0  # the loss checks' baseline
 
 
 def test_robots_wait_for_a_lost_world_server_and_resume_with_a_new_one() -> None:

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import math
 import random
+from collections.abc import Callable
+from dataclasses import astuple, dataclass
 from typing import Any
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from deploy.credentials import RunNetwork
@@ -93,19 +95,22 @@ def _world_info() -> protocol.WorldInfo:
     return World(WorldConfig(num_sites=5, num_robots=2)).info
 
 
-def _node() -> RobotNode:
+def _node() -> tuple[RobotNode, Controller, _Publisher]:
+    """A robot node with recorders in place of its Zenoh publishers: handling an input
+    publishes through those, never through the session."""
     info = _world_info()
     controller = Controller(1, info, ControllerConfig(), random.Random(1))
     node = RobotNode(
         1,
-        session=None,
+        session=None,  # type: ignore[arg-type]  # never used: see the publishers below
         keys=protocol.Keys("fuzz"),
-        controller=controller,  # type: ignore[arg-type]
+        controller=controller,
         inbox=BoundedInbox(),
         world=info,
     )
-    node._act, node._status, node._tx = _Publisher(), _Publisher(), _Publisher()
-    return node
+    act = _Publisher()
+    node._act, node._status, node._tx = act, _Publisher(), _Publisher()  # type: ignore[assignment]  # recorders
+    return node, controller, act
 
 
 @FUZZ
@@ -122,18 +127,19 @@ def _node() -> RobotNode:
 def test_a_robot_survives_any_sequence_of_inputs(
     events: list[tuple[str, bytes, bytes | None]],
 ) -> None:
-    node = _node()
+    node, controller, act = _node()
     for kind, payload, attachment in events:
         node.handle(Event(1, kind, payload, attachment))
-    opinion = node.controller.opinion
+    opinion = controller.opinion
     assert all(value >= 0.0 and math.isfinite(value) for value in opinion)
     assert math.isclose(sum(opinion), 1.0, rel_tol=1e-9)
-    for payload, _ in node._act.sent:  # type: ignore[attr-defined]
+    for payload, _ in act.sent:
         protocol.decode(payload, protocol.Act)
 
 
 def _world_server() -> WorldServer:
     world = World(WorldConfig(run="fuzz", num_sites=5, num_robots=2))
+    # No Zenoh: the test sets stand-ins for the session and publishers it uses.
     server = WorldServer(None, world, protocol.Keys("fuzz"))  # type: ignore[arg-type]
     world.join_robot(0)
     world.join_robot(1)
@@ -166,20 +172,76 @@ class _Bytes:
         return self.data
 
 
-TOKEN_KEYS = [
-    "bestofn/fuzz/alive/robot/0",
-    "bestofn/fuzz/alive/robot/1",
-    "bestofn/fuzz/alive/robot/2",  # outside a swarm of two
-    "bestofn/fuzz/alive/robot/99999",
-    "bestofn/fuzz/alive/robot/01",
-    "bestofn/fuzz/alive/robot/-1",
-    "bestofn/fuzz/alive/beacon/nest",
-    "bestofn/fuzz/alive/beacon/7",
-    "bestofn/fuzz/alive/beacon/other",
-    "bestofn/fuzz/alive/world/abc",
-    "bestofn/fuzz/alive/robot",
-    "bogus",
-]
+# What an ``alive`` token does in a swarm of robots 0 and 1: join (a robot of the swarm
+# or a beacon name), rejected (a robot or beacon no member of the run can be), or
+# nothing (a role the barrier does not involve, or no token key at all).
+TOKEN_KEYS = {
+    "bestofn/fuzz/alive/robot/0": "join",
+    "bestofn/fuzz/alive/robot/1": "join",
+    "bestofn/fuzz/alive/robot/2": "rejected",  # outside a swarm of two
+    "bestofn/fuzz/alive/robot/99999": "rejected",
+    "bestofn/fuzz/alive/robot/01": "rejected",
+    "bestofn/fuzz/alive/robot/-1": "rejected",
+    "bestofn/fuzz/alive/beacon/nest": "join",
+    "bestofn/fuzz/alive/beacon/7": "rejected",
+    "bestofn/fuzz/alive/beacon/other": "join",
+    "bestofn/fuzz/alive/world/abc": "nothing",
+    "bestofn/fuzz/alive/robot": "nothing",
+    "bogus": "nothing",
+}
+
+
+@dataclass(frozen=True)
+class _WorldCounts:
+    """What the world server did with one input, as far as it shows."""
+
+    rejected: int
+    radio_rejected: int
+    late: int
+    acts: int
+    transmissions: int
+    answers: int  # answers the barrier took (acts and beacon acks)
+    joins: int
+
+    @classmethod
+    def of(cls, server: WorldServer) -> _WorldCounts:
+        return cls(
+            rejected=server.counters.rejected,
+            radio_rejected=server.world.radio.rejected,
+            late=server.counters.late,
+            acts=len(server.acts),
+            transmissions=len(server.transmissions),
+            answers=sum(entry.radio_tx is not None for entry in server.barrier.answers.values()),
+            joins=len(server.pending_joins),
+        )
+
+    def __sub__(self, other: _WorldCounts) -> _WorldCounts:
+        return _WorldCounts(*(a - b for a, b in zip(astuple(self), astuple(other), strict=True)))
+
+
+def _decodes(payload: bytes | None, kind: Any) -> bool:
+    try:
+        protocol.decode(payload or b"", kind)
+    except protocol.ProtocolError:
+        return False
+    return True
+
+
+def _check_message(kind: str, key: str, event: WorldEvent, change: _WorldCounts) -> None:
+    """An act, beacon ack or radio message is taken, late or rejected: exactly one."""
+    taken = {"act": change.acts, "ack": change.answers, "tx": change.transmissions}[kind]
+    assert change.rejected + change.late + taken == 1, (kind, key, change)
+    assert change.joins == 0
+    # The radio counts the world's rejections of radio messages, and only those.
+    assert change.radio_rejected == (change.rejected if kind == "tx" else 0)
+    if kind == "act" and taken:
+        assert key == "bestofn/fuzz/robot/0/act" and _decodes(event.payload, protocol.Act)
+        assert change.answers == 1
+    if kind == "ack" and taken:
+        assert key == "bestofn/fuzz/beacon/nest/ack" and _decodes(event.payload, protocol.Ack)
+    if kind == "tx" and taken:
+        assert key in ("bestofn/fuzz/radio/tx/1", "bestofn/fuzz/radio/tx/nest"), key
+        assert _decodes(event.attachment, protocol.RadioTxMeta)
 
 
 @FUZZ
@@ -205,7 +267,7 @@ TOKEN_KEYS = [
             ),
             st.tuples(
                 st.sampled_from(["alive", "gone"]),
-                st.sampled_from(TOKEN_KEYS),
+                st.sampled_from(list(TOKEN_KEYS)),
                 st.just(b""),
                 st.none(),
             ),
@@ -215,21 +277,41 @@ TOKEN_KEYS = [
         max_size=16,
     )
 )
+@example(events=[("act", "bestofn/fuzz/robot/0/act", VALID[1], None)])  # taken
+@example(events=[("act", "bestofn/fuzz/robot/0/act", VALID[1], None)] * 2)  # then late
+@example(events=[("tx", "bestofn/fuzz/radio/tx/1", VALID[2], VALID[6])])  # taken
+@example(events=[("ack", "bestofn/fuzz/beacon/nest/ack", b'{"v":1,"tick":3,"radio_tx":0}', None)])
 def test_the_world_server_survives_any_sequence_of_inputs(
     events: list[tuple[str, str, bytes, bytes | None]],
 ) -> None:
     """Any messages, liveliness changes, id requests and tick closes, in any order: the
-    world never fails, takes only its swarm's members, and answers every query."""
+    world never fails, takes only its swarm's members, answers every query, and accounts
+    for every message exactly once (taken, late or rejected)."""
     server = _world_server()
+    # Stand-ins that take the world's publications, in place of Zenoh's.
     server.session = _Session()  # type: ignore[assignment]
     server._clock_publisher = server._state_publisher = _Session()  # type: ignore[assignment]
     for kind, key, payload, attachment in events:
+        before = _WorldCounts.of(server)
         if kind == "close":
             server._apply_joins()
             server._close_tick()
+            change = _WorldCounts.of(server) - before
+            assert (change.rejected, change.late, change.radio_rejected) == (0, 0, 0)
             continue
         query = _Query(attachment) if kind in ("join", "stats") else None
-        server._handle(WorldEvent(kind, key, payload, attachment, query=query))
+        event = WorldEvent(kind, key, payload, attachment, query=query)
+        server._handle(event)
+        change = _WorldCounts.of(server) - before
+        if kind in ("act", "ack", "tx"):
+            _check_message(kind, key, event, change)
+        elif kind == "alive":
+            outcome = TOKEN_KEYS[key]
+            assert change.joins == (outcome == "join"), (key, change)
+            assert change.rejected == (outcome == "rejected"), (key, change)
+            assert change.late == 0
+        else:  # gone, join, stats: no message to count in an unkeyed run
+            assert (change.rejected, change.late) == (0, 0), (kind, change)
         if query is not None:
             assert len(query.replies) + len(query.errors) == 1
         server._apply_joins()
@@ -262,11 +344,65 @@ def observer(request: pytest.FixtureRequest) -> Swarm:
     return swarm
 
 
+def _launcher_took(observer: Swarm, kind: str, leaf: str, payload: bytes) -> Callable[[], bool]:
+    """Whether the launcher believed one status, clock, state or ack: what it keeps of
+    that kind changed to the message (the launcher keeps nothing of a rejected one)."""
+    if kind == "status":
+        robot = observer.keys.robot_of(f"{observer.keys.prefix}/{leaf}")
+        record = observer.records.get(robot) if robot is not None else None
+        old = record.status if record is not None else None
+        return lambda: record is not None and record.status is not old
+    if kind == "clock":
+        observer.sim_time = -1.0  # no clock has this time
+        return lambda: observer.sim_time != -1.0
+    if kind == "state":
+        old_state = observer.last_state
+        return lambda: observer.last_state is not old_state
+    observer.beacon_rejected.clear()
+    return lambda: bool(observer.beacon_rejected)
+
+
+STATUS = protocol.encode(
+    protocol.Status(
+        v=protocol.VERSION,
+        id=0,
+        tick=3,
+        t=0.3,
+        phase="to_site",
+        trips=0,
+        opinion=[0.2] * 5,
+        pool_size=0,
+        poolings=0,
+        decided_site=None,
+        decision_time=None,
+        decision_trips=None,
+        comparison=None,
+    )
+)
+STATE = protocol.encode(
+    protocol.WorldState(
+        v=protocol.VERSION,
+        tick=3,
+        t=0.3,
+        robots=[protocol.Pose(0, 0.1, 0.2, 0.0)],
+        radio=protocol.RadioCounters(),
+        rejected=0,
+        stalls=0,
+    )
+)
+LAUNCHER_KINDS = {
+    "status": protocol.Status,
+    "clock": protocol.Clock,
+    "state": protocol.WorldState,
+    "ack": protocol.Ack,
+}
+
+
 @FUZZ
 @given(
     events=st.lists(
         st.tuples(
-            st.sampled_from(["status", "clock", "state", "ack"]),
+            st.sampled_from(list(LAUNCHER_KINDS)),
             st.sampled_from(
                 ["robot/0/status", "robot/5/status", "beacon/nest/ack", "beacon/a b/ack", "x"]
             ),
@@ -276,15 +412,25 @@ def observer(request: pytest.FixtureRequest) -> Swarm:
         max_size=10,
     )
 )
+@example(events=[("clock", "x", VALID[7], None)])  # taken, unkeyed
+@example(events=[("status", "robot/0/status", STATUS, None)])
+@example(events=[("status", "robot/0/status", STATUS, None)] * 2)  # the same tick again: taken
+@example(events=[("status", "robot/5/status", STATUS, None)])  # a status of robot 0 on 5's key
+@example(events=[("state", "x", STATE, None)])
+@example(events=[("ack", "beacon/nest/ack", b'{"v":1,"tick":3,"radio_tx":0}', None)])
+@example(events=[("clock", "x", b"not json", None)])  # rejected
 def test_the_launcher_survives_any_status_clock_or_state(
     observer: Swarm, events: list[tuple[str, str, bytes, bytes | None]]
 ) -> None:
-    """Nothing it is sent breaks the launcher; in a keyed run nothing untagged counts."""
-    before = observer.rejected
+    """Nothing it is sent breaks the launcher; each message is believed or counted as
+    rejected, exactly one of the two; in a keyed run nothing untagged is believed."""
     for kind, leaf, payload, attachment in events:
+        before = observer.rejected
+        took = _launcher_took(observer, kind, leaf, payload)
         observer.events.put((kind, f"{observer.keys.prefix}/{leaf}", payload, attachment))
-    observer.poll()
-    if observer.keyring is not None:
-        assert observer.rejected == before + len(events)
-    else:
-        assert observer.rejected >= before
+        observer.poll()
+        believed = took()
+        assert observer.rejected - before == (0 if believed else 1), (kind, leaf, payload)
+        if believed:
+            assert observer.keyring is None
+            assert _decodes(payload, LAUNCHER_KINDS[kind])

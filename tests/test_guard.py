@@ -50,7 +50,7 @@ def _node(keyring: auth.Keyring | None) -> node.RobotNode:
     controller = Controller(1, info, ControllerConfig(), random.Random(1))
     return node.RobotNode(
         1,
-        session=None,  # type: ignore[arg-type]
+        session=None,  # type: ignore[arg-type]  # the guard's checks never publish
         keys=protocol.Keys("guard"),
         controller=controller,
         inbox=BoundedInbox(),

@@ -11,6 +11,7 @@ import signal
 import subprocess
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 from swarm_helpers import REPO, kill_leftovers, swarm_command
@@ -23,7 +24,7 @@ pytestmark = pytest.mark.timeout(180)
 FOUR = ["--engine", "inprocess", "--robots", "4", "--sites", "3", "--no-record", "--json"]
 
 
-def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, dict[str, object]]:
+def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, dict[str, Any]]:
     code = cli.main(["run", *argv, "--quiet"])
     return code, json.loads(capsys.readouterr().out)
 
@@ -48,7 +49,7 @@ def test_each_ending_has_swarm_runs_exit_code(
     exit_code, summary = _run(capsys, *FOUR, *options)
     assert (summary["ended"], exit_code) == (ended, code)
     assert summary["faults"] == [] and summary["recording"] is None
-    assert summary["config"]["engine"] == "inprocess"  # type: ignore[index]
+    assert summary["config"]["engine"] == "inprocess"
     if ended == "timeout":
         assert summary["timeout_kind"] == "sim"
 
@@ -60,7 +61,7 @@ def test_a_wall_time_limit_ends_the_run_as_a_wall_timeout(
     assert (summary["ended"], summary["timeout_kind"], exit_code) == ("timeout", "wall", 5)
     # Stopped long before anyone could decide (the first decision takes tens of seconds of
     # sim time): every robot is still undecided, and listed.
-    assert [robot["id"] for robot in summary["stuck"]] == [0, 1, 2, 3]  # type: ignore[index, union-attr]
+    assert [robot["id"] for robot in summary["stuck"]] == [0, 1, 2, 3]
 
 
 @pytest.mark.parametrize(

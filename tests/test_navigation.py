@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import math
 import random
+from typing import Any
 
 import pytest
 from fakes import MAX_SPEED, ROBOT_RADIUS, proximity, unicycle
@@ -72,7 +73,7 @@ def test_params_mirror_the_simulated_epuck() -> None:
         ("prox_angles", ()),
     ],
 )
-def test_params_are_validated(field: str, value: object) -> None:
+def test_params_are_validated(field: str, value: Any) -> None:
     with pytest.raises(ValueError, match=field):
         NavParams(**{field: value})
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import random
 import typing
+from typing import Any
 
 import pytest
 from hypothesis import assume, given, settings
@@ -36,7 +37,10 @@ def pools(draw: st.DrawFn, entries: st.SearchStrategy[float] = weights) -> list[
     return pool
 
 
-def assert_close(actual: list[float], expected: list[float], tolerance: float = 1e-9) -> None:
+def assert_close(
+    actual: list[float] | None, expected: list[float], tolerance: float = 1e-9
+) -> None:
+    assert actual is not None
     assert len(actual) == len(expected)
     for a, b in zip(actual, expected, strict=True):
         assert a == pytest.approx(b, abs=tolerance)
@@ -71,9 +75,9 @@ def test_the_default_weight_dilutes() -> None:
 
 
 @pytest.mark.parametrize("weight", [-0.1, 1.5, math.nan, math.inf, True, "0.5", None])
-def test_neighbour_weight_outside_0_1_is_rejected(weight: object) -> None:
+def test_neighbour_weight_outside_0_1_is_rejected(weight: Any) -> None:
     with pytest.raises(ValueError, match="neighbour_weight"):
-        loglinear_pool([[0.5, 0.5], [0.2, 0.8]], weight)  # type: ignore[arg-type]
+        loglinear_pool([[0.5, 0.5], [0.2, 0.8]], weight)
 
 
 @pytest.mark.parametrize(
@@ -154,8 +158,9 @@ def test_commutative_in_the_neighbours(
 def test_not_commutative_between_the_agent_and_a_neighbour() -> None:
     # The agent trusts its own opinion more than a neighbour's: swapping them matters.
     mine, theirs = [0.8, 0.2], [0.2, 0.8]
-    assert loglinear_pool([mine, theirs])[0] > 0.5  # type: ignore[index]
-    assert loglinear_pool([theirs, mine])[0] < 0.5  # type: ignore[index]
+    trusting_mine, trusting_theirs = loglinear_pool([mine, theirs]), loglinear_pool([theirs, mine])
+    assert trusting_mine is not None and trusting_theirs is not None
+    assert trusting_mine[0] > 0.5 > trusting_theirs[0]
 
 
 @given(pools(positive_entries))
@@ -252,8 +257,9 @@ def test_repeated_pooling_of_the_same_evidence_is_bounded_by_dilution() -> None:
     for pool, growth in ((mprodop, 2.0), (loglinear_pool, 1.0 + LOGLINEAR_NEIGHBOUR_WEIGHT)):
         a, b = start, [0.5, 0.5]
         for _ in range(3):
-            a, b = pool([a, b]), pool([b, a])
-            assert a is not None and b is not None
+            pooled_a, pooled_b = pool([a, b]), pool([b, a])
+            assert pooled_a is not None and pooled_b is not None
+            a, b = pooled_a, pooled_b
         # The odds in favour of option 0, as a power of the evidence's odds.
         exponent = math.log(a[0] / a[1]) / math.log(odds_of_evidence)
         # Linear recurrence (a, b) -> (a + w b, b + w a): the sum grows by 1 + w a round.

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from typing import Any
 
 import pytest
 from fakes import make_swarm
@@ -17,9 +18,9 @@ N_ROBOTS = 10
 
 
 @pytest.mark.parametrize("pooling", ["linear", "MProdOp", "", None, 1, ["mprodop"]])
-def test_config_rejects_unknown_pooling(pooling: object) -> None:
+def test_config_rejects_unknown_pooling(pooling: Any) -> None:
     with pytest.raises(ValueError, match="pooling must be one of mprodop, loglinear"):
-        ControllerConfig(pooling=pooling)  # type: ignore[arg-type]
+        ControllerConfig(pooling=pooling)
 
 
 def test_config_defaults_to_the_papers_operator() -> None:

@@ -6,11 +6,12 @@ import math
 import random
 from collections import Counter
 from collections.abc import Mapping
+from typing import Any
 
 import pytest
 
 from robot_agent import protocol
-from world_server.radio import Delivery, RadioConfig, RadioMedium, sender_order
+from world_server.radio import Delivery, RadioConfig, RadioMedium, SenderKind, sender_order
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -34,7 +35,7 @@ def broadcast(
     receivers: Positions,
     *,
     sender: str = "0",
-    kind: str = "robot",
+    kind: SenderKind = "robot",
     deliver: bool = True,
 ) -> list[tuple[int, Delivery]]:
     """``sender`` at the origin sends one message a tick; every (tick, delivery) returned.
@@ -118,7 +119,7 @@ def test_deliveries_are_sorted_by_receiver_sender_and_seq_in_sender_order() -> N
         key=lambda call: (sender_order(call[0]), call[1]),
     )
     for sender, seq in calls:
-        kind = "beacon" if sender == "nest" else "robot"
+        kind: SenderKind = "beacon" if sender == "nest" else "robot"
         medium.transmit(0, sender, seq, b"", positions[sender], kind, positions)
     got = [(d.receiver, d.sender, d.seq) for d in medium.deliveries(1)]
     assert got == sorted(got, key=lambda k: (sender_order(k[0]), sender_order(k[1]), k[2]))
@@ -129,7 +130,8 @@ def test_deliveries_are_sorted_by_receiver_sender_and_seq_in_sender_order() -> N
 def test_invalid_calls_and_configs_are_refused() -> None:
     medium = RadioMedium(RadioConfig(), seed=1)
     with pytest.raises(ValueError):
-        medium.transmit(0, "1", 0, b"", (0.0, 0.0), "drone", {})  # type: ignore[arg-type]
+        drone: Any = "drone"  # no such kind of sender
+        medium.transmit(0, "1", 0, b"", (0.0, 0.0), drone, {})
     with pytest.raises(ValueError):
         medium.transmit(0, "1", 0, b"", (math.nan, 0.0), "robot", {})
     for bad in (
@@ -302,7 +304,7 @@ def swarm_traffic(seed: int, config: RadioConfig = ALL_FAULTS, ticks: int = 60):
         positions["beacon"] = (0.0, 0.0)
         senders = sorted(rng.sample(sorted(positions), 9), key=sender_order)
         for sender in senders:
-            kind = "beacon" if sender == "beacon" else "robot"
+            kind: SenderKind = "beacon" if sender == "beacon" else "robot"
             medium.transmit(tick, sender, tick, sender.encode(), positions[sender], kind, positions)
         log.append(medium.deliveries(tick))
         assert medium.copies == medium.delivered + medium.dropped + medium.in_flight

@@ -22,6 +22,7 @@ from typing import Any
 import jsonschema
 import pytest
 from mcap.reader import make_reader
+from mcap.records import Channel, Message, Schema
 from swarm_helpers import REPO, kill_leftovers, loopback_router, run_swarm, unique_run_id
 
 from deploy import report
@@ -46,10 +47,13 @@ class Run:
         self.keys = protocol.Keys(run_id)
         with open(path, "rb") as stream:
             reader = make_reader(stream)
-            self.statistics = reader.get_summary().statistics  # type: ignore[union-attr]
-            self.messages = [
-                (schema, channel, message) for schema, channel, message in reader.iter_messages()
-            ]
+            contents = reader.get_summary()
+            assert contents is not None and contents.statistics is not None
+            self.statistics = contents.statistics
+            self.messages: list[tuple[Schema, Channel, Message]] = []
+            for schema, channel, message in reader.iter_messages():
+                assert schema is not None, f"{channel.topic} has no schema"
+                self.messages.append((schema, channel, message))
             self.metadata = {record.name: record.metadata for record in reader.iter_metadata()}
 
     def of_schema(self, name: str) -> list[tuple[Any, Any, dict[str, Any]]]:
@@ -290,7 +294,7 @@ def test_samples_that_do_not_decode_are_kept_raw_on_the_rejected_channel() -> No
     rejected = [
         (channel.topic, json.loads(message.data))
         for schema, channel, message in reader.iter_messages()
-        if schema.name == "bestofn.RejectedSample"
+        if schema is not None and schema.name == "bestofn.RejectedSample"
     ]
     assert [record["key"] for _, record in rejected] == [sample.key for sample in bad]
     assert {topic for topic, _ in rejected} == {f"{keys.prefix}/recorder/rejected"}

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from typing import Any
 
 import pytest
 from swarm_helpers import (
@@ -279,10 +280,10 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run() -> None:
     )
     assert code == 0, stderr
 
-    def decisions(summary: dict[str, object]) -> list[tuple[object, ...]]:
+    def decisions(summary: dict[str, Any]) -> list[tuple[object, ...]]:
         return [
             (r["id"], r["decided_site"], r["steps"], r["decision_time_s"], r["pool_sizes"])
-            for r in summary["per_robot"]  # type: ignore[attr-defined]
+            for r in summary["per_robot"]
         ]
 
     assert decisions(over_zenoh) == decisions(in_memory)
@@ -304,41 +305,42 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run() -> None:
     ]
 
 
-def test_the_realtime_clock_follows_the_wall_clock_at_the_asked_speed() -> None:
+def test_a_swarm_on_the_realtime_clock_reaches_the_right_consensus() -> None:
+    """How closely the world keeps to the asked speed is a figure, not a check: measured by
+    ``benchmarks/swarm_speed.py --realtime``."""
     code, summary, stderr = run_swarm(
         [*SMALL, "--seed", "1", "--clock", "realtime", "--speed", "25"],
         unique_run_id("realtime"),
     )
     assert code == 0, stderr
     assert summary["correct"]
-    # Paced by the wall clock: a lockstep world would run several times faster than this.
-    # (Only an upper bound: a slow machine may fall behind the asked speed.)
-    assert summary["real_time_factor"] <= 25 * 1.1
 
 
 @pytest.mark.parametrize(
-    ("command", "bad"),
+    ("command", "bad", "named"),
     [
-        (["world-server"], ["--sites", "1"]),
-        (["world-server"], ["--drop", "2"]),
-        (["world-server"], ["--burst-loss", "0.1"]),
-        (["nest-beacon"], ["--beacon-outage", "5:1"]),
-        (["nest-beacon"], ["--name", "7"]),
-        (["robot-agent"], ["--id", "-1"]),
-        (["robot-agent"], ["--id", "1", "--alpha", "0.9"]),
-        (["robot-agent"], ["--id", "1", "--connect", "nowhere"]),
-        (["swarm", "wellstirred"], ["--pool", "0"]),
-        (["swarm", "report"], ["--out"]),
-        (["swarm", "experiment"], ["--runs", "0"]),
-        (["swarm", "router"], ["--listen", "x"]),
-        (["swarm", "run"], ["--kill", "3"]),
-        (["swarm", "run"], ["--robots", "2", "--kill", "5@10"]),
-        (["swarm"], ["nonsense"]),
+        (["world-server"], ["--sites", "1"], "--sites"),
+        (["world-server"], ["--drop", "2"], "--drop"),
+        (["world-server"], ["--burst-loss", "0.1"], "--burst-loss"),
+        (["nest-beacon"], ["--outage", "5:1"], "START < END"),
+        (["nest-beacon"], ["--name", "7"], "'7'"),
+        (["robot-agent"], ["--id", "-1"], "--id"),
+        (["robot-agent"], ["--id", "1", "--alpha", "0.9"], "--alpha"),
+        (["robot-agent"], ["--id", "1", "--connect", "nowhere"], "'nowhere'"),
+        (["swarm", "wellstirred"], ["--pool", "0"], "--pool"),
+        (["swarm", "report"], ["--out"], "--out"),
+        (["swarm", "experiment"], ["--runs", "0"], "--runs"),
+        (["swarm", "router"], ["--listen", "x"], "'x'"),
+        (["swarm", "run"], ["--kill", "3"], "--kill"),
+        (["swarm", "run"], ["--robots", "2", "--kill", "5@10"], "robot 5"),
+        (["swarm"], ["nonsense"], "'nonsense'"),
     ],
 )
 def test_every_command_rejects_bad_arguments_in_one_line_with_code_2(
-    command: list[str], bad: list[str]
+    command: list[str], bad: list[str], named: str
 ) -> None:
+    """Each bad argument is refused for what is wrong with it (``named``: the option or
+    the rule), not for some other reason such as an option the command does not have."""
     modules = {
         "world-server": "world_server.server",
         "nest-beacon": "nest_beacon",
@@ -350,4 +352,6 @@ def test_every_command_rejects_bad_arguments_in_one_line_with_code_2(
     errors = done.stderr.decode()
     assert done.returncode == 2, errors
     assert "Traceback" not in errors
-    assert errors.strip().splitlines()[-1].count("error") >= 1
+    last = errors.strip().splitlines()[-1]
+    assert "error:" in last and named in last, last
+    assert "unrecognized arguments" not in last, last

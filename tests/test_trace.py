@@ -7,6 +7,7 @@ import importlib.util
 import json
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import pytest
 from swarm_helpers import REPO, run_swarm, unique_run_id
@@ -25,7 +26,7 @@ def _tick_timeline() -> ModuleType:
     return module
 
 
-def _lines(path: Path) -> list[dict[str, object]]:
+def _lines(path: Path) -> list[dict[str, Any]]:
     return [json.loads(line) for line in path.read_text().splitlines()]
 
 
@@ -53,20 +54,20 @@ def test_trace_writes_every_tick_of_the_world_and_every_step_of_each_robot(
     # each closed only when every robot and the beacon answered (no stall in a healthy
     # run); while the launcher stops the processes, their leaving closes the last ones.
     assert ticks == list(range(len(ticks)))
-    running = [line for line in world if line["tick"] < LIMIT_TICKS]  # type: ignore[operator]
+    running = [line for line in world if line["tick"] < LIMIT_TICKS]
     assert len(running) == LIMIT_TICKS
     for line in running:
         assert line["robots"] == 3
-        answers = sorted(who for who, _, _ in line["answers"])  # type: ignore[attr-defined]
+        answers = sorted(who for who, _, _ in line["answers"])
         assert answers == ["beacon/nest", "robot/0", "robot/1", "robot/2"]
-        assert line["open_start"] <= line["opened"] <= line["close_start"]  # type: ignore[operator]
-        assert line["close_start"] <= line["advanced"] <= line["delivered"]  # type: ignore[operator]
+        assert line["open_start"] <= line["opened"] <= line["close_start"]
+        assert line["close_start"] <= line["advanced"] <= line["delivered"]
     steps = _lines(trace / "robot-0-1.jsonl") + _lines(trace / "robot-2.jsonl")
     for robot in range(3):
         stepped = [line["tick"] for line in steps if line["robot"] == robot]
         assert stepped[:LIMIT_TICKS] == list(range(LIMIT_TICKS))  # one line per step
     for line in steps:
-        assert line["arrived"] <= line["handled"] <= line["answered"]  # type: ignore[operator]
+        assert line["arrived"] <= line["handled"] <= line["answered"]
     report = _tick_timeline().timeline(trace, skip=10)
     assert report[0].startswith(f"{trace}: {len(ticks) - 10} ticks, 3.0 robots")
     assert "2 robot process(es)" in report[0]

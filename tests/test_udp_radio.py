@@ -90,7 +90,7 @@ def test_encode_frame_refuses_what_receivers_would_drop(
 @pytest.mark.parametrize("address", ["239.255.77.77", "127.255.255.255"])
 def test_radios_exchange_opinion_and_beacon_payloads(address: str) -> None:
     port = free_udp_port()
-    options = {"address": address, "port": port, "interface": LOOPBACK}
+    options: dict[str, Any] = {"address": address, "port": port, "interface": LOOPBACK}
     with (
         UdpRadio("3", **options) as robot,
         UdpRadio("nest", **options) as beacon,
@@ -177,13 +177,14 @@ def test_one_poll_takes_at_most_max_per_poll_datagrams() -> None:
     ):
         for seq in range(5):
             sender.send(protocol.encode(protocol.BeaconPayload(v=1, id="b", seq=seq)))
-        batches = []
+        batches: list[list[tuple[str, bytes]]] = []
         deadline = time.monotonic() + 5.0
         while sum(map(len, batches)) < 5 and time.monotonic() < deadline:
             select.select([receiver], [], [], 0.05)
             batches.append(receiver.poll())
         assert all(len(batch) <= 2 for batch in batches)
-        sequence = [protocol.decode_radio(p).seq for batch in batches for _, p in batch]
+        beacons = [protocol.decode_radio(p) for batch in batches for _, p in batch]
+        sequence = [b.seq for b in beacons if isinstance(b, protocol.BeaconPayload)]
         assert sequence == [0, 1, 2, 3, 4]  # one sender's datagrams keep their order
         assert receiver.poll() == []  # nothing left, and an empty poll returns at once
 
@@ -245,7 +246,7 @@ def read_ready(processes: Sequence[subprocess.Popen[str]], timeout: float) -> No
         if line.strip() != "ready":
             process.kill()
             _, errors = process.communicate(timeout=10)
-            pytest.fail(f"{process.args} did not get ready: {line!r} {errors}")
+            pytest.fail(f"{process.args!r} did not get ready: {line!r} {errors}")
 
 
 def start_all(processes: Sequence[subprocess.Popen[str]], delay: float = 0.3) -> None:
@@ -259,7 +260,7 @@ def start_all(processes: Sequence[subprocess.Popen[str]], delay: float = 0.3) ->
 def summary_of(process: subprocess.Popen[str], timeout: float) -> tuple[dict[str, Any], str]:
     """The JSON summary a process prints last, and what it wrote on stderr."""
     output, errors = process.communicate(timeout=timeout)
-    assert process.returncode == 0, f"{process.args} failed:\n{errors}"
+    assert process.returncode == 0, f"{process.args!r} failed:\n{errors}"
     return json.loads(output.strip().splitlines()[-1]), errors
 
 
@@ -437,14 +438,15 @@ def test_a_link_going_down_costs_broadcasts_not_the_robot(lan: Lan) -> None:
     processes = Processes()
     try:
         sender = processes.start(lan.run(2, sys.executable, "-c", SEND_PER_LINE, address))
-        assert sender.stdin is not None and sender.stdout is not None
+        to_sender, from_sender = sender.stdin, sender.stdout
+        assert to_sender is not None and from_sender is not None
 
         def send() -> dict[str, int]:
-            sender.stdin.write("\n")
-            sender.stdin.flush()
-            readable, _, _ = select.select([sender.stdout], [], [], 30)
+            to_sender.write("\n")
+            to_sender.flush()
+            readable, _, _ = select.select([from_sender], [], [], 30)
             assert readable, "the sender did not answer"
-            return json.loads(sender.stdout.readline())
+            return dict(json.loads(from_sender.readline()))
 
         assert send()["sent"] == 1
         set_link("down")
@@ -458,7 +460,7 @@ def test_a_link_going_down_costs_broadcasts_not_the_robot(lan: Lan) -> None:
         }
         set_link("up")
         assert send()["sent"] == 2
-        sender.stdin.close()
+        to_sender.close()
         assert sender.wait(timeout=30) == 0
     finally:
         processes.kill_all()

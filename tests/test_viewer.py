@@ -33,6 +33,7 @@ from swarm_helpers import (
     unique_run_id,
 )
 from websockets.sync.client import connect
+from websockets.typing import Subprotocol
 
 from deploy.processes import free_port
 from plumbing.world_info import ask
@@ -538,7 +539,7 @@ def _watch_foxglove(
             time.sleep(0.05)
         subscriptions: dict[int, str] = {}
         with connect(
-            f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], open_timeout=5
+            f"ws://127.0.0.1:{port}", subprotocols=[Subprotocol("foxglove.sdk.v1")], open_timeout=5
         ) as connection:
             while not stop.is_set():
                 try:

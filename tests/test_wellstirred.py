@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import itertools
 import math
+from typing import Any
 
 import numpy as np
 import pytest
 
 from wellstirred import model as wellstirred
 from wellstirred.model import (
+    Method,
     Model,
     Outcome,
     cell_rng,
@@ -55,9 +57,9 @@ def test_qualities_follow_the_paper() -> None:
         ({"options": 10.0, "pool": 3}, "options must be an integer"),
     ],
 )
-def test_bad_models_are_rejected(kwargs: dict[str, object], message: str) -> None:
+def test_bad_models_are_rejected(kwargs: dict[str, Any], message: str) -> None:
     with pytest.raises(ValueError, match=message):
-        Model(**kwargs)  # type: ignore[arg-type]
+        Model(**kwargs)
 
 
 def test_population_defaults_to_the_pool() -> None:
@@ -73,7 +75,8 @@ def test_runs_and_method_are_checked() -> None:
     with pytest.raises(ValueError, match="survivors path is exact only"):
         simulate(Model(10, 2, 4), 5, rng(), method="survivors")
     with pytest.raises(ValueError, match="unknown method"):
-        simulate(Model(10, 2), 5, rng(), method="fastest")  # type: ignore[arg-type]
+        unknown: Any = "fastest"
+        simulate(Model(10, 2), 5, rng(), method=unknown)
 
 
 # --- the exact chain -------------------------------------------------------------------
@@ -176,8 +179,8 @@ def test_opinions_path_matches_the_exact_mean(n: int, k: int) -> None:
 
 
 @pytest.mark.parametrize("method", ["survivors", "opinions"])
-def test_one_agent_takes_n_minus_1_steps(method: str) -> None:
-    outcome = simulate(Model(12, 1), 50, rng(), method=method)  # type: ignore[arg-type]
+def test_one_agent_takes_n_minus_1_steps(method: Method) -> None:
+    outcome = simulate(Model(12, 1), 50, rng(), method=method)
     assert (outcome.times == 11).all()
     assert outcome.success.all()
 
@@ -187,13 +190,13 @@ def test_auto_takes_the_survivors_path_only_where_exact(monkeypatch: pytest.Monk
     original_survivors = wellstirred._simulate_survivors
     original_opinions = wellstirred._simulate_opinions
 
-    def survivors(*args: object) -> object:
+    def survivors(*args: Any) -> Any:
         calls.append("survivors")
-        return original_survivors(*args)  # type: ignore[arg-type]
+        return original_survivors(*args)
 
-    def opinions(*args: object) -> object:
+    def opinions(*args: Any) -> Any:
         calls.append("opinions")
-        return original_opinions(*args)  # type: ignore[arg-type]
+        return original_opinions(*args)
 
     monkeypatch.setattr(wellstirred, "_simulate_survivors", survivors)
     monkeypatch.setattr(wellstirred, "_simulate_opinions", opinions)
@@ -214,7 +217,7 @@ def test_step_limit_counts_failures_as_the_limit() -> None:
 
 def test_a_low_threshold_can_be_met_at_the_start() -> None:
     for method in ("survivors", "opinions"):
-        outcome = simulate(Model(4, 2, threshold=0.25), 5, rng(), method=method)  # type: ignore[arg-type]
+        outcome = simulate(Model(4, 2, threshold=0.25), 5, rng(), method=method)
         assert (outcome.times == 0).all() and outcome.success.all()
 
 
@@ -252,7 +255,7 @@ def test_population_larger_than_the_pool() -> None:
 def test_pools_get_shuffled_members_and_a_smaller_last_pool() -> None:
     """5 agents in pools of 2: two pairs adopt their pair's product, one agent is alone."""
     updated = rng(4).dirichlet(np.ones(4), size=(1, 5))
-    pairs_seen = set()
+    pairs_seen: set[frozenset[int]] = set()
     for seed in range(20):
         pooled = wellstirred._pool(updated, 2, rng(seed))[0]
         own = updated[0] / updated[0].sum(axis=-1, keepdims=True)

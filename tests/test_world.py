@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from deploy.inmemory import run_in_memory
@@ -12,7 +14,7 @@ from world_server.world import World, WorldConfig
 pytestmark = pytest.mark.timeout(120)
 
 
-def _config(seed: int, robots: int = 6, sites: int = 8, **radio: float) -> WorldConfig:
+def _config(seed: int, robots: int = 6, sites: int = 8, **radio: Any) -> WorldConfig:
     return WorldConfig(
         run="memory",
         seed=seed,

@@ -198,7 +198,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         sink = FoxgloveSink(context)
         run = RunDescription(args.run_id, args.seed, args.robots, args.sites)
         recorder = McapRecorder(
-            None,  # type: ignore[arg-type]
+            None,  # no file: records go to the sink's writer
             keys,
             run,
             info,

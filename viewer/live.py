@@ -72,7 +72,6 @@ class LiveSource:
         self._pending_status: dict[int, protocol.Status] = {}
         self._pending_state: protocol.WorldState | None = None
         self._deliveries: collections.deque[Delivery] = collections.deque(maxlen=MAX_DELIVERIES)
-        self._drawn_deliveries: list[tuple[str, int]] = []
 
     def take(self, key: str, payload: bytes, attachment: bytes | None) -> None:
         """One sample from Zenoh (any thread)."""

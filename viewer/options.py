@@ -10,7 +10,6 @@ from plumbing import cliargs
 
 VIEW_PORT = 8700
 FOXGLOVE_PORT = 8765  # the Foxglove app's default for a WebSocket connection
-ANY_PORT = 0
 
 
 @dataclass(frozen=True)

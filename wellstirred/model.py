@@ -102,16 +102,14 @@ class Model:
     threshold: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.population is None:
-            object.__setattr__(self, "population", self.pool)
+        population = self.pool if self.population is None else self.population
+        object.__setattr__(self, "population", population)
         _require_int(self.options, "options", low=2)
         _require_int(self.pool, "pool", low=1)
-        _require_int(self.population, "population", low=1)
+        _require_int(population, "population", low=1)
         _require_int(self.steps, "steps", low=1)
-        if self.population < self.pool:
-            raise ValueError(
-                f"population ({self.population}) is smaller than the pool ({self.pool})"
-            )
+        if population < self.pool:
+            raise ValueError(f"population ({population}) is smaller than the pool ({self.pool})")
         object.__setattr__(self, "alpha", validate_alpha(self.alpha))
         threshold = self.threshold
         if isinstance(threshold, bool) or not isinstance(threshold, (int, float)):
@@ -513,7 +511,8 @@ def _draw_worse(opinions: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     if lone.any():
         offset = rng.integers(1, n, size=int(lone.sum()))
         second[lone] = (first[lone] + offset) % n
-    return np.maximum(first, second)
+    later: np.ndarray = np.maximum(first, second)
+    return later
 
 
 def _weighted_choice(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -524,7 +523,7 @@ def _weighted_choice(weights: np.ndarray, rng: np.random.Generator) -> np.ndarra
     cumulative = np.cumsum(weights, axis=-1)
     target = rng.random(weights.shape[:-1]) * cumulative[..., -1]
     # Index i is chosen when cumulative[i-1] <= target < cumulative[i]: never a zero weight.
-    chosen = np.count_nonzero(cumulative <= target[..., None], axis=-1)
+    chosen: np.ndarray = np.count_nonzero(cumulative <= target[..., None], axis=-1)
     overflow = chosen >= weights.shape[-1]
     if overflow.any():
         # Rounding put the target at the very top: take the last positive weight.
@@ -584,7 +583,8 @@ def _pool(updated: np.ndarray, pool: int, rng: np.random.Generator) -> np.ndarra
 
 
 def _normalised_rows(opinions: np.ndarray) -> np.ndarray:
-    return opinions / opinions.sum(axis=-1, keepdims=True)
+    rows: np.ndarray = opinions / opinions.sum(axis=-1, keepdims=True)
+    return rows
 
 
 def _normalised_product(log_sums: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

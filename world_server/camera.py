@@ -298,7 +298,8 @@ class CameraRenderer:
         nearest = hit_distance.min(axis=0)
         if not np.isfinite(nearest).any():
             return None
-        return np.maximum(nearest * self._column_cos, NEAR_CLIP)
+        depths: np.ndarray = np.maximum(nearest * self._column_cos, NEAR_CLIP)
+        return depths
 
     def _add_pixel_noise(self, image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         noise = rng.standard_normal(image.shape, dtype=np.float32)

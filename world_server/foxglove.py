@@ -78,10 +78,6 @@ def schema(name: str) -> dict[str, Any]:
     return dict(json.loads(text))
 
 
-def schema_bytes(name: str) -> bytes:
-    return json.dumps(schema(name), separators=(",", ":")).encode()
-
-
 # --- small values ------------------------------------------------------------------------
 
 

@@ -118,7 +118,7 @@ def start_poses(
 
     Robot ``i`` always gets pose ``i``, so a run's start does not depend on join order.
     """
-    poses = []
+    poses: list[tuple[float, float, float]] = []
     ring = 0
     while len(poses) < num_robots:
         radius = nest_radius + robot_radius * (2 + 2.5 * ring)

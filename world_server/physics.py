@@ -1,11 +1,13 @@
 """The world's bodies: e-puck robots driven as differential drives in a walled disc.
 
 pymunk (Chipmunk 2) resolves robot-robot and robot-wall contacts; the robots' wheel
-speeds are applied as body velocities at every substep, so the solver can still push a
-robot aside. The 8 infrared proximity rays are computed analytically with numpy (robots
-are discs and the wall is a circle), which costs far less than 8 pymunk ray queries per
-robot; ``proximity_raycast`` does the same with pymunk's segment queries and serves as
-the reference the tests compare against.
+speeds are reached through forces: at every substep each body gets the force that brings
+its velocity to its wheels' velocity, so the contact solver can still push a robot aside
+(``Physics.step`` says why not a velocity written straight onto the body). The 8 infrared
+proximity rays are computed analytically with numpy (robots are discs and the wall is a
+circle), which costs far less than 8 pymunk ray queries per robot; ``proximity_raycast``
+does the same with pymunk's segment queries and serves as the reference the tests
+compare against.
 
 Determinism: bodies are added in call order and pymunk iterates them in that order; every
 public result is keyed or sorted by robot id. The same calls in the same order give
@@ -306,7 +308,7 @@ class Physics:
         along = centres[:, :1] * ray_x + centres[:, 1:2] * ray_y
         inside = (self.arena_radius**2 - np.einsum("ij,ij->i", centres, centres))[:, None]
         to_wall = -along + np.sqrt(np.maximum(along * along + inside, 0.0))
-        readings = np.clip(1.0 - (to_wall - radius) / reach, 0.0, 1.0)
+        readings: np.ndarray = np.clip(1.0 - (to_wall - radius) / reach, 0.0, 1.0)
 
         owners, others = self._neighbour_pairs(2.0 * radius + reach)
         if owners.size:

@@ -44,6 +44,8 @@ SenderKind = Literal["robot", "beacon"]
 Metres = Annotated[float, Meta(gt=0.0)]
 Probability = Annotated[float, Meta(ge=0.0, le=1.0)]
 Ticks = Annotated[int, Meta(ge=0)]
+# Where a copy goes in a tick's deliveries: receiver, sender, sequence number, sent tick.
+_OrderKey = tuple[tuple[int, int, str], tuple[int, int, str], int, int]
 _KINDS = ("robot", "beacon")
 
 
@@ -177,7 +179,7 @@ class RadioConfig:
         fraction = distance / reach
         if start >= 1.0 or fraction <= start:
             return 0.0
-        return min(1.0, (fraction - start) / (1.0 - start)) ** self.range_loss_exponent
+        return math.pow(min(1.0, (fraction - start) / (1.0 - start)), self.range_loss_exponent)
 
 
 @dataclass(frozen=True)
@@ -225,7 +227,7 @@ class RadioMedium:
             for name in ("drop", "burst", "range", "jitter", "duplicate", "reorder")
         }
         self._link_bad: dict[tuple[str, str], bool] = {}
-        self._pending: dict[int, list[tuple[tuple, int, Delivery]]] = {}
+        self._pending: dict[int, list[tuple[_OrderKey, int, Delivery]]] = {}
         self._scheduled = 0  # tie-breaker that keeps sorting stable for duplicates
         self._index: _ReceiverIndex | None = None
         self._index_key: tuple[int, int] | None = None
@@ -333,7 +335,7 @@ class RadioMedium:
             self._index_source = receivers  # held, so its id cannot be reused meanwhile
         return self._index
 
-    def _schedule(self, due: int, order_key: tuple, delivery: Delivery) -> None:
+    def _schedule(self, due: int, order_key: _OrderKey, delivery: Delivery) -> None:
         self._pending.setdefault(due, []).append((order_key, self._scheduled, delivery))
         self._scheduled += 1
 

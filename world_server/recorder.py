@@ -85,14 +85,14 @@ class RadioTxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     """A ``radio/tx/<sender>`` sample as recorded: its attachment and its payload."""
 
     meta: protocol.RadioTxMeta
-    payload: protocol.RadioPayload  # type: ignore[valid-type]
+    payload: protocol.RadioPayload
 
 
 class RadioRxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     """A ``radio/rx/<receiver>`` sample as recorded: its attachment and its payload."""
 
     meta: protocol.RadioRxMeta
-    payload: protocol.RadioPayload  # type: ignore[valid-type]
+    payload: protocol.RadioPayload
 
 
 class RejectedSample(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
@@ -127,9 +127,6 @@ def schema_name(kind: str) -> str:
     if kind == CAMERA:
         return foxglove.COMPRESSED_IMAGE
     return SCHEMA_PREFIX + MESSAGE_TYPES[kind].__name__
-
-
-KIND_OF_SCHEMA = {schema_name(kind): kind for kind in MESSAGE_TYPES}
 
 
 def inline_refs(schema: dict[str, Any]) -> dict[str, Any]:
@@ -295,7 +292,7 @@ class McapRecorder:
 
     def __init__(
         self,
-        stream: IO[bytes],
+        stream: IO[bytes] | None,
         keys: protocol.Keys,
         run: RunDescription,
         info: protocol.WorldInfo | None = None,
@@ -321,9 +318,11 @@ class McapRecorder:
         self.rejected = 0
         self.closed = False
         self._versions = versions()
-        self._writer = writer or Writer(
-            stream, chunk_size=chunk_size, compression=CompressionType.ZSTD
-        )
+        if writer is None:
+            if stream is None:
+                raise ValueError("a recorder needs a stream to write to, or a writer")
+            writer = Writer(stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        self._writer = writer
         self._writer.start(library=f"bestofn-swarm recorder, {self._writer_library()}")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, _Channel] = {}

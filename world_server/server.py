@@ -70,7 +70,6 @@ class Counters:
     stalls: int = 0
     missed: dict[str, int] = field(default_factory=dict)  # consecutive stalled ticks
     logged_keys: set[str] = field(default_factory=set)
-    by_reason: dict[str, int] = field(default_factory=dict)  # rejections by kind, for logs
 
 
 class WorldServer:

@@ -20,7 +20,7 @@ from robot_agent.settings import Flag
 from world_server.camera import CameraNoise, CameraRenderer
 from world_server.layout import Layout, make_layout
 from world_server.physics import EpuckSpec, Physics
-from world_server.radio import Delivery, RadioConfig, RadioMedium
+from world_server.radio import Delivery, RadioConfig, RadioMedium, SenderKind
 
 DEFAULT_CAMERA = protocol.CameraSpec(width=64, height=48, fov=0.84)
 OCCLUSION_RANGE = 1.0  # metres: robots further away are too small to hide a site
@@ -200,6 +200,7 @@ class World:
             for robot in sorted(self._live_robots)
         }
         for message in sorted(transmissions, key=_transmission_order):
+            kind: SenderKind
             if message.sender in self._beacons:
                 position, kind = (self.info.nest.x, self.info.nest.y), "beacon"
             elif message.sender in receivers:

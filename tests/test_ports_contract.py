@@ -1,0 +1,245 @@
+"""One port contract, and every transport runs it.
+
+``ports.control_step`` is the loop docs/porting.md tells a port to implement. The Zenoh
+robot (robot_agent/node.py), the in-process engine (deploy/inmemory.py) and the UDP
+example (examples/udp_robot.py) are adapters of it. These tests replay the tick vectors
+(tests/vectors/tick.json) through the adapter the node and the engine share, and through
+the node itself, and check in each transport that its controller is stepped by
+``control_step`` and by nothing else (the calling frame is the contract's code, however
+the adapter imported it).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from types import CodeType, ModuleType
+from typing import Any
+
+import pytest
+
+from deploy.inmemory import run_in_memory
+from plumbing.inbox import BoundedInbox
+from robot_agent import ports, protocol
+from robot_agent.controller import Controller, ControllerConfig
+from robot_agent.node import Event, RobotNode
+from robot_agent.simulated import SimulatedPorts
+from robot_agent.udp_radio import UdpRadioStats
+from world_server.world import World, WorldConfig
+
+REPO = Path(__file__).resolve().parent.parent
+CONTRACT = ports.control_step.__code__
+TICKS: list[dict[str, Any]] = json.loads(
+    (REPO / "tests" / "vectors" / "tick.json").read_text(encoding="utf-8")
+)["ticks"]
+ROBOT = 7  # the robot of the tick vectors
+
+
+class Scripted:
+    """A ``RobotController`` that commands what a tick vector says and keeps what it got."""
+
+    def __init__(self, command: dict[str, Any]) -> None:
+        self.command = ports.Command(
+            left=command["left"],
+            right=command["right"],
+            capture=command["capture"],
+            broadcasts=tuple(
+                protocol.decode_radio(json.dumps(payload).encode())  # type: ignore[misc]
+                for payload in command["broadcasts"]
+            ),
+        )
+        self.steps: list[tuple[ports.BodyReading, Sequence[ports.Received]]] = []
+        self.stepped_by: list[CodeType] = []
+
+    def step(self, reading: ports.BodyReading, received: Sequence[ports.Received]) -> ports.Command:
+        self.stepped_by.append(sys._getframe(1).f_code)
+        self.steps.append((reading, received))
+        return self.command
+
+    def status(self, tick: int) -> protocol.Status:
+        raise AssertionError("a tick's answer needs no status")
+
+    def take_status_change(self) -> bool:
+        return False
+
+    @property
+    def decided_site(self) -> int | None:
+        return None
+
+
+def check_what_the_controller_got(controller: Scripted, vector: dict[str, Any]) -> None:
+    assert controller.stepped_by == [CONTRACT]
+    [(reading, received)] = controller.steps
+    expected = vector["reading"]
+    assert (reading.t, reading.x, reading.y, reading.theta) == (
+        expected["t"],
+        expected["x"],
+        expected["y"],
+        expected["theta"],
+    )
+    assert reading.proximity == tuple(expected["proximity"])
+    frame = expected["frame"]
+    if frame is None:
+        assert reading.frame is None
+    else:
+        assert reading.frame is not None
+        assert reading.frame.shape == (frame["height"], frame["width"], 3)
+        assert (reading.frame == frame["bgr"]).all()
+    assert [(item.sender, json.loads(protocol.encode(item.payload))) for item in received] == [
+        (item["sender"], item["message"]) for item in vector["received"]
+    ]
+
+
+def expected_transmissions(vector: dict[str, Any]) -> list[tuple[int, str, str]]:
+    return [(sent["seq"], sent["hex"], sent["meta_hex"]) for sent in vector["out"]["radio_tx"]]
+
+
+@pytest.mark.parametrize("vector", TICKS, ids=[vector["name"] for vector in TICKS])
+def test_tick_vectors_through_the_adapter_of_the_node_and_the_engine(
+    vector: dict[str, Any],
+) -> None:
+    inputs = vector["in"]
+    rejects = ports.RejectCounter()
+    adapter = SimulatedPorts(rejects)
+    adapter.radio.seq = vector["sent_before"]
+    controller = Scripted(vector["command"])
+    answer = adapter.answer(
+        controller,
+        protocol.decode(bytes.fromhex(inputs["sense"]["hex"]), protocol.Sense),
+        [(item["sender"], bytes.fromhex(item["hex"])) for item in inputs["radio_rx"]],
+        bytes.fromhex(inputs["camera"]["hex"]) if inputs["camera"] else None,
+    )
+    check_what_the_controller_got(controller, vector)
+    assert rejects.count == vector["rejected"]
+    assert [
+        (sent.seq, sent.payload.hex(), sent.meta.hex()) for sent in answer.transmissions
+    ] == expected_transmissions(vector)
+    assert protocol.encode(answer.act).hex() == vector["out"]["act"]["hex"]
+
+
+class _Publisher:
+    def __init__(self) -> None:
+        self.sent: list[tuple[bytes, bytes | None]] = []
+
+    def put(self, payload: bytes, attachment: bytes | None = None) -> None:
+        self.sent.append((payload, attachment))
+
+
+@pytest.mark.parametrize("vector", TICKS, ids=[vector["name"] for vector in TICKS])
+def test_tick_vectors_through_the_zenoh_robot(vector: dict[str, Any]) -> None:
+    """The node's handling of what a Zenoh subscriber hands it (sense first: it must wait
+    for the tick's radio and frame), and exactly what it publishes (an unkeyed run)."""
+    controller = Scripted(vector["command"])
+    node = RobotNode(
+        ROBOT,
+        session=None,  # type: ignore[arg-type]
+        keys=protocol.Keys("ticks"),
+        controller=controller,
+        inbox=BoundedInbox(),
+        world=World(WorldConfig(num_sites=5, num_robots=8)).info,
+    )
+    tx, act = _Publisher(), _Publisher()
+    node._tx, node._act, node._status = tx, act, _Publisher()  # type: ignore[assignment]
+    node.ports.radio.seq = vector["sent_before"]
+    inputs = vector["in"]
+    node.handle(Event(ROBOT, "sense", bytes.fromhex(inputs["sense"]["hex"])))
+    for item in inputs["radio_rx"]:
+        node.handle(Event(ROBOT, "rx", bytes.fromhex(item["hex"]), bytes.fromhex(item["meta_hex"])))
+    if inputs["camera"]:
+        camera = inputs["camera"]
+        node.handle(
+            Event(ROBOT, "camera", bytes.fromhex(camera["hex"]), bytes.fromhex(camera["meta_hex"]))
+        )
+    check_what_the_controller_got(controller, vector)
+    assert node.rejects.count == vector["rejected"]
+    assert [(payload.hex(), (meta or b"").hex()) for payload, meta in tx.sent] == [
+        (payload, meta) for _, payload, meta in expected_transmissions(vector)
+    ]
+    assert act.sent == [(bytes.fromhex(vector["out"]["act"]["hex"]), None)]
+
+
+def witness(stepped_by: list[CodeType]) -> type[Controller]:
+    """The real controller, noting which function steps it."""
+
+    class Witness(Controller):
+        def step(
+            self, reading: ports.BodyReading, received: Sequence[ports.Received]
+        ) -> ports.Command:
+            stepped_by.append(sys._getframe(1).f_code)
+            return super().step(reading, received)
+
+    return Witness
+
+
+def test_the_in_process_engine_steps_every_robot_through_the_contract() -> None:
+    stepped_by: list[CodeType] = []
+    ticks: list[int] = []
+    run_in_memory(
+        WorldConfig(num_sites=3, num_robots=2),
+        ControllerConfig(),
+        timeout=1.0,
+        controller_factory=witness(stepped_by),
+        on_tick=lambda world: ticks.append(world.tick),
+    )
+    assert len(ticks) == 11  # ticks 0 to 10: sim time 0 to 1 s
+    assert stepped_by == [CONTRACT] * (2 * len(ticks))
+
+
+def _udp_example() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("udp_robot", REPO / "examples" / "udp_robot.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+class _SteppedClock:
+    """The example's clock, moved on only by its own sleeps: a fixed number of steps."""
+
+    def __init__(self, speed: float = 1.0, start_at: float | None = None) -> None:
+        self.t = 0.0
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep_until(self, t: float) -> None:
+        self.t = max(self.t, t)
+
+
+class _QuietRadio:
+    """The example's UdpRadio on no network: hears nothing, keeps what it sends."""
+
+    def __init__(self, name: str, **options: object) -> None:
+        self.stats = UdpRadioStats()
+        self.sent: list[bytes] = []
+
+    def __enter__(self) -> _QuietRadio:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+    def send(self, payload: bytes) -> None:
+        self.sent.append(payload)
+
+    def poll(self) -> list[tuple[str, bytes]]:
+        return []
+
+
+def test_the_udp_example_steps_its_robot_through_the_contract(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    example = _udp_example()
+    stepped_by: list[CodeType] = []
+    monkeypatch.setattr(example, "Controller", witness(stepped_by))
+    monkeypatch.setattr(example, "ScaledClock", _SteppedClock)
+    monkeypatch.setattr(example, "UdpRadio", _QuietRadio)
+    args = example.build_parser().parse_args(
+        ["--id", "0", "--qualities", "1,0.5,0", "--max-seconds", "0.95"]
+    )
+    summary = example.run(args)
+    assert summary["phase"] != "stopped"
+    assert stepped_by == [CONTRACT] * 10  # clock 0 to 0.9 s, a step every 0.1 s
