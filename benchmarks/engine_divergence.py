@@ -31,6 +31,7 @@ from mcap.stream_reader import StreamReader
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from benchmarks.scale_consensus import ROBOTS_PER_PROCESS, ZENOH_STALL_TIMEOUT  # noqa: E402
 from robot_agent import protocol  # noqa: E402
 
 TOLERANCE = 1e-9  # metres and radians: the runs must agree exactly, up to float printing
@@ -144,7 +145,7 @@ def record_both(args: argparse.Namespace) -> tuple[Path, Path]:
         ]
         if engine == "zenoh":
             # A starved robot process must be waited for, or the run leaves lockstep.
-            command += ["--stall-timeout", "300"]
+            command += ["--stall-timeout", str(ZENOH_STALL_TIMEOUT)]
             if args.robots_per_process:
                 command += ["--robots-per-process", str(args.robots_per_process)]
         print("$ swarm", " ".join(command[1:]), file=sys.stderr, flush=True)
@@ -168,7 +169,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sites", type=int, default=10)
     parser.add_argument("--seed", type=int, default=8)
     parser.add_argument("--until", type=float, default=400.0, help="sim seconds of each run")
-    parser.add_argument("--robots-per-process", type=int, default=50, help="zenoh run's hosts")
+    parser.add_argument(
+        "--robots-per-process", type=int, default=ROBOTS_PER_PROCESS, help="zenoh run's hosts"
+    )
     parser.add_argument("--out", type=Path, default=Path("divergence"), help="recordings here")
     parser.add_argument("--show", type=int, default=5, help="differing ticks to print")
     args = parser.parse_args(argv)
