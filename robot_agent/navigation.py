@@ -15,7 +15,12 @@ Three things break the deadlocks and dithering that crowds produce:
 * a robot that has barely moved for ``stuck_time`` seconds while trying to reach a goal
   escapes: it heads off in a random direction (seeded RNG) for ``escape_time`` seconds,
   then draws a new side and tries again. Two robots blocking each other thus separate
-  after a few seconds instead of pushing forever.
+  after a few seconds instead of pushing forever;
+* a robot whose last ``push_after`` escapes all began within a body radius of each other
+  is wedged among bodies with no gap its avoidance will take (the crowd pressed it
+  between robots parked against the wall, issue 10): its next escapes push, straight for
+  the goal and blind to the sensors, until it has moved a body radius. Bodies give way
+  to a push, and a crowd never keeps a robot this still for this long otherwise.
 """
 
 from __future__ import annotations
@@ -54,6 +59,7 @@ class NavParams:
     stuck_time: float = 3.0  # s of trying with less than stuck_distance of progress -> escape
     stuck_distance: float = 0.02  # m
     escape_time: float = 1.5  # s spent heading in a random direction to get unstuck
+    push_after: int = 3  # escapes begun within robot_radius of each other -> push instead
 
     def __post_init__(self) -> None:
         positive = {
@@ -93,6 +99,8 @@ class NavParams:
             )
         if not self.prox_angles or not all(math.isfinite(a) for a in self.prox_angles):
             raise ValueError(f"NavParams.prox_angles must be finite angles, got {self.prox_angles}")
+        if self.push_after < 1:
+            raise ValueError(f"NavParams.push_after must be at least 1, got {self.push_after}")
         if self.forget_steps < 1:
             raise ValueError(f"NavParams.forget_steps must be at least 1, got {self.forget_steps}")
 
@@ -124,7 +132,13 @@ class Navigator:
         self._steps_clear = 0
         self._escape_steps = 0
         self._escape_heading = 0.0
+        # Where the current run of escapes began, how many began near there since, and
+        # whether the escape under way is a push.
+        self._escape_origin: tuple[float, float] | None = None
+        self._fruitless_escapes = 0
+        self._pushing = False
         self.escapes = 0  # how many times it had to escape (for tests and diagnostics)
+        self.pushes = 0  # how many of them were pushes
 
     def reset(self) -> None:
         """Forget progress and avoidance state (call when a new leg of travel starts)."""
@@ -134,6 +148,9 @@ class Navigator:
         self._obstacle = (0.0, 0.0)
         self._steps_clear = 0
         self._escape_steps = 0
+        self._escape_origin = None
+        self._fruitless_escapes = 0
+        self._pushing = False
 
     def drive_to(  # noqa: PLR0917 -- pose, sensors, goal: the ports' shared signature
         self,
@@ -168,18 +185,21 @@ class Navigator:
             self._escape_steps -= 1
             bearing = wrap_angle(self._escape_heading - theta)
         else:
+            self._pushing = False
             bearing = wrap_angle(math.atan2(dy, dx) - theta)
             if self._is_stuck(x, y):
-                self._start_escape(theta)
+                self._start_escape(x, y, theta, math.atan2(dy, dx))
                 bearing = wrap_angle(self._escape_heading - theta)
         self._trail.append((x, y))
 
-        heading_error = self._steer(bearing, proximity, theta)
+        # A push goes through whatever is in the way.
+        heading_error = bearing if self._pushing else self._steer(bearing, proximity, theta)
         cap = self.params.max_speed * min(1.0, distance / self.params.slow_radius)
         cap = max(cap, self.params.min_speed)
         cap = min(cap, distance / self.params.control_period)
         forward = cap * max(0.0, math.cos(heading_error))
-        forward *= 1.0 - self._front_reading(proximity)
+        if not self._pushing:
+            forward *= 1.0 - self._front_reading(proximity)
         left, right = self._wheels(forward, self._turn_rate(heading_error))
         return left, right, False
 
@@ -265,11 +285,24 @@ class Navigator:
         old_x, old_y = self._trail[0]
         return math.hypot(x - old_x, y - old_y) < self.params.stuck_distance
 
-    def _start_escape(self, theta: float) -> None:
-        turn = self._rng.uniform(math.pi / 2, math.pi) * self._rng.choice((-1, 1))
-        self._escape_heading = wrap_angle(theta + turn)
+    def _start_escape(self, x: float, y: float, theta: float, goal_heading: float) -> None:
+        origin = self._escape_origin
+        if origin is not None and math.hypot(x - origin[0], y - origin[1]) < (
+            self.params.robot_radius
+        ):
+            self._fruitless_escapes += 1
+        else:
+            self._escape_origin = (x, y)
+            self._fruitless_escapes = 0
+        self._pushing = self._fruitless_escapes >= self.params.push_after
+        if self._pushing:
+            self._escape_heading = goal_heading
+            self.pushes += 1
+        else:
+            turn = self._rng.uniform(math.pi / 2, math.pi) * self._rng.choice((-1, 1))
+            self._escape_heading = wrap_angle(theta + turn)
+            self._avoid_side = self._rng.choice((-1, 1))
         self._escape_steps = self._escape_steps_total
-        self._avoid_side = self._rng.choice((-1, 1))
         self._trail.clear()
         self.escapes += 1
 

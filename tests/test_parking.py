@@ -185,3 +185,50 @@ def test_a_robot_caught_in_an_empty_wall_slot_finds_its_way_back_to_the_nest(
         physics.set_wheels(130, left, right)
         physics.step(0.1)
     pytest.fail(f"still at ({x:.2f}, {y:.2f}) after 60 s, {navigator.escapes} escapes")
+
+
+def _polar(radius: float, degrees: float) -> tuple[float, float]:
+    return radius * math.cos(math.radians(degrees)), radius * math.sin(math.radians(degrees))
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("navigator_seed", range(2))
+def test_robots_pressed_in_behind_the_wall_row_push_their_way_out(navigator_seed: int) -> None:
+    """Seed 0 of a 500-robot swarm: the crowd round site 0 pressed robots 65 and 169 against
+    the wall at -5 degrees, where robots 114 and 118 then parked either side of them with
+    robot 116 between them, and they stayed there for good: every gap out is narrower
+    than a body, and the navigator steers round every body it senses. Their places and
+    their neighbours' as `benchmarks/stall_diagnosis.py --robots 500 --seed 0 --until 2000`
+    printed them, on real physics: both must get back among the free robots."""
+    config = ControllerConfig()
+    layout = make_layout(10, 500, seed=0)
+    pressed_in = {65: _polar(5.253, -5.4), 169: _polar(5.257, -4.3)}
+    pushed_aside = {114: _polar(5.232, -6.2), 116: _polar(5.200, -4.8), 118: _polar(5.230, -3.6)}
+    physics = Physics(layout.arena_radius)
+    for robot, slot in enumerate(slots_for(500, 8, config)):
+        if robot % 2 == 0 and math.dist(slot, pressed_in[65]) < 1.0:  # site 8's even robots
+            x, y = pushed_aside.get(robot, slot)
+            physics.add_robot(robot, x, y, math.atan2(y, x))
+    for robot, (x, y) in pressed_in.items():
+        physics.add_robot(robot, x, y, math.atan2(-y, -x))
+    navigators = {
+        robot: Navigator(NavParams(), random.Random(navigator_seed * 1000 + robot))
+        for robot in pressed_in
+    }
+    still_in = set(pressed_in)
+    for _ in range(600):  # 60 s of sim time
+        for robot, navigator in navigators.items():
+            x, y, theta = physics.pose(robot)
+            if math.hypot(x, y) < layout.arena_radius - 0.5:
+                still_in.discard(robot)
+            wheels = (0.0, 0.0)
+            if robot in still_in:
+                wheels = navigator.drive_to(x, y, theta, physics.proximity(robot), (0, 0), 0.05)[:2]
+            physics.set_wheels(robot, *wheels)
+        if not still_in:
+            break
+        physics.step(0.1)
+    assert not still_in, {
+        robot: (physics.pose(robot)[:2], navigators[robot].escapes) for robot in still_in
+    }
+    assert all(navigator.pushes >= 1 for navigator in navigators.values())
