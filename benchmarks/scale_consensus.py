@@ -66,6 +66,7 @@ class Run:
     timed_out: bool
     stalls: int = 0  # lockstep ticks closed without a silent controller (Zenoh only)
     ended: str = ""  # the summary's ending: consensus, split, stalled, timeout, ...
+    departures: int = 0  # robots whose liveliness went mid-run (Zenoh only; breaks lockstep)
 
 
 def from_summary(robots: int, seed: int, mode: str, summary: dict[str, Any], wall: float) -> Run:
@@ -83,6 +84,7 @@ def from_summary(robots: int, seed: int, mode: str, summary: dict[str, Any], wal
         timed_out=bool(summary["timed_out"]),
         stalls=int(summary["world"]["stalls"]),
         ended=str(summary.get("ended", "")),
+        departures=int(summary["world"].get("departures", 0)),
     )
 
 
@@ -221,8 +223,8 @@ def zenoh_against_in_process(zenoh: Sequence[Run], in_process: Sequence[Run]) ->
     """Each Zenoh run beside the in-process run of the same size and seed."""
     lines = [
         "| robots | seed | sim time in one process (s) | over Zenoh (s) | slowest steps, "
-        "in one process / over Zenoh | same result | lockstep stalls |",
-        "|---:|---:|---:|---:|---:|:---:|---:|",
+        "in one process / over Zenoh | same result | lockstep stalls | departures |",
+        "|---:|---:|---:|---:|---:|:---:|---:|---:|",
     ]
     twins = {(run.robots, run.seed): run for run in in_process}
     for run in zenoh:
@@ -237,7 +239,8 @@ def zenoh_against_in_process(zenoh: Sequence[Run], in_process: Sequence[Run]) ->
         )
         lines.append(
             f"| {run.robots} | {run.seed} | {twin.sim_time_s:.1f} | {run.sim_time_s:.1f} | "
-            f"{twin.slowest_steps} / {run.slowest_steps} | {yes(same)} | {run.stalls} |"
+            f"{twin.slowest_steps} / {run.slowest_steps} | {yes(same)} | {run.stalls} | "
+            f"{run.departures} |"
         )
     return "\n".join(lines)
 
@@ -339,7 +342,9 @@ def render_doc(runs: Sequence[Run], before: Sequence[Run], figure: str) -> str:
             "keeps the world waiting for a robot process the busy machine starved, so the "
             "run stays in lockstep (lockstep stalls: ticks closed without a robot). A lockstep "
             "run should give the same sim time and steps as in one process; the last table "
-            "says where it did.\n",
+            "says where it did. Departures are robots whose liveliness token went while the "
+            "world ran (the summary's `world.departures`): the world takes such a robot out "
+            "of the tick at once, so a run with any is no longer the seed's lockstep run.\n",
             HEADER + "\n" + "\n".join(row(run) for run in zenoh) + "\n",
             zenoh_against_in_process(zenoh, in_process) + "\n",
         ]

@@ -428,6 +428,8 @@ class Swarm:
         self.last_state: protocol.WorldState | None = None
         self.rejected = 0  # invalid messages the launcher itself received
         self.final_stats: protocol.WorldState | None = None
+        # Departures the world counted before the run was stopped (stopping makes more).
+        self.departures = 0
         self.pending_faults = list(plan.faults)
         self.fault_log: list[dict[str, Any]] = []
         # Log lines from before the recorder listens, held back so that the recording has
@@ -743,6 +745,9 @@ class Swarm:
         if self.ended_at is not None:
             return self.final_stats
         self.ended_at = time.monotonic()
+        if self.world is not None and self.world.alive():
+            before = self._query_world_stats() or self.last_state
+            self.departures = before.departures if before else 0
         swarm = [
             child
             for child in self.group.children
@@ -962,6 +967,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ending) -> int:
             radio=stats.radio if stats else protocol.RadioCounters(),
             world_rejected=stats.rejected if stats else 0,
             stalls=stats.stalls if stats else 0,
+            departures=swarm.departures,
             observer_rejected=swarm.rejected,
             beacon_rejected=sum(swarm.beacon_rejected.values()),
             config=plan.config,
@@ -1093,6 +1099,13 @@ def print_summary(summary: dict[str, Any], console: Console) -> None:
         f"delivered {summary['radio']['delivered']}, dropped {summary['radio']['dropped']}, "
         f"rejected {summary['radio']['rejected']}"
     )
+    departures = summary["world"].get("departures", 0)
+    if departures:
+        console.print(
+            f"[yellow]{departures} robot(s) or beacon(s) left while the world ran (killed, "
+            "crashed, or their connection lost): a lockstep run is then not the seed's "
+            "deterministic one[/]"
+        )
     if summary.get("recording"):
         console.print(f"recording: {summary['recording']} (swarm report, or open in Foxglove)")
 

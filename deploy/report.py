@@ -424,6 +424,7 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
             radio=state.radio if state else protocol.RadioCounters(),
             world_rejected=state.rejected if state else 0,
             stalls=state.stalls if state else 0,
+            departures=state.departures if state else 0,
             observer_rejected=recording.undecodable,
             config=recording.config,
             stuck=watchdog.stuck(),

@@ -77,6 +77,7 @@ class RunOutcome:
     stuck: list[dict[str, Any]] = field(default_factory=list)
     beacon_rejected: int = 0
     byzantine: Mapping[int, str] = field(default_factory=dict)  # robot -> how it misbehaves
+    departures: int = 0  # robots and beacons whose liveliness went mid-run (world's count)
 
 
 def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[str, Any]:
@@ -124,7 +125,11 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
             "dropped": outcome.radio.dropped,
             "rejected": outcome.radio.rejected,
         },
-        "world": {"rejected": outcome.world_rejected, "stalls": outcome.stalls},
+        "world": {
+            "rejected": outcome.world_rejected,
+            "stalls": outcome.stalls,
+            "departures": outcome.departures,
+        },
         "rejected": {
             "world": outcome.world_rejected,
             "robots": sum(r.status.rejected for r in robots if r.status),

@@ -155,6 +155,9 @@ class WorldState(Message, frozen=True):
     radio: RadioCounters
     rejected: _Count
     stalls: _Count
+    # Robots and beacons whose liveliness token went while the world ran (a crash, a kill,
+    # a lost connection). Absent from recordings made before it was counted.
+    departures: _Count = 0
 
 
 # --- world <-> robot body (reliable) -------------------------------------------------

@@ -285,6 +285,8 @@ def test_the_swarm_still_decides_right_with(switch: str, tmp_path: Path) -> None
         raise AssertionError(f"--{switch}: no effect seen in the {process}: {error}") from None
     if switch not in ("iid-loss", "burst-loss", "range-loss"):
         assert summary["radio"]["dropped"] == 0  # the loss checks' baseline
+    # Only a robot that is killed or restarted leaves mid-run, and the world says so.
+    assert summary["world"]["departures"] == (1 if switch in ("kill", "restart") else 0)
 
 
 def test_robots_wait_for_a_lost_world_server_and_resume_with_a_new_one() -> None:

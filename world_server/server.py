@@ -68,6 +68,7 @@ class Counters:
     rejected: int = 0
     late: int = 0
     stalls: int = 0
+    departures: int = 0  # robots and beacons whose liveliness token went while it ran
     missed: dict[str, int] = field(default_factory=dict)  # consecutive stalled ticks
     logged_keys: set[str] = field(default_factory=set)
 
@@ -430,11 +431,14 @@ class WorldServer:
         role, ident = token
         self.pending_joins = [join for join in self.pending_joins if join != token]
         if role == "robot":
+            if int(ident) in self.world.live_robots():
+                self.counters.departures += 1
             log.warning("robot %s left (liveliness lost); its body stays as an obstacle", ident)
             self.world.leave_robot(int(ident))
             self.acts.pop(int(ident), None)
             self.barrier.leave(f"robot/{ident}")
         elif ident in self.world.beacons():
+            self.counters.departures += 1
             log.warning("beacon %s left", ident)
             self.world.leave_beacon(ident)
             self.barrier.leave(f"beacon/{ident}")
@@ -472,7 +476,7 @@ class WorldServer:
             event.query.reply_err(b"unauthenticated query")
             return
         self._take_dropped()
-        payload = protocol.encode(self.world.state(self.counters.rejected, self.counters.stalls))
+        payload = protocol.encode(self._state())
         attachment = auth.reply_seal(self.keyring, identity, key, payload, nonce)
         event.query.reply(key, payload, attachment=attachment)
 
@@ -602,10 +606,14 @@ class WorldServer:
 
     def _publish_state(self) -> None:
         self._take_dropped()
-        state = protocol.encode(self.world.state(self.counters.rejected, self.counters.stalls))
+        state = protocol.encode(self._state())
         self._state_publisher.put(
             state, attachment=self._seal(auth.WORLD, self.keys.world_state, state)
         )
+
+    def _state(self) -> protocol.WorldState:
+        counters = self.counters
+        return self.world.state(counters.rejected, counters.stalls, counters.departures)
 
     def _seal(self, identity: str, key: str, payload: bytes, metadata: bytes = b"") -> bytes | None:
         return auth.seal(self.keyring, identity, key, payload, metadata)

@@ -246,7 +246,7 @@ class World:
         ]
         return self.camera.render(x, y, theta, others, rng=self._camera_rng)
 
-    def state(self, rejected: int = 0, stalls: int = 0) -> protocol.WorldState:
+    def state(self, rejected: int = 0, stalls: int = 0, departures: int = 0) -> protocol.WorldState:
         counters = self.radio.counters
         return protocol.WorldState(
             v=protocol.VERSION,
@@ -264,6 +264,7 @@ class World:
             ),
             rejected=rejected,
             stalls=stalls,
+            departures=departures,
         )
 
 
