@@ -260,6 +260,18 @@ def results_of(summary: dict[str, Any]) -> list[dict[str, Any]]:
     return [{**robot, "phase": None} for robot in summary["per_robot"]]
 
 
+def decisions_until(summary: dict[str, Any], cut: float) -> list[tuple[Any, ...]]:
+    """Each robot's decision (site and sim time) if it came by ``cut`` sim seconds: what two
+    runs stopped by --timeout at slightly different times can be compared on (over Zenoh
+    the launcher notices the timeout a tick or two late, and robots decide in between)."""
+    return [
+        (robot["id"], robot["decided_site"], robot["decision_time_s"])
+        if robot["decision_time_s"] is not None and robot["decision_time_s"] <= cut
+        else (robot["id"], None, None)
+        for robot in summary["per_robot"]
+    ]
+
+
 def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
     """In one process against over Zenoh, per swarm size: the markdown rows."""
     print(
@@ -285,7 +297,12 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
                 robots, seed, args.sites, ["--engine", "inprocess", *options]
             )
             distributed = swarm_summary(robots, seed, args.sites, options)
-            same = same and results_of(in_process) == results_of(distributed)
+            if limit:
+                cut = min(in_process["sim_time_s"], distributed["sim_time_s"])
+                agreed = decisions_until(in_process, cut) == decisions_until(distributed, cut)
+            else:
+                agreed = results_of(in_process) == results_of(distributed)
+            same = same and agreed
             # A tick the world closed without a silent controller (--stall-timeout) breaks
             # lockstep's determinism: say so when the results differ.
             stalls += distributed["world"]["stalls"]
@@ -303,6 +320,8 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
         to_floor = f"{slow / floor:.2f}" if floor else "-"
         ended = "to consensus" if not limit else f"{args.scale_sim:g} s of sim time"
         agree = "yes" if same else f"no ({stalls} stalled ticks)"
+        if limit and same:
+            agree = "yes (decisions)"
         print(
             f"{robots:>6} {distributed['sim_time_s']:>7.1f} {fast:>9.1f}x {slow:>10.1f}x "
             f"{ratio:>6.2f}{spread} {floor_text:>7} {to_floor:>10} {agree:>12}",
@@ -339,6 +358,11 @@ def write_readme(path: Path, rows: list[str], command: str, args: argparse.Names
         "two runs measured back to back (with --pairs, the median of the pairs and their "
         f"range). {args.machine_note}"
     ).strip()
+    if any("yes (decisions)" in row for row in rows):
+        note += (
+            " A run cut at a sim time is compared on its robots' decisions up to the earlier"
+            " of the two stops (over Zenoh the launcher notices the limit a tick or two late)."
+        )
     path.write_text(f"{head}{README_BEGIN}\n{chr(10).join(table)}\n\n{note}\n{README_END}{tail}")
     print(f"wrote the engines table into {path}")
 

@@ -4,8 +4,11 @@ The world server writes one line per tick (when it began and finished publishing
 tick's inputs, when each answer reached its Zenoh callback and its thread, when it began
 closing the tick and how long ``World.advance`` and the radio deliveries took); each robot
 process writes one line per control step (when the step's last input reached its
-callback, when its thread began the step, when the answer was published). All times are
-one machine-wide monotonic clock, so the hops line up:
+callback, when the step began, when the answer was published: for robots answering in
+one batch, when the batch was). A robot steps in the callback of its last input, after
+the robots of its process that came before it in the batch, so "input to its step" is
+the wait for those, not a thread hand-off. All times are one machine-wide monotonic
+clock, so the hops line up:
 
     .venv/bin/swarm run --robots 10 --seed 4 --no-record --trace /tmp/trace10
     .venv/bin/python benchmarks/tick_timeline.py /tmp/trace10
@@ -104,8 +107,8 @@ def timeline(folder: Path, skip: int) -> list[str]:
         describe("whole tick (inputs published to inputs published)", ticks),
         describe("world: publish a tick's inputs (sense, frames)", publish),
         describe("world -> robot: inputs published to the robot's callback", to_robot),
-        describe("robot: callback to its thread", robot_handoff),
-        describe("robot: step (decode, controller, encode, publish)", robot_step),
+        describe("robot: input to its step (the process's robots before it)", robot_handoff),
+        describe("robot: step to its answer published (and its batch's)", robot_step),
         describe("robot -> world: answer published to the world's callback", to_world),
         describe("world: callback to its thread", handoff),
         describe("world: inputs published to the last answer taken (barrier)", wait),

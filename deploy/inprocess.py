@@ -57,6 +57,7 @@ def refuse_unsupported(args: argparse.Namespace) -> None:
         (bool(args.kill), "--kill", "it acts on a robot's process, and there is none"),
         (bool(args.restart), "--restart", "it acts on a robot's process, and there is none"),
         (args.robots_per_process is not None, "--robots-per-process", "there are no processes"),
+        (args.no_batch, "--no-batch", "there are no processes"),
         (args.spawn != "fork", "--spawn", "there are no processes to start"),
         (args.connect is not None, "--connect", "it uses no network"),
         (args.secure, "--secure", "it uses no network"),

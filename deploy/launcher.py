@@ -73,7 +73,12 @@ how a run ends (the summary's "ended"), and the exit code of each:
   130  interrupted  by SIGINT (Ctrl-C); 143 by SIGTERM (e.g. timeout(1)); 129 by SIGHUP
 Unless it ended in consensus, the summary lists the undecided robots under "stuck".
 """
-ROBOT_PROCESSES_PER_CORE = 25
+# Robot processes exchange one batch of senses and acts per tick with the world, so fewer,
+# fuller processes are faster: a process carries at least ROBOTS_PER_PROCESS robots (all of
+# a small swarm), and larger swarms spread over ROBOT_PROCESSES_PER_CORE per core
+# (benchmarks/swarm_speed.py, docs/performance.md).
+ROBOTS_PER_PROCESS = 25
+ROBOT_PROCESSES_PER_CORE = 2
 RUN_ID_ENV = "BESTOFN_RUN_ID"
 # Processes that only watch: they stay to the end, and their crash does not end the run.
 OBSERVERS = ("viewer", "foxglove")
@@ -143,6 +148,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="host K robots in each robot process, each robot still with "
         "its own Zenoh session, keys and RNG (default: chosen from the "
         "swarm size and the cores)",
+    )
+    processes.add_argument(
+        "--no-batch",
+        action="store_true",
+        help="a process hosting several robots answers on each robot's own keys, one message "
+        "per robot per tick, instead of one batch per tick (docs/protocol.md); for comparison",
     )
     processes.add_argument(
         "--spawn",
@@ -221,6 +232,7 @@ class RunPlan:
     recorder_args: list[str] = field(default_factory=list)
     faults: list[Fault] = field(default_factory=list)
     robots_per_process: int = 1
+    batch: bool = True  # a process hosting several robots exchanges batches with the world
     byzantine_robots: dict[int, byzantine.Behaviour] = field(default_factory=dict)
     spawn: str = "fork"
     config: dict[str, Any] = field(default_factory=dict)
@@ -248,7 +260,8 @@ class RunPlan:
         )
         agent = RobotAgentConfig(self.seed, self.switches.controller, hosted)
         ids = [arg for robot in robots for arg in ("--id", str(robot))]
-        return [*ids, "--run-id", self.run_id, "--config", settings.encode(agent)]
+        batching = [] if self.batch else ["--no-batch"]
+        return [*ids, *batching, "--run-id", self.run_id, "--config", settings.encode(agent)]
 
     def trace_args(self, process: str) -> list[str]:
         """``--trace DIR/<process>.jsonl`` for a process, when tracing."""
@@ -256,7 +269,16 @@ class RunPlan:
 
 
 # Launcher options that shape no run: kept out of its recorded configuration.
-NOT_CONFIG = {"module", "command", "json", "quiet", "verbose", "trace", *VIEW_OPTIONS}
+NOT_CONFIG = {
+    "module",
+    "command",
+    "json",
+    "quiet",
+    "verbose",
+    "trace",
+    "no_batch",
+    *VIEW_OPTIONS,
+}
 
 
 def plan_from_args(args: argparse.Namespace) -> RunPlan:
@@ -280,7 +302,10 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
                 f"{fault.robot} in a swarm of {args.robots}"
             )
     byzantine_robots = byzantine_plan(robot_faults.byzantine, args.robots, args.sites, args.seed)
-    per_process = args.robots_per_process or default_robots_per_process(args.robots)
+    # A fault acts on one robot's process: one robot per process unless told otherwise.
+    per_process = args.robots_per_process or (
+        1 if faults else default_robots_per_process(args.robots)
+    )
     if faults and per_process > 1:
         raise ValueError(
             "--kill and --restart act on one robot's process: use them with --robots-per-process 1"
@@ -340,6 +365,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         faults=faults,
         config=config,
         robots_per_process=per_process,
+        batch=not args.no_batch,
         byzantine_robots=byzantine_robots,
         spawn=args.spawn,
         observers=observers(args, common, free_port(), free_port()),
@@ -391,11 +417,12 @@ def byzantine_plan(
 
 
 def default_robots_per_process(robots: int, cores: int | None = None) -> int:
-    """One robot per process for small swarms; beyond that, about ROBOT_PROCESSES_PER_CORE
-    processes per core, which measured fastest on a 2-core machine (benchmarks/
-    swarm_speed.py)."""
+    """All of a small swarm in one process; larger ones in ROBOT_PROCESSES_PER_CORE
+    processes per core of at least ROBOTS_PER_PROCESS robots each, which measured fastest
+    on a 2-core machine once senses and acts travel in batches (docs/performance.md)."""
     cores = cores or os.cpu_count() or 1
-    return max(1, math.ceil(robots / (ROBOT_PROCESSES_PER_CORE * cores)))
+    spread = math.ceil(robots / (ROBOT_PROCESSES_PER_CORE * cores))
+    return max(1, min(robots, max(ROBOTS_PER_PROCESS, spread)))
 
 
 class Swarm:

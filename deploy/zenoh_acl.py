@@ -176,6 +176,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
             ["put"],
             [
                 keys.sense("*"),
+                keys.host_sense("*"),
                 keys.camera("*"),
                 keys.radio_rx("*"),
                 keys.world_clock,
@@ -226,13 +227,20 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
     grant_client(WORLD, ["world-speak", "world-alive", "world-serve", "world-asked", *reading])
     for robot in plan.robots:
         identity, name = robot_identity(robot), protocol.radio_name(robot)
-        own_inputs = [keys.sense(robot), keys.camera(robot), keys.radio_rx(name)]
+        # A robot may lead a process hosting several: its session then carries their
+        # senses and acts as batches (each entry sealed with its own robot's key).
+        own_inputs = [
+            keys.sense(robot),
+            keys.host_sense(robot),
+            keys.camera(robot),
+            keys.radio_rx(name),
+        ]
         rules += [
             _rule(
                 f"{identity}-speak",
                 "ingress",
                 ["put"],
-                [keys.act(robot), keys.status(robot), keys.radio_tx(name)],
+                [keys.act(robot), keys.host_act(robot), keys.status(robot), keys.radio_tx(name)],
             ),
             _rule(
                 f"{identity}-alive", "ingress", ["liveliness_token"], [keys.alive("robot", robot)]

@@ -13,6 +13,7 @@ import queue
 import random
 import signal
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -174,10 +175,20 @@ def main(argv: Sequence[str] | None = None) -> int:
             ),
         )
 
+        lock = threading.Lock()  # the beacon: one thread at a time
+
         def on_clock(sample: zenoh.Sample) -> None:
+            """Answered in Zenoh's callback: a wake-up of the main thread per tick was most
+            of the beacon's answer time, and it is in the lockstep barrier."""
             payload = sample.payload.to_bytes()
             extra = sample.attachment.to_bytes() if sample.attachment is not None else None
-            inbox.put(_Input("clock", payload, extra), len(payload) + len(extra or b""))
+            item = _Input("clock", payload, extra)
+            size = len(payload) + len(extra or b"")
+            if size > MAX_MESSAGE_BYTES:  # never valid: the inbox drops and counts it
+                inbox.put(item, size)
+                return
+            with lock:
+                node.handle(item)
 
         def on_world(sample: zenoh.Sample) -> None:
             kind = "world" if sample.kind == zenoh.SampleKind.PUT else "no-world"
@@ -191,11 +202,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             try:
                 item = inbox.get(timeout=0.5)
             except queue.Empty:
-                continue
-            if item.kind == "stop":
+                item = None
+            if item is not None and item.kind == "stop":
                 break
-            node.handle(item)
-            node.rejected += inbox.take_dropped(None)
+            with lock:
+                if item is not None:
+                    node.handle(item)
+                node.rejected += inbox.take_dropped(None)
         token.undeclare()
     log.info("beacon %s stopped (%d rejected clock messages)", name, node.rejected)
     return 0

@@ -27,6 +27,7 @@ import hmac
 import re
 import struct
 from collections.abc import Iterable, Mapping
+from typing import Any
 
 from robot_agent import protocol
 
@@ -86,9 +87,32 @@ def _framed(key_expr: str, metadata: bytes, payload: bytes) -> bytes:
     )
 
 
+_BLOCK = 64  # SHA-256's block size, HMAC's key length
+
+
+@functools.lru_cache(maxsize=4096)
+def _hmac_pads(key: bytes) -> tuple[Any, Any]:
+    """SHA-256 states that have taken in HMAC's inner and outer padded keys (RFC 2104).
+
+    A process tags with a few keys over and over; ``hmac.digest`` starts from the key each
+    time, which made it most of the cost of a tag (4 of 5 microseconds): copying these
+    states is the same HMAC-SHA256, byte for byte (tests/vectors/auth.json)."""
+    if len(key) > _BLOCK:
+        key = hashlib.sha256(key).digest()
+    key = key.ljust(_BLOCK, b"\0")
+    inner = hashlib.sha256(bytes(byte ^ 0x36 for byte in key))
+    outer = hashlib.sha256(bytes(byte ^ 0x5C for byte in key))
+    return inner, outer
+
+
 def tag(key: bytes, key_expr: str, metadata: bytes, payload: bytes) -> bytes:
     """The 16-byte tag of one message: its key expression, metadata and payload."""
-    return hmac.digest(key, _framed(key_expr, metadata, payload), hashlib.sha256)[:TAG_BYTES]
+    inner_pad, outer_pad = _hmac_pads(key)
+    inner = inner_pad.copy()
+    inner.update(_framed(key_expr, metadata, payload))
+    outer = outer_pad.copy()
+    outer.update(inner.digest())
+    return bytes(outer.digest()[:TAG_BYTES])
 
 
 class Keyring:

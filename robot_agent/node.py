@@ -1,8 +1,19 @@
 """``robot-agent``: robots on Zenoh. The only Zenoh code of the robot.
 
 Each robot has its own Zenoh session, keys, liveliness token and RNG; a process can host
-one robot or many (they share one inbox and one thread, and are indistinguishable on the
-wire from single-robot processes). Zenoh callbacks only copy bytes into the inbox.
+one robot or many. A process hosting several robots answers for all of them in one batch
+of acts per input that stepped them, on its first robot's session (``host/<lead>/act``,
+robot_agent/batch.py); the world then sends their senses in one batch too. Each entry is
+sealed with its own robot's key, and every robot keeps its own keys for radio, status,
+camera and liveliness.
+
+Threads: a robot's inputs (sense, batch of senses, radio, camera) are handled in the Zenoh
+callback that brings them, under one lock per process, so the robots of a process are
+stepped by one thread at a time and a tick's step needs no wake-up of another thread (that
+hand-off was a large part of a lockstep tick: docs/performance.md). Nothing queues for
+them: an input waits in Zenoh until the robots are free. The process's own thread handles
+what is rare (the world's liveliness, stop) from a bounded inbox, under the same lock, and
+the inbox still takes what is too big to be a valid input, to drop and count it.
 
 Lockstep: the world's ``sense`` for tick t says how many radio messages and whether a
 camera frame belong to tick t; the robot steps only when all of them are in, so the
@@ -20,6 +31,7 @@ import logging
 import random
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -34,7 +46,7 @@ from plumbing.lifecycle import die_with_launcher
 from plumbing.trace import TraceWriter, now, open_trace
 from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import certificate_name, open_from_args, reliable_publisher
-from robot_agent import auth, byzantine, guard, protocol
+from robot_agent import auth, batch, byzantine, guard, protocol
 from robot_agent.options import AGENT_OPTIONS, RobotAgentConfig, hosted_byzantine
 from robot_agent.ports import RejectCounter, RobotController
 from robot_agent.simulated import SimulatedPorts
@@ -56,7 +68,7 @@ MAX_MESSAGE_BYTES = protocol.MAX_FRAME_BYTES + 1024  # a frame and its attachmen
 @dataclass(frozen=True)
 class Event:
     robot: int
-    kind: str  # sense | camera | rx | world | no-world | stop
+    kind: str  # sense | batch | camera | rx | world | no-world | stop
     payload: bytes = b""
     attachment: bytes | None = None
     arrived: float = 0.0  # monotonic time the callback took it (only when tracing)
@@ -84,6 +96,7 @@ class RobotNode:
         controller: RobotController,
         inbox: BoundedInbox[Event],
         world: protocol.WorldInfo,
+        lock: threading.Lock | None = None,
         keyring: auth.Keyring | None = None,
         trace: TraceWriter | None = None,
     ) -> None:
@@ -93,6 +106,8 @@ class RobotNode:
         self.keys = keys
         self.controller = controller
         self.inbox = inbox
+        # The process's (shared by the robots it hosts): one thread at a time steps them.
+        self.lock = lock or threading.Lock()
         self.lockstep = world.clock == "lockstep"
         self.keyring = keyring  # None: an unauthenticated run
         self.dt = world.dt
@@ -108,6 +123,7 @@ class RobotNode:
         self._declared: list[object] = []
         self.trace = trace  # --trace: one line per step (plumbing/trace.py)
         self._arrived = 0.0  # the arrival time of the event being handled
+        self.host: HostBatch | None = None  # set when its acts go out in its process's batch
 
     @property
     def last_tick(self) -> int:
@@ -124,7 +140,14 @@ class RobotNode:
                 extra = attachment.to_bytes() if attachment is not None else None
                 size = len(payload) + len(extra or b"")
                 arrived = now() if self.trace is not None else 0.0
-                self.inbox.put(Event(robot, kind, payload, extra, arrived), size, robot)
+                event = Event(robot, kind, payload, extra, arrived)
+                if size > MAX_MESSAGE_BYTES:  # never valid: the inbox drops and counts it
+                    self.inbox.put(event, size, robot)
+                    return
+                with self.lock:
+                    self.handle(event)
+                    if self.host is not None:
+                        self.host.flush()
 
             return callback
 
@@ -302,16 +325,22 @@ class RobotNode:
             attachment = self._seal(self._tx_key, sent.payload, sent.meta)
             self._tx.put(sent.payload, attachment=attachment)
         act = protocol.encode(answer.act)
-        self._act.put(act, attachment=self._seal(self._act_key, act))
+        attachment = self._seal(self._act_key, act)
         self.ticks.last = sense.tick
+        step: dict[str, float] | None = None
         if self.trace is not None:
-            self.trace.write(
-                robot=self.robot_id,
-                tick=sense.tick,
-                arrived=round(inputs.arrived, 6),
-                handled=round(handled, 6),
-                answered=round(now(), 6),
-            )
+            step = {
+                "robot": self.robot_id,
+                "tick": sense.tick,
+                "arrived": round(inputs.arrived, 6),
+                "handled": round(handled, 6),
+            }
+        if self.host is not None:
+            self.host.add(batch.Entry(self.robot_id, act, attachment), step)
+        else:
+            self._act.put(act, attachment=attachment)
+            if self.trace is not None and step is not None:
+                self.trace.write(**step, answered=round(now(), 6))
         if self.controller.take_status_change():
             self._publish_status(sense.tick)
 
@@ -337,14 +366,95 @@ class RobotNode:
         return auth.seal(self.keyring, self.identity, key, payload, metadata)
 
 
+class HostBatch:
+    """The batched path of a process hosting several robots: the senses of all of them
+    arrive as one batch on ``host/<lead>/sense``, and the acts of the robots stepped on one
+    event leave as one batch on ``host/<lead>/act``, both on the lead robot's session.
+
+    The world learns the path from the first batch of acts, and until then (and after
+    it restarts) sends each robot's sense on its own key, which every robot still
+    subscribes to; a tick's sense is taken once whichever way it came.
+
+    Like every input, a batch is handled in its Zenoh callback under the process's lock;
+    a robot steps only once all of a tick's inputs are in, whatever order they came in.
+    """
+
+    def __init__(self, nodes: Sequence[RobotNode], inbox: BoundedInbox[Event]) -> None:
+        self.lead = nodes[0]
+        self.by_id = {node.robot_id: node for node in nodes}
+        self.inbox = inbox
+        self.entries: list[batch.Entry] = []
+        self.steps: list[dict[str, float]] = []  # --trace lines of the batched acts
+        self.lock = self.lead.lock
+        with self.lock:
+            for node in nodes:
+                node.host = self
+
+    def start(self) -> None:
+        lead, keys = self.lead, self.lead.keys
+
+        def callback(sample: zenoh.Sample) -> None:
+            payload = sample.payload.to_bytes()
+            arrived = now() if lead.trace is not None else 0.0
+            event = Event(lead.robot_id, "batch", payload, None, arrived)
+            if len(payload) > MAX_MESSAGE_BYTES:  # never valid: the inbox drops and counts it
+                self.inbox.put(event, len(payload), lead.robot_id)
+                return
+            with self.lock:
+                self.deliver(event)
+                self.flush()
+
+        self._subscriber = lead.session.declare_subscriber(keys.host_sense(lead.robot_id), callback)
+        self._publisher = reliable_publisher(lead.session, keys.host_act(lead.robot_id))
+
+    def close(self) -> None:
+        self._subscriber.undeclare()
+
+    def deliver(self, event: Event) -> None:
+        """Hand each entry of a batch of senses to its robot, as if it came on its key."""
+        try:
+            entries = batch.decode(event.payload)
+        except batch.BatchError as error:
+            self.lead._reject("host sense", error)
+            return
+        for robot, payload, attachment in entries:
+            node = self.by_id.get(robot)
+            if node is None:
+                stranger = protocol.ProtocolError(f"robot {robot} is not hosted here")
+                self.lead._reject("host sense", stranger)
+                continue
+            node.handle(Event(robot, "sense", payload, attachment, event.arrived))
+
+    def add(self, entry: batch.Entry, step: dict[str, float] | None) -> None:
+        self.entries.append(entry)
+        if step is not None:
+            self.steps.append(step)
+
+    def flush(self) -> None:
+        """Publish the acts gathered since the last flush, as one batch."""
+        if not self.entries:
+            return
+        self._publisher.put(batch.encode(self.entries))
+        self.entries.clear()
+        trace = self.lead.trace
+        if trace is not None:
+            answered = round(now(), 6)
+            for step in self.steps:
+                trace.write(**step, answered=answered)
+            self.steps.clear()
+
+
 def serve(nodes: Sequence[RobotNode], inbox: BoundedInbox[Event]) -> None:
-    """Feed every node its events until a stop event arrives."""
+    """Feed the nodes the events of their inbox (the world's liveliness) until a stop event
+    arrives; their inputs they handle in Zenoh's callbacks."""
     by_id = {node.robot_id: node for node in nodes}
     while True:
         event = inbox.get()
         if event.kind == "stop":
             return
-        by_id[event.robot].handle(event)
+        node = by_id[event.robot]
+        with node.lock:
+            node.handle(event)
 
 
 # --- command line ------------------------------------------------------------------------
@@ -433,6 +543,12 @@ def build_parser() -> argparse.ArgumentParser:
     AGENT_OPTIONS.add_to(parser)
     settings_cli.add_config_option(parser, RobotAgentConfig)
     parser.add_argument(
+        "--no-batch",
+        action="store_true",
+        help="answer on each robot's own keys even when hosting several robots (by default "
+        "a process hosting several robots exchanges one batch per step with the world)",
+    )
+    parser.add_argument(
         "--trace",
         metavar="PATH",
         default=None,
@@ -467,10 +583,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     inbox: BoundedInbox[Event] = BoundedInbox(
         INBOX_BYTES + INBOX_BYTES_PER_ROBOT * len(args.ids), MAX_MESSAGE_BYTES
     )
+    lock = threading.Lock()  # the robots of this process: one thread at a time
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: inbox.put(Event(-1, "stop")))
     sessions: list[zenoh.Session] = []
     nodes: list[RobotNode] = []
+    host: HostBatch | None = None
     trace = open_trace(args.trace)
     try:
         for requested in args.ids:
@@ -497,18 +615,24 @@ def main(argv: Sequence[str] | None = None) -> int:
                 keys=keys,
                 controller=controller,
                 inbox=inbox,
+                lock=lock,
                 world=info,
                 keyring=keyring.only([identity]) if keyring is not None else None,
                 trace=trace,
             )
             node.start()
             nodes.append(node)
+        if len(nodes) > 1 and not args.no_batch:
+            host = HostBatch(nodes, inbox)
+            host.start()
         log.info("robot(s) %s running", ", ".join(str(node.robot_id) for node in nodes))
         serve(nodes, inbox)
     except (zenoh.ZError, TimeoutError, NoKeyError) as error:
         print(f"robot-agent: {error}", file=sys.stderr)
         return 1
     finally:
+        if host is not None:
+            host.close()
         for node in nodes:
             node.close()
         for session in sessions:

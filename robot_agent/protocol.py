@@ -356,6 +356,15 @@ class Keys:
     def status(self, robot: int | str) -> str:
         return f"{self.prefix}/robot/{robot}/status"
 
+    def host_sense(self, lead: int | str) -> str:
+        """The senses of every robot a process hosts, as one batch (robot_agent/batch.py);
+        ``lead`` is the first robot the process hosts."""
+        return f"{self.prefix}/host/{lead}/sense"
+
+    def host_act(self, lead: int | str) -> str:
+        """The acts of robots one process hosts, as one batch (robot_agent/batch.py)."""
+        return f"{self.prefix}/host/{lead}/act"
+
     def beacon_ack(self, beacon: str) -> str:
         return f"{self.prefix}/beacon/{beacon}/ack"
 
@@ -386,10 +395,11 @@ class Keys:
     def last_chunk(self, key: str) -> str:
         return key.rsplit("/", 1)[-1]
 
-    def robot_of(self, key: str) -> int | None:
-        """The robot id in ``<prefix>/robot/<id>/<leaf>``, or None if it is not one."""
+    def robot_of(self, key: str, section: str = "robot") -> int | None:
+        """The robot id in ``<prefix>/robot/<id>/<leaf>`` (or ``<prefix>/<section>/<id>/<leaf>``:
+        a host's lead robot in ``host/<id>/act``), or None if it is not one."""
         parts = key[len(self.prefix) + 1 :].split("/") if key.startswith(self.prefix + "/") else []
-        if len(parts) == 3 and parts[0] == "robot" and parts[1].isascii() and parts[1].isdigit():
+        if len(parts) == 3 and parts[0] == section and parts[1].isascii() and parts[1].isdigit():
             robot = int(parts[1])
             # One spelling per robot ("7", never "07"): a key names one robot or none.
             return robot if robot < MAX_ROBOTS and str(robot) == parts[1] else None

@@ -37,7 +37,7 @@ from swarm_helpers import (
 from deploy.processes import python_module
 from plumbing import run_keys
 from plumbing.world_info import ask
-from robot_agent import auth, node, protocol
+from robot_agent import auth, batch, node, protocol
 from world_server.layout import make_layout
 
 pytestmark = pytest.mark.timeout(180)
@@ -187,6 +187,56 @@ def test_a_forged_sense_for_the_last_tick_does_not_freeze_a_robot(keys: list[str
         code, summary, stderr = run.finish()
     assert_right_consensus(code, summary, stderr)
     assert summary is not None and summary["per_robot"][0]["rejected"] == 2
+
+
+def test_forged_and_malformed_batches_are_refused_entry_by_entry_and_counted() -> None:
+    """One process hosts the three robots, so robot 0 leads it and the senses and acts go
+    as batches (``host/0/...``). Forged and malformed batches, both ways: each is refused
+    and counted once (a forged entry by the robot it names), and the run goes on."""
+    with attacked_run(*SMALL, "--no-record", "--robots-per-process", "3") as run:
+        run.wait_for_tick(10)
+        act = protocol.encode(
+            protocol.Act(v=1, tick=run.tick + 1, left=0.1, right=0.1, capture=False, radio_tx=0)
+        )
+        forged_act = batch.Entry(1, act, b"\x00" * auth.TAG_BYTES)  # not robot 1's tag
+        sense = protocol.encode(
+            protocol.Sense(
+                v=1,
+                tick=run.tick + 1,
+                t=0.1 * (run.tick + 1),
+                x=0,
+                y=0,
+                theta=0,
+                prox=[0.0] * 8,
+                rx=0,
+                camera=False,
+            )
+        )
+        to_world = [
+            (run.keys.host_act(0), batch.encode([forged_act])),  # the world: 1 (robot 1's tag)
+            (run.keys.host_act(0), b"BNB1\xff\xff"),  # 1: malformed
+            (run.keys.host_act(0), b"\x00" * (batch.MAX_BATCH_BYTES + 1)),  # 1: oversized
+            (run.keys.host_act(99_999), batch.encode([])),  # 1: no robot of the swarm
+        ]
+        to_host = [
+            (run.keys.host_sense(0), batch.encode([batch.Entry(1, sense, None)])),  # robot 1
+            (run.keys.host_sense(0), b"BNB1"),  # robot 0, the lead: malformed
+            (
+                run.keys.host_sense(0),
+                batch.encode([batch.Entry(2, sense, b"tag"), batch.Entry(2, sense, b"tag")]),
+            ),  # robot 0: robot 2 twice
+            (
+                run.keys.host_sense(0),
+                batch.encode([batch.Entry(7, sense, None)]),
+            ),  # robot 0: not hosted
+        ]
+        for key, payload in [*to_world, *to_host]:
+            run.session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+        code, summary, stderr = run.finish()
+    assert_right_consensus(code, summary, stderr)
+    assert summary is not None
+    assert summary["rejected"]["world"] == 4
+    assert [robot["rejected"] for robot in summary["per_robot"]] == [3, 1, 0]
 
 
 # --- mislead ----------------------------------------------------------------------------

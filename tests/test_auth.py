@@ -3,6 +3,8 @@ keys (plumbing/run_keys.py), and a run's private directory (deploy/credentials.p
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import json
 import os
 import stat
@@ -10,6 +12,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from deploy.credentials import RunNetwork
 from plumbing import run_keys
@@ -229,3 +233,13 @@ def test_a_run_on_an_existing_router_makes_no_directory() -> None:
     network = RunNetwork.create("demo", 2, connect="tcp/127.0.0.1:7447", keyed=False)
     assert network.directory is None and network.keyring is None and network.env() == {}
     assert network.world_args() == ["--mode", "client", "--connect", "tcp/127.0.0.1:7447"]
+
+
+@given(st.binary(max_size=100), st.text(max_size=30), st.binary(max_size=40), st.binary())
+def test_a_tag_is_hmac_sha256_whatever_the_key(
+    key: bytes, key_expr: str, metadata: bytes, payload: bytes
+) -> None:
+    """The tag reuses the padded key's hash states (speed); it must stay plain HMAC."""
+    framed = auth._framed(key_expr, metadata, payload)
+    expected = hmac.digest(key, framed, hashlib.sha256)[: auth.TAG_BYTES]
+    assert auth.tag(key, key_expr, metadata, payload) == expected

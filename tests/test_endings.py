@@ -90,14 +90,26 @@ class StopCase:
 
 STOP_CASES = {
     # timeout(1) sends SIGTERM to its whole process group: here, the job's.
-    "sigterm-fork": StopCase(signal.SIGTERM, 143, ["--record", "{tmp}/run.mcap"], 4, True, True),
+    "sigterm-fork": StopCase(
+        signal.SIGTERM,
+        143,
+        ["--record", "{tmp}/run.mcap", "--robots-per-process", "1"],
+        4,
+        True,
+        True,
+    ),
     # A closing terminal hangs up the job; two robots in each robot process.
     "sighup-fork-2-per-process": StopCase(
         signal.SIGHUP, 129, ["--no-record", "--robots-per-process", "2"], 2, True, False
     ),
     # Ctrl-C, with robots started as fresh interpreters.
     "sigint-exec": StopCase(
-        signal.SIGINT, 130, ["--no-record", "--spawn", "exec"], 4, False, False
+        signal.SIGINT,
+        130,
+        ["--no-record", "--spawn", "exec", "--robots-per-process", "1"],
+        4,
+        False,
+        False,
     ),
 }
 

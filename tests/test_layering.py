@@ -24,6 +24,7 @@ PURE = [
     "robot_agent/navigation.py",
     "robot_agent/vision.py",
     "robot_agent/protocol.py",
+    "robot_agent/batch.py",
     "robot_agent/ports.py",
     "robot_agent/simulated.py",
     "robot_agent/auth.py",

@@ -180,7 +180,7 @@ def test_keys_never_show_on_a_command_line_and_the_default_listens_on_no_port(
     tmp.mkdir()
     run_id = unique_run_id("no-leak")
     command = swarm_command("run", "--run-id", run_id, "--quiet", *SMALL, "--no-record")
-    command += ["--clock", "realtime", "--speed", "2"]
+    command += ["--clock", "realtime", "--speed", "2", "--robots-per-process", "1"]
     # Output to a file, not a pipe: waiting for the launcher must not wait for whatever
     # else holds the pipe open.
     log = (tmp_path / "launcher.log").open("wb")

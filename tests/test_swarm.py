@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -92,6 +93,8 @@ def test_killing_a_robot_mid_run_does_not_hang_the_world() -> None:
             endpoint,
             "--spawn",
             "exec",
+            "--robots-per-process",
+            "1",
         )
         process = subprocess.Popen(
             command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE
@@ -262,8 +265,10 @@ def test_alpha_without_threshold_is_a_usage_error_not_a_traceback() -> None:
     assert "threshold" in done.stderr.decode()
 
 
-def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run() -> None:
-    """Same seed: the distributed run and the single-process run agree robot by robot."""
+def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run(tmp_path: Path) -> None:
+    """Same seed: the distributed run and the single-process run agree robot by robot. Over
+    Zenoh, robots 0-4 share a process that exchanges batches with the world, and robot 5
+    has one of its own, on its own keys (the world's timeline says which went how)."""
     from deploy.inmemory import run_in_memory
     from robot_agent import node, options
     from world_server import server
@@ -275,10 +280,15 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run() -> None:
     )
     controller_config = options.controller_config(node.build_parser().parse_args(["--id", "0"]))
     in_memory = run_in_memory(world_config, controller_config, timeout=900)
+    trace = tmp_path / "trace"
+    hosts = ["--robots-per-process", "5", "--trace", str(trace)]
     code, over_zenoh, stderr = run_swarm(
-        [*common, "--timeout", "900", "--no-record"], unique_run_id("vs-memory")
+        [*common, "--timeout", "900", "--no-record", *hosts], unique_run_id("vs-memory")
     )
     assert code == 0, stderr
+    ticks = [json.loads(line) for line in (trace / "world.jsonl").read_text().splitlines()]
+    # From the second tick on, robots 0-4 are sensed in their process's batch.
+    assert {tick["batched"] for tick in ticks[2:]} == {5}
 
     def decisions(summary: dict[str, Any]) -> list[tuple[object, ...]]:
         return [

@@ -230,7 +230,9 @@ def test_a_robot_cannot_speak_for_another_robot_or_the_world(swarm: Swarm) -> No
             KEYS.act(2),
             KEYS.status(2),
             KEYS.radio_tx(2),  # another robot's
+            KEYS.host_act(2),  # the batch of another robot's process
             KEYS.sense(1),
+            KEYS.host_sense(1),
             KEYS.camera(1),
             KEYS.radio_rx(1),
             KEYS.world_clock,  # the world's
@@ -241,11 +243,12 @@ def test_a_robot_cannot_speak_for_another_robot_or_the_world(swarm: Swarm) -> No
             robot.put(key, b"spoofed")
         spoofed_token = robot.liveliness().declare_token(KEYS.alive("robot", 2))
         own_token = robot.liveliness().declare_token(KEYS.alive("robot", 1))
+        robot.put(KEYS.host_act(1), b"batch")  # the acts of the process it leads
         robot.put(KEYS.act(1), b"sentinel")  # sent after the forbidden ones, on the same link
         heard.wait_for(KEYS.act(1))
         alive.wait_for(KEYS.alive("robot", 1))
         time.sleep(SETTLE)
-        assert heard.heard_keys() == {KEYS.status(1), KEYS.act(1)}
+        assert heard.heard_keys() == {KEYS.status(1), KEYS.host_act(1), KEYS.act(1)}
         assert alive.heard_keys() == {KEYS.alive("robot", 1)}
         spoofed_token.undeclare()
         own_token.undeclare()
@@ -326,15 +329,21 @@ def test_the_world_senses_for_each_robot_and_only_that_robot_hears_it(swarm: Swa
         robot_1.declare_subscriber(KEYS.sense(1), robot_1_hears)
         robot_2.declare_subscriber(KEYS.sense(1), robot_2_hears)  # not its own: refused
         robot_2.declare_subscriber(KEYS.sense(2), robot_2_hears)
+        robot_1.declare_subscriber(KEYS.host_sense(1), robot_1_hears)  # its process's batch
+        robot_2.declare_subscriber(KEYS.host_sense(1), robot_2_hears)  # another's: refused
         senses = {
             robot: zenoh_session.reliable_publisher(world, KEYS.sense(robot)) for robot in (1, 2)
         }
+        batched = zenoh_session.reliable_publisher(world, KEYS.host_sense(1))
         put_until_heard(senses[1], KEYS.sense(1), robot_1_hears)
         put_until_heard(senses[2], KEYS.sense(2), robot_2_hears)
+        put_until_heard(batched, KEYS.host_sense(1), robot_1_hears)
         senses[1].put(b"sense 1")
         senses[2].put(b"sense 2")
+        batched.put(b"batch 1")
         assert until(lambda: (KEYS.sense(1), b"sense 1") in robot_1_hears.received)
         assert until(lambda: (KEYS.sense(2), b"sense 2") in robot_2_hears.received)
+        assert until(lambda: (KEYS.host_sense(1), b"batch 1") in robot_1_hears.received)
         time.sleep(SETTLE)
         assert robot_2_hears.heard_keys() == {KEYS.sense(2)}
 

@@ -56,7 +56,7 @@ from plumbing import cliargs, run_keys, settings_cli
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.settings_cli import Options
-from robot_agent import auth, protocol, settings
+from robot_agent import auth, batch, protocol, settings
 from robot_agent.settings import Flag
 from world_server import foxglove
 from world_server.layout import Layout, make_layout
@@ -327,6 +327,7 @@ class McapRecorder:
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, _Channel] = {}
         self._routes: dict[str, tuple[Callable[[Sample], None], str | None]] = {}
+        self._host_prefix = f"{keys.prefix}/host/"
         self._decoders: dict[str, msgspec.json.Decoder[Any]] = {
             name: msgspec.json.Decoder(kind_type)
             for name, kind_type in (
@@ -410,7 +411,11 @@ class McapRecorder:
     # --- samples -------------------------------------------------------------------
 
     def record(self, sample: Sample) -> None:
-        """Record one sample, in the order samples arrived."""
+        """Record one sample, in the order samples arrived; a batch (``host/<lead>/sense``
+        or ``act``, robot_agent/batch.py) as the robots' own messages it carries."""
+        if sample.key.startswith(self._host_prefix):
+            self._record_batch(sample)
+            return
         route = self._routes.get(sample.key)
         if route is None:
             route = self._routes[sample.key] = self._route(sample.key)
@@ -429,6 +434,20 @@ class McapRecorder:
         except Exception as error:  # a recorder bug must not cost the rest of the run
             log.exception("failed to record a sample on %s", sample.key)
             self._reject(sample, f"recorder error: {error!r}")
+
+    def _record_batch(self, sample: Sample) -> None:
+        leaf = sample.key.rsplit("/", 1)[-1]
+        if self.keys.robot_of(sample.key, "host") is None or leaf not in ("sense", "act"):
+            self._reject(sample, "not a key of the protocol")
+            return
+        try:
+            entries = batch.decode(sample.payload)
+        except batch.BatchError as error:
+            self._reject(sample, f"batch: {error}")
+            return
+        per_robot = self.keys.sense if leaf == "sense" else self.keys.act
+        for robot, payload, attachment in entries:
+            self.record(Sample(per_robot(robot), payload, attachment, sample.wall_ns))
 
     def _speaker(self, key: str) -> str:
         """The identity whose key tags a sample on ``key`` (a key of the protocol)."""

@@ -19,6 +19,7 @@ import signal
 import sys
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -36,7 +37,7 @@ from plumbing.zenoh_session import (
     reliable_put,
     session_mode,
 )
-from robot_agent import auth, protocol
+from robot_agent import auth, batch, protocol
 from world_server.clock import Barrier, Pacer
 from world_server.options import WORLD_SERVER_OPTIONS, WorldServerConfig, world_server_config
 from world_server.world import Transmission, World, WorldConfig
@@ -49,13 +50,13 @@ MAX_BEACONS = 16  # beacon tokens the world takes part in its barrier
 MAX_TX_PER_TICK = 1000  # radio messages one sender may send in one tick (Act.radio_tx's bound)
 MAX_LOGGED_KEYS = 1000  # keys whose first rejection is logged; then one line says so
 INBOX_BYTES = 256 * 2**20  # what may wait for the world's thread, at most
-# The largest valid message: a radio payload and its attachment (tag and metadata).
-MAX_MESSAGE_BYTES = protocol.MAX_PAYLOAD_BYTES + 1024
+# The largest valid message: a batch of acts (a radio payload and its attachment, alone).
+MAX_MESSAGE_BYTES = max(batch.MAX_BATCH_BYTES, protocol.MAX_PAYLOAD_BYTES + 1024)
 
 
 @dataclass(frozen=True)
 class Event:
-    kind: str  # act | ack | tx | alive | gone | stats | stop
+    kind: str  # act | acts | ack | tx | alive | gone | stats | stop
     key: str = ""
     payload: bytes = b""
     attachment: bytes | None = None
@@ -114,16 +115,22 @@ class WorldServer:
         self.assigned: set[int] = set()  # ids handed out on world/join
         self._info_bytes = protocol.encode(world.info)
         self._sense_publishers: dict[int, zenoh.Publisher] = {}
+        # Robots whose process answers in batches: robot -> the process's lead robot. Their
+        # senses go out in one batch per process; learnt from the first authentic act in a
+        # batch, forgotten when the lead's liveliness goes (robot_agent/batch.py).
+        self.hosts: dict[int, int] = {}
+        self._batch_publishers: dict[int, zenoh.Publisher] = {}
         self._declared: list[Any] = []
         self.trace = trace  # --trace: one line per tick (plumbing/trace.py)
         self._tick_trace: dict[str, Any] = {}
         # Built once: every act and radio message of every tick goes through it.
-        self._handlers: dict[str, Callable[[Event], None]] = {
+        self._handlers: dict[str, Callable[[Event], object]] = {
             "act": self._handle_act,
+            "acts": self._handle_acts,
             "ack": self._handle_ack,
             "tx": self._handle_tx,
             "alive": self._handle_alive,
-            "gone": self._handle_gone,
+            "gone": self._handle_departure,
             "stats": self._handle_stats,
             "join": self._handle_join,
             "refused": lambda event: self._reject(event.key, event.payload.decode()),
@@ -169,6 +176,7 @@ class WorldServer:
         keys, session = self.keys, self.session
         self._declared = [
             session.declare_subscriber(keys.act("*"), self._on_sample("act")),
+            session.declare_subscriber(keys.host_act("*"), self._on_sample("acts")),
             session.declare_subscriber(keys.beacon_ack("*"), self._on_sample("ack")),
             session.declare_subscriber(keys.radio_tx("*"), self._on_sample("tx")),
             session.liveliness().declare_subscriber(
@@ -297,22 +305,43 @@ class WorldServer:
         robot = int(name)
         return robot if self.world.is_member(robot) else None
 
-    def _handle_act(self, event: Event) -> None:
+    def _handle_acts(self, event: Event) -> None:
+        """A batch of acts from a process hosting several robots: each entry is checked as
+        the act it carries (its robot's tag on ``robot/<id>/act``), and the robots of the
+        authentic ones get their next senses in one batch to that process."""
+        lead = self.keys.robot_of(event.key, "host")
+        if lead is None or not self.world.is_member(lead):
+            self._reject(event.key, "not a robot of the swarm")
+            return
+        try:
+            entries = batch.decode(event.payload)
+        except batch.BatchError as error:
+            self._reject(event.key, error)
+            return
+        for robot, payload, attachment in entries:
+            act_event = Event(
+                "act", self.keys.act(robot), payload, attachment, arrived=event.arrived
+            )
+            if self._handle_act(act_event):
+                self.hosts[robot] = lead
+
+    def _handle_act(self, event: Event) -> bool:
+        """Take one robot's act; whether it was authentic and well formed (even if late)."""
         robot = self.keys.robot_of(event.key)
         if robot is None or not self.world.is_member(robot):
             self._reject(event.key, "not a robot of the swarm")
-            return
+            return False
         if not self._authentic(event, auth.robot_identity(robot)):
-            return
+            return False
         try:
             act = protocol.decode(event.payload, protocol.Act)
         except protocol.ProtocolError as error:
             self._reject(event.key, error)
-            return
+            return False
         if not self.lockstep:
             if robot in self.world.live_robots():
                 self.acts[robot] = act
-            return
+            return True
         self.counters.missed.pop(f"robot/{robot}", None)  # it is alive: wait for it again
         if self.barrier.answer(act.tick, f"robot/{robot}", act.radio_tx):
             self.acts[robot] = act
@@ -320,6 +349,7 @@ class WorldServer:
                 self._trace_answer(event, f"robot/{robot}")
         else:
             self._unexpected_answer(event.key, act.tick)
+        return True
 
     def _handle_ack(self, event: Event) -> None:
         name = self.keys.last_chunk(event.key.rsplit("/", 1)[0])
@@ -443,6 +473,18 @@ class WorldServer:
             self.world.leave_beacon(ident)
             self.barrier.leave(f"beacon/{ident}")
 
+    def _handle_departure(self, event: Event) -> None:
+        """A liveliness token went: a robot's process that answered in batches may be gone
+        (its lead's token), so its robots' senses go to their own keys again until a batch
+        says otherwise (a restarted process may host other robots, or none)."""
+        token = self._token(event, count=False)
+        if token is not None and token[0] == "robot":
+            gone = int(token[1])
+            self.hosts = {
+                robot: lead for robot, lead in self.hosts.items() if gone not in (robot, lead)
+            }
+        self._handle_gone(event)
+
     def _handle_join(self, event: Event) -> None:
         """Give a robot started with ``--id auto`` an id: the smallest never handed out,
         else (a replacement container) the smallest whose robot is not running."""
@@ -554,6 +596,11 @@ class WorldServer:
 
     def _open_tick(self, tick: int, rx_counts: dict[str, int], frames: dict[int, bytes]) -> None:
         opening = now() if self.trace is not None else 0.0
+        # The clock first: the beacon, in the barrier too, answers while the senses go out.
+        clock = protocol.encode(protocol.Clock(v=protocol.VERSION, tick=tick, t=self.world.t))
+        self._clock_publisher.put(
+            clock, attachment=self._seal(auth.WORLD, self.keys.world_clock, clock)
+        )
         spec = self.world.config.camera
         for robot, frame in frames.items():
             meta = protocol.CameraMeta(
@@ -567,19 +614,33 @@ class WorldServer:
             attachment = self._seal(auth.robot_identity(robot), key, frame, protocol.encode(meta))
             reliable_put(self.session, key, frame, attachment)
         robots = self.world.live_robots()
+        batches: dict[int, list[batch.Entry]] = {}
+        # A process's batch leaves as soon as its robots' senses are made, so it steps them
+        # while this thread makes the next process's.
+        batch_sizes = Counter(self.hosts[robot] for robot in robots if robot in self.hosts)
         for robot in robots:
             sense = self.world.sense(
                 robot, rx_counts.get(protocol.radio_name(robot), 0), robot in frames
             )
-            publisher = self._sense_publishers.get(robot)
-            if publisher is None:
-                publisher = reliable_publisher(self.session, self.keys.sense(robot))
-                self._sense_publishers[robot] = publisher
             payload = protocol.encode(sense)
-            publisher.put(
-                payload,
-                attachment=self._seal(auth.robot_identity(robot), self.keys.sense(robot), payload),
-            )
+            key = self.keys.sense(robot)
+            attachment = self._seal(auth.robot_identity(robot), key, payload)
+            lead = self.hosts.get(robot)
+            if lead is None:
+                publisher = self._sense_publishers.get(robot)
+                if publisher is None:
+                    publisher = reliable_publisher(self.session, key)
+                    self._sense_publishers[robot] = publisher
+                publisher.put(payload, attachment=attachment)
+                continue
+            entries = batches.setdefault(lead, [])
+            entries.append(batch.Entry(robot, payload, attachment))
+            if len(entries) == batch_sizes[lead]:
+                publisher = self._batch_publishers.get(lead)
+                if publisher is None:
+                    publisher = reliable_publisher(self.session, self.keys.host_sense(lead))
+                    self._batch_publishers[lead] = publisher
+                publisher.put(batch.encode(entries))
         participants = [f"robot/{robot}" for robot in robots]
         participants += [f"beacon/{name}" for name in self.world.beacons()]
         # A controller that went silent (hung, not gone) is not waited for until it
@@ -587,10 +648,6 @@ class WorldServer:
         self.barrier.open(
             tick,
             [who for who in participants if self.counters.missed.get(who, 0) < SUSPEND_AFTER],
-        )
-        clock = protocol.encode(protocol.Clock(v=protocol.VERSION, tick=tick, t=self.world.t))
-        self._clock_publisher.put(
-            clock, attachment=self._seal(auth.WORLD, self.keys.world_clock, clock)
         )
         if tick % self.state_every == 0:
             self._publish_state()
@@ -600,6 +657,7 @@ class WorldServer:
                 "robots": len(robots),
                 "frames": len(frames),
                 "rx": sum(rx_counts.values()),
+                "batched": sum(len(entries) for entries in batches.values()),
                 "open_start": round(opening, 6),
                 "opened": round(now(), 6),
             }
