@@ -176,6 +176,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
 
         lock = threading.Lock()  # the beacon: one thread at a time
+        stopped = threading.Event()  # set under the lock: later clocks are not answered
 
         def on_clock(sample: zenoh.Sample) -> None:
             """Answered in Zenoh's callback: a wake-up of the main thread per tick was most
@@ -188,7 +189,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 inbox.put(item, size)
                 return
             with lock:
-                node.handle(item)
+                if not stopped.is_set():
+                    node.handle(item)
 
         def on_world(sample: zenoh.Sample) -> None:
             kind = "world" if sample.kind == zenoh.SampleKind.PUT else "no-world"
@@ -204,6 +206,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             except queue.Empty:
                 item = None
             if item is not None and item.kind == "stop":
+                with lock:
+                    stopped.set()
                 break
             with lock:
                 if item is not None:

@@ -108,6 +108,9 @@ class RobotNode:
         self.inbox = inbox
         # The process's (shared by the robots it hosts): one thread at a time steps them.
         self.lock = lock or threading.Lock()
+        # Set under the lock when the process stops: a callback that comes after does
+        # nothing, so none publishes on a session being closed.
+        self.closed = False
         self.lockstep = world.clock == "lockstep"
         self.keyring = keyring  # None: an unauthenticated run
         self.dt = world.dt
@@ -145,6 +148,8 @@ class RobotNode:
                     self.inbox.put(event, size, robot)
                     return
                 with self.lock:
+                    if self.closed:
+                        return
                     self.handle(event)
                     if self.host is not None:
                         self.host.flush()
@@ -401,6 +406,8 @@ class HostBatch:
                 self.inbox.put(event, len(payload), lead.robot_id)
                 return
             with self.lock:
+                if self.lead.closed:
+                    return
                 self.deliver(event)
                 self.flush()
 
@@ -631,6 +638,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"robot-agent: {error}", file=sys.stderr)
         return 1
     finally:
+        with lock:  # once held, no callback is stepping a robot, and none will after
+            for node in nodes:
+                node.closed = True
         if host is not None:
             host.close()
         for node in nodes:
