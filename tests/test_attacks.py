@@ -239,6 +239,30 @@ def test_forged_and_malformed_batches_are_refused_entry_by_entry_and_counted() -
     assert [robot["rejected"] for robot in summary["per_robot"]] == [3, 1, 0]
 
 
+def test_a_copied_act_in_another_process_s_batch_does_not_divert_a_robot_s_senses() -> None:
+    """Robot 1's own act, authentic but already answered, copied by an eavesdropper into a
+    batch on robot 2's process key: it must not teach the world that robot 1 answers from
+    robot 2's process, or robot 1's senses would go where nobody hears them."""
+    with attacked_run(*SMALL, "--no-record", "--robots-per-process", "1") as run:
+        seen: list[tuple[bytes, bytes | None]] = []
+
+        def on_act(sample: zenoh.Sample) -> None:
+            attachment = sample.attachment
+            seen.append((sample.payload.to_bytes(), attachment.to_bytes() if attachment else None))
+
+        subscriber = run.session.declare_subscriber(run.keys.act(1), on_act)
+        run.wait_for_tick(10)
+        subscriber.undeclare()
+        payload, attachment = seen[-1]
+        copied = batch.encode([batch.Entry(1, payload, attachment)])
+        run.session.put(
+            run.keys.host_act(2), copied, congestion_control=zenoh.CongestionControl.BLOCK
+        )
+        code, summary, stderr = run.finish()
+    assert_right_consensus(code, summary, stderr)
+    assert summary is not None and summary["world"]["stalls"] == 0
+
+
 # --- mislead ----------------------------------------------------------------------------
 
 

@@ -326,7 +326,9 @@ class WorldServer:
                 self.hosts[robot] = lead
 
     def _handle_act(self, event: Event) -> bool:
-        """Take one robot's act; whether it was authentic and well formed (even if late)."""
+        """Take one robot's act; whether it was taken as the robot's answer to the tick
+        under way. Only such an act teaches the world a batch route: an old act of robot r,
+        copied into a batch on another process's key, must not divert r's senses there."""
         robot = self.keys.robot_of(event.key)
         if robot is None or not self.world.is_member(robot):
             self._reject(event.key, "not a robot of the swarm")
@@ -339,17 +341,18 @@ class WorldServer:
             self._reject(event.key, error)
             return False
         if not self.lockstep:
-            if robot in self.world.live_robots():
-                self.acts[robot] = act
-            return True
+            if robot not in self.world.live_robots():
+                return False
+            self.acts[robot] = act
+            return act.tick == self.world.tick
         self.counters.missed.pop(f"robot/{robot}", None)  # it is alive: wait for it again
         if self.barrier.answer(act.tick, f"robot/{robot}", act.radio_tx):
             self.acts[robot] = act
             if self.trace is not None:
                 self._trace_answer(event, f"robot/{robot}")
-        else:
-            self._unexpected_answer(event.key, act.tick)
-        return True
+            return True
+        self._unexpected_answer(event.key, act.tick)
+        return False
 
     def _handle_ack(self, event: Event) -> None:
         name = self.keys.last_chunk(event.key.rsplit("/", 1)[0])
