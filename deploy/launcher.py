@@ -751,6 +751,17 @@ class Swarm:
             if robot not in self.plan.byzantine_robots
         )
 
+    def last_decision_time(self) -> float:
+        """The sim time at which the last running robot decided (0 if none did)."""
+        return max(
+            (
+                status.decision_time or 0.0
+                for robot in self.live_robots()
+                if (status := self.records[robot].status) is not None
+            ),
+            default=0.0,
+        )
+
     def stalled(self) -> bool:
         """No undecided robot made progress for the stall window (a restart to come will)."""
         return (
@@ -1081,7 +1092,11 @@ def _watch(swarm: Swarm, console: Console, quiet: bool) -> Ending:
                 else "waiting for the robots to join",
             )
             if swarm.started_at is not None and swarm.all_live_decided():
-                return Ending("decided")
+                # A fast swarm can pass the limit between two looks: what counts is when
+                # the last robot decided, in sim time, not when the launcher noticed.
+                if swarm.last_decision_time() <= plan.timeout:
+                    return Ending("decided")
+                return Ending("timeout", timeout_kind="sim")
             if swarm.sim_time >= plan.timeout:
                 return Ending("timeout", timeout_kind="sim")
             wall = time.monotonic() - swarm.launched_at
