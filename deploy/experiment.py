@@ -435,6 +435,10 @@ def run(args: argparse.Namespace) -> int:
             recordings,
             args.out,
             warn=lambda text: print(f"swarm report: {text}", file=sys.stderr),
+            # A recorder that fell behind leaves no summary in its file: the run's own.
+            launcher_summaries={
+                result.spec.recording: result.summary for result in results if result.summary
+            },
         )
         output.update(report.as_json())
         if not args.json:

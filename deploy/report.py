@@ -30,7 +30,7 @@ import re
 import statistics
 import sys
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -324,13 +324,20 @@ ROBOT_FIELDS: dict[str, tuple[type, ...]] = {
 }
 
 
-def run_summary(recording: Recording, warn: Any = None) -> dict[str, Any]:
-    """The run's summary: the launcher's if recorded, else rebuilt from status messages.
+def run_summary(
+    recording: Recording, warn: Any = None, launcher: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """The run's summary: the launcher's if recorded; else ``launcher``, the summary the
+    launcher printed, when its caller has it (a recorder that fell behind leaves its file
+    unfinished, without one); else rebuilt from status messages.
 
     A recorded summary missing a field the report needs (or holding it in the wrong
     type) gets that field from the rebuilt summary, and ``warn`` is told which.
     """
     recorded = recording.summary
+    source = "metadata"
+    if recorded is None and launcher is not None:
+        recorded, source = launcher, "launcher"
     if recorded is None:
         return {
             **rebuild_summary(recording),
@@ -348,7 +355,7 @@ def run_summary(recording: Recording, warn: Any = None) -> dict[str, Any]:
                 f"{', '.join(unusable)}; taken from the status messages instead"
             )
     summary["ended"] = recorded_ending(summary)
-    return {**summary, "source": "metadata", "complete": recording.complete}
+    return {**summary, "source": source, "complete": recording.complete}
 
 
 def unusable_fields(summary: dict[str, Any]) -> list[str]:
@@ -817,8 +824,10 @@ def write_report(
     robot: int | None = None,
     per_run: bool = False,
     warn: Any = None,
+    launcher_summaries: Mapping[Path, dict[str, Any]] | None = None,
 ) -> Report:
-    """Read every recording, write the figures and tables into ``out``."""
+    """Read every recording, write the figures and tables into ``out``; a recording
+    without the launcher's summary takes it from ``launcher_summaries`` if there."""
     out.mkdir(parents=True, exist_ok=True)
     recordings: list[Recording] = []
     unreadable: list[str] = []
@@ -833,7 +842,10 @@ def write_report(
         if recording.problem and warn is not None:
             warn(f"{path}: {recording.problem}; reporting what was recorded")
         recordings.append(recording)
-    summaries = [run_summary(recording, warn) for recording in recordings]
+    launchers = launcher_summaries or {}
+    summaries = [
+        run_summary(recording, warn, launchers.get(recording.path)) for recording in recordings
+    ]
     order = sorted(
         range(len(recordings)),
         key=lambda i: (

@@ -188,6 +188,25 @@ def test_a_cut_short_recording_is_reported_from_its_status_messages(
     assert (tmp_path / "p" / "fig4.png").read_bytes().startswith(PNG_MAGIC)
 
 
+def test_a_cut_short_recording_takes_the_launchers_printed_summary_when_given(
+    tmp_path: Path,
+) -> None:
+    """What ``swarm experiment`` does when a recorder fell behind and left its file without
+    the summary: the run's own (here: all decided) beats the truncated status messages."""
+    whole = tmp_path / "whole.mcap"
+    before_last, _ = make_recording(whole, "made-d", finish=False)
+    full = report.rebuild_summary(report.read_recording(whole))
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(whole.read_bytes()[: before_last + 20])
+    alone = report.write_report([cut], tmp_path / "alone")
+    given = report.write_report([cut], tmp_path / "given", launcher_summaries={cut: full})
+    (alone_row,) = alone.as_json()["runs"]
+    (given_row,) = given.as_json()["runs"]
+    assert (alone_row["source"], alone_row["decided"]) == ("status messages", 2)
+    assert (given_row["source"], given_row["decided"]) == ("launcher", 3)
+    assert given_row["complete"] is False and given_row["ended"] == "consensus"
+
+
 def test_runs_are_grouped_by_swarm_size_and_sites(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
