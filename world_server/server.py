@@ -130,7 +130,7 @@ class WorldServer:
             "ack": self._handle_ack,
             "tx": self._handle_tx,
             "alive": self._handle_alive,
-            "gone": self._handle_departure,
+            "gone": self._handle_gone,
             "stats": self._handle_stats,
             "join": self._handle_join,
             "refused": lambda event: self._reject(event.key, event.payload.decode()),
@@ -458,35 +458,30 @@ class WorldServer:
             self.pending_joins.append(token)
 
     def _handle_gone(self, event: Event) -> None:
+        """A liveliness token went. A robot's process that answered in batches may be gone
+        with it (its lead's token), so its robots' senses go to their own keys again until
+        a batch says otherwise (a restarted process may host other robots, or none)."""
         token = self._token(event, count=False)
         if token is None:
             return
         role, ident = token
         self.pending_joins = [join for join in self.pending_joins if join != token]
         if role == "robot":
-            if int(ident) in self.world.live_robots():
+            gone = int(ident)
+            self.hosts = {
+                robot: lead for robot, lead in self.hosts.items() if gone not in (robot, lead)
+            }
+            if gone in self.world.live_robots():
                 self.counters.departures += 1
             log.warning("robot %s left (liveliness lost); its body stays as an obstacle", ident)
-            self.world.leave_robot(int(ident))
-            self.acts.pop(int(ident), None)
+            self.world.leave_robot(gone)
+            self.acts.pop(gone, None)
             self.barrier.leave(f"robot/{ident}")
         elif ident in self.world.beacons():
             self.counters.departures += 1
             log.warning("beacon %s left", ident)
             self.world.leave_beacon(ident)
             self.barrier.leave(f"beacon/{ident}")
-
-    def _handle_departure(self, event: Event) -> None:
-        """A liveliness token went: a robot's process that answered in batches may be gone
-        (its lead's token), so its robots' senses go to their own keys again until a batch
-        says otherwise (a restarted process may host other robots, or none)."""
-        token = self._token(event, count=False)
-        if token is not None and token[0] == "robot":
-            gone = int(token[1])
-            self.hosts = {
-                robot: lead for robot, lead in self.hosts.items() if gone not in (robot, lead)
-            }
-        self._handle_gone(event)
 
     def _handle_join(self, event: Event) -> None:
         """Give a robot started with ``--id auto`` an id: the smallest never handed out,
