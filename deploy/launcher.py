@@ -80,6 +80,11 @@ Unless it ended in consensus, the summary lists the undecided robots under "stuc
 ROBOTS_PER_PROCESS = 25
 ROBOT_PROCESSES_PER_CORE = 2
 RUN_ID_ENV = "BESTOFN_RUN_ID"
+# Waiting for the recorder after the run: given up once its file has not grown for
+# RECORDER_PATIENCE wall seconds, and after RECORDER_LONGEST_WAIT in any case.
+RECORDER_PATIENCE = 60.0
+RECORDER_LONGEST_WAIT = 3600.0
+RECORDER_REPORT_EVERY = 10.0
 # Processes that only watch: they stay to the end, and their crash does not end the run.
 OBSERVERS = ("viewer", "foxglove")
 # Each observer's certificate in secure mode: a reader with its own token (and the page
@@ -440,6 +445,7 @@ class Swarm:
         self.robot_children: dict[int, Child] = {}
         self.world: Child | None = None
         self.recorder: Child | None = None
+        self.recording_problem = "it was not running"
         self.network: RunNetwork | None = None  # made when the run starts
         self.events: BoundedInbox[tuple[str, str, bytes, bytes | None]] = BoundedInbox(
             EVENTS_BYTES, MAX_EVENT_BYTES
@@ -824,15 +830,28 @@ class Swarm:
             return None
         return None
 
-    def finish_recording(self, summary: dict[str, Any]) -> bool:
-        """Hand the summary to the recorder and wait until the file is complete."""
+    def finish_recording(
+        self, summary: dict[str, Any], say: Callable[[str], None] | None = None
+    ) -> bool:
+        """Hand the summary to the recorder and wait until the file is complete: as long as
+        the recorder is alive and its file grows (it writes what it fell behind on first)."""
         if self.session is None or self.recorder is None or not self.recorder.alive():
             return False
+        assert self.plan.record is not None  # a recorder runs only with a file to write
+        waiting = RecorderProgress(self.plan.record, self.recorder.alive, say)
         payload = json.dumps(summary).encode()
         key = self.keys.recorder_finish
         answers, _ = ask(
-            self.session, key, self.keyring, auth.LAUNCHER, payload=payload, timeout=30.0
+            self.session,
+            key,
+            self.keyring,
+            auth.LAUNCHER,
+            payload=payload,
+            timeout=RECORDER_LONGEST_WAIT,
+            worth_waiting=waiting,
         )
+        if not answers:
+            self.recording_problem = waiting.why_not()
         return bool(answers)
 
     def close(self) -> None:
@@ -847,6 +866,58 @@ class Swarm:
         self.group.stop_all()
         if self.network is not None:
             self.network.close()  # its socket, certificates and keys
+
+
+class RecorderProgress:
+    """Whether waiting for the recorder still makes sense: it is alive and its file grew
+    within ``RECORDER_PATIENCE`` wall seconds. A recorder at low priority falls behind a
+    large swarm (docs/recording.md) and catches up once the swarm stops; ``say`` hears how
+    far it got every ``RECORDER_REPORT_EVERY`` seconds."""
+
+    def __init__(
+        self,
+        path: Path,
+        alive: Callable[[], bool],
+        say: Callable[[str], None] | None = None,
+        patience: float = 0.0,
+    ) -> None:
+        self.path = path
+        self.alive = alive
+        self.say = say
+        self.patience = patience or RECORDER_PATIENCE
+        self.started = self.grew_at = self.reported_at = time.monotonic()
+        self.size = self._size()
+        self.died = False
+
+    def _size(self) -> int:
+        try:
+            return self.path.stat().st_size
+        except OSError:
+            return 0
+
+    def __call__(self) -> bool:
+        now = time.monotonic()
+        if not self.alive():
+            self.died = True
+            return False
+        size = self._size()
+        if size > self.size:
+            self.size, self.grew_at = size, now
+        if self.say is not None and now - self.reported_at >= RECORDER_REPORT_EVERY:
+            self.reported_at = now
+            self.say(
+                f"waiting for the recorder to write what it fell behind on: "
+                f"{self.size / 2**20:.0f} MB written, {now - self.started:.0f} s so far"
+            )
+        return now - self.grew_at < self.patience
+
+    def why_not(self) -> str:
+        if self.died:
+            return "exited before it confirmed the file"
+        return (
+            f"did not confirm the file: it did not grow for {self.patience:g} s "
+            f"({self.size / 2**20:.0f} MB written)"
+        )
 
 
 class StartError(Exception):
@@ -1023,8 +1094,11 @@ def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ending) -> int:
     swarm.finish_observers(summary)
     if not args.quiet:
         print(f"swarm run: {describe_ending(summary)}", file=sys.stderr)
-    if plan.record is not None and not swarm.finish_recording(summary):
-        print(f"swarm run: the recorder did not confirm {plan.record}", file=sys.stderr)
+    if plan.record is not None and not swarm.finish_recording(summary, _say(args.quiet)):
+        print(
+            f"swarm run: the recorder did not confirm {plan.record}: {swarm.recording_problem}",
+            file=sys.stderr,
+        )
         summary["recording"] = None
     if args.json:
         print(json.dumps(summary))
@@ -1033,6 +1107,13 @@ def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ending) -> int:
     if robot_crashes:
         print(f"swarm run: robot process(es) {robot_crashes} crashed", file=sys.stderr)
     return exit_code(summary["ended"], ending.signum)
+
+
+def _say(quiet: bool) -> Callable[[str], None] | None:
+    """A line on stderr from ``swarm run``, or nothing with ``--quiet``."""
+    if quiet:
+        return None
+    return lambda line: print(f"swarm run: {line}", file=sys.stderr, flush=True)
 
 
 def exit_code(ended: str, signum: int | None = None) -> int:

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import zenoh
 
@@ -23,14 +25,20 @@ def ask(
     *,
     payload: bytes = b"",
     timeout: float = 1.0,
+    worth_waiting: Callable[[], bool] | None = None,
 ) -> tuple[list[bytes], list[str]]:
     """Query ``key`` once as ``identity``: the payloads of the replies that answer it, and
-    what was wrong with the others (error replies, replies that fail their check)."""
+    what was wrong with the others (error replies, replies that fail their check).
+
+    With ``worth_waiting``, ``timeout`` is only the longest wait: the query is given up as
+    soon as ``worth_waiting()``, asked every ``POLL_SECONDS`` while no reply comes, says no.
+    """
     nonce = os.urandom(auth.NONCE_BYTES) if keyring is not None else b""
     attachment = auth.query_seal(keyring, identity, key, payload, nonce)
     answers: list[bytes] = []
     refused: list[str] = []
-    for reply in session.get(key, payload=payload or None, attachment=attachment, timeout=timeout):
+    handler = session.get(key, payload=payload or None, attachment=attachment, timeout=timeout)
+    for reply in _replies(handler, worth_waiting):
         ok, err = reply.ok, reply.err
         if ok is None:
             said = err.payload.to_bytes() if err is not None else b"neither an answer nor an error"
@@ -47,6 +55,27 @@ def ask(
             continue
         answers.append(data)
     return answers, refused
+
+
+POLL_SECONDS = 0.5
+
+
+def _replies(handler: Any, worth_waiting: Callable[[], bool] | None) -> Iterator[Any]:
+    """The replies of a query, until it is done or no longer ``worth_waiting``."""
+    if worth_waiting is None:
+        yield from handler
+        return
+    while True:
+        try:
+            reply = handler.try_recv()
+        except zenoh.ZError:  # the channel is closed: every reply is in, or the timeout passed
+            return
+        if reply is not None:
+            yield reply
+        elif worth_waiting():
+            time.sleep(POLL_SECONDS)
+        else:
+            return
 
 
 def fetch_world_info(

@@ -377,3 +377,70 @@ def test_sigterm_without_a_finish_query_closes_the_file_cleanly(tmp_path: Path) 
     record = final[recorder.RUN_METADATA]
     assert record["finished_by"] == "signal" and "summary" not in record
     assert json.loads(record["config"]) == {"robots": 2}
+
+
+# --- waiting for a recorder that fell behind ------------------------------------------
+
+
+def test_a_query_is_waited_for_while_worth_it_and_given_up_when_not() -> None:
+    """The launcher's finish query waits beyond a short timeout while the recorder works,
+    and gives up at once when the recorder stops making progress."""
+    import threading
+
+    from plumbing.world_info import ask
+
+    def answer_late(query: Any) -> None:
+        def later() -> None:
+            time.sleep(1.5)
+            query.reply("test/late", b"done")
+            query.drop()
+
+        threading.Thread(target=later, daemon=True).start()
+
+    with loopback_router() as (session, _):
+        queryable = session.declare_queryable("test/late", answer_late)
+        try:
+            asked = []
+
+            def still_working() -> bool:
+                asked.append(time.monotonic())
+                return True
+
+            answers, _ = ask(
+                session, "test/late", None, "launcher", timeout=20.0, worth_waiting=still_working
+            )
+            assert answers == [b"done"]
+            assert 2 <= len(asked) <= 5  # polled every 0.5 s for the 1.5 s it took
+
+            started = time.monotonic()
+            answers, _ = ask(
+                session, "test/late", None, "launcher", timeout=20.0, worth_waiting=lambda: False
+            )
+            assert answers == []
+            assert time.monotonic() - started < 1.4  # given up before the answer came
+        finally:
+            queryable.undeclare()
+
+
+def test_the_launcher_waits_for_the_recorder_while_its_file_grows(tmp_path: Path) -> None:
+    from deploy.launcher import RecorderProgress
+
+    path = tmp_path / "run.mcap"
+    path.write_bytes(b"x" * 100)
+    alive = [True]
+    lines: list[str] = []
+    waiting = RecorderProgress(path, lambda: alive[0], lines.append, patience=0.3)
+    assert waiting()
+    for _ in range(3):  # growing: worth waiting however long it takes
+        time.sleep(0.2)
+        with path.open("ab") as stream:
+            stream.write(b"x" * 2**20)
+        assert waiting()
+    time.sleep(0.4)  # no growth for longer than the patience
+    assert not waiting()
+    assert "did not grow for 0.3 s (3 MB written)" in waiting.why_not()
+    assert lines == []  # nothing said before RECORDER_REPORT_EVERY seconds
+
+    dead = RecorderProgress(path, lambda: False)
+    assert not dead()
+    assert dead.why_not() == "exited before it confirmed the file"

@@ -69,7 +69,7 @@ SCHEMA_PREFIX = "bestofn."
 LINK_SECONDS = 5.0  # sim seconds a pooling's radio links stay in the scene
 CHUNK_BYTES = 256 * 1024  # a crash loses at most the chunk being filled
 # After a finish query (or a stop signal), keep recording until nothing arrived for QUIET
-# seconds, but no longer than LIMIT: within the launcher's 30 s reply and 3 s stop grace.
+# seconds, but no longer than LIMIT (the stop's 3 s grace bounds STOP_DRAIN_LIMIT).
 FINISH_QUIET, FINISH_DRAIN_LIMIT = 0.2, 10.0
 STOP_QUIET, STOP_DRAIN_LIMIT = 0.1, 1.0
 # Rejected samples: every one counted, the first REJECTED_KEPT kept, each cut to this size.
