@@ -86,10 +86,14 @@ class BeaconNode:
         if item.kind in ("world", "no-world"):
             instance = item.payload.decode(errors="replace")
             present = item.kind == "world"
-            if present and self.worlds.appeared(instance):
+            seen = self.worlds.appeared(instance) if present else None
+            if seen == "new":
                 log.warning("beacon %s: a new world server appeared; following it", self.name)
                 self.ticks = guard.TickWindow()
                 self.beacon.follow_new_world()
+            elif seen == "back":  # its ticks went on while this beacon was cut off
+                log.warning("beacon %s: the world server is back; following it", self.name)
+                self.ticks = guard.TickWindow()
             elif not present:
                 self.worlds.vanished(instance)
             return

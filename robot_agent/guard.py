@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Literal
 
 TICK_WINDOW = 100  # how far ahead of the last tick a message may be (10 s at dt = 0.1)
 
@@ -51,21 +52,29 @@ class WorldFollower:
 
     followed: str | None = None
     present: set[str] = field(default_factory=set)
+    lost: bool = False  # the followed world's token went and has not come back
 
-    def appeared(self, instance: str) -> bool:
-        """Note a token; True when it is a new world to follow after the old one left."""
+    def appeared(self, instance: str) -> Literal["new", "back"] | None:
+        """Note a token: "new" when it is a new world to follow after the old one left;
+        "back" when it is the followed world's again after it went (the same world, whose
+        link was down longer than Zenoh's lease: a frozen process; it ticked on meanwhile)."""
         self.present.add(instance)
         if self.followed is None:
             self.followed = instance
-            return False
-        if instance == self.followed or self.followed in self.present:
-            return False
-        self.followed = instance
-        return True
+            return None
+        if instance == self.followed:
+            back, self.lost = self.lost, False
+            return "back" if back else None
+        if self.followed in self.present:
+            return None
+        self.followed, self.lost = instance, False
+        return "new"
 
     def vanished(self, instance: str) -> bool:
         """Note a token gone; True when it was the followed world."""
         self.present.discard(instance)
+        if instance == self.followed:
+            self.lost = True
         return instance == self.followed
 
     @property

@@ -275,11 +275,18 @@ class RobotNode:
             if self.worlds.vanished(instance):
                 log.warning("robot %d lost the world server; waiting", self.robot_id)
             return
-        if self.worlds.appeared(instance):
+        seen = self.worlds.appeared(instance)
+        if seen == "new":
             log.warning("robot %d: a new world server appeared; resuming", self.robot_id)
             self._drop_pending(list(self.pending))
             self.ticks = guard.TickWindow()
             self.time_offset = self.last_t
+        elif seen == "back":
+            # Its ticks went on while this robot was cut off (perhaps by far more than
+            # the tick window allows): take the next one it sends as where it is now.
+            log.warning("robot %d: the world server is back; resuming", self.robot_id)
+            self._drop_pending(list(self.pending))
+            self.ticks = guard.TickWindow()
         elif instance != self.worlds.followed:
             log.warning(
                 "robot %d: ignoring a second world token %s while following %s",

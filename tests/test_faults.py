@@ -9,6 +9,7 @@ import random
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -363,3 +364,73 @@ def test_robots_wait_for_a_lost_world_server_and_resume_with_a_new_one() -> None
     assert {status.decided_site for status in statuses.values()} == {best}
     assert b"Traceback" not in errors, errors.decode()[-3000:]
     assert b"new world server appeared" in errors
+
+
+# --- a process frozen for longer than Zenoh's lease --------------------------------------
+
+FROZEN_SECONDS = 13.0  # longer than Zenoh's 10 s lease: every link of the process goes
+
+
+def _parent(pid: int) -> int:
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+
+
+@pytest.mark.parametrize("frozen", ["world", "robots"])
+def test_a_swarm_frozen_longer_than_the_lease_resumes_and_decides(frozen: str) -> None:
+    """SIGSTOP, as a suspended laptop or a swapping machine does: the world, or the robots'
+    process, stops answering for longer than Zenoh's lease, so every token of
+    the frozen side goes. Once thawed, the tokens come back and the run goes on to the
+    right consensus (it used to hang with the world frozen, and stall with the robots)."""
+    from swarm_helpers import processes_of, swarm_command, wait_for_processes
+
+    run_id = unique_run_id(f"frozen-{frozen}")
+    robots, sites, seed = 10, 10, 0  # 153 s of sim time: long enough to freeze it midway
+    command = swarm_command(
+        "run",
+        *("--run-id", run_id, "--json", "--quiet", "--no-record", "--verbose"),
+        *("--robots", str(robots), "--sites", str(sites), "--seed", str(seed)),
+        *("--wall-timeout", "100"),
+    )
+    launcher = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    lines: list[bytes] = []
+    started = threading.Event()
+
+    def read_stderr() -> None:
+        assert launcher.stderr is not None
+        for line in launcher.stderr:
+            lines.append(line)
+            if b"starting with 10 robot(s)" in line:  # the world's log: tick 0 opens now
+                started.set()
+
+    reader = threading.Thread(target=read_stderr, daemon=True)
+    reader.start()
+    try:
+        assert started.wait(60), b"".join(lines).decode()[-2000:]
+        time.sleep(1.0)  # well into the run: a quiet machine takes 3 s or more
+        if frozen == "world":
+            pids = wait_for_processes(run_id, "world_server.server", 1, 10)
+        else:  # the fork server's child: the process of the ten robots
+            forked = wait_for_processes(run_id, "multiprocessing.forkserver", 2, 10)
+            pids = [pid for pid in forked if _parent(pid) in forked]
+            assert len(pids) == 1, pids
+        for pid in pids:
+            os.kill(pid, signal.SIGSTOP)
+        time.sleep(FROZEN_SECONDS)
+        for pid in pids:
+            os.kill(pid, signal.SIGCONT)
+        assert launcher.stdout is not None
+        stdout = launcher.stdout.read()
+        launcher.wait(timeout=110)
+        reader.join(timeout=10)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+        kill_leftovers(run_id)
+    summary = json.loads(stdout)
+    assert summary["ended"] == "consensus", (summary["ended"], b"".join(lines).decode()[-2000:])
+    assert launcher.returncode == 0
+    assert summary["chosen_site"] == make_layout(sites, robots, seed).best_site
+    # Every token of the frozen side went once (the world saw its links die, or they saw
+    # its link die): every robot's, and with the world frozen the beacon's too.
+    assert summary["world"]["departures"] == robots + (1 if frozen == "world" else 0)
+    assert processes_of(run_id) == []

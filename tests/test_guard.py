@@ -38,8 +38,18 @@ def test_a_second_world_token_is_no_restart_while_the_followed_world_lives() -> 
     assert follower.followed == "real" and follower.impostors == ["fake"]
     assert not follower.vanished("fake")
     assert follower.vanished("real")  # the world died
-    assert follower.appeared("new")  # and a new one is a restart
+    assert follower.appeared("new") == "new"  # and a new one is a restart
     assert follower.followed == "new"
+
+
+def test_the_followed_world_coming_back_is_told_apart_from_a_restart() -> None:
+    follower = guard.WorldFollower()
+    assert follower.appeared("real") is None
+    assert follower.appeared("real") is None  # the same token again: nothing new
+    assert follower.vanished("real")  # its link went (a process frozen beyond the lease)
+    assert follower.appeared("real") == "back"  # the same world: resume at its tick
+    assert follower.appeared("real") is None  # once
+    assert follower.followed == "real" and not follower.lost
 
 
 # --- a robot's budget -------------------------------------------------------------------

@@ -222,9 +222,16 @@ class WorldServer:
                 self._handle(event)
             now = time.monotonic()
             if self.lockstep:
-                if not self.barrier.answers and not self.world.live_robots():
+                if (
+                    not self.barrier.answers
+                    and not self.world.live_robots()
+                    and not self.pending_joins
+                ):
                     stall_deadline = now + self.stall_timeout  # nobody to wait for: idle
                     continue
+                # Robots that join while nobody is left (every token went at once: this
+                # process or its links were frozen longer than Zenoh's lease) find the next
+                # tick open for them at once: joins take effect when a tick closes.
                 stalled = now >= stall_deadline
                 if self.barrier.complete or stalled:
                     if stalled and not self.barrier.complete:
