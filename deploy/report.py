@@ -62,6 +62,7 @@ CSV_COLUMNS = (
     "timeout_kind",
     "stuck",
     "complete",
+    "missing_messages",
     "source",
     "sim_time_s",
     "wall_time_s",
@@ -343,6 +344,7 @@ def run_summary(
             **rebuild_summary(recording),
             "source": "status messages",
             "complete": recording.complete,
+            "missing_messages": missing_messages(recording),
         }
     unusable = unusable_fields(recorded)
     summary = dict(recorded)
@@ -355,7 +357,12 @@ def run_summary(
                 f"{', '.join(unusable)}; taken from the status messages instead"
             )
     summary["ended"] = recorded_ending(summary)
-    return {**summary, "source": source, "complete": recording.complete}
+    return {
+        **summary,
+        "source": source,
+        "complete": recording.complete,
+        "missing_messages": missing_messages(recording),
+    }
 
 
 def unusable_fields(summary: dict[str, Any]) -> list[str]:
@@ -511,6 +518,7 @@ def report_row(summary: dict[str, Any], recording: Path | str) -> dict[str, Any]
         "timeout_kind": summary.get("timeout_kind"),
         "stuck": len(summary.get("stuck") or []),
         "complete": summary["complete"],
+        "missing_messages": summary["missing_messages"],
         "source": summary["source"],
         "sim_time_s": summary["sim_time_s"],
         "wall_time_s": summary["wall_time_s"],
@@ -615,6 +623,11 @@ def audit(recording: Recording) -> dict[str, dict[str, int]]:
             "recorded": counts["bestofn.Status"],
         },
     }
+
+
+def missing_messages(recording: Recording) -> int:
+    """How many messages ``audit`` finds missing from the file, of every kind together."""
+    return sum(max(0, entry["expected"] - entry["recorded"]) for entry in audit(recording).values())
 
 
 # --- figures -------------------------------------------------------------------------------
@@ -841,6 +854,13 @@ def write_report(
             continue
         if recording.problem and warn is not None:
             warn(f"{path}: {recording.problem}; reporting what was recorded")
+        missing = missing_messages(recording)
+        if missing and warn is not None:
+            warn(
+                f"{path}: {missing:,} of the messages its publishers sent are not in it "
+                "(a recorder that fell behind drops what it cannot hold); what is drawn "
+                "from them has gaps"
+            )
         recordings.append(recording)
     launchers = launcher_summaries or {}
     summaries = [

@@ -444,3 +444,12 @@ def test_the_launcher_waits_for_the_recorder_while_its_file_grows(tmp_path: Path
     dead = RecorderProgress(path, lambda: False)
     assert not dead()
     assert dead.why_not() == "exited before it confirmed the file"
+
+
+def test_the_recorder_yields_the_cpu_only_to_a_swarm_that_leaves_it_idle_time() -> None:
+    from deploy.launcher import ROBOTS_PER_PROCESS, recorder_niceness
+
+    assert recorder_niceness(10) == recorder.DEFAULT_NICENESS == 10
+    assert recorder_niceness(ROBOTS_PER_PROCESS) == 10  # one robot process
+    assert recorder_niceness(ROBOTS_PER_PROCESS + 1) == 0  # it would fall behind for good
+    assert recorder_niceness(500) == 0

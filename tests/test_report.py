@@ -61,9 +61,11 @@ def make_recording(
     *,
     finish: bool = True,
     summary: dict[str, Any] | None = None,
+    lost: range = range(0),
 ) -> tuple[int, int]:
-    """Write a recording of a made-up run. Returns two file sizes: before the last status
-    message, and before the records that finishing the file adds."""
+    """Write a recording of a made-up run, without the clock and senses of the ticks in
+    ``lost``. Returns two file sizes: before the last status message, and before the
+    records that finishing the file adds."""
     keys = protocol.Keys(run_id)
     best = make_layout(sites, ROBOTS, SEED).best_site
     stream = io.BytesIO()
@@ -79,7 +81,9 @@ def make_recording(
     def put(key: str, payload: bytes) -> None:
         mcap.record(recorder.Sample(key, payload, None, time.time_ns()))
 
-    for tick in range(0, 400, 10):
+    for tick in range(400):
+        if tick in lost:
+            continue
         put(keys.world_clock, protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * 0.1)))
         for robot in range(ROBOTS):
             sense = protocol.Sense(
@@ -341,3 +345,22 @@ def test_aborted_and_interrupted_runs_are_labelled_and_kept_out_of_the_aggregate
     assert group["swarm_steps"] == {"mean": 3, "median": 3, "min": 3, "max": 3}
     assert (group["robot_steps"]["min"], group["robot_steps"]["max"]) == (2, 3)
     assert group["runs_within_half_n"] == 0
+
+
+def test_messages_missing_from_a_recording_are_counted_and_warned_of(tmp_path: Path) -> None:
+    """A recorder that fell behind by more than it may hold drops samples: the file is
+    complete, but the report must not pass the gaps off as the whole run."""
+    whole, gappy = tmp_path / "whole.mcap", tmp_path / "gappy.mcap"
+    make_recording(whole, "made-w")
+    make_recording(gappy, "made-g", lost=range(100, 150))
+    warnings: list[str] = []
+    result = report.write_report([whole, gappy], tmp_path / "out", warn=warnings.append)
+    rows = {row["run_id"]: row for row in result.as_json()["runs"]}
+    assert rows["made-w"]["missing_messages"] == 0
+    # 50 ticks: a clock and a sense of each of the three robots each.
+    assert rows["made-g"]["missing_messages"] == 50 * (1 + ROBOTS)
+    assert rows["made-g"]["complete"] is True
+    assert warnings == [
+        f"{gappy}: 200 of the messages its publishers sent are not in it (a recorder that "
+        "fell behind drops what it cannot hold); what is drawn from them has gaps"
+    ]
