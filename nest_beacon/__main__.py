@@ -93,7 +93,7 @@ class BeaconNode:
                 self.beacon.follow_new_world()
             elif seen == "back":  # its ticks went on while this beacon was cut off
                 log.warning("beacon %s: the world server is back; following it", self.name)
-                self.ticks = guard.TickWindow()
+                self.ticks.rejoin()
             elif not present:
                 self.worlds.vanished(instance)
             return
@@ -112,7 +112,7 @@ class BeaconNode:
             return
         if not self.ticks.ahead(clock.tick):
             return  # a tick already answered
-        self.ticks.last = clock.tick
+        self.ticks.acted(clock.tick)
         sent = 0
         for message in self.beacon.on_tick(clock.t):
             payload = protocol.encode(message)

@@ -21,12 +21,21 @@ class TickWindow:
 
     window: int = TICK_WINDOW
     last: int = -1  # the last tick acted on; -1 before the first
+    rejoined: bool = False  # the next tick may be any distance ahead (see rejoin)
 
     def refuses(self, tick: int) -> str | None:
         """Why ``tick`` is not believable now, or None."""
-        if self.last >= 0 and tick > self.last + self.window:
+        if self.last >= 0 and not self.rejoined and tick > self.last + self.window:
             return f"tick {tick} is more than {self.window} ahead of tick {self.last}"
         return None
+
+    def acted(self, tick: int) -> None:
+        self.last, self.rejoined = tick, False
+
+    def rejoin(self) -> None:
+        """The sender went on while this receiver was cut off from it: take its next tick
+        however far ahead, but still none already acted on (a replay stays refused)."""
+        self.rejoined = True
 
     def ahead(self, tick: int) -> bool:
         """Whether ``tick`` is still to come (not acted on yet)."""

@@ -282,11 +282,11 @@ class RobotNode:
             self.ticks = guard.TickWindow()
             self.time_offset = self.last_t
         elif seen == "back":
-            # Its ticks went on while this robot was cut off (perhaps by far more than
-            # the tick window allows): take the next one it sends as where it is now.
+            # Its ticks went on while this robot was cut off, perhaps by far more than
+            # the tick window allows.
             log.warning("robot %d: the world server is back; resuming", self.robot_id)
             self._drop_pending(list(self.pending))
-            self.ticks = guard.TickWindow()
+            self.ticks.rejoin()
         elif instance != self.worlds.followed:
             log.warning(
                 "robot %d: ignoring a second world token %s while following %s",
@@ -338,7 +338,7 @@ class RobotNode:
             self._tx.put(sent.payload, attachment=attachment)
         act = protocol.encode(answer.act)
         attachment = self._seal(self._act_key, act)
-        self.ticks.last = sense.tick
+        self.ticks.acted(sense.tick)
         step: dict[str, float] | None = None
         if self.trace is not None:
             step = {

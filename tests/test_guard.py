@@ -52,6 +52,17 @@ def test_the_followed_world_coming_back_is_told_apart_from_a_restart() -> None:
     assert follower.followed == "real" and not follower.lost
 
 
+def test_a_receiver_that_rejoins_takes_a_far_tick_once_and_never_an_old_one() -> None:
+    ticks = guard.TickWindow()
+    ticks.acted(900)
+    assert ticks.refuses(1500) is not None  # too far ahead: a forged future tick
+    ticks.rejoin()  # the followed world came back after ticking on without us
+    assert ticks.refuses(1500) is None
+    assert not ticks.ahead(900) and not ticks.ahead(850)  # a replay: already acted on
+    ticks.acted(1500)
+    assert ticks.refuses(2100) is not None  # bounded again from there
+
+
 # --- a robot's budget -------------------------------------------------------------------
 
 
