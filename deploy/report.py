@@ -593,13 +593,7 @@ def audit(recording: Recording) -> dict[str, dict[str, int]]:
     """
     counts = recording.messages
     declared = recording.declared
-    steps = sorted({b - a for a, b in itertools.pairwise(recording.state_ticks)})
-    state_step = steps[0] if steps and steps[0] > 0 else 1
-    state_expected = (
-        (max(recording.state_ticks) - min(recording.state_ticks)) // state_step + 1
-        if recording.state_ticks
-        else 0
-    )
+    state_expected = _states_expected(recording.state_ticks)
     return {
         "world/clock": {"expected": recording.clock.expected, "recorded": recording.clock.count},
         "world/state": {"expected": state_expected, "recorded": len(recording.state_ticks)},
@@ -623,6 +617,18 @@ def audit(recording: Recording) -> dict[str, dict[str, int]]:
             "recorded": counts["bestofn.Status"],
         },
     }
+
+
+def _states_expected(ticks: Sequence[int]) -> int:
+    """World states due from the first to the last recorded: one every ``state_every``
+    ticks (the most common step) and any off that grid (the world's last state, published
+    when it stops), which the recording holds by definition."""
+    if not ticks:
+        return 0
+    steps = Counter(b - a for a, b in itertools.pairwise(ticks) if b > a)
+    step = steps.most_common(1)[0][0] if steps else 1
+    on_grid = [tick for tick in ticks if (tick - ticks[0]) % step == 0]
+    return (max(on_grid) - ticks[0]) // step + 1 + len(ticks) - len(on_grid)
 
 
 def missing_messages(recording: Recording) -> int:

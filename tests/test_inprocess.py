@@ -102,10 +102,12 @@ def test_its_recording_reads_like_a_swarm_run_recording(
     assert recording.complete and recording.problem is None
     reported = run_summary(recording)
     assert reported["source"] == "metadata"
-    assert {**reported, "source": None, "complete": None} == {
+    assert reported["missing_messages"] == 0
+    assert {**reported, "source": None, "complete": None, "missing_messages": None} == {
         **summary,
         "source": None,
         "complete": None,
+        "missing_messages": None,
     }
     ticks = recording.clock.count
     assert recording.clock.first == 0 and recording.clock.last == ticks - 1
