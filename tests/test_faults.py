@@ -389,7 +389,10 @@ def test_a_swarm_frozen_longer_than_the_lease_resumes_and_decides(frozen: str) -
         "run",
         *("--run-id", run_id, "--json", "--quiet", "--no-record", "--verbose"),
         *("--robots", str(robots), "--sites", str(sites), "--seed", str(seed)),
-        *("--wall-timeout", "100"),
+        # Frozen robots are departed robots: the world ticks on without them, as fast as
+        # the beacon answers, and the stall window in sim time may pass before they come
+        # back (then the run ends stalled, saying so). Here only the wall clock limits.
+        *("--wall-timeout", "100", "--stall-window", "100000", "--timeout", "100000"),
     )
     launcher = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     lines: list[bytes] = []
