@@ -890,12 +890,12 @@ class RecorderProgress:
         path: Path,
         alive: Callable[[], bool],
         say: Callable[[str], None] | None = None,
-        patience: float = 0.0,
+        patience: float = RECORDER_PATIENCE,
     ) -> None:
         self.path = path
         self.alive = alive
         self.say = say
-        self.patience = patience or RECORDER_PATIENCE
+        self.patience = patience
         self.started = self.grew_at = self.reported_at = time.monotonic()
         self.size = self._size()
         self.died = False

@@ -860,18 +860,18 @@ def write_report(
             continue
         if recording.problem and warn is not None:
             warn(f"{path}: {recording.problem}; reporting what was recorded")
-        missing = missing_messages(recording)
-        if missing and warn is not None:
-            warn(
-                f"{path}: {missing:,} of the messages its publishers sent are not in it "
-                "(a recorder that fell behind drops what it cannot hold); what is drawn "
-                "from them has gaps"
-            )
         recordings.append(recording)
     launchers = launcher_summaries or {}
     summaries = [
         run_summary(recording, warn, launchers.get(recording.path)) for recording in recordings
     ]
+    for recording, summary in zip(recordings, summaries, strict=True):
+        if summary["missing_messages"] and warn is not None:
+            warn(
+                f"{recording.path}: {summary['missing_messages']:,} of the messages its "
+                "publishers sent are not in it (a recorder that fell behind drops what it "
+                "cannot hold); what is drawn from them has gaps"
+            )
     order = sorted(
         range(len(recordings)),
         key=lambda i: (

@@ -61,30 +61,32 @@ class WorldFollower:
 
     followed: str | None = None
     present: set[str] = field(default_factory=set)
-    lost: bool = False  # the followed world's token went and has not come back
 
     def appeared(self, instance: str) -> Literal["new", "back"] | None:
         """Note a token: "new" when it is a new world to follow after the old one left;
         "back" when it is the followed world's again after it went (the same world, whose
         link was down longer than Zenoh's lease: a frozen process; it ticked on meanwhile)."""
+        back = instance == self.followed and self.lost
         self.present.add(instance)
         if self.followed is None:
             self.followed = instance
             return None
         if instance == self.followed:
-            back, self.lost = self.lost, False
             return "back" if back else None
         if self.followed in self.present:
             return None
-        self.followed, self.lost = instance, False
+        self.followed = instance
         return "new"
 
     def vanished(self, instance: str) -> bool:
         """Note a token gone; True when it was the followed world."""
         self.present.discard(instance)
-        if instance == self.followed:
-            self.lost = True
         return instance == self.followed
+
+    @property
+    def lost(self) -> bool:
+        """Whether the followed world's token went and has not come back."""
+        return self.followed is not None and self.followed not in self.present
 
     @property
     def impostors(self) -> list[str]:
