@@ -26,8 +26,9 @@ by the wall clock, so the factor should come close to the asked speed and never 
 
 The engines table (``--engines``) runs each swarm size with ``swarm run --engine
 inprocess`` and over Zenoh (``swarm run``), the same seed, one after the other
-(``--pairs`` such pairs, alternating), and prints both real-time factors, their ratio and
-the messaging floor, and whether the two agree robot for robot; ``--readme README.md``
+(``--pairs`` such pairs, alternating), and prints both real-time factors, their ratio, the
+ratio of the CPU their processes spent per tick (each run less the same run stopped after
+one tick), the messaging floor, and whether the two agree robot for robot; ``--readme README.md``
 also writes that table into README between its ``swarm_speed:engines`` markers:
 
     .venv/bin/python benchmarks/swarm_speed.py --robots --scale --engines 10 100 --pairs 3 \
@@ -40,6 +41,7 @@ import argparse
 import json
 import os
 import platform
+import resource
 import shlex
 import statistics
 import subprocess
@@ -126,8 +128,18 @@ def messaging_floor(robots: int, ticks: int, endpoint: str | None = None) -> flo
         session.close()
 
 
+def children_cpu() -> float:
+    """CPU seconds (user + system) of every finished process this one has waited for,
+    their own waited-for children included: a swarm run's launcher reaps all of its."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def swarm_summary(robots: int, seed: int, sites: int, extra: list[str]) -> dict[str, Any]:
-    """The ``--json`` summary of one unrecorded ``swarm run`` (a result ending, or an error)."""
+    """The ``--json`` summary of one unrecorded ``swarm run`` (a result ending, or an error),
+    with ``cpu_s``: the CPU seconds all of the run's processes used, start and stop
+    included."""
+    cpu = children_cpu()
     command = [
         *(sys.executable, "-m", "deploy.cli", "run", "--robots", str(robots)),
         *("--sites", str(sites), "--seed", str(seed), "--json", "--quiet", "--no-record"),
@@ -136,7 +148,7 @@ def swarm_summary(robots: int, seed: int, sites: int, extra: list[str]) -> dict[
     done = subprocess.run(command, capture_output=True, cwd=REPO, timeout=7200)
     if done.returncode not in RESULT_CODES:
         raise RuntimeError(f"swarm run failed: {done.stderr.decode()[-2000:]}")
-    return dict(json.loads(done.stdout))
+    return {**json.loads(done.stdout), "cpu_s": children_cpu() - cpu}
 
 
 def swarm_run(
@@ -281,7 +293,7 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
     )
     print(
         f"{'robots':>6} {'sim s':>7} {'in-process':>10} {'distributed':>11} {'ratio':>6} "
-        f"{'floor':>7} {'dist/floor':>10} {'same results':>12}"
+        f"{'CPU x':>6} {'floor':>7} {'dist/floor':>10} {'same results':>12}"
     )
     rows = []
     loads = [os.getloadavg()[0]]  # how busy the machine was: said under the table
@@ -292,6 +304,15 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
         # Alternating pairs, each pair's ratio measured back to back: on a shared machine
         # the load changes between pairs more than within one.
         fast_runs, slow_runs, ratios, same, stalls = [], [], [], True, 0
+        # CPU per sim second while ticking, over Zenoh / in one process: each run's CPU less
+        # that of the same run stopped after its first tick (starting and stopping).
+        start_stop = {
+            engine: swarm_summary(
+                robots, seed, args.sites, ["--engine", engine, "--timeout", "0.1", *extra]
+            )["cpu_s"]
+            for engine in ("inprocess", "zenoh")
+        }
+        cpu_ratios = []
         for _ in range(args.pairs):
             in_process = swarm_summary(
                 robots, seed, args.sites, ["--engine", "inprocess", *options]
@@ -309,9 +330,14 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
             fast_runs.append(in_process["real_time_factor"])
             slow_runs.append(distributed["real_time_factor"])
             ratios.append(slow_runs[-1] / fast_runs[-1])
+            cpu_ratios.append(
+                ((distributed["cpu_s"] - start_stop["zenoh"]) / distributed["sim_time_s"])
+                / ((in_process["cpu_s"] - start_stop["inprocess"]) / in_process["sim_time_s"])
+            )
             loads.append(os.getloadavg()[0])
         fast, slow = statistics.median(fast_runs), statistics.median(slow_runs)
         ratio = statistics.median(ratios)
+        cpu_ratio = statistics.median(cpu_ratios)
         spread = f" ({min(ratios):.2f}-{max(ratios):.2f})" if len(ratios) > 1 else ""
         floor = 0.0
         if robots <= args.floor_max and not args.no_floor:
@@ -324,12 +350,13 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
             agree = "yes (decisions)"
         print(
             f"{robots:>6} {distributed['sim_time_s']:>7.1f} {fast:>9.1f}x {slow:>10.1f}x "
-            f"{ratio:>6.2f}{spread} {floor_text:>7} {to_floor:>10} {agree:>12}",
+            f"{ratio:>6.2f}{spread} {cpu_ratio:>5.1f}x {floor_text:>7} {to_floor:>10} {agree:>12}",
             flush=True,
         )
         rows.append(
             f"| {robots} robots, seed {seed}, {ended} ({distributed['sim_time_s']:.0f} s) "
-            f"| {fast:.1f}x | {slow:.1f}x | **{ratio:.2f}**{spread} | {floor_text} | "
+            f"| {fast:.1f}x | {slow:.1f}x | **{ratio:.2f}**{spread} | {cpu_ratio:.1f}x "
+            f"| {floor_text} | "
             f"{to_floor} | {agree} |"
         )
     args.loads = (min(loads), max(loads))
@@ -345,8 +372,9 @@ def write_readme(path: Path, rows: list[str], command: str, args: argparse.Names
     _, tail = rest.split(README_END, 1)
     table = [
         f"| swarm (lockstep, {args.sites} sites) | in one process | over Zenoh | ratio "
-        "| messaging floor | over Zenoh / floor | same per-robot results |",
-        "|---|---|---|---|---|---|---|",
+        "| CPU over Zenoh / in one process | messaging floor | over Zenoh / floor "
+        "| same per-robot results |",
+        "|---|---|---|---|---|---|---|---|",
         *rows,
     ]
     low, high = args.loads
@@ -356,7 +384,11 @@ def write_readme(path: Path, rows: list[str], command: str, args: argparse.Names
         f"{high:.0f} while the table was measured (other jobs shared the machine). "
         "Absolute real-time factors depend on the machine and its load; each ratio is of "
         "two runs measured back to back (with --pairs, the median of the pairs and their "
-        f"range). {args.machine_note}"
+        "range). The CPU column divides the CPU time that all of a run's processes used per "
+        "second of sim time while ticking (a run's CPU less that of the same run stopped "
+        "after its first tick), over Zenoh by in one process: the distributed swarm, with "
+        f"{os.cpu_count()} cores, cannot reach a ratio above {os.cpu_count()} / that figure. "
+        f"{args.machine_note}"
     ).strip()
     if any("yes (decisions)" in row for row in rows):
         note += (
