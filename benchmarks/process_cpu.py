@@ -11,9 +11,9 @@ measured the same way, for comparison:
     .venv/bin/python benchmarks/process_cpu.py --robots 100 --timeout 100
 
 Every option is passed to ``swarm run`` (``--no-record`` is added unless ``--record`` is
-given), except ``--doc PATH``: write the table into PATH too, between the markers
-``<!-- process_cpu: OPTIONS -->`` and ``<!-- /process_cpu -->`` (OPTIONS: the ``swarm run``
-options as given), as docs/performance.md holds it. A process's last 50 ms before it exits
+given), except ``--doc PATH``: write the table into PATH too, between the generated-block
+markers that name this command (``deploy/section5.replace_block``), as docs/performance.md
+holds it. A process's last 50 ms before it exits
 can be missed; they are spent stopping.
 """
 
@@ -77,22 +77,20 @@ def run_cpu(options: list[str]) -> tuple[dict[str, float], dict[str, object]]:
     cpu: dict[int, float] = {}
     roles: dict[int, str] = {}
     while process.poll() is None:
-        parents = {}
+        stats = {}  # pid -> (parent pid, CPU seconds) of every process on the machine
         for entry in os.listdir("/proc"):
             if entry.isdigit() and (stat := _stat(int(entry))) is not None:
-                parents[int(entry)] = stat[0]
-        tree, stack = [], [process.pid]
+                stats[int(entry)] = stat
+        parents = {pid: parent for pid, (parent, _) in stats.items()}
         children: dict[int, list[int]] = {}
         for pid, parent in parents.items():
             children.setdefault(parent, []).append(pid)
+        stack = [process.pid]
         while stack:
             pid = stack.pop()
-            tree.append(pid)
             stack.extend(children.get(pid, []))
-        for pid in tree:
-            stat = _stat(pid)
-            if stat is not None:
-                cpu[pid] = stat[1]
+            if pid in stats:
+                cpu[pid] = stats[pid][1]
                 # Named at every sample: until it execs, a new process still shows the
                 # command line of the process that started it.
                 role = _role(pid, parents)
@@ -110,18 +108,17 @@ def run_cpu(options: list[str]) -> tuple[dict[str, float], dict[str, object]]:
 
 
 def write_doc(path: Path, options: list[str], lines: list[str]) -> None:
-    """Replace the block after this command's marker in ``path`` with ``lines``."""
-    begin, end = f"<!-- process_cpu: {' '.join(options)} -->", "<!-- /process_cpu -->"
-    text = path.read_text()
-    if begin not in text:
-        raise SystemExit(f"{path}: no {begin!r} marker")
-    head, rest = text.split(begin, 1)
-    if end not in rest:
-        raise SystemExit(f"{path}: no {end!r} after {begin!r}")
-    tail = rest.split(end, 1)[1]
-    command = f"benchmarks/process_cpu.py {' '.join(options)} --doc {path}"
-    block = [begin, "```", f"$ {command}", *lines, "```", end]
-    path.write_text(head + "\n".join(block) + tail)
+    """Replace this command's generated block in ``path`` with ``lines``."""
+    from deploy.section5 import replace_block
+
+    name = " ".join(options)
+    command = f"benchmarks/process_cpu.py {name} --doc {path}"
+    block = "\n".join(["```", f"$ {command}", *lines, "```"])
+    try:
+        text = replace_block(path.read_text(), name, block, command, "benchmarks/process_cpu.py")
+    except ValueError as error:
+        raise SystemExit(f"{path}: {error}") from None
+    path.write_text(text)
     print(f"wrote the table into {path}")
 
 
@@ -141,14 +138,15 @@ def main() -> None:
     asked = list(options)
     if "--record" not in options:
         options.append("--no-record")
-    first_tick = ["--timeout", "0.1"]
     load_before = os.getloadavg()[0]
     whole, summary = run_cpu(options)
+    dt = float(summary["config"]["dt"])  # type: ignore[index]
+    first_tick = ["--timeout", str(dt)]
     start_stop, _ = run_cpu([*options, *first_tick])
     in_process, alone = run_cpu([*options, "--engine", "inprocess"])
     in_process_start_stop, _ = run_cpu([*options, "--engine", "inprocess", *first_tick])
     sim = float(summary["sim_time_s"])  # type: ignore[arg-type]
-    ticks = round(sim / 0.1)
+    ticks = round(sim / dt)
     lines: list[str] = []
     lines.append(
         f"swarm run {' '.join(options)}: {sim:.1f} s of sim time ({ticks} ticks), "
@@ -167,7 +165,7 @@ def main() -> None:
             f"{ticking:>8.2f} {1e3 * ticking / ticks:>8.2f}"
         )
     alone_ticking = sum(in_process.values()) - sum(in_process_start_stop.values())
-    alone_ticks = round(float(alone["sim_time_s"]) / 0.1)  # type: ignore[arg-type]
+    alone_ticks = round(float(alone["sim_time_s"]) / dt)  # type: ignore[arg-type]
     lines.append(
         f"{'all, over Zenoh':<26} {'':>11} {'':>10} {total:>8.2f} {1e3 * total / ticks:>8.2f}"
     )

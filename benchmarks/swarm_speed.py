@@ -356,8 +356,7 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
         rows.append(
             f"| {robots} robots, seed {seed}, {ended} ({distributed['sim_time_s']:.0f} s) "
             f"| {fast:.1f}x | {slow:.1f}x | **{ratio:.2f}**{spread} | {cpu_ratio:.1f}x "
-            f"| {floor_text} | "
-            f"{to_floor} | {agree} |"
+            f"| {floor_text} | {to_floor} | {agree} |"
         )
     args.loads = (min(loads), max(loads))
     return rows
