@@ -304,15 +304,7 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
         # Alternating pairs, each pair's ratio measured back to back: on a shared machine
         # the load changes between pairs more than within one.
         fast_runs, slow_runs, ratios, same, stalls = [], [], [], True, 0
-        # CPU per sim second while ticking, over Zenoh / in one process: each run's CPU less
-        # that of the same run stopped after its first tick (starting and stopping).
-        start_stop = {
-            engine: swarm_summary(
-                robots, seed, args.sites, ["--engine", engine, "--timeout", "0.1", *extra]
-            )["cpu_s"]
-            for engine in ("inprocess", "zenoh")
-        }
-        cpu_ratios = []
+        pairs = []  # (in process, over Zenoh) summaries
         for _ in range(args.pairs):
             in_process = swarm_summary(
                 robots, seed, args.sites, ["--engine", "inprocess", *options]
@@ -330,11 +322,20 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
             fast_runs.append(in_process["real_time_factor"])
             slow_runs.append(distributed["real_time_factor"])
             ratios.append(slow_runs[-1] / fast_runs[-1])
-            cpu_ratios.append(
-                ((distributed["cpu_s"] - start_stop["zenoh"]) / distributed["sim_time_s"])
-                / ((in_process["cpu_s"] - start_stop["inprocess"]) / in_process["sim_time_s"])
-            )
+            pairs.append((in_process, distributed))
             loads.append(os.getloadavg()[0])
+        # CPU per sim second while ticking, over Zenoh / in one process: each run's CPU less
+        # that of the same run stopped after its first tick (starting and stopping).
+        first_tick = ["--timeout", str(pairs[0][0]["config"]["dt"]), *extra]
+        start_stop = [
+            swarm_summary(robots, seed, args.sites, ["--engine", engine, *first_tick])["cpu_s"]
+            for engine in ("inprocess", "zenoh")
+        ]
+        cpu_ratios = [
+            ((distributed["cpu_s"] - start_stop[1]) / distributed["sim_time_s"])
+            / ((in_process["cpu_s"] - start_stop[0]) / in_process["sim_time_s"])
+            for in_process, distributed in pairs
+        ]
         fast, slow = statistics.median(fast_runs), statistics.median(slow_runs)
         ratio = statistics.median(ratios)
         cpu_ratio = statistics.median(cpu_ratios)
