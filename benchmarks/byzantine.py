@@ -43,7 +43,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from robot_agent import byzantine, protocol  # noqa: E402
+from robot_agent.core import byzantine  # noqa: E402
+from wire import protocol  # noqa: E402
 
 MODES = ("liar", "inverted", "silent")
 MAX_BYZANTINE = 3
@@ -103,8 +104,9 @@ def byzantine_ids(seed: int, robots: int, count: int) -> list[int]:
 def run_task(task: Task) -> Outcome:
     """One run in memory (in a worker process)."""
     from deploy.inmemory import run_in_memory
-    from robot_agent import node, options
-    from world_server import server
+    from robot_agent.node import options
+    from robot_agent.node import robot_node as node
+    from world_server.server import world_server as server
 
     common = ["--seed", str(task.seed), "--robots", str(task.robots), "--sites", str(task.sites)]
     world_config = server.config_from_args(

@@ -22,10 +22,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from robot_agent import protocol
-from robot_agent.vision import decode_frame, estimate_quality
-from world_server.camera import CameraNoise, CameraRenderer
-from world_server.layout import make_layout
+from robot_agent.core.vision import decode_frame, estimate_quality
+from wire import protocol
+from world_server.core.camera import CameraNoise, CameraRenderer
+from world_server.core.layout import make_layout
 
 
 def per_call_us(action: Callable[[], object], calls: int, repeats: int = 5) -> tuple[float, float]:

@@ -34,10 +34,10 @@ from foxglove.messages import (
     Vector3,
 )
 
-from robot_agent import protocol
-from world_server import foxglove
-from world_server.camera import CameraRenderer
-from world_server.layout import make_layout
+from wire import protocol
+from world_server.core.camera import CameraRenderer
+from world_server.core.layout import make_layout
+from world_server.recording import foxglove
 
 
 def per_call(function: Callable[[], Any], seconds: float = 0.5) -> float:

@@ -22,10 +22,10 @@ import time
 
 import numpy as np
 
-from robot_agent import protocol
-from world_server import layout
-from world_server.physics import MAX_SUBSTEP, Physics, wrap_angle
-from world_server.radio import RadioConfig, RadioMedium, sender_order
+from wire import names
+from world_server.core import layout
+from world_server.core.physics import MAX_SUBSTEP, Physics, wrap_angle
+from world_server.core.radio import RadioConfig, RadioMedium, sender_order
 
 NUM_SITES = 10
 WANDER_PERIOD = 20  # ticks between wheel changes
@@ -113,11 +113,11 @@ def time_radio(num_robots: int, ticks: int, senders_fraction: float, seed: int =
         # Uniform over the disc, inside the wall.
         radius = (arena_radius - 0.04) * math.sqrt(rng.random())
         angle = rng.uniform(-math.pi, math.pi)
-        positions[protocol.radio_name(robot_id)] = (
+        positions[names.robot_name(robot_id)] = (
             radius * math.cos(angle),
             radius * math.sin(angle),
         )
-    names = sorted(positions, key=sender_order)
+    everyone = sorted(positions, key=sender_order)
     payload = bytes(200)
     results = {}
     configs = {
@@ -140,7 +140,7 @@ def time_radio(num_robots: int, ticks: int, senders_fraction: float, seed: int =
         copies = 0
         for tick in range(ticks):
             senders = sorted(
-                rng.sample(names, int(senders_fraction * num_robots)), key=sender_order
+                rng.sample(everyone, int(senders_fraction * num_robots)), key=sender_order
             )
             start = time.perf_counter()
             for sender in senders:

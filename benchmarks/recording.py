@@ -31,6 +31,8 @@ from typing import Any
 
 from mcap.reader import make_reader
 
+from wire.names import Role
+
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
@@ -38,8 +40,8 @@ from deploy import report  # noqa: E402
 from deploy.launcher import RESULT_CODES  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
-from robot_agent import protocol  # noqa: E402
-from world_server import recorder as recorder_module  # noqa: E402
+from wire import protocol  # noqa: E402
+from world_server.recording import writer as recorder_module  # noqa: E402
 
 SIM_SECONDS = {10: 100.0, 100: 60.0}
 
@@ -178,7 +180,7 @@ def flood(count: int, folder: Path) -> None:
         cwd=REPO,
     )
     try:
-        while not list(router.liveliness().get(keys.alive("recorder", 0), timeout=1.0)):
+        while not list(router.liveliness().get(keys.alive(Role.RECORDER, 0), timeout=1.0)):
             if recorder.poll() is not None:
                 raise RuntimeError("the recorder did not start")
             time.sleep(0.05)

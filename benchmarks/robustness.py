@@ -52,8 +52,8 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from deploy.launcher import RESULT_CODES  # noqa: E402
-from robot_agent import ports  # noqa: E402
-from robot_agent.controller import Controller  # noqa: E402
+from robot_agent.core import ports  # noqa: E402
+from robot_agent.core.controller import Controller  # noqa: E402
 
 DROP_LEVELS = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8]
 QUICK_DROP_LEVELS = [0.0, 0.3, 0.6, 0.8]
@@ -141,8 +141,9 @@ def observing_controller(log: list[tuple[int, Any]]) -> type[Controller]:
 def run_task(task: Task) -> Outcome:
     """Run one task in memory (in a worker process) and judge its comparisons."""
     from deploy.inmemory import run_in_memory
-    from robot_agent import node, options
-    from world_server import server
+    from robot_agent.node import options
+    from robot_agent.node import robot_node as node
+    from world_server.server import world_server as server
 
     common = ["--seed", str(task.seed), "--robots", str(task.robots), "--sites", str(task.sites)]
     world_args = server.build_parser().parse_args(
@@ -364,11 +365,12 @@ def sensing_table(sigmas: Sequence[float], args: argparse.Namespace, frames: int
     """
     import numpy as np
 
-    from robot_agent import protocol, vision
-    from robot_agent.controller import ControllerConfig
-    from world_server.camera import CameraNoise, CameraRenderer
-    from world_server.layout import make_layout
-    from world_server.world import DEFAULT_CAMERA
+    from robot_agent.core import vision
+    from robot_agent.core.controller import ControllerConfig
+    from wire import protocol
+    from world_server.core.camera import CameraNoise, CameraRenderer
+    from world_server.core.layout import make_layout
+    from world_server.core.world import DEFAULT_CAMERA
 
     layout = make_layout(args.sites, args.robots, seed=0)
     best, second = sorted(layout.sites, key=lambda site: site.rank)[:2]

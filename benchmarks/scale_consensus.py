@@ -91,8 +91,8 @@ def from_summary(robots: int, seed: int, mode: str, summary: dict[str, Any], wal
 def run_in_process(task: tuple[int, int, float]) -> Run:
     """One lockstep run in this process (a worker of the pool)."""
     from deploy.inmemory import run_in_memory
-    from robot_agent.controller import ControllerConfig
-    from world_server.world import WorldConfig
+    from robot_agent.core.controller import ControllerConfig
+    from world_server.core.world import WorldConfig
 
     robots, seed, timeout = task
     started = time.perf_counter()
@@ -321,7 +321,7 @@ def render_doc(runs: Sequence[Run], before: Sequence[Run], figure: str) -> str:
         "# Large swarms\n",
         "How long a swarm takes to agree, against its size: 10 sites, default settings "
         "(alpha = 0, MProdOp, threshold 1), lockstep; the arena and the nest grow with the "
-        "swarm (`world_server/layout.py`). Made by `benchmarks/scale_consensus.py`:\n",
+        "swarm (`world_server/core/layout.py`). Made by `benchmarks/scale_consensus.py`:\n",
         f"```\n{COMMANDS}\n```\n",
         "Sim times are exact: a lockstep run is deterministic, in one process or over "
         "Zenoh. Wall times are indicative only: the machine (2 cores) was shared with other "

@@ -38,11 +38,11 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from nest_beacon.beacon import BeaconConfig  # noqa: E402
-from robot_agent import ports  # noqa: E402
-from robot_agent.controller import Controller, ControllerConfig  # noqa: E402
-from world_server.physics import EpuckSpec  # noqa: E402
-from world_server.world import WorldConfig  # noqa: E402
+from nest_beacon.core.beacon import BeaconConfig  # noqa: E402
+from robot_agent.core import ports  # noqa: E402
+from robot_agent.core.controller import Controller, ControllerConfig  # noqa: E402
+from world_server.core.physics import EpuckSpec  # noqa: E402
+from world_server.core.world import WorldConfig  # noqa: E402
 
 DEFAULT_OUT = Path("/tmp/section5-study")
 SITES = (5, 8, 10)

@@ -30,8 +30,8 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from deploy.inmemory import run_in_memory  # noqa: E402
-from robot_agent.controller import Controller, ControllerConfig  # noqa: E402
-from world_server.world import World, WorldConfig  # noqa: E402
+from robot_agent.core.controller import Controller, ControllerConfig  # noqa: E402
+from world_server.core.world import World, WorldConfig  # noqa: E402
 
 NEIGHBOUR_RANGE = 0.25  # metres: who counts as "around" a stuck robot
 LOOK_BACK = 200.0  # sim seconds of trail printed from before the current leg

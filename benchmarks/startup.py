@@ -17,12 +17,14 @@ import sys
 import time
 from pathlib import Path
 
+from wire.names import Role
+
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from deploy.processes import ProcessGroup, free_port, python_module, wait_for_port  # noqa: E402
 from plumbing.zenoh_session import open_session  # noqa: E402
-from robot_agent import protocol  # noqa: E402
+from wire import protocol  # noqa: E402
 
 
 def time_to_ready(robots: int, spawn: str) -> float:
@@ -55,7 +57,7 @@ def time_to_ready(robots: int, spawn: str) -> float:
         ready: set[str] = set()
         with open_session("client", [endpoint]) as session:
             session.liveliness().declare_subscriber(
-                keys.alive("robot", "*"),
+                keys.alive(Role.ROBOT, "*"),
                 lambda sample: ready.add(str(sample.key_expr)),
                 history=True,
             )

@@ -5,7 +5,7 @@ that a busy machine slows each way alike, and reports real-time factors and thei
 ratios to the unkeyed run:
 
 * ``--no-keys``: no tags, every message believed (as before run keys);
-* the default: every message tagged and checked with run keys (robot_agent/auth.py),
+* the default: every message tagged and checked with run keys (wire/auth.py),
   the router on a Unix socket in a private directory;
 * ``--secure``: run keys, and TLS on loopback with a certificate per process and the
   access control (deploy/credentials.py).
@@ -39,7 +39,7 @@ sys.path.insert(0, str(REPO))
 
 from benchmarks.swarm_speed import messaging_floor  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
-from robot_agent import auth, protocol  # noqa: E402
+from wire import auth, protocol  # noqa: E402
 
 MODES = {"unkeyed": ["--no-keys"], "keyed": [], "secure": ["--secure"]}
 

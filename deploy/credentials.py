@@ -1,7 +1,7 @@
 """What keeps one local run to itself: run keys, a private directory, and in secure mode an
 ephemeral certificate authority with a certificate and an access control for each process.
 
-* Run keys (robot_agent/auth.py): a fresh secret per run. The world server, beacon and
+* Run keys (wire/auth.py): a fresh secret per run. The world server, beacon and
   recorder get it; each robot process gets only the keys of the robots it hosts. Keys go
   through each child's environment or the fork call, never a command line.
 * The private directory (mode 0700, removed by ``close``) holds the router's Unix socket:
@@ -25,13 +25,13 @@ from pathlib import Path
 from deploy import zenoh_acl
 from deploy.processes import free_port, wait_for_port
 from plumbing import run_keys
-from robot_agent import auth, protocol
+from wire import auth, names, protocol
 
 DIRECTORY_PREFIX = "bestofn-"
 SOCKET_NAME = "zenoh.sock"
 SOCKET_PATH_LIMIT = 100  # bytes: sun_path holds 108 with its terminating zero
 CERTIFICATE_DAYS = 1  # ephemeral: the run's certificates are removed with it anyway
-BEACON = zenoh_acl.DEFAULT_BEACON
+BEACON = names.DEFAULT_BEACON
 
 
 def private_directory() -> Path:

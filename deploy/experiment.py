@@ -38,7 +38,7 @@ from deploy.inprocess import add_engine_option
 from deploy.run_switches import add_swarm_switches, switches_argv
 from plumbing import cliargs
 from plumbing.lifecycle import PARENT_ENV
-from robot_agent import protocol
+from wire import protocol
 
 STOP_GRACE = 30.0  # wall seconds a run has to stop after SIGINT before SIGKILL
 BACKSTOP = 60.0  # wall seconds past --run-timeout before a run is stopped from here

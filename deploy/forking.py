@@ -31,7 +31,11 @@ from typing import IO, Any
 
 from plumbing.lifecycle import PARENT_ENV, die_with_launcher
 
-PRELOAD = ["deploy.fork_server_group", "robot_agent.node", "nest_beacon.__main__"]
+PRELOAD = [
+    "deploy.fork_server_group",
+    "robot_agent.node.robot_node",
+    "nest_beacon.node.beacon_node",
+]
 FORK_SERVER_OF = "BESTOFN_FORK_SERVER_OF"  # the pid of the launcher that asks for the server
 
 # Single-threaded numerical libraries: no thread pools to copy into forks, and no

@@ -1,7 +1,7 @@
 """A whole lockstep run in one process, without Zenoh: for tests, sweeps and benchmarks.
 
 It drives the same World, the same controllers (through the port contract's
-``control_step`` on ``robot_agent.simulated``'s body and radio, as ``node.py`` does) and
+``control_step`` on ``robot_agent.core.simulated``'s body and radio, as ``node.py`` does) and
 the same beacon logic as ``swarm run``, tick by tick in the same order, so a seed gives the
 same per-robot results here as over Zenoh.
 """
@@ -16,12 +16,13 @@ from typing import Any, Literal
 from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary
 from deploy.watchdog import Watchdog, default_stall_window
 from deploy.wire_tap import WireTap, with_rejects
-from nest_beacon.beacon import Beacon, BeaconConfig
-from robot_agent import byzantine, protocol
-from robot_agent.controller import Controller, ControllerConfig
-from robot_agent.ports import RejectCounter, RobotController
-from robot_agent.simulated import SimulatedPorts
-from world_server.world import Transmission, World, WorldConfig
+from nest_beacon.core.beacon import Beacon, BeaconConfig
+from robot_agent.core import byzantine
+from robot_agent.core.controller import Controller, ControllerConfig
+from robot_agent.core.ports import RejectCounter, RobotController
+from robot_agent.core.simulated import SimulatedPorts
+from wire import names, protocol
+from world_server.core.world import Transmission, World, WorldConfig
 
 # The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
 # world/state (the world server's default --state-every): both see the same samples.
@@ -127,13 +128,13 @@ def run_in_memory(
         transmissions: list[Transmission] = []
         senses = []  # the world's readings of the tick, taken before any robot answers
         for robot_id in robots:
-            rx = len(deliveries.get(protocol.radio_name(robot_id), []))
+            rx = len(deliveries.get(names.robot_name(robot_id), []))
             senses.append((robot_id, world.sense(robot_id, rx, robot_id in frames)))
         if wire is not None:
             wire.tick_opened(world, senses, frames)
         for robot_id, sense in senses:
             robot = robots[robot_id]
-            name = protocol.radio_name(robot_id)
+            name = names.robot_name(robot_id)
             radio = deliveries.get(name, [])
             answer = robot.ports.answer(robot.controller, sense, radio, frames.get(robot_id))
             acts[robot_id] = answer.act

@@ -27,9 +27,9 @@ from deploy.run_progress import decided_progress
 from deploy.wire_tap import WireTap
 from plumbing.cliargs import UsageError
 from plumbing.lifecycle import die_with_launcher
-from robot_agent import protocol
-from world_server.recorder import McapRecorder, RunDescription, Sample
-from world_server.world import World, WorldConfig
+from wire import protocol
+from world_server.core.world import World, WorldConfig
+from world_server.recording.writer import McapRecorder, RunDescription, Sample
 
 if TYPE_CHECKING:
     from deploy.launcher import RunPlan

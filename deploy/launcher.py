@@ -37,19 +37,21 @@ from deploy.run_progress import decided_progress
 from deploy.run_switches import SWITCHES, RunSwitches, add_swarm_switches, run_switches
 from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary, describe
 from deploy.watchdog import Watchdog, default_stall_window
-from nest_beacon.options import NestBeaconConfig
+from nest_beacon.node.options import NestBeaconConfig
 from plumbing import cliargs
 from plumbing.cliargs import UsageError
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import open_session
-from robot_agent import auth, byzantine, protocol, settings
-from robot_agent.options import RobotAgentConfig
+from robot_agent.core import byzantine
+from robot_agent.node.options import RobotAgentConfig
 from viewer.options import VIEW_OPTIONS, Observer, add_view_options, observers
-from world_server.layout import make_layout
-from world_server.physics import EpuckSpec
-from world_server.recorder import DEFAULT_NICENESS, RunDescription
+from wire import auth, names, protocol, settings
+from wire.names import Role
+from world_server.core.layout import make_layout
+from world_server.core.physics import EpuckSpec
+from world_server.recording.writer import DEFAULT_NICENESS, RunDescription
 
 log = logging.getLogger("swarm.run")
 STATS_ATTEMPTS, STATS_RETRY_PAUSE = 5, 0.2
@@ -492,7 +494,7 @@ class Swarm:
         if session is not None:
             key, payload = self.keys.log(message.process), protocol.encode(message)
             with contextlib.suppress(zenoh.ZError):
-                session.put(key, payload, attachment=self._seal(auth.LAUNCHER, key, payload))
+                session.put(key, payload, attachment=self._seal(names.LAUNCHER, key, payload))
 
     @property
     def keyring(self) -> auth.Keyring | None:
@@ -545,7 +547,7 @@ class Swarm:
                 f"{time.monotonic() - opening:.0f} s): {str(error).split(' at ')[0]}"
             ) from None
         try:
-            fetch_world_info(self.session, self.keys, 30.0, self.keyring, auth.LAUNCHER)
+            fetch_world_info(self.session, self.keys, 30.0, self.keyring, names.LAUNCHER)
         except TimeoutError as error:
             raise StartError(str(error), world) from None
         watched = {
@@ -568,11 +570,11 @@ class Swarm:
                 ),
                 env=network.env(),
             )
-            if not self._wait_alive("recorder", 0, 30.0, self.recorder):
+            if not self._wait_alive(Role.RECORDER, 0, 30.0, self.recorder):
                 raise StartError("the recorder did not start", self.recorder)
             self._release_held_logs()
         self._start_observers()
-        beacon = zenoh_acl.beacon_identity(zenoh_acl.DEFAULT_BEACON)
+        beacon = names.beacon_certificate(names.DEFAULT_BEACON)
         self.group.start(
             "beacon",
             python_module("nest_beacon", *plan.beacon_argv(), *network.client_args(beacon)),
@@ -609,7 +611,7 @@ class Swarm:
                 self.session,
                 self.keys.viewer_finish,
                 self.keyring,
-                auth.LAUNCHER,
+                names.LAUNCHER,
                 payload=payload,
                 timeout=5.0,
             )
@@ -623,7 +625,7 @@ class Swarm:
 
         return callback
 
-    def _wait_alive(self, role: str, ident: int | str, timeout: float, child: Child) -> bool:
+    def _wait_alive(self, role: Role, ident: int | str, timeout: float, child: Child) -> bool:
         """Wait for a liveliness token, as long as the process that should declare it lives."""
         assert self.session is not None
         deadline = time.monotonic() + timeout
@@ -662,7 +664,7 @@ class Swarm:
             robot = self.keys.robot_of(key)
             if robot not in self.records:
                 raise protocol.ProtocolError(f"no robot {robot} in this run")
-            auth.unseal(keyring, auth.robot_identity(robot), key, payload, attachment)
+            auth.unseal(keyring, names.robot_identity(robot), key, payload, attachment)
             status = protocol.decode(payload, protocol.Status)
             if status.id != robot:
                 raise protocol.ProtocolError(f"status of robot {status.id} on {key}")
@@ -674,9 +676,9 @@ class Swarm:
             self.watchdog.status(status)
             self.watchdog.status(status)
         elif kind == "ack":
-            identity = auth.beacon_identity(key.rsplit("/", 2)[-2])
+            identity = names.beacon_identity(key.rsplit("/", 2)[-2])
             try:
-                auth.check_identity(identity)
+                names.check_identity(identity)
             except ValueError as error:
                 raise protocol.ProtocolError(str(error)) from None
             auth.unseal(keyring, identity, key, payload, attachment)
@@ -684,7 +686,7 @@ class Swarm:
             ack = protocol.decode(payload, protocol.Ack)
             self.beacon_rejected[name] = max(self.beacon_rejected.get(name, 0), ack.rejected)
         else:
-            auth.unseal(keyring, auth.WORLD, key, payload, attachment)
+            auth.unseal(keyring, names.WORLD, key, payload, attachment)
             if kind == "clock":
                 clock = protocol.decode(payload, protocol.Clock)
                 if self.started_at is None:
@@ -726,12 +728,15 @@ class Swarm:
         network = self.network
         assert network is not None
         # In secure mode each hosted robot's session presents its own certificate: '{id}'.
-        argv = [*self.plan.robot_argv(robots), *network.client_args("robot-{id}")]
+        argv = [
+            *self.plan.robot_argv(robots),
+            *network.client_args(names.robot_certificate("{id}")),
+        ]
         argv += self.plan.trace_args(name)
         # Only the keys of its own robots: whatever it says can only be in their names.
-        env = network.env(auth.robot_identity(robot) for robot in robots)
+        env = network.env(names.robot_identity(robot) for robot in robots)
         if self.plan.spawn == "fork":
-            return self.group.fork(name, "robot_agent.node", argv, env=env)
+            return self.group.fork(name, "robot_agent.node.robot_node", argv, env=env)
         return self.group.start(name, python_module("robot_agent.node", *argv), env=env)
 
     def infrastructure_crash(self) -> Child | None:
@@ -824,7 +829,7 @@ class Swarm:
             return None
         try:
             answers, _ = ask(
-                self.session, self.keys.world_stats, self.keyring, auth.LAUNCHER, timeout=2.0
+                self.session, self.keys.world_stats, self.keyring, names.LAUNCHER, timeout=2.0
             )
             for answer in answers:
                 return protocol.decode(answer, protocol.WorldState)
@@ -847,7 +852,7 @@ class Swarm:
             self.session,
             key,
             self.keyring,
-            auth.LAUNCHER,
+            names.LAUNCHER,
             payload=payload,
             timeout=RECORDER_LONGEST_WAIT,
             worth_waiting=waiting,

@@ -1,6 +1,6 @@
 """``swarm report``: the paper's Section 5 figures and a summary table, from recordings alone.
 
-Reads MCAP recordings made by the recorder (``world_server/recorder.py``) with ``mcap``'s
+Reads MCAP recordings made by the recorder (``world_server/recording/writer.py``) with ``mcap``'s
 stream reader, so a file cut short by a crash is read up to its last complete record.
 The run summary comes from the recording's ``bestofn.run`` metadata record when there is
 one, else it is rebuilt from the robots' status messages (the same code that
@@ -41,11 +41,11 @@ from mcap.stream_reader import StreamReader
 
 from deploy.summary import ENDINGS, RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from deploy.watchdog import Watchdog
-from robot_agent import protocol
-from world_server.layout import make_layout
-from world_server.physics import EpuckSpec
+from wire import protocol
+from world_server.core.layout import make_layout
+from world_server.core.physics import EpuckSpec
 
-START_METADATA = "bestofn.start"  # the names the recorder writes (world_server/recorder.py)
+START_METADATA = "bestofn.start"  # the names the recorder writes (world_server/recording/writer.py)
 RUN_METADATA = "bestofn.run"
 FIGURES = ("fig4.png", "fig5.png", "fig2.png", "trajectories.png")
 CSV_COLUMNS = (
@@ -703,7 +703,7 @@ def plot_boxes(summaries: Sequence[dict[str, Any]], path: Path, *, pools: bool) 
 
 def _site_colours(layout: dict[str, Any] | None, sites: int) -> dict[int, tuple[float, ...]]:
     """Each site's rendered colour (red share = quality), for legends and the arena."""
-    from world_server.foxglove import site_colour
+    from world_server.recording.foxglove import site_colour
 
     if layout is None:
         return {site: (0.5, 0.5, 0.5, 1.0) for site in range(sites)}

@@ -3,7 +3,7 @@ process), the clock, radio medium and camera (the world server), the nest beacon
 ``--beacon-*``) and the robot faults (the launcher itself).
 
 ``swarm run`` and ``swarm experiment`` both take all of them. Each option is made from its
-setting's one definition on the config dataclass (``robot_agent/settings.py``), and the
+setting's one definition on the config dataclass (``wire/settings.py``), and the
 processes of a run are handed the configs these options make, each as one JSON object.
 """
 
@@ -15,12 +15,13 @@ from typing import Annotated, Any, ClassVar, NamedTuple
 
 from msgspec import Meta
 
-from nest_beacon.beacon import BeaconConfig
+from nest_beacon.core.beacon import BeaconConfig
 from plumbing.settings_cli import Options
-from robot_agent import byzantine, settings
-from robot_agent.controller_config import ControllerConfig
-from robot_agent.settings import Flag
-from world_server.options import WorldServerConfig
+from robot_agent.core import byzantine
+from robot_agent.core.controller_config import ControllerConfig
+from wire import settings
+from wire.settings import Flag
+from world_server.server.options import WorldServerConfig
 
 
 class RobotAtTime(NamedTuple):

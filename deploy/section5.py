@@ -72,8 +72,8 @@ class Task:
 def run_task(task: Task) -> dict[str, Any]:
     """One run in process; its compact record (see section5_tables)."""
     from deploy.inmemory import run_in_memory
-    from robot_agent.controller import ControllerConfig
-    from world_server.world import WorldConfig
+    from robot_agent.core.controller import ControllerConfig
+    from world_server.core.world import WorldConfig
 
     world = WorldConfig(
         run="section5", seed=task.seed, num_sites=task.sites, num_robots=tables.ROBOTS

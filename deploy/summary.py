@@ -7,7 +7,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from robot_agent import byzantine, protocol
+from robot_agent.core import byzantine
+from wire import protocol
 
 
 @dataclass

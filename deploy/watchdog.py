@@ -16,7 +16,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from robot_agent import protocol
+from wire import protocol
 
 # Body lengths a robot must move to count as progress. One is not enough: robot 361 of a
 # 500-robot run (seed 2), trapped among parked robots, wriggled over 8 cm, a little more

@@ -5,8 +5,8 @@ recording must read like one of ``swarm run``: the same keys, the same payloads 
 attachments (world/clock and world/state, each robot's sense, camera, act and status,
 radio tx and rx with their metadata, the beacon's ack), in the order the processes
 publish them within a tick. ``deploy/inmemory.py`` calls a WireTap at those points; it
-encodes each message as ``world_server/server.py``, ``robot_agent/node.py`` and
-``nest_beacon`` do (an unkeyed run: attachments carry only metadata) and hands it on.
+encodes each message as the world server, the robot processes and the beacon
+do (an unkeyed run: attachments carry only metadata) and hands it on.
 """
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ from collections.abc import Callable, Iterable, Sequence
 
 import msgspec
 
-from robot_agent import protocol
-from robot_agent.simulated import TickAnswer
-from world_server.radio import Delivery
-from world_server.world import World
+from robot_agent.core.simulated import TickAnswer
+from wire import names, protocol
+from world_server.core.radio import Delivery
+from world_server.core.world import World
 
 # key, payload, attachment: a sample as a Zenoh subscriber would see it.
 Put = Callable[[str, bytes, bytes | None], None]
@@ -60,7 +60,7 @@ class WireTap:
         self, robot: int, answer: TickAnswer, status: protocol.Status | None
     ) -> None:
         """A robot's answer: its radio messages, its act, and its status if it changed."""
-        name = protocol.radio_name(robot)
+        name = names.robot_name(robot)
         for sent in answer.transmissions:
             self.put(self.keys.radio_tx(name), sent.payload, sent.meta)
         self.put(self.keys.act(robot), protocol.encode(answer.act), None)

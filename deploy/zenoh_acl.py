@@ -5,7 +5,7 @@ the certificate's common name is its identity (``robot-3``, ``world``, ``beacon-
 ``observer``, ``launcher``, ``recorder``, ``viewer``, ``foxglove``; routers use their host
 name). The router's
 access control denies by default and allows each identity exactly its part of the
-protocol (robot_agent/protocol.py), so a robot can only publish its own ``act``,
+protocol (wire/protocol.py), so a robot can only publish its own ``act``,
 ``status`` and ``radio/tx/<id>`` and only the world server can publish ``sense``,
 ``camera`` and ``radio/rx``. See deploy/zenoh/README.md.
 
@@ -37,16 +37,16 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from plumbing import cliargs
-from robot_agent import protocol
+from wire import names, protocol
+from wire.names import Role
 
 DEFAULT_PORT = 7447
 DEFAULT_ROUTER = "router"
-DEFAULT_BEACON = "nest"
-# Identities (certificate common names) of the processes that are neither robots nor beacons.
-OBSERVER, LAUNCHER, RECORDER, WORLD = "observer", "launcher", "recorder", "world"
-# The observers of swarm run --view and --foxglove: readers with a token (and the page a
-# queryable) of their own.
-VIEWER, FOXGLOVE = "viewer", "foxglove"
+# Certificate names of the processes that are neither robots nor beacons (wire/names.py):
+# the observers of swarm run --view and --foxglove are readers with a token (and the page a
+# queryable) of their own; OBSERVER is any other reader.
+OBSERVER, LAUNCHER, RECORDER, WORLD = names.OBSERVER, names.LAUNCHER, names.RECORDER, names.WORLD
+VIEWER, FOXGLOVE = names.VIEWER, names.FOXGLOVE
 # Zenoh 1.10's ACL message types (the config parser rejects any other name).
 ALL_MESSAGES = (
     "put",
@@ -62,34 +62,23 @@ ALL_MESSAGES = (
 _HOST_NAME = re.compile(r"[A-Za-z0-9]([A-Za-z0-9.-]{0,62}[A-Za-z0-9])?")
 
 
-def robot_identity(robot: int) -> str:
-    return f"robot-{robot}"
-
-
-def beacon_identity(name: str) -> str:
-    return f"beacon-{name}"
-
-
 @dataclass(frozen=True)
 class SwarmPlan:
     """Who takes part in one secured run: the identities the router will know."""
 
     keys: protocol.Keys
     robots: tuple[int, ...]
-    beacons: tuple[str, ...] = (DEFAULT_BEACON,)
+    beacons: tuple[str, ...] = (names.DEFAULT_BEACON,)
     routers: tuple[str, ...] = (DEFAULT_ROUTER,)
     port: int = DEFAULT_PORT
 
     def __post_init__(self) -> None:
         if len(set(self.robots)) != len(self.robots) or any(
-            not 0 <= robot < protocol.MAX_ROBOTS for robot in self.robots
+            not 0 <= robot < names.MAX_ROBOTS for robot in self.robots
         ):
-            raise ValueError(f"robot ids must be distinct and in [0, {protocol.MAX_ROBOTS})")
+            raise ValueError(f"robot ids must be distinct and in [0, {names.MAX_ROBOTS})")
         for beacon in self.beacons:
-            protocol.check_name(beacon, "beacon name")
-            # The world server tells beacons from robots by a non-numeric radio name.
-            if beacon.isdigit():
-                raise ValueError(f"beacon name {beacon!r} is a number: it would be a robot's")
+            names.check_beacon_name(beacon)
         if len(set(self.beacons)) != len(self.beacons):
             raise ValueError("each beacon name may be given once")
         clients = set(self.client_identities())
@@ -107,8 +96,8 @@ class SwarmPlan:
     def client_identities(self) -> list[str]:
         return [
             WORLD,
-            *(robot_identity(robot) for robot in self.robots),
-            *(beacon_identity(beacon) for beacon in self.beacons),
+            *(names.robot_certificate(robot) for robot in self.robots),
+            *(names.beacon_certificate(beacon) for beacon in self.beacons),
             OBSERVER,
             LAUNCHER,
             RECORDER,
@@ -166,9 +155,9 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
             "follow-world",
             "ingress",
             ["declare_liveliness_subscriber", "liveliness_query"],
-            [keys.alive(WORLD, "*")],
+            [keys.alive(Role.WORLD, "*")],
         ),
-        _rule("follow-world-token", "egress", ["liveliness_token"], [keys.alive(WORLD, "*")]),
+        _rule("follow-world-token", "egress", ["liveliness_token"], [keys.alive(Role.WORLD, "*")]),
         # The world server: the robots' bodies, the radio medium, the clock.
         _rule(
             "world-speak",
@@ -183,7 +172,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 keys.world_state,
             ],
         ),
-        _rule("world-alive", "ingress", ["liveliness_token"], [keys.alive(WORLD, "*")]),
+        _rule("world-alive", "ingress", ["liveliness_token"], [keys.alive(Role.WORLD, "*")]),
         _rule("world-serve", "ingress", ["declare_queryable", "reply"], world_services),
         _rule("world-asked", "egress", ["query"], world_services),
         # Beacons hear the clock.
@@ -195,14 +184,14 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         _rule("launcher-finished", "egress", ["reply"], finishes),
         # The recorder answers the finish query once its file is complete.
         _rule("recorder-serve", "ingress", ["declare_queryable", "reply"], [keys.recorder_finish]),
-        _rule("recorder-alive", "ingress", ["liveliness_token"], [keys.alive(RECORDER, "*")]),
+        _rule("recorder-alive", "ingress", ["liveliness_token"], [keys.alive(Role.RECORDER, "*")]),
         _rule("recorder-asked", "egress", ["query"], [keys.recorder_finish]),
         # The page answers its finish query once every page was sent how the run ended.
         _rule("viewer-serve", "ingress", ["declare_queryable", "reply"], [keys.viewer_finish]),
-        _rule("viewer-alive", "ingress", ["liveliness_token"], [keys.alive(VIEWER, 0)]),
+        _rule("viewer-alive", "ingress", ["liveliness_token"], [keys.alive(Role.VIEWER, 0)]),
         _rule("viewer-asked", "egress", ["query"], [keys.viewer_finish]),
         # Foxglove live only listens, and says it serves.
-        _rule("foxglove-alive", "ingress", ["liveliness_token"], [keys.alive(FOXGLOVE, 0)]),
+        _rule("foxglove-alive", "ingress", ["liveliness_token"], [keys.alive(Role.FOXGLOVE, 0)]),
         # Routers of the other hosts relay everyone's traffic; each checks its own clients.
         _rule("router-relay-in", "ingress", ALL_MESSAGES, everything),
         _rule("router-relay-out", "egress", ALL_MESSAGES, everything),
@@ -226,7 +215,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
     reading = ["read-subscribe", "read-receive", "read-query", "read-answer"]
     grant_client(WORLD, ["world-speak", "world-alive", "world-serve", "world-asked", *reading])
     for robot in plan.robots:
-        identity, name = robot_identity(robot), protocol.radio_name(robot)
+        identity, name = names.robot_certificate(robot), names.robot_name(robot)
         # A robot may lead a process hosting several: its session then carries their
         # senses and acts as batches (each entry sealed with its own robot's key).
         own_inputs = [
@@ -243,7 +232,10 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 [keys.act(robot), keys.host_act(robot), keys.status(robot), keys.radio_tx(name)],
             ),
             _rule(
-                f"{identity}-alive", "ingress", ["liveliness_token"], [keys.alive("robot", robot)]
+                f"{identity}-alive",
+                "ingress",
+                ["liveliness_token"],
+                [keys.alive(Role.ROBOT, robot)],
             ),
             _rule(f"{identity}-subscribe", "ingress", ["declare_subscriber"], own_inputs),
             _rule(f"{identity}-receive", "egress", ["put"], own_inputs),
@@ -262,7 +254,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
             ],
         )
     for beacon in plan.beacons:
-        identity = beacon_identity(beacon)
+        identity = names.beacon_certificate(beacon)
         rules += [
             _rule(
                 f"{identity}-speak",
@@ -271,7 +263,10 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 [keys.radio_tx(beacon), keys.beacon_ack(beacon)],
             ),
             _rule(
-                f"{identity}-alive", "ingress", ["liveliness_token"], [keys.alive("beacon", beacon)]
+                f"{identity}-alive",
+                "ingress",
+                ["liveliness_token"],
+                [keys.alive(Role.BEACON, beacon)],
             ),
         ]
         grant_client(
@@ -413,12 +408,12 @@ def plan_title(plan: SwarmPlan) -> str:
 def write_configs(plan: SwarmPlan, out: Path, cert_dir: PurePath) -> list[Path]:
     """Write ``routers/<router>.json5`` and ``clients/<identity>.json5`` under ``out``."""
     written = []
-    for folder, names, make in (
+    for folder, identities, make in (
         ("routers", plan.routers, router_config),
         ("clients", plan.client_identities(), client_config),
     ):
         (out / folder).mkdir(parents=True, exist_ok=True)
-        for name in names:
+        for name in identities:
             path = out / folder / f"{name}.json5"
             path.write_text(render(make(plan, name, cert_dir), f"{name}, {plan_title(plan)}"))
             written.append(path)
@@ -570,8 +565,8 @@ def issue_all(
         shutil.copyfile(ca_certificate, cert_dir / "ca.pem")
     for router in plan.routers:
         # Clients reach their own host's router on loopback; routers reach it by name.
-        names = list(dict.fromkeys([router, "localhost", "127.0.0.1"]))
-        issue_certificate(ca_certificate, ca_key, router, cert_dir, server_names=names, days=days)
+        hosts = list(dict.fromkeys([router, "localhost", "127.0.0.1"]))
+        issue_certificate(ca_certificate, ca_key, router, cert_dir, server_names=hosts, days=days)
     for identity in plan.client_identities():
         issue_certificate(ca_certificate, ca_key, identity, cert_dir, days=days)
 
@@ -599,7 +594,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--robots",
-        type=cliargs.int_range(1, protocol.MAX_ROBOTS),
+        type=cliargs.int_range(1, names.MAX_ROBOTS),
         required=True,
         help="number of robots (ids 0 to N-1)",
     )
@@ -618,7 +613,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         type=cliargs.name,
         metavar="NAME",
-        help=f"a nest beacon's name (repeatable; default: {DEFAULT_BEACON})",
+        help=f"a nest beacon's name (repeatable; default: {names.DEFAULT_BEACON})",
     )
     parser.add_argument(
         "--router",
@@ -678,7 +673,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         plan = SwarmPlan(
             keys=protocol.Keys(args.run_id, args.root),
             robots=tuple(range(args.robots)),
-            beacons=tuple(args.beacons or [DEFAULT_BEACON]),
+            beacons=tuple(args.beacons or [names.DEFAULT_BEACON]),
             routers=tuple(args.routers or [DEFAULT_ROUTER]),
             port=args.port,
         )

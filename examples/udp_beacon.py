@@ -19,10 +19,10 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict
 
-from nest_beacon.beacon import Beacon, BeaconConfig
+from nest_beacon.core.beacon import Beacon, BeaconConfig
 from plumbing import cliargs
-from robot_agent import protocol
-from robot_agent.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
+from robot_agent.link.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
+from wire import protocol
 
 STOP = threading.Event()
 

@@ -30,9 +30,10 @@ from dataclasses import asdict
 import numpy as np
 
 from plumbing import cliargs
-from robot_agent import ports, protocol
-from robot_agent.controller import Controller, ControllerConfig
-from robot_agent.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
+from robot_agent.core import ports
+from robot_agent.core.controller import Controller, ControllerConfig
+from robot_agent.link.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
+from wire import names, protocol
 
 PANEL_FRACTION = 0.7  # of each site's share of the wall that its coloured panel covers
 CAMERA_REACH = 0.3  # metres: a panel further away is too small to judge
@@ -206,7 +207,7 @@ def run(args: argparse.Namespace) -> dict[str, object]:
     controller = Controller(args.id, world, config, rng)
     rejects = ports.RejectCounter()
     with UdpRadio(
-        protocol.radio_name(args.id),
+        names.robot_name(args.id),
         address=args.address,
         port=args.port,
         interface=args.interface,
@@ -251,7 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="udp_robot", description="One robot of the swarm on a UDP radio, with a stub body."
     )
-    parser.add_argument("--id", type=cliargs.int_range(0, protocol.MAX_ROBOTS - 1), required=True)
+    parser.add_argument("--id", type=cliargs.int_range(0, names.MAX_ROBOTS - 1), required=True)
     parser.add_argument(
         "--robots",
         type=cliargs.positive_int,

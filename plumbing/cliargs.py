@@ -12,7 +12,7 @@ import logging
 import math
 from collections.abc import Callable
 
-from robot_agent import protocol
+from wire import names, protocol
 
 
 class UsageError(Exception):
@@ -70,9 +70,9 @@ def _bounds(low: object, high: object, low_open: bool = False, high_open: bool =
 
 
 def name(text: str) -> str:
-    """A name (run id, key root, beacon): the one rule of ``protocol.check_name``."""
+    """A name (run id, key root, beacon): the one rule of ``names.check_name``."""
     try:
-        return protocol.check_name(text)
+        return names.check_name(text)
     except ValueError as error:
         raise argparse.ArgumentTypeError(str(error)) from None
 

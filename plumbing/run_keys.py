@@ -25,7 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from plumbing import cliargs
-from robot_agent import auth, protocol
+from wire import auth, names
 
 KEYS_ENV = "BESTOFN_RUN_KEYS"
 log = logging.getLogger("run_keys")
@@ -126,7 +126,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--run-id", type=cliargs.name, required=True, help="the run id")
     parser.add_argument(
         "--robots",
-        type=cliargs.int_range(1, protocol.MAX_ROBOTS),
+        type=cliargs.int_range(1, names.MAX_ROBOTS),
         required=True,
         help="number of robots (ids 0 to N-1)",
     )
@@ -145,7 +145,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     keyring = auth.Keyring(secret=new_secret())
     write(out / "secret.json", keyring, args.run_id)
     for robot in range(args.robots):
-        robot_keys = keyring.only([auth.robot_identity(robot)])
+        robot_keys = keyring.only([names.robot_identity(robot)])
         write(out / f"robot-{robot}.json", robot_keys, args.run_id)
     print(f"wrote secret.json and {args.robots} robot key file(s) in {out}")
     return 0

@@ -1,4 +1,4 @@
-"""Command-line options made from config dataclasses (``robot_agent/settings.py``).
+"""Command-line options made from config dataclasses (``wire/settings.py``).
 
 ``Options(Config)`` gathers the flagged settings of ``Config`` and of the config
 dataclasses in its fields. ``add_to(parser)`` declares them: spelling, help section,
@@ -22,8 +22,8 @@ from collections.abc import Collection, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from robot_agent import settings
-from robot_agent.settings import Setting
+from wire import settings
+from wire.settings import Setting
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """Asking the run's queryables (``world/info`` first of all) and believing only true answers.
 
 In a keyed run a query carries a fresh nonce and the asker's tag, and only a reply tagged
-for that nonce with the asker's key counts (robot_agent/auth.py): anyone else on the
+for that nonce with the asker's key counts (wire/auth.py): anyone else on the
 router can answer too, but cannot make an answer that passes.
 """
 
@@ -14,7 +14,7 @@ from typing import Any
 
 import zenoh
 
-from robot_agent import auth, protocol
+from wire import auth, names, protocol
 
 
 def ask(
@@ -83,7 +83,7 @@ def fetch_world_info(
     keys: protocol.Keys,
     timeout: float,
     keyring: auth.Keyring | None = None,
-    identity: str = auth.LAUNCHER,
+    identity: str = names.LAUNCHER,
 ) -> protocol.WorldInfo:
     """Ask ``world/info`` until a world server answers, or raise TimeoutError."""
     deadline = time.monotonic() + timeout

@@ -26,12 +26,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from robot_agent import ports, protocol
-from robot_agent.controller import Controller, ControllerConfig
-from robot_agent.navigation import EPUCK_PROX_ANGLES, wrap_angle
+from robot_agent.core import ports
+from robot_agent.core.controller import Controller, ControllerConfig
+from robot_agent.core.navigation import EPUCK_PROX_ANGLES, wrap_angle
+from wire import names, protocol
 
 if TYPE_CHECKING:
-    from world_server.physics import Physics
+    from world_server.core.physics import Physics
 
 ROBOT_RADIUS = 0.037
 WHEEL_BASE = 0.053
@@ -40,7 +41,7 @@ PROX_RANGE = 0.06
 DT = 0.1
 FRAME_SHAPE = (48, 64, 3)
 CAMERA_REACH = 0.3  # metres: beyond this a panel is too small to judge
-PANEL_FRACTION = 0.7  # of each site's share of the wall, as in world_server.layout
+PANEL_FRACTION = 0.7  # of each site's share of the wall, as in world_server.core.layout
 
 
 def quality_of_rank(rank: int, num_sites: int) -> float:
@@ -198,7 +199,7 @@ class FakeWorld:
     robots_sense_each_other: bool = False
     # Overrides the default camera; returning None loses the frame.
     camera: Callable[[FakeBody], np.ndarray | None] | None = None
-    physics: bool = False  # move and sense with world_server.physics instead of kinematics
+    physics: bool = False  # move and sense with world_server.core.physics instead of kinematics
     t: float = 0.0
     tick: int = 0
     bodies: list[FakeBody] = field(default_factory=list)
@@ -213,7 +214,7 @@ class FakeWorld:
         self._next_beacon = 0.0
         self._physics: Physics | None = None
         if self.physics:
-            from world_server.physics import Physics
+            from world_server.core.physics import Physics
 
             self._physics = Physics(self.info.arena_radius)
 
@@ -223,7 +224,7 @@ class FakeWorld:
         body = FakeBody(self, robot_id, pose)
         if self._physics is not None:
             self._physics.add_robot(robot_id, *pose)
-        radio = FakeRadio(self, protocol.radio_name(robot_id))
+        radio = FakeRadio(self, names.robot_name(robot_id))
         self.bodies.append(body)
         self.radios.append(radio)
         return body, radio

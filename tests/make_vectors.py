@@ -3,11 +3,11 @@
     python tests/make_vectors.py           # (re)write the files from protocol.py
     python tests/make_vectors.py --check   # exit 1 if a file differs from what it would write
 
-One file per message type of ``robot_agent/protocol.py``, plus ``udp_frame.json`` for the
-UDP radio's framing (``robot_agent/udp_radio.py``), ``auth.json`` for run keys and
-message tags (``robot_agent/auth.py``) and ``tick.json`` for one lockstep tick of a robot
+One file per message type of ``wire/protocol.py``, plus ``udp_frame.json`` for the
+UDP radio's framing (``robot_agent/link/udp_radio.py``), ``auth.json`` for run keys and
+message tags (``wire/auth.py``) and ``tick.json`` for one lockstep tick of a robot
 on Zenoh: what arrives, what the port contract hands the controller, what goes out
-(``robot_agent/simulated.py``). Each message file holds:
+(``robot_agent/core/simulated.py``). Each message file holds:
 
 * ``valid``: messages with the exact bytes ``protocol.encode`` produces for them (as a
   UTF-8 string and as hex). A decoder must accept them; an encoder that wants to be
@@ -37,8 +37,8 @@ from typing import Any
 
 import msgspec
 
-from robot_agent import auth, protocol
-from robot_agent.udp_radio import MAX_PAYLOAD_BYTES, encode_frame
+from robot_agent.link.udp_radio import MAX_PAYLOAD_BYTES, encode_frame
+from wire import auth, names, protocol
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
 
@@ -720,7 +720,7 @@ def opinion_vectors() -> TypeVectors:
         "worst_case_n100",
         protocol.OpinionPayload(
             v=1,
-            id=protocol.MAX_ROBOTS - 1,
+            id=names.MAX_ROBOTS - 1,
             trip=2**53,
             decided=False,
             opinion=worst,
@@ -839,7 +839,7 @@ def udp_frame_vectors() -> dict[str, Any]:
     worst = protocol.encode(
         protocol.OpinionPayload(
             v=1,
-            id=protocol.MAX_ROBOTS - 1,
+            id=names.MAX_ROBOTS - 1,
             trip=2**53,
             decided=False,
             opinion=worst_case_opinion(),
@@ -855,7 +855,7 @@ def udp_frame_vectors() -> dict[str, Any]:
         for name, sender, payload in (
             ("opinion", "3", opinion),
             ("beacon", "nest", beacon),
-            ("worst_case_n100", str(protocol.MAX_ROBOTS - 1), worst),
+            ("worst_case_n100", str(names.MAX_ROBOTS - 1), worst),
         )
     ]
     good = encode_frame("3", opinion)

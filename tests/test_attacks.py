@@ -37,8 +37,10 @@ from swarm_helpers import (
 from deploy.processes import python_module
 from plumbing import run_keys
 from plumbing.world_info import ask
-from robot_agent import auth, batch, node, protocol
-from world_server.layout import make_layout
+from robot_agent.node import robot_node as node
+from wire import auth, batch, names, protocol
+from wire.names import Role
+from world_server.core.layout import make_layout
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -152,7 +154,7 @@ KEYED = pytest.mark.parametrize("keys", [[], ["--no-keys"]], ids=["keyed", "no-k
 def test_a_liveliness_token_of_a_robot_outside_the_swarm_is_refused(keys: list[str]) -> None:
     with attacked_run(*SMALL, "--no-record", *keys) as run:
         run.wait_for_tick(10)
-        token = run.session.liveliness().declare_token(run.keys.alive("robot", 99999))
+        token = run.session.liveliness().declare_token(run.keys.alive(Role.ROBOT, 99999))
         code, summary, stderr = run.finish()
         token.undeclare()
     assert_right_consensus(code, summary, stderr)
@@ -452,9 +454,9 @@ def test_a_sender_that_leaves_with_its_transmission_queued_does_not_crash_the_wo
         ticks: list[int] = []
         sent: list[int] = []  # the tick of the test's one transmission
         if role == "robot":
-            name, keyring, identity = "2", mine, auth.robot_identity(2)
+            name, keyring, identity = "2", mine, names.robot_identity(2)
         else:
-            name, keyring, identity = "spare", secret, auth.beacon_identity("spare")
+            name, keyring, identity = "spare", secret, names.beacon_identity("spare")
         joined_at: list[int] = []
 
         def transmit(tick: int) -> None:
@@ -486,14 +488,14 @@ def test_a_sender_that_leaves_with_its_transmission_queued_does_not_crash_the_wo
             if role == "beacon":
                 assert _wait_until(lambda: len(ticks) > 3, 60), "the run never started"
                 joined_at.append(ticks[-1])
-            token = session.liveliness().declare_token(keys.alive(role, name))
+            token = session.liveliness().declare_token(keys.alive(Role(role), name))
             assert _wait_until(lambda: bool(sent), 60), "the test's sender never took part"
             tick = sent[0]
             time.sleep(0.5)  # the world has it queued, and waits for an answer that never comes
             token.undeclare()  # ... and leaves
             assert _wait_until(lambda: ticks[-1] >= tick + 20, 60), "the world stopped ticking"
             assert started[0].poll() is None, "the world server exited"
-            answers, refused = ask(session, keys.world_stats, secret, auth.LAUNCHER, timeout=5.0)
+            answers, refused = ask(session, keys.world_stats, secret, names.LAUNCHER, timeout=5.0)
             assert answers, refused
             stats = protocol.decode(answers[0], protocol.WorldState)
         finally:

@@ -1,4 +1,4 @@
-"""Run keys and message tags (robot_agent/auth.py), key files and the launcher's hand-over of
+"""Run keys and message tags (wire/auth.py), key files and the launcher's hand-over of
 keys (plumbing/run_keys.py), and a run's private directory (deploy/credentials.py)."""
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from deploy.credentials import RunNetwork
 from plumbing import run_keys
-from robot_agent import auth
+from wire import auth
 
 VECTORS = json.loads((Path(__file__).parent / "vectors" / "auth.json").read_text())
 PROTOCOL_DOC = (Path(__file__).resolve().parent.parent / "docs" / "protocol.md").read_text()

@@ -1,4 +1,4 @@
-"""The batch codec (robot_agent/batch.py): what it encodes reads back, and anything that is
+"""The batch codec (wire/batch.py): what it encodes reads back, and anything that is
 not exactly a valid batch is refused whole, with a BatchError, never another exception."""
 
 from __future__ import annotations
@@ -10,12 +10,12 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from robot_agent import batch, protocol
+from wire import batch, names, protocol
 
 ENTRIES = [
     batch.Entry(0, b'{"v":1,"tick":3}', b"\x01" * 16),
     batch.Entry(7, b"{}", None),
-    batch.Entry(protocol.MAX_ROBOTS - 1, b"", b"tag"),
+    batch.Entry(names.MAX_ROBOTS - 1, b"", b"tag"),
 ]
 
 
@@ -51,7 +51,7 @@ GOOD = batch.encode(ENTRIES)
         (_header(1) + _entry(1, b"", b"{}")[:-1], "cut short"),
         (GOOD[:-1], "cut short"),
         (GOOD + b"\x00", "1 bytes after the last entry"),
-        (_header(1) + _entry(protocol.MAX_ROBOTS, b"", b""), "out of range"),
+        (_header(1) + _entry(names.MAX_ROBOTS, b"", b""), "out of range"),
         (_header(2) + _entry(3, b"", b"") + _entry(3, b"", b""), "robot 3 twice"),
         (_header(1) + _entry(1, b"x" * 1025, b""), "attachment of 1025 bytes"),
         (

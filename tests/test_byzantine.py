@@ -17,11 +17,14 @@ from swarm_helpers import run_swarm, unique_run_id
 
 from deploy.cli import main as swarm_main
 from deploy.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
-from robot_agent import byzantine, decision, node, options, ports, protocol, settings
-from robot_agent.byzantine import Behaviour, ByzantineRobot
-from robot_agent.controller import ControllerConfig
-from robot_agent.options import RobotAgentConfig
-from world_server.layout import make_layout
+from robot_agent.core import byzantine, decision, ports
+from robot_agent.core.byzantine import Behaviour, ByzantineRobot
+from robot_agent.core.controller import ControllerConfig
+from robot_agent.node import options
+from robot_agent.node import robot_node as node
+from robot_agent.node.options import RobotAgentConfig
+from wire import names, protocol, settings
+from world_server.core.layout import make_layout
 
 # --- the wrappers, on a lone robot in the fake world -----------------------------------
 
@@ -338,7 +341,7 @@ def test_a_real_run_with_a_liar_and_an_inverted_robot_matches_the_in_process_run
     process. The recording shows robot 1's one-hot broadcasts; the results are the
     in-process engine's, robot by robot."""
     from deploy.inmemory import run_in_memory
-    from world_server import server
+    from world_server.server import world_server as server
 
     seed, robots, sites = 3, 4, 5
     common = ["--seed", str(seed), "--robots", str(robots), "--sites", str(sites)]
@@ -392,7 +395,7 @@ def test_a_real_run_with_a_liar_and_an_inverted_robot_matches_the_in_process_run
     with open(path, "rb") as stream:
         for _, channel, message in make_reader(stream).iter_messages():
             for robot in range(robots):
-                if channel.topic == keys.radio_tx(protocol.radio_name(robot)):
+                if channel.topic == keys.radio_tx(names.robot_name(robot)):
                     broadcasts[robot].append(json.loads(message.data)["payload"])
     claim = byzantine.one_hot(liar_site, sites)
     lies = broadcasts[1]

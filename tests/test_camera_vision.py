@@ -20,16 +20,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from robot_agent import protocol
-from robot_agent.vision import decode_frame, estimate_quality
-from world_server.camera import (
+from robot_agent.core.vision import decode_frame, estimate_quality
+from wire import protocol
+from world_server.core.camera import (
     FLOOR_BGR,
     WALL_BGR,
     CameraNoise,
     CameraRenderer,
     site_colour_bgr,
 )
-from world_server.layout import Layout, make_layout
+from world_server.core.layout import Layout, make_layout
 
 SPEC = protocol.CameraSpec(width=64, height=48, fov=0.84)
 ROBOT_RADIUS = 0.037

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from world_server.clock import Barrier, Pacer
+from world_server.core.clock import Barrier, Pacer
 
 
 def test_a_tick_closes_when_everyone_answered_and_their_radio_arrived() -> None:

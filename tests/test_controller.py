@@ -21,11 +21,12 @@ from fakes import (
     site_frame,
 )
 
-from robot_agent import ports, protocol, vision
-from robot_agent.controller import Controller, ControllerConfig
-from robot_agent.navigation import wrap_angle
-from world_server.camera import CameraRenderer
-from world_server.layout import make_layout
+from robot_agent.core import ports, vision
+from robot_agent.core.controller import Controller, ControllerConfig
+from robot_agent.core.navigation import wrap_angle
+from wire import protocol
+from world_server.core.camera import CameraRenderer
+from world_server.core.layout import make_layout
 
 N_ROBOTS = 10
 
@@ -441,8 +442,8 @@ def test_swarm_decides_on_real_physics_camera_and_vision() -> None:
 def test_parking_slots_are_distinct_clear_of_every_site_and_inside_the_arena(
     robots: int,
 ) -> None:
-    from robot_agent.controller import parking_slot
-    from world_server.layout import make_layout
+    from robot_agent.core.controller import parking_slot
+    from world_server.core.layout import make_layout
 
     layout = make_layout(10, robots, seed=0)
     angles = [site.angle for site in layout.sites]
@@ -479,7 +480,7 @@ def test_parking_slots_are_distinct_clear_of_every_site_and_inside_the_arena(
 @pytest.mark.timeout(600)  # 30 s of CPU; far longer on a loaded machine
 def test_a_hundred_robots_all_park_and_decide_in_one_process() -> None:
     from deploy.inmemory import run_in_memory
-    from world_server.world import WorldConfig
+    from world_server.core.world import WorldConfig
 
     summary = run_in_memory(
         WorldConfig(seed=0, num_sites=10, num_robots=100), ControllerConfig(), timeout=1800
@@ -520,7 +521,7 @@ def test_a_robot_kept_from_its_slot_backs_off_and_parks_later_instead_of_stoppin
     """A decided robot that stopped wherever its parking stalled stood in the lanes the
     parking rings keep free, and with 500 robots walled undecided ones in (issue 10). Now
     it backs off and tries again until it is in its slot."""
-    from robot_agent.controller import parking_slot
+    from robot_agent.core.controller import parking_slot
 
     swarm = make_swarm(1, 5, seed=3)
     robot, body, world = swarm.controllers[0], swarm.bodies[0], swarm.world

@@ -12,7 +12,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from opinion_helpers import assert_close, assert_distribution, normalise, working_alphas
 
-from robot_agent.decision import (
+from robot_agent.core.decision import (
     choose_pair,
     decided_option,
     mprodop,

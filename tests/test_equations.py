@@ -11,7 +11,7 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 from opinion_helpers import assert_close, assert_distribution, normalise, working_alphas
 
-from robot_agent.decision import choose_pair, mprodop, negative_update, uniform_opinion
+from robot_agent.core.decision import choose_pair, mprodop, negative_update, uniform_opinion
 from wellstirred.equations import (
     enumeration_terms,
     evidence_probability,

@@ -31,12 +31,12 @@ from swarm_helpers import (
     unique_run_id,
 )
 
-from nest_beacon.beacon import Beacon, BeaconConfig
-from robot_agent import protocol
-from world_server.camera import CameraNoise
-from world_server.layout import make_layout
-from world_server.radio import sender_order
-from world_server.world import World, WorldConfig
+from nest_beacon.core.beacon import Beacon, BeaconConfig
+from wire import protocol
+from world_server.core.camera import CameraNoise
+from world_server.core.layout import make_layout
+from world_server.core.radio import sender_order
+from world_server.core.world import World, WorldConfig
 
 pytestmark = pytest.mark.timeout(240)
 

@@ -16,12 +16,12 @@ from hypothesis import strategies as st
 from deploy.credentials import RunNetwork
 from deploy.launcher import Swarm, plan_from_args
 from plumbing.inbox import BoundedInbox
-from robot_agent import auth, protocol
-from robot_agent.controller import Controller, ControllerConfig
-from robot_agent.node import Event, RobotNode
-from world_server.server import Event as WorldEvent
-from world_server.server import WorldServer
-from world_server.world import World, WorldConfig
+from robot_agent.core.controller import Controller, ControllerConfig
+from robot_agent.node.robot_node import Event, RobotNode
+from wire import auth, protocol
+from world_server.core.world import World, WorldConfig
+from world_server.server.world_server import Event as WorldEvent
+from world_server.server.world_server import WorldServer
 
 MESSAGE_TYPES = [
     value

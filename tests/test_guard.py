@@ -1,4 +1,4 @@
-"""What each receiver checks before it believes a message (robot_agent/guard.py and its
+"""What each receiver checks before it believes a message (wire/guard.py and its
 users), without processes: tick windows, one world at a time, a robot's memory budget, the
 world's handling of replays, foreign ids and senders that leave."""
 
@@ -9,11 +9,12 @@ import random
 import pytest
 
 from plumbing.inbox import BoundedInbox
-from robot_agent import auth, guard, node, protocol
-from robot_agent.controller import Controller, ControllerConfig
-from world_server.server import Event as WorldEvent
-from world_server.server import WorldServer
-from world_server.world import Transmission, World, WorldConfig
+from robot_agent.core.controller import Controller, ControllerConfig
+from robot_agent.node import robot_node as node
+from wire import auth, guard, protocol
+from world_server.core.world import Transmission, World, WorldConfig
+from world_server.server.world_server import Event as WorldEvent
+from world_server.server.world_server import WorldServer
 
 SECRET = bytes(range(32))
 

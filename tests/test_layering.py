@@ -1,90 +1,252 @@
-"""The layering rules of DESIGN.md, read from the source: the pure core touches no Zenoh,
-the robot needs nothing of the world, the beacon, the launcher or the Section 4 model."""
+"""The layers, read from the source: every folder is one layer, and what it may import is
+said here once, per folder (docs/architecture.md draws the same map).
+
+* **pure** folders (every ``core/``, the wire vocabulary ``wire/``, the Section 4 model)
+  import no network, no clock, no thread, no process and no adapter: what a port to a robot
+  copies, and what tests drive without Zenoh. mypy checks exactly these folders strictly
+  (``pyproject.toml``; plus ``plumbing/``).
+* **adapters** (a process on Zenoh, a hardware link, the recorder) import the pure layers
+  and their own transport; the robot's hardware link imports no Zenoh.
+* **deploy** (the ``swarm`` command) and the observers (``viewer/``) may use everything
+  but are used by nothing below them.
+* No two folders import each other, directly or round a cycle.
+"""
 
 from __future__ import annotations
 
 import ast
+import tomllib
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 
-# Modules that must run without a network, a clock of their own or I/O (rule 1).
+# The folders of the code, each one layer (a folder's own modules; its sub-folders are
+# layers of their own).
 PURE = [
-    "robot_agent/decision.py",
-    "robot_agent/controller.py",
-    "robot_agent/controller_config.py",
-    "robot_agent/settings.py",
-    "robot_agent/phases.py",
-    "robot_agent/beliefs.py",
-    "robot_agent/motion.py",
-    "robot_agent/sensing.py",
-    "robot_agent/parking.py",
-    "robot_agent/navigation.py",
-    "robot_agent/vision.py",
-    "robot_agent/protocol.py",
-    "robot_agent/batch.py",
-    "robot_agent/ports.py",
-    "robot_agent/simulated.py",
-    "robot_agent/auth.py",
-    "robot_agent/guard.py",
-    "robot_agent/byzantine.py",
-    "nest_beacon/beacon.py",
-    "world_server/world.py",
-    "world_server/physics.py",
-    "world_server/camera.py",
-    "world_server/radio.py",
-    "world_server/clock.py",
-    "world_server/layout.py",
-    "wellstirred/model.py",
-    "wellstirred/equations.py",
-    "viewer/model.py",
-    "viewer/decode.py",
+    "wire",
+    "robot_agent/core",
+    "world_server/core",
+    "nest_beacon/core",
+    "viewer/core",
+    "wellstirred",
 ]
-# What each package may never import (rule 2, and what a port to a robot can do without).
-FORBIDDEN = {
-    "robot_agent": {"world_server", "nest_beacon", "deploy", "wellstirred", "viewer"},
-    "plumbing": {"world_server", "nest_beacon", "deploy", "wellstirred", "viewer"},
-    "nest_beacon": {"world_server", "deploy", "wellstirred", "viewer"},
-    "world_server": {"nest_beacon", "deploy", "wellstirred", "viewer"},
-    "wellstirred": {"world_server", "nest_beacon", "deploy", "zenoh", "viewer"},
-    # The view watches a run: it reads the protocol, the layout and the recorder's
-    # records, and needs nothing of the launcher (which starts it as a process).
-    "viewer": {"nest_beacon", "deploy", "wellstirred"},
+ADAPTERS = [
+    "robot_agent/node",
+    "robot_agent/link",
+    "world_server/server",
+    "world_server/recording",
+    "world_server/recorder",
+    "nest_beacon/node",
+    "plumbing",
+]
+OUTER = ["deploy", "viewer"]
+# The package roots that hold only layers and a ``__main__`` that starts one.
+ROOTS = ["robot_agent", "world_server", "nest_beacon"]
+FOLDERS = PURE + ADAPTERS + OUTER + ROOTS
+
+# What a pure folder never imports: the network, clocks, threads, processes, signals,
+# and the layers outside the pure ones.
+NOT_PURE = {
+    "zenoh",
+    "socket",
+    "ssl",
+    "serial",
+    "asyncio",
+    "selectors",
+    "time",
+    "datetime",
+    "threading",
+    "queue",
+    "concurrent",
+    "multiprocessing",
+    "subprocess",
+    "signal",
+    "os",
+    "mcap",
 }
-NETWORK = {"zenoh", "plumbing", "socket", "deploy"}
+# Folders each folder may import (beyond itself and third-party libraries), by layer.
+ALLOWED: dict[str, set[str]] = {
+    "wire": set(),
+    "robot_agent/core": {"wire"},
+    "world_server/core": {"wire"},
+    "nest_beacon/core": {"wire"},
+    "viewer/core": {"wire", "world_server/core"},
+    "wellstirred": {"robot_agent/core"},
+    "plumbing": {"wire"},
+    "robot_agent/node": {"wire", "robot_agent/core", "plumbing"},
+    "robot_agent/link": {"wire", "robot_agent/core"},
+    "world_server/server": {"wire", "world_server/core", "plumbing"},
+    "world_server/recording": {"wire", "world_server/core", "plumbing"},
+    "world_server/recorder": {"wire", "world_server/core", "world_server/recording", "plumbing"},
+    "nest_beacon/node": {"wire", "nest_beacon/core", "plumbing"},
+    "robot_agent": {"robot_agent/node"},
+    "world_server": {"world_server/server", "world_server/recorder"},
+    "nest_beacon": {"nest_beacon/node"},
+    "viewer": {
+        "wire",
+        "plumbing",
+        "viewer/core",
+        "world_server/core",
+        "world_server/recording",
+    },
+    "deploy": set(FOLDERS) - {"deploy"},
+}
+# Imports a link to a robot's hardware may not make: it runs where there is no Zenoh.
+LINK_FORBIDDEN = {"zenoh", "plumbing"}
 
 
-def imported_packages(path: Path) -> set[str]:
-    """Top-level names of every module ``path`` imports, wherever in the file."""
+def imported_modules(path: Path) -> set[str]:
+    """Every module ``path`` imports, wherever in the file: ``import a.b`` gives ``a.b``,
+    ``from a import b`` gives ``a`` and ``a.b`` (b may be a module or a name)."""
     tree = ast.parse(path.read_text(), filename=str(path))
     names: set[str] = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            names.update(alias.name.split(".")[0] for alias in node.names)
+            names.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            names.add(node.module.split(".")[0])
+            names.add(node.module)
+            names.update(f"{node.module}.{alias.name}" for alias in node.names)
     return names
 
 
-def test_imported_packages_reads_every_import(tmp_path: Path) -> None:
+def folder_of(module: str) -> str | None:
+    """The layer folder a module of this repository is in (the deepest that holds it)."""
+    path = module.replace(".", "/")
+    found = [folder for folder in FOLDERS if path == folder or path.startswith(folder + "/")]
+    return max(found, key=len) if found else None
+
+
+def modules_of(folder: str) -> list[Path]:
+    """The folder's own modules (not those of the layer folders inside it)."""
+    return sorted((REPO / folder).glob("*.py"))
+
+
+def test_imported_modules_reads_every_import(tmp_path: Path) -> None:
     source = tmp_path / "sample.py"
     source.write_text(
         "import os.path\nfrom zenoh import Session\n\ndef f():\n    import deploy.cli\n"
     )
-    assert imported_packages(source) == {"os", "zenoh", "deploy"}
+    assert imported_modules(source) == {"os.path", "zenoh", "zenoh.Session", "deploy.cli"}
 
 
-@pytest.mark.parametrize("module", PURE)
-def test_the_pure_core_has_no_network(module: str) -> None:
-    assert not imported_packages(REPO / module) & NETWORK
-
-
-@pytest.mark.parametrize("package", sorted(FORBIDDEN))
-def test_packages_import_only_what_they_may(package: str) -> None:
-    offenders = {
-        str(path.relative_to(REPO)): sorted(imported_packages(path) & FORBIDDEN[package])
-        for path in sorted((REPO / package).rglob("*.py"))
+def test_every_package_folder_is_a_layer() -> None:
+    """A new folder of code must be given its layer here before it can be imported."""
+    packages = {
+        str(init.parent.relative_to(REPO))
+        for root in ["wire", *ROOTS, "plumbing", "deploy", "viewer", "wellstirred"]
+        for init in (REPO / root).rglob("__init__.py")
+        if ".venv" not in init.parts
     }
-    assert {path: names for path, names in offenders.items() if names} == {}
+    assert packages - set(FOLDERS) == set()
+
+
+@pytest.mark.parametrize("folder", PURE)
+def test_pure_folders_import_no_network_clock_or_thread(folder: str) -> None:
+    offenders = {
+        path.name: sorted(
+            module
+            for module in imported_modules(path)
+            if module.split(".")[0] in NOT_PURE
+            or (folder_of(module) is not None and folder_of(module) not in PURE)
+        )
+        for path in modules_of(folder)
+    }
+    assert {name: found for name, found in offenders.items() if found} == {}
+
+
+@pytest.mark.parametrize("folder", PURE)
+def test_pure_folders_use_no_global_random_number_generator(folder: str) -> None:
+    """Randomness comes in as a seeded ``random.Random`` or numpy Generator: a call of the
+    ``random`` module's own functions would draw from the process's global state."""
+    offenders = []
+    for path in modules_of(folder):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if (
+                isinstance(node, ast.Attribute)
+                and isinstance(node.value, ast.Name)
+                and node.value.id == "random"
+                and node.attr != "Random"
+            ):
+                offenders.append(f"{path.name}:{node.lineno} random.{node.attr}")
+    assert offenders == []
+
+
+@pytest.mark.parametrize("folder", sorted(ALLOWED))
+def test_folders_import_only_the_layers_they_may(folder: str) -> None:
+    offenders = {}
+    for path in modules_of(folder):
+        bad = {
+            target
+            for module in imported_modules(path)
+            if (target := folder_of(module)) is not None
+            and target != folder
+            and target not in ALLOWED[folder]
+        }
+        if bad:
+            offenders[path.name] = sorted(bad)
+    assert offenders == {}
+
+
+def test_the_robot_link_runs_without_zenoh() -> None:
+    offenders = {
+        path.name: sorted(m for m in imported_modules(path) if m.split(".")[0] in LINK_FORBIDDEN)
+        for path in modules_of("robot_agent/link")
+    }
+    assert {name: found for name, found in offenders.items() if found} == {}
+
+
+def import_graph() -> dict[str, set[str]]:
+    graph: dict[str, set[str]] = {folder: set() for folder in FOLDERS}
+    for folder in FOLDERS:
+        for path in modules_of(folder):
+            for module in imported_modules(path):
+                target = folder_of(module)
+                if target is not None and target != folder:
+                    graph[folder].add(target)
+    return graph
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """A cycle of the graph (its nodes in order, the first repeated at the end), or None."""
+    state: dict[str, str] = {}  # "open" while on the path, "done" once explored
+    path: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = "open"
+        path.append(node)
+        for target in sorted(graph.get(node, ())):
+            if state.get(target) == "open":
+                return [*path[path.index(target) :], target]
+            if target not in state and (cycle := visit(target)) is not None:
+                return cycle
+        path.pop()
+        state[node] = "done"
+        return None
+
+    for node in sorted(graph):
+        if node not in state and (cycle := visit(node)) is not None:
+            return cycle
+    return None
+
+
+def test_find_cycle_finds_one() -> None:
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+
+
+def test_no_import_cycle_between_folders() -> None:
+    assert find_cycle(import_graph()) is None
+
+
+def test_mypy_checks_exactly_the_pure_folders_strictly() -> None:
+    config = tomllib.loads((REPO / "pyproject.toml").read_text())
+    strict = next(
+        override["module"]
+        for override in config["tool"]["mypy"]["overrides"]
+        if override.get("disallow_untyped_defs")
+    )
+    pure = {folder.replace("/", ".") + ".*" for folder in PURE}
+    assert set(strict) - {"plumbing.*"} == pure

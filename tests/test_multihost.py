@@ -17,7 +17,7 @@ import pytest
 from netns import Lan, namespaces
 from swarm_helpers import REPO, stop_processes
 
-from world_server.layout import make_layout
+from world_server.core.layout import make_layout
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -27,7 +27,7 @@ RUN, SEED, SITES, ROBOTS = "multihost", 3, 5, 4
 
 OBSERVER = """
 import json, sys, time
-from robot_agent import protocol
+from wire import protocol
 from plumbing.zenoh_session import open_session
 keys = protocol.Keys(sys.argv[2])
 statuses = {}

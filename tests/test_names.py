@@ -9,7 +9,8 @@ from collections.abc import Callable
 import msgspec
 import pytest
 
-from robot_agent import auth, protocol, udp_radio
+from robot_agent.link import udp_radio
+from wire import names, protocol
 
 NOT_NAMES = ["ünïcode", "run\n", "a b", "a/b", "x" * 65, "", "*", "é"]
 NAMES = ["run", "exp-N10-n5-r01", "a.b_c", "x" * 64, "0"]
@@ -21,7 +22,7 @@ def _parser(command: str) -> Callable[[list[str]], argparse.Namespace]:
 
         parser = build_parser(["run"])
         return lambda argv: parser.parse_args(["run", *argv])
-    from robot_agent import node
+    from robot_agent.node import robot_node as node
 
     return lambda argv: node.build_parser().parse_args(["--id", "0", *argv])
 
@@ -43,21 +44,21 @@ def test_a_run_id_that_is_not_a_name_is_refused_at_the_command_line(
 
 @pytest.mark.parametrize("text", NOT_NAMES)
 def test_everything_that_checks_a_name_refuses_the_same_texts(text: str) -> None:
-    assert not protocol.is_name(text)
+    assert not names.is_name(text)
     with pytest.raises(ValueError, match="invalid run id"):
         protocol.Keys(text)
     with pytest.raises(msgspec.ValidationError):
         msgspec.convert(text, protocol._Name)
     with pytest.raises(ValueError):
-        auth.check_identity(auth.beacon_identity(text))
+        names.check_identity(names.beacon_identity(text))
     with pytest.raises(ValueError):
         udp_radio.sender_bytes(text)
 
 
 @pytest.mark.parametrize("text", NAMES)
 def test_everything_that_checks_a_name_takes_the_same_texts(text: str) -> None:
-    assert protocol.is_name(text)
+    assert names.is_name(text)
     assert protocol.Keys(text).run == text
     assert msgspec.convert(text, protocol._Name) == text
-    assert auth.check_identity(auth.beacon_identity(text))
+    assert names.check_identity(names.beacon_identity(text))
     assert udp_radio.sender_bytes(text) == text.encode()

@@ -10,9 +10,9 @@ from typing import Any
 import pytest
 from fakes import MAX_SPEED, ROBOT_RADIUS, proximity, unicycle
 
-from robot_agent.navigation import Navigator, NavParams, wrap_angle
-from world_server.layout import make_layout
-from world_server.physics import EpuckSpec, Physics
+from robot_agent.core.navigation import Navigator, NavParams, wrap_angle
+from world_server.core.layout import make_layout
+from world_server.core.physics import EpuckSpec, Physics
 
 ARENA_RADIUS = 0.75
 DT = 0.1

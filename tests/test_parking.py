@@ -17,10 +17,10 @@ import cv2
 import numpy as np
 import pytest
 
-from robot_agent.controller import ControllerConfig, parking_rings, parking_slot
-from robot_agent.navigation import Navigator, NavParams
-from world_server.layout import make_layout
-from world_server.physics import Physics
+from robot_agent.core.controller import ControllerConfig, parking_rings, parking_slot
+from robot_agent.core.navigation import Navigator, NavParams
+from world_server.core.layout import make_layout
+from world_server.core.physics import Physics
 
 ROBOT_RADIUS = 0.037
 CELL = 0.01  # metres per cell of the free-space map

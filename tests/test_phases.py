@@ -1,4 +1,4 @@
-"""The Section 5 protocol is one table (robot_agent/phases.py), and the controller's phase
+"""The Section 5 protocol is one table (robot_agent/core/phases.py), and the controller's phase
 changes only through it."""
 
 from __future__ import annotations
@@ -11,15 +11,16 @@ import numpy as np
 import pytest
 from fakes import FakeBody, FakeSwarm, make_swarm
 
-from robot_agent import ports, protocol
-from robot_agent.controller import Controller, ControllerConfig
-from robot_agent.phases import (
+from robot_agent.core import ports
+from robot_agent.core.controller import Controller, ControllerConfig
+from robot_agent.core.phases import (
     INITIAL_PHASE,
     TRANSITIONS,
     Event,
     IllegalTransitionError,
     PhaseMachine,
 )
+from wire import protocol
 
 EDGES = {(phase, event) for phase, leaving in TRANSITIONS.items() for event in leaving}
 

@@ -8,8 +8,8 @@ import random
 import numpy as np
 import pytest
 
-from world_server import layout
-from world_server.physics import MAX_SUBSTEP, EpuckSpec, Physics, wrap_angle
+from world_server.core import layout
+from world_server.core.physics import MAX_SUBSTEP, EpuckSpec, Physics, wrap_angle
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from robot_agent.decision import (
+from robot_agent.core.decision import (
     LOGLINEAR_NEIGHBOUR_WEIGHT,
     POOLING_OPERATORS,
     PoolingName,

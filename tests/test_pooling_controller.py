@@ -8,8 +8,9 @@ from typing import Any
 import pytest
 from fakes import make_swarm
 
-from robot_agent import decision, ports, protocol
-from robot_agent.controller import Controller, ControllerConfig
+from robot_agent.core import decision, ports
+from robot_agent.core.controller import Controller, ControllerConfig
+from wire import protocol
 
 N_ROBOTS = 10
 
@@ -29,7 +30,8 @@ def test_config_defaults_to_the_papers_operator() -> None:
 
 
 def test_robot_agent_takes_pooling_from_its_command_line() -> None:
-    from robot_agent import node, options
+    from robot_agent.node import options
+    from robot_agent.node import robot_node as node
 
     parser = node.build_parser()
     default = options.controller_config(parser.parse_args(["--id", "0"]))
@@ -45,8 +47,8 @@ def test_robot_agent_takes_pooling_from_its_command_line() -> None:
 def test_swarm_run_forwards_pooling_to_every_robot_and_records_it() -> None:
     from deploy.cli import build_parser
     from deploy.launcher import plan_from_args
-    from robot_agent import settings
-    from robot_agent.options import RobotAgentConfig
+    from robot_agent.node.options import RobotAgentConfig
+    from wire import settings
 
     parser = build_parser(["run"])
     plan = plan_from_args(parser.parse_args(["run", "--pooling", "loglinear", "--no-record"]))

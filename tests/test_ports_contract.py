@@ -1,7 +1,7 @@
 """One port contract, and every transport runs it.
 
 ``ports.control_step`` is the loop docs/porting.md tells a port to implement. The Zenoh
-robot (robot_agent/node.py), the in-process engine (deploy/inmemory.py) and the UDP
+robot (robot_agent/node/robot_node.py), the in-process engine (deploy/inmemory.py) and the UDP
 example (examples/udp_robot.py) are adapters of it. These tests replay the tick vectors
 (tests/vectors/tick.json) through the adapter the node and the engine share, and through
 the node itself, and check in each transport that its controller is stepped by
@@ -23,12 +23,13 @@ import pytest
 
 from deploy.inmemory import run_in_memory
 from plumbing.inbox import BoundedInbox
-from robot_agent import ports, protocol
-from robot_agent.controller import Controller, ControllerConfig
-from robot_agent.node import Event, RobotNode
-from robot_agent.simulated import SimulatedPorts
-from robot_agent.udp_radio import UdpRadioStats
-from world_server.world import World, WorldConfig
+from robot_agent.core import ports
+from robot_agent.core.controller import Controller, ControllerConfig
+from robot_agent.core.simulated import SimulatedPorts
+from robot_agent.link.udp_radio import UdpRadioStats
+from robot_agent.node.robot_node import Event, RobotNode
+from wire import protocol
+from world_server.core.world import World, WorldConfig
 
 REPO = Path(__file__).resolve().parent.parent
 CONTRACT = ports.control_step.__code__

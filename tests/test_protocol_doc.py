@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from robot_agent import protocol
+from wire import protocol
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "protocol.md"
 EXAMPLE = re.compile(r"```json (\w+)\n(.*?)\n```", re.DOTALL)

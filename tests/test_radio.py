@@ -10,8 +10,8 @@ from typing import Any
 
 import pytest
 
-from robot_agent import protocol
-from world_server.radio import Delivery, RadioConfig, RadioMedium, SenderKind, sender_order
+from wire import names, protocol
+from world_server.core.radio import Delivery, RadioConfig, RadioMedium, SenderKind, sender_order
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -299,7 +299,7 @@ def swarm_traffic(seed: int, config: RadioConfig = ALL_FAULTS, ticks: int = 60):
     log = []
     for tick in range(ticks):
         positions = {
-            protocol.radio_name(k): (rng.uniform(-1, 1), rng.uniform(-1, 1)) for k in range(40)
+            names.robot_name(k): (rng.uniform(-1, 1), rng.uniform(-1, 1)) for k in range(40)
         }
         positions["beacon"] = (0.0, 0.0)
         senders = sorted(rng.sample(sorted(positions), 9), key=sender_order)

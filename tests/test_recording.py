@@ -26,9 +26,11 @@ from mcap.records import Channel, Message, Schema
 from swarm_helpers import REPO, kill_leftovers, loopback_router, run_swarm, unique_run_id
 
 from deploy import report
-from robot_agent import protocol
-from world_server import foxglove, recorder
-from world_server.layout import make_layout
+from wire import protocol
+from wire.names import Role
+from world_server.core.layout import make_layout
+from world_server.recording import foxglove
+from world_server.recording import writer as recorder
 
 ROBOTS, SITES, SEED = 3, 5, 3
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -350,7 +352,7 @@ def test_sigterm_without_a_finish_query_closes_the_file_cleanly(tmp_path: Path) 
         )
         try:
             deadline = time.monotonic() + 30
-            while not list(session.liveliness().get(keys.alive("recorder", 0), timeout=1.0)):
+            while not list(session.liveliness().get(keys.alive(Role.RECORDER, 0), timeout=1.0)):
                 assert process.poll() is None and time.monotonic() < deadline
                 time.sleep(0.05)
             # Recording yields the CPU to the swarm (it is off the barrier's critical path).

@@ -20,9 +20,9 @@ from swarm_helpers import REPO, swarm_command
 
 from deploy import report
 from deploy.cli import main
-from robot_agent import protocol
-from world_server import recorder
-from world_server.layout import make_layout
+from wire import protocol
+from world_server.core.layout import make_layout
+from world_server.recording import writer as recorder
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 SITES, ROBOTS, SEED = 4, 3, 7

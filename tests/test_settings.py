@@ -15,19 +15,21 @@ import pytest
 from deploy import run_switches
 from deploy.cli import build_parser
 from deploy.launcher import plan_from_args
-from nest_beacon import __main__ as beacon_main
-from nest_beacon.beacon import BeaconConfig
-from nest_beacon.options import NEST_BEACON_OPTIONS, NestBeaconConfig
+from nest_beacon.core.beacon import BeaconConfig
+from nest_beacon.node import beacon_node as beacon_main
+from nest_beacon.node.options import NEST_BEACON_OPTIONS, NestBeaconConfig
 from plumbing.settings_cli import Options
-from robot_agent import node, settings
-from robot_agent.byzantine import Behaviour, ByzantineRobot
-from robot_agent.controller_config import ControllerConfig
-from robot_agent.options import AGENT_OPTIONS, RobotAgentConfig
-from world_server import recorder, server
-from world_server.camera import CameraNoise
-from world_server.options import WORLD_SERVER_OPTIONS, WorldServerConfig
-from world_server.radio import RadioConfig
-from world_server.world import WorldConfig
+from robot_agent.core.byzantine import Behaviour, ByzantineRobot
+from robot_agent.core.controller_config import ControllerConfig
+from robot_agent.node import robot_node as node
+from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig
+from wire import settings
+from world_server.core.camera import CameraNoise
+from world_server.core.radio import RadioConfig
+from world_server.core.world import WorldConfig
+from world_server.recording import writer as recorder
+from world_server.server import world_server as server
+from world_server.server.options import WORLD_SERVER_OPTIONS, WorldServerConfig
 
 CONFIGS = [
     ControllerConfig,

@@ -23,7 +23,7 @@ from swarm_helpers import (
     wait_for_processes,
 )
 
-from robot_agent import protocol
+from wire import protocol
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -270,8 +270,9 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run(tmp_path: Path
     Zenoh, robots 0-4 share a process that exchanges batches with the world, and robot 5
     has one of its own, on its own keys (the world's timeline says which went how)."""
     from deploy.inmemory import run_in_memory
-    from robot_agent import node, options
-    from world_server import server
+    from robot_agent.node import options
+    from robot_agent.node import robot_node as node
+    from world_server.server import world_server as server
 
     seed, robots, sites = 5, 6, 6
     common = ["--seed", str(seed), "--robots", str(robots), "--sites", str(sites)]

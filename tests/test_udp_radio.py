@@ -19,8 +19,8 @@ from typing import Any
 import pytest
 from netns import UDP_SUBNET, Lan, lan_address, namespaces
 
-from robot_agent import ports, protocol
-from robot_agent.udp_radio import (
+from robot_agent.core import ports
+from robot_agent.link.udp_radio import (
     MAX_DATAGRAM_BYTES,
     MAX_PAYLOAD_BYTES,
     FrameError,
@@ -29,6 +29,7 @@ from robot_agent.udp_radio import (
     decode_frame,
     encode_frame,
 )
+from wire import protocol
 
 TESTS = Path(__file__).resolve().parent
 NODE = TESTS / "udp_swarm_node.py"
@@ -420,7 +421,7 @@ def test_controllers_in_separate_namespaces_pool_opinions_and_decide(lan: Lan) -
 # One send per line on stdin, the counts after it on stdout.
 SEND_PER_LINE = """
 import dataclasses, json, sys
-from robot_agent.udp_radio import UdpRadio
+from robot_agent.link.udp_radio import UdpRadio
 with UdpRadio("1", interface=sys.argv[1]) as radio:
     for _ in sys.stdin:
         radio.send(b'{"kind":"beacon","v":1,"id":"x","seq":0}')

@@ -15,14 +15,14 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from robot_agent import protocol
-from robot_agent.udp_radio import (
+from robot_agent.link.udp_radio import (
     MAX_DATAGRAM_BYTES,
     MAX_PAYLOAD_BYTES,
     FrameError,
     decode_frame,
     encode_frame,
 )
+from wire import names, protocol
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
 ZENOH_PICO_BATCH = 2048  # bytes: one opinion and its attachment must fit one batch
@@ -166,7 +166,7 @@ def test_the_longest_opinion_over_100_sites_fits_one_2kb_batch() -> None:
     payload = protocol.encode(
         protocol.OpinionPayload(
             v=1,
-            id=protocol.MAX_ROBOTS - 1,
+            id=names.MAX_ROBOTS - 1,
             trip=2**53,
             decided=False,
             opinion=worst,
@@ -177,7 +177,7 @@ def test_the_longest_opinion_over_100_sites_fits_one_2kb_batch() -> None:
     attachment = protocol.encode(protocol.RadioTxMeta(v=1, tick=2**53, seq=2**53))
     assert len(payload) + len(attachment) <= ZENOH_PICO_BATCH
     assert len(payload) <= MAX_PAYLOAD_BYTES
-    assert len(encode_frame(str(protocol.MAX_ROBOTS - 1), payload)) <= MAX_DATAGRAM_BYTES
+    assert len(encode_frame(str(names.MAX_ROBOTS - 1), payload)) <= MAX_DATAGRAM_BYTES
 
 
 @given(st.floats(min_value=0.0, max_value=1.0))

@@ -37,12 +37,13 @@ from websockets.typing import Subprotocol
 
 from deploy.processes import free_port
 from plumbing.world_info import ask
-from robot_agent import auth, protocol
-from viewer import model, replay
-from viewer.decode import Delivery, InvalidSampleError, decode_sample
+from viewer import replay
+from viewer.core import model
+from viewer.core.decode import Delivery, InvalidSampleError, decode_sample
 from viewer.live import MAX_DELIVERIES, LiveSource
-from world_server.layout import make_layout
-from world_server.recorder import McapRecorder, RunDescription, Sample
+from wire import auth, names, protocol
+from world_server.core.layout import make_layout
+from world_server.recording.writer import McapRecorder, RunDescription, Sample
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -426,12 +427,12 @@ def test_in_a_keyed_run_the_gate_checks_each_tag_with_its_speakers_key() -> None
         return decode_sample(keys, key, payload, attachment, keyring=keyring)
 
     clock = protocol.encode(protocol.Clock(v=1, tick=3, t=0.3))
-    sealed = keyring.seal(auth.WORLD, keys.world_clock, clock)
+    sealed = keyring.seal(names.WORLD, keys.world_clock, clock)
     assert gate(keys.world_clock, clock, sealed) == protocol.Clock(v=1, tick=3, t=0.3)
     for attachment in (
         None,
-        keyring.seal(auth.robot_identity(0), keys.world_clock, clock),
-        stranger.seal(auth.WORLD, keys.world_clock, clock),
+        keyring.seal(names.robot_identity(0), keys.world_clock, clock),
+        stranger.seal(names.WORLD, keys.world_clock, clock),
     ):
         with pytest.raises(InvalidSampleError, match="world"):
             gate(keys.world_clock, clock, attachment)
@@ -465,7 +466,7 @@ def test_a_forged_status_is_counted_and_never_reaches_the_page() -> None:
             stalls=0,
         )
     )
-    source.take(keys.world_state, state, keyring.seal(auth.WORLD, keys.world_state, state))
+    source.take(keys.world_state, state, keyring.seal(names.WORLD, keys.world_state, state))
     honest, forged = protocol.encode(_status(1, trips=2)), protocol.encode(_status(1, trips=999))
     source.take(keys.status(1), honest, keyring.seal("robot/1", keys.status(1), honest))
     source.take(keys.status(1), forged, bytes(16))
@@ -719,7 +720,7 @@ def test_a_forged_status_and_finish_are_neither_drawn_nor_believed_but_counted(
                     session.put(
                         key,
                         payload,
-                        attachment=stranger.seal(auth.robot_identity(robot), key, payload),
+                        attachment=stranger.seal(names.robot_identity(robot), key, payload),
                         congestion_control=zenoh.CongestionControl.BLOCK,
                     )
                     sent[0] += 1
@@ -740,7 +741,7 @@ def test_a_forged_status_and_finish_are_neither_drawn_nor_believed_but_counted(
             claim = json.dumps({"run_id": run_id, "consensus": True, "chosen_site": 0}).encode()
             unsealed = list(session.get(keys.viewer_finish, payload=claim, timeout=5.0))
             answers, refused = ask(
-                session, keys.viewer_finish, stranger, auth.LAUNCHER, payload=claim, timeout=5.0
+                session, keys.viewer_finish, stranger, names.LAUNCHER, payload=claim, timeout=5.0
             )
             time.sleep(0.5)
             during = chromium.canvas_data()

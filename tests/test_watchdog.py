@@ -7,10 +7,10 @@ import pytest
 from deploy.inmemory import run_in_memory
 from deploy.summary import ENDINGS, ending
 from deploy.watchdog import Watchdog, default_stall_window
-from nest_beacon.beacon import BeaconConfig
-from robot_agent import protocol
-from robot_agent.controller import ControllerConfig
-from world_server.world import WorldConfig
+from nest_beacon.core.beacon import BeaconConfig
+from robot_agent.core.controller import ControllerConfig
+from wire import protocol
+from world_server.core.world import WorldConfig
 
 BODY = 0.074  # two e-puck radii
 WINDOW = 100.0

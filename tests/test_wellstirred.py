@@ -302,7 +302,7 @@ def test_weighted_choice_never_picks_a_zero_weight() -> None:
 
 
 def test_negative_update_matches_the_pure_python_version() -> None:
-    from robot_agent.decision import negative_update
+    from robot_agent.core.decision import negative_update
 
     opinions = rng(3).dirichlet(np.ones(6), size=(4, 5))
     eliminated = rng(4).integers(0, 6, size=(4, 5))

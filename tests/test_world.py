@@ -7,9 +7,9 @@ from typing import Any
 import pytest
 
 from deploy.inmemory import run_in_memory
-from robot_agent.controller import ControllerConfig
-from world_server.radio import RadioConfig
-from world_server.world import World, WorldConfig
+from robot_agent.core.controller import ControllerConfig
+from world_server.core.radio import RadioConfig
+from world_server.core.world import World, WorldConfig
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -54,7 +54,7 @@ def test_a_robot_whose_controller_left_stops_and_stays_an_obstacle() -> None:
     world.join_robot(1)
     world.leave_robot(1)
     before = world.physics.pose(1)
-    from robot_agent import protocol
+    from wire import protocol
 
     act = protocol.Act(v=1, tick=0, left=0.13, right=0.13, capture=False, radio_tx=0)
     for _ in range(20):

@@ -25,8 +25,9 @@ import zenoh
 from deploy import zenoh_acl
 from deploy.processes import python_module
 from plumbing import run_keys, zenoh_session
-from robot_agent import protocol
-from world_server.layout import make_layout
+from wire import protocol
+from wire.names import Role
+from world_server.core.layout import make_layout
 
 REPO = Path(__file__).resolve().parent.parent
 TEMPLATES = REPO / "deploy" / "zenoh"
@@ -207,10 +208,10 @@ def test_a_robot_speaks_on_its_own_keys_and_asks_for_the_map(swarm: Swarm) -> No
         put_until_heard(publishers[KEYS.act(1)], KEYS.act(1), heard)
         for key, payload in own.items():
             publishers[key].put(payload)
-        token = robot.liveliness().declare_token(KEYS.alive("robot", 1))
+        token = robot.liveliness().declare_token(KEYS.alive(Role.ROBOT, 1))
         for key in own:
             heard.wait_for(key)
-        alive.wait_for(KEYS.alive("robot", 1))
+        alive.wait_for(KEYS.alive(Role.ROBOT, 1))
         assert {key: payload for key, payload in heard.received if key in own} == own
 
         replies = list(robot.get(KEYS.world_info, timeout=WAIT))
@@ -241,15 +242,15 @@ def test_a_robot_cannot_speak_for_another_robot_or_the_world(swarm: Swarm) -> No
         ]
         for key in forbidden:  # session puts: they reach the router whoever subscribes
             robot.put(key, b"spoofed")
-        spoofed_token = robot.liveliness().declare_token(KEYS.alive("robot", 2))
-        own_token = robot.liveliness().declare_token(KEYS.alive("robot", 1))
+        spoofed_token = robot.liveliness().declare_token(KEYS.alive(Role.ROBOT, 2))
+        own_token = robot.liveliness().declare_token(KEYS.alive(Role.ROBOT, 1))
         robot.put(KEYS.host_act(1), b"batch")  # the acts of the process it leads
         robot.put(KEYS.act(1), b"sentinel")  # sent after the forbidden ones, on the same link
         heard.wait_for(KEYS.act(1))
-        alive.wait_for(KEYS.alive("robot", 1))
+        alive.wait_for(KEYS.alive(Role.ROBOT, 1))
         time.sleep(SETTLE)
         assert heard.heard_keys() == {KEYS.status(1), KEYS.host_act(1), KEYS.act(1)}
-        assert alive.heard_keys() == {KEYS.alive("robot", 1)}
+        assert alive.heard_keys() == {KEYS.alive(Role.ROBOT, 1)}
         spoofed_token.undeclare()
         own_token.undeclare()
 
@@ -284,16 +285,16 @@ def test_the_page_and_foxglove_live_declare_their_own_tokens_and_the_page_answer
     ):
         launcher.liveliness().declare_subscriber(f"{KEYS.prefix}/alive/**", alive, history=True)
         spoofed = [
-            foxglove.liveliness().declare_token(KEYS.alive("viewer", 0)),
-            foxglove.liveliness().declare_token(KEYS.alive("recorder", 0)),
-            viewer.liveliness().declare_token(KEYS.alive("viewer", 1)),
+            foxglove.liveliness().declare_token(KEYS.alive(Role.VIEWER, 0)),
+            foxglove.liveliness().declare_token(KEYS.alive(Role.RECORDER, 0)),
+            viewer.liveliness().declare_token(KEYS.alive(Role.VIEWER, 1)),
         ]
         tokens = [
-            foxglove.liveliness().declare_token(KEYS.alive("foxglove", 0)),
-            viewer.liveliness().declare_token(KEYS.alive("viewer", 0)),
+            foxglove.liveliness().declare_token(KEYS.alive(Role.FOXGLOVE, 0)),
+            viewer.liveliness().declare_token(KEYS.alive(Role.VIEWER, 0)),
         ]
-        alive.wait_for(KEYS.alive("foxglove", 0))
-        alive.wait_for(KEYS.alive("viewer", 0))
+        alive.wait_for(KEYS.alive(Role.FOXGLOVE, 0))
+        alive.wait_for(KEYS.alive(Role.VIEWER, 0))
         impostor = foxglove.declare_queryable(  # only the page may answer
             KEYS.viewer_finish, lambda query: query.reply(KEYS.viewer_finish, b"spoofed")
         )
@@ -308,7 +309,7 @@ def test_the_page_and_foxglove_live_declare_their_own_tokens_and_the_page_answer
         assert until(lambda: answers(launcher) == [b"ended"])
         assert answers(robot) == []  # a robot may not end the page
         time.sleep(SETTLE)
-        assert alive.heard_keys() == {KEYS.alive("foxglove", 0), KEYS.alive("viewer", 0)}
+        assert alive.heard_keys() == {KEYS.alive(Role.FOXGLOVE, 0), KEYS.alive(Role.VIEWER, 0)}
         queryable.undeclare()
         impostor.undeclare()
         for token in [*spoofed, *tokens]:

@@ -6,7 +6,7 @@ with ``ip netns exec``.
 * ``robot``: the real ``Controller`` stepped by ``ports.control_step`` on a kinematic
   fake body from ``tests/fakes.py`` (its camera shows the sites' qualities, the same in
   every process for one seed) and a ``UdpRadio``.
-* ``beacon``: the real ``nest_beacon.beacon.Beacon`` transmitting on a ``UdpRadio``.
+* ``beacon``: the real ``nest_beacon.core.beacon.Beacon`` transmitting on a ``UdpRadio``.
 * ``hello``: sends a few beacon payloads under its own name and reports whom it heard
   (a quick check of a transport setting without a whole swarm).
 
@@ -37,11 +37,12 @@ from dataclasses import asdict
 
 from fakes import ROBOT_RADIUS, FakeBody, FakeWorld, make_world_info, shuffled_qualities
 
-from nest_beacon.beacon import Beacon, BeaconConfig
+from nest_beacon.core.beacon import Beacon, BeaconConfig
 from plumbing import cliargs
-from robot_agent import ports, protocol
-from robot_agent.controller import Controller, ControllerConfig
-from robot_agent.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
+from robot_agent.core import ports
+from robot_agent.core.controller import Controller, ControllerConfig
+from robot_agent.link.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
+from wire import names, protocol
 
 STOP = threading.Event()  # set by SIGTERM: finish the step, print the summary, exit
 
@@ -122,7 +123,7 @@ def run_robot(args: argparse.Namespace) -> dict[str, object]:
     )
     rejects = ports.RejectCounter()
     best_site = max(range(args.sites), key=world.qualities.__getitem__)
-    with open_radio(args, protocol.radio_name(args.id)) as udp:
+    with open_radio(args, names.robot_name(args.id)) as udp:
         radio = NestRange(udp, body, info.nest)
         clock = await_start(args, info.dt)
         while controller.phase != "stopped" and world.t < args.max_sim and not STOP.is_set():
@@ -209,7 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     roles = parser.add_subparsers(dest="role", required=True)
     robot = roles.add_parser("robot")
-    robot.add_argument("--id", type=cliargs.int_range(0, protocol.MAX_ROBOTS - 1), required=True)
+    robot.add_argument("--id", type=cliargs.int_range(0, names.MAX_ROBOTS - 1), required=True)
     robot.add_argument(
         "--robots", type=cliargs.positive_int, required=True, help="swarm size (for the start ring)"
     )

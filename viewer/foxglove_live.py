@@ -34,8 +34,9 @@ from typing import Any
 
 from plumbing import cliargs, run_keys
 from plumbing.lifecycle import die_with_launcher
-from robot_agent import auth, protocol
-from world_server.recorder import McapRecorder, RunDescription, Sample
+from wire import names, protocol
+from wire.names import Role
+from world_server.recording.writer import McapRecorder, RunDescription, Sample
 
 log = logging.getLogger("foxglove-live")
 
@@ -98,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
     parser.add_argument(
         "--robots",
-        type=cliargs.int_range(1, protocol.MAX_ROBOTS),
+        type=cliargs.int_range(1, names.MAX_ROBOTS),
         default=10,
         help="swarm size of the run, for its layout (default: 10)",
     )
@@ -190,7 +191,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         subscriber = session.declare_subscriber(keys.all, on_sample)
         try:
             info: protocol.WorldInfo | None = fetch_world_info(
-                session, keys, 10.0, keyring, auth.FOXGLOVE
+                session, keys, 10.0, keyring, names.FOXGLOVE
             )
         except TimeoutError as error:
             log.warning("%s; sim times will follow world/clock", error)
@@ -207,7 +208,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         writer = threading.Thread(target=_forward, args=(recorder, inbox), daemon=True)
         writer.start()
-        token = session.liveliness().declare_token(keys.alive("foxglove", 0))
+        token = session.liveliness().declare_token(keys.alive(Role.FOXGLOVE, 0))
         log.info("serving the run to Foxglove on ws://%s:%d", args.host, server.port)
         while not stopping.wait(0.2):
             pass

@@ -10,7 +10,7 @@ was sent that last frame, then answers. In a keyed run only the launcher's query
 counted. Stopped by a signal instead, it tells the pages that the run stopped.
 
 It only listens: it publishes nothing the swarm reads, so it cannot change a decision.
-Zenoh callbacks pass every sample through ``viewer.decode.decode_sample``, which checks
+Zenoh callbacks pass every sample through ``viewer.core.decode.decode_sample``, which checks
 its tag against the run's keys (``swarm run`` hands the view the run secret, like the
 recorder) before it decodes anything, and keep only the newest message per key (and a
 bounded list of radio deliveries): the page needs the current state, not a history, so a
@@ -35,11 +35,12 @@ from typing import Any
 
 from plumbing import cliargs, run_keys
 from plumbing.lifecycle import die_with_launcher
-from robot_agent import auth, protocol
-from viewer import model
-from viewer.decode import Decoded, Delivery, InvalidSampleError, decode_sample
+from viewer.core import model
+from viewer.core.decode import Decoded, Delivery, InvalidSampleError, decode_sample
 from viewer.server import ViewServer
-from world_server.layout import make_layout
+from wire import auth, names, protocol
+from wire.names import Role
+from world_server.core.layout import make_layout
 
 log = logging.getLogger("viewer")
 
@@ -183,7 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
     parser.add_argument(
         "--robots",
-        type=cliargs.int_range(1, protocol.MAX_ROBOTS),
+        type=cliargs.int_range(1, names.MAX_ROBOTS),
         default=10,
         help="swarm size of the run, for its layout (default: 10)",
     )
@@ -258,7 +259,7 @@ async def _serve(args: argparse.Namespace, keyring: auth.Keyring | None) -> int:
     finish_queries: asyncio.Queue[Any] = asyncio.Queue()
     with session:
         try:
-            info = fetch_world_info(session, keys, 10.0, keyring, auth.VIEWER)
+            info = fetch_world_info(session, keys, 10.0, keyring, names.VIEWER)
             robot_radius = info.robot_radius
         except TimeoutError as error:
             log.warning("%s; drawing robots at the e-puck's size", error)
@@ -284,7 +285,7 @@ async def _serve(args: argparse.Namespace, keyring: auth.Keyring | None) -> int:
         )
         server = ViewServer(source, fps=args.fps)
         port = await server.start(args.host, args.port)
-        token = session.liveliness().declare_token(keys.alive("viewer", 0))
+        token = session.liveliness().declare_token(keys.alive(Role.VIEWER, 0))
         log.info("serving the live view on http://%s:%d/", args.host, port)
         finisher = asyncio.create_task(_finish_on_query(finish_queries, source, server, keys))
         stop_waiter = asyncio.create_task(stop.wait())
@@ -315,7 +316,7 @@ async def _finish_on_query(
         attachment = query.attachment.to_bytes() if query.attachment is not None else None
         try:
             asker, nonce = auth.query_open(source.keyring, key, payload, attachment)
-            if source.keyring is not None and asker != auth.LAUNCHER:
+            if source.keyring is not None and asker != names.LAUNCHER:
                 raise auth.AuthError(f"{asker} may not end the view")
         except auth.AuthError as error:
             source.refuse(f"{key}: finish query refused: {error}")

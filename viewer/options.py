@@ -7,6 +7,7 @@ import argparse
 from dataclasses import dataclass
 
 from plumbing import cliargs
+from wire.names import Role
 
 VIEW_PORT = 8700
 FOXGLOVE_PORT = 8765  # the Foxglove app's default for a WebSocket connection
@@ -22,8 +23,8 @@ class Observer:
     url: str
 
     @property
-    def role(self) -> str:
-        return self.name
+    def role(self) -> Role:
+        return Role(self.name)
 
 
 def add_view_options(group: argparse._ArgumentGroup) -> None:

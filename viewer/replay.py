@@ -28,12 +28,12 @@ import msgspec
 from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from robot_agent import protocol
-from viewer import model
+from viewer.core import model
 from viewer.server import ViewServer
-from world_server.layout import make_layout
+from wire import protocol
+from world_server.core.layout import make_layout
 
-START_METADATA, RUN_METADATA = "bestofn.start", "bestofn.run"  # world_server/recorder.py
+START_METADATA, RUN_METADATA = "bestofn.start", "bestofn.run"  # world_server/recording/writer.py
 DEFAULT_PORT = 8700
 SPEEDS = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
 MAX_DELIVERIES_PER_FRAME = 2000

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator, Sequence
 
-from robot_agent.decision import as_count, normalised, validate_alpha
+from robot_agent.core.decision import as_count, normalised, validate_alpha
 
 __all__ = [
     "MAX_ENUMERATION_TERMS",

@@ -49,7 +49,7 @@ from typing import Literal
 
 import numpy as np
 
-from robot_agent.decision import validate_alpha
+from robot_agent.core.decision import validate_alpha
 
 __all__ = [
     "FIGURE1_OPTIONS",

@@ -1,0 +1,29 @@
+"""What a ``nest-beacon`` process is configured with, as one object (``NestBeaconConfig``):
+``swarm run`` hands it over as ``--config JSON``; by hand, its options are made from the
+settings' own definitions (``BeaconConfig``'s flagged settings and the seed)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Annotated
+
+from msgspec import Meta
+
+from nest_beacon.core.beacon import BeaconConfig
+from plumbing.settings_cli import Options
+from wire import protocol, settings
+from wire.settings import Flag
+
+
+@dataclass(frozen=True)
+class NestBeaconConfig:
+    """The beacon and the run seed its flakiness draws from."""
+
+    seed: Annotated[protocol.Seed, Meta(description="run seed"), Flag()] = 0
+    beacon: BeaconConfig = field(default_factory=BeaconConfig)
+
+    def __post_init__(self) -> None:
+        settings.check(self)
+
+
+NEST_BEACON_OPTIONS = Options(NestBeaconConfig)

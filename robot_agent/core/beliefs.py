@@ -1,0 +1,74 @@
+"""What one robot believes: its opinion over the sites and, once it has one, its decision.
+
+A comparison of the two sites of a pair updates the opinion by Definition 1 (negative
+updating); at the nest it is pooled (MProdOp, Definition 2, or ``config.pooling``) with the
+latest opinion of every neighbour heard since the robot arrived, and then tested for a
+decision. The arithmetic is ``robot_agent/core/decision.py``'s; this is the state it acts on.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from robot_agent.core import decision
+from wire import protocol
+
+if TYPE_CHECKING:
+    from robot_agent.core.controller import ControllerConfig
+
+
+class Beliefs:
+    """One robot's opinion, what it heard from neighbours, and its decision."""
+
+    def __init__(self, num_sites: int, config: ControllerConfig) -> None:
+        self._config = config
+        self.opinion = decision.uniform_opinion(num_sites)
+        self.trips = 0  # poolings so far: one per trip
+        self.pool_sizes: list[int] = []  # robots in each pool, this one included
+        self.comparison: protocol.Comparison | None = None  # the last one that told apart
+        self.decided_site: int | None = None
+        self.decision_time: float | None = None
+        self.decision_trips: int | None = None
+        # The latest opinion of each robot, with when it was heard; pooling takes those
+        # heard since arriving at the nest.
+        self.heard: dict[int, tuple[float, list[float]]] = {}
+
+    def hear(self, robot_id: int, t: float, opinion: list[float]) -> None:
+        """Robot ``robot_id``'s opinion (validated over our sites), heard at sim time ``t``."""
+        self.heard[robot_id] = (t, opinion)
+
+    def compare(self, qualities: dict[int, float]) -> bool:
+        """Negative update from the two sites' qualities (in visiting order); whether the
+        opinion changed. Equal qualities are no evidence either way: no update."""
+        (site_a, quality_a), (site_b, quality_b) = qualities.items()
+        if quality_a == quality_b:
+            return False  # an update would be a coin toss
+        worse = site_a if quality_a < quality_b else site_b
+        self.comparison = protocol.Comparison(site_a, quality_a, site_b, quality_b, worse)
+        updated = decision.negative_update(self.opinion, worse, self._config.alpha)
+        if updated == self.opinion:
+            return False
+        self.opinion = updated
+        return True
+
+    def pool(self, since: float, t: float) -> None:
+        """Pool with every neighbour heard since ``since``, count the trip, and decide at
+        sim time ``t`` if an option reaches the threshold (``decided_site``)."""
+        neighbours = [
+            opinion for _, (heard, opinion) in sorted(self.heard.items()) if heard >= since
+        ]
+        pool = [self.opinion, *neighbours]
+        pooled = decision.POOLING_OPERATORS[self._config.pooling](pool)
+        if pooled is not None:  # None: contradictory evidence, keep our own opinion
+            self.opinion = pooled
+        self.heard = {}
+        self.pool_sizes.append(len(pool))
+        self.trips += 1
+        decided = decision.decided_option(self.opinion, self._config.threshold)
+        if decided is not None:
+            self.decided_site = decided
+            self.decision_time = t
+            self.decision_trips = self.trips
+
+
+__all__ = ["Beliefs"]

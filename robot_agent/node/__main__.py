@@ -1,0 +1,7 @@
+"""``python -m robot_agent.node``: the robot process (``robot-agent``)."""
+
+import sys
+
+from robot_agent.node.robot_node import main
+
+sys.exit(main())

@@ -1,0 +1,268 @@
+"""The world of one run, without any I/O: layout, physics, camera and radio together.
+
+``server.py`` feeds it what arrives over Zenoh and publishes what it returns; tests and
+benchmarks drive it directly. One call to ``advance`` closes one control tick.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Annotated, ClassVar, Literal
+
+import numpy as np
+from msgspec import Meta
+
+from wire import names, protocol, settings
+from wire.settings import Flag
+from world_server.core.camera import CameraNoise, CameraRenderer
+from world_server.core.layout import Layout, make_layout
+from world_server.core.physics import EpuckSpec, Physics
+from world_server.core.radio import Delivery, RadioConfig, RadioMedium, SenderKind
+
+DEFAULT_CAMERA = protocol.CameraSpec(width=64, height=48, fov=0.84)
+OCCLUSION_RANGE = 1.0  # metres: robots further away are too small to hide a site
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """The world of one run; its flagged settings are options of world-server and swarm run."""
+
+    FLAG_GROUP: ClassVar[str] = "world"
+
+    run: Annotated[names.Name, Meta(description="the run id")] = "run"
+    seed: Annotated[protocol.Seed, Meta(description="run seed"), Flag()] = 0
+    num_sites: Annotated[
+        int,
+        Meta(ge=2, le=protocol.MAX_OPTIONS, description="number of sites n"),
+        Flag(name="sites"),
+    ] = 10
+    num_robots: Annotated[
+        int,
+        Meta(
+            ge=1,
+            le=names.MAX_ROBOTS,
+            description="expected swarm size: sizes the arena and the nest; the run starts "
+            "when this many robots are live",
+        ),
+        Flag(name="robots"),
+    ] = 10
+    dt: Annotated[
+        float,
+        Meta(ge=0.001, le=1.0, description="control tick in sim seconds"),
+        Flag(group="clock"),
+    ] = 0.1
+    substeps: Annotated[int, Meta(ge=1, description="physics steps per control tick")] = 2
+    clock: Annotated[
+        Literal["lockstep", "realtime"],
+        Meta(
+            description="lockstep: deterministic, waits for every controller each tick, as "
+            "fast as the processes go; realtime: follows the wall clock"
+        ),
+        Flag(group="clock"),
+    ] = "lockstep"
+    radio: RadioConfig = field(default_factory=RadioConfig)  # its beacon_range is replaced:
+    beacon_range: Annotated[
+        Annotated[float, Meta(gt=0.0)] | None,
+        Meta(description="beacon range in metres"),
+        Flag(group=RadioConfig.FLAG_GROUP, default_text="the nest radius"),
+    ] = None
+    camera: Annotated[
+        protocol.CameraSpec, Meta(description="the robots' camera: frame size, field of view")
+    ] = DEFAULT_CAMERA
+    camera_noise: CameraNoise = field(default_factory=CameraNoise)
+    spec: EpuckSpec = field(default_factory=EpuckSpec)
+
+    def __post_init__(self) -> None:
+        settings.check(self)
+
+
+@dataclass(frozen=True)
+class Transmission:
+    """A radio message a controller sent during the tick being closed."""
+
+    sender: str
+    seq: int
+    payload: bytes
+
+
+@dataclass(frozen=True)
+class TickResult:
+    tick: int  # the tick that now begins
+    deliveries: dict[str, list[Delivery]]  # by receiver name, in delivery order
+    frames: dict[int, bytes]  # encoded camera frames by robot id
+
+
+class World:
+    def __init__(self, config: WorldConfig) -> None:
+        self.config = config
+        self.layout: Layout = make_layout(
+            config.num_sites, config.num_robots, config.seed, config.spec.radius
+        )
+        self.physics = Physics(self.layout.arena_radius, config.spec, config.substeps)
+        # The beacon reaches exactly the nest unless a range was chosen.
+        radio = dataclasses.replace(
+            config.radio, beacon_range=config.beacon_range or self.layout.nest_radius
+        )
+        self.radio = RadioMedium(radio, protocol.derive_seed(config.seed, "radio"))
+        self.camera = CameraRenderer(
+            self.layout,
+            config.camera,
+            robot_radius=config.spec.radius,
+            noise=config.camera_noise,
+            seed=protocol.derive_seed(config.seed, "camera"),
+        )
+        self._camera_rng = np.random.default_rng(protocol.derive_seed(config.seed, "frames"))
+        self.tick = 0
+        # Bodies of the expected swarm are created now, in id order: pymunk's contact
+        # solving depends on the order bodies were added, and the order in which robot
+        # processes happen to join must not change a run.
+        for robot_id, pose in enumerate(self.layout.start_poses):
+            self.physics.add_robot(robot_id, *pose)
+        self._live_robots: set[int] = set()
+        self._beacons: set[str] = set()
+        self.info = protocol.WorldInfo(
+            v=protocol.VERSION,
+            run=config.run,
+            seed=config.seed,
+            dt=config.dt,
+            arena_radius=self.layout.arena_radius,
+            nest=protocol.Nest(0.0, 0.0, self.layout.nest_radius),
+            sites=self.layout.info_sites(),
+            robot_radius=config.spec.radius,
+            wheel_base=config.spec.wheel_base,
+            max_wheel_speed=config.spec.max_wheel_speed,
+            camera=config.camera,
+            clock=config.clock,
+        )
+
+    @property
+    def t(self) -> float:
+        return self.tick * self.config.dt
+
+    # --- membership ----------------------------------------------------------------
+
+    def is_member(self, robot_id: int) -> bool:
+        """Whether ``robot_id`` is one of the swarm's robots (ids 0 to num_robots - 1)."""
+        return 0 <= robot_id < self.config.num_robots
+
+    def join_robot(self, robot_id: int) -> None:
+        """A controller for ``robot_id`` is live: its body, made at the start, answers to it.
+
+        Only the swarm's own ids have a body (an arena sized for N robots has no room
+        for a robot 99999); ValueError for any other."""
+        if not self.is_member(robot_id):
+            raise ValueError(f"robot {robot_id} is not one of the {self.config.num_robots}")
+        self._live_robots.add(robot_id)
+
+    def leave_robot(self, robot_id: int) -> None:
+        """Its controller is gone: the body stops and stays as an obstacle."""
+        self._live_robots.discard(robot_id)
+        if self.physics.has_robot(robot_id):
+            self.physics.set_wheels(robot_id, 0.0, 0.0)
+
+    def join_beacon(self, name: str) -> None:
+        self._beacons.add(name)
+
+    def leave_beacon(self, name: str) -> None:
+        self._beacons.discard(name)
+
+    def live_robots(self) -> list[int]:
+        return sorted(self._live_robots)
+
+    def beacons(self) -> list[str]:
+        return sorted(self._beacons)
+
+    # --- one tick ------------------------------------------------------------------
+
+    def sense(self, robot_id: int, rx: int, camera: bool) -> protocol.Sense:
+        x, y, theta = self.physics.pose(robot_id)
+        return protocol.Sense(
+            v=protocol.VERSION,
+            tick=self.tick,
+            t=self.t,
+            x=x,
+            y=y,
+            theta=theta,
+            prox=list(self.physics.proximity(robot_id)),
+            rx=rx,
+            camera=camera,
+        )
+
+    def advance(
+        self, acts: Mapping[int, protocol.Act], transmissions: Sequence[Transmission]
+    ) -> TickResult:
+        """Close the current tick: transmit, move, render, and deliver what is due next."""
+        receivers = {
+            names.robot_name(robot): self.physics.pose(robot)[:2]
+            for robot in sorted(self._live_robots)
+        }
+        for message in sorted(transmissions, key=_transmission_order):
+            kind: SenderKind
+            if message.sender in self._beacons:
+                position, kind = (self.info.nest.x, self.info.nest.y), "beacon"
+            elif message.sender in receivers:
+                position, kind = receivers[message.sender], "robot"
+            else:  # its sender left after sending it: there is no transmitter any more
+                self.radio.reject()
+                continue
+            self.radio.transmit(
+                self.tick, message.sender, message.seq, message.payload, position, kind, receivers
+            )
+        for robot, act in sorted(acts.items()):
+            if robot in self._live_robots:
+                self.physics.set_wheels(robot, act.left, act.right)
+        self.physics.step(self.config.dt)
+        self.tick += 1
+        frames = {
+            robot: self.camera.encode(self._render(robot))
+            for robot, act in sorted(acts.items())
+            if act.capture and robot in self._live_robots
+        }
+        deliveries: dict[str, list[Delivery]] = {}
+        for delivery in self.radio.deliveries(self.tick):
+            deliveries.setdefault(delivery.receiver, []).append(delivery)
+        return TickResult(self.tick, deliveries, frames)
+
+    def is_sender(self, name: str) -> bool:
+        """Whether ``name`` may transmit now (a live robot or a known beacon)."""
+        if name in self._beacons:
+            return True
+        robot = names.robot_of_name(name)
+        return robot is not None and robot in self._live_robots
+
+    def _render(self, robot_id: int) -> np.ndarray:
+        x, y, theta = self.physics.pose(robot_id)
+        others = [
+            (ox, oy)
+            for other, (ox, oy, _) in sorted(self.physics.poses().items())
+            if other != robot_id and math.hypot(ox - x, oy - y) < OCCLUSION_RANGE
+        ]
+        return self.camera.render(x, y, theta, others, rng=self._camera_rng)
+
+    def state(self, rejected: int = 0, stalls: int = 0, departures: int = 0) -> protocol.WorldState:
+        counters = self.radio.counters
+        return protocol.WorldState(
+            v=protocol.VERSION,
+            tick=self.tick,
+            t=self.t,
+            robots=[
+                protocol.Pose(robot, x, y, theta)
+                for robot, (x, y, theta) in sorted(self.physics.poses().items())
+            ],
+            radio=protocol.RadioCounters(
+                sent=counters.sent,
+                delivered=counters.delivered,
+                dropped=counters.dropped,
+                rejected=counters.rejected,
+            ),
+            rejected=rejected,
+            stalls=stalls,
+            departures=departures,
+        )
+
+
+def _transmission_order(message: Transmission) -> tuple[object, ...]:
+    return (*RadioMedium.sender_order(message.sender), message.seq)

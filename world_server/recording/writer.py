@@ -1,0 +1,912 @@
+"""``recorder``: every message of one run, into one MCAP file that opens in Foxglove.
+
+Two parts. ``McapRecorder`` (no Zenoh) turns samples into MCAP records; ``main`` is the
+process the launcher starts: it subscribes to ``<root>/<run>/**`` before it declares its
+liveliness token, and Zenoh callbacks only append ``(key, payload, attachment, wall time)``
+to a queue that one writer thread empties, in arrival order.
+
+What a recording holds (see docs/recording.md):
+
+* one channel per key, topic = the key, schema encoding ``jsonschema`` with the schema
+  generated from the message's one definition in ``wire/protocol.py`` (refs
+  inlined), message encoding ``json``, the payload bytes as they were on the wire. Radio
+  samples are recorded as ``{"meta": <attachment>, "payload": <payload>}``; camera frames
+  as ``foxglove.CompressedImage``;
+* log time = sim time: ``tick * dt`` for every message that carries a tick, the latest
+  ``world/clock`` for the rest (process logs); publish time = the wall time of arrival;
+* derived Foxglove topics ``<prefix>/foxglove/{scene,transforms,log}``: the arena as a
+  ``foxglove.SceneUpdate`` at every ``world/state``, robot poses as
+  ``foxglove.FrameTransforms`` every tick, process logs as ``foxglove.Log``;
+* a sample that fails its tag (in a keyed run), or to decode or validate, is counted;
+  the first ``REJECTED_KEPT`` of them go, base64-encoded with their key, the reason and
+  their first ``REJECTED_SAMPLE_BYTES`` bytes, to the ``<prefix>/recorder/rejected``
+  channel. Junk costs a recording a few hundred kilobytes at most, however much is sent;
+* metadata records: ``bestofn.start`` when recording begins (configuration, versions,
+  seed, layout, world info) and ``bestofn.run`` at the end (the same, the recorder's
+  counts, and the run summary when the launcher sent one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import contextlib
+import functools
+import importlib.metadata
+import json
+import logging
+import os
+import platform
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Annotated, Any, ClassVar, NamedTuple
+
+import msgspec
+from mcap.writer import CompressionType, Writer
+from msgspec import Meta
+
+from plumbing import cliargs, run_keys, settings_cli
+from plumbing.inbox import BoundedInbox
+from plumbing.lifecycle import die_with_launcher
+from plumbing.settings_cli import Options
+from wire import auth, batch, names, protocol, settings
+from wire.names import Role
+from wire.settings import Flag
+from world_server.core.layout import Layout, make_layout
+from world_server.recording import foxglove
+
+log = logging.getLogger("recorder")
+
+START_METADATA = "bestofn.start"
+RUN_METADATA = "bestofn.run"
+SCHEMA_PREFIX = "bestofn."
+LINK_SECONDS = 5.0  # sim seconds a pooling's radio links stay in the scene
+CHUNK_BYTES = 256 * 1024  # a crash loses at most the chunk being filled
+# After a finish query (or a stop signal), keep recording until nothing arrived for QUIET
+# seconds, but no longer than LIMIT (the stop's 3 s grace bounds STOP_DRAIN_LIMIT).
+FINISH_QUIET, FINISH_DRAIN_LIMIT = 0.2, 10.0
+STOP_QUIET, STOP_DRAIN_LIMIT = 0.1, 1.0
+# Rejected samples: every one counted, the first REJECTED_KEPT kept, each cut to this size.
+REJECTED_KEPT, REJECTED_SAMPLE_BYTES = 100, 1024
+INBOX_BYTES = 256 * 2**20  # what may wait for the writer thread, at most
+MAX_SAMPLE_BYTES = protocol.MAX_FRAME_BYTES + 1024  # a frame and its attachment
+# Nothing waits for the recorder, so it yields the CPU to the swarm: at nice 10 recording
+# costs a 10-robot run 8% of its real-time factor instead of 21% (docs/recording.md).
+DEFAULT_NICENESS = 10
+
+
+class RadioTxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """A ``radio/tx/<sender>`` sample as recorded: its attachment and its payload."""
+
+    meta: protocol.RadioTxMeta
+    payload: protocol.RadioPayload
+
+
+class RadioRxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """A ``radio/rx/<receiver>`` sample as recorded: its attachment and its payload."""
+
+    meta: protocol.RadioRxMeta
+    payload: protocol.RadioPayload
+
+
+class RejectedSample(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """A sample that did not decode as its key's message (or failed its tag): its first
+    bytes, raw, with the reason."""
+
+    key: str
+    reason: str
+    payload: str  # base64 of at most REJECTED_SAMPLE_BYTES
+    attachment: str | None  # base64 of at most REJECTED_SAMPLE_BYTES
+    payload_bytes: int  # the whole payload's size
+
+
+# Key leaf -> message type. ``camera`` is recorded as foxglove.CompressedImage.
+MESSAGE_TYPES: dict[str, Any] = {
+    "clock": protocol.Clock,
+    "state": protocol.WorldState,
+    "sense": protocol.Sense,
+    "act": protocol.Act,
+    "status": protocol.Status,
+    "ack": protocol.Ack,
+    "log": protocol.LogLine,
+    "radio_tx": RadioTxRecord,
+    "radio_rx": RadioRxRecord,
+    "rejected": RejectedSample,
+}
+CAMERA = "camera"
+
+
+def schema_name(kind: str) -> str:
+    """The MCAP schema name of a kind of sample: ``bestofn.Sense``, ``foxglove.Log`` ..."""
+    if kind == CAMERA:
+        return foxglove.COMPRESSED_IMAGE
+    return SCHEMA_PREFIX + MESSAGE_TYPES[kind].__name__
+
+
+def inline_refs(schema: dict[str, Any]) -> dict[str, Any]:
+    """A self-contained copy of a msgspec JSON Schema: every ``$ref`` replaced by its
+    definition, as in Foxglove's own schemas (viewers need not resolve references)."""
+    definitions = schema.get("$defs", {})
+
+    def resolve(node: Any) -> Any:
+        if isinstance(node, dict):
+            if "$ref" in node:
+                return resolve(definitions[node["$ref"].rsplit("/", 1)[-1]])
+            return {
+                key: resolve(value)
+                for key, value in node.items()
+                if key not in ("$defs", "discriminator")  # the mapping names $defs entries
+            }
+        if isinstance(node, list):
+            return [resolve(item) for item in node]
+        return node
+
+    return dict(resolve(schema))
+
+
+@functools.cache
+def message_schema(kind: str) -> dict[str, Any]:
+    """The JSON Schema of a recorded kind, from its definition in the protocol."""
+    if kind == CAMERA:
+        return foxglove.schema(foxglove.COMPRESSED_IMAGE)
+    return inline_refs(protocol.json_schema(MESSAGE_TYPES[kind]))
+
+
+def classify(keys: protocol.Keys, key: str) -> str | None:
+    """The kind of sample a key carries, or None for a key outside the protocol."""
+    if not key.startswith(keys.prefix + "/"):
+        return None
+    parts = key[len(keys.prefix) + 1 :].split("/")
+    match parts:
+        case ["world", "clock"]:
+            return "clock"
+        case ["world", "state"]:
+            return "state"
+        case ["robot", robot, ("sense" | "act" | "status" | "camera") as leaf] if (
+            names.robot_of_name(robot) is not None
+        ):
+            return leaf
+        case ["beacon", _, "ack"]:
+            return "ack"
+        case ["radio", ("tx" | "rx") as direction, _]:
+            return f"radio_{direction}"
+        case ["log", _]:
+            return "log"
+    return None
+
+
+def versions() -> dict[str, str]:
+    """Versions of everything that shapes a run, for the metadata record."""
+    found = {
+        "protocol": str(protocol.VERSION),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+    }
+    for package in (
+        "bestofn-swarm",
+        "eclipse-zenoh",
+        "mcap",
+        "msgspec",
+        "numpy",
+        "pymunk",
+        "opencv-python-headless",
+    ):
+        with contextlib.suppress(importlib.metadata.PackageNotFoundError):
+            found[package] = importlib.metadata.version(package)
+    source = Path(__file__).resolve().parent.parent
+    with contextlib.suppress(OSError, subprocess.SubprocessError):
+        commit = subprocess.run(
+            ["git", "-C", str(source), "describe", "--always", "--dirty", "--abbrev=12"],
+            capture_output=True,
+            text=True,
+            timeout=5,
+            check=True,
+        ).stdout.strip()
+        if commit:
+            found["git"] = commit
+    return found
+
+
+def layout_description(layout: Layout) -> dict[str, Any]:
+    return {
+        "arena_radius": layout.arena_radius,
+        "nest_radius": layout.nest_radius,
+        "best_site": layout.best_site,
+        "sites": [
+            {
+                "id": site.id,
+                "x": site.x,
+                "y": site.y,
+                "angle": site.angle,
+                "quality": site.quality,
+                "rank": site.rank,
+            }
+            for site in layout.sites
+        ],
+    }
+
+
+def json_object(text: str) -> dict[str, Any]:
+    """``--config-json``: a JSON object, or ValueError."""
+    try:
+        value = json.loads(text)
+    except ValueError as error:
+        raise ValueError(f"not JSON: {error}") from None
+    if not isinstance(value, dict):
+        raise ValueError("not a JSON object")
+    return value
+
+
+@dataclass(frozen=True)
+class RunDescription:
+    """The run a recording is of: what the recorder is configured with (its options, or
+    ``--config``, which is how ``swarm run`` hands it over)."""
+
+    FLAG_GROUP: ClassVar[str] = "run"
+
+    run_id: Annotated[names.Name, Meta(description="the run id")] = "run"
+    seed: Annotated[protocol.Seed, Meta(description="run seed"), Flag()] = 0
+    robots: Annotated[
+        int,
+        Meta(ge=1, le=names.MAX_ROBOTS, description="swarm size of the run, for its layout"),
+        Flag(),
+    ] = 10
+    sites: Annotated[
+        int,
+        Meta(ge=2, le=protocol.MAX_OPTIONS, description="number of sites of the run"),
+        Flag(),
+    ] = 10
+    config: Annotated[
+        dict[str, Any],
+        Meta(description="the run's full configuration, kept in the metadata record"),
+        Flag(name="config-json", metavar="JSON", parse=json_object, default_text="{}"),
+    ] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        settings.check(self)
+
+
+@dataclass
+class _Channel:
+    id: int
+    kind: str
+    robot: int | None = None
+    sequence: int = 0
+
+
+class Sample(NamedTuple):
+    """One Zenoh sample as the callback copied it."""
+
+    key: str
+    payload: bytes
+    attachment: bytes | None
+    wall_ns: int  # wall time of arrival: the MCAP publish time
+
+
+class McapRecorder:
+    """Writes one run's samples to an MCAP stream. Not thread-safe: one writer thread."""
+
+    def __init__(
+        self,
+        stream: IO[bytes] | None,
+        keys: protocol.Keys,
+        run: RunDescription,
+        info: protocol.WorldInfo | None = None,
+        *,
+        chunk_size: int = CHUNK_BYTES,
+        writer: Any = None,
+        keyring: auth.Keyring | None = None,
+    ) -> None:
+        """``writer``: where records go instead of an MCAP file in ``stream``; any object
+        with ``mcap.writer.Writer``'s methods (Foxglove live passes one; viewer/foxglove_live.py).
+        """
+        self.keys = keys
+        self.keyring = keyring  # None: an unauthenticated run, every tag-less sample taken
+        self.run = run
+        self.info = info
+        self.layout = make_layout(run.sites, run.robots, run.seed)
+        self.scene = foxglove.ArenaScene(
+            self.layout, info.robot_radius if info is not None else 0.037
+        )
+        self.dt_ns = round(info.dt * 1e9) if info is not None else 0
+        self.sim_ns = 0
+        self.counts: dict[str, int] = {}
+        self.rejected = 0
+        self.closed = False
+        self._versions = versions()
+        if writer is None:
+            if stream is None:
+                raise ValueError("a recorder needs a stream to write to, or a writer")
+            writer = Writer(stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        self._writer = writer
+        self._writer.start(library=f"bestofn-swarm recorder, {self._writer_library()}")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, _Channel] = {}
+        self._routes: dict[str, tuple[Callable[[Sample], None], str | None]] = {}
+        self._host_prefix = f"{keys.prefix}/host/"
+        self._decoders: dict[str, msgspec.json.Decoder[Any]] = {
+            name: msgspec.json.Decoder(kind_type)
+            for name, kind_type in (
+                ("clock", protocol.Clock),
+                ("state", protocol.WorldState),
+                ("sense", protocol.Sense),
+                ("act", protocol.Act),
+                ("ack", protocol.Ack),
+                ("status", protocol.Status),
+                ("log", protocol.LogLine),
+                ("camera meta", protocol.CameraMeta),
+                ("radio_tx meta", protocol.RadioTxMeta),
+                ("radio_rx meta", protocol.RadioRxMeta),
+                ("radio payload", protocol.RadioPayload),
+            )
+        }
+        self._encoder = msgspec.json.Encoder()
+        # Scene state: the latest pose and status of each robot, and pooling links.
+        self.poses: dict[int, tuple[float, float, float]] = {}
+        self.views: dict[int, foxglove.RobotView] = {}
+        self._pose_batch: list[tuple[int, float, float, float]] = []
+        self._pose_batch_ns = 0
+        self._heard: dict[int, set[int]] = {}
+        self._links: dict[int, tuple[int, list[foxglove.Segment]]] = {}  # robot -> (when, links)
+        self._writer.add_metadata(START_METADATA, self._description())
+
+    @staticmethod
+    def _writer_library() -> str:
+        try:
+            return f"mcap-python {importlib.metadata.version('mcap')}"
+        except importlib.metadata.PackageNotFoundError:
+            return "mcap-python"
+
+    def _description(self) -> dict[str, str]:
+        run = self.run
+        return {
+            "run_id": run.run_id,
+            "root": self.keys.root,
+            "seed": str(run.seed),
+            "robots": str(run.robots),
+            "sites": str(run.sites),
+            "config": json.dumps(run.config),
+            "versions": json.dumps(self._versions),
+            "layout": json.dumps(layout_description(self.layout)),
+            "world_info": protocol.encode(self.info).decode() if self.info is not None else "",
+            "foxglove_schemas": foxglove.SCHEMA_SOURCE,
+        }
+
+    # --- channels ------------------------------------------------------------------
+
+    def _schema_id(self, name: str, schema: dict[str, Any]) -> int:
+        schema_id = self._schemas.get(name)
+        if schema_id is None:
+            data = json.dumps(schema, separators=(",", ":")).encode()
+            schema_id = self._writer.register_schema(name, "jsonschema", data)
+            self._schemas[name] = schema_id
+        return schema_id
+
+    def _channel(self, topic: str, kind: str, robot: int | None = None) -> _Channel:
+        channel = self._channels.get(topic)
+        if channel is None:
+            if kind in foxglove.SCHEMA_NAMES:
+                schema_id = self._schema_id(kind, foxglove.schema(kind))
+            else:
+                schema_id = self._schema_id(schema_name(kind), message_schema(kind))
+            channel_id = self._writer.register_channel(topic, "json", schema_id)
+            channel = self._channels[topic] = _Channel(channel_id, kind, robot)
+        return channel
+
+    def _write(self, channel: _Channel, log_ns: int, data: bytes, wall_ns: int) -> None:
+        self._writer.add_message(channel.id, log_ns, data, wall_ns, channel.sequence)
+        channel.sequence += 1
+        self.counts[channel.kind] = self.counts.get(channel.kind, 0) + 1
+
+    def _write_derived(
+        self, leaf: str, schema: str, log_ns: int, message: Any, wall_ns: int
+    ) -> None:
+        channel = self._channel(f"{self.keys.prefix}/foxglove/{leaf}", schema)
+        self._write(channel, log_ns, self._encoder.encode(message), wall_ns)
+
+    # --- samples -------------------------------------------------------------------
+
+    def record(self, sample: Sample) -> None:
+        """Record one sample, in the order samples arrived; a batch (``host/<lead>/sense``
+        or ``act``, wire/batch.py) as the robots' own messages it carries."""
+        if sample.key.startswith(self._host_prefix):
+            self._record_batch(sample)
+            return
+        route = self._routes.get(sample.key)
+        if route is None:
+            route = self._routes[sample.key] = self._route(sample.key)
+        handler, speaker = route
+        try:
+            if self.keyring is not None and speaker is not None:
+                try:
+                    metadata = self.keyring.open(
+                        speaker, sample.key, sample.payload, sample.attachment
+                    )
+                except auth.AuthError as error:
+                    self._reject(sample, f"{speaker}: {error}")
+                    return
+                sample = sample._replace(attachment=metadata or None)
+            handler(sample)
+        except Exception as error:  # a recorder bug must not cost the rest of the run
+            log.exception("failed to record a sample on %s", sample.key)
+            self._reject(sample, f"recorder error: {error!r}")
+
+    def _record_batch(self, sample: Sample) -> None:
+        leaf = sample.key.rsplit("/", 1)[-1]
+        if self.keys.robot_of(sample.key, "host") is None or leaf not in ("sense", "act"):
+            self._reject(sample, "not a key of the protocol")
+            return
+        try:
+            entries = batch.decode(sample.payload)
+        except batch.BatchError as error:
+            self._reject(sample, f"batch: {error}")
+            return
+        per_robot = self.keys.sense if leaf == "sense" else self.keys.act
+        for robot, payload, attachment in entries:
+            self.record(Sample(per_robot(robot), payload, attachment, sample.wall_ns))
+
+    def _speaker(self, key: str) -> str | None:
+        """The identity whose key tags a sample on ``key`` (a key of the protocol), or None
+        if no robot or beacon of a run can have the name it gives."""
+        parts = key[len(self.keys.prefix) + 1 :].split("/")
+        match parts:
+            case ["world", _]:
+                return names.WORLD
+            case ["robot", robot, _]:
+                return names.robot_identity(int(robot))  # classify() checked it is a number
+            case ["beacon", name, _]:
+                return names.beacon_identity(name) if names.is_beacon_name(name) else None
+            case ["radio", _, name]:
+                return names.sender_identity(name)
+        return names.LAUNCHER  # log/<process>
+
+    def _route(self, key: str) -> tuple[Callable[[Sample], None], str | None]:
+        """How to record a sample on ``key``, and whose tag it must carry."""
+        kind = classify(self.keys, key)
+        if kind is None:
+            return functools.partial(self._reject, reason="not a key of the protocol"), None
+        speaker = self._speaker(key)
+        if speaker is None or not names.is_identity(speaker):
+            return functools.partial(self._reject, reason="no identity of the run"), None
+        channel = self._channel(key, kind, self.keys.robot_of(key))
+        handler = getattr(self, f"_on_{kind}")
+        return functools.partial(handler, channel), speaker
+
+    def _tick_ns(self, tick: int) -> int:
+        return tick * self.dt_ns if self.dt_ns else self.sim_ns
+
+    def _reject(self, sample: Sample, reason: str) -> None:
+        """Count a sample that is not a valid message; keep the first few, cut short, raw,
+        on the rejected channel."""
+        self.rejected += 1
+        if self.rejected <= 10:
+            log.warning("recording a sample on %s as rejected: %s", sample.key, reason[:200])
+        if self.rejected > REJECTED_KEPT:
+            return
+
+        def head(data: bytes) -> str:
+            return base64.b64encode(data[:REJECTED_SAMPLE_BYTES]).decode("ascii")
+
+        record = RejectedSample(
+            key=sample.key[:1000],
+            reason=reason[:1000],
+            payload=head(sample.payload),
+            attachment=head(sample.attachment) if sample.attachment is not None else None,
+            payload_bytes=len(sample.payload),
+        )
+        channel = self._channel(f"{self.keys.prefix}/recorder/rejected", "rejected")
+        self._write(channel, self.sim_ns, self._encoder.encode(record), sample.wall_ns)
+
+    def _decoded(self, what: str, data: bytes | None, sample: Sample) -> Any:
+        """``data`` decoded and validated as the protocol does, or None once rejected."""
+        if data is None:
+            reason = f"{what}: missing"
+        elif len(data) > protocol.MAX_PAYLOAD_BYTES:
+            reason = f"{what}: {len(data)} bytes exceeds {protocol.MAX_PAYLOAD_BYTES}"
+        else:
+            try:
+                return self._decoders[what].decode(data)
+            except (msgspec.DecodeError, msgspec.ValidationError) as error:
+                reason = f"{what}: {error}"
+        self._reject(sample, reason)
+        return None
+
+    def _on_clock(self, channel: _Channel, sample: Sample) -> None:
+        clock = self._decoded("clock", sample.payload, sample)
+        if clock is None:
+            return
+        if not self.dt_ns and clock.tick > 0:
+            self.dt_ns = round(clock.t * 1e9 / clock.tick)
+        ns = self._tick_ns(clock.tick) if self.dt_ns else round(clock.t * 1e9)
+        self.sim_ns = max(self.sim_ns, ns)
+        self._write(channel, ns, sample.payload, sample.wall_ns)
+        self._flush_poses(sample.wall_ns)
+
+    def _on_sense(self, channel: _Channel, sample: Sample) -> None:
+        sense = self._decoded("sense", sample.payload, sample)
+        if sense is None:
+            return
+        ns = self._tick_ns(sense.tick)
+        self._write(channel, ns, sample.payload, sample.wall_ns)
+        if ns != self._pose_batch_ns:
+            self._flush_poses(sample.wall_ns)
+            self._pose_batch_ns = ns
+        robot = channel.robot
+        assert robot is not None  # classify() only routes robot/<id>/sense here
+        self._pose_batch.append((robot, sense.x, sense.y, sense.theta))
+        self.poses[robot] = (sense.x, sense.y, sense.theta)
+
+    def _flush_poses(self, wall_ns: int) -> None:
+        """All robots' poses of one tick as one ``foxglove.FrameTransforms``."""
+        if self._pose_batch:
+            message = foxglove.frame_transforms(self._pose_batch_ns, self._pose_batch)
+            self._write_derived(
+                "transforms", foxglove.FRAME_TRANSFORMS, self._pose_batch_ns, message, wall_ns
+            )
+            self._pose_batch = []
+
+    def _on_act(self, channel: _Channel, sample: Sample) -> None:
+        act = self._decoded("act", sample.payload, sample)
+        if act is not None:
+            self._write(channel, self._tick_ns(act.tick), sample.payload, sample.wall_ns)
+
+    def _on_ack(self, channel: _Channel, sample: Sample) -> None:
+        ack = self._decoded("ack", sample.payload, sample)
+        if ack is not None:
+            self._write(channel, self._tick_ns(ack.tick), sample.payload, sample.wall_ns)
+
+    def _on_status(self, channel: _Channel, sample: Sample) -> None:
+        status = self._decoded("status", sample.payload, sample)
+        if status is None:
+            return
+        ns = self._tick_ns(status.tick)
+        self._write(channel, ns, sample.payload, sample.wall_ns)
+        robot = channel.robot
+        assert robot is not None
+        previous = self.views.get(robot, foxglove.RobotView())
+        view = foxglove.RobotView(status.phase, status.decided_site, status.trips, status.poolings)
+        self.views[robot] = view
+        if status.phase == "at_nest" and previous.phase != "at_nest":
+            self._heard[robot] = set()
+        if status.poolings > previous.poolings:
+            self._note_links(robot, ns)
+        if (view.phase, view.decided_site) != (previous.phase, previous.decided_site):
+            update = self.scene.robot_update(ns, robot, view)
+            self._write_derived("scene", foxglove.SCENE_UPDATE, ns, update, sample.wall_ns)
+
+    def _note_links(self, robot: int, ns: int) -> None:
+        """The radio links of a pooling: to every robot heard at the nest this visit."""
+        here = self.poses.get(robot)
+        heard = self._heard.pop(robot, set())
+        if here is None:
+            return
+        segments = [
+            ((here[0], here[1]), (self.poses[other][0], self.poses[other][1]))
+            for other in sorted(heard)
+            if other in self.poses
+        ]
+        self._links[robot] = (ns, segments)
+
+    def _on_state(self, channel: _Channel, sample: Sample) -> None:
+        state = self._decoded("state", sample.payload, sample)
+        if state is None:
+            return
+        ns = self._tick_ns(state.tick)
+        self._write(channel, ns, sample.payload, sample.wall_ns)
+        for pose in state.robots:
+            self.poses[pose.id] = (pose.x, pose.y, pose.theta)
+        recent = ns - round(LINK_SECONDS * 1e9)
+        segments = [
+            segment
+            for pooled_ns, robot_segments in self._links.values()
+            if pooled_ns >= recent
+            for segment in robot_segments
+        ]
+        views = {robot: self.views.get(robot, foxglove.RobotView()) for robot in self.poses}
+        update = self.scene.update(ns, views, segments)
+        self._write_derived("scene", foxglove.SCENE_UPDATE, ns, update, sample.wall_ns)
+
+    def _on_camera(self, channel: _Channel, sample: Sample) -> None:
+        meta = self._decoded("camera meta", sample.attachment, sample)
+        if meta is None:
+            return
+        if len(sample.payload) > protocol.MAX_FRAME_BYTES:
+            self._reject(sample, f"camera frame of {len(sample.payload)} bytes")
+            return
+        ns = self._tick_ns(meta.tick)
+        frame_id = f"{foxglove.robot_frame(channel.robot or 0)}/camera"
+        image = foxglove.compressed_image(ns, frame_id, sample.payload, meta.encoding)
+        self._write(channel, ns, self._encoder.encode(image), sample.wall_ns)
+
+    def _on_radio_tx(self, channel: _Channel, sample: Sample) -> None:
+        self._radio("radio_tx meta", channel, sample)
+
+    def _on_radio_rx(self, channel: _Channel, sample: Sample) -> None:
+        message = self._radio("radio_rx meta", channel, sample)
+        receiver = self.keys.last_chunk(sample.key)
+        robot = names.robot_of_name(receiver)
+        if isinstance(message, protocol.OpinionPayload) and robot is not None:
+            heard = self._heard.get(robot)
+            if heard is not None:
+                heard.add(message.id)
+
+    def _radio(self, meta_kind: str, channel: _Channel, sample: Sample) -> Any:
+        """Record a radio sample as ``{"meta": <attachment>, "payload": <payload>}``."""
+        meta = self._decoded(meta_kind, sample.attachment, sample)
+        if meta is None:
+            return None
+        message = self._decoded("radio payload", sample.payload, sample)
+        if message is None:
+            return None
+        assert sample.attachment is not None  # _decoded refused a missing one
+        data = b'{"meta":' + sample.attachment + b',"payload":' + sample.payload + b"}"
+        self._write(channel, self._tick_ns(meta.tick), data, sample.wall_ns)
+        return message
+
+    def _on_log(self, channel: _Channel, sample: Sample) -> None:
+        line = self._decoded("log", sample.payload, sample)
+        if line is None:
+            return
+        self._write(channel, self.sim_ns, sample.payload, sample.wall_ns)
+        message = foxglove.log_message(self.sim_ns, line.process, line.line)
+        self._write_derived("log", foxglove.LOG, self.sim_ns, message, sample.wall_ns)
+
+    # --- the end -------------------------------------------------------------------
+
+    def finish(self, summary: Any = None, finished_by: str = "finish query") -> None:
+        """Write the run's metadata record and close the MCAP file's summary section."""
+        if self.closed:
+            return
+        self._flush_poses(time.time_ns())
+        record = self._description()
+        record["finished_by"] = finished_by
+        record["recorder"] = json.dumps(
+            {
+                "messages": dict(sorted(self.counts.items())),
+                "rejected": self.rejected,
+                "channels": len(self._channels),
+            }
+        )
+        if summary is not None:
+            record["summary"] = summary if isinstance(summary, str) else json.dumps(summary)
+        self._writer.add_metadata(RUN_METADATA, record)
+        self._writer.finish()
+        self.closed = True
+
+
+# --- the process ---------------------------------------------------------------------------
+
+
+class _Finish:
+    """A finish query in the queue: everything queued before it is recorded first."""
+
+    def __init__(self, query: Any) -> None:
+        self.query = query
+
+
+_STOP = object()
+
+
+RECORDER_OPTIONS = Options(RunDescription)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="recorder",
+        description="Record every message of one run to an MCAP file (opens in Foxglove).",
+    )
+    parser.add_argument("--out", required=True, metavar="PATH", help="the MCAP file to write")
+    RECORDER_OPTIONS.add_to(parser)
+    settings_cli.add_config_option(parser, RunDescription)
+    parser.add_argument(
+        "--info-timeout",
+        type=cliargs.positive_float,
+        default=10.0,
+        help="wall seconds to wait for world/info (default: 10)",
+    )
+    parser.add_argument(
+        "--niceness",
+        type=cliargs.int_range(0, 19),
+        default=DEFAULT_NICENESS,
+        help="how much to lower this process's CPU priority, 0 to 19: "
+        "recording is off the barrier's critical path, so on a busy "
+        f"machine it yields to the swarm and catches up (default: "
+        f"{DEFAULT_NICENESS})",
+    )
+    cliargs.add_zenoh_options(parser)
+    cliargs.add_log_level(parser)
+    return parser
+
+
+def _lower_priority(niceness: int) -> None:
+    """Yield the CPU to the swarm; a platform without nice() just records at full priority."""
+    try:
+        os.nice(niceness)
+    except (AttributeError, OSError) as error:
+        log.info("could not lower the recorder's priority: %s", error)
+
+
+def _world_info(
+    session: Any, keys: protocol.Keys, timeout: float, keyring: auth.Keyring | None
+) -> protocol.WorldInfo | None:
+    """The world's info if a world server answers in time (it gives dt and robot size)."""
+    from plumbing.world_info import fetch_world_info
+
+    try:
+        return fetch_world_info(session, keys, timeout, keyring, names.RECORDER)
+    except TimeoutError as error:
+        log.warning("%s; sim times will follow world/clock", error)
+        return None
+
+
+def _write_loop(
+    recorder: McapRecorder,
+    inbox: BoundedInbox[Any],
+    keys: protocol.Keys,
+    done: threading.Event,
+) -> None:
+    """The writer thread: record samples in arrival order until a finish query or a stop."""
+    try:
+        while True:
+            item = inbox.get()
+            if isinstance(item, Sample):
+                recorder.record(item)
+            elif isinstance(item, _Finish):
+                if _refused(recorder, item.query, keys):
+                    continue
+                _drain(recorder, inbox, FINISH_QUIET, FINISH_DRAIN_LIMIT)
+                _finish_on_query(recorder, item.query, keys)
+                return
+            elif item is _STOP:
+                _drain(recorder, inbox, STOP_QUIET, STOP_DRAIN_LIMIT)
+                recorder.rejected += inbox.take_dropped(None)
+                recorder.finish(finished_by="signal")
+                log.info("recording closed on a signal, without a run summary")
+                return
+    finally:
+        done.set()
+
+
+def _drain(recorder: McapRecorder, inbox: BoundedInbox[Any], quiet: float, limit: float) -> None:
+    """Record what still arrives until the inbox stays empty for ``quiet`` seconds.
+
+    Zenoh keeps order per publisher, not between a query and other publishers' samples:
+    a sample published just before the finish query can arrive just after it.
+    """
+    deadline = time.monotonic() + limit
+    while time.monotonic() < deadline:
+        try:
+            item = inbox.get(timeout=quiet)
+        except queue.Empty:
+            break
+        if isinstance(item, Sample):
+            recorder.record(item)
+    recorder.rejected += inbox.take_dropped(None)
+
+
+def _query_parts(query: Any) -> tuple[bytes, bytes | None]:
+    payload = query.payload.to_bytes() if query.payload is not None else b""
+    attachment = query.attachment.to_bytes() if query.attachment is not None else None
+    return payload, attachment
+
+
+def _refused(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> bool:
+    """Whether a finish query is someone's but the launcher's (then counted and refused).
+
+    In a keyed run only the launcher that started the recorder holds the key to finish it.
+    """
+    payload, attachment = _query_parts(query)
+    try:
+        asker, _ = auth.query_open(recorder.keyring, keys.recorder_finish, payload, attachment)
+        if recorder.keyring is not None and asker != names.LAUNCHER:
+            raise auth.AuthError(f"{asker} may not finish the recording")
+    except auth.AuthError as error:
+        sample = Sample(keys.recorder_finish, payload, attachment, time.time_ns())
+        recorder._reject(sample, f"finish query refused: {error}")
+        query.reply_err(b"unauthenticated query")
+        query.drop()
+        return True
+    return False
+
+
+def _finish_on_query(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> None:
+    payload, attachment = _query_parts(query)
+    asker, nonce = auth.query_open(recorder.keyring, keys.recorder_finish, payload, attachment)
+    summary: Any = None
+    if payload:
+        try:
+            summary = json.loads(payload)
+        except ValueError:
+            summary = payload.decode("utf-8", "replace")
+    recorder.finish(summary, finished_by="finish query")
+    answer = b"ok"
+    sealed = auth.reply_seal(recorder.keyring, asker, keys.recorder_finish, answer, nonce)
+    query.reply(keys.recorder_finish, answer, attachment=sealed)
+    query.drop()  # sends the final reply now, not when the object is collected
+    log.info("recording complete: %s", dict(sorted(recorder.counts.items())))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    run: RunDescription = settings_cli.config_from(
+        parser, args, RECORDER_OPTIONS, {"run_id": args.run_id}
+    )
+    if run.run_id != args.run_id:
+        parser.exit(
+            2, f"recorder: error: --config is of run {run.run_id!r}, not --run-id {args.run_id!r}\n"
+        )
+    cliargs.configure_logging("recorder", args.log_level)
+    keyring = run_keys.from_args(parser, args, "recorder")
+    if keyring is not None and keyring.secret is None:
+        parser.exit(2, "recorder: error: the recorder needs the run secret\n")
+    if args.niceness:  # before Zenoh starts its threads, so that they inherit it
+        _lower_priority(args.niceness)
+    import zenoh
+
+    from plumbing.zenoh_session import open_from_args
+
+    keys = protocol.Keys(args.run_id, args.root)
+    out = Path(args.out)
+    try:
+        stream = out.open("wb")
+    except OSError as error:
+        print(f"recorder: cannot write {out}: {error}", file=sys.stderr)
+        return 1
+    # Anything bigger than a camera frame is junk: dropped on arrival, counted.
+    inbox: BoundedInbox[Any] = BoundedInbox(INBOX_BYTES, MAX_SAMPLE_BYTES)
+    for signum in (signal.SIGINT, signal.SIGTERM):  # the writer thread sees the stop later
+        signal.signal(signum, lambda *_: inbox.put(_STOP))
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        attachment = sample.attachment
+        payload = sample.payload.to_bytes()
+        extra = attachment.to_bytes() if attachment is not None else None
+        size = len(payload) + len(extra or b"")
+        inbox.put(Sample(str(sample.key_expr), payload, extra, time.time_ns()), size)
+
+    try:
+        session = open_from_args(args)
+    except zenoh.ZError as error:
+        print(f"recorder: cannot open Zenoh session: {error}", file=sys.stderr)
+        stream.close()
+        return 1
+    with session, stream:
+        subscriber = session.declare_subscriber(keys.all, on_sample)
+        queryable = session.declare_queryable(
+            keys.recorder_finish, lambda query: inbox.put(_Finish(query))
+        )
+        info = _world_info(session, keys, args.info_timeout, keyring)
+        recorder = McapRecorder(stream, keys, run, info, keyring=keyring)
+        done = threading.Event()
+        writer = threading.Thread(
+            target=_write_loop,
+            args=(recorder, inbox, keys, done),
+            name="mcap-writer",
+            daemon=True,
+        )
+        writer.start()
+        token = session.liveliness().declare_token(keys.alive(Role.RECORDER, 0))
+        log.info("recording %s to %s", keys.all, out)
+        while not done.wait(0.2):  # wake up for signals
+            pass
+        token.undeclare()
+        queryable.undeclare()
+        subscriber.undeclare()
+        if not recorder.closed:  # the writer thread failed: keep what can be kept
+            with contextlib.suppress(Exception):
+                recorder.finish(finished_by="error")
+            return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

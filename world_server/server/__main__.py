@@ -1,0 +1,7 @@
+"""``python -m world_server.server``: the world server process (``world-server``)."""
+
+import sys
+
+from world_server.server.world_server import main
+
+sys.exit(main())
