@@ -41,7 +41,7 @@ sys.path.insert(0, str(REPO))
 from nest_beacon.core.beacon import BeaconConfig  # noqa: E402
 from robot_agent.core import ports  # noqa: E402
 from robot_agent.core.controller import Controller, ControllerConfig  # noqa: E402
-from world_server.core.physics import EpuckSpec  # noqa: E402
+from world_server.core.body import EpuckSpec  # noqa: E402
 from world_server.core.world import WorldConfig  # noqa: E402
 
 DEFAULT_OUT = Path("/tmp/section5-study")

@@ -38,9 +38,10 @@ from deploy.inprocess import add_engine_option
 from deploy.run_switches import add_swarm_switches, switches_argv
 from plumbing import cliargs
 from plumbing.lifecycle import PARENT_ENV
-from wire import protocol
+from wire import shape
 
 STOP_GRACE = 30.0  # wall seconds a run has to stop after SIGINT before SIGKILL
+RUN_WALL_TIMEOUT = 1800.0  # wall seconds a run of a sweep may take, by default
 BACKSTOP = 60.0  # wall seconds past --run-timeout before a run is stopped from here
 FAILED_ENDINGS = ("crashed", "interrupted")  # endings that are not results of the run
 
@@ -49,15 +50,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.usage = "%(prog)s --out DIR [options] [-- SWARM-RUN-OPTIONS]  (see --help)"
     parser.add_argument(
         "--robots",
-        type=cliargs.int_range(1, 1000),
+        type=cliargs.robots,
         nargs="+",
-        default=[10],
+        default=[shape.DEFAULT_ROBOTS],
         metavar="N",
-        help="swarm sizes N (default: 10)",
+        help=f"swarm sizes N (default: {shape.DEFAULT_ROBOTS})",
     )
     parser.add_argument(
         "--sites",
-        type=cliargs.int_range(2, protocol.MAX_OPTIONS),
+        type=cliargs.sites,
         nargs="+",
         default=[5, 8, 10],
         metavar="n",
@@ -71,9 +72,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--seed",
-        type=cliargs.int_range(0, 2**62),
-        default=0,
-        help="seed of the first run; run i uses seed + i - 1 (default: 0)",
+        type=cliargs.seed,
+        default=shape.DEFAULT_SEED,
+        help=f"seed of the first run; run i uses seed + i - 1 (default: {shape.DEFAULT_SEED})",
     )
     parser.add_argument(
         "--parallel",
@@ -114,11 +115,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--run-timeout",
         "--wall-timeout",
         type=cliargs.positive_float,
-        default=1800.0,
+        default=RUN_WALL_TIMEOUT,
         metavar="WALL_SECONDS",
         help="each run's wall time limit, forwarded as swarm run --wall-timeout: a run "
         f"that reaches it ends as timeout (wall); one that still runs {BACKSTOP:g} s later "
-        "is stopped from here (default: 1800)",
+        f"is stopped from here (default: {RUN_WALL_TIMEOUT:g})",
     )
     add_engine_option(parser)
     parser.add_argument(

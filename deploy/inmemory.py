@@ -21,7 +21,7 @@ from robot_agent.core import byzantine
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.ports import RejectCounter, RobotController
 from robot_agent.core.simulated import SimulatedPorts
-from wire import names, protocol
+from wire import names, protocol, shape
 from world_server.core.world import Transmission, World, WorldConfig
 
 # The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
@@ -67,7 +67,7 @@ def run_in_memory(
     controller_config: ControllerConfig,
     beacon_config: BeaconConfig | None = None,
     *,
-    timeout: float = 1800.0,
+    timeout: float = shape.DEFAULT_TIMEOUT,
     stall_window: float | None = None,
     on_tick: Callable[[World], None] | None = None,
     controller_factory: type[Controller] = Controller,

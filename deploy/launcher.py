@@ -47,10 +47,10 @@ from plumbing.zenoh_session import open_session
 from robot_agent.core import byzantine
 from robot_agent.node.options import RobotAgentConfig
 from viewer.options import VIEW_OPTIONS, Observer, add_view_options, observers
-from wire import auth, names, protocol, settings
+from wire import auth, names, protocol, settings, shape
 from wire.names import Role
+from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
-from world_server.core.physics import EpuckSpec
 from world_server.recording.writer import DEFAULT_NICENESS, RunDescription
 
 log = logging.getLogger("swarm.run")
@@ -100,19 +100,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.epilog = EXIT_CODES_HELP
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     swarm = parser.add_argument_group("swarm")
-    swarm.add_argument(
-        "--robots",
-        type=cliargs.int_range(1, 1000),
-        default=10,
-        help="number of robots (default: 10)",
-    )
-    swarm.add_argument(
-        "--sites",
-        type=cliargs.int_range(2, protocol.MAX_OPTIONS),
-        default=10,
-        help="number of sites n (default: 10)",
-    )
-    swarm.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
+    cliargs.add_run_shape(swarm)
     add_engine_option(swarm)
     swarm.add_argument(
         "--run-id",
@@ -123,9 +111,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     swarm.add_argument(
         "--timeout",
         type=cliargs.positive_float,
-        default=1800.0,
+        default=shape.DEFAULT_TIMEOUT,
         metavar="SIM_SECONDS",
-        help="give up after this much sim time (default: 1800)",
+        help=f"give up after this much sim time (default: {shape.DEFAULT_TIMEOUT:g})",
     )
     swarm.add_argument(
         "--wall-timeout",
@@ -332,7 +320,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     arena_radius = make_layout(args.sites, args.robots, args.seed).arena_radius
     stall_window = args.stall_window or default_stall_window(
         arena_radius,
-        EpuckSpec().max_wheel_speed,
+        EPUCK.max_wheel_speed,
         # The longest leg a robot may take before it gives up: across the arena.
         switches.controller.leg_allowance(2 * arena_radius),
         switches.beacon.outages,
@@ -444,7 +432,7 @@ class Swarm:
         self.group = ProcessGroup(self._on_log_line)
         self.records = {robot: RobotRecord(robot) for robot in range(plan.robots)}
         self.watchdog = Watchdog(
-            range(plan.robots), plan.stall_window, body_length=2 * EpuckSpec().radius
+            range(plan.robots), plan.stall_window, body_length=2 * EPUCK.radius
         )
         self.robot_children: dict[int, Child] = {}
         self.world: Child | None = None

@@ -42,8 +42,8 @@ from mcap.stream_reader import StreamReader
 from deploy.summary import ENDINGS, RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from deploy.watchdog import Watchdog
 from wire import protocol
+from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
-from world_server.core.physics import EpuckSpec
 
 START_METADATA = "bestofn.start"  # the names the recorder writes (world_server/recording/writer.py)
 RUN_METADATA = "bestofn.run"
@@ -452,7 +452,7 @@ def _replay_progress(recording: Recording, records: dict[int, RobotRecord]) -> W
     """The stall watchdog fed with each undecided robot's statuses and poses, in time order
     (robots are independent, so one at a time): where each is stuck, and since when."""
     window = float(recording.config.get("stall_window") or 1.0)
-    watchdog = Watchdog(records, window, body_length=2 * EpuckSpec().radius)
+    watchdog = Watchdog(records, window, body_length=2 * EPUCK.radius)
     for robot, record in records.items():
         statuses = recording.statuses.get(robot, [])
         if record.decided_site is not None:

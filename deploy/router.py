@@ -19,8 +19,6 @@ from plumbing.lifecycle import die_with_launcher
 
 log = logging.getLogger("router")
 
-DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
@@ -29,8 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="ENDPOINT",
-        help=f"endpoint to listen on, repeatable (default: {DEFAULT_LISTEN}); "
-        "use tcp/0.0.0.0:7447 to accept other hosts",
+        help=f"endpoint to listen on, repeatable (default: {cliargs.LOCAL_ENDPOINT}); "
+        f"use tcp/0.0.0.0:{cliargs.ZENOH_PORT} to accept other hosts",
     )
     parser.add_argument(
         "--connect",
@@ -68,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
     from plumbing.zenoh_session import open_session
 
-    listen = args.listen or ([] if args.zenoh_config else [DEFAULT_LISTEN])
+    listen = args.listen or ([] if args.zenoh_config else [cliargs.LOCAL_ENDPOINT])
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())

@@ -40,7 +40,7 @@ from plumbing import cliargs
 from wire import names, protocol
 from wire.names import Role
 
-DEFAULT_PORT = 7447
+DEFAULT_PORT = cliargs.ZENOH_PORT
 DEFAULT_ROUTER = "router"
 # Certificate names of the processes that are neither robots nor beacons (wire/names.py):
 # the observers of swarm run --view and --foxglove are readers with a token (and the page a

@@ -12,7 +12,10 @@ import logging
 import math
 from collections.abc import Callable
 
-from wire import names, protocol
+from wire import names, protocol, shape
+
+ZENOH_PORT = 7447  # Zenoh's own default port
+LOCAL_ENDPOINT = f"tcp/127.0.0.1:{ZENOH_PORT}"  # a router of this host, on loopback
 
 
 class UsageError(Exception):
@@ -78,7 +81,7 @@ def name(text: str) -> str:
 
 
 def endpoint(text: str) -> str:
-    """A Zenoh endpoint such as ``tcp/127.0.0.1:7447``."""
+    """A Zenoh endpoint such as ``tcp/127.0.0.1:7447`` (Zenoh's port)."""
     proto, sep, rest = text.partition("/")
     if not sep or proto not in {"tcp", "udp", "tls", "quic", "ws", "unixsock-stream"} or not rest:
         raise argparse.ArgumentTypeError(
@@ -90,7 +93,9 @@ def endpoint(text: str) -> str:
 alpha = float_range(0.0, 0.5)
 probability = float_range(0.0, 1.0)
 threshold = float_range(0.0, 1.0, low_open=True)
-seed = int_range(0, 2**63 - 1)
+seed = int_range(0, shape.MAX_SEED)
+robots = int_range(1, shape.MAX_SWARM)  # a run's swarm size
+sites = int_range(2, protocol.MAX_OPTIONS)  # a run's number of sites n
 positive_int = int_range(1)
 positive_float = float_range(0.0, low_open=True)
 
@@ -143,6 +148,32 @@ def add_zenoh_options(parser: argparse.ArgumentParser, *, default_mode: str = "c
         help="this process's run keys (python -m plumbing.run_keys writes them); every "
         "message is then tagged and checked. Without one (and not started by swarm run) "
         "the process runs unauthenticated",
+    )
+
+
+def add_run_shape(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup, what: str = ""
+) -> None:
+    """``--robots``, ``--sites`` and ``--seed``: a run's shape (wire/shape.py), read and
+    bounded the same way by every command that takes it. ``what`` ends each help line."""
+    suffix = f" {what}" if what else ""
+    parser.add_argument(
+        "--robots",
+        type=robots,
+        default=shape.DEFAULT_ROBOTS,
+        help=f"number of robots{suffix} (default: {shape.DEFAULT_ROBOTS})",
+    )
+    parser.add_argument(
+        "--sites",
+        type=sites,
+        default=shape.DEFAULT_SITES,
+        help=f"number of sites n{suffix} (default: {shape.DEFAULT_SITES})",
+    )
+    parser.add_argument(
+        "--seed",
+        type=seed,
+        default=shape.DEFAULT_SEED,
+        help=f"run seed{suffix} (default: {shape.DEFAULT_SEED})",
     )
 
 

@@ -126,7 +126,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--run-id", type=cliargs.name, required=True, help="the run id")
     parser.add_argument(
         "--robots",
-        type=cliargs.int_range(1, names.MAX_ROBOTS),
+        type=cliargs.robots,
         required=True,
         help="number of robots (ids 0 to N-1)",
     )

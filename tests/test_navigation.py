@@ -8,11 +8,13 @@ import random
 from typing import Any
 
 import pytest
+from bodies import epuck_nav_params
 from fakes import MAX_SPEED, ROBOT_RADIUS, proximity, unicycle
 
 from robot_agent.core.navigation import Navigator, NavParams, wrap_angle
+from world_server.core.body import EpuckSpec
 from world_server.core.layout import make_layout
-from world_server.core.physics import EpuckSpec, Physics
+from world_server.core.physics import Physics
 
 ARENA_RADIUS = 0.75
 DT = 0.1
@@ -48,15 +50,9 @@ def random_point(rng: random.Random, max_radius: float) -> tuple[float, float]:
     return radius * math.cos(angle), radius * math.sin(angle)
 
 
-def test_params_mirror_the_simulated_epuck() -> None:
-    spec = EpuckSpec()
-    params = NavParams()
-    assert params.prox_angles == spec.prox_angles
-    assert (params.max_speed, params.wheel_base, params.robot_radius) == (
-        spec.max_wheel_speed,
-        spec.wheel_base,
-        spec.radius,
-    )
+def test_the_robots_sensor_layout_mirrors_the_simulated_epuck() -> None:
+    """The robot's own copy of its sensor directions (WorldInfo does not carry them)."""
+    assert NavParams.__dataclass_fields__["prox_angles"].default == EpuckSpec().prox_angles
 
 
 @pytest.mark.parametrize(
@@ -75,11 +71,11 @@ def test_params_mirror_the_simulated_epuck() -> None:
 )
 def test_params_are_validated(field: str, value: Any) -> None:
     with pytest.raises(ValueError, match=field):
-        NavParams(**{field: value})
+        epuck_nav_params(**{field: value})
 
 
 def test_inputs_are_validated() -> None:
-    navigator = Navigator(NavParams(), random.Random(0))
+    navigator = Navigator(epuck_nav_params(), random.Random(0))
     with pytest.raises(ValueError, match="8 proximity readings"):
         navigator.drive_to(0.0, 0.0, 0.0, (0.0,) * 7, (0.1, 0.0), 0.01)
     with pytest.raises(ValueError, match="tolerance"):
@@ -94,7 +90,7 @@ def test_reaches_goals_from_many_start_poses() -> None:
     for trial in range(60):
         start = (*random_point(rng, ARENA_RADIUS - 0.1), rng.uniform(-math.pi, math.pi))
         goal = random_point(rng, ARENA_RADIUS - 0.15)
-        navigator = Navigator(NavParams(), random.Random(trial))
+        navigator = Navigator(epuck_nav_params(), random.Random(trial))
         arrived, pose, path = drive(navigator, start, goal)
         assert arrived, f"trial {trial}: from {start} to {goal}, stopped at {pose}"
         assert math.hypot(pose[0] - goal[0], pose[1] - goal[1]) <= 0.015
@@ -108,7 +104,7 @@ def test_reaches_viewpoints_near_the_wall_from_the_nest() -> None:
         angle = 2 * math.pi * index / 12
         goal = (view_radius * math.cos(angle), view_radius * math.sin(angle))
         start = (0.05 * math.cos(3 * angle), 0.05 * math.sin(3 * angle), -angle)
-        arrived, _, path = drive(Navigator(NavParams(), random.Random(index)), start, goal)
+        arrived, _, path = drive(Navigator(epuck_nav_params(), random.Random(index)), start, goal)
         assert arrived
         # A straight run, not a wander: at most 40% longer than the straight line.
         length = sum(math.dist(a[:2], b[:2]) for a, b in itertools.pairwise(path))
@@ -117,7 +113,7 @@ def test_reaches_viewpoints_near_the_wall_from_the_nest() -> None:
 
 def test_turns_to_headings_on_the_spot() -> None:
     rng = random.Random(2)
-    navigator = Navigator(NavParams(), rng)
+    navigator = Navigator(epuck_nav_params(), rng)
     for _ in range(100):
         theta = rng.uniform(-math.pi, math.pi)
         heading = rng.uniform(-3 * math.pi, 3 * math.pi)  # any representation of an angle
@@ -138,7 +134,7 @@ def test_goes_round_an_obstacle_on_either_side_without_touching_it() -> None:
     obstacle = (0.0, 0.0, ROBOT_RADIUS)
     sides = set()
     for seed in range(16):
-        navigator = Navigator(NavParams(), random.Random(seed))
+        navigator = Navigator(epuck_nav_params(), random.Random(seed))
         arrived, _, path = drive(navigator, (-0.4, 0.0, 0.0), (0.4, 0.0), obstacles=(obstacle,))
         assert arrived
         clearance = min(math.hypot(x, y) for x, y, _ in path) - 2 * ROBOT_RADIUS
@@ -153,7 +149,7 @@ def test_same_rng_same_wheel_speeds() -> None:
     obstacles = ((0.1, 0.02, ROBOT_RADIUS), (0.3, -0.1, ROBOT_RADIUS))
     runs = []
     for _ in range(2):
-        navigator = Navigator(NavParams(), random.Random(5))
+        navigator = Navigator(epuck_nav_params(), random.Random(5))
         runs.append(drive(navigator, (-0.3, 0.0, 0.2), (0.5, 0.0), obstacles=obstacles)[2])
     assert runs[0] == runs[1]
 
@@ -167,7 +163,9 @@ def test_head_on_robots_pass_each_other_on_physics() -> None:
         for robot, pose in starts.items():
             physics.add_robot(robot, *pose)
         rng = random.Random(seed)
-        navigators = {robot: Navigator(NavParams(), random.Random(rng.random())) for robot in goals}
+        navigators = {
+            robot: Navigator(epuck_nav_params(), random.Random(rng.random())) for robot in goals
+        }
         arrived = dict.fromkeys(goals, False)
         for _ in range(600):
             for robot, navigator in navigators.items():
@@ -205,7 +203,7 @@ def nest_site_cycles(
     arrivals: list[list[float]] = [[] for _ in range(robots)]
     for robot in range(robots):
         physics.add_robot(robot, *layout.start_poses[robot])
-        navigators.append(Navigator(NavParams(), random.Random(rng.getrandbits(64))))
+        navigators.append(Navigator(epuck_nav_params(), random.Random(rng.getrandbits(64))))
         goals.append(rng.choice(viewpoints))
     for tick in range(round(minutes * 60 / DT)):
         t = tick * DT

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from world_server.core import layout
-from world_server.core.physics import MAX_SUBSTEP, EpuckSpec, Physics, wrap_angle
+from world_server.core.body import EpuckSpec
+from world_server.core.physics import MAX_SUBSTEP, Physics, wrap_angle
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -34,13 +34,13 @@ from typing import Any
 
 from plumbing import cliargs, run_keys
 from plumbing.lifecycle import die_with_launcher
+from viewer.options import FOXGLOVE_PORT
 from wire import names, protocol
 from wire.names import Role
 from world_server.recording.writer import McapRecorder, RunDescription, Sample
 
 log = logging.getLogger("foxglove-live")
 
-DEFAULT_PORT = 8765
 INBOX_LIMIT = 50_000  # samples waiting for the writer thread
 BACKLOG = 4096  # messages the SDK buffers per connected app
 DEFAULT_NICENESS = 10
@@ -96,27 +96,15 @@ def build_parser() -> argparse.ArgumentParser:
         prog="viewer.foxglove_live",
         description="Serve one run live to the Foxglove app (Foxglove WebSocket protocol).",
     )
-    parser.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
-    parser.add_argument(
-        "--robots",
-        type=cliargs.int_range(1, names.MAX_ROBOTS),
-        default=10,
-        help="swarm size of the run, for its layout (default: 10)",
-    )
-    parser.add_argument(
-        "--sites",
-        type=cliargs.int_range(2, protocol.MAX_OPTIONS),
-        default=10,
-        help="number of sites of the run (default: 10)",
-    )
+    cliargs.add_run_shape(parser, "of the run, for its layout")
     parser.add_argument(
         "--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1)"
     )
     parser.add_argument(
         "--port",
         type=cliargs.int_range(0, 65535),
-        default=DEFAULT_PORT,
-        help=f"TCP port (default: {DEFAULT_PORT}, the Foxglove app's default)",
+        default=FOXGLOVE_PORT,
+        help=f"TCP port (default: {FOXGLOVE_PORT}, the Foxglove app's default)",
     )
     parser.add_argument(
         "--niceness",

@@ -37,14 +37,15 @@ from plumbing import cliargs, run_keys
 from plumbing.lifecycle import die_with_launcher
 from viewer.core import model
 from viewer.core.decode import Decoded, Delivery, InvalidSampleError, decode_sample
+from viewer.options import VIEW_PORT
 from viewer.server import ViewServer
 from wire import auth, names, protocol
 from wire.names import Role
+from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
 
 log = logging.getLogger("viewer")
 
-DEFAULT_PORT = 8700
 MAX_DELIVERIES = 2000  # radio deliveries kept between two frames; older ones are dropped
 FLUSH_TIMEOUT = 2.0  # wall seconds to get the last frame to every page
 DEFAULT_NICENESS = 10  # like the recorder: nothing waits for the view
@@ -181,27 +182,15 @@ def build_parser() -> argparse.ArgumentParser:
         prog="viewer.live",
         description="Serve the live page of one run (the view of swarm run --view).",
     )
-    parser.add_argument("--seed", type=cliargs.seed, default=0, help="run seed (default: 0)")
-    parser.add_argument(
-        "--robots",
-        type=cliargs.int_range(1, names.MAX_ROBOTS),
-        default=10,
-        help="swarm size of the run, for its layout (default: 10)",
-    )
-    parser.add_argument(
-        "--sites",
-        type=cliargs.int_range(2, protocol.MAX_OPTIONS),
-        default=10,
-        help="number of sites of the run (default: 10)",
-    )
+    cliargs.add_run_shape(parser, "of the run, for its layout")
     parser.add_argument(
         "--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1)"
     )
     parser.add_argument(
         "--port",
         type=cliargs.int_range(0, 65535),
-        default=DEFAULT_PORT,
-        help=f"TCP port of the page (default: {DEFAULT_PORT}; 0: any free port)",
+        default=VIEW_PORT,
+        help=f"TCP port of the page (default: {VIEW_PORT}; 0: any free port)",
     )
     parser.add_argument(
         "--fps",
@@ -263,7 +252,7 @@ async def _serve(args: argparse.Namespace, keyring: auth.Keyring | None) -> int:
             robot_radius = info.robot_radius
         except TimeoutError as error:
             log.warning("%s; drawing robots at the e-puck's size", error)
-            robot_radius = 0.037
+            robot_radius = EPUCK.radius
         scene = model.Scene(args.run_id, args.seed, args.robots, layout, robot_radius)
         source = LiveSource(scene, keys, keyring)
 

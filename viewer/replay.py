@@ -29,12 +29,12 @@ from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from viewer.core import model
+from viewer.options import VIEW_PORT
 from viewer.server import ViewServer
 from wire import protocol
 from world_server.core.layout import make_layout
 
 START_METADATA, RUN_METADATA = "bestofn.start", "bestofn.run"  # world_server/recording/writer.py
-DEFAULT_PORT = 8700
 SPEEDS = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
 MAX_DELIVERIES_PER_FRAME = 2000
 
@@ -401,8 +401,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--port",
         type=_port,
-        default=DEFAULT_PORT,
-        help=f"TCP port of the page (default: {DEFAULT_PORT}; 0: any free port)",
+        default=VIEW_PORT,
+        help=f"TCP port of the page (default: {VIEW_PORT}; 0: any free port)",
     )
     parser.add_argument(
         "--host",

@@ -21,10 +21,10 @@ import struct
 from collections.abc import Sequence
 from typing import NamedTuple
 
-from wire import names, protocol
+from wire import names, protocol, shape
 
 MAGIC = b"BNB1"
-MAX_ENTRIES = 1000  # robots one host may carry (a process's inbox is sized for far fewer)
+MAX_ENTRIES = shape.MAX_SWARM  # robots one host may carry: a whole swarm at most
 MAX_ATTACHMENT_BYTES = 1024  # a tag and, for what is batched today, no metadata
 MAX_BATCH_BYTES = 4 * 2**20
 

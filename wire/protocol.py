@@ -45,7 +45,8 @@ _Opinion = Annotated[list[_Unit], msgspec.Meta(min_length=2, max_length=MAX_OPTI
 _Name = names.Name
 
 
-Seed = Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)]  # a run seed
+MAX_SEED = 2**63 - 1
+Seed = Annotated[int, msgspec.Meta(ge=0, le=MAX_SEED)]  # a run seed
 
 
 class Message(msgspec.Struct, forbid_unknown_fields=True, frozen=True):

@@ -41,9 +41,10 @@ EPUCK_PROX_ANGLES: tuple[float, ...] = (-0.30, -0.80, -1.57, -2.64, 2.64, 1.57, 
 class NavParams:
     """Body geometry, sensor layout and gains of the navigator (SI units, radians)."""
 
-    max_speed: float = 0.13  # wheel speed limit, m/s
-    wheel_base: float = 0.053  # distance between the wheels, m
-    robot_radius: float = 0.037  # body radius, m
+    # The body: no defaults, a robot's own (the world's WorldInfo, or a port's hardware).
+    max_speed: float  # wheel speed limit, m/s
+    wheel_base: float  # distance between the wheels, m
+    robot_radius: float  # body radius, m
     prox_angles: tuple[float, ...] = EPUCK_PROX_ANGLES  # sensor directions, robot frame
     control_period: float = 0.1  # nominal seconds between calls; caps steps so none overshoots
     turn_gain: float = 4.0  # rad/s of turning per radian of heading error

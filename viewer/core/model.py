@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from wire import names, protocol
+from world_server.core.body import EPUCK
 from world_server.core.camera import site_colour_bgr
 from world_server.core.layout import Layout
 from world_server.core.palette import PHASE_COLOURS, UNKNOWN_PHASE_COLOUR, Rgba
@@ -64,7 +65,7 @@ class Scene:
     seed: int
     robots: int
     layout: Layout
-    robot_radius: float = 0.037
+    robot_radius: float = EPUCK.radius
     mode: str = "live"  # live | replay
 
     def hello(self, extra: Mapping[str, Any] | None = None) -> dict[str, Any]:

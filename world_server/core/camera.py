@@ -30,6 +30,7 @@ from msgspec import Meta
 
 from wire import protocol, settings
 from wire.settings import Flag
+from world_server.core.body import EPUCK
 from world_server.core.layout import Layout
 
 WALL_HEIGHT = 0.10  # metres; panels cover the wall's full height
@@ -128,7 +129,7 @@ class CameraRenderer:
         self,
         layout: Layout,
         spec: protocol.CameraSpec,
-        robot_radius: float = 0.037,
+        robot_radius: float = EPUCK.radius,
         noise: CameraNoise = CameraNoise(),
         seed: int = 0,
         *,

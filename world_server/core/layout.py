@@ -12,6 +12,7 @@ import random
 from dataclasses import dataclass
 
 from wire import protocol
+from world_server.core.body import EPUCK
 
 BASE_ARENA_RADIUS = 0.75  # the paper's 1.5 m disc
 BASE_ROBOTS = 10  # the paper's swarm size for that disc
@@ -83,7 +84,9 @@ def nest_radius_for(num_robots: int) -> float:
     return BASE_NEST_RADIUS * math.sqrt(max(num_robots, BASE_ROBOTS) / BASE_ROBOTS)
 
 
-def make_layout(num_sites: int, num_robots: int, seed: int, robot_radius: float = 0.037) -> Layout:
+def make_layout(
+    num_sites: int, num_robots: int, seed: int, robot_radius: float = EPUCK.radius
+) -> Layout:
     if num_sites < 2:
         raise ValueError(f"need at least 2 sites, got {num_sites}")
     if num_robots < 1:

@@ -17,15 +17,12 @@ bit-identical poses on the same machine and build. No clock and no randomness he
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 import pymunk
 from pymunk import batch
 
-# e-puck sensors ps0..ps7 in the robot's frame (radians, 0 = ahead, counter-clockwise
-# positive): ps0-ps3 on the right side, front to back, ps4-ps7 on the left, back to front.
-EPUCK_PROX_ANGLES: tuple[float, ...] = (-0.30, -0.80, -1.57, -2.64, 2.64, 1.57, 0.80, 0.30)
+from world_server.core.body import EPUCK, EpuckSpec
 
 ROBOT_MASS = 0.15  # kg, about an e-puck
 COLLISION_SLOP = 0.001  # metres of allowed overlap; pymunk's default (0.1) is for pixels
@@ -47,17 +44,6 @@ _STATE_FIELDS = (
 _FORCE_FIELDS = batch.BodyFields.FORCE | batch.BodyFields.TORQUE
 
 
-@dataclass(frozen=True)
-class EpuckSpec:
-    """Body and sensor geometry of one e-puck (metres, metres per second, radians)."""
-
-    radius: float = 0.037
-    wheel_base: float = 0.053
-    max_wheel_speed: float = 0.13
-    prox_range: float = 0.06  # how far beyond the body a proximity ray reaches
-    prox_angles: tuple[float, ...] = EPUCK_PROX_ANGLES
-
-
 def wall_segment_count(arena_radius: float, sag: float = WALL_SAG) -> int:
     """Segments for a polygon whose bulge beyond the circle stays under ``sag`` metres.
 
@@ -77,7 +63,7 @@ class Physics:
     def __init__(
         self,
         arena_radius: float,
-        spec: EpuckSpec = EpuckSpec(),  # frozen, so one shared default is safe
+        spec: EpuckSpec = EPUCK,  # frozen, so one shared default is safe
         substeps: int = 2,
         *,
         max_substep: float | None = MAX_SUBSTEP,

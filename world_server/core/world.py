@@ -15,11 +15,12 @@ from typing import Annotated, ClassVar, Literal
 import numpy as np
 from msgspec import Meta
 
-from wire import names, protocol, settings
+from wire import names, protocol, settings, shape
 from wire.settings import Flag
+from world_server.core.body import EpuckSpec
 from world_server.core.camera import CameraNoise, CameraRenderer
 from world_server.core.layout import Layout, make_layout
-from world_server.core.physics import EpuckSpec, Physics
+from world_server.core.physics import Physics
 from world_server.core.radio import Delivery, RadioConfig, RadioMedium, SenderKind
 
 DEFAULT_CAMERA = protocol.CameraSpec(width=64, height=48, fov=0.84)
@@ -33,22 +34,18 @@ class WorldConfig:
     FLAG_GROUP: ClassVar[str] = "world"
 
     run: Annotated[names.Name, Meta(description="the run id")] = "run"
-    seed: Annotated[protocol.Seed, Meta(description="run seed"), Flag()] = 0
-    num_sites: Annotated[
-        int,
-        Meta(ge=2, le=protocol.MAX_OPTIONS, description="number of sites n"),
-        Flag(name="sites"),
-    ] = 10
+    seed: Annotated[shape.Seed, Meta(description="run seed"), Flag()] = shape.DEFAULT_SEED
+    num_sites: Annotated[shape.Sites, Meta(description="number of sites n"), Flag(name="sites")] = (
+        shape.DEFAULT_SITES
+    )
     num_robots: Annotated[
-        int,
+        shape.Robots,
         Meta(
-            ge=1,
-            le=names.MAX_ROBOTS,
             description="expected swarm size: sizes the arena and the nest; the run starts "
             "when this many robots are live",
         ),
         Flag(name="robots"),
-    ] = 10
+    ] = shape.DEFAULT_ROBOTS
     dt: Annotated[
         float,
         Meta(ge=0.001, le=1.0, description="control tick in sim seconds"),

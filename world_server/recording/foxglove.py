@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from world_server.core.body import EPUCK
 from world_server.core.camera import WALL_HEIGHT, site_colour_bgr
 from world_server.core.layout import Layout
 from world_server.core.palette import PHASE_COLOURS, UNKNOWN_PHASE_COLOUR, Rgba
@@ -252,7 +253,7 @@ def _lines(line_type: int, points: Sequence[Point], thickness: float, rgba: Rgba
 class ArenaScene:
     """Builds ``foxglove.SceneUpdate`` messages of one run: arena, robots, radio links."""
 
-    def __init__(self, layout: Layout, robot_radius: float = 0.037) -> None:
+    def __init__(self, layout: Layout, robot_radius: float = EPUCK.radius) -> None:
         self.layout = layout
         self.robot_radius = robot_radius
 

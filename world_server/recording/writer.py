@@ -56,9 +56,10 @@ from plumbing import cliargs, run_keys, settings_cli
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.settings_cli import Options
-from wire import auth, batch, names, protocol, settings
+from wire import auth, batch, names, protocol, settings, shape
 from wire.names import Role
 from wire.settings import Flag
+from world_server.core.body import EPUCK
 from world_server.core.layout import Layout, make_layout
 from world_server.recording import foxglove
 
@@ -252,17 +253,13 @@ class RunDescription:
     FLAG_GROUP: ClassVar[str] = "run"
 
     run_id: Annotated[names.Name, Meta(description="the run id")] = "run"
-    seed: Annotated[protocol.Seed, Meta(description="run seed"), Flag()] = 0
+    seed: Annotated[shape.Seed, Meta(description="run seed"), Flag()] = shape.DEFAULT_SEED
     robots: Annotated[
-        int,
-        Meta(ge=1, le=names.MAX_ROBOTS, description="swarm size of the run, for its layout"),
-        Flag(),
-    ] = 10
-    sites: Annotated[
-        int,
-        Meta(ge=2, le=protocol.MAX_OPTIONS, description="number of sites of the run"),
-        Flag(),
-    ] = 10
+        shape.Robots, Meta(description="swarm size of the run, for its layout"), Flag()
+    ] = shape.DEFAULT_ROBOTS
+    sites: Annotated[shape.Sites, Meta(description="number of sites of the run"), Flag()] = (
+        shape.DEFAULT_SITES
+    )
     config: Annotated[
         dict[str, Any],
         Meta(description="the run's full configuration, kept in the metadata record"),
@@ -313,7 +310,7 @@ class McapRecorder:
         self.info = info
         self.layout = make_layout(run.sites, run.robots, run.seed)
         self.scene = foxglove.ArenaScene(
-            self.layout, info.robot_radius if info is not None else 0.037
+            self.layout, info.robot_radius if info is not None else EPUCK.radius
         )
         self.dt_ns = round(info.dt * 1e9) if info is not None else 0
         self.sim_ns = 0

@@ -45,7 +45,6 @@ from world_server.server.options import WORLD_SERVER_OPTIONS, WorldServerConfig,
 
 log = logging.getLogger("world_server")
 
-DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 SUSPEND_AFTER = 3  # consecutive stalled ticks before the barrier stops waiting
 MAX_BEACONS = 16  # beacon tokens the world takes part in its barrier
 MAX_TX_PER_TICK = 1000  # radio messages one sender may send in one tick (Act.radio_tx's bound)
@@ -726,7 +725,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"not --run-id {args.run_id!r}\n",
         )
     if session_mode(args) == "router" and not args.listen and not args.zenoh_config:
-        args.listen = [DEFAULT_LISTEN]
+        args.listen = [cliargs.LOCAL_ENDPOINT]
     cliargs.configure_logging("world-server", args.log_level)
     keyring = run_keys.from_args(parser, args, "world-server")
     if keyring is not None and keyring.secret is None:
