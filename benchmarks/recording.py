@@ -41,7 +41,7 @@ from deploy.launcher import RESULT_CODES  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
 from wire import protocol  # noqa: E402
-from world_server.recording import writer as recorder_module  # noqa: E402
+from world_server.recorder.write_loop import FINISH_QUIET  # noqa: E402
 
 SIM_SECONDS = {10: 100.0, 100: 60.0}
 
@@ -223,7 +223,7 @@ def flood(count: int, folder: Path) -> None:
     print(
         f"  published {count} in {published:.2f} s ({count / published:,.0f} msg/s); "
         f"all received by {received:.2f} s ({count / received:,.0f} msg/s); "
-        f"closed after {finished:.2f} s (incl. {recorder_module.FINISH_QUIET:g} s quiet); "
+        f"closed after {finished:.2f} s (incl. {FINISH_QUIET:g} s quiet); "
         f"{recorded} of {count} in the file; finish reply: "
         f"{'ok' if replies and replies[0].ok is not None else 'MISSING'}; recorder exit "
         f"code {exit_code}"

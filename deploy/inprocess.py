@@ -29,7 +29,8 @@ from plumbing.cliargs import UsageError
 from plumbing.lifecycle import die_with_launcher
 from wire import protocol
 from world_server.core.world import World, WorldConfig
-from world_server.recording.writer import McapRecorder, RunDescription, Sample
+from world_server.recording.description import RunDescription
+from world_server.recording.writer import McapRecorder, Sample
 
 if TYPE_CHECKING:
     from deploy.launcher import RunPlan

@@ -51,7 +51,8 @@ from wire import auth, names, protocol, settings, shape
 from wire.names import Role
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
-from world_server.recording.writer import DEFAULT_NICENESS, RunDescription
+from world_server.recorder.options import DEFAULT_NICENESS
+from world_server.recording.description import RunDescription
 
 log = logging.getLogger("swarm.run")
 STATS_ATTEMPTS, STATS_RETRY_PAUSE = 5, 0.2

@@ -78,7 +78,7 @@ ALLOWED: dict[str, set[str]] = {
     "robot_agent/node": {"wire", "robot_agent/core", "plumbing"},
     "robot_agent/link": {"wire", "robot_agent/core"},
     "world_server/server": {"wire", "world_server/core", "plumbing"},
-    "world_server/recording": {"wire", "world_server/core", "plumbing"},
+    "world_server/recording": {"wire", "world_server/core"},
     "world_server/recorder": {"wire", "world_server/core", "world_server/recording", "plumbing"},
     "nest_beacon/node": {"wire", "nest_beacon/core", "plumbing"},
     "robot_agent": {"robot_agent/node"},

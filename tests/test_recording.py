@@ -29,8 +29,9 @@ from deploy import report
 from wire import protocol
 from wire.names import Role
 from world_server.core.layout import make_layout
-from world_server.recording import foxglove
-from world_server.recording import writer as recorder
+from world_server.recorder import options as recorder_options
+from world_server.recording import foxglove, records, writer
+from world_server.recording.description import RunDescription
 
 ROBOTS, SITES, SEED = 3, 5, 3
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -135,7 +136,7 @@ def test_one_channel_per_key_with_its_protocol_schema(run: Run) -> None:
     for topic, name in expected.items():
         assert by_topic[topic].name == name, topic
     # The schemas are the protocol's own definitions, not a second copy.
-    assert json.loads(by_topic[keys.sense(0)].data) == recorder.inline_refs(
+    assert json.loads(by_topic[keys.sense(0)].data) == records.inline_refs(
         protocol.json_schema(protocol.Sense)
     )
     assert "$ref" not in by_topic[keys.world_state].data.decode()
@@ -218,7 +219,7 @@ def test_log_time_is_sim_time_and_publish_time_is_wall_time(run: Run) -> None:
 
 @pytest.mark.timeout(180)
 def test_metadata_holds_config_versions_seed_and_summary(run: Run) -> None:
-    start, final = run.metadata[recorder.START_METADATA], run.metadata[recorder.RUN_METADATA]
+    start, final = run.metadata[records.START_METADATA], run.metadata[records.RUN_METADATA]
     for record in (start, final):
         assert record["run_id"] == run.run_id and record["seed"] == str(SEED)
         assert record["robots"] == str(ROBOTS) and record["sites"] == str(SITES)
@@ -275,14 +276,14 @@ def test_a_cut_short_recording_still_gives_a_report(run: Run, tmp_path: Path) ->
             assert row["robots"] == ROBOTS and row["sites"] == SITES
 
 
-def _sample(key: str, payload: bytes, attachment: bytes | None = None) -> recorder.Sample:
-    return recorder.Sample(key, payload, attachment, time.time_ns())
+def _sample(key: str, payload: bytes, attachment: bytes | None = None) -> writer.Sample:
+    return writer.Sample(key, payload, attachment, time.time_ns())
 
 
 def test_samples_that_do_not_decode_are_kept_raw_on_the_rejected_channel() -> None:
     keys = protocol.Keys("rejects")
     stream = io.BytesIO()
-    mcap = recorder.McapRecorder(stream, keys, recorder.RunDescription("rejects", 1, 2, 3))
+    mcap = writer.McapRecorder(stream, keys, RunDescription("rejects", 1, 2, 3))
     clock = protocol.encode(protocol.Clock(v=1, tick=5, t=0.5))
     bad = [
         _sample(keys.sense(0), b'{"v": 1, "tick": -1}'),
@@ -305,7 +306,7 @@ def test_samples_that_do_not_decode_are_kept_raw_on_the_rejected_channel() -> No
     assert base64.b64decode(rejected[0][1]["payload"]) == bad[0].payload
     assert rejected[2][1]["attachment"] == base64.b64encode(b"not json").decode()
     assert mcap.rejected == len(bad) and mcap.counts == {"clock": 1, "rejected": len(bad)}
-    schema = recorder.message_schema("rejected")
+    schema = records.message_schema("rejected")
     for _, record in rejected:
         jsonschema.validate(record, schema)
 
@@ -313,7 +314,7 @@ def test_samples_that_do_not_decode_are_kept_raw_on_the_rejected_channel() -> No
 @pytest.mark.parametrize("niceness", ["-1", "20", "low"])
 def test_a_bad_niceness_is_a_usage_error(niceness: str, tmp_path: Path) -> None:
     with pytest.raises(SystemExit) as exit_info:
-        recorder.build_parser().parse_args(
+        recorder_options.build_parser().parse_args(
             ["--out", str(tmp_path / "x.mcap"), "--niceness", niceness]
         )
     assert exit_info.value.code == 2
@@ -357,7 +358,7 @@ def test_sigterm_without_a_finish_query_closes_the_file_cleanly(tmp_path: Path) 
                 time.sleep(0.05)
             # Recording yields the CPU to the swarm (it is off the barrier's critical path).
             expected_niceness = min(
-                19, os.getpriority(os.PRIO_PROCESS, 0) + recorder.DEFAULT_NICENESS
+                19, os.getpriority(os.PRIO_PROCESS, 0) + recorder_options.DEFAULT_NICENESS
             )
             assert os.getpriority(os.PRIO_PROCESS, process.pid) == expected_niceness
             for tick in range(1, 4):
@@ -376,7 +377,7 @@ def test_sigterm_without_a_finish_query_closes_the_file_cleanly(tmp_path: Path) 
         clocks = [json.loads(m.data)["tick"] for _, _, m in reader.iter_messages()]
         final = {record.name: record.metadata for record in reader.iter_metadata()}
     assert clocks == [1, 2, 3]
-    record = final[recorder.RUN_METADATA]
+    record = final[records.RUN_METADATA]
     assert record["finished_by"] == "signal" and "summary" not in record
     assert json.loads(record["config"]) == {"robots": 2}
 
@@ -451,7 +452,7 @@ def test_the_launcher_waits_for_the_recorder_while_its_file_grows(tmp_path: Path
 def test_the_recorder_yields_the_cpu_only_to_a_swarm_that_leaves_it_idle_time() -> None:
     from deploy.launcher import ROBOTS_PER_PROCESS, recorder_niceness
 
-    assert recorder_niceness(10) == recorder.DEFAULT_NICENESS == 10
+    assert recorder_niceness(10) == recorder_options.DEFAULT_NICENESS == 10
     assert recorder_niceness(ROBOTS_PER_PROCESS) == 10  # one robot process
     assert recorder_niceness(ROBOTS_PER_PROCESS + 1) == 0  # it would fall behind for good
     assert recorder_niceness(500) == 0

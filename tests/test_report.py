@@ -22,7 +22,8 @@ from deploy import report
 from deploy.cli import main
 from wire import protocol
 from world_server.core.layout import make_layout
-from world_server.recording import writer as recorder
+from world_server.recording.description import RunDescription
+from world_server.recording.writer import McapRecorder, Sample
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 SITES, ROBOTS, SEED = 4, 3, 7
@@ -69,17 +70,17 @@ def make_recording(
     keys = protocol.Keys(run_id)
     best = make_layout(sites, ROBOTS, SEED).best_site
     stream = io.BytesIO()
-    mcap = recorder.McapRecorder(
+    mcap = McapRecorder(
         stream,
         keys,
-        recorder.RunDescription(run_id, SEED, ROBOTS, sites, {"sites": sites}),
+        RunDescription(run_id, SEED, ROBOTS, sites, {"sites": sites}),
         chunk_size=1,  # every message in its own chunk: a cut loses only what is after it
     )
     uniform = [1.0 / sites] * sites
     certain = [1.0 if site == best else 0.0 for site in range(sites)]
 
     def put(key: str, payload: bytes) -> None:
-        mcap.record(recorder.Sample(key, payload, None, time.time_ns()))
+        mcap.record(Sample(key, payload, None, time.time_ns()))
 
     for tick in range(400):
         if tick in lost:

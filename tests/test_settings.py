@@ -27,7 +27,8 @@ from wire import settings
 from world_server.core.camera import CameraNoise
 from world_server.core.radio import RadioConfig
 from world_server.core.world import WorldConfig
-from world_server.recording import writer as recorder
+from world_server.recorder import recorder_process as recorder_main
+from world_server.recording.description import RunDescription
 from world_server.server import world_server as server
 from world_server.server.options import WORLD_SERVER_OPTIONS, WorldServerConfig
 
@@ -41,7 +42,7 @@ CONFIGS = [
     RobotAgentConfig,
     NestBeaconConfig,
     run_switches.RobotFaults,
-    recorder.RunDescription,
+    RunDescription,
 ]
 # Many switches at once, in every form an option takes: a number, a choice, a switch, a
 # joined A:B[:C:D], a repeated START:END, ROBOT@SIMTIME and ROBOT:MODE.
@@ -165,7 +166,7 @@ def test_a_config_goes_to_a_child_and_back_unchanged(config_type: type) -> None:
         RobotAgentConfig: RobotAgentConfig(3, switches.controller, switches.faults.byzantine),
         NestBeaconConfig: NestBeaconConfig(3, switches.beacon),
         run_switches.RobotFaults: switches.faults,
-        recorder.RunDescription: recorder.RunDescription("r", 3, 8, 6, switches.record()),
+        RunDescription: RunDescription("r", 3, 8, 6, switches.record()),
     }
     config = examples[config_type]
     assert settings.decode(settings.encode(config), config_type) == config
@@ -245,8 +246,8 @@ def test_a_config_made_in_python_is_checked_by_the_same_definitions(
         (server.main, ["--config", '{"world": {"run": "a"}}'], "not --run-id 'run'"),
         (beacon_main.main, ["--config", "{}", "--outage", "1:2"], "--outage cannot be given"),
         (beacon_main.main, ["--outage", "5:1"], "outage 5:1 must have START < END"),
-        (recorder.main, ["--out", "x", "--config", "{}", "--seed", "1"], "--seed cannot be"),
-        (recorder.main, ["--out", "x", "--config-json", "[]"], "not a JSON object"),
+        (recorder_main.main, ["--out", "x", "--config", "{}", "--seed", "1"], "--seed cannot be"),
+        (recorder_main.main, ["--out", "x", "--config-json", "[]"], "not a JSON object"),
     ],
 )
 def test_a_child_refuses_options_beside_its_config_in_one_line(
@@ -276,6 +277,6 @@ def test_swarm_run_hands_each_process_the_configs_its_options_make() -> None:
     assert handed(plan.robot_argv([0, 1]), RobotAgentConfig) == RobotAgentConfig(
         3, switches.controller, ()
     )
-    assert handed(plan.recorder_args, recorder.RunDescription) == recorder.RunDescription(
+    assert handed(plan.recorder_args, RunDescription) == RunDescription(
         plan.run_id, 3, 8, 6, plan.config
     )

@@ -43,7 +43,8 @@ from viewer.core.decode import Delivery, InvalidSampleError, decode_sample
 from viewer.live import MAX_DELIVERIES, LiveSource
 from wire import auth, names, protocol
 from world_server.core.layout import make_layout
-from world_server.recording.writer import McapRecorder, RunDescription, Sample
+from world_server.recording.description import RunDescription
+from world_server.recording.writer import McapRecorder, Sample
 
 pytestmark = pytest.mark.timeout(180)
 

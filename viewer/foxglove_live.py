@@ -37,7 +37,8 @@ from plumbing.lifecycle import die_with_launcher
 from viewer.options import FOXGLOVE_PORT
 from wire import names, protocol
 from wire.names import Role
-from world_server.recording.writer import McapRecorder, RunDescription, Sample
+from world_server.recording.description import RunDescription
+from world_server.recording.writer import McapRecorder, Sample
 
 log = logging.getLogger("foxglove-live")
 

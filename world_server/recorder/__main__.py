@@ -2,6 +2,6 @@
 
 import sys
 
-from world_server.recording.writer import main
+from world_server.recorder.recorder_process import main
 
 sys.exit(main())

@@ -1,11 +1,9 @@
-"""``recorder``: every message of one run, into one MCAP file that opens in Foxglove.
+"""The MCAP writer: ``McapRecorder`` turns one run's samples into the records of one MCAP
+file that opens in Foxglove. No Zenoh: the recorder process (``world_server/recorder/``)
+feeds it what it receives, the in-process engine what it computes, Foxglove live what it
+forwards.
 
-Two parts. ``McapRecorder`` (no Zenoh) turns samples into MCAP records; ``main`` is the
-process the launcher starts: it subscribes to ``<root>/<run>/**`` before it declares its
-liveliness token, and Zenoh callbacks only append ``(key, payload, attachment, wall time)``
-to a queue that one writer thread empties, in arrival order.
-
-What a recording holds (see docs/recording.md):
+What a recording holds (see docs/recording.md; the record types in ``records.py``):
 
 * one channel per key, topic = the key, schema encoding ``jsonschema`` with the schema
   generated from the message's one definition in ``wire/protocol.py`` (refs
@@ -28,246 +26,39 @@ What a recording holds (see docs/recording.md):
 
 from __future__ import annotations
 
-import argparse
 import base64
-import contextlib
 import functools
 import importlib.metadata
 import json
 import logging
-import os
-import platform
-import queue
-import signal
-import subprocess
-import sys
-import threading
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import IO, Annotated, Any, ClassVar, NamedTuple
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import IO, Any, NamedTuple
 
 import msgspec
 from mcap.writer import CompressionType, Writer
-from msgspec import Meta
 
-from plumbing import cliargs, run_keys, settings_cli
-from plumbing.inbox import BoundedInbox
-from plumbing.lifecycle import die_with_launcher
-from plumbing.settings_cli import Options
-from wire import auth, batch, names, protocol, settings, shape
-from wire.names import Role
-from wire.settings import Flag
+from wire import auth, batch, names, protocol
 from world_server.core.body import EPUCK
-from world_server.core.layout import Layout, make_layout
+from world_server.core.layout import make_layout
 from world_server.recording import foxglove
+from world_server.recording.description import RunDescription, layout_description, versions
+from world_server.recording.records import (
+    RUN_METADATA,
+    START_METADATA,
+    RejectedSample,
+    classify,
+    message_schema,
+    schema_name,
+)
 
 log = logging.getLogger("recorder")
 
-START_METADATA = "bestofn.start"
-RUN_METADATA = "bestofn.run"
-SCHEMA_PREFIX = "bestofn."
 LINK_SECONDS = 5.0  # sim seconds a pooling's radio links stay in the scene
 CHUNK_BYTES = 256 * 1024  # a crash loses at most the chunk being filled
-# After a finish query (or a stop signal), keep recording until nothing arrived for QUIET
-# seconds, but no longer than LIMIT (the stop's 3 s grace bounds STOP_DRAIN_LIMIT).
-FINISH_QUIET, FINISH_DRAIN_LIMIT = 0.2, 10.0
-STOP_QUIET, STOP_DRAIN_LIMIT = 0.1, 1.0
 # Rejected samples: every one counted, the first REJECTED_KEPT kept, each cut to this size.
 REJECTED_KEPT, REJECTED_SAMPLE_BYTES = 100, 1024
-INBOX_BYTES = 256 * 2**20  # what may wait for the writer thread, at most
-MAX_SAMPLE_BYTES = protocol.MAX_FRAME_BYTES + 1024  # a frame and its attachment
-# Nothing waits for the recorder, so it yields the CPU to the swarm: at nice 10 recording
-# costs a 10-robot run 8% of its real-time factor instead of 21% (docs/recording.md).
-DEFAULT_NICENESS = 10
-
-
-class RadioTxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
-    """A ``radio/tx/<sender>`` sample as recorded: its attachment and its payload."""
-
-    meta: protocol.RadioTxMeta
-    payload: protocol.RadioPayload
-
-
-class RadioRxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
-    """A ``radio/rx/<receiver>`` sample as recorded: its attachment and its payload."""
-
-    meta: protocol.RadioRxMeta
-    payload: protocol.RadioPayload
-
-
-class RejectedSample(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
-    """A sample that did not decode as its key's message (or failed its tag): its first
-    bytes, raw, with the reason."""
-
-    key: str
-    reason: str
-    payload: str  # base64 of at most REJECTED_SAMPLE_BYTES
-    attachment: str | None  # base64 of at most REJECTED_SAMPLE_BYTES
-    payload_bytes: int  # the whole payload's size
-
-
-# Key leaf -> message type. ``camera`` is recorded as foxglove.CompressedImage.
-MESSAGE_TYPES: dict[str, Any] = {
-    "clock": protocol.Clock,
-    "state": protocol.WorldState,
-    "sense": protocol.Sense,
-    "act": protocol.Act,
-    "status": protocol.Status,
-    "ack": protocol.Ack,
-    "log": protocol.LogLine,
-    "radio_tx": RadioTxRecord,
-    "radio_rx": RadioRxRecord,
-    "rejected": RejectedSample,
-}
-CAMERA = "camera"
-
-
-def schema_name(kind: str) -> str:
-    """The MCAP schema name of a kind of sample: ``bestofn.Sense``, ``foxglove.Log`` ..."""
-    if kind == CAMERA:
-        return foxglove.COMPRESSED_IMAGE
-    return SCHEMA_PREFIX + MESSAGE_TYPES[kind].__name__
-
-
-def inline_refs(schema: dict[str, Any]) -> dict[str, Any]:
-    """A self-contained copy of a msgspec JSON Schema: every ``$ref`` replaced by its
-    definition, as in Foxglove's own schemas (viewers need not resolve references)."""
-    definitions = schema.get("$defs", {})
-
-    def resolve(node: Any) -> Any:
-        if isinstance(node, dict):
-            if "$ref" in node:
-                return resolve(definitions[node["$ref"].rsplit("/", 1)[-1]])
-            return {
-                key: resolve(value)
-                for key, value in node.items()
-                if key not in ("$defs", "discriminator")  # the mapping names $defs entries
-            }
-        if isinstance(node, list):
-            return [resolve(item) for item in node]
-        return node
-
-    return dict(resolve(schema))
-
-
-@functools.cache
-def message_schema(kind: str) -> dict[str, Any]:
-    """The JSON Schema of a recorded kind, from its definition in the protocol."""
-    if kind == CAMERA:
-        return foxglove.schema(foxglove.COMPRESSED_IMAGE)
-    return inline_refs(protocol.json_schema(MESSAGE_TYPES[kind]))
-
-
-def classify(keys: protocol.Keys, key: str) -> str | None:
-    """The kind of sample a key carries, or None for a key outside the protocol."""
-    if not key.startswith(keys.prefix + "/"):
-        return None
-    parts = key[len(keys.prefix) + 1 :].split("/")
-    match parts:
-        case ["world", "clock"]:
-            return "clock"
-        case ["world", "state"]:
-            return "state"
-        case ["robot", robot, ("sense" | "act" | "status" | "camera") as leaf] if (
-            names.robot_of_name(robot) is not None
-        ):
-            return leaf
-        case ["beacon", _, "ack"]:
-            return "ack"
-        case ["radio", ("tx" | "rx") as direction, _]:
-            return f"radio_{direction}"
-        case ["log", _]:
-            return "log"
-    return None
-
-
-def versions() -> dict[str, str]:
-    """Versions of everything that shapes a run, for the metadata record."""
-    found = {
-        "protocol": str(protocol.VERSION),
-        "python": platform.python_version(),
-        "platform": platform.platform(),
-    }
-    for package in (
-        "bestofn-swarm",
-        "eclipse-zenoh",
-        "mcap",
-        "msgspec",
-        "numpy",
-        "pymunk",
-        "opencv-python-headless",
-    ):
-        with contextlib.suppress(importlib.metadata.PackageNotFoundError):
-            found[package] = importlib.metadata.version(package)
-    source = Path(__file__).resolve().parent.parent
-    with contextlib.suppress(OSError, subprocess.SubprocessError):
-        commit = subprocess.run(
-            ["git", "-C", str(source), "describe", "--always", "--dirty", "--abbrev=12"],
-            capture_output=True,
-            text=True,
-            timeout=5,
-            check=True,
-        ).stdout.strip()
-        if commit:
-            found["git"] = commit
-    return found
-
-
-def layout_description(layout: Layout) -> dict[str, Any]:
-    return {
-        "arena_radius": layout.arena_radius,
-        "nest_radius": layout.nest_radius,
-        "best_site": layout.best_site,
-        "sites": [
-            {
-                "id": site.id,
-                "x": site.x,
-                "y": site.y,
-                "angle": site.angle,
-                "quality": site.quality,
-                "rank": site.rank,
-            }
-            for site in layout.sites
-        ],
-    }
-
-
-def json_object(text: str) -> dict[str, Any]:
-    """``--config-json``: a JSON object, or ValueError."""
-    try:
-        value = json.loads(text)
-    except ValueError as error:
-        raise ValueError(f"not JSON: {error}") from None
-    if not isinstance(value, dict):
-        raise ValueError("not a JSON object")
-    return value
-
-
-@dataclass(frozen=True)
-class RunDescription:
-    """The run a recording is of: what the recorder is configured with (its options, or
-    ``--config``, which is how ``swarm run`` hands it over)."""
-
-    FLAG_GROUP: ClassVar[str] = "run"
-
-    run_id: Annotated[names.Name, Meta(description="the run id")] = "run"
-    seed: Annotated[shape.Seed, Meta(description="run seed"), Flag()] = shape.DEFAULT_SEED
-    robots: Annotated[
-        shape.Robots, Meta(description="swarm size of the run, for its layout"), Flag()
-    ] = shape.DEFAULT_ROBOTS
-    sites: Annotated[shape.Sites, Meta(description="number of sites of the run"), Flag()] = (
-        shape.DEFAULT_SITES
-    )
-    config: Annotated[
-        dict[str, Any],
-        Meta(description="the run's full configuration, kept in the metadata record"),
-        Flag(name="config-json", metavar="JSON", parse=json_object, default_text="{}"),
-    ] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        settings.check(self)
 
 
 @dataclass
@@ -279,7 +70,7 @@ class _Channel:
 
 
 class Sample(NamedTuple):
-    """One Zenoh sample as the callback copied it."""
+    """One sample as it arrived (in the recorder, a Zenoh sample as its callback copied it)."""
 
     key: str
     payload: bytes
@@ -427,23 +218,23 @@ class McapRecorder:
                         speaker, sample.key, sample.payload, sample.attachment
                     )
                 except auth.AuthError as error:
-                    self._reject(sample, f"{speaker}: {error}")
+                    self.reject(sample, f"{speaker}: {error}")
                     return
                 sample = sample._replace(attachment=metadata or None)
             handler(sample)
         except Exception as error:  # a recorder bug must not cost the rest of the run
             log.exception("failed to record a sample on %s", sample.key)
-            self._reject(sample, f"recorder error: {error!r}")
+            self.reject(sample, f"recorder error: {error!r}")
 
     def _record_batch(self, sample: Sample) -> None:
         leaf = sample.key.rsplit("/", 1)[-1]
         if self.keys.robot_of(sample.key, "host") is None or leaf not in ("sense", "act"):
-            self._reject(sample, "not a key of the protocol")
+            self.reject(sample, "not a key of the protocol")
             return
         try:
             entries = batch.decode(sample.payload)
         except batch.BatchError as error:
-            self._reject(sample, f"batch: {error}")
+            self.reject(sample, f"batch: {error}")
             return
         per_robot = self.keys.sense if leaf == "sense" else self.keys.act
         for robot, payload, attachment in entries:
@@ -468,10 +259,10 @@ class McapRecorder:
         """How to record a sample on ``key``, and whose tag it must carry."""
         kind = classify(self.keys, key)
         if kind is None:
-            return functools.partial(self._reject, reason="not a key of the protocol"), None
+            return functools.partial(self.reject, reason="not a key of the protocol"), None
         speaker = self._speaker(key)
         if speaker is None or not names.is_identity(speaker):
-            return functools.partial(self._reject, reason="no identity of the run"), None
+            return functools.partial(self.reject, reason="no identity of the run"), None
         channel = self._channel(key, kind, self.keys.robot_of(key))
         handler = getattr(self, f"_on_{kind}")
         return functools.partial(handler, channel), speaker
@@ -479,7 +270,7 @@ class McapRecorder:
     def _tick_ns(self, tick: int) -> int:
         return tick * self.dt_ns if self.dt_ns else self.sim_ns
 
-    def _reject(self, sample: Sample, reason: str) -> None:
+    def reject(self, sample: Sample, reason: str) -> None:
         """Count a sample that is not a valid message; keep the first few, cut short, raw,
         on the rejected channel."""
         self.rejected += 1
@@ -512,7 +303,7 @@ class McapRecorder:
                 return self._decoders[what].decode(data)
             except (msgspec.DecodeError, msgspec.ValidationError) as error:
                 reason = f"{what}: {error}"
-        self._reject(sample, reason)
+        self.reject(sample, reason)
         return None
 
     def _on_clock(self, channel: _Channel, sample: Sample) -> None:
@@ -615,7 +406,7 @@ class McapRecorder:
         if meta is None:
             return
         if len(sample.payload) > protocol.MAX_FRAME_BYTES:
-            self._reject(sample, f"camera frame of {len(sample.payload)} bytes")
+            self.reject(sample, f"camera frame of {len(sample.payload)} bytes")
             return
         ns = self._tick_ns(meta.tick)
         frame_id = f"{foxglove.robot_frame(channel.robot or 0)}/camera"
@@ -676,234 +467,3 @@ class McapRecorder:
         self._writer.add_metadata(RUN_METADATA, record)
         self._writer.finish()
         self.closed = True
-
-
-# --- the process ---------------------------------------------------------------------------
-
-
-class _Finish:
-    """A finish query in the queue: everything queued before it is recorded first."""
-
-    def __init__(self, query: Any) -> None:
-        self.query = query
-
-
-_STOP = object()
-
-
-RECORDER_OPTIONS = Options(RunDescription)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="recorder",
-        description="Record every message of one run to an MCAP file (opens in Foxglove).",
-    )
-    parser.add_argument("--out", required=True, metavar="PATH", help="the MCAP file to write")
-    RECORDER_OPTIONS.add_to(parser)
-    settings_cli.add_config_option(parser, RunDescription)
-    parser.add_argument(
-        "--info-timeout",
-        type=cliargs.positive_float,
-        default=10.0,
-        help="wall seconds to wait for world/info (default: 10)",
-    )
-    parser.add_argument(
-        "--niceness",
-        type=cliargs.int_range(0, 19),
-        default=DEFAULT_NICENESS,
-        help="how much to lower this process's CPU priority, 0 to 19: "
-        "recording is off the barrier's critical path, so on a busy "
-        f"machine it yields to the swarm and catches up (default: "
-        f"{DEFAULT_NICENESS})",
-    )
-    cliargs.add_zenoh_options(parser)
-    cliargs.add_log_level(parser)
-    return parser
-
-
-def _lower_priority(niceness: int) -> None:
-    """Yield the CPU to the swarm; a platform without nice() just records at full priority."""
-    try:
-        os.nice(niceness)
-    except (AttributeError, OSError) as error:
-        log.info("could not lower the recorder's priority: %s", error)
-
-
-def _world_info(
-    session: Any, keys: protocol.Keys, timeout: float, keyring: auth.Keyring | None
-) -> protocol.WorldInfo | None:
-    """The world's info if a world server answers in time (it gives dt and robot size)."""
-    from plumbing.world_info import fetch_world_info
-
-    try:
-        return fetch_world_info(session, keys, timeout, keyring, names.RECORDER)
-    except TimeoutError as error:
-        log.warning("%s; sim times will follow world/clock", error)
-        return None
-
-
-def _write_loop(
-    recorder: McapRecorder,
-    inbox: BoundedInbox[Any],
-    keys: protocol.Keys,
-    done: threading.Event,
-) -> None:
-    """The writer thread: record samples in arrival order until a finish query or a stop."""
-    try:
-        while True:
-            item = inbox.get()
-            if isinstance(item, Sample):
-                recorder.record(item)
-            elif isinstance(item, _Finish):
-                if _refused(recorder, item.query, keys):
-                    continue
-                _drain(recorder, inbox, FINISH_QUIET, FINISH_DRAIN_LIMIT)
-                _finish_on_query(recorder, item.query, keys)
-                return
-            elif item is _STOP:
-                _drain(recorder, inbox, STOP_QUIET, STOP_DRAIN_LIMIT)
-                recorder.rejected += inbox.take_dropped(None)
-                recorder.finish(finished_by="signal")
-                log.info("recording closed on a signal, without a run summary")
-                return
-    finally:
-        done.set()
-
-
-def _drain(recorder: McapRecorder, inbox: BoundedInbox[Any], quiet: float, limit: float) -> None:
-    """Record what still arrives until the inbox stays empty for ``quiet`` seconds.
-
-    Zenoh keeps order per publisher, not between a query and other publishers' samples:
-    a sample published just before the finish query can arrive just after it.
-    """
-    deadline = time.monotonic() + limit
-    while time.monotonic() < deadline:
-        try:
-            item = inbox.get(timeout=quiet)
-        except queue.Empty:
-            break
-        if isinstance(item, Sample):
-            recorder.record(item)
-    recorder.rejected += inbox.take_dropped(None)
-
-
-def _query_parts(query: Any) -> tuple[bytes, bytes | None]:
-    payload = query.payload.to_bytes() if query.payload is not None else b""
-    attachment = query.attachment.to_bytes() if query.attachment is not None else None
-    return payload, attachment
-
-
-def _refused(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> bool:
-    """Whether a finish query is someone's but the launcher's (then counted and refused).
-
-    In a keyed run only the launcher that started the recorder holds the key to finish it.
-    """
-    payload, attachment = _query_parts(query)
-    try:
-        asker, _ = auth.query_open(recorder.keyring, keys.recorder_finish, payload, attachment)
-        if recorder.keyring is not None and asker != names.LAUNCHER:
-            raise auth.AuthError(f"{asker} may not finish the recording")
-    except auth.AuthError as error:
-        sample = Sample(keys.recorder_finish, payload, attachment, time.time_ns())
-        recorder._reject(sample, f"finish query refused: {error}")
-        query.reply_err(b"unauthenticated query")
-        query.drop()
-        return True
-    return False
-
-
-def _finish_on_query(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> None:
-    payload, attachment = _query_parts(query)
-    asker, nonce = auth.query_open(recorder.keyring, keys.recorder_finish, payload, attachment)
-    summary: Any = None
-    if payload:
-        try:
-            summary = json.loads(payload)
-        except ValueError:
-            summary = payload.decode("utf-8", "replace")
-    recorder.finish(summary, finished_by="finish query")
-    answer = b"ok"
-    sealed = auth.reply_seal(recorder.keyring, asker, keys.recorder_finish, answer, nonce)
-    query.reply(keys.recorder_finish, answer, attachment=sealed)
-    query.drop()  # sends the final reply now, not when the object is collected
-    log.info("recording complete: %s", dict(sorted(recorder.counts.items())))
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    die_with_launcher()
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    run: RunDescription = settings_cli.config_from(
-        parser, args, RECORDER_OPTIONS, {"run_id": args.run_id}
-    )
-    if run.run_id != args.run_id:
-        parser.exit(
-            2, f"recorder: error: --config is of run {run.run_id!r}, not --run-id {args.run_id!r}\n"
-        )
-    cliargs.configure_logging("recorder", args.log_level)
-    keyring = run_keys.from_args(parser, args, "recorder")
-    if keyring is not None and keyring.secret is None:
-        parser.exit(2, "recorder: error: the recorder needs the run secret\n")
-    if args.niceness:  # before Zenoh starts its threads, so that they inherit it
-        _lower_priority(args.niceness)
-    import zenoh
-
-    from plumbing.zenoh_session import open_from_args
-
-    keys = protocol.Keys(args.run_id, args.root)
-    out = Path(args.out)
-    try:
-        stream = out.open("wb")
-    except OSError as error:
-        print(f"recorder: cannot write {out}: {error}", file=sys.stderr)
-        return 1
-    # Anything bigger than a camera frame is junk: dropped on arrival, counted.
-    inbox: BoundedInbox[Any] = BoundedInbox(INBOX_BYTES, MAX_SAMPLE_BYTES)
-    for signum in (signal.SIGINT, signal.SIGTERM):  # the writer thread sees the stop later
-        signal.signal(signum, lambda *_: inbox.put(_STOP))
-
-    def on_sample(sample: zenoh.Sample) -> None:
-        attachment = sample.attachment
-        payload = sample.payload.to_bytes()
-        extra = attachment.to_bytes() if attachment is not None else None
-        size = len(payload) + len(extra or b"")
-        inbox.put(Sample(str(sample.key_expr), payload, extra, time.time_ns()), size)
-
-    try:
-        session = open_from_args(args)
-    except zenoh.ZError as error:
-        print(f"recorder: cannot open Zenoh session: {error}", file=sys.stderr)
-        stream.close()
-        return 1
-    with session, stream:
-        subscriber = session.declare_subscriber(keys.all, on_sample)
-        queryable = session.declare_queryable(
-            keys.recorder_finish, lambda query: inbox.put(_Finish(query))
-        )
-        info = _world_info(session, keys, args.info_timeout, keyring)
-        recorder = McapRecorder(stream, keys, run, info, keyring=keyring)
-        done = threading.Event()
-        writer = threading.Thread(
-            target=_write_loop,
-            args=(recorder, inbox, keys, done),
-            name="mcap-writer",
-            daemon=True,
-        )
-        writer.start()
-        token = session.liveliness().declare_token(keys.alive(Role.RECORDER, 0))
-        log.info("recording %s to %s", keys.all, out)
-        while not done.wait(0.2):  # wake up for signals
-            pass
-        token.undeclare()
-        queryable.undeclare()
-        subscriber.undeclare()
-        if not recorder.closed:  # the writer thread failed: keep what can be kept
-            with contextlib.suppress(Exception):
-                recorder.finish(finished_by="error")
-            return 1
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,0 +1,124 @@
+"""What a recording holds, record by record: the names of its metadata records, the
+types of the samples it records and their JSON Schemas, and which key is which kind.
+
+One channel per key, topic = the key, schema encoding ``jsonschema`` with the schema
+generated from the message's one definition in ``wire/protocol.py`` (refs inlined), message
+encoding ``json``. Radio samples are recorded as ``{"meta": <attachment>, "payload":
+<payload>}`` (``RadioTxRecord``, ``RadioRxRecord``); camera frames as
+``foxglove.CompressedImage``; samples refused as ``RejectedSample``. The writer
+(``writer.py``) and the reader (``reader.py``) both go by these names.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import msgspec
+
+from wire import names, protocol
+from world_server.recording import foxglove
+
+START_METADATA = "bestofn.start"  # written when recording begins
+RUN_METADATA = "bestofn.run"  # written at the end, with the recorder's counts and the summary
+SCHEMA_PREFIX = "bestofn."
+
+
+class RadioTxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """A ``radio/tx/<sender>`` sample as recorded: its attachment and its payload."""
+
+    meta: protocol.RadioTxMeta
+    payload: protocol.RadioPayload
+
+
+class RadioRxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """A ``radio/rx/<receiver>`` sample as recorded: its attachment and its payload."""
+
+    meta: protocol.RadioRxMeta
+    payload: protocol.RadioPayload
+
+
+class RejectedSample(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """A sample that did not decode as its key's message (or failed its tag): its first
+    bytes, raw, with the reason."""
+
+    key: str
+    reason: str
+    payload: str  # base64 of at most writer.REJECTED_SAMPLE_BYTES
+    attachment: str | None  # base64 of at most writer.REJECTED_SAMPLE_BYTES
+    payload_bytes: int  # the whole payload's size
+
+
+# Key leaf -> message type. ``camera`` is recorded as foxglove.CompressedImage.
+MESSAGE_TYPES: dict[str, Any] = {
+    "clock": protocol.Clock,
+    "state": protocol.WorldState,
+    "sense": protocol.Sense,
+    "act": protocol.Act,
+    "status": protocol.Status,
+    "ack": protocol.Ack,
+    "log": protocol.LogLine,
+    "radio_tx": RadioTxRecord,
+    "radio_rx": RadioRxRecord,
+    "rejected": RejectedSample,
+}
+CAMERA = "camera"
+
+
+def schema_name(kind: str) -> str:
+    """The MCAP schema name of a kind of sample: ``bestofn.Sense``, ``foxglove.Log`` ..."""
+    if kind == CAMERA:
+        return foxglove.COMPRESSED_IMAGE
+    return SCHEMA_PREFIX + MESSAGE_TYPES[kind].__name__
+
+
+def inline_refs(schema: dict[str, Any]) -> dict[str, Any]:
+    """A self-contained copy of a msgspec JSON Schema: every ``$ref`` replaced by its
+    definition, as in Foxglove's own schemas (viewers need not resolve references)."""
+    definitions = schema.get("$defs", {})
+
+    def resolve(node: Any) -> Any:
+        if isinstance(node, dict):
+            if "$ref" in node:
+                return resolve(definitions[node["$ref"].rsplit("/", 1)[-1]])
+            return {
+                key: resolve(value)
+                for key, value in node.items()
+                if key not in ("$defs", "discriminator")  # the mapping names $defs entries
+            }
+        if isinstance(node, list):
+            return [resolve(item) for item in node]
+        return node
+
+    return dict(resolve(schema))
+
+
+@functools.cache
+def message_schema(kind: str) -> dict[str, Any]:
+    """The JSON Schema of a recorded kind, from its definition in the protocol."""
+    if kind == CAMERA:
+        return foxglove.schema(foxglove.COMPRESSED_IMAGE)
+    return inline_refs(protocol.json_schema(MESSAGE_TYPES[kind]))
+
+
+def classify(keys: protocol.Keys, key: str) -> str | None:
+    """The kind of sample a key carries, or None for a key outside the protocol."""
+    if not key.startswith(keys.prefix + "/"):
+        return None
+    parts = key[len(keys.prefix) + 1 :].split("/")
+    match parts:
+        case ["world", "clock"]:
+            return "clock"
+        case ["world", "state"]:
+            return "state"
+        case ["robot", robot, ("sense" | "act" | "status" | "camera") as leaf] if (
+            names.robot_of_name(robot) is not None
+        ):
+            return leaf
+        case ["beacon", _, "ack"]:
+            return "ack"
+        case ["radio", ("tx" | "rx") as direction, _]:
+            return f"radio_{direction}"
+        case ["log", _]:
+            return "log"
+    return None
