@@ -1,7 +1,8 @@
 """``swarm report``: the paper's Section 5 figures and a summary table, from recordings alone.
 
-Reads MCAP recordings made by the recorder (``world_server/recording/writer.py``) with ``mcap``'s
-stream reader, so a file cut short by a crash is read up to its last complete record.
+Reads MCAP recordings made by the recorder (``world_server/recording/writer.py``) one message
+at a time with ``world_server/recording/reader.py``, so a file cut short by a crash is read
+up to its last complete record.
 The run summary comes from the recording's ``bestofn.run`` metadata record when there is
 one, else it is rebuilt from the robots' status messages (the same code that
 ``swarm run`` uses); a recorded summary that lacks a field the report needs gets it from
@@ -36,17 +37,15 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
-from mcap.records import Channel, Footer, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
 
 from deploy.summary import ENDINGS, RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from deploy.watchdog import Watchdog
 from wire import protocol
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
+from world_server.recording.reader import RecordedMessage, RecordingReader, run_description
+from world_server.recording.records import RUN_METADATA
 
-START_METADATA = "bestofn.start"  # the names the recorder writes (world_server/recording/writer.py)
-RUN_METADATA = "bestofn.run"
 FIGURES = ("fig4.png", "fig5.png", "fig2.png", "trajectories.png")
 CSV_COLUMNS = (
     "run_id",
@@ -145,7 +144,7 @@ class Recording:
     @property
     def description(self) -> dict[str, str]:
         """The final metadata record if the run finished, else the one written at start."""
-        return self.metadata.get(RUN_METADATA) or self.metadata.get(START_METADATA) or {}
+        return run_description(self.metadata)
 
     def _number(self, name: str) -> int | None:
         text = self.description.get(name, "")
@@ -199,13 +198,11 @@ class Recording:
         return value if isinstance(value, dict) else None
 
 
-class _Reader:
-    """Decodes the messages a report needs; counts the rest."""
+class _Collector:
+    """Decodes the messages a report needs, one at a time; counts the rest."""
 
     def __init__(self, recording: Recording) -> None:
         self.recording = recording
-        self.schemas: dict[int, str] = {}
-        self.channels: dict[int, tuple[str, str]] = {}  # id -> (topic, schema name)
         self.status = msgspec.json.Decoder(protocol.Status)
         self.sense = msgspec.json.Decoder(protocol.Sense)
         self.act = msgspec.json.Decoder(protocol.Act)
@@ -213,21 +210,9 @@ class _Reader:
         self.clock = msgspec.json.Decoder(protocol.Clock)
         self.state = msgspec.json.Decoder(protocol.WorldState)
 
-    def take(self, record: Any) -> None:
-        if isinstance(record, Message):
-            self.message(record)
-        elif isinstance(record, Schema):
-            self.schemas[record.id] = record.name
-        elif isinstance(record, Channel):
-            self.channels[record.id] = (record.topic, self.schemas.get(record.schema_id, ""))
-        elif isinstance(record, Metadata):
-            self.recording.metadata[record.name] = dict(record.metadata)
-        elif isinstance(record, Footer):
-            self.recording.complete = True
-
-    def message(self, message: Message) -> None:
+    def message(self, message: RecordedMessage) -> None:
         recording = self.recording
-        topic, schema = self.channels.get(message.channel_id, ("", ""))
+        topic, schema = message.topic, message.schema
         recording.messages[schema] += 1
         try:
             if schema == "bestofn.Sense":
@@ -277,24 +262,19 @@ def _robot_of(topic: str) -> int:
 
 
 def read_recording(path: Path) -> Recording:
-    """Read one recording as far as it is readable (a truncated file too).
+    """Read one recording as far as it is readable (a truncated file too), one message at
+    a time.
 
     Raises ValueError if the file is not an MCAP file at all.
     """
     recording = Recording(Path(path))
-    reader = _Reader(recording)
-    with open(path, "rb") as stream:
-        try:
-            for record in StreamReader(stream, validate_crcs=True).records:
-                reader.take(record)
-        # A cut-short file ends in McapError or struct.error; a corrupt chunk raises its
-        # codec's own error type: whatever stops the reader, keep what was read before it.
-        except Exception as error:
-            if not recording.metadata and not reader.schemas:
-                raise ValueError(f"{path}: not a readable MCAP recording ({error!r})") from None
-            recording.problem = f"cut short: {type(error).__name__} {error}".strip()
-    if not recording.complete and recording.problem is None:
-        recording.problem = "cut short: no footer"
+    collector = _Collector(recording)
+    reader = RecordingReader(path)
+    for message in reader:
+        collector.message(message)
+    recording.metadata = reader.metadata
+    recording.complete = reader.complete
+    recording.problem = reader.problem
     return recording
 
 

@@ -1,7 +1,8 @@
 """``swarm view RECORDING.mcap``: the live page, replaying a recording.
 
-The recording is read once, as far as it is readable (a file cut short by a crash too,
-like ``swarm report``), into a ``Timeline``: world states, each robot's statuses, the
+The recording is read once, message by message, as far as it is readable (a file cut short
+by a crash too, like ``swarm report``: ``world_server/recording/reader.py``), into a
+``Timeline``: world states, each robot's statuses, the
 clock and the radio deliveries, in sim time. A frame at any sim time is then looked up,
 not replayed: poses are interpolated between the two world states around it, each robot
 shows its latest status, and poolings and decisions were found once while reading. So
@@ -25,16 +26,15 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
-from mcap.records import Channel, Footer, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
 
 from viewer.core import model
 from viewer.options import VIEW_PORT
 from viewer.server import ViewServer
 from wire import protocol
 from world_server.core.layout import make_layout
+from world_server.recording.reader import RecordedMessage, RecordingReader
+from world_server.recording.records import RUN_METADATA
 
-START_METADATA, RUN_METADATA = "bestofn.start", "bestofn.run"  # world_server/recording/writer.py
 SPEEDS = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
 MAX_DELIVERIES_PER_FRAME = 2000
 
@@ -91,12 +91,11 @@ def _robot_in(topic: str) -> int | None:
 
 
 class _Loader:
+    """Puts the messages the page shows into a timeline, one at a time."""
+
     def __init__(self, timeline: Timeline, with_sense: bool) -> None:
         self.timeline = timeline
         self.with_sense = with_sense
-        self.schemas: dict[int, str] = {}
-        self.channels: dict[int, tuple[str, str]] = {}
-        self.metadata: dict[str, dict[str, str]] = {}
         self.tracker = model.PoolingTracker()
         self.decoders: dict[str, msgspec.json.Decoder[Any]] = {
             "bestofn.WorldState": msgspec.json.Decoder(protocol.WorldState),
@@ -106,20 +105,8 @@ class _Loader:
             "bestofn.Sense": msgspec.json.Decoder(protocol.Sense),
         }
 
-    def take(self, record: Any) -> None:
-        if isinstance(record, Message):
-            self.message(record)
-        elif isinstance(record, Schema):
-            self.schemas[record.id] = record.name
-        elif isinstance(record, Channel):
-            self.channels[record.id] = (record.topic, self.schemas.get(record.schema_id, ""))
-        elif isinstance(record, Metadata):
-            self.metadata[record.name] = dict(record.metadata)
-        elif isinstance(record, Footer):
-            self.timeline.complete = True
-
-    def message(self, message: Message) -> None:
-        topic, schema = self.channels.get(message.channel_id, ("", ""))
+    def message(self, message: RecordedMessage) -> None:
+        topic, schema = message.topic, message.schema
         decoder = self.decoders.get(schema)
         if decoder is None or (schema == "bestofn.Sense" and not self.with_sense):
             return
@@ -169,25 +156,22 @@ def load(path: Path) -> Timeline:
 def _read(path: Path, with_sense: bool) -> Timeline:
     timeline = Timeline(Path(path))
     loader = _Loader(timeline, with_sense)
-    with open(path, "rb") as stream:
-        try:
-            for record in StreamReader(stream, validate_crcs=True).records:
-                loader.take(record)
-        # A file cut short ends in an error of the reader or of a chunk's codec: whatever
-        # stops the reader, keep what was read before it (as swarm report does).
-        except Exception as error:
-            if not loader.metadata and not loader.schemas:
-                raise ValueError(f"{path}: not a readable MCAP recording ({error!r})") from None
-            timeline.problem = f"cut short: {type(error).__name__}"
-    if not timeline.complete and timeline.problem is None:
-        timeline.problem = "cut short: no footer"
-    description = loader.metadata.get(RUN_METADATA) or loader.metadata.get(START_METADATA) or {}
+    reader = RecordingReader(path)
+    for message in reader:
+        loader.message(message)
+    timeline.complete = reader.complete
+    # The page names only the kind of error that cut the file short.
+    stopped = reader.stopped_by
+    timeline.problem = (
+        f"cut short: {type(stopped).__name__}" if stopped is not None else reader.problem
+    )
+    description = reader.description
     timeline.run_id = description.get("run_id") or Path(path).stem
     timeline.seed = _int(description.get("seed"))
     timeline.robots = _int(description.get("robots")) or len(timeline.statuses)
     timeline.sites = _int(description.get("sites")) or _sites_of(timeline)
     timeline.layout = _json(description.get("layout"))
-    summary = _json(loader.metadata.get(RUN_METADATA, {}).get("summary"))
+    summary = _json(reader.metadata.get(RUN_METADATA, {}).get("summary"))
     timeline.summary = summary
     return timeline
 
