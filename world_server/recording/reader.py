@@ -8,7 +8,8 @@ keeps is up to it (``swarm report``'s ``Recording``, the replay's ``Timeline``).
 A file cut short by a crash is read up to its last complete record: whatever stops the
 stream reader there (``EndOfFile``, ``struct.error``, a chunk's codec or CRC error) ends
 the pass quietly, and the reader says why. Only a file that is not a recording at all (the
-pass stops before any schema or metadata record) raises ValueError.
+pass stops before any schema or metadata record) raises ValueError; a path that cannot be
+opened, OSError. A pass opens its file when its first message is asked for.
 """
 
 from __future__ import annotations
