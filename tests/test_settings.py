@@ -28,7 +28,7 @@ from world_server.core.camera import CameraNoise
 from world_server.core.radio import RadioConfig
 from world_server.core.world import WorldConfig
 from world_server.recording import writer as recorder
-from world_server.server import world_server as server
+from world_server.server import cli as server
 from world_server.server.options import WORLD_SERVER_OPTIONS, WorldServerConfig
 
 CONFIGS = [
