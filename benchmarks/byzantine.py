@@ -106,7 +106,7 @@ def run_task(task: Task) -> Outcome:
     from deploy.inmemory import run_in_memory
     from robot_agent.node import options
     from robot_agent.node import robot_node as node
-    from world_server.server import world_server as server
+    from world_server.server import cli as server
 
     common = ["--seed", str(task.seed), "--robots", str(task.robots), "--sites", str(task.sites)]
     world_config = server.config_from_args(

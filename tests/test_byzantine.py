@@ -341,7 +341,7 @@ def test_a_real_run_with_a_liar_and_an_inverted_robot_matches_the_in_process_run
     process. The recording shows robot 1's one-hot broadcasts; the results are the
     in-process engine's, robot by robot."""
     from deploy.inmemory import run_in_memory
-    from world_server.server import world_server as server
+    from world_server.server import cli as server
 
     seed, robots, sites = 3, 4, 5
     common = ["--seed", str(seed), "--robots", str(robots), "--sites", str(sites)]

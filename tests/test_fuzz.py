@@ -19,9 +19,10 @@ from plumbing.inbox import BoundedInbox
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.node.robot_node import Event, RobotNode
 from wire import auth, protocol
+from world_server.core.coordinator import Coordinator
+from world_server.core.events import Event as WorldEvent
+from world_server.core.events import EventKind, Output, Reply, ReplyError
 from world_server.core.world import World, WorldConfig
-from world_server.server.world_server import Event as WorldEvent
-from world_server.server.world_server import WorldServer
 
 MESSAGE_TYPES = [
     value
@@ -137,39 +138,21 @@ def test_a_robot_survives_any_sequence_of_inputs(
         protocol.decode(payload, protocol.Act)
 
 
-def _world_server() -> WorldServer:
+def _world_server(outputs: list[Output]) -> Coordinator:
     world = World(WorldConfig(run="fuzz", num_sites=5, num_robots=2))
-    # No Zenoh: the test sets stand-ins for the session and publishers it uses.
-    server = WorldServer(None, world, protocol.Keys("fuzz"))  # type: ignore[arg-type]
+    server = Coordinator(
+        world,
+        protocol.Keys("fuzz"),
+        outputs.append,
+        stall_timeout=5.0,
+        start_timeout=60.0,
+        state_every=10,
+    )
     world.join_robot(0)
     world.join_robot(1)
     world.join_beacon("nest")
-    server.barrier.open(3, ["robot/0", "robot/1", "beacon/nest"])
+    server.intake.barrier.open(3, ["robot/0", "robot/1", "beacon/nest"])
     return server
-
-
-class _Query:
-    """What the world server uses of a Zenoh query: its payload, attachment and replies."""
-
-    def __init__(self, attachment: bytes | None) -> None:
-        self.payload = None
-        self.attachment = None if attachment is None else _Bytes(attachment)
-        self.replies: list[tuple[str, bytes]] = []
-        self.errors: list[bytes] = []
-
-    def reply(self, key: str, payload: bytes, attachment: bytes | None = None) -> None:
-        self.replies.append((key, payload))
-
-    def reply_err(self, payload: bytes) -> None:
-        self.errors.append(payload)
-
-
-class _Bytes:
-    def __init__(self, data: bytes) -> None:
-        self.data = data
-
-    def to_bytes(self) -> bytes:
-        return self.data
 
 
 # What an ``alive`` token does in a swarm of robots 0 and 1: join (a robot of the swarm
@@ -204,15 +187,16 @@ class _WorldCounts:
     joins: int
 
     @classmethod
-    def of(cls, server: WorldServer) -> _WorldCounts:
+    def of(cls, server: Coordinator) -> _WorldCounts:
+        intake = server.intake
         return cls(
             rejected=server.counters.rejected,
             radio_rejected=server.world.radio.rejected,
             late=server.counters.late,
-            acts=len(server.acts),
-            transmissions=len(server.transmissions),
-            answers=sum(entry.radio_tx is not None for entry in server.barrier.answers.values()),
-            joins=len(server.pending_joins),
+            acts=len(intake.acts),
+            transmissions=len(intake.transmissions),
+            answers=sum(entry.radio_tx is not None for entry in intake.barrier.answers.values()),
+            joins=len(server.roster.pending),
         )
 
     def __sub__(self, other: _WorldCounts) -> _WorldCounts:
@@ -287,21 +271,20 @@ def test_the_world_server_survives_any_sequence_of_inputs(
     """Any messages, liveliness changes, id requests and tick closes, in any order: the
     world never fails, takes only its swarm's members, answers every query, and accounts
     for every message exactly once (taken, late or rejected)."""
-    server = _world_server()
-    # Stand-ins that take the world's publications, in place of Zenoh's.
-    server.session = _Session()  # type: ignore[assignment]
-    server._clock_publisher = server._state_publisher = _Session()  # type: ignore[assignment]
+    outputs: list[Output] = []
+    server = _world_server(outputs)
     for kind, key, payload, attachment in events:
         before = _WorldCounts.of(server)
         if kind == "close":
-            server._apply_joins()
-            server._close_tick()
+            server.roster.apply_joins()
+            server.close_tick()
             change = _WorldCounts.of(server) - before
             assert (change.rejected, change.late, change.radio_rejected) == (0, 0, 0)
             continue
-        query = _Query(attachment) if kind in ("join", "stats") else None
-        event = WorldEvent(kind, key, payload, attachment, query=query)
-        server._handle(event)
+        query = object() if kind in ("join", "stats") else None
+        outputs.clear()
+        event = WorldEvent(EventKind(kind), key, payload, attachment, query=query)
+        server.take(event, 0.0)
         change = _WorldCounts.of(server) - before
         if kind in ("act", "ack", "tx"):
             _check_message(kind, key, event, change)
@@ -313,23 +296,14 @@ def test_the_world_server_survives_any_sequence_of_inputs(
         else:  # gone, join, stats: no message to count in an unkeyed run
             assert (change.rejected, change.late) == (0, 0), (kind, change)
         if query is not None:
-            assert len(query.replies) + len(query.errors) == 1
-        server._apply_joins()
-    for transmission in server.transmissions:
+            replies = [out for out in outputs if isinstance(out, Reply | ReplyError)]
+            assert [reply.query for reply in replies] == [query]
+        server.roster.apply_joins()
+    for transmission in server.intake.transmissions:
         assert server.world.is_sender(transmission.sender)
     assert set(server.world.live_robots()) <= {0, 1}
     assert set(server.world.beacons()) <= {"nest", "other"}
-    assert server.assigned <= {0, 1}
-
-
-class _Session:
-    """Takes the world's publications (a closed tick publishes senses, radio, the clock)."""
-
-    def put(self, *args: object, **kwargs: object) -> None:
-        pass
-
-    def declare_publisher(self, *args: object, **kwargs: object) -> _Session:
-        return self
+    assert server.roster.assigned <= {0, 1}
 
 
 @pytest.fixture(scope="module", params=[False, True], ids=["unkeyed", "keyed"])

@@ -12,9 +12,10 @@ from plumbing.inbox import BoundedInbox
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.node import robot_node as node
 from wire import auth, guard, protocol
+from world_server.core.coordinator import Coordinator
+from world_server.core.events import Event as WorldEvent
+from world_server.core.events import EventKind
 from world_server.core.world import Transmission, World, WorldConfig
-from world_server.server.world_server import Event as WorldEvent
-from world_server.server.world_server import WorldServer
 
 SECRET = bytes(range(32))
 
@@ -121,37 +122,47 @@ def test_a_keyed_robot_holds_nothing_without_its_key() -> None:
 # --- the world --------------------------------------------------------------------------
 
 
-def _world_server(keyring: auth.Keyring | None = None) -> WorldServer:
+def _world_server(keyring: auth.Keyring | None = None) -> Coordinator:
     world = World(WorldConfig(run="guard", num_sites=4, num_robots=2))
-    server = WorldServer(None, world, protocol.Keys("guard"), keyring=keyring)  # type: ignore[arg-type]
+    server = Coordinator(
+        world,
+        protocol.Keys("guard"),
+        lambda output: None,
+        stall_timeout=5.0,
+        start_timeout=60.0,
+        state_every=10,
+        keyring=keyring,
+    )
     world.join_robot(0)
     world.join_robot(1)
-    server.barrier.open(0, ["robot/0", "robot/1"])
+    server.intake.barrier.open(0, ["robot/0", "robot/1"])
     return server
 
 
-def _tx(server: WorldServer, sender: int, seq: int, keyring: auth.Keyring) -> WorldEvent:
+def _tx(server: Coordinator, sender: int, seq: int, keyring: auth.Keyring) -> WorldEvent:
     key = server.keys.radio_tx(sender)
     payload = b'{"kind":"opinion"}'
     meta = protocol.encode(protocol.RadioTxMeta(v=1, tick=0, seq=seq))
-    return WorldEvent("tx", key, payload, keyring.seal(f"robot/{sender}", key, payload, meta))
+    return WorldEvent(
+        EventKind.TX, key, payload, keyring.seal(f"robot/{sender}", key, payload, meta)
+    )
 
 
 def test_the_world_takes_a_robots_transmission_once_per_tick() -> None:
     keyring = auth.Keyring(secret=SECRET)
     server = _world_server(keyring)
-    server._handle(_tx(server, 0, 1, keyring))
-    server._handle(_tx(server, 0, 1, keyring))  # the same message again: a replay
-    server._handle(_tx(server, 0, 2, keyring))
-    assert [(t.sender, t.seq) for t in server.transmissions] == [("0", 1), ("0", 2)]
+    server.take(_tx(server, 0, 1, keyring), 0.0)
+    server.take(_tx(server, 0, 1, keyring), 0.0)  # the same message again: a replay
+    server.take(_tx(server, 0, 2, keyring), 0.0)
+    assert [(t.sender, t.seq) for t in server.intake.transmissions] == [("0", 1), ("0", 2)]
     assert server.counters.rejected == 1 and server.world.radio.rejected == 1
 
 
 @pytest.mark.parametrize("ident", ["2", "99999", "01", "-1", "x"])
 def test_the_world_refuses_a_robot_token_outside_its_swarm(ident: str) -> None:
     server = _world_server()
-    server._handle(WorldEvent("alive", f"{server.keys.prefix}/alive/robot/{ident}"))
-    server._apply_joins()
+    server.take(WorldEvent(EventKind.ALIVE, f"{server.keys.prefix}/alive/robot/{ident}"), 0.0)
+    server.roster.apply_joins()
     assert server.world.live_robots() == [0, 1]
     assert server.counters.rejected == 1
 

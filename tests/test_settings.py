@@ -29,7 +29,7 @@ from world_server.core.radio import RadioConfig
 from world_server.core.world import WorldConfig
 from world_server.recorder import recorder_process as recorder_main
 from world_server.recording.description import RunDescription
-from world_server.server import world_server as server
+from world_server.server import cli as server
 from world_server.server.options import WORLD_SERVER_OPTIONS, WorldServerConfig
 
 CONFIGS = [

@@ -272,7 +272,7 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run(tmp_path: Path
     from deploy.inmemory import run_in_memory
     from robot_agent.node import options
     from robot_agent.node import robot_node as node
-    from world_server.server import world_server as server
+    from world_server.server import cli as server
 
     seed, robots, sites = 5, 6, 6
     common = ["--seed", str(seed), "--robots", str(robots), "--sites", str(sites)]

@@ -2,6 +2,6 @@
 
 import sys
 
-from world_server.server.world_server import main
+from world_server.server.cli import main
 
 sys.exit(main())

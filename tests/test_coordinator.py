@@ -1,0 +1,583 @@
+"""The world's coordinator without Zenoh (world_server/core/coordinator.py): fed events and
+a fake clock, it opens and closes ticks, takes joins and departures, learns and forgets
+batch routes, refuses what it must, and answers queries; all it does comes out as data."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import pytest
+
+from wire import auth, batch, names, protocol
+from wire.names import Role
+from world_server.core.coordinator import NO_ID_LEFT, UNAUTHENTICATED, Coordinator
+from world_server.core.events import (
+    Answered,
+    Event,
+    EventKind,
+    Mark,
+    Moment,
+    Opened,
+    Output,
+    Publish,
+    Reply,
+    ReplyError,
+)
+from world_server.core.roster import MAX_BEACONS, SUSPEND_AFTER
+from world_server.core.world import World, WorldConfig
+from world_server.server.timeline import TickTimeline
+
+KEYS = protocol.Keys("coord")
+KEYRING = auth.Keyring(secret=bytes(range(32)))
+STALL = 5.0
+START = 60.0
+NONCE = bytes(range(16))
+
+
+@dataclass
+class Harness:
+    coordinator: Coordinator
+    outputs: list[Output] = field(default_factory=list)
+
+    @property
+    def world(self) -> World:
+        return self.coordinator.world
+
+    def published(self, key: str) -> list[Publish]:
+        return [out for out in self.outputs if isinstance(out, Publish) and out.key == key]
+
+    def clocks(self) -> list[int]:
+        """The ticks the world's clock announced, in order."""
+        return [
+            protocol.decode(out.payload, protocol.Clock).tick
+            for out in self.published(KEYS.world_clock)
+        ]
+
+
+def harness(
+    robots: int = 2,
+    *,
+    clock: Literal["lockstep", "realtime"] = "lockstep",
+    expect_robots: int | None = None,
+    expect_beacons: int = 1,
+    traced: bool = False,
+) -> Harness:
+    world = World(WorldConfig(run="coord", num_sites=4, num_robots=robots, clock=clock))
+    outputs: list[Output] = []
+    coordinator = Coordinator(
+        world,
+        KEYS,
+        outputs.append,
+        stall_timeout=STALL,
+        start_timeout=START,
+        state_every=10,
+        expect_robots=robots if expect_robots is None else expect_robots,
+        expect_beacons=expect_beacons,
+        keyring=KEYRING,
+        traced=traced,
+    )
+    return Harness(coordinator, outputs)
+
+
+def started(robots: int = 2, *, now: float = 0.0, **options: Any) -> Harness:
+    """A run that started at ``now`` with robots 0..robots-1 and the nest beacon."""
+    h = harness(robots, **options)
+    h.coordinator.begin(now)
+    for robot in range(robots):
+        h.coordinator.handle(alive(Role.ROBOT, str(robot)), now)
+    h.coordinator.handle(alive(Role.BEACON, "nest"), now)
+    assert h.coordinator.phase == "running" and h.world.tick == 0
+    return h
+
+
+# --- events, as the robots and the beacon send them ---------------------------------------
+
+
+def act(
+    robot: int,
+    tick: int,
+    *,
+    radio_tx: int = 0,
+    capture: bool = False,
+    wheels: float = 0.1,
+    keyring: auth.Keyring | None = KEYRING,
+) -> Event:
+    key = KEYS.act(robot)
+    payload = protocol.encode(
+        protocol.Act(v=1, tick=tick, left=wheels, right=wheels, capture=capture, radio_tx=radio_tx)
+    )
+    attachment = keyring.seal(names.robot_identity(robot), key, payload) if keyring else None
+    return Event(EventKind.ACT, key, payload, attachment)
+
+
+def batch_of(lead: int, *acts: Event) -> Event:
+    entries = [
+        batch.Entry(KEYS.robot_of(event.key) or 0, event.payload, event.attachment)
+        for event in acts
+    ]
+    return Event(EventKind.ACTS, KEYS.host_act(lead), batch.encode(entries))
+
+
+def ack(name: str, tick: int, radio_tx: int = 0) -> Event:
+    key = KEYS.beacon_ack(name)
+    payload = protocol.encode(protocol.Ack(v=1, tick=tick, radio_tx=radio_tx))
+    return Event(
+        EventKind.ACK, key, payload, KEYRING.seal(names.beacon_identity(name), key, payload)
+    )
+
+
+def tx(sender: str, tick: int, seq: int, keyring: auth.Keyring = KEYRING) -> Event:
+    key = KEYS.radio_tx(sender)
+    payload = b'{"kind":"beacon","v":1,"id":"nest","seq":1}'
+    meta = protocol.encode(protocol.RadioTxMeta(v=1, tick=tick, seq=seq))
+    identity = names.sender_identity(sender)
+    assert identity is not None
+    return Event(EventKind.TX, key, payload, keyring.seal(identity, key, payload, meta))
+
+
+def alive(role: Role, ident: str) -> Event:
+    return Event(EventKind.ALIVE, KEYS.alive(role, ident))
+
+
+def gone(role: Role, ident: str) -> Event:
+    return Event(EventKind.GONE, KEYS.alive(role, ident))
+
+
+def query(kind: EventKind, key: str, identity: str, keyring: auth.Keyring = KEYRING) -> Event:
+    attachment = auth.query_seal(keyring, identity, key, b"", NONCE)
+    return Event(kind, key, b"", attachment, query=object())
+
+
+def answer_all(h: Harness, tick: int, now: float = 0.0, robots: tuple[int, ...] = (0, 1)) -> None:
+    for robot in robots:
+        h.coordinator.handle(act(robot, tick), now)
+    h.coordinator.handle(ack("nest", tick), now)
+
+
+# --- the start ------------------------------------------------------------------------
+
+
+def test_the_run_starts_when_the_expected_robots_and_beacons_are_live() -> None:
+    h = harness()
+    h.coordinator.begin(0.0)
+    h.coordinator.handle(alive(Role.ROBOT, "0"), 1.0)
+    h.coordinator.handle(alive(Role.ROBOT, "1"), 1.0)
+    assert h.coordinator.phase == "waiting" and h.outputs == []  # the beacon is expected
+    assert h.coordinator.deadline == START
+    h.coordinator.handle(alive(Role.BEACON, "nest"), 2.0)
+    assert h.coordinator.phase == "running"
+    assert h.clocks() == [0]
+    assert [len(h.published(KEYS.sense(robot))) for robot in (0, 1)] == [1, 1]
+    assert len(h.published(KEYS.world_state)) == 1  # tick 0: every state_every ticks
+    assert h.coordinator.deadline == 2.0 + STALL
+
+
+def test_the_start_timeout_starts_with_the_robots_there_are_but_not_with_none() -> None:
+    h = harness()
+    h.coordinator.begin(0.0)
+    h.coordinator.wake(START)
+    assert h.coordinator.phase == "waiting"  # no robot: nothing to run
+    assert h.coordinator.deadline is None  # only a token can start it now
+    h.coordinator.handle(alive(Role.ROBOT, "1"), START + 3.0)
+    assert h.coordinator.phase == "running" and h.world.live_robots() == [1]
+    assert h.clocks() == [0]
+
+
+def test_a_stop_publishes_the_last_state_of_a_running_world_only() -> None:
+    waiting = harness()
+    waiting.coordinator.begin(0.0)
+    waiting.coordinator.handle(Event(EventKind.STOP), 1.0)
+    assert waiting.coordinator.stopped and waiting.outputs == []
+    h = started()
+    h.outputs.clear()
+    h.coordinator.handle(Event(EventKind.STOP), 1.0)
+    assert h.coordinator.stopped and len(h.published(KEYS.world_state)) == 1
+    h.coordinator.handle(alive(Role.ROBOT, "0"), 2.0)  # nothing is taken after a stop
+    assert h.coordinator.deadline is None and h.coordinator.roster.pending == []
+
+
+# --- lockstep -------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("radio_first", [False, True])
+def test_a_tick_closes_only_with_every_answer_and_every_announced_radio_message(
+    radio_first: bool,
+) -> None:
+    h = started()
+    if radio_first:  # a radio message may overtake its sender's act
+        h.coordinator.handle(tx("0", 0, seq=1), 0.1)
+    h.coordinator.handle(act(0, 0, radio_tx=1), 0.1)
+    h.coordinator.handle(act(1, 0), 0.1)
+    assert h.world.tick == 0  # the beacon has not answered
+    h.coordinator.handle(ack("nest", 0), 0.1)
+    if not radio_first:
+        assert h.world.tick == 0  # robot 0's announced message has not arrived
+        h.coordinator.handle(tx("0", 0, seq=1), 0.1)
+    assert h.world.tick == 1 and h.clocks() == [0, 1]
+    assert h.world.radio.counters.sent == 1
+    assert h.coordinator.deadline == 0.1 + STALL
+
+
+def test_the_stall_deadline_closes_a_tick_without_a_silent_robot() -> None:
+    h = started()
+    h.coordinator.handle(act(0, 0), 1.0)
+    h.coordinator.handle(ack("nest", 0), 1.0)
+    assert h.coordinator.deadline == STALL
+    h.coordinator.wake(STALL - 0.01)
+    assert h.world.tick == 0 and h.coordinator.counters.stalls == 0
+    h.coordinator.wake(STALL)
+    assert h.world.tick == 1
+    assert h.coordinator.counters.stalls == 1
+    assert h.coordinator.counters.missed == {"robot/1": 1}
+    assert h.coordinator.deadline == 2 * STALL
+
+
+def test_a_robot_silent_for_suspend_after_ticks_is_not_waited_for_until_it_answers() -> None:
+    h = started()
+    now = 0.0
+    for tick in range(SUSPEND_AFTER):
+        answer_all(h, tick, now, robots=(0,))
+        now = h.coordinator.deadline or 0.0
+        h.coordinator.wake(now)
+    assert h.world.tick == SUSPEND_AFTER
+    assert h.coordinator.counters.stalls == SUSPEND_AFTER
+    # Tick 3 closes as soon as the others answered: robot 1 is not waited for.
+    answer_all(h, SUSPEND_AFTER, now, robots=(0,))
+    assert h.world.tick == SUSPEND_AFTER + 1 and h.coordinator.counters.stalls == SUSPEND_AFTER
+    # Its answer to a tick it was not waited for is late, but it is waited for again.
+    h.coordinator.handle(act(1, SUSPEND_AFTER + 1), now)
+    assert h.coordinator.counters.late == 1
+    assert h.world.tick == SUSPEND_AFTER + 1
+    answer_all(h, SUSPEND_AFTER + 1, now, robots=(0,))
+    assert h.world.tick == SUSPEND_AFTER + 2
+    assert "robot/1" in h.coordinator.intake.barrier.answers
+
+
+def test_a_join_takes_effect_when_the_tick_under_way_closes() -> None:
+    h = started()
+    h.coordinator.handle(gone(Role.ROBOT, "1"), 0.0)
+    answer_all(h, 0, robots=(0,))
+    assert h.world.tick == 1 and h.world.live_robots() == [0]
+    h.outputs.clear()
+    h.coordinator.handle(alive(Role.ROBOT, "1"), 0.5)
+    assert h.world.live_robots() == [0]  # not during tick 1
+    assert "robot/1" not in h.coordinator.intake.barrier.answers
+    h.coordinator.handle(act(1, 1), 0.5)  # a newcomer's answer to a tick it is not in
+    assert h.coordinator.counters.late == 1
+    answer_all(h, 1, 0.5, robots=(0,))
+    assert h.world.tick == 2 and h.world.live_robots() == [0, 1]
+    sense = protocol.decode(h.published(KEYS.sense(1))[0].payload, protocol.Sense)
+    assert sense.tick == 2
+    assert sorted(h.coordinator.intake.barrier.answers) == ["beacon/nest", "robot/0", "robot/1"]
+
+
+def test_with_nobody_left_the_world_idles_and_the_next_token_closes_the_tick_at_once() -> None:
+    h = started()
+    for event in (gone(Role.ROBOT, "0"), gone(Role.ROBOT, "1"), gone(Role.BEACON, "nest")):
+        h.coordinator.handle(event, 1.0)
+    for now in (10.0, 100.0, 1000.0):
+        h.coordinator.wake(now)
+        assert h.coordinator.deadline == now + STALL  # nothing to wait for: no stall
+    assert h.world.tick == 0 and h.coordinator.counters.stalls == 0
+    h.coordinator.handle(alive(Role.ROBOT, "1"), 1001.0)
+    assert h.world.tick == 1 and h.world.live_robots() == [1]
+    sense = protocol.decode(h.published(KEYS.sense(1))[-1].payload, protocol.Sense)
+    assert sense.tick == 1
+    assert list(h.coordinator.intake.barrier.answers) == ["robot/1"]
+
+
+def test_departures_are_counted_once_for_robots_and_beacons_taking_part() -> None:
+    h = started(3)
+    h.coordinator.handle(gone(Role.ROBOT, "1"), 0.0)
+    h.coordinator.handle(gone(Role.ROBOT, "1"), 0.0)  # not live any more: not again
+    h.coordinator.handle(gone(Role.BEACON, "nest"), 0.0)
+    h.coordinator.handle(gone(Role.BEACON, "other"), 0.0)  # never took part
+    h.coordinator.handle(gone(Role.WORLD, "abc"), 0.0)  # not a participant's token
+    assert h.coordinator.counters.departures == 2
+    assert h.coordinator.state().departures == 2
+    # The tick under way stops waiting for them.
+    h.coordinator.handle(act(0, 0), 0.0)
+    h.coordinator.handle(act(2, 0), 0.0)
+    assert h.world.tick == 1 and h.coordinator.counters.stalls == 0
+
+
+def test_more_than_max_beacons_beacons_are_refused() -> None:
+    h = harness(expect_beacons=MAX_BEACONS)
+    h.coordinator.begin(0.0)
+    for index in range(MAX_BEACONS + 1):
+        h.coordinator.handle(alive(Role.BEACON, f"b{index}"), 0.0)
+    h.coordinator.handle(alive(Role.BEACON, "b0"), 0.0)  # one of them again: still in
+    assert len(h.world.beacons()) == MAX_BEACONS and f"b{MAX_BEACONS}" not in h.world.beacons()
+    assert h.coordinator.counters.rejected == 1
+
+
+# --- batch routes ---------------------------------------------------------------------
+
+
+def test_a_batch_route_is_learnt_from_current_acts_and_forgotten_when_the_lead_goes() -> None:
+    h = started()
+    h.coordinator.handle(batch_of(0, act(0, 0), act(1, 0)), 0.0)
+    h.coordinator.handle(ack("nest", 0), 0.0)
+    assert h.world.tick == 1 and h.coordinator.roster.hosts == {0: 0, 1: 0}
+    batches = h.published(KEYS.host_sense(0))
+    assert len(batches) == 1 and batches[0].steady
+    entries = batch.decode(batches[0].payload)
+    assert [entry.robot for entry in entries] == [0, 1]
+    for entry in entries:  # each entry is the robot's own message, its key's tag
+        robot_keyring = KEYRING.only([names.robot_identity(entry.robot)])
+        key = KEYS.sense(entry.robot)
+        auth.unseal(
+            robot_keyring, names.robot_identity(entry.robot), key, entry.payload, entry.attachment
+        )
+        assert protocol.decode(entry.payload, protocol.Sense).tick == 1
+    assert len(h.published(KEYS.sense(1))) == 1  # tick 0's, on its own key
+    h.coordinator.handle(gone(Role.ROBOT, "0"), 0.0)  # the lead's process is gone
+    assert h.coordinator.roster.hosts == {}
+    h.coordinator.handle(act(1, 1), 0.0)
+    h.coordinator.handle(ack("nest", 1), 0.0)
+    assert h.world.tick == 2
+    assert len(h.published(KEYS.host_sense(0))) == 1  # no batch for tick 2
+    assert protocol.decode(h.published(KEYS.sense(1))[-1].payload, protocol.Sense).tick == 2
+
+
+def test_an_old_act_copied_into_a_batch_teaches_no_route() -> None:
+    h = started()
+    stale = act(0, 0)
+    h.coordinator.handle(stale, 0.0)
+    answer_all(h, 0, robots=(1,))
+    assert h.world.tick == 1
+    # Robot 1's process replays robot 0's act of tick 0 in a batch of its own.
+    h.coordinator.handle(batch_of(1, stale), 0.0)
+    assert h.coordinator.roster.hosts == {} and h.coordinator.counters.late == 1
+    answer_all(h, 1)
+    assert h.published(KEYS.host_sense(1)) == []
+    assert protocol.decode(h.published(KEYS.sense(0))[-1].payload, protocol.Sense).tick == 2
+
+
+# --- real time ------------------------------------------------------------------------
+
+
+def test_real_time_closes_ticks_on_the_pacers_clock_holding_commands_capturing_once() -> None:
+    h = started(1, now=100.0, clock="realtime")
+    assert h.coordinator.deadline == pytest.approx(100.1)
+    h.coordinator.handle(act(0, 0, capture=True, wheels=0.5), 100.05)
+    h.coordinator.wake(100.09)
+    assert h.world.tick == 0
+    h.coordinator.wake(100.11)
+    assert h.world.tick == 1 and h.coordinator.deadline == pytest.approx(100.2)
+    assert len(h.published(KEYS.camera(0))) == 1
+    held = h.coordinator.intake.acts[0]
+    assert (held.left, held.right, held.capture) == (0.5, 0.5, False)  # the command holds
+    x1 = h.world.physics.pose(0)[:2]
+    h.coordinator.wake(100.21)
+    assert h.world.tick == 2
+    assert len(h.published(KEYS.camera(0))) == 1  # the capture happened once
+    assert h.world.physics.pose(0)[:2] != x1  # still driving
+
+
+def test_real_time_ignores_the_acts_of_robots_not_taking_part() -> None:
+    h = started(2, now=0.0, clock="realtime")
+    h.coordinator.handle(gone(Role.ROBOT, "1"), 0.0)
+    h.coordinator.handle(act(1, 0), 0.01)
+    assert h.coordinator.intake.acts == {}
+    assert (h.coordinator.counters.rejected, h.coordinator.counters.late) == (0, 0)
+
+
+# --- refusals -------------------------------------------------------------------------
+
+
+OTHER_RUN = auth.Keyring(secret=bytes(32))
+ACT_PAYLOAD = act(0, 0).payload
+
+
+def sealed(kind: EventKind, key: str, payload: bytes, identity: str) -> Event:
+    return Event(kind, key, payload, KEYRING.seal(identity, key, payload))
+
+
+@pytest.mark.parametrize(
+    "event",
+    [
+        act(0, 0, keyring=OTHER_RUN),  # forged: another run's key
+        act(0, 0, keyring=None),  # no tag in a keyed run
+        sealed(EventKind.ACT, KEYS.act(0), ACT_PAYLOAD, "robot/1"),  # robot 1 speaking for 0
+        sealed(EventKind.ACT, KEYS.act(7), ACT_PAYLOAD, "robot/7"),  # outside the swarm
+        sealed(EventKind.ACT, KEYS.act(0), b"{not json", "robot/0"),
+        act(0, 5),  # a tick that has not begun
+        batch_of(7, act(0, 0)),  # a lead outside the swarm
+        Event(EventKind.ACTS, KEYS.host_act(0), b"BNB1 cut short"),
+        Event(EventKind.ACK, KEYS.beacon_ack("7"), ack("nest", 0).payload),  # no beacon name
+        Event(EventKind.ACK, KEYS.beacon_ack("nest"), ack("nest", 0).payload),  # untagged
+        tx("99", 0, 1),  # no robot of the swarm
+        tx("0", 0, 1, keyring=OTHER_RUN),
+        tx("0", 3, 1),  # radio for a tick that has not begun
+        alive(Role.ROBOT, "2"),  # a token outside a swarm of two
+        alive(Role.BEACON, "07"),  # all digits: a robot's name, not a beacon's
+        Event(EventKind.REFUSED, KEYS.world_info, b"no authentication tag"),
+    ],
+)
+def test_forged_and_foreign_inputs_are_refused_and_counted(event: Event) -> None:
+    h = started()
+    h.coordinator.handle(event, 0.1)
+    assert h.coordinator.counters.rejected == 1
+    assert h.coordinator.counters.late == 0
+    assert h.coordinator.intake.acts == {} and h.coordinator.intake.transmissions == []
+    assert h.world.live_robots() == [0, 1] and h.world.beacons() == ["nest"]
+    if event.kind == EventKind.TX:  # the radio counts the medium's refusals too
+        assert h.world.radio.counters.rejected == 1
+    answer_all(h, 0, 0.1)  # the tick closes as ever: nothing was taken
+    assert h.world.tick == 1 and h.coordinator.counters.stalls == 0
+
+
+def test_a_radio_message_is_taken_once_and_at_most_max_tx_per_tick() -> None:
+    h = started()
+    h.coordinator.handle(tx("0", 0, 1), 0.0)
+    h.coordinator.handle(tx("0", 0, 1), 0.0)  # a replay
+    assert [(t.sender, t.seq) for t in h.coordinator.intake.transmissions] == [("0", 1)]
+    assert h.coordinator.counters.rejected == 1 and h.world.radio.counters.rejected == 1
+
+
+def test_the_inputs_dropped_by_the_transport_are_counted() -> None:
+    h = started()
+    h.coordinator.dropped(3)
+    h.coordinator.dropped(0)
+    assert h.coordinator.counters.rejected == 3 and h.coordinator.state().rejected == 3
+
+
+# --- queries --------------------------------------------------------------------------
+
+
+def _reply(h: Harness, event: Event) -> Reply | ReplyError:
+    h.outputs.clear()
+    h.coordinator.handle(event, 0.0)
+    replies = [out for out in h.outputs if isinstance(out, Reply | ReplyError)]
+    assert len(replies) == 1 and replies[0].query is event.query
+    return replies[0]
+
+
+def _join(h: Harness, identity: str = "robot/0") -> int | bytes:
+    reply = _reply(h, query(EventKind.JOIN, KEYS.world_join, identity))
+    if isinstance(reply, ReplyError):
+        return reply.reason
+    auth.reply_open(
+        KEYRING.only([identity]), identity, reply.key, reply.payload, reply.attachment, nonce=NONCE
+    )
+    return protocol.decode(reply.payload, protocol.JoinReply).id
+
+
+def test_join_hands_out_the_smallest_id_never_given_then_one_whose_robot_left() -> None:
+    h = harness()
+    h.coordinator.begin(0.0)
+    h.coordinator.handle(alive(Role.ROBOT, "1"), 0.0)  # robot 1 runs: its id is taken
+    assert _join(h) == 0
+    h.coordinator.handle(alive(Role.ROBOT, "0"), 0.0)
+    assert _join(h) == NO_ID_LEFT  # both robots run
+    h.coordinator.handle(gone(Role.ROBOT, "1"), 0.0)
+    assert _join(h) == 1  # a replacement for the robot that left
+    assert h.coordinator.counters.rejected == 0
+
+
+def test_stats_answers_the_world_state_to_the_asker() -> None:
+    h = started()
+    h.coordinator.handle(act(0, 0, keyring=OTHER_RUN), 0.0)
+    reply = _reply(h, query(EventKind.STATS, KEYS.world_stats, names.LAUNCHER))
+    assert isinstance(reply, Reply)
+    auth.reply_open(
+        KEYRING, names.LAUNCHER, reply.key, reply.payload, reply.attachment, nonce=NONCE
+    )
+    state = protocol.decode(reply.payload, protocol.WorldState)
+    assert (state.tick, state.rejected, len(state.robots)) == (0, 1, 2)
+
+
+@pytest.mark.parametrize("kind", [EventKind.JOIN, EventKind.STATS])
+def test_an_unauthenticated_query_is_refused_and_counted(kind: EventKind) -> None:
+    h = started()
+    key = KEYS.world_join if kind == EventKind.JOIN else KEYS.world_stats
+    forged = query(kind, key, "robot/0", keyring=OTHER_RUN)
+    assert _reply(h, forged) == ReplyError(forged.query, UNAUTHENTICATED)
+    assert h.coordinator.counters.rejected == 1 and h.coordinator.roster.assigned == {0, 1}
+
+
+# --- what goes out --------------------------------------------------------------------
+
+
+def test_what_the_world_sends_a_robot_carries_that_robots_tag() -> None:
+    h = started()
+    h.coordinator.handle(act(0, 0, capture=True), 0.0)
+    answer_all(h, 0, robots=(1,))
+    robot_keyring = KEYRING.only(["robot/0"])
+    for key, kind in ((KEYS.sense(0), protocol.Sense), (KEYS.camera(0), None)):
+        message = h.published(key)[-1]
+        metadata = auth.unseal(robot_keyring, "robot/0", key, message.payload, message.attachment)
+        if kind is not None:
+            assert protocol.decode(message.payload, kind).tick == 1
+            assert message.steady
+        else:
+            assert protocol.decode(metadata or b"", protocol.CameraMeta).tick == 1
+            assert not message.steady
+    clock = h.published(KEYS.world_clock)[-1]
+    auth.unseal(KEYRING, names.WORLD, KEYS.world_clock, clock.payload, clock.attachment)
+
+
+def test_the_timeline_comes_out_in_the_order_of_the_ticks_work() -> None:
+    h = started(traced=True)
+    h.outputs.clear()
+    answer_all(h, 0, now=0.25)
+    timeline = [out for out in h.outputs if isinstance(out, Mark | Opened | Answered)]
+    assert timeline == [
+        Answered("robot/0", 0.0, 0.25),
+        Answered("robot/1", 0.0, 0.25),
+        Answered("beacon/nest", 0.0, 0.25),
+        Mark(Moment.CLOSE_START),
+        Mark(Moment.ADVANCED),
+        Mark(Moment.DELIVERED),
+        Mark(Moment.OPEN_START),
+        Opened(tick=1, robots=2, frames=0, rx=0, batched=0),
+        Mark(Moment.OPENED),
+    ]
+    untraced = started()
+    answer_all(untraced, 0)
+    assert not any(isinstance(out, Mark | Opened | Answered) for out in untraced.outputs)
+
+
+class _Writer:
+    def __init__(self) -> None:
+        self.lines: list[dict[str, Any]] = []
+
+    def write(self, **fields: Any) -> None:
+        self.lines.append(fields)
+
+    def close(self) -> None:
+        pass
+
+
+def test_the_trace_line_of_a_tick_holds_its_opening_answers_and_closing() -> None:
+    h = started(traced=True)
+    writer = _Writer()
+    timeline = TickTimeline(writer)  # type: ignore[arg-type]
+    for output in h.outputs:
+        if isinstance(output, Mark | Opened | Answered):
+            timeline.note(output)
+    h.outputs.clear()
+    answer_all(h, 0, now=0.25)
+    for output in h.outputs:
+        if isinstance(output, Mark | Opened | Answered):
+            timeline.note(output)
+    [line] = writer.lines
+    assert list(line) == [
+        "tick",
+        "robots",
+        "frames",
+        "rx",
+        "batched",
+        "open_start",
+        "opened",
+        "answers",
+        "close_start",
+        "advanced",
+        "delivered",
+    ]
+    assert (line["tick"], line["robots"]) == (0, 2)
+    assert [who for who, _, _ in line["answers"]] == ["robot/0", "robot/1", "beacon/nest"]
+    assert line["open_start"] <= line["opened"] <= line["close_start"]
+    assert line["close_start"] <= line["advanced"] <= line["delivered"]

@@ -1,0 +1,399 @@
+"""The world's coordinator: one run's ticks as a state machine fed events and a clock (no I/O).
+
+It is fed ``Event``s with the time each is handled at, and ``wake`` calls when its
+``deadline`` passes; it gives back ``Output``s (messages to publish, replies to queries,
+the timeline of ``--trace``) through its outbox as soon as each is made. It never reads
+a clock: every time it knows is one it was given.
+
+Its life: it waits for the expected robots and beacons (or ``start_timeout``), opens
+tick 0, then closes and opens ticks. Lockstep closes a tick when every participant
+answered it and every radio message they announced arrived, or when the stall deadline
+passes (a participant that misses SUSPEND_AFTER ticks in a row is not waited for until it
+answers again); with nobody left it idles, and the next token that comes back closes the
+tick at once. Real time closes a tick when the pacer says so, with whatever arrived.
+Closing advances the World and delivers the radio; opening sends the clock first, the
+camera frames, each robot's senses (in its process's batch if it answers in batches),
+and every ``state_every`` ticks the world's state.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from collections.abc import Callable
+from enum import StrEnum
+
+from wire import auth, batch, names, protocol
+from wire.names import Role
+from world_server.core.clock import Pacer
+from world_server.core.counters import Counters
+from world_server.core.events import (
+    Answered,
+    Event,
+    EventKind,
+    Mark,
+    Moment,
+    Opened,
+    Outbox,
+    Publish,
+    Reply,
+    ReplyError,
+)
+from world_server.core.intake import TickIntake
+from world_server.core.roster import SUSPEND_AFTER, Roster
+from world_server.core.world import World
+
+log = logging.getLogger("world_server")
+
+UNAUTHENTICATED = b"unauthenticated query"
+NO_ID_LEFT = b"no robot id left"
+
+
+class Phase(StrEnum):
+    WAITING = "waiting"  # for the expected robots and beacons
+    RUNNING = "running"  # ticking
+    STOPPED = "stopped"
+
+
+class Coordinator:
+    """Runs the ticks of one World."""
+
+    def __init__(
+        self,
+        world: World,
+        keys: protocol.Keys,
+        outbox: Outbox,
+        *,
+        stall_timeout: float,
+        start_timeout: float,
+        state_every: int,
+        speed: float = 1.0,
+        expect_robots: int = 0,
+        expect_beacons: int = 0,
+        keyring: auth.Keyring | None = None,
+        traced: bool = False,
+    ) -> None:
+        """The run starts once ``expect_robots`` robots and ``expect_beacons`` beacons are
+        live (0: as soon as one robot is), or ``start_timeout`` after ``begin`` with at
+        least one robot; ``traced`` adds the timeline outputs (Mark, Opened, Answered)."""
+        self.world = world
+        self.keys = keys
+        self.outbox = outbox
+        self.keyring = keyring  # None: an unauthenticated run
+        self.lockstep = world.config.clock == "lockstep"
+        self.pacer = Pacer(world.config.dt, speed)
+        self.stall_timeout = stall_timeout
+        self.start_timeout = start_timeout
+        self.state_every = state_every
+        self.expect_robots = expect_robots
+        self.expect_beacons = expect_beacons
+        self.traced = traced
+        self.counters = Counters()
+        self.roster = Roster(world, keys, self.counters)
+        self.intake = TickIntake(world, keys, self.counters, keyring)
+        self.phase = Phase.WAITING
+        self.start_deadline = 0.0
+        self.stall_deadline = 0.0  # lockstep: when the tick under way closes without all
+        self.now = 0.0  # the time of the last event or wake-up
+        self._handlers: dict[EventKind, Callable[[Event], None]] = {
+            EventKind.ACT: self._act,
+            EventKind.ACTS: self._acts,
+            EventKind.ACK: self._ack,
+            EventKind.TX: self.intake.take_tx,
+            EventKind.ALIVE: lambda event: self.roster.appeared(event.key),
+            EventKind.GONE: self._gone,
+            EventKind.STATS: self._stats,
+            EventKind.JOIN: self._join,
+            EventKind.REFUSED: lambda event: self.counters.reject(
+                event.key, event.payload.decode(errors="replace")
+            ),
+            EventKind.STOP: lambda event: self.stop(),
+        }
+
+    # --- fed from outside --------------------------------------------------------------
+
+    def begin(self, now: float) -> None:
+        """Start waiting for the expected robots and beacons."""
+        self.now = now
+        self.start_deadline = now + self.start_timeout
+        log.info(
+            "waiting for %d robot(s) and %d beacon(s)", self.expect_robots, self.expect_beacons
+        )
+        self.wake(now)
+
+    def handle(self, event: Event, now: float) -> None:
+        """Take one event handled at ``now``, then close and open ticks as due."""
+        self.take(event, now)
+        self.wake(now)
+
+    def take(self, event: Event, now: float) -> None:
+        """Take one event handled at ``now``, without closing a tick."""
+        self.now = now
+        if self.phase != Phase.STOPPED:
+            self._handlers[event.kind](event)
+
+    def wake(self, now: float) -> None:
+        """Time is ``now``: start, close and open ticks as due."""
+        self.now = now
+        if self.phase == Phase.WAITING:
+            self._wait(now)
+        elif self.phase == Phase.RUNNING:
+            if self.lockstep:
+                self._lockstep(now)
+            elif now >= self.pacer.deadline(self.world.tick, now):
+                self.close_tick()
+
+    def dropped(self, count: int) -> None:
+        """The transport dropped ``count`` messages on arrival (too big, or over its cap)."""
+        self.counters.dropped(count)
+
+    def stop(self) -> None:
+        """Stop; a running world publishes its state a last time."""
+        if self.phase == Phase.RUNNING:
+            self._publish_state()
+        self.phase = Phase.STOPPED
+
+    @property
+    def stopped(self) -> bool:
+        return self.phase == Phase.STOPPED
+
+    @property
+    def deadline(self) -> float | None:
+        """When to wake the coordinator if no event comes first; None: only an event."""
+        if self.phase == Phase.WAITING:
+            return self.start_deadline if self.now < self.start_deadline else None
+        if self.phase == Phase.STOPPED:
+            return None
+        if self.lockstep:
+            return self.stall_deadline
+        return self.pacer.deadline(self.world.tick, self.now)
+
+    # --- the start ---------------------------------------------------------------------
+
+    def _wait(self, now: float) -> None:
+        """Start at tick 0 once the expected robots and beacons are live, or once the
+        start timeout passed with at least one robot."""
+        self.roster.apply_joins()
+        robots, beacons = len(self.world.live_robots()), len(self.world.beacons())
+        if robots == 0:
+            return
+        if robots >= self.expect_robots and beacons >= self.expect_beacons:
+            log.info("starting with %d robot(s), %d beacon(s)", robots, beacons)
+        elif now >= self.start_deadline:
+            log.warning(
+                "start timeout: starting with %d of %d robot(s), %d of %d beacon(s)",
+                robots,
+                self.expect_robots,
+                beacons,
+                self.expect_beacons,
+            )
+        else:
+            return
+        self.phase = Phase.RUNNING
+        self._open_tick(self.world.tick, rx_counts={}, frames={})
+        self.stall_deadline = now + self.stall_timeout
+        if not self.lockstep:
+            self.pacer.deadline(self.world.tick, now)  # the pacer's clock starts now
+
+    # --- lockstep ----------------------------------------------------------------------
+
+    def _lockstep(self, now: float) -> None:
+        if (
+            not self.intake.barrier.answers
+            and not self.world.live_robots()
+            and not self.roster.pending
+        ):
+            # Nobody to wait for: idle. Robots that join while nobody is left (every token
+            # went at once: this process or its links were frozen longer than Zenoh's
+            # lease) find the next tick open for them at once: joins take effect when a
+            # tick closes.
+            self.stall_deadline = now + self.stall_timeout
+            return
+        complete = self.intake.barrier.complete
+        if complete or now >= self.stall_deadline:
+            if not complete:
+                self._log_stall()
+            self.close_tick()
+            self.stall_deadline = now + self.stall_timeout
+
+    def _log_stall(self) -> None:
+        self.counters.stalls += 1
+        missing = self.intake.barrier.missing()
+        for who in missing:
+            self.counters.missed[who] = self.counters.missed.get(who, 0) + 1
+            if self.counters.missed[who] == SUSPEND_AFTER:
+                log.warning(
+                    "%s missed %d ticks in a row: not waiting for it until it answers again",
+                    who,
+                    SUSPEND_AFTER,
+                )
+        if self.counters.stalls <= 5 or self.counters.stalls % 100 == 0:
+            log.warning(
+                "tick %d stalled for %.1fs waiting for %s (stall #%d)",
+                self.world.tick,
+                self.stall_timeout,
+                ", ".join(missing[:10]),
+                self.counters.stalls,
+            )
+
+    # --- inputs ------------------------------------------------------------------------
+
+    def _act(self, event: Event) -> None:
+        robot = self.intake.take_act(event)
+        if robot is not None and self.lockstep and self.traced:
+            self._answered(event, names.robot_identity(robot))
+
+    def _acts(self, event: Event) -> None:
+        routes = self.intake.take_acts(event)
+        self.roster.hosts.update(routes)
+        if self.lockstep and self.traced:
+            for robot in routes:
+                self._answered(event, names.robot_identity(robot))
+
+    def _ack(self, event: Event) -> None:
+        who = self.intake.take_ack(event)
+        if who is not None and self.traced:
+            self._answered(event, who)
+
+    def _answered(self, event: Event, who: str) -> None:
+        self.outbox(Answered(who, event.arrived, self.now))
+
+    def _gone(self, event: Event) -> None:
+        token = self.roster.went(event.key)
+        if token is None:
+            return
+        if token.role == Role.ROBOT:
+            robot = int(token.ident)
+            self.intake.leave(names.robot_identity(robot), robot)
+        else:
+            self.intake.leave(names.beacon_identity(token.ident))
+
+    def _asker(self, event: Event) -> tuple[str, bytes] | None:
+        """Who asked the query (identity, nonce); None (rejected, refused) without its
+        asker's tag."""
+        try:
+            return auth.query_open(self.keyring, event.key, event.payload, event.attachment)
+        except auth.AuthError as error:
+            self.counters.reject(event.key, error)
+            self.outbox(ReplyError(event.query, UNAUTHENTICATED))
+            return None
+
+    def _join(self, event: Event) -> None:
+        """Give a robot started with ``--id auto`` an id."""
+        asker = self._asker(event)
+        if asker is None:
+            return
+        robot = self.roster.assign_id()
+        if robot is None:
+            self.outbox(ReplyError(event.query, NO_ID_LEFT))
+            return
+        self._reply(event, asker, protocol.encode(protocol.JoinReply(v=protocol.VERSION, id=robot)))
+
+    def _stats(self, event: Event) -> None:
+        asker = self._asker(event)
+        if asker is not None:
+            self._reply(event, asker, protocol.encode(self.state()))
+
+    def _reply(self, event: Event, asker: tuple[str, bytes], payload: bytes) -> None:
+        identity, nonce = asker
+        attachment = auth.reply_seal(self.keyring, identity, event.key, payload, nonce)
+        self.outbox(Reply(event.query, event.key, payload, attachment))
+
+    # --- closing and opening ticks -----------------------------------------------------
+
+    def close_tick(self) -> None:
+        """Close the tick under way with what arrived: advance the world, let the joins
+        take effect, deliver the radio; then open the next tick."""
+        if self.traced:
+            self.outbox(Mark(Moment.CLOSE_START))
+        acts, transmissions = self.intake.close()
+        result = self.world.advance(acts, transmissions)
+        if self.traced:
+            self.outbox(Mark(Moment.ADVANCED))
+        self.roster.apply_joins()
+        rx_counts = {name: len(items) for name, items in result.deliveries.items()}
+        for name, deliveries in result.deliveries.items():
+            key = self.keys.radio_rx(name)
+            receiver = names.robot_identity(int(name))  # only robots receive
+            for delivery in deliveries:
+                meta = protocol.RadioRxMeta(
+                    v=protocol.VERSION,
+                    tick=result.tick,
+                    sender=delivery.sender,
+                    seq=delivery.seq,
+                    sent_tick=delivery.sent_tick,
+                )
+                attachment = self._seal(receiver, key, delivery.payload, protocol.encode(meta))
+                self.outbox(Publish(key, delivery.payload, attachment))
+        if self.traced:
+            self.outbox(Mark(Moment.DELIVERED))
+        self._open_tick(result.tick, rx_counts, result.frames)
+
+    def _open_tick(self, tick: int, rx_counts: dict[str, int], frames: dict[int, bytes]) -> None:
+        if self.traced:
+            self.outbox(Mark(Moment.OPEN_START))
+        # The clock first: the beacon, in the barrier too, answers while the senses go out.
+        clock = protocol.encode(protocol.Clock(v=protocol.VERSION, tick=tick, t=self.world.t))
+        key = self.keys.world_clock
+        self.outbox(Publish(key, clock, self._seal(names.WORLD, key, clock), steady=True))
+        spec = self.world.config.camera
+        for robot, frame in frames.items():
+            meta = protocol.CameraMeta(
+                v=protocol.VERSION,
+                tick=tick,
+                width=spec.width,
+                height=spec.height,
+                encoding="png",
+            )
+            key = self.keys.camera(robot)
+            attachment = self._seal(names.robot_identity(robot), key, frame, protocol.encode(meta))
+            self.outbox(Publish(key, frame, attachment))
+        batched = self._send_senses(rx_counts, frames)
+        self.intake.open(tick, self.roster.participants())
+        if tick % self.state_every == 0:
+            self._publish_state()
+        if self.traced:
+            rx = sum(rx_counts.values())
+            robots = len(self.world.live_robots())
+            self.outbox(Opened(tick, robots, len(frames), rx, batched))
+            self.outbox(Mark(Moment.OPENED))
+
+    def _send_senses(self, rx_counts: dict[str, int], frames: dict[int, bytes]) -> int:
+        """Send every live robot its senses, on its own key or in its process's batch;
+        how many went in batches. A process's batch leaves as soon as its robots' senses
+        are made, so it steps them while the next process's are made."""
+        robots = self.world.live_robots()
+        hosts = self.roster.hosts
+        batches: dict[int, list[batch.Entry]] = {}
+        batch_sizes = Counter(hosts[robot] for robot in robots if robot in hosts)
+        for robot in robots:
+            sense = self.world.sense(
+                robot, rx_counts.get(names.robot_name(robot), 0), robot in frames
+            )
+            payload = protocol.encode(sense)
+            key = self.keys.sense(robot)
+            attachment = self._seal(names.robot_identity(robot), key, payload)
+            lead = hosts.get(robot)
+            if lead is None:
+                self.outbox(Publish(key, payload, attachment, steady=True))
+                continue
+            entries = batches.setdefault(lead, [])
+            entries.append(batch.Entry(robot, payload, attachment))
+            if len(entries) == batch_sizes[lead]:
+                self.outbox(
+                    Publish(self.keys.host_sense(lead), batch.encode(entries), None, steady=True)
+                )
+        return sum(len(entries) for entries in batches.values())
+
+    def _publish_state(self) -> None:
+        state = protocol.encode(self.state())
+        key = self.keys.world_state
+        self.outbox(Publish(key, state, self._seal(names.WORLD, key, state), steady=True))
+
+    def state(self) -> protocol.WorldState:
+        """The world's poses and counters (world/state, world/stats)."""
+        counters = self.counters
+        return self.world.state(counters.rejected, counters.stalls, counters.departures)
+
+    def _seal(self, identity: str, key: str, payload: bytes, metadata: bytes = b"") -> bytes | None:
+        return auth.seal(self.keyring, identity, key, payload, metadata)

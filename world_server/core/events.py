@@ -1,0 +1,114 @@
+"""What the world's coordinator is fed and what it gives back, as data (no I/O).
+
+A transport (the Zenoh adapter in ``world_server/server``, a test) turns what arrives into
+``Event``s and hands the coordinator each one with the time it is handled at; the
+coordinator answers with ``Output``s, which the transport publishes, replies with, or (the
+timeline of ``--trace``) stamps with its clock.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import StrEnum
+
+
+class EventKind(StrEnum):
+    """What arrived, by where it came from."""
+
+    ACT = "act"  # robot/<id>/act: one robot's answer to a tick
+    ACTS = "acts"  # host/<lead>/act: a batch of the acts of a process's robots
+    ACK = "ack"  # beacon/<name>/ack: a beacon's answer to a tick
+    TX = "tx"  # radio/tx/<sender>: a radio message for the medium
+    ALIVE = "alive"  # a liveliness token appeared
+    GONE = "gone"  # a liveliness token went
+    STATS = "stats"  # a query of world/stats
+    JOIN = "join"  # a query of world/join: an id for a robot started with --id auto
+    REFUSED = "refused"  # something the transport refused on its own side: counted here
+    STOP = "stop"  # the process is told to stop
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    kind: EventKind
+    key: str = ""  # the key expression it came on (or was asked on)
+    payload: bytes = b""  # REFUSED: why, in UTF-8
+    attachment: bytes | None = None
+    query: object = None  # the transport's handle of a query, handed back with its reply
+    arrived: float = 0.0  # when the transport took it (only when tracing)
+
+
+# --- outputs ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Publish:
+    """A message to publish, reliably (blocking rather than dropping under congestion)."""
+
+    key: str
+    payload: bytes
+    attachment: bytes | None
+    # Sent tick after tick on this key (senses, batches, the clock, the state): worth a
+    # publisher kept for the key; else one put (camera frames, radio deliveries).
+    steady: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class Reply:
+    """The answer to a query (``Event.query``)."""
+
+    query: object
+    key: str
+    payload: bytes
+    attachment: bytes | None
+
+
+@dataclass(frozen=True, slots=True)
+class ReplyError:
+    """A query refused: ``reason`` goes back to the asker."""
+
+    query: object
+    reason: bytes
+
+
+class Moment(StrEnum):
+    """Points in the work of a tick that ``--trace`` times (plumbing/trace.py)."""
+
+    OPEN_START = "open_start"  # the tick's inputs start going out
+    OPENED = "opened"  # they are all out
+    CLOSE_START = "close_start"  # the tick is closing
+    ADVANCED = "advanced"  # the world advanced
+    DELIVERED = "delivered"  # the radio deliveries are out
+
+
+@dataclass(frozen=True, slots=True)
+class Mark:
+    """A moment of the tick's work; the transport notes when it came out (tracing only)."""
+
+    moment: Moment
+
+
+@dataclass(frozen=True, slots=True)
+class Opened:
+    """What the tick just opened holds (tracing only; comes just before Mark(OPENED))."""
+
+    tick: int
+    robots: int
+    frames: int
+    rx: int  # radio deliveries
+    batched: int  # senses sent in batches
+
+
+@dataclass(frozen=True, slots=True)
+class Answered:
+    """An answer the tick under way took: who, when it arrived, when it was handled."""
+
+    who: str
+    arrived: float
+    handled: float
+
+
+Output = Publish | Reply | ReplyError | Mark | Opened | Answered
+# Where the coordinator puts what it gives back, one output at a time, as soon as it is
+# made: a process's batch of senses leaves before the next process's is made.
+Outbox = Callable[[Output], None]

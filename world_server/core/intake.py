@@ -1,0 +1,215 @@
+"""What the world takes in during a tick, each input checked here and nowhere else (no I/O).
+
+Trust: a message is taken only with its sender's run-key tag (in a keyed run), from a
+robot of the swarm or a beacon, for the tick under way (lockstep); a radio sender sends
+at most MAX_TX_PER_TICK messages in a tick, each sequence number once. An input that
+fails a check is rejected and counted (``Counters``; a radio message also by the radio);
+a sender's own message that comes after its tick, or after it left, is counted late.
+What is taken waits here for the tick to close: acts by robot, radio transmissions, and
+the barrier's book of who answered (lockstep).
+"""
+
+from __future__ import annotations
+
+import msgspec
+
+from wire import auth, batch, names, protocol
+from world_server.core.clock import Barrier
+from world_server.core.counters import Counters
+from world_server.core.events import Event, EventKind
+from world_server.core.world import Transmission, World
+
+MAX_TX_PER_TICK = 1000  # radio messages one sender may send in one tick (Act.radio_tx's bound)
+
+
+class TickIntake:
+    def __init__(
+        self,
+        world: World,
+        keys: protocol.Keys,
+        counters: Counters,
+        keyring: auth.Keyring | None = None,
+    ) -> None:
+        self.world = world
+        self.keys = keys
+        self.counters = counters
+        self.keyring = keyring  # None: an unauthenticated run
+        self.lockstep = world.config.clock == "lockstep"
+        self.barrier = Barrier()
+        self.acts: dict[int, protocol.Act] = {}
+        self.transmissions: list[Transmission] = []
+        self.sent_this_tick: dict[str, int] = {}  # radio messages per sender in this tick
+        self.seqs_this_tick: set[tuple[str, int]] = set()  # (sender, seq): each once
+
+    # --- acts --------------------------------------------------------------------------
+
+    def take_act(self, event: Event) -> int | None:
+        """Take one robot's act; the robot, if its act was taken as its answer to the tick
+        under way. Only such an act teaches the world a batch route: an old act of robot r,
+        copied into a batch on another process's key, must not divert r's senses there."""
+        robot = self.keys.robot_of(event.key)
+        if robot is None or not self.world.is_member(robot):
+            self.counters.reject(event.key, "not a robot of the swarm")
+            return None
+        who = names.robot_identity(robot)
+        if not self._authentic(event, who):
+            return None
+        try:
+            act = protocol.decode(event.payload, protocol.Act)
+        except protocol.ProtocolError as error:
+            self.counters.reject(event.key, error)
+            return None
+        if not self.lockstep:
+            if robot not in self.world.live_robots():
+                return None
+            self.acts[robot] = act
+            return robot if act.tick == self.world.tick else None
+        self.counters.missed.pop(who, None)  # it is alive: wait for it again
+        if self.barrier.answer(act.tick, who, act.radio_tx):
+            self.acts[robot] = act
+            return robot
+        self._unexpected_answer(event.key, act.tick)
+        return None
+
+    def take_acts(self, event: Event) -> dict[int, int]:
+        """Take a batch of acts from a process hosting several robots: each entry is
+        checked as the act it carries (its robot's tag on ``robot/<id>/act``). The batch
+        routes it teaches: robot -> the process's lead robot, for each robot whose act was
+        taken as its answer to the tick under way."""
+        lead = self.keys.robot_of(event.key, "host")
+        if lead is None or not self.world.is_member(lead):
+            self.counters.reject(event.key, "not a robot of the swarm")
+            return {}
+        try:
+            entries = batch.decode(event.payload)
+        except batch.BatchError as error:
+            self.counters.reject(event.key, error)
+            return {}
+        routes = {}
+        for robot, payload, attachment in entries:
+            entry = Event(
+                EventKind.ACT, self.keys.act(robot), payload, attachment, arrived=event.arrived
+            )
+            if self.take_act(entry) is not None:
+                routes[robot] = lead
+        return routes
+
+    def take_ack(self, event: Event) -> str | None:
+        """Take a beacon's answer; its identity if the tick under way took it (lockstep)
+        or it came from a beacon taking part (real time)."""
+        name = self.keys.last_chunk(event.key.rsplit("/", 1)[0])
+        if not names.is_beacon_name(name):
+            self.counters.reject(event.key, f"no beacon of this run is called {name!r}")
+            return None
+        who = names.beacon_identity(name)
+        if not self._authentic(event, who):
+            return None
+        if name not in self.world.beacons():
+            self.counters.late += 1  # its own, but it has left (or not joined yet)
+            return None
+        try:
+            ack = protocol.decode(event.payload, protocol.Ack)
+        except protocol.ProtocolError as error:
+            self.counters.reject(event.key, error)
+            return None
+        self.counters.missed.pop(who, None)
+        if self.lockstep and not self.barrier.answer(ack.tick, who, ack.radio_tx):
+            self._unexpected_answer(event.key, ack.tick)
+            return None
+        return who
+
+    # --- radio -------------------------------------------------------------------------
+
+    def take_tx(self, event: Event) -> None:
+        """Take a radio message for the medium, to transmit when the tick closes."""
+        sender = self.keys.last_chunk(event.key)
+        robot = names.robot_of_name(sender)
+        if robot is not None and not self.world.is_member(robot):
+            robot = None
+        if robot is None and not names.is_beacon_name(sender):
+            self._reject_tx(event.key, f"no robot or beacon of this run is called {sender!r}")
+            return
+        identity = names.beacon_identity(sender) if robot is None else names.robot_identity(robot)
+        try:
+            metadata = auth.unseal(
+                self.keyring, identity, event.key, event.payload, event.attachment
+            )
+            if metadata is None:
+                raise protocol.ProtocolError("missing attachment")
+            meta = protocol.decode(metadata, protocol.RadioTxMeta)
+            if len(event.payload) > protocol.MAX_PAYLOAD_BYTES:
+                raise protocol.ProtocolError(f"payload of {len(event.payload)} bytes")
+            if self.sent_this_tick.get(sender, 0) >= MAX_TX_PER_TICK:
+                raise protocol.ProtocolError(f"more than {MAX_TX_PER_TICK} messages in a tick")
+            if (sender, meta.seq) in self.seqs_this_tick:
+                raise protocol.ProtocolError(f"message {meta.seq} again: a replay")
+        except (auth.AuthError, protocol.ProtocolError) as error:
+            self._reject_tx(event.key, error)
+            return
+        if not self.world.is_sender(sender):
+            # Its own, but it has left (or not joined yet): late, like an act after a tick.
+            self.counters.late += 1
+            return
+        self.sent_this_tick[sender] = self.sent_this_tick.get(sender, 0) + 1
+        self.seqs_this_tick.add((sender, meta.seq))
+        if self.lockstep:
+            role = "beacon" if sender in self.world.beacons() else "robot"
+            if not self.barrier.transmitted(meta.tick, f"{role}/{sender}"):
+                if meta.tick < self.barrier.tick:
+                    self.counters.late += 1
+                else:
+                    reason = f"tx for tick {meta.tick} at tick {self.barrier.tick}"
+                    self._reject_tx(event.key, reason)
+                return
+        self.transmissions.append(Transmission(sender, meta.seq, event.payload))
+
+    # --- the tick ----------------------------------------------------------------------
+
+    def leave(self, who: str, robot: int | None = None) -> None:
+        """``who`` left: the tick under way does not wait for it (nor moves its robot)."""
+        if robot is not None:
+            self.acts.pop(robot, None)
+        self.barrier.leave(who)
+
+    def close(self) -> tuple[dict[int, protocol.Act], list[Transmission]]:
+        """The acts and transmissions of the tick that closes; the next tick starts empty
+        but in real time, where a command holds until replaced but a capture happens once."""
+        acts, transmissions = self.acts, self.transmissions
+        self.transmissions = []
+        self.sent_this_tick = {}
+        self.seqs_this_tick = set()
+        if self.lockstep:
+            self.acts = {}
+        else:
+            self.acts = {
+                robot: msgspec.structs.replace(act, capture=False, radio_tx=0)
+                for robot, act in acts.items()
+            }
+        return acts, transmissions
+
+    def open(self, tick: int, participants: list[str]) -> None:
+        self.barrier.open(tick, participants)
+
+    # --- checks ------------------------------------------------------------------------
+
+    def _authentic(self, event: Event, identity: str) -> bool:
+        """Whether the event carries ``identity``'s tag (always, in an unkeyed run)."""
+        try:
+            auth.unseal(self.keyring, identity, event.key, event.payload, event.attachment)
+        except auth.AuthError as error:
+            self.counters.reject(event.key, error)
+            return False
+        return True
+
+    def _unexpected_answer(self, key: str, tick: int) -> None:
+        """An answer the barrier did not take: stale, repeated, or from a newcomer (late),
+        or for a tick that has not begun (rejected)."""
+        if tick <= self.barrier.tick:
+            self.counters.late += 1
+        else:
+            self.counters.reject(key, f"answer for tick {tick} while at tick {self.barrier.tick}")
+
+    def _reject_tx(self, key: str, reason: object) -> None:
+        """A radio message the medium refuses: counted by the world and by the radio."""
+        self.counters.reject(key, reason)
+        self.world.radio.reject()

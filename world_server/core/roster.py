@@ -1,0 +1,134 @@
+"""Who takes part in the world's ticks (no I/O): liveliness tokens, joins, departures,
+ids handed out on ``world/join``, and the batch routes of robots hosted together.
+
+A token that appears is a join that takes effect when the tick under way closes (or at
+once, before the start), so a tick's participants never change while it runs; a token
+that goes is a departure at once. A robot whose process answers in batches gets its
+senses in its process's batch (wire/batch.py) until its process's lead robot goes.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import NamedTuple
+
+from wire import names, protocol
+from wire.names import Role
+from world_server.core.counters import Counters
+from world_server.core.world import World
+
+log = logging.getLogger("world_server")
+
+MAX_BEACONS = 16  # beacon tokens the world takes part in its barrier
+SUSPEND_AFTER = 3  # consecutive stalled ticks before the barrier stops waiting
+
+
+class Token(NamedTuple):
+    """A robot's or a beacon's liveliness token: ``alive/<role>/<ident>``."""
+
+    role: Role  # Role.ROBOT or Role.BEACON
+    ident: str
+
+
+class Roster:
+    def __init__(self, world: World, keys: protocol.Keys, counters: Counters) -> None:
+        self.world = world
+        self.keys = keys
+        self.counters = counters
+        self.pending: list[Token] = []  # joins to apply when the tick under way closes
+        self.assigned: set[int] = set()  # ids handed out on world/join (or taken by a token)
+        # Robots whose process answers in batches: robot -> the process's lead robot.
+        # Learnt only from acts taken as the answer to the tick under way.
+        self.hosts: dict[int, int] = {}
+
+    def token(self, key: str, count: bool) -> Token | None:
+        """The robot's or beacon's token ``key`` is; None for other roles (the world, the
+        recorder), which the barrier does not involve, and for a robot outside the swarm
+        or a beacon name no beacon can have (rejected if ``count``)."""
+        parts = key[len(self.keys.prefix) + 1 :].split("/")
+        if len(parts) != 3 or parts[0] != "alive" or parts[1] not in (Role.ROBOT, Role.BEACON):
+            return None
+        role, ident = Role(parts[1]), parts[2]
+        if role == Role.ROBOT:
+            robot = names.robot_of_name(ident)
+            valid = robot is not None and self.world.is_member(robot)
+        else:
+            valid = names.is_beacon_name(ident)
+        if not valid:
+            if count:
+                self.counters.reject(key, f"no {role} of this run is called {ident!r}")
+            return None
+        return Token(role, ident)
+
+    def appeared(self, key: str) -> None:
+        token = self.token(key, count=True)
+        if token is not None:
+            self.pending.append(token)
+
+    def went(self, key: str) -> Token | None:
+        """A token went: the robot's body stops and stays as an obstacle, the beacon goes
+        silent; counted as a departure if it was taking part. The robots of a process that
+        answered in batches get their senses on their own keys again until a batch says
+        otherwise (a restarted process may host other robots, or none). The robot or
+        beacon that left, for the tick under way to stop waiting for it."""
+        token = self.token(key, count=False)
+        if token is None:
+            return None
+        self.pending = [join for join in self.pending if join != token]
+        if token.role == Role.ROBOT:
+            gone = int(token.ident)
+            self.hosts = {
+                robot: lead for robot, lead in self.hosts.items() if gone not in (robot, lead)
+            }
+            if gone in self.world.live_robots():
+                self.counters.departures += 1
+            log.warning(
+                "robot %s left (liveliness lost); its body stays as an obstacle", token.ident
+            )
+            self.world.leave_robot(gone)
+        elif token.ident in self.world.beacons():
+            self.counters.departures += 1
+            log.warning("beacon %s left", token.ident)
+            self.world.leave_beacon(token.ident)
+        return token
+
+    def apply_joins(self) -> None:
+        """Let the robots and beacons whose tokens appeared take part (at most
+        MAX_BEACONS beacons: one more is rejected)."""
+        for role, ident in self.pending:
+            if role == Role.ROBOT:
+                robot = int(ident)
+                self.assigned.add(robot)
+                if robot not in self.world.live_robots():
+                    log.info("robot %s joined at tick %d", ident, self.world.tick)
+                self.world.join_robot(robot)
+            elif ident not in self.world.beacons() and len(self.world.beacons()) >= MAX_BEACONS:
+                self.counters.reject(
+                    self.keys.alive(Role.BEACON, ident), f"more than {MAX_BEACONS} beacons"
+                )
+            else:
+                self.world.join_beacon(ident)
+        self.pending.clear()
+
+    def assign_id(self) -> int | None:
+        """An id for a robot started with ``--id auto``: the smallest never handed out,
+        else (a replacement container) the smallest whose robot is not running; None when
+        every robot of the swarm is running."""
+        live = set(self.world.live_robots())
+        members = range(self.world.config.num_robots)
+        free = next((robot for robot in members if robot not in self.assigned | live), None)
+        if free is None:
+            free = next((robot for robot in sorted(self.assigned) if robot not in live), None)
+        if free is not None:
+            self.assigned.add(free)
+            log.info("assigned id %d to a robot that asked for one", free)
+        return free
+
+    def participants(self) -> list[str]:
+        """The identities a tick opened now waits for: every live robot and beacon but a
+        controller that went silent (hung, not gone), until it answers again, so one stuck
+        process cannot slow the swarm to its stall timeout."""
+        everyone = [names.robot_identity(robot) for robot in self.world.live_robots()]
+        everyone += [names.beacon_identity(name) for name in self.world.beacons()]
+        missed = self.counters.missed
+        return [who for who in everyone if missed.get(who, 0) < SUSPEND_AFTER]

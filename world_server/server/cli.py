@@ -1,0 +1,113 @@
+"""``world-server``: the world of one run on Zenoh, from the command line.
+
+By default the server is the Zenoh router of a local run, listening on loopback. Its
+settings come from ``--config`` (what ``swarm run`` hands over) or its own options.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+from collections.abc import Sequence
+
+import zenoh
+
+from plumbing import cliargs, run_keys, settings_cli
+from plumbing.lifecycle import die_with_launcher
+from plumbing.trace import open_trace
+from plumbing.zenoh_session import open_from_args, session_mode
+from wire import protocol
+from world_server.core.world import World, WorldConfig
+from world_server.server.options import WORLD_SERVER_OPTIONS, WorldServerConfig, world_server_config
+from world_server.server.zenoh_adapter import WorldServer
+
+log = logging.getLogger("world_server")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="world-server",
+        description="The world of one swarm: physics, cameras, the radio medium and the clock. "
+        "By default it is the Zenoh router of a local run.",
+    )
+    WORLD_SERVER_OPTIONS.add_to(parser)
+    settings_cli.add_config_option(parser, WorldServerConfig)
+    parser.add_argument(
+        "--trace",
+        metavar="PATH",
+        default=None,
+        help="write a timeline of every tick to PATH as JSON lines: when it opened, when "
+        "each answer arrived, how long the world's own work took (docs/performance.md)",
+    )
+    cliargs.add_zenoh_options(parser, default_mode="router")
+    cliargs.add_log_level(parser)
+    return parser
+
+
+def config_from_args(args: argparse.Namespace) -> WorldConfig:
+    """The WorldConfig of ``world-server``'s options."""
+    return world_server_config(args).world
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    config: WorldServerConfig = settings_cli.config_from(
+        parser, args, WORLD_SERVER_OPTIONS, {"world.run": args.run_id}
+    )
+    if config.world.run != args.run_id:
+        parser.exit(
+            2,
+            f"world-server: error: --config is of run {config.world.run!r}, "
+            f"not --run-id {args.run_id!r}\n",
+        )
+    if session_mode(args) == "router" and not args.listen and not args.zenoh_config:
+        args.listen = [cliargs.LOCAL_ENDPOINT]
+    cliargs.configure_logging("world-server", args.log_level)
+    keyring = run_keys.from_args(parser, args, "world-server")
+    if keyring is not None and keyring.secret is None:
+        parser.exit(2, "world-server: error: the world server needs the run secret\n")
+    world = World(config.world)
+    keys = protocol.Keys(args.run_id, args.root)
+    try:
+        session = open_from_args(args)
+    except zenoh.ZError as error:
+        print(f"world-server: cannot open Zenoh session: {error}", file=sys.stderr)
+        return 1
+    with session:
+        server = WorldServer(
+            session,
+            world,
+            keys,
+            config=config,
+            expect_robots=config.world.num_robots,
+            expect_beacons=config.beacons,
+            keyring=keyring,
+            trace=open_trace(args.trace),
+        )
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, lambda *_: server.stop())
+        log.info(
+            "run %s: %d sites, arena radius %.2f m, best site %d, listening on %s",
+            args.run_id,
+            config.world.num_sites,
+            world.layout.arena_radius,
+            world.layout.best_site,
+            ", ".join(args.listen) or "(client)",
+        )
+        # The loop runs in its own thread so that this one stays free for the signals.
+        thread_result: list[int] = []
+        worker = threading.Thread(target=lambda: thread_result.append(server.run()), daemon=True)
+        worker.start()
+        while worker.is_alive():
+            worker.join(0.2)
+        server.close_trace()
+        return thread_result[0] if thread_result else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

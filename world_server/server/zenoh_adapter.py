@@ -1,0 +1,201 @@
+"""The world server on Zenoh: a thin adapter around the coordinator (world_server/core).
+
+Zenoh callbacks only copy bytes into one inbox; a single thread owns the World and the
+coordinator: it waits on the inbox until the coordinator's deadline, feeds it what came
+(or wakes it), and publishes what it gives back, so there are no locks around the
+simulation. ``world/info`` is answered at once on Zenoh's thread: it needs nothing of the
+tick. What is checked, and how, is the coordinator's (``world_server/core/intake.py``).
+"""
+
+from __future__ import annotations
+
+import queue
+import time
+from typing import Any, cast
+
+import zenoh
+
+from plumbing.inbox import BoundedInbox
+from plumbing.trace import TraceWriter, now
+from plumbing.zenoh_session import reliable_publisher, reliable_put
+from wire import auth, batch, protocol
+from wire.names import Role
+from world_server.core.coordinator import UNAUTHENTICATED, Coordinator
+from world_server.core.events import (
+    Event,
+    EventKind,
+    Output,
+    Publish,
+    Reply,
+    ReplyError,
+)
+from world_server.core.world import World
+from world_server.server.options import WorldServerConfig
+from world_server.server.timeline import TickTimeline
+
+INBOX_BYTES = 256 * 2**20  # what may wait for the world's thread, at most
+# The largest valid message: a batch of acts (a radio payload and its attachment, alone).
+MAX_MESSAGE_BYTES = max(batch.MAX_BATCH_BYTES, protocol.MAX_PAYLOAD_BYTES + 1024)
+ARRIVAL = "arrival"  # the inbox's source of every message (its drops are counted so)
+MAX_WAIT = 0.5  # seconds the thread waits on the inbox at most, whatever the deadline
+
+
+class WorldServer:
+    """Runs the tick loop of one World over a Zenoh session."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        world: World,
+        keys: protocol.Keys,
+        *,
+        config: WorldServerConfig | None = None,
+        expect_robots: int = 0,
+        expect_beacons: int = 0,
+        keyring: auth.Keyring | None = None,
+        trace: TraceWriter | None = None,
+    ) -> None:
+        """``config`` says how to pace and publish ``world`` (its own world is not used);
+        the run starts once ``expect_robots`` robots and ``expect_beacons`` beacons are live
+        (0: at once)."""
+        config = config or WorldServerConfig()
+        self.session = session
+        self.keys = keys
+        self.keyring = keyring  # None: an unauthenticated run
+        self.inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
+        self.timeline = TickTimeline(trace) if trace is not None else None
+        self.coordinator = Coordinator(
+            world,
+            keys,
+            self._send,
+            stall_timeout=config.stall_timeout,
+            start_timeout=config.start_timeout,
+            state_every=config.state_every,
+            speed=config.speed,
+            expect_robots=expect_robots,
+            expect_beacons=expect_beacons,
+            keyring=keyring,
+            traced=trace is not None,
+        )
+        self._info_bytes = protocol.encode(world.info)
+        # Publishers kept per key, for what goes out tick after tick (Publish.steady).
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._declared: list[Any] = []
+
+    # --- Zenoh side: callbacks copy bytes and return ----------------------------------
+
+    def _on_sample(self, kind: EventKind) -> Any:
+        def callback(sample: zenoh.Sample) -> None:
+            attachment = sample.attachment
+            payload = sample.payload.to_bytes()
+            extra = attachment.to_bytes() if attachment is not None else None
+            size = len(payload) + len(extra or b"")
+            arrived = now() if self.timeline is not None else 0.0
+            event = Event(kind, str(sample.key_expr), payload, extra, arrived=arrived)
+            self.inbox.put(event, size, ARRIVAL)
+
+        return callback
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        kind = EventKind.ALIVE if sample.kind == zenoh.SampleKind.PUT else EventKind.GONE
+        self.inbox.put(Event(kind, str(sample.key_expr)))
+
+    def _on_query(self, kind: EventKind, key: str) -> Any:
+        def callback(query: zenoh.Query) -> None:
+            payload, attachment = _query_bytes(query)
+            self.inbox.put(Event(kind, key, payload, attachment, query=query))
+
+        return callback
+
+    def _on_info(self, query: zenoh.Query) -> None:
+        """Answer ``world/info`` at once (on Zenoh's thread: it needs nothing of the tick)."""
+        key = self.keys.world_info
+        payload, attachment = _query_bytes(query)
+        try:
+            identity, nonce = auth.query_open(self.keyring, key, payload, attachment)
+        except auth.AuthError as error:
+            self.inbox.put(Event(EventKind.REFUSED, key, str(error).encode()))
+            query.reply_err(UNAUTHENTICATED)
+            return
+        sealed = auth.reply_seal(self.keyring, identity, key, self._info_bytes, nonce)
+        query.reply(key, self._info_bytes, attachment=sealed)
+
+    def declare(self) -> None:
+        keys, session = self.keys, self.session
+        self._declared = [
+            session.declare_subscriber(keys.act("*"), self._on_sample(EventKind.ACT)),
+            session.declare_subscriber(keys.host_act("*"), self._on_sample(EventKind.ACTS)),
+            session.declare_subscriber(keys.beacon_ack("*"), self._on_sample(EventKind.ACK)),
+            session.declare_subscriber(keys.radio_tx("*"), self._on_sample(EventKind.TX)),
+            session.liveliness().declare_subscriber(
+                f"{keys.prefix}/alive/**", self._on_alive, history=True
+            ),
+            session.declare_queryable(keys.world_info, self._on_info),
+            session.declare_queryable(
+                keys.world_stats, self._on_query(EventKind.STATS, keys.world_stats)
+            ),
+            session.declare_queryable(
+                keys.world_join, self._on_query(EventKind.JOIN, keys.world_join)
+            ),
+            # The token names this world instance, so robots can tell a restarted world.
+            session.liveliness().declare_token(keys.alive(Role.WORLD, str(session.info.zid()))),
+        ]
+        for key in (keys.world_clock, keys.world_state):
+            self._publishers[key] = reliable_publisher(session, key)
+
+    def stop(self) -> None:
+        self.inbox.put(Event(EventKind.STOP))
+
+    # --- the loop ----------------------------------------------------------------------
+
+    def run(self) -> int:
+        """Feed the coordinator until it stops (the stop event)."""
+        self.declare()
+        coordinator = self.coordinator
+        coordinator.begin(time.monotonic())
+        while not coordinator.stopped:
+            deadline = coordinator.deadline
+            wait = MAX_WAIT if deadline is None else deadline - time.monotonic()
+            try:
+                event: Event | None = self.inbox.get(timeout=min(max(0.0, wait), MAX_WAIT))
+            except queue.Empty:
+                event = None
+            dropped = self.inbox.take_dropped(ARRIVAL)
+            if dropped:
+                coordinator.dropped(dropped)
+            if event is None:
+                coordinator.wake(time.monotonic())
+            else:
+                coordinator.handle(event, time.monotonic())
+        return 0
+
+    def _send(self, output: Output) -> None:
+        """Publish, reply or note (``--trace``) what the coordinator gave back."""
+        if isinstance(output, Publish):
+            if not output.steady:
+                reliable_put(self.session, output.key, output.payload, output.attachment)
+                return
+            publisher = self._publishers.get(output.key)
+            if publisher is None:
+                publisher = self._publishers[output.key] = reliable_publisher(
+                    self.session, output.key
+                )
+            publisher.put(output.payload, attachment=output.attachment)
+        elif isinstance(output, Reply):
+            query = cast(zenoh.Query, output.query)
+            query.reply(output.key, output.payload, attachment=output.attachment)
+        elif isinstance(output, ReplyError):
+            cast(zenoh.Query, output.query).reply_err(output.reason)
+        elif self.timeline is not None:
+            self.timeline.note(output)
+
+    def close_trace(self) -> None:
+        if self.timeline is not None:
+            self.timeline.close()
+
+
+def _query_bytes(query: zenoh.Query) -> tuple[bytes, bytes | None]:
+    """A query's payload and attachment, copied."""
+    payload = query.payload.to_bytes() if query.payload is not None else b""
+    attachment = query.attachment.to_bytes() if query.attachment is not None else None
+    return payload, attachment
