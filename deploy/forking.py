@@ -34,7 +34,7 @@ from plumbing.lifecycle import PARENT_ENV, die_with_launcher
 PRELOAD = [
     "deploy.fork_server_group",
     "robot_agent.node.cli",
-    "nest_beacon.node.beacon_node",
+    "nest_beacon.node.cli",
 ]
 FORK_SERVER_OF = "BESTOFN_FORK_SERVER_OF"  # the pid of the launcher that asks for the server
 
