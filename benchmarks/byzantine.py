@@ -104,8 +104,8 @@ def byzantine_ids(seed: int, robots: int, count: int) -> list[int]:
 def run_task(task: Task) -> Outcome:
     """One run in memory (in a worker process)."""
     from deploy.inmemory import run_in_memory
+    from robot_agent.node import cli as node
     from robot_agent.node import options
-    from robot_agent.node import robot_node as node
     from world_server.server import cli as server
 
     common = ["--seed", str(task.seed), "--robots", str(task.robots), "--sites", str(task.sites)]

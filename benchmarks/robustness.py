@@ -141,8 +141,8 @@ def observing_controller(log: list[tuple[int, Any]]) -> type[Controller]:
 def run_task(task: Task) -> Outcome:
     """Run one task in memory (in a worker process) and judge its comparisons."""
     from deploy.inmemory import run_in_memory
+    from robot_agent.node import cli as node
     from robot_agent.node import options
-    from robot_agent.node import robot_node as node
     from world_server.server import cli as server
 
     common = ["--seed", str(task.seed), "--robots", str(task.robots), "--sites", str(task.sites)]

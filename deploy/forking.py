@@ -33,8 +33,8 @@ from plumbing.lifecycle import PARENT_ENV, die_with_launcher
 
 PRELOAD = [
     "deploy.fork_server_group",
-    "robot_agent.node.robot_node",
-    "nest_beacon.node.beacon_node",
+    "robot_agent.node.cli",
+    "nest_beacon.node.cli",
 ]
 FORK_SERVER_OF = "BESTOFN_FORK_SERVER_OF"  # the pid of the launcher that asks for the server
 

@@ -725,7 +725,7 @@ class Swarm:
         # Only the keys of its own robots: whatever it says can only be in their names.
         env = network.env(names.robot_identity(robot) for robot in robots)
         if self.plan.spawn == "fork":
-            return self.group.fork(name, "robot_agent.node.robot_node", argv, env=env)
+            return self.group.fork(name, "robot_agent.node.cli", argv, env=env)
         return self.group.start(name, python_module("robot_agent.node", *argv), env=env)
 
     def infrastructure_crash(self) -> Child | None:

@@ -2,6 +2,6 @@
 
 import sys
 
-from nest_beacon.node.beacon_node import main
+from nest_beacon.node.cli import main
 
 sys.exit(main())

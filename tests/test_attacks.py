@@ -37,6 +37,7 @@ from swarm_helpers import (
 from deploy.processes import python_module
 from plumbing import run_keys
 from plumbing.world_info import ask
+from robot_agent.core import tick_assembly
 from robot_agent.node import robot_node as node
 from wire import auth, batch, names, protocol
 from wire.names import Role
@@ -372,7 +373,7 @@ def test_a_flood_of_radio_messages_for_future_ticks_does_not_grow_a_robot(keyed:
     flood, size = 4000, 20_000  # 76 MiB, more than three times what robot 0 may hold
     # What one robot process may hold: its inbox and the robot's pending inputs. The
     # allocator and Zenoh's buffers add to that, so allow twice it, still below the flood.
-    held = node.INBOX_BYTES + node.INBOX_BYTES_PER_ROBOT + node.PENDING_BYTES
+    held = node.INBOX_BYTES + node.INBOX_BYTES_PER_ROBOT + tick_assembly.PENDING_BYTES
     allowed = 2 * held / 2**20
     # Paced by the wall clock, so that the run outlasts the flood.
     options = [*SMALL, "--no-record", "--spawn", "exec", "--clock", "realtime", "--speed", "5"]

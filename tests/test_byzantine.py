@@ -20,8 +20,8 @@ from deploy.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_
 from robot_agent.core import byzantine, decision, ports
 from robot_agent.core.byzantine import Behaviour, ByzantineRobot
 from robot_agent.core.controller import ControllerConfig
+from robot_agent.node import cli as node
 from robot_agent.node import options
-from robot_agent.node import robot_node as node
 from robot_agent.node.options import RobotAgentConfig
 from wire import names, protocol, settings
 from world_server.core.layout import make_layout

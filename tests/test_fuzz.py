@@ -17,7 +17,8 @@ from deploy.credentials import RunNetwork
 from deploy.launcher import Swarm, plan_from_args
 from plumbing.inbox import BoundedInbox
 from robot_agent.core.controller import Controller, ControllerConfig
-from robot_agent.node.robot_node import Event, RobotNode
+from robot_agent.core.endpoint import RobotEndpoint
+from robot_agent.node.robot_node import Event, EventKind, RobotNode
 from wire import auth, protocol
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event as WorldEvent
@@ -101,14 +102,9 @@ def _node() -> tuple[RobotNode, Controller, _Publisher]:
     publishes through those, never through the session."""
     info = _world_info()
     controller = Controller(1, info, ControllerConfig(), random.Random(1))
-    node = RobotNode(
-        1,
-        session=None,  # type: ignore[arg-type]  # never used: see the publishers below
-        keys=protocol.Keys("fuzz"),
-        controller=controller,
-        inbox=BoundedInbox(),
-        world=info,
-    )
+    endpoint = RobotEndpoint(1, keys=protocol.Keys("fuzz"), controller=controller, world=info)
+    # The session is never used: see the publishers below.
+    node = RobotNode(endpoint, session=None, inbox=BoundedInbox())  # type: ignore[arg-type]
     act = _Publisher()
     node._act, node._status, node._tx = act, _Publisher(), _Publisher()  # type: ignore[assignment]  # recorders
     return node, controller, act
@@ -118,7 +114,15 @@ def _node() -> tuple[RobotNode, Controller, _Publisher]:
 @given(
     events=st.lists(
         st.tuples(
-            st.sampled_from(["sense", "rx", "camera", "world", "no-world"]),
+            st.sampled_from(
+                [
+                    EventKind.SENSE,
+                    EventKind.RX,
+                    EventKind.CAMERA,
+                    EventKind.WORLD,
+                    EventKind.NO_WORLD,
+                ]
+            ),
             payloads(),
             st.one_of(st.none(), payloads()),
         ),
@@ -126,7 +130,7 @@ def _node() -> tuple[RobotNode, Controller, _Publisher]:
     )
 )
 def test_a_robot_survives_any_sequence_of_inputs(
-    events: list[tuple[str, bytes, bytes | None]],
+    events: list[tuple[EventKind, bytes, bytes | None]],
 ) -> None:
     node, controller, act = _node()
     for kind, payload, attachment in events:

@@ -8,9 +8,9 @@ import random
 
 import pytest
 
-from plumbing.inbox import BoundedInbox
 from robot_agent.core.controller import Controller, ControllerConfig
-from robot_agent.node import robot_node as node
+from robot_agent.core.endpoint import InputKind, RobotEndpoint
+from robot_agent.core.tick_assembly import PENDING_BYTES
 from wire import auth, guard, protocol
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event as WorldEvent
@@ -68,28 +68,23 @@ def test_a_receiver_that_rejoins_takes_a_far_tick_once_and_never_an_old_one() ->
 # --- a robot's budget -------------------------------------------------------------------
 
 
-def _node(keyring: auth.Keyring | None) -> node.RobotNode:
+def _robot(keyring: auth.Keyring | None) -> RobotEndpoint:
     info = World(WorldConfig(num_sites=4, num_robots=2)).info
     controller = Controller(1, info, ControllerConfig(), random.Random(1))
-    return node.RobotNode(
-        1,
-        session=None,  # type: ignore[arg-type]  # the guard's checks never publish
-        keys=protocol.Keys("guard"),
-        controller=controller,
-        inbox=BoundedInbox(),
-        world=info,
-        keyring=keyring,
+    return RobotEndpoint(
+        1, keys=protocol.Keys("guard"), controller=controller, world=info, keyring=keyring
     )
 
 
-def _rx(robot: node.RobotNode, tick: int, size: int, keyring: auth.Keyring | None) -> node.Event:
+def _rx(
+    robot: RobotEndpoint, tick: int, size: int, keyring: auth.Keyring | None
+) -> tuple[bytes, bytes | None]:
     payload = b'{"kind":"opinion"' + b" " * (size - 17)
     meta = protocol.encode(
         protocol.RadioRxMeta(v=1, tick=tick, sender="0", seq=tick, sent_tick=tick - 1)
     )
     key = robot.keys.radio_rx(1)
-    attachment = auth.seal(keyring, "robot/1", key, payload, meta)
-    return node.Event(1, "rx", payload, attachment)
+    return payload, auth.seal(keyring, "robot/1", key, payload, meta)
 
 
 @pytest.mark.parametrize("keyed", [False, True])
@@ -97,25 +92,26 @@ def test_radio_for_future_ticks_is_held_only_within_the_robots_budget(keyed: boo
     """What the world would send (tagged with the robot's key when keyed) for the coming
     ticks is held, within a bound; the rest is rejected and counted."""
     keyring = auth.Keyring(secret=SECRET).only(["robot/1"]) if keyed else None
-    robot = _node(keyring)
-    robot.ticks.last = 10
+    robot = _robot(keyring)
+    robot.assembly.ticks.last = 10
     size, count = 20_000, 400
     for index in range(count):
-        robot.handle(_rx(robot, 11 + index % 100, size, keyring))
-    held = node.PENDING_BYTES // size
-    assert robot.pending_bytes == held * size <= node.PENDING_BYTES
+        robot.receive(InputKind.RADIO_RX, *_rx(robot, 11 + index % 100, size, keyring))
+    held = PENDING_BYTES // size
+    assert robot.assembly.pending_bytes == held * size <= PENDING_BYTES
     assert robot.rejects.count == count - held
-    robot.handle(_rx(robot, 10 + guard.TICK_WINDOW + 1, 10, keyring))  # too far ahead
+    too_far = _rx(robot, 10 + guard.TICK_WINDOW + 1, 10, keyring)
+    robot.receive(InputKind.RADIO_RX, *too_far)
     assert robot.rejects.count == count - held + 1
 
 
 def test_a_keyed_robot_holds_nothing_without_its_key() -> None:
-    robot = _node(auth.Keyring(secret=SECRET).only(["robot/1"]))
+    robot = _robot(auth.Keyring(secret=SECRET).only(["robot/1"]))
     forged = auth.Keyring(secret=bytes(32)).only(["robot/1"])  # another run's key
     for tick in range(1, 50):
-        robot.handle(_rx(robot, tick, 1000, None))
-        robot.handle(_rx(robot, tick, 1000, forged))
-    assert robot.pending == {} and robot.pending_bytes == 0
+        robot.receive(InputKind.RADIO_RX, *_rx(robot, tick, 1000, None))
+        robot.receive(InputKind.RADIO_RX, *_rx(robot, tick, 1000, forged))
+    assert robot.assembly.pending == {} and robot.assembly.pending_bytes == 0
     assert robot.rejects.count == 98
 
 

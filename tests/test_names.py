@@ -22,7 +22,7 @@ def _parser(command: str) -> Callable[[list[str]], argparse.Namespace]:
 
         parser = build_parser(["run"])
         return lambda argv: parser.parse_args(["run", *argv])
-    from robot_agent.node import robot_node as node
+    from robot_agent.node import cli as node
 
     return lambda argv: node.build_parser().parse_args(["--id", "0", *argv])
 

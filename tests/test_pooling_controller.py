@@ -30,8 +30,8 @@ def test_config_defaults_to_the_papers_operator() -> None:
 
 
 def test_robot_agent_takes_pooling_from_its_command_line() -> None:
+    from robot_agent.node import cli as node
     from robot_agent.node import options
-    from robot_agent.node import robot_node as node
 
     parser = node.build_parser()
     default = options.controller_config(parser.parse_args(["--id", "0"]))

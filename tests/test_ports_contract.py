@@ -25,9 +25,10 @@ from deploy.inmemory import run_in_memory
 from plumbing.inbox import BoundedInbox
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
+from robot_agent.core.endpoint import RobotEndpoint
 from robot_agent.core.simulated import SimulatedPorts
 from robot_agent.link.udp_radio import UdpRadioStats
-from robot_agent.node.robot_node import Event, RobotNode
+from robot_agent.node.robot_node import Event, EventKind, RobotNode
 from wire import protocol
 from world_server.core.world import World, WorldConfig
 
@@ -134,28 +135,33 @@ def test_tick_vectors_through_the_zenoh_robot(vector: dict[str, Any]) -> None:
     """The node's handling of what a Zenoh subscriber hands it (sense first: it must wait
     for the tick's radio and frame), and exactly what it publishes (an unkeyed run)."""
     controller = Scripted(vector["command"])
-    node = RobotNode(
+    endpoint = RobotEndpoint(
         ROBOT,
-        session=None,  # type: ignore[arg-type]
         keys=protocol.Keys("ticks"),
         controller=controller,
-        inbox=BoundedInbox(),
         world=World(WorldConfig(num_sites=5, num_robots=8)).info,
     )
+    node = RobotNode(endpoint, session=None, inbox=BoundedInbox())  # type: ignore[arg-type]
     tx, act = _Publisher(), _Publisher()
     node._tx, node._act, node._status = tx, act, _Publisher()  # type: ignore[assignment]
-    node.ports.radio.seq = vector["sent_before"]
+    endpoint.ports.radio.seq = vector["sent_before"]
     inputs = vector["in"]
-    node.handle(Event(ROBOT, "sense", bytes.fromhex(inputs["sense"]["hex"])))
+    node.handle(Event(ROBOT, EventKind.SENSE, bytes.fromhex(inputs["sense"]["hex"])))
     for item in inputs["radio_rx"]:
-        node.handle(Event(ROBOT, "rx", bytes.fromhex(item["hex"]), bytes.fromhex(item["meta_hex"])))
+        rx = Event(ROBOT, EventKind.RX, bytes.fromhex(item["hex"]), bytes.fromhex(item["meta_hex"]))
+        node.handle(rx)
     if inputs["camera"]:
         camera = inputs["camera"]
         node.handle(
-            Event(ROBOT, "camera", bytes.fromhex(camera["hex"]), bytes.fromhex(camera["meta_hex"]))
+            Event(
+                ROBOT,
+                EventKind.CAMERA,
+                bytes.fromhex(camera["hex"]),
+                bytes.fromhex(camera["meta_hex"]),
+            )
         )
     check_what_the_controller_got(controller, vector)
-    assert node.rejects.count == vector["rejected"]
+    assert endpoint.rejects.count == vector["rejected"]
     assert [(payload.hex(), (meta or b"").hex()) for payload, meta in tx.sent] == [
         (payload, meta) for _, payload, meta in expected_transmissions(vector)
     ]

@@ -16,12 +16,12 @@ from deploy import run_switches
 from deploy.cli import build_parser
 from deploy.launcher import plan_from_args
 from nest_beacon.core.beacon import BeaconConfig
-from nest_beacon.node import beacon_node as beacon_main
+from nest_beacon.node import cli as beacon_main
 from nest_beacon.node.options import NEST_BEACON_OPTIONS, NestBeaconConfig
 from plumbing.settings_cli import Options
 from robot_agent.core.byzantine import Behaviour, ByzantineRobot
 from robot_agent.core.controller_config import ControllerConfig
-from robot_agent.node import robot_node as node
+from robot_agent.node import cli as node
 from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig
 from wire import settings
 from world_server.core.camera import CameraNoise

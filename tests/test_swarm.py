@@ -270,8 +270,8 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run(tmp_path: Path
     Zenoh, robots 0-4 share a process that exchanges batches with the world, and robot 5
     has one of its own, on its own keys (the world's timeline says which went how)."""
     from deploy.inmemory import run_in_memory
+    from robot_agent.node import cli as node
     from robot_agent.node import options
-    from robot_agent.node import robot_node as node
     from world_server.server import cli as server
 
     seed, robots, sites = 5, 6, 6

@@ -2,6 +2,6 @@
 
 import sys
 
-from robot_agent.node.robot_node import main
+from robot_agent.node.cli import main
 
 sys.exit(main())

@@ -1,0 +1,99 @@
+"""``nest-beacon``: the command that runs the nest's radio transmitter as its own process
+(``python -m nest_beacon``).
+
+It follows ``world/clock``: for every tick it transmits when due (through the radio
+medium, like a robot) and answers the tick on ``beacon/<name>/ack``, so it takes part in
+the lockstep barrier like any controller (nest_beacon/core/endpoint.py; on Zenoh,
+beacon_node.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import random
+import signal
+import sys
+from collections.abc import Sequence
+
+import zenoh
+
+from nest_beacon.core.beacon import Beacon
+from nest_beacon.core.endpoint import BeaconEndpoint
+from nest_beacon.node.beacon_node import (
+    INBOX_BYTES,
+    MAX_MESSAGE_BYTES,
+    BeaconNode,
+    Event,
+    EventKind,
+)
+from nest_beacon.node.options import NEST_BEACON_OPTIONS, NestBeaconConfig
+from plumbing import cliargs, run_keys, settings_cli
+from plumbing.inbox import BoundedInbox
+from plumbing.lifecycle import die_with_launcher
+from plumbing.world_info import fetch_world_info
+from plumbing.zenoh_session import open_from_args
+from wire import names, protocol
+
+log = logging.getLogger("nest_beacon")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="nest-beacon",
+        description="The nest beacon: robots that hear it know they are at the nest.",
+    )
+    NEST_BEACON_OPTIONS.add_to(parser)
+    settings_cli.add_config_option(parser, NestBeaconConfig)
+    parser.add_argument(
+        "--info-timeout",
+        type=cliargs.positive_float,
+        default=60.0,
+        help="wall seconds to wait for the world server (default: 60)",
+    )
+    cliargs.add_zenoh_options(parser)
+    cliargs.add_log_level(parser)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    process_config: NestBeaconConfig = settings_cli.config_from(parser, args, NEST_BEACON_OPTIONS)
+    config = process_config.beacon
+    name = config.name
+    cliargs.configure_logging("nest-beacon", args.log_level)
+    keyring = run_keys.from_args(parser, args, "nest-beacon")
+    identity = names.beacon_identity(name)
+    if keyring is not None and not (keyring.holds(identity) and keyring.holds(names.WORLD)):
+        parser.exit(2, "nest-beacon: error: the beacon needs its own key and the world's\n")
+    rng = random.Random(protocol.derive_seed(process_config.seed, "beacon", name))
+    beacon = Beacon(config, rng)
+    keys = protocol.Keys(args.run_id, args.root)
+    inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: inbox.put(Event(EventKind.STOP)))
+    try:
+        session = open_from_args(args)
+    except zenoh.ZError as error:
+        print(f"nest-beacon: cannot open Zenoh session: {error}", file=sys.stderr)
+        return 1
+    with session:
+        try:
+            info = fetch_world_info(session, keys, args.info_timeout, keyring, identity)
+        except TimeoutError as error:
+            print(f"nest-beacon: {error}", file=sys.stderr)
+            return 1
+        endpoint = BeaconEndpoint(beacon, keys, info.dt, keyring)
+        node = BeaconNode(endpoint, session=session, keys=keys, inbox=inbox)
+        node.start()
+        log.info("beacon %s transmitting every %.2fs of sim time", name, config.period)
+        node.serve()
+        node.close()
+    log.info("beacon %s stopped (%d rejected clock messages)", name, endpoint.rejected)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,250 @@
+"""One robot's end of the wire, whatever carries it (pure: no I/O, no clock).
+
+A transport hands ``RobotEndpoint`` each message it receives for the robot as (input
+kind, payload, attachment) and sends what comes back: Zenoh in ``robot_agent/node``, and
+any link that carries the same (key, payload, attachment) triples. The endpoint
+
+* checks every input in one place: the tag of the robot's own run key (``wire.auth``),
+  the decoding (``wire.protocol``), sim time against the tick (``wire.guard``), the tick
+  window and the budget of pending inputs (``tick_assembly``); a refusal is counted in
+  ``rejects`` and reported in the robot's status, never raised;
+* gathers inputs into ticks (``tick_assembly``) and steps the controller once a tick is
+  complete, through ``SimulatedPorts`` (the port contract's control step);
+* follows one world server (``wire.guard.WorldFollower``): a new one counts ticks from
+  zero, so the pending ticks are forgotten and its sim time is shifted by the last time
+  seen (the controller's clock never runs backwards); the same one back after an outage
+  is rejoined at whatever tick it has reached;
+* returns what the robot sends for a step as data (``Step``): its radio transmissions, its
+  act and, when it changed, its status, each sealed with the robot's key.
+
+Time comes only from the messages. ``arrived`` is an opaque mark a tracing transport may
+attach to an input (its clock's reading); it comes back in the ``Step`` untouched.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+from typing import NamedTuple, TypeVar
+
+import msgspec
+
+from robot_agent.core.ports import RejectCounter, RobotController
+from robot_agent.core.simulated import SimulatedPorts
+from robot_agent.core.tick_assembly import ReadyTick, TickAssembly
+from wire import auth, guard, names, protocol
+
+log = logging.getLogger(__name__)
+Meta = TypeVar("Meta", protocol.RadioRxMeta, protocol.CameraMeta)
+
+
+class InputKind(enum.StrEnum):
+    """What the world sends a robot, by key (``robot/<id>/sense`` ...)."""
+
+    SENSE = "sense"
+    RADIO_RX = "radio/rx"
+    CAMERA = "camera"
+
+
+class OutputKind(enum.StrEnum):
+    """What a robot (or a process hosting robots) sends, by key."""
+
+    RADIO_TX = "radio/tx"
+    ACT = "act"
+    STATUS = "status"
+    HOST_ACT = "host/act"  # a batch of the acts of the robots one process hosts
+
+
+class Outgoing(NamedTuple):
+    """One message to send: on ``key``, ``payload`` with ``attachment`` (sealed)."""
+
+    kind: OutputKind
+    key: str
+    payload: bytes
+    attachment: bytes | None
+
+
+class Step(NamedTuple):
+    """What one control step of a robot sends, in sending order: its transmissions, its
+    act, and its status if it changed."""
+
+    robot: int
+    tick: int
+    arrived: float  # the latest mark of the tick's inputs (0.0 unless the transport marks)
+    transmissions: tuple[Outgoing, ...]
+    act: Outgoing
+    status: Outgoing | None
+
+    @property
+    def outgoing(self) -> list[Outgoing]:
+        status = [] if self.status is None else [self.status]
+        return [*self.transmissions, self.act, *status]
+
+
+class RobotEndpoint:
+    """One robot: its controller, its checks of what it receives, its tick assembly."""
+
+    def __init__(
+        self,
+        robot_id: int,
+        *,
+        keys: protocol.Keys,
+        controller: RobotController,
+        world: protocol.WorldInfo,
+        keyring: auth.Keyring | None = None,
+    ) -> None:
+        self.robot_id = robot_id
+        self.identity = names.robot_identity(robot_id)
+        self.keys = keys
+        self.controller = controller
+        self.keyring = keyring  # None: an unauthenticated run
+        self.dt = world.dt
+        self.rejects = RejectCounter()
+        self.ports = SimulatedPorts(self.rejects)  # the body and radio control_step drives
+        self.assembly = TickAssembly(world.clock == "lockstep")
+        self.worlds = guard.WorldFollower()  # the world server's instance (its Zenoh id)
+        self.time_offset = 0.0  # keeps the controller's clock monotonic across world restarts
+        self.last_t = 0.0
+        name = names.robot_name(robot_id)
+        # The key each input comes on: its tag covers it.
+        self.input_keys = {
+            InputKind.SENSE: keys.sense(robot_id),
+            InputKind.RADIO_RX: keys.radio_rx(name),
+            InputKind.CAMERA: keys.camera(robot_id),
+        }
+        # The key each of its own messages goes out on.
+        self.output_keys = {
+            OutputKind.RADIO_TX: keys.radio_tx(name),
+            OutputKind.ACT: keys.act(robot_id),
+            OutputKind.STATUS: keys.status(robot_id),
+        }
+        self._tx_key = self.output_keys[OutputKind.RADIO_TX]
+        self._act_key = self.output_keys[OutputKind.ACT]
+        self._status_key = self.output_keys[OutputKind.STATUS]
+
+    @property
+    def last_tick(self) -> int:
+        return self.assembly.last_tick
+
+    # --- inputs --------------------------------------------------------------------
+
+    def receive(
+        self,
+        kind: InputKind,
+        payload: bytes,
+        attachment: bytes | None,
+        arrived: float = 0.0,
+    ) -> Step | None:
+        """Take one message the world sent this robot; the step it completes, if any."""
+        tick = self._hold(kind, payload, attachment, arrived)
+        if tick is None:
+            return None
+        ready = self.assembly.take_ready(tick)
+        if ready is None:
+            return None
+        return self._step(ready)
+
+    def _hold(
+        self, kind: InputKind, payload: bytes, attachment: bytes | None, arrived: float
+    ) -> int | None:
+        """Check an input and hold it for its tick: the tick, or None if it was refused
+        (counted) or is stale (a tick already stepped)."""
+        try:
+            metadata = auth.unseal(
+                self.keyring, self.identity, self.input_keys[kind], payload, attachment
+            )
+            if kind is InputKind.SENSE:
+                sense = protocol.decode(payload, protocol.Sense)
+                refused = guard.time_refused(sense.tick, sense.t, self.dt)
+                if refused:
+                    raise protocol.ProtocolError(refused)
+                tick, held = sense.tick, self.assembly.add_sense(sense, arrived)
+            elif kind is InputKind.RADIO_RX:
+                radio = _metadata(metadata, protocol.RadioRxMeta)
+                tick = radio.tick
+                held = self.assembly.add_rx(tick, radio.sender, payload, arrived)
+            else:
+                camera = _metadata(metadata, protocol.CameraMeta)
+                tick, held = camera.tick, self.assembly.add_frame(camera.tick, payload, arrived)
+        except (auth.AuthError, protocol.ProtocolError) as error:
+            self.reject(kind, error)
+            return None
+        return tick if held else None
+
+    def reject(self, source: str, error: Exception) -> None:
+        """Count a refused input (``source``: what it came as), logged once per source."""
+        self.rejects.reject(f"robot {self.robot_id} {source}", error)
+
+    def count_dropped(self, count: int) -> None:
+        """Count inputs the transport dropped on arrival (too big, or no room to queue)."""
+        for _ in range(count):
+            self.reject("inbox", protocol.ProtocolError("dropped on arrival"))
+
+    # --- the world server ----------------------------------------------------------
+
+    def world_appeared(self, instance: str) -> None:
+        """A world server's liveliness token: the first is followed; when the followed one
+        is gone, another is a new world; the followed one again is the same world back."""
+        seen = self.worlds.appeared(instance)
+        if seen == "new":
+            log.warning("robot %d: a new world server appeared; resuming", self.robot_id)
+            self.assembly.follow_new_world()
+            self.time_offset = self.last_t
+        elif seen == "back":
+            log.warning("robot %d: the world server is back; resuming", self.robot_id)
+            self.assembly.rejoin()
+        elif instance != self.worlds.followed:
+            log.warning(
+                "robot %d: ignoring a second world token %s while following %s",
+                self.robot_id,
+                instance,
+                self.worlds.followed,
+            )
+
+    def world_vanished(self, instance: str) -> None:
+        """A world server's token went: if it was the followed one, wait for it."""
+        if self.worlds.vanished(instance):
+            log.warning("robot %d lost the world server; waiting", self.robot_id)
+
+    # --- outputs -------------------------------------------------------------------
+
+    def _step(self, ready: ReadyTick) -> Step:
+        sense = ready.sense
+        if self.time_offset:
+            sense = msgspec.structs.replace(sense, t=sense.t + self.time_offset)
+        self.last_t = sense.t
+        answer = self.ports.answer(self.controller, sense, ready.rx, ready.frame)
+        tx_key = self._tx_key
+        transmissions = tuple(
+            Outgoing(
+                OutputKind.RADIO_TX,
+                tx_key,
+                sent.payload,
+                self._seal(tx_key, sent.payload, sent.meta),
+            )
+            for sent in answer.transmissions
+        )
+        act = protocol.encode(answer.act)
+        act_message = Outgoing(OutputKind.ACT, self._act_key, act, self._seal(self._act_key, act))
+        status = self.status(sense.tick) if self.controller.take_status_change() else None
+        return Step(self.robot_id, sense.tick, ready.arrived, transmissions, act_message, status)
+
+    def status(self, tick: int) -> Outgoing:
+        """The robot's status at ``tick``, its rejections included, sealed."""
+        status = self.controller.status(tick)
+        status = msgspec.structs.replace(status, rejected=status.rejected + self.rejects.count)
+        payload = protocol.encode(status)
+        return Outgoing(
+            OutputKind.STATUS, self._status_key, payload, self._seal(self._status_key, payload)
+        )
+
+    def _seal(self, key: str, payload: bytes, metadata: bytes = b"") -> bytes | None:
+        return auth.seal(self.keyring, self.identity, key, payload, metadata)
+
+
+def _metadata(metadata: bytes | None, kind: type[Meta]) -> Meta:
+    """An input's metadata (after its tag, in its attachment) as ``kind``; ProtocolError
+    if there is none or it is not one."""
+    if metadata is None:
+        raise protocol.ProtocolError("missing attachment")
+    return protocol.decode(metadata, kind)

@@ -1,0 +1,227 @@
+"""``robot-agent``: the command that runs robots on Zenoh (``python -m robot_agent.node``).
+
+It opens one Zenoh session per robot it hosts, asks the world server for what its robots
+need (an id for ``--id auto``, the world's map), builds each robot's controller and
+endpoint, and runs them as ``RobotNode`` s (``robot_node.py``) until it is stopped.
+
+Trust: in a keyed run a robot holds only its own run key; it believes an input only with
+that key's tag (wire/auth.py), only for a tick within reach of its last one, and holds at
+most PENDING_BYTES of inputs for ticks it has not reached (robot_agent/core/endpoint.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import random
+import signal
+import sys
+import threading
+import time
+from collections.abc import Sequence
+
+import zenoh
+
+from plumbing import cliargs, run_keys, settings_cli
+from plumbing.inbox import BoundedInbox
+from plumbing.lifecycle import die_with_launcher
+from plumbing.trace import open_trace
+from plumbing.world_info import ask, fetch_world_info
+from plumbing.zenoh_session import certificate_name, open_from_args
+from robot_agent.core import byzantine
+from robot_agent.core.endpoint import RobotEndpoint
+from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig, hosted_byzantine
+from robot_agent.node.robot_node import (
+    INBOX_BYTES,
+    INBOX_BYTES_PER_ROBOT,
+    MAX_MESSAGE_BYTES,
+    Event,
+    EventKind,
+    HostBatch,
+    RobotNode,
+    serve,
+)
+from wire import auth, names, protocol
+
+log = logging.getLogger("robot_agent")
+
+
+def robot_id(text: str) -> int | None:
+    """A robot id, or None for ``auto``."""
+    if text == "auto":
+        return None
+    return cliargs.int_range(0, names.MAX_ROBOTS - 1)(text)
+
+
+class NoKeyError(Exception):
+    """The world assigned an id whose key this process does not hold."""
+
+
+def ask_for_id(
+    session: zenoh.Session,
+    keys: protocol.Keys,
+    timeout: float,
+    keyring: auth.Keyring | None = None,
+) -> int:
+    """Ask the world server for a free robot id (``--id auto``).
+
+    In a keyed run the question is asked in the name of a robot whose key this process
+    holds (robot 0 with the run secret), and the id is only taken if its key is held too.
+    """
+    asker = ""
+    if keyring is not None:
+        robots = [name for name in keyring.identities if name.startswith("robot/")]
+        asker = robots[0] if robots else names.robot_identity(0)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        answers, refused = ask(session, keys.world_join, keyring, asker)
+        for answer in answers:
+            try:
+                robot = protocol.decode(answer, protocol.JoinReply).id
+            except protocol.ProtocolError as error:
+                raise TimeoutError(f"invalid answer on {keys.world_join}: {error}") from None
+            if keyring is not None and not keyring.holds(names.robot_identity(robot)):
+                raise NoKeyError(f"the world server gave id {robot}, whose key this process lacks")
+            return robot
+        if refused and not answers:
+            raise TimeoutError(f"the world server gave no id: {refused[-1]}")
+        time.sleep(0.2)
+    raise TimeoutError(f"no world server answered on {keys.world_join}")
+
+
+def certificate_robot(config_file: str | None) -> int | None:
+    """The robot a Zenoh configuration's client certificate names (``CN=robot-<id>``).
+
+    Under the access control a robot may speak only as the robot of its certificate, so
+    ``--id auto`` takes that id rather than ask the world for one it could not use."""
+    if not config_file:
+        return None
+    return names.robot_of_certificate(certificate_name(config_file))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="robot-agent",
+        description="A robot of the swarm: the decision controller on Zenoh. Several --id "
+        "options host several robots in this process, each with its own Zenoh session.",
+    )
+    parser.add_argument(
+        "--id",
+        dest="ids",
+        type=robot_id,
+        action="append",
+        required=True,
+        metavar="N|auto",
+        help="robot id, or 'auto' to be given one by the world server "
+        "(repeatable to host several robots)",
+    )
+    parser.add_argument(
+        "--info-timeout",
+        type=cliargs.positive_float,
+        default=60.0,
+        help="wall seconds to wait for the world server (default: 60)",
+    )
+    AGENT_OPTIONS.add_to(parser)
+    settings_cli.add_config_option(parser, RobotAgentConfig)
+    parser.add_argument(
+        "--no-batch",
+        action="store_true",
+        help="answer on each robot's own keys even when hosting several robots (by default "
+        "a process hosting several robots exchanges one batch per step with the world)",
+    )
+    parser.add_argument(
+        "--trace",
+        metavar="PATH",
+        default=None,
+        help="write a timeline of every control step to PATH as JSON lines (docs/performance.md)",
+    )
+    cliargs.add_zenoh_options(parser)
+    cliargs.add_log_level(parser)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    die_with_launcher()
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    fixed = [robot for robot in args.ids if robot is not None]
+    if len(set(fixed)) != len(fixed):
+        parser.exit(2, "robot-agent: error: the same --id is given twice\n")
+    if None in args.ids and "{id}" in (args.zenoh_config or ""):
+        parser.exit(2, "robot-agent: error: --id auto cannot fill '{id}' in --zenoh-config\n")
+    agent: RobotAgentConfig = settings_cli.config_from(parser, args, AGENT_OPTIONS)
+    config = agent.controller
+    try:
+        misbehaving = hosted_byzantine(agent.byzantine, fixed)
+    except ValueError as error:
+        parser.exit(2, f"robot-agent: error: {error}\n")
+    cliargs.configure_logging("robot-agent", args.log_level)
+    keyring = run_keys.from_args(parser, args, "robot-agent")
+    for robot in fixed:
+        if keyring is not None and not keyring.holds(names.robot_identity(robot)):
+            parser.exit(2, f"robot-agent: error: the run keys hold no key for robot {robot}\n")
+    keys = protocol.Keys(args.run_id, args.root)
+    inbox: BoundedInbox[Event] = BoundedInbox(
+        INBOX_BYTES + INBOX_BYTES_PER_ROBOT * len(args.ids), MAX_MESSAGE_BYTES
+    )
+    lock = threading.Lock()  # the robots of this process: one thread at a time
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: inbox.put(Event(-1, EventKind.STOP)))
+    sessions: list[zenoh.Session] = []
+    nodes: list[RobotNode] = []
+    host: HostBatch | None = None
+    trace = open_trace(args.trace)
+    try:
+        for requested in args.ids:
+            session = open_from_args(args, requested)
+            sessions.append(session)
+            robot = requested
+            if robot is None:
+                robot = certificate_robot(args.zenoh_config)
+            if robot is None:
+                robot = ask_for_id(session, keys, args.info_timeout, keyring)
+            identity = names.robot_identity(robot)
+            info = fetch_world_info(session, keys, args.info_timeout, keyring, identity)
+            rng = random.Random(protocol.derive_seed(agent.seed, "robot", robot))
+            try:
+                controller = byzantine.build_controller(
+                    robot, info, config, rng, misbehaving.get(robot)
+                )
+            except ValueError as error:  # e.g. a liar's site the world does not have
+                print(f"robot-agent: error: {error}", file=sys.stderr)
+                return 2
+            endpoint = RobotEndpoint(
+                robot,
+                keys=keys,
+                controller=controller,
+                world=info,
+                keyring=keyring.only([identity]) if keyring is not None else None,
+            )
+            node = RobotNode(endpoint, session=session, inbox=inbox, lock=lock, trace=trace)
+            node.start()
+            nodes.append(node)
+        if len(nodes) > 1 and not args.no_batch:
+            host = HostBatch(nodes, inbox)
+            host.start()
+        log.info("robot(s) %s running", ", ".join(str(node.robot_id) for node in nodes))
+        serve(nodes, inbox)
+    except (zenoh.ZError, TimeoutError, NoKeyError) as error:
+        print(f"robot-agent: {error}", file=sys.stderr)
+        return 1
+    finally:
+        with lock:  # once held, no callback is stepping a robot, and none will after
+            for node in nodes:
+                node.closed = True
+        if host is not None:
+            host.close()
+        for node in nodes:
+            node.close()
+        for session in sessions:
+            session.close()
+        if trace is not None:
+            trace.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,123 @@
+"""The nest beacon's end of the wire without Zenoh (nest_beacon/core/endpoint.py): which
+clocks it answers, what it refuses and counts, and what it sends."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+
+from nest_beacon.core.beacon import Beacon, BeaconConfig
+from nest_beacon.core.endpoint import BeaconEndpoint, Outgoing, OutputKind
+from wire import auth, guard, names, protocol
+
+SECRET = bytes(range(32))
+KEYS = protocol.Keys("beacon")
+RUN_KEYS = auth.Keyring(secret=SECRET)  # the world's and the beacon's keys derive from it
+DT = 0.1
+IDENTITY = names.beacon_identity("nest")
+
+
+def beacon(keyed: bool = True) -> BeaconEndpoint:
+    config = BeaconConfig(period=0.5)  # every five ticks
+    keyring = RUN_KEYS.only([IDENTITY, names.WORLD]) if keyed else None
+    return BeaconEndpoint(Beacon(config, random.Random(0)), KEYS, DT, keyring)
+
+
+def clock(
+    tick: int, *, keyring: auth.Keyring | None = RUN_KEYS, t: float | None = None
+) -> tuple[bytes, bytes | None]:
+    payload = protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * DT if t is None else t))
+    return payload, auth.seal(keyring, names.WORLD, KEYS.world_clock, payload)
+
+
+def ack(message: Outgoing) -> protocol.Ack:
+    assert message.kind is OutputKind.ACK and message.key == KEYS.beacon_ack("nest")
+    return protocol.decode(message.payload, protocol.Ack)
+
+
+def test_each_tick_is_answered_and_a_transmission_sent_when_due() -> None:
+    endpoint = beacon()
+    answers = [endpoint.receive_clock(*clock(tick)) for tick in range(7)]
+    assert [[message.kind for message in answer] for answer in answers] == [
+        [OutputKind.RADIO_TX, OutputKind.ACK],
+        *[[OutputKind.ACK]] * 4,
+        [OutputKind.RADIO_TX, OutputKind.ACK],
+        [OutputKind.ACK],
+    ]
+    assert [(ack(answer[-1]).tick, ack(answer[-1]).radio_tx) for answer in answers] == [
+        (tick, 1 if tick in (0, 5) else 0) for tick in range(7)
+    ]
+    sent = answers[5][0]
+    assert sent.key == KEYS.radio_tx("nest")
+    assert protocol.decode(sent.payload, protocol.BeaconPayload).seq == 2
+
+
+def test_what_the_beacon_sends_is_sealed_with_its_own_key() -> None:
+    endpoint = beacon()
+    for message in endpoint.receive_clock(*clock(0)):
+        metadata = RUN_KEYS.open(IDENTITY, message.key, message.payload, message.attachment)
+        if message.kind is OutputKind.RADIO_TX:
+            meta = protocol.decode(metadata, protocol.RadioTxMeta)
+            assert (meta.tick, meta.seq) == (0, 1)
+        with pytest.raises(auth.AuthError):  # not in the world's name
+            RUN_KEYS.open(names.WORLD, message.key, message.payload, message.attachment)
+    unkeyed = beacon(keyed=False).receive_clock(*clock(0, keyring=None))
+    assert [message.attachment is None for message in unkeyed] == [False, True]  # bare meta
+
+
+def test_a_repeated_or_old_clock_is_not_answered_nor_counted() -> None:
+    endpoint = beacon()
+    assert endpoint.receive_clock(*clock(3))
+    assert endpoint.receive_clock(*clock(3)) == []
+    assert endpoint.receive_clock(*clock(1)) == []
+    assert endpoint.rejected == 0
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        clock(1, keyring=None),  # untagged
+        clock(1, keyring=auth.Keyring(secret=bytes(32))),  # another run's world
+        (clock(1)[0], RUN_KEYS.seal(IDENTITY, KEYS.world_clock, clock(1)[0])),  # not the world
+        clock(1, t=0.5),  # sim time not its tick's
+        (b"[]", RUN_KEYS.seal(names.WORLD, KEYS.world_clock, b"[]")),  # no clock
+        clock(guard.TICK_WINDOW + 1),  # beyond the window of tick 0
+    ],
+    ids=["untagged", "other run", "not the world", "wrong time", "undecodable", "too far"],
+)
+def test_a_clock_that_fails_a_check_is_refused_and_counted_in_the_next_ack(
+    bad: tuple[bytes, bytes | None],
+) -> None:
+    endpoint = beacon()
+    assert endpoint.receive_clock(*clock(0))
+    assert endpoint.receive_clock(*bad) == []
+    endpoint.count_dropped(2)  # what the transport dropped on arrival
+    assert ack(endpoint.receive_clock(*clock(1))[-1]).rejected == 3
+
+
+def test_a_new_world_is_followed_from_its_tick_zero() -> None:
+    endpoint = beacon()
+    endpoint.world_appeared("first")
+    for tick in range(8):
+        endpoint.receive_clock(*clock(tick))
+    endpoint.world_appeared("impostor")  # a second token while the first lives: ignored
+    assert endpoint.receive_clock(*clock(0)) == []
+    endpoint.world_vanished("first")
+    endpoint.world_appeared("second")
+    answer = endpoint.receive_clock(*clock(0))  # its tick 0, and a transmission at once
+    assert [message.kind for message in answer] == [OutputKind.RADIO_TX, OutputKind.ACK]
+    assert endpoint.rejected == 0
+
+
+def test_the_same_world_back_is_rejoined_at_its_tick_and_a_replay_is_still_refused() -> None:
+    endpoint = beacon()
+    endpoint.world_appeared("world")
+    assert endpoint.receive_clock(*clock(10))
+    endpoint.world_vanished("world")
+    endpoint.world_appeared("world")
+    assert endpoint.receive_clock(*clock(10)) == []  # a replay
+    far = 10 + 5 * guard.TICK_WINDOW
+    assert ack(endpoint.receive_clock(*clock(far))[-1]).tick == far
+    assert endpoint.receive_clock(*clock(far + guard.TICK_WINDOW + 1)) == []
+    assert endpoint.rejected == 1  # bounded again from there
