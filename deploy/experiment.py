@@ -39,11 +39,11 @@ from deploy.run_switches import add_swarm_switches, switches_argv
 from plumbing import cliargs
 from plumbing.lifecycle import PARENT_ENV
 from wire import shape
+from wire.endings import Ending
 
 STOP_GRACE = 30.0  # wall seconds a run has to stop after SIGINT before SIGKILL
 RUN_WALL_TIMEOUT = 1800.0  # wall seconds a run of a sweep may take, by default
 BACKSTOP = 60.0  # wall seconds past --run-timeout before a run is stopped from here
-FAILED_ENDINGS = ("crashed", "interrupted")  # endings that are not results of the run
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -164,20 +164,15 @@ class RunResult:
     note: str = ""
 
     @property
-    def ended(self) -> str | None:
+    def ended(self) -> Ending | None:
         """How the run ended, from its summary (None: it printed none)."""
-        ended = self.summary.get("ended") if self.summary else None
-        return ended if isinstance(ended, str) else None
+        return Ending.named(self.summary.get("ended")) if self.summary else None
 
     @property
     def ok(self) -> bool:
         """The run ended in a stated way that is a result (consensus, split, stalled,
         timeout) and was recorded; crashed, interrupted or silent runs failed."""
-        return (
-            self.ended is not None
-            and self.ended not in FAILED_ENDINGS
-            and self.spec.recording.is_file()
-        )
+        return self.ended is not None and self.ended.is_result and self.spec.recording.is_file()
 
 
 @dataclass

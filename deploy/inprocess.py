@@ -28,6 +28,7 @@ from deploy.wire_tap import WireTap
 from plumbing.cliargs import UsageError
 from plumbing.lifecycle import die_with_launcher
 from wire import protocol
+from wire.endings import Ending
 from world_server.core.world import World, WorldConfig
 from world_server.recording.writer import McapRecorder, RunDescription, Sample
 
@@ -106,14 +107,6 @@ def run_inprocess(args: argparse.Namespace) -> int:
     state_every = switches.world.state_every
     recording = _Recording.open(plan.record, config, plan) if plan.record is not None else None
     signals = _Signals()
-
-    def halt() -> inmemory.Halt | None:
-        if signals.received is not None:
-            return "interrupted", None
-        if plan.wall_timeout is not None and time.monotonic() - launched >= plan.wall_timeout:
-            return "timeout", "wall"
-        return None
-
     console = Console(stderr=True)
     progress = decided_progress(console, args.quiet)
     task = progress.add_task("decided", total=plan.robots, info="starting")
@@ -130,7 +123,9 @@ def run_inprocess(args: argparse.Namespace) -> int:
         )
 
     hooks = inmemory.EngineHooks(
-        halt=halt,
+        stop_signal=lambda: signals.received is not None,
+        since_launch=lambda: time.monotonic() - launched,
+        wall_timeout=plan.wall_timeout,
         progress=None if args.quiet else show,
         wire=recording.tap(protocol.Keys(plan.run_id), state_every) if recording else None,
         wall_clock=time.monotonic,
@@ -152,8 +147,10 @@ def run_inprocess(args: argparse.Namespace) -> int:
         if recording is not None:
             recording.close(None)
         raise
-    if signals.received is not None:
-        summary["signal"] = signal.Signals(signals.received).name
+    ended = Ending(summary["ended"])
+    signum = signals.received if ended is Ending.INTERRUPTED else None
+    if signum is not None:
+        summary["signal"] = signal.Signals(signum).name
     summary["faults"] = []
     summary["recording"] = str(plan.record) if plan.record is not None else None
     if not args.quiet:
@@ -164,7 +161,7 @@ def run_inprocess(args: argparse.Namespace) -> int:
         print(json.dumps(summary))
     else:
         launcher.print_summary(summary, Console())
-    return launcher.exit_code(summary["ended"], signals.received)
+    return ended.exit_code(signum)
 
 
 class _Recording:

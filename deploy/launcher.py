@@ -4,7 +4,7 @@ Starts the world server (the Zenoh router of the run, on a free loopback port), 
 beacon and the robot processes; watches their status over Zenoh; shows progress; stops
 every process it started, by pid, however the run ends; prints a summary that says how
 it ended (``deploy/summary.py``: consensus, split, stalled, timeout, interrupted,
-crashed), and exits with that ending's code (``EXIT_CODES``).
+crashed), and exits with that ending's code (wire/endings.py).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import zenoh
 from rich.console import Console
@@ -35,7 +35,7 @@ from deploy.inprocess import add_engine_option, refuse_unsupported, run_inproces
 from deploy.processes import Child, ProcessGroup, free_port, python_module, wait_for_port
 from deploy.run_progress import decided_progress
 from deploy.run_switches import SWITCHES, RunSwitches, add_swarm_switches, run_switches
-from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary, describe
+from deploy.summary import RobotRecord, RunOutcome, build_summary, describe
 from deploy.watchdog import Watchdog, default_stall_window
 from nest_beacon.node.options import NestBeaconConfig
 from plumbing import cliargs
@@ -48,6 +48,7 @@ from robot_agent.core import byzantine
 from robot_agent.node.options import RobotAgentConfig
 from viewer.options import VIEW_OPTIONS, Observer, add_view_options, observers
 from wire import auth, names, protocol, settings, shape
+from wire.endings import Ending, Halt, Look, Stop, exit_codes_help, stop_reason
 from wire.names import Role
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
@@ -56,25 +57,8 @@ from world_server.recording.writer import DEFAULT_NICENESS, RunDescription
 log = logging.getLogger("swarm.run")
 STATS_ATTEMPTS, STATS_RETRY_PAUSE = 5, 0.2
 
-EXIT_CRASH = 1  # usage errors exit 2 through argparse and UsageError
-# The exit code of each ending; an interrupted run exits 128 + the signal's number.
-EXIT_CODES = {"consensus": 0, "crashed": 1, "split": 3, "stalled": 4, "timeout": 5}
-# The codes of runs that ended with a result to read (all but crashed and interrupted).
-RESULT_CODES = frozenset(code for ended, code in EXIT_CODES.items() if ended != "crashed")
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 CONNECT_WAIT = 5.0  # wall seconds to wait for the router given by --connect
-EXIT_CODES_HELP = """\
-how a run ends (the summary's "ended"), and the exit code of each:
-  0    consensus    every running robot decided, all on the same site
-  1    crashed      a process of the run died on its own (or the run could not start)
-  2    -            usage error: nothing was started
-  3    split        every running robot decided, not all on the same site
-  4    stalled      no undecided robot made progress for --stall-window sim seconds
-  5    timeout      --timeout sim seconds or --wall-timeout wall seconds passed
-                    (the summary's "timeout_kind": sim or wall)
-  130  interrupted  by SIGINT (Ctrl-C); 143 by SIGTERM (e.g. timeout(1)); 129 by SIGHUP
-Unless it ended in consensus, the summary lists the undecided robots under "stuck".
-"""
 # Robot processes exchange one batch of senses and acts per tick with the world, so fewer,
 # fuller processes are faster: a process carries at least ROBOTS_PER_PROCESS robots (all of
 # a small swarm), and larger swarms spread over ROBOT_PROCESSES_PER_CORE per core
@@ -97,7 +81,7 @@ EVENTS_BYTES, MAX_EVENT_BYTES = 64 * 2**20, protocol.MAX_PAYLOAD_BYTES + 1024
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = EXIT_CODES_HELP
+    parser.epilog = exit_codes_help()
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     swarm = parser.add_argument_group("swarm")
     cliargs.add_run_shape(swarm)
@@ -994,11 +978,10 @@ class StopSignals:
 
 
 @dataclass(frozen=True)
-class Ending:
+class Ended:
     """Why the launcher stopped following the run."""
 
-    stop: Stop
-    timeout_kind: Literal["sim", "wall"] | None = None
+    halt: Halt
     signum: int | None = None  # the signal that interrupted the run
     crashed: Child | None = None  # the infrastructure process that died
 
@@ -1040,14 +1023,14 @@ def _run_swarm(
         print(f"swarm run: could not start: {error}", file=sys.stderr)
         if error.child is not None and error.child.tail():
             print(error.child.tail(), file=sys.stderr)
-        return EXIT_CRASH
+        return Ending.CRASHED.code
     except Interrupted as interrupt:
-        ending = Ending("interrupted", signum=interrupt.signum)
+        ending = Ended(Halt(Stop.INTERRUPTED), signum=interrupt.signum)
     signals.hold()
     return _finish(swarm, args, ending)
 
 
-def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ending) -> int:
+def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ended) -> int:
     """Stop the swarm, build and print the summary, finish the recording; the exit code."""
     plan = swarm.plan
     if ending.signum is not None:
@@ -1063,9 +1046,9 @@ def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ending) -> int:
         )
     stats = swarm.stop_swarm()
     robot_crashes = [record.id for record in swarm.records.values() if record.crashed]
-    stop = ending.stop
-    if robot_crashes and stop != "interrupted":
-        stop = "crashed"
+    stop = ending.halt.stop
+    if robot_crashes and stop is not Stop.INTERRUPTED:
+        stop = Stop.CRASHED
     wall = (swarm.ended_at or 0.0) - swarm.started_at if swarm.started_at else 0.0
     summary = build_summary(
         RunOutcome(
@@ -1076,7 +1059,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ending) -> int:
             best_site=make_layout(plan.sites, plan.robots, plan.seed).best_site,
             sim_time_s=swarm.sim_time,
             wall_time_s=wall,
-            timed_out=stop == "timeout",
+            timed_out=stop is Stop.TIMEOUT,
             radio=stats.radio if stats else protocol.RadioCounters(),
             world_rejected=stats.rejected if stats else 0,
             stalls=stats.stalls if stats else 0,
@@ -1085,7 +1068,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ending) -> int:
             beacon_rejected=sum(swarm.beacon_rejected.values()),
             config=plan.config,
             stop=stop,
-            timeout_kind=ending.timeout_kind if stop == "timeout" else None,
+            timeout_kind=ending.halt.limit if stop is Stop.TIMEOUT else None,
             stuck=swarm.watchdog.stuck(),
             byzantine={robot: str(how) for robot, how in plan.byzantine_robots.items()},
         ),
@@ -1110,7 +1093,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, ending: Ending) -> int:
         print_summary(summary, Console())
     if robot_crashes:
         print(f"swarm run: robot process(es) {robot_crashes} crashed", file=sys.stderr)
-    return exit_code(summary["ended"], ending.signum)
+    return Ending(summary["ended"]).exit_code(ending.signum)
 
 
 def _say(quiet: bool) -> Callable[[str], None] | None:
@@ -1120,39 +1103,32 @@ def _say(quiet: bool) -> Callable[[str], None] | None:
     return lambda line: print(f"swarm run: {line}", file=sys.stderr, flush=True)
 
 
-def exit_code(ended: str, signum: int | None = None) -> int:
-    """The exit code of an ending (see EXIT_CODES_HELP)."""
-    if ended == "interrupted":
-        return 128 + (signum or signal.SIGINT)
-    return EXIT_CODES[ended]
-
-
 def describe_ending(summary: dict[str, Any]) -> str:
     """One line: how the run ended, and what held it up."""
-    ended = summary["ended"]
+    ended = Ending.named(summary["ended"])
     at = f"at sim {summary['sim_time_s']:.0f} s"
     stuck = summary.get("stuck") or []
     undecided = f"; {len(stuck)} robot(s) undecided" if stuck else ""
-    if ended == "consensus":
+    if ended is Ending.CONSENSUS:
         return f"ended in consensus on site {summary['chosen_site']} {at}"
-    if ended == "split":
+    if ended is Ending.SPLIT:
         sites = sorted({r["decided_site"] for r in summary["per_robot"]} - {None})
         return f"ended split: the robots decided on different sites ({sites}) {at}"
-    if ended == "stalled":
+    if ended is Ending.STALLED:
         window = summary["config"].get("stall_window")
         quiet = f" for {window:g} s of sim time" if window else ""
         return f"ended stalled {at}: no undecided robot made progress{quiet}{undecided}"
-    if ended == "timeout":
+    if ended is Ending.TIMEOUT:
         limit = "wall time limit (--wall-timeout)"
         if summary.get("timeout_kind") != "wall":
             limit = "sim time limit (--timeout)"
         return f"ended at the {limit} {at}{undecided}"
-    if ended == "interrupted":
+    if ended is Ending.INTERRUPTED:
         return f"interrupted by {summary.get('signal', 'a signal')} {at}{undecided}"
     return f"ended crashed {at}: a process of the run died{undecided}"
 
 
-def _watch(swarm: Swarm, console: Console, quiet: bool) -> Ending:
+def _watch(swarm: Swarm, console: Console, quiet: bool) -> Ended:
     """Follow the run until every live robot decided, it stalls, a time limit, or a crash."""
     plan = swarm.plan
     progress = decided_progress(console, quiet)
@@ -1164,8 +1140,6 @@ def _watch(swarm: Swarm, console: Console, quiet: bool) -> Ending:
             swarm.poll()
             swarm.apply_faults()
             crashed = swarm.infrastructure_crash()
-            if crashed is not None:
-                return Ending("crashed", crashed=crashed)
             elapsed = time.monotonic() - swarm.started_at if swarm.started_at else 0.0
             factor = swarm.sim_time / elapsed if elapsed > 0 else 0.0
             progress.update(
@@ -1176,19 +1150,21 @@ def _watch(swarm: Swarm, console: Console, quiet: bool) -> Ending:
                 if swarm.started_at
                 else "waiting for the robots to join",
             )
-            if swarm.started_at is not None and swarm.all_live_decided():
-                # A fast swarm can pass the limit between two looks: what counts is when
-                # the last robot decided, in sim time, not when the launcher noticed.
-                if swarm.last_decision_time() <= plan.timeout:
-                    return Ending("decided")
-                return Ending("timeout", timeout_kind="sim")
-            if swarm.sim_time >= plan.timeout:
-                return Ending("timeout", timeout_kind="sim")
-            wall = time.monotonic() - swarm.launched_at
-            if plan.wall_timeout is not None and wall >= plan.wall_timeout:
-                return Ending("timeout", timeout_kind="wall")
-            if swarm.stalled():
-                return Ending("stalled")
+            decided = swarm.started_at is not None and swarm.all_live_decided()
+            halt = stop_reason(
+                Look(
+                    sim_time=swarm.sim_time,
+                    sim_limit=plan.timeout,
+                    all_decided=decided,
+                    last_decision=swarm.last_decision_time() if decided else 0.0,
+                    stalled=swarm.stalled(),
+                    wall_time=time.monotonic() - swarm.launched_at,
+                    wall_limit=plan.wall_timeout,
+                    crashed=crashed is not None,
+                )
+            )
+            if halt is not None:
+                return Ended(halt, crashed=crashed)
 
 
 def print_summary(summary: dict[str, Any], console: Console) -> None:

@@ -39,9 +39,10 @@ import msgspec
 from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from deploy.summary import ENDINGS, RobotRecord, RunOutcome, build_summary, byzantine_in_config
+from deploy.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from deploy.watchdog import Watchdog
 from wire import protocol
+from wire.endings import ENDINGS
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
 
