@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import IO, Any, NoReturn
 
 from deploy.cli import UsageError
-from deploy.inprocess import add_engine_option
+from deploy.run_options import add_engine_option
 from deploy.run_switches import add_swarm_switches, switches_argv
 from plumbing import cliargs
 from plumbing.lifecycle import PARENT_ENV
@@ -234,17 +234,18 @@ def _run_options(args: argparse.Namespace) -> list[str]:
 
 def validate_run_options(spec: RunSpec) -> None:
     """Parse one run's command line as ``swarm run`` would, so mistakes show up now."""
-    from deploy import launcher
+    from deploy.run_options import add_arguments
+    from deploy.run_plan import plan_from_args
 
     class Probe(argparse.ArgumentParser):
         def error(self, message: str) -> NoReturn:
             raise UsageError(f"swarm run option: {message}")
 
     probe = Probe(prog="swarm run")
-    launcher.add_arguments(probe)
+    add_arguments(probe)
     namespace = probe.parse_args(spec.argv)
     try:
-        launcher.plan_from_args(namespace)
+        plan_from_args(namespace)
     except ValueError as error:
         raise UsageError(f"swarm run option: {error}") from None
 

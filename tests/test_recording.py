@@ -425,23 +425,34 @@ def test_a_query_is_waited_for_while_worth_it_and_given_up_when_not() -> None:
 
 
 def test_the_launcher_waits_for_the_recorder_while_its_file_grows(tmp_path: Path) -> None:
-    from deploy.launcher import RecorderProgress
+    from deploy.run.recording import RECORDER_REPORT_EVERY, RecorderProgress
 
     path = tmp_path / "run.mcap"
     path.write_bytes(b"x" * 100)
-    alive = [True]
+    now = [0.0]
+
+    def clock() -> float:
+        return now[0]
+
     lines: list[str] = []
-    waiting = RecorderProgress(path, lambda: alive[0], lines.append, patience=0.3)
+    waiting = RecorderProgress(path, lambda: True, lines.append, patience=30.0, clock=clock)
     assert waiting()
     for _ in range(3):  # growing: worth waiting however long it takes
-        time.sleep(0.2)
+        now[0] += 20.0
         with path.open("ab") as stream:
             stream.write(b"x" * 2**20)
         assert waiting()
-    time.sleep(0.4)  # no growth for longer than the patience
+    assert len(lines) == 3  # one line every RECORDER_REPORT_EVERY seconds: here, every look
+    assert lines[-1].endswith("3 MB written, 60 s so far")
+    now[0] += 29.9  # not grown, but within the patience
+    assert waiting()
+    now[0] += 0.1  # no growth for the patience
     assert not waiting()
-    assert "did not grow for 0.3 s (3 MB written)" in waiting.why_not()
-    assert lines == []  # nothing said before RECORDER_REPORT_EVERY seconds
+    assert "did not grow for 30 s (3 MB written)" in waiting.why_not()
+
+    quiet = RecorderProgress(path, lambda: True, lines.append, clock=clock)
+    now[0] += RECORDER_REPORT_EVERY - 0.1
+    assert quiet() and len(lines) == 3  # nothing said before RECORDER_REPORT_EVERY
 
     dead = RecorderProgress(path, lambda: False)
     assert not dead()
@@ -449,7 +460,7 @@ def test_the_launcher_waits_for_the_recorder_while_its_file_grows(tmp_path: Path
 
 
 def test_the_recorder_yields_the_cpu_only_to_a_swarm_that_leaves_it_idle_time() -> None:
-    from deploy.launcher import ROBOTS_PER_PROCESS, recorder_niceness
+    from deploy.run_plan import ROBOTS_PER_PROCESS, recorder_niceness
 
     assert recorder_niceness(10) == recorder.DEFAULT_NICENESS == 10
     assert recorder_niceness(ROBOTS_PER_PROCESS) == 10  # one robot process
