@@ -444,15 +444,21 @@ def test_the_launcher_waits_for_the_recorder_while_its_file_grows(tmp_path: Path
         assert waiting()
     assert len(lines) == 3  # one line every RECORDER_REPORT_EVERY seconds: here, every look
     assert lines[-1].endswith("3 MB written, 60 s so far")
-    now[0] += 29.9  # not grown, but within the patience
+    now[0] += 29.0  # not grown, but within the patience
     assert waiting()
-    now[0] += 0.1  # no growth for the patience
+    now[0] += 1.0  # no growth for the patience
     assert not waiting()
     assert "did not grow for 30 s (3 MB written)" in waiting.why_not()
 
-    quiet = RecorderProgress(path, lambda: True, lines.append, clock=clock)
-    now[0] += RECORDER_REPORT_EVERY - 0.1
-    assert quiet() and len(lines) == 3  # nothing said before RECORDER_REPORT_EVERY
+    said: list[str] = []
+    now[0] = 100.0
+    quiet = RecorderProgress(path, lambda: True, said.append, clock=clock)
+    now[0] += RECORDER_REPORT_EVERY - 1.0
+    assert quiet() and said == []  # nothing said before RECORDER_REPORT_EVERY
+    now[0] += 1.0
+    assert quiet() and said == [
+        "waiting for the recorder to write what it fell behind on: 3 MB written, 10 s so far"
+    ]
 
     dead = RecorderProgress(path, lambda: False)
     assert not dead()
