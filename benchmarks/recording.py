@@ -37,10 +37,10 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from deploy import report  # noqa: E402
-from deploy.launcher import RESULT_CODES  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
 from wire import protocol  # noqa: E402
+from wire.endings import RESULT_CODES  # noqa: E402
 from world_server.recorder.write_loop import FINISH_QUIET  # noqa: E402
 
 SIM_SECONDS = {10: 100.0, 100: 60.0}

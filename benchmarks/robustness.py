@@ -51,9 +51,9 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from deploy.launcher import RESULT_CODES  # noqa: E402
 from robot_agent.core import ports  # noqa: E402
 from robot_agent.core.controller import Controller  # noqa: E402
+from wire.endings import RESULT_CODES  # noqa: E402
 
 DROP_LEVELS = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8]
 QUICK_DROP_LEVELS = [0.0, 0.3, 0.6, 0.8]

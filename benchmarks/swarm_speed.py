@@ -57,9 +57,9 @@ sys.path.insert(0, str(REPO))
 
 import zenoh  # noqa: E402
 
-from deploy.launcher import RESULT_CODES  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
+from wire.endings import RESULT_CODES  # noqa: E402
 
 TARGETS = {10: 50.0, 50: 10.0, 100: 2.0, 200: 3.0, 500: 1.0}
 

@@ -18,7 +18,7 @@ __all__ = ["SUBCOMMANDS", "UsageError", "main"]
 # name -> (module, one-line help)
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "wellstirred": ("deploy.wellstirred", "the paper's Section 4 well-stirred model"),
-    "run": ("deploy.launcher", "run a swarm of robot processes to consensus"),
+    "run": ("deploy.run.launcher", "run a swarm of robot processes to consensus"),
     "report": ("deploy.report", "the paper's Section 5 figures and a summary from recordings"),
     "experiment": ("deploy.experiment", "the paper's Section 5 protocol: many runs, one report"),
     "section5": (

@@ -8,7 +8,8 @@ ephemeral certificate authority with a certificate and an access control for eac
   a run's router is then reachable by this user only, not by every user of the machine as
   a loopback TCP port is. In secure mode it also holds the CA, the certificates and the
   Zenoh configurations, and the router listens on TLS on loopback instead, with the
-  access control of deploy/zenoh_acl.py (each process may publish only on its own keys).
+  access control of deploy/zenoh_acl.py (each process may publish only on its own keys)
+  and certificates from an authority made for the run (deploy/certificates.py).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from deploy import zenoh_acl
+from deploy import certificates, zenoh_acl
 from deploy.processes import free_port, wait_for_port
 from plumbing import run_keys
 from wire import auth, names, protocol
@@ -91,12 +92,19 @@ class RunNetwork:
             plan = zenoh_acl.SwarmPlan(
                 protocol.Keys(run_id, root), tuple(range(robots)), (BEACON,), port=port
             )
-            certificates = directory / "certs"
+            cert_dir = directory / "certs"
             ca, ca_key = directory / "ca.pem", directory / "ca.key"
-            zenoh_acl.create_ca(ca, ca_key, days=CERTIFICATE_DAYS)
-            zenoh_acl.issue_all(plan, ca, ca_key, certificates, days=CERTIFICATE_DAYS)
+            certificates.create_ca(ca, ca_key, days=CERTIFICATE_DAYS)
+            certificates.issue_all(
+                plan.routers,
+                plan.client_identities(),
+                ca,
+                ca_key,
+                cert_dir,
+                days=CERTIFICATE_DAYS,
+            )
             ca_key.unlink()  # nothing more to sign: no process needs it
-            zenoh_acl.write_configs(plan, directory, certificates)
+            zenoh_acl.write_configs(plan, directory, cert_dir)
             endpoint = f"tls/127.0.0.1:{port}"
             return cls(run_id, endpoint, True, keyring, directory, secure=True)
         except BaseException:

@@ -34,16 +34,16 @@ from pathlib import Path
 from typing import IO, Any, NoReturn
 
 from deploy.cli import UsageError
-from deploy.inprocess import add_engine_option
+from deploy.run_options import add_engine_option
 from deploy.run_switches import add_swarm_switches, switches_argv
 from plumbing import cliargs
 from plumbing.lifecycle import PARENT_ENV
 from wire import shape
+from wire.endings import Ending
 
 STOP_GRACE = 30.0  # wall seconds a run has to stop after SIGINT before SIGKILL
 RUN_WALL_TIMEOUT = 1800.0  # wall seconds a run of a sweep may take, by default
 BACKSTOP = 60.0  # wall seconds past --run-timeout before a run is stopped from here
-FAILED_ENDINGS = ("crashed", "interrupted")  # endings that are not results of the run
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -164,20 +164,15 @@ class RunResult:
     note: str = ""
 
     @property
-    def ended(self) -> str | None:
+    def ended(self) -> Ending | None:
         """How the run ended, from its summary (None: it printed none)."""
-        ended = self.summary.get("ended") if self.summary else None
-        return ended if isinstance(ended, str) else None
+        return Ending.named(self.summary.get("ended")) if self.summary else None
 
     @property
     def ok(self) -> bool:
         """The run ended in a stated way that is a result (consensus, split, stalled,
         timeout) and was recorded; crashed, interrupted or silent runs failed."""
-        return (
-            self.ended is not None
-            and self.ended not in FAILED_ENDINGS
-            and self.spec.recording.is_file()
-        )
+        return self.ended is not None and self.ended.is_result and self.spec.recording.is_file()
 
 
 @dataclass
@@ -239,17 +234,18 @@ def _run_options(args: argparse.Namespace) -> list[str]:
 
 def validate_run_options(spec: RunSpec) -> None:
     """Parse one run's command line as ``swarm run`` would, so mistakes show up now."""
-    from deploy import launcher
+    from deploy.run_options import add_arguments
+    from deploy.run_plan import plan_from_args
 
     class Probe(argparse.ArgumentParser):
         def error(self, message: str) -> NoReturn:
             raise UsageError(f"swarm run option: {message}")
 
     probe = Probe(prog="swarm run")
-    launcher.add_arguments(probe)
+    add_arguments(probe)
     namespace = probe.parse_args(spec.argv)
     try:
-        launcher.plan_from_args(namespace)
+        plan_from_args(namespace)
     except ValueError as error:
         raise UsageError(f"swarm run option: {error}") from None
 

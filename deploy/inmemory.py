@@ -11,9 +11,9 @@ from __future__ import annotations
 import random
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
-from deploy.summary import RobotRecord, RunOutcome, Stop, build_summary
+from deploy.summary import RobotRecord, RunOutcome, build_summary
 from deploy.watchdog import Watchdog, default_stall_window
 from deploy.wire_tap import WireTap, with_rejects
 from nest_beacon.core.beacon import Beacon, BeaconConfig
@@ -22,14 +22,12 @@ from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.ports import RejectCounter, RobotController
 from robot_agent.core.simulated import SimulatedPorts
 from wire import names, protocol, shape
+from wire.endings import Look, Stop, stop_reason
 from world_server.core.world import Transmission, World, WorldConfig
 
 # The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
 # world/state (the world server's default --state-every): both see the same samples.
 POSES_EVERY = 10
-
-# Why a run was stopped from outside, and for a timeout which limit: ("timeout", "wall").
-Halt = tuple[Stop, Literal["sim", "wall"] | None]
 
 
 @dataclass(frozen=True)
@@ -43,7 +41,9 @@ class Progress:
 class EngineHooks:
     """What ``swarm run --engine inprocess`` adds to a bare run (every part optional)."""
 
-    halt: Callable[[], Halt | None] | None = None  # asked every tick: stop now?
+    stop_signal: Callable[[], bool] | None = None  # asked every tick: has a stop signal come?
+    since_launch: Callable[[], float] | None = None  # wall seconds, for wall_timeout
+    wall_timeout: float | None = None  # --wall-timeout (with since_launch)
     progress: Callable[[Progress], None] | None = None  # told every ``poses_every`` ticks
     wire: WireTap | None = None  # every message as the processes would publish it
     wall_clock: Callable[[], float] | None = None  # measures wall_time_s when given
@@ -121,8 +121,6 @@ def run_in_memory(
     honest = [robot for robot_id, robot in robots.items() if robot_id not in behaviours]
     deliveries: dict[str, list[tuple[str, bytes]]] = {}
     frames: dict[int, bytes] = {}
-    stop: Stop = "decided"
-    timeout_kind: Literal["sim", "wall"] | None = None
     while True:
         acts: dict[int, protocol.Act] = {}
         transmissions: list[Transmission] = []
@@ -161,17 +159,8 @@ def run_in_memory(
             watchdog.poses(world.t, _positions(world))
             if hooks.progress is not None:
                 hooks.progress(_progress(world, robots))
-        if all(robot.controller.decided_site is not None for robot in honest):
-            break
-        if world.t >= timeout:
-            stop, timeout_kind = "timeout", "sim"
-            break
-        if watchdog.stalled(world.t):
-            stop = "stalled"
-            break
-        halted = hooks.halt() if hooks.halt is not None else None
-        if halted is not None:
-            stop, timeout_kind = halted
+        halt = stop_reason(_look(world.t, timeout, honest, watchdog, hooks))
+        if halt is not None:
             break
         result = world.advance(acts, transmissions)
         if wire is not None:
@@ -199,18 +188,43 @@ def run_in_memory(
             best_site=world.layout.best_site,
             sim_time_s=world.t,
             wall_time_s=wall,
-            timed_out=stop == "timeout",
+            timed_out=halt.stop is Stop.TIMEOUT,
             radio=state.radio,
             world_rejected=0,
             stalls=0,
             observer_rejected=0,
             config=hooks.config,
-            stop=stop,
-            timeout_kind=timeout_kind if stop == "timeout" else None,
+            stop=halt.stop,
+            timeout_kind=halt.limit,
             stuck=watchdog.stuck(),
             byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
         ),
         [robot.record for robot in robots.values()],
+    )
+
+
+def _look(
+    sim_time: float, timeout: float, honest: list[_Robot], watchdog: Watchdog, hooks: EngineHooks
+) -> Look:
+    """What this engine sees at the end of a tick (``wire.endings.stop_reason`` decides)."""
+    decided = all(robot.controller.decided_site is not None for robot in honest)
+    return Look(
+        sim_time=sim_time,
+        sim_limit=timeout,
+        all_decided=decided,
+        last_decision=_last_decision(honest) if decided else 0.0,
+        stalled=watchdog.stalled(sim_time),
+        wall_time=hooks.since_launch() if hooks.since_launch is not None else 0.0,
+        wall_limit=hooks.wall_timeout,
+        signalled=hooks.stop_signal() if hooks.stop_signal is not None else False,
+    )
+
+
+def _last_decision(robots: list[_Robot]) -> float:
+    """The sim time at which the last of ``robots`` decided (0 if none did)."""
+    return max(
+        (r.record.status.decision_time or 0.0 for r in robots if r.record.status is not None),
+        default=0.0,
     )
 
 

@@ -2,9 +2,12 @@
 
 Children die with the launcher (plumbing.lifecycle), their stderr is kept in a
 ring buffer so a crash can be explained, and ``stop_all`` ends each by pid: SIGTERM, a
-grace period, then SIGKILL. Each child runs in a process group of its own: a Ctrl-C in
-the terminal, a closing terminal or ``timeout(1)`` signal the launcher's whole group, and
-only the launcher should get that signal, so that it stops the run in order.
+grace period, then SIGKILL. Each child's stderr is read by a thread of its own (its
+pump), which the group joins once the child is gone: no pump outlives its ``stop``, so
+nothing passes on a child's lines after that. Each child runs in a process group of its
+own: a Ctrl-C in the terminal, a closing terminal or ``timeout(1)`` signal the launcher's
+whole group, and only the launcher should get that signal, so that it stops the run in
+order.
 """
 
 from __future__ import annotations
@@ -24,6 +27,9 @@ from deploy.forking import QUIET_THREADS, ForkedProcess, ForkServer
 from plumbing.lifecycle import PARENT_ENV
 
 LOG_LINES_KEPT = 200
+# Wall seconds the group waits for the pumps of stopped children to read their last lines
+# (each ends at its pipe's end of file, as soon as the child is gone).
+PUMP_JOIN_WAIT = 5.0
 
 
 def free_port() -> int:
@@ -58,6 +64,7 @@ class Child:
     )
     expected_exit: bool = False
     on_line: Callable[[str, str], None] | None = None
+    pump: threading.Thread | None = None  # reads stderr into ``log``; the group joins it
 
     @property
     def pid(self) -> int:
@@ -100,7 +107,12 @@ class ProcessGroup:
 
     def _adopt(self, child: Child) -> Child:
         self.children.append(child)
-        threading.Thread(target=self._pump, args=(child,), daemon=True).start()
+        # A daemon only as a last resort: a pipe held open elsewhere must not keep the
+        # launcher from exiting (the group joins it, for at most PUMP_JOIN_WAIT).
+        child.pump = threading.Thread(
+            target=self._pump, args=(child,), name=f"pump-{child.name}", daemon=True
+        )
+        child.pump.start()
         return child
 
     def _pump(self, child: Child) -> None:
@@ -127,6 +139,7 @@ class ProcessGroup:
             except subprocess.TimeoutExpired:
                 child.process.kill()
                 child.process.wait()
+        self._join_pumps(children)
 
     def kill(self, child: Child) -> None:
         """SIGKILL one child on purpose (fault injection), and say it was meant."""
@@ -134,6 +147,14 @@ class ProcessGroup:
         if child.alive():
             child.process.kill()
             child.process.wait()
+        self._join_pumps([child])
+
+    def _join_pumps(self, children: Sequence[Child]) -> None:
+        """Wait until the pumps of these (exited) children have read their last lines."""
+        deadline = time.monotonic() + PUMP_JOIN_WAIT
+        for child in children:
+            if child.pump is not None:
+                child.pump.join(max(0.0, deadline - time.monotonic()))
 
     def stop_all(self, grace: float = 3.0) -> None:
         self.stop(self.children, grace)

@@ -38,9 +38,10 @@ from typing import Any
 
 import msgspec
 
-from deploy.summary import ENDINGS, RobotRecord, RunOutcome, build_summary, byzantine_in_config
+from deploy.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from deploy.watchdog import Watchdog
 from wire import protocol
+from wire.endings import ENDINGS
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
 from world_server.recording.reader import RecordedMessage, RecordingReader, run_description

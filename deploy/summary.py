@@ -5,10 +5,11 @@ from __future__ import annotations
 import statistics
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 from robot_agent.core import byzantine
 from wire import protocol
+from wire.endings import Ending, Stop, TimeLimit, ending_of
 
 
 @dataclass
@@ -47,17 +48,6 @@ class RobotRecord:
         return self.status.decided_site
 
 
-# How a run ended. ``consensus``: every running robot decided, all on the same site;
-# ``split``: every running robot decided, not all on the same site; ``stalled``: the
-# watchdog saw no undecided robot make progress for its window; ``timeout``: the sim or
-# wall time limit; ``interrupted``: SIGINT, SIGTERM or SIGHUP; ``crashed``: a process of
-# the run died on its own.
-ENDINGS = ("consensus", "split", "stalled", "timeout", "interrupted", "crashed")
-Ending = Literal["consensus", "split", "stalled", "timeout", "interrupted", "crashed"]
-# Why the launcher (or the in-process engine) stopped: ``decided`` becomes consensus or split.
-Stop = Literal["decided", "stalled", "timeout", "interrupted", "crashed"]
-
-
 @dataclass(frozen=True)
 class RunOutcome:
     run_id: str
@@ -74,7 +64,7 @@ class RunOutcome:
     observer_rejected: int
     config: dict[str, Any]
     stop: Stop | None = None  # None: not known (a summary rebuilt from a recording)
-    timeout_kind: Literal["sim", "wall"] | None = None
+    timeout_kind: TimeLimit | None = None
     stuck: list[dict[str, Any]] = field(default_factory=list)
     beacon_rejected: int = 0
     byzantine: Mapping[int, str] = field(default_factory=dict)  # robot -> how it misbehaves
@@ -105,7 +95,7 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
     # lockstep); the launcher notices a little later, which only the speed figure uses.
     all_decided = bool(survivors) and all(site is not None for site in decided)
     sim_time = max(decision_times) if all_decided and decision_times else outcome.sim_time_s
-    ended = ending(outcome.stop, all_decided, consensus)
+    ended = ending_of(outcome.stop, all_decided, consensus)
     summary: dict[str, Any] = {
         "run_id": outcome.run_id,
         "num_robots": outcome.num_robots,
@@ -116,7 +106,7 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
         "chosen_site": chosen,
         "correct": consensus and chosen == outcome.best_site,
         "timed_out": outcome.timed_out,
-        "ended": ended,
+        "ended": None if ended is None else ended.value,
         "sim_time_s": round(sim_time, 3),
         "wall_time_s": round(outcome.wall_time_s, 3),
         "real_time_factor": round(outcome.sim_time_s / wall, 2),
@@ -143,24 +133,12 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
             for record in robots
         ],
     }
-    if ended == "timeout":
-        summary["timeout_kind"] = outcome.timeout_kind
-    if ended != "consensus":
+    if ended is Ending.TIMEOUT:
+        kind = outcome.timeout_kind
+        summary["timeout_kind"] = None if kind is None else kind.value
+    if ended is not Ending.CONSENSUS:
         summary["stuck"] = list(outcome.stuck)
     return summary
-
-
-def ending(stop: Stop | None, all_decided: bool, consensus: bool) -> Ending | None:
-    """How the run ended, from why it stopped and what the robots decided.
-
-    With no stop reason (a run rebuilt from its recording), what the robots decided is
-    all there is: consensus or split if every running robot decided, else not known.
-    """
-    if stop == "decided" or (stop is None and all_decided):
-        if consensus:
-            return "consensus"
-        return "split" if all_decided else "stalled"  # stalled: no robot left running
-    return stop
 
 
 def byzantine_in_config(config: dict[str, Any]) -> dict[int, str]:

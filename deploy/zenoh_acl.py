@@ -13,14 +13,12 @@ protocol (wire/protocol.py), so a robot can only publish its own ``act``,
         --new-ca --out swarm-zenoh
 
 writes ``routers/<router>.json5``, ``clients/<identity>.json5`` and, when the CA key is
-given, a key and certificate per identity in ``certs/`` (made with the cryptography package).
+given, a key and certificate per identity in ``certs/`` (deploy/certificates.py).
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime
-import ipaddress
 import json
 import os
 import re
@@ -31,11 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePath
 from typing import Any
 
-from cryptography import x509
-from cryptography.hazmat.primitives import hashes, serialization
-from cryptography.hazmat.primitives.asymmetric import ec
-from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
-
+from deploy.certificates import create_ca, is_ip, issue_all
 from plumbing import cliargs
 from wire import names, protocol
 from wire.names import Role
@@ -83,7 +77,7 @@ class SwarmPlan:
             raise ValueError("each beacon name may be given once")
         clients = set(self.client_identities())
         for router in self.routers:
-            if not _HOST_NAME.fullmatch(router) and not _is_ip(router):
+            if not _HOST_NAME.fullmatch(router) and not is_ip(router):
                 raise ValueError(f"router name {router!r} is not a host name or IP address")
             # A router's certificate grants everything: it must not name a client too.
             if router in clients:
@@ -420,167 +414,8 @@ def write_configs(plan: SwarmPlan, out: Path, cert_dir: PurePath) -> list[Path]:
     return written
 
 
-# --- certificates (the cryptography package) -----------------------------------------
-
-# P-256 keys: small, fast to make, accepted by rustls (Zenoh's TLS) and zenoh-pico's mbedTLS.
-_CURVE = ec.SECP256R1()
-# A little slack before "now", so that a certificate made this instant is already valid
-# for a peer whose clock is slightly behind.
-_BACKDATE = datetime.timedelta(minutes=5)
-
-
-def _write_private(path: Path, data: bytes) -> None:
-    """A file only its owner can read, created that way (never readable for a moment)."""
-    descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(descriptor, "wb") as file:
-        file.write(data)
-    path.chmod(0o600)
-
-
-def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
-    return key.private_bytes(
-        serialization.Encoding.PEM,
-        serialization.PrivateFormat.PKCS8,
-        serialization.NoEncryption(),
-    )
-
-
-def _validity(days: int) -> tuple[datetime.datetime, datetime.datetime]:
-    now = datetime.datetime.now(datetime.UTC)
-    return now - _BACKDATE, now + datetime.timedelta(days=days)
-
-
-def create_ca(
-    certificate: Path, key: Path, *, days: int = 365, common_name: str = "bestofn-swarm-ca"
-) -> None:
-    """A new self-signed certificate authority (refuses to overwrite an existing one)."""
-    for path in (certificate, key):
-        if path.exists():
-            raise FileExistsError(f"{path} exists; not replacing a certificate authority")
-        path.parent.mkdir(parents=True, exist_ok=True)
-    private = ec.generate_private_key(_CURVE)
-    name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, common_name)])
-    start, end = _validity(days)
-    ca = (
-        x509.CertificateBuilder()
-        .subject_name(name)
-        .issuer_name(name)
-        .public_key(private.public_key())
-        .serial_number(x509.random_serial_number())
-        .not_valid_before(start)
-        .not_valid_after(end)
-        .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-        .add_extension(
-            x509.KeyUsage(
-                digital_signature=False,
-                content_commitment=False,
-                key_encipherment=False,
-                data_encipherment=False,
-                key_agreement=False,
-                key_cert_sign=True,
-                crl_sign=True,
-                encipher_only=False,
-                decipher_only=False,
-            ),
-            critical=True,
-        )
-        .add_extension(x509.SubjectKeyIdentifier.from_public_key(private.public_key()), False)
-        .sign(private, hashes.SHA256())
-    )
-    _write_private(key, _key_pem(private))
-    certificate.write_bytes(ca.public_bytes(serialization.Encoding.PEM))
-
-
-def issue_certificate(
-    ca_certificate: Path,
-    ca_key: Path,
-    common_name: str,
-    out_dir: Path,
-    *,
-    server_names: Sequence[str] = (),
-    days: int = 365,
-) -> tuple[Path, Path]:
-    """A key and a certificate signed by the CA, named ``<common_name>.key/.pem``.
-
-    Every certificate may authenticate a client (mutual TLS); one with ``server_names``
-    (host names or IP addresses) may also serve, for routers.
-    """
-    out_dir.mkdir(parents=True, exist_ok=True)
-    key, certificate = out_dir / f"{common_name}.key", out_dir / f"{common_name}.pem"
-    authority = x509.load_pem_x509_certificate(ca_certificate.read_bytes())
-    signer = serialization.load_pem_private_key(ca_key.read_bytes(), password=None)
-    if not isinstance(signer, ec.EllipticCurvePrivateKey):
-        raise RuntimeError(f"{ca_key} is not an elliptic-curve key")
-    private = ec.generate_private_key(_CURVE)
-    usages = [ExtendedKeyUsageOID.CLIENT_AUTH]
-    if server_names:
-        usages.insert(0, ExtendedKeyUsageOID.SERVER_AUTH)
-    start, end = _validity(days)
-    builder = (
-        x509.CertificateBuilder()
-        .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, common_name)]))
-        .issuer_name(authority.subject)
-        .public_key(private.public_key())
-        .serial_number(x509.random_serial_number())
-        .not_valid_before(start)
-        .not_valid_after(min(end, authority.not_valid_after_utc))
-        .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
-        .add_extension(
-            x509.KeyUsage(
-                digital_signature=True,
-                content_commitment=False,
-                key_encipherment=False,
-                data_encipherment=False,
-                key_agreement=False,
-                key_cert_sign=False,
-                crl_sign=False,
-                encipher_only=False,
-                decipher_only=False,
-            ),
-            critical=True,
-        )
-        .add_extension(x509.ExtendedKeyUsage(usages), critical=False)
-        .add_extension(
-            x509.AuthorityKeyIdentifier.from_issuer_public_key(signer.public_key()), False
-        )
-    )
-    if server_names:
-        alternatives: list[x509.GeneralName] = [
-            x509.IPAddress(ipaddress.ip_address(name)) if _is_ip(name) else x509.DNSName(name)
-            for name in server_names
-        ]
-        builder = builder.add_extension(x509.SubjectAlternativeName(alternatives), False)
-    issued = builder.sign(signer, hashes.SHA256())
-    _write_private(key, _key_pem(private))
-    certificate.write_bytes(issued.public_bytes(serialization.Encoding.PEM))
-    return key, certificate
-
-
-def issue_all(
-    plan: SwarmPlan, ca_certificate: Path, ca_key: Path, cert_dir: Path, *, days: int = 365
-) -> None:
-    """Certificates for every router and client identity of the plan, plus ``ca.pem``."""
-    cert_dir.mkdir(parents=True, exist_ok=True)
-    if ca_certificate.resolve() != (cert_dir / "ca.pem").resolve():
-        shutil.copyfile(ca_certificate, cert_dir / "ca.pem")
-    for router in plan.routers:
-        # Clients reach their own host's router on loopback; routers reach it by name.
-        hosts = list(dict.fromkeys([router, "localhost", "127.0.0.1"]))
-        issue_certificate(ca_certificate, ca_key, router, cert_dir, server_names=hosts, days=days)
-    for identity in plan.client_identities():
-        issue_certificate(ca_certificate, ca_key, identity, cert_dir, days=days)
-
-
-def _is_ip(text: str) -> bool:
-    try:
-        ipaddress.ip_address(text)
-    except ValueError:
-        return False
-    return True
-
-
 def _host_in_endpoint(host: str) -> str:
-    return f"[{host}]" if _is_ip(host) and ":" in host else host
+    return f"[{host}]" if is_ip(host) and ":" in host else host
 
 
 # --- command line --------------------------------------------------------------------
@@ -685,7 +520,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.new_ca:
             create_ca(args.ca, args.ca_key, days=args.days)
         if args.ca_key is not None:
-            issue_all(plan, args.ca, args.ca_key, local_certs, days=args.days)
+            issue_all(
+                plan.routers,
+                plan.client_identities(),
+                args.ca,
+                args.ca_key,
+                local_certs,
+                days=args.days,
+            )
         elif not args.ca.is_file():
             parser.error(f"no CA certificate at {args.ca} (create one with --new-ca)")
         else:

@@ -20,8 +20,8 @@ from typing import Any
 
 import zenoh
 
-from deploy.launcher import RUN_ID_ENV
 from deploy.processes import free_port
+from deploy.run.supervisor import RUN_ID_ENV
 from plumbing.zenoh_session import open_session
 
 REPO = Path(__file__).resolve().parent.parent

@@ -206,7 +206,9 @@ def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot(
 ) -> None:
     from deploy.cli import build_parser
     from deploy.credentials import RunNetwork
-    from deploy.launcher import Swarm, plan_from_args
+    from deploy.run.supervisor import Supervisor
+    from deploy.run_plan import plan_from_args
+    from plumbing.inbox import BoundedInbox
 
     parser = build_parser(["run"])
     seed, sites = 4, 6
@@ -222,14 +224,14 @@ def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot(
     assert plan.config["byzantine"] == [f"1:liar={liar_site}", "2:inverted"]
     json.dumps(plan.config)  # the recorder gets the configuration as JSON
     started: list[list[str]] = []
-    swarm = Swarm(plan)
+    swarm = Supervisor(plan, BoundedInbox())
     monkeypatch.setattr(
         swarm.group, "fork", lambda name, module, argv, env=None: started.append(list(argv))
     )
     swarm.network = RunNetwork.create(plan.run_id, plan.robots, connect=None, keyed=True)
     try:
-        swarm._start_robots([0, 1])
-        swarm._start_robots([2, 3])
+        swarm.start_robots([0, 1])
+        swarm.start_robots([2, 3])
     finally:
         swarm.network.close()
     hosts = [argv[: argv.index("--run-id")] for argv in started]

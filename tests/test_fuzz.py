@@ -13,8 +13,8 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from deploy.credentials import RunNetwork
-from deploy.launcher import Swarm, plan_from_args
+from deploy.run.follower import Follower, Heard, Kind
+from deploy.run_plan import plan_from_args
 from plumbing.inbox import BoundedInbox
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import RobotEndpoint
@@ -22,7 +22,8 @@ from robot_agent.node.robot_node import Event, EventKind, RobotNode
 from wire import auth, protocol
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event as WorldEvent
-from world_server.core.events import EventKind, Output, Reply, ReplyError
+from world_server.core.events import EventKind as WorldEventKind
+from world_server.core.events import Output, Reply, ReplyError
 from world_server.core.world import World, WorldConfig
 
 MESSAGE_TYPES = [
@@ -287,7 +288,7 @@ def test_the_world_server_survives_any_sequence_of_inputs(
             continue
         query = object() if kind in ("join", "stats") else None
         outputs.clear()
-        event = WorldEvent(EventKind(kind), key, payload, attachment, query=query)
+        event = WorldEvent(WorldEventKind(kind), key, payload, attachment, query=query)
         server.take(event, 0.0)
         change = _WorldCounts.of(server) - before
         if kind in ("act", "ack", "tx"):
@@ -310,34 +311,39 @@ def test_the_world_server_survives_any_sequence_of_inputs(
     assert server.roster.assigned <= {0, 1}
 
 
+@dataclass
+class Launcher:
+    """What the launcher takes samples with: its follower and the run's keys (or none)."""
+
+    follower: Follower
+    keyring: auth.Keyring | None
+
+
 @pytest.fixture(scope="module", params=[False, True], ids=["unkeyed", "keyed"])
-def observer(request: pytest.FixtureRequest) -> Swarm:
+def observer(request: pytest.FixtureRequest) -> Launcher:
     from deploy.cli import build_parser
 
     args = build_parser(["run"]).parse_args(["run", "--robots", "2", "--no-record"])
-    swarm = Swarm(plan_from_args(args))
-    if request.param:  # what start() would make, without starting anything
-        keyring = auth.Keyring(secret=bytes(range(32)))
-        swarm.network = RunNetwork(swarm.plan.run_id, "tcp/127.0.0.1:1", False, keyring)
-    return swarm
+    keyring = auth.Keyring(secret=bytes(range(32))) if request.param else None
+    return Launcher(Follower(plan_from_args(args), clock=lambda: 0.0), keyring)
 
 
-def _launcher_took(observer: Swarm, kind: str, leaf: str, payload: bytes) -> Callable[[], bool]:
+def _launcher_took(follower: Follower, kind: str, leaf: str, payload: bytes) -> Callable[[], bool]:
     """Whether the launcher believed one status, clock, state or ack: what it keeps of
     that kind changed to the message (the launcher keeps nothing of a rejected one)."""
     if kind == "status":
-        robot = observer.keys.robot_of(f"{observer.keys.prefix}/{leaf}")
-        record = observer.records.get(robot) if robot is not None else None
+        robot = follower.keys.robot_of(f"{follower.keys.prefix}/{leaf}")
+        record = follower.records.get(robot) if robot is not None else None
         old = record.status if record is not None else None
         return lambda: record is not None and record.status is not old
     if kind == "clock":
-        observer.sim_time = -1.0  # no clock has this time
-        return lambda: observer.sim_time != -1.0
+        follower.sim_time = -1.0  # no clock has this time
+        return lambda: follower.sim_time != -1.0
     if kind == "state":
-        old_state = observer.last_state
-        return lambda: observer.last_state is not old_state
-    observer.beacon_rejected.clear()
-    return lambda: bool(observer.beacon_rejected)
+        old_state = follower.last_state
+        return lambda: follower.last_state is not old_state
+    follower.beacon_rejected.clear()
+    return lambda: bool(follower.beacon_rejected)
 
 
 STATUS = protocol.encode(
@@ -398,17 +404,18 @@ LAUNCHER_KINDS = {
 @example(events=[("ack", "beacon/nest/ack", b'{"v":1,"tick":3,"radio_tx":0}', None)])
 @example(events=[("clock", "x", b"not json", None)])  # rejected
 def test_the_launcher_survives_any_status_clock_or_state(
-    observer: Swarm, events: list[tuple[str, str, bytes, bytes | None]]
+    observer: Launcher, events: list[tuple[str, str, bytes, bytes | None]]
 ) -> None:
     """Nothing it is sent breaks the launcher; each message is believed or counted as
     rejected, exactly one of the two; in a keyed run nothing untagged is believed."""
+    follower = observer.follower
     for kind, leaf, payload, attachment in events:
-        before = observer.rejected
-        took = _launcher_took(observer, kind, leaf, payload)
-        observer.events.put((kind, f"{observer.keys.prefix}/{leaf}", payload, attachment))
-        observer.poll()
-        believed = took()
-        assert observer.rejected - before == (0 if believed else 1), (kind, leaf, payload)
+        before = follower.rejected
+        took = _launcher_took(follower, kind, leaf, payload)
+        heard = Heard(Kind(kind), f"{follower.keys.prefix}/{leaf}", payload, attachment)
+        believed = follower.take(heard, observer.keyring)
+        assert believed == took()
+        assert follower.rejected - before == (0 if believed else 1), (kind, leaf, payload)
         if believed:
             assert observer.keyring is None
             assert _decodes(payload, LAUNCHER_KINDS[kind])

@@ -41,7 +41,7 @@ ADAPTERS = [
     "nest_beacon/node",
     "plumbing",
 ]
-OUTER = ["deploy", "viewer"]
+OUTER = ["deploy", "deploy/run", "viewer"]
 # The package roots that hold only layers and a ``__main__`` that starts one.
 ROOTS = ["robot_agent", "world_server", "nest_beacon"]
 FOLDERS = PURE + ADAPTERS + OUTER + ROOTS
@@ -91,7 +91,8 @@ ALLOWED: dict[str, set[str]] = {
         "world_server/core",
         "world_server/recording",
     },
-    "deploy": set(FOLDERS) - {"deploy"},
+    "deploy": set(FOLDERS) - {"deploy", "deploy/run"},
+    "deploy/run": set(FOLDERS) - {"deploy/run"},
 }
 # Imports a link to a robot's hardware may not make: it runs where there is no Zenoh.
 LINK_FORBIDDEN = {"zenoh", "plumbing"}

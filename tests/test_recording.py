@@ -426,23 +426,40 @@ def test_a_query_is_waited_for_while_worth_it_and_given_up_when_not() -> None:
 
 
 def test_the_launcher_waits_for_the_recorder_while_its_file_grows(tmp_path: Path) -> None:
-    from deploy.launcher import RecorderProgress
+    from deploy.run.recording import RECORDER_REPORT_EVERY, RecorderProgress
 
     path = tmp_path / "run.mcap"
     path.write_bytes(b"x" * 100)
-    alive = [True]
+    now = [0.0]
+
+    def clock() -> float:
+        return now[0]
+
     lines: list[str] = []
-    waiting = RecorderProgress(path, lambda: alive[0], lines.append, patience=0.3)
+    waiting = RecorderProgress(path, lambda: True, lines.append, patience=30.0, clock=clock)
     assert waiting()
     for _ in range(3):  # growing: worth waiting however long it takes
-        time.sleep(0.2)
+        now[0] += 20.0
         with path.open("ab") as stream:
             stream.write(b"x" * 2**20)
         assert waiting()
-    time.sleep(0.4)  # no growth for longer than the patience
+    assert len(lines) == 3  # one line every RECORDER_REPORT_EVERY seconds: here, every look
+    assert lines[-1].endswith("3 MB written, 60 s so far")
+    now[0] += 29.0  # not grown, but within the patience
+    assert waiting()
+    now[0] += 1.0  # no growth for the patience
     assert not waiting()
-    assert "did not grow for 0.3 s (3 MB written)" in waiting.why_not()
-    assert lines == []  # nothing said before RECORDER_REPORT_EVERY seconds
+    assert "did not grow for 30 s (3 MB written)" in waiting.why_not()
+
+    said: list[str] = []
+    now[0] = 100.0
+    quiet = RecorderProgress(path, lambda: True, said.append, clock=clock)
+    now[0] += RECORDER_REPORT_EVERY - 1.0
+    assert quiet() and said == []  # nothing said before RECORDER_REPORT_EVERY
+    now[0] += 1.0
+    assert quiet() and said == [
+        "waiting for the recorder to write what it fell behind on: 3 MB written, 10 s so far"
+    ]
 
     dead = RecorderProgress(path, lambda: False)
     assert not dead()
@@ -450,7 +467,7 @@ def test_the_launcher_waits_for_the_recorder_while_its_file_grows(tmp_path: Path
 
 
 def test_the_recorder_yields_the_cpu_only_to_a_swarm_that_leaves_it_idle_time() -> None:
-    from deploy.launcher import ROBOTS_PER_PROCESS, recorder_niceness
+    from deploy.run_plan import ROBOTS_PER_PROCESS, recorder_niceness
 
     assert recorder_niceness(10) == recorder_options.DEFAULT_NICENESS == 10
     assert recorder_niceness(ROBOTS_PER_PROCESS) == 10  # one robot process

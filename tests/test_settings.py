@@ -14,7 +14,7 @@ import pytest
 
 from deploy import run_switches
 from deploy.cli import build_parser
-from deploy.launcher import plan_from_args
+from deploy.run_plan import plan_from_args
 from nest_beacon.core.beacon import BeaconConfig
 from nest_beacon.node import cli as beacon_main
 from nest_beacon.node.options import NEST_BEACON_OPTIONS, NestBeaconConfig

@@ -5,11 +5,11 @@ from __future__ import annotations
 import pytest
 
 from deploy.inmemory import run_in_memory
-from deploy.summary import ENDINGS, ending
 from deploy.watchdog import Watchdog, default_stall_window
 from nest_beacon.core.beacon import BeaconConfig
 from robot_agent.core.controller import ControllerConfig
 from wire import protocol
+from wire.endings import ENDINGS, Stop, ending_of
 from world_server.core.world import WorldConfig
 
 BODY = 0.074  # two e-puck radii
@@ -136,11 +136,11 @@ def test_the_default_window_grows_with_the_arena_and_the_beacons_outages() -> No
 
 
 def test_endings_from_why_the_run_stopped_and_what_the_robots_decided() -> None:
-    assert ending("decided", all_decided=True, consensus=True) == "consensus"
-    assert ending("decided", all_decided=True, consensus=False) == "split"
-    assert ending("stalled", all_decided=False, consensus=False) == "stalled"
-    assert ending(None, all_decided=True, consensus=True) == "consensus"  # from a recording
-    assert ending(None, all_decided=False, consensus=False) is None  # not known
+    assert ending_of(Stop.DECIDED, all_decided=True, consensus=True) == "consensus"
+    assert ending_of(Stop.DECIDED, all_decided=True, consensus=False) == "split"
+    assert ending_of(Stop.STALLED, all_decided=False, consensus=False) == "stalled"
+    assert ending_of(None, all_decided=True, consensus=True) == "consensus"  # from a recording
+    assert ending_of(None, all_decided=False, consensus=False) is None  # not known
     assert set(ENDINGS) == {"consensus", "split", "stalled", "timeout", "interrupted", "crashed"}
 
 

@@ -22,7 +22,7 @@ from pathlib import Path, PurePath
 import pytest
 import zenoh
 
-from deploy import zenoh_acl
+from deploy import certificates, zenoh_acl
 from deploy.processes import python_module
 from plumbing import run_keys, zenoh_session
 from wire import protocol
@@ -96,8 +96,8 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
         == 0
     )
     rogue = base / "rogue"
-    zenoh_acl.create_ca(rogue / "ca.pem", rogue / "ca.key", days=2)
-    zenoh_acl.issue_certificate(rogue / "ca.pem", rogue / "ca.key", "robot-1", rogue, days=2)
+    certificates.create_ca(rogue / "ca.pem", rogue / "ca.key", days=2)
+    certificates.issue_certificate(rogue / "ca.pem", rogue / "ca.key", "robot-1", rogue, days=2)
 
     endpoint = f"tls/127.0.0.1:{free_loopback_port()}"
     router = subprocess.Popen(

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from wire import names, protocol
+from wire.endings import Ending
 from world_server.core.body import EPUCK
 from world_server.core.camera import site_colour_bgr
 from world_server.core.layout import Layout
@@ -288,11 +289,11 @@ def ending(summary: Mapping[str, Any] | None, fallback: str = "stopped") -> dict
     if summary is None:
         return {"reason": fallback, "text": f"run {fallback}"}
     reason = summary.get("ended")
-    if not isinstance(reason, str):
+    if not isinstance(reason, str):  # the summary does not say (an older or rebuilt one)
         reason = (
-            "timeout"
+            Ending.TIMEOUT.value
             if summary.get("timed_out")
-            else "consensus"
+            else Ending.CONSENSUS.value
             if summary.get("consensus")
             else "ended"
         )
@@ -303,6 +304,6 @@ def ending(summary: Mapping[str, Any] | None, fallback: str = "stopped") -> dict
         text = f"consensus on site {summary.get('chosen_site')}, {verdict}"
     else:
         text = "no consensus"
-    if reason not in ("consensus", "ended"):
+    if reason not in (Ending.CONSENSUS, "ended"):
         text = f"{reason}: {text}"
     return {"reason": reason, "text": text}

@@ -1,0 +1,142 @@
+"""The parts of ``swarm run`` that own threads and time, each on its own: stop signals as
+events, the process group's log pumps, the log relay's end, the fault schedule, and the
+launcher's look at a run (with its clock given)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+from typing import Any, cast
+
+import pytest
+import zenoh
+
+from deploy.cli import build_parser
+from deploy.processes import ProcessGroup
+from deploy.run.faults import FaultSchedule
+from deploy.run.follower import Heard, Kind
+from deploy.run.launcher import Swarm
+from deploy.run.log_relay import LogRelay
+from deploy.run.signals import StopSignals
+from deploy.run_plan import Fault, FaultAction, RunPlan, plan_from_args
+from wire import protocol
+from wire.endings import Halt, Stop, TimeLimit
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def test_a_stop_signal_becomes_one_event_and_later_ones_change_nothing() -> None:
+    heard: list[int] = []
+    passed_on = threading.Event()
+
+    def notify(signum: int) -> None:
+        heard.append(signum)
+        passed_on.set()
+
+    before = signal.getsignal(signal.SIGHUP)
+    with StopSignals(notify) as signals:
+        os.kill(os.getpid(), signal.SIGHUP)  # handled, not the end of this process
+        assert passed_on.wait(10.0)
+        os.kill(os.getpid(), signal.SIGTERM)
+        assert signals.received == signal.SIGHUP
+    assert heard == [signal.SIGHUP]  # the relay was joined: nothing more can come
+    assert signal.getsignal(signal.SIGHUP) is before
+
+
+def test_the_group_joins_each_childs_pump_once_it_read_the_last_line() -> None:
+    lines: list[tuple[str, str]] = []
+    group = ProcessGroup(lambda name, line: lines.append((name, line)))
+    child = group.start(
+        "talker", [sys.executable, "-c", "import sys; print('last words', file=sys.stderr)"]
+    )
+    child.process.wait(timeout=30)  # gone, but its pump may not have read it all yet
+    group.stop_all()
+    assert child.pump is not None and not child.pump.is_alive()
+    assert list(child.log) == ["last words"] and lines == [("talker", "last words")]
+
+
+class _Session:
+    """Keeps what is published on it."""
+
+    def __init__(self) -> None:
+        self.put_keys: list[str] = []
+
+    def put(self, key: str, payload: bytes, **options: Any) -> None:
+        self.put_keys.append(key)
+
+
+def test_the_log_relay_holds_lines_for_the_recorder_and_publishes_none_once_detached() -> None:
+    keys = protocol.Keys("parts")
+    echoed: list[str] = []
+    relay = LogRelay(keys, lambda process, line: echoed.append(line), hold=True)
+    session = _Session()
+    relay.line("world", "before the session")
+    relay.attach(cast(zenoh.Session, session), None)
+    relay.line("beacon", "before the recorder")
+    assert session.put_keys == []
+    relay.release()
+    relay.line("robot-0", "while recording")
+    assert session.put_keys == [keys.log("world"), keys.log("beacon"), keys.log("robot-0")]
+    relay.detach()
+    relay.line("world", "while closing")
+    assert len(session.put_keys) == 3
+    assert echoed[-1] == "while closing"  # still shown with --verbose
+
+
+def test_faults_fall_due_in_sim_time_order_and_are_noted_as_the_summary_lists_them() -> None:
+    schedule = FaultSchedule(
+        [Fault(1, FaultAction.RESTART, 20.0), Fault(0, FaultAction.KILL, 10.0)]
+    )
+    assert schedule.due(9.9) == [] and schedule.restart_pending()
+    (kill,) = schedule.due(15.0)
+    assert kill == Fault(0, FaultAction.KILL, 10.0)
+    schedule.note(kill, 15.04, was_running=True)
+    assert schedule.due(30.0) == [Fault(1, FaultAction.RESTART, 20.0)]
+    assert not schedule.restart_pending() and schedule.pending == []
+    assert schedule.applied == [
+        {"robot": 0, "action": "kill", "at_s": 10.0, "applied_at_s": 15.04, "was_running": True}
+    ]
+
+
+# --- the launcher's look, with no process started -----------------------------------------
+
+
+def _plan(*options: str) -> RunPlan:
+    args = build_parser(["run"]).parse_args(["run", "--robots", "2", "--no-record", *options])
+    return plan_from_args(args)
+
+
+def _clock_message(t: float) -> Heard:
+    clock = protocol.Clock(v=protocol.VERSION, tick=round(t * 10), t=t)
+    return Heard(Kind.CLOCK, protocol.Keys("x").world_clock, protocol.encode(clock))
+
+
+def test_the_launcher_looks_with_its_clock_given_and_takes_a_signal_as_an_event() -> None:
+    now = [1000.0]
+    # A restart still to come: the robots' decisions (there are no processes here) wait.
+    plan = _plan("--wall-timeout", "30", "--timeout", "50", "--restart", "0@1000")
+    swarm = Swarm(plan, clock=lambda: now[0])
+    assert swarm.wall_deadline == 1030.0
+    assert swarm.look(signalled=False) is None
+    swarm.inbox.put(_clock_message(12.5))
+    assert not swarm.take_events(until=now[0])
+    assert swarm.follower.sim_time == 12.5 and swarm.follower.started_at == 1000.0
+    swarm.signalled(signal.SIGINT)
+    assert swarm.take_events(until=now[0])  # the relay's event: a stop signal came
+    assert swarm.look(signalled=True) == Halt(Stop.INTERRUPTED)
+    now[0] = 1030.0
+    assert swarm.look(signalled=False) == Halt(Stop.TIMEOUT, TimeLimit.WALL)
+    swarm.inbox.put(_clock_message(50.0))
+    swarm.take_events(until=now[0])
+    assert swarm.look(signalled=True) == Halt(Stop.TIMEOUT, TimeLimit.SIM)
+
+
+def test_the_inbox_takes_a_signal_whatever_else_filled_it() -> None:
+    swarm = Swarm(_plan())
+    swarm.inbox.max_bytes = 0  # full: every sample is dropped and counted
+    swarm.inbox.put(_clock_message(1.0), 100)
+    swarm.signalled(signal.SIGTERM)
+    assert swarm.take_events(until=swarm.clock())
+    assert swarm.follower.rejected == 1 and swarm.follower.sim_time == 0.0
