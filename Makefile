@@ -1,11 +1,16 @@
-# `make run`: a default swarm to consensus. `make test`: the whole test suite.
-# Both create .venv and install the project on first use (and again when
+# `make run`: a default swarm to consensus.
+# `make test`: lint, then the whole test suite (CI's budget for it: 15 minutes
+#   on 2 cores). tests/test_section5.py reruns only seeds 0-9 of Section 5.
+# `make check-published`: every published Section 5 run again (all of
+#   docs/section5-runs.json, `swarm section5 --check`; about 7 minutes on 2 cores). CI runs
+#   it after `make test`. What else is published and what checks it: docs/section5.md.
+# All of them create .venv and install the project on first use (and again when
 # pyproject.toml changes).
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test explore lint bench clean
+.PHONY: run test check-published explore lint bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -27,6 +32,9 @@ test: $(VENV)/.installed-test
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
 	$(BIN)/python -m pytest
+
+check-published: $(VENV)/.installed
+	$(BIN)/swarm section5 --check
 
 # The property tests with fresh random examples (make test repeats the same ones).
 explore: $(VENV)/.installed-test
