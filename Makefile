@@ -1,6 +1,12 @@
 # `make run`: a default swarm to consensus.
-# `make test`: lint, then the whole test suite (CI's budget for it: 15 minutes
+# `make test`: lint, then the whole test suite (every tier; CI's budget for it: 15 minutes
 #   on 2 cores). tests/test_section5.py reruns only seeds 0-9 of Section 5.
+# `make test-fast`: the fast tier only: the tests of the pure layers, which start no process
+#   and open no Zenoh session or network connection (848 tests, 100 s wall on a quiet
+#   2-core machine; more when it is shared). The tier is FAST in tests/tiers.py, less the
+#   whole-swarm tests in SLOW; tests/test_tiers.py fails if a test module is in no tier,
+#   and tests/conftest.py fails a fast test that starts a process, connects, listens or
+#   sends on a socket, or opens a Zenoh session.
 # `make check-published`: every published Section 5 run again (all of
 #   docs/section5-runs.json, `swarm section5 --check`; about 7 minutes on 2 cores). CI runs
 #   it after `make test`. What else is published and what checks it: docs/section5.md.
@@ -10,7 +16,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test check-published explore lint bench clean
+.PHONY: run test test-fast check-published explore lint bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -32,6 +38,9 @@ test: $(VENV)/.installed-test
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
 	$(BIN)/python -m pytest
+
+test-fast: $(VENV)/.installed-test
+	$(BIN)/python -m pytest -m fast
 
 check-published: $(VENV)/.installed
 	$(BIN)/swarm section5 --check
