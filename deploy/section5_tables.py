@@ -209,8 +209,9 @@ def provenance(meta: dict[str, Any]) -> str:
     return (
         f"Made by `{meta.get('command', 'swarm section5')}` (runs at commit {commit}{dirty}; "
         f"in-process lockstep runs, {meta.get('robots', ROBOTS)} robots, default settings "
-        "unless named). `swarm section5 --check` (run by `tests/test_section5.py`) runs "
-        "seeds 0-9 again and fails if anything here differs."
+        "unless named). `swarm section5 --check` (`make check-published`, run by CI) runs "
+        "every one of these runs again and fails if anything here differs; "
+        "`tests/test_section5.py` (`make test`) does the same for seeds 0-9."
     )
 
 

@@ -1,18 +1,74 @@
-"""Hypothesis profiles: repeatable by default, exploring on request.
+"""Hypothesis profiles, and the fast tier's marker and guard.
 
 ``make test`` (and CI) use ``repeatable``: examples are derived from each test's own
 source, so the same commit passes or fails the same way every time. ``make explore``
 (``HYPOTHESIS_PROFILE=explore``) draws fresh random examples (500 per test that sets no
 count of its own) to hunt for new edge cases; pin any it finds as a regression test.
+
+Every test of a module in ``tiers.FAST`` but those in ``tiers.SLOW`` is marked ``fast``
+(``make test-fast`` runs ``pytest -m fast``), and while it runs, starting a process, using
+the network or opening a Zenoh session fails it: a module that does belongs in
+``tiers.FULL_ONLY``.
 """
 
 from __future__ import annotations
 
+import multiprocessing.process
 import os
+import socket
+import subprocess
+from collections.abc import Iterator
+from typing import Any
 
+import pytest
+import zenoh
 from hypothesis import settings
+from tiers import is_fast
 
 # No per-example deadline in either: timing varies on a loaded CI machine.
 settings.register_profile("repeatable", derandomize=True, deadline=None, print_blob=True)
 settings.register_profile("explore", max_examples=500, deadline=None, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
+
+
+class FastTierError(AssertionError):
+    """A test of the fast tier started a process, used the network or opened Zenoh."""
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if is_fast(item.path.stem, getattr(item, "originalname", item.name)):
+            item.add_marker(pytest.mark.fast)
+
+
+@pytest.fixture(autouse=True)
+def _fast_tests_start_nothing(
+    request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch
+) -> Iterator[None]:
+    if request.node.get_closest_marker("fast") is not None:
+        refuse_processes_and_networks(monkeypatch, request.node.nodeid)
+    yield
+
+
+def refuse_processes_and_networks(monkeypatch: pytest.MonkeyPatch, test: str) -> None:
+    """Until ``monkeypatch`` undoes it: every way the tests start a process, connect, listen
+    or send on a socket, or open a Zenoh session raises ``FastTierError`` naming ``test``."""
+
+    def refuse(what: str) -> Any:
+        def refused(*args: Any, **kwargs: Any) -> Any:
+            raise FastTierError(
+                f"{test} is in the fast tier (tests/tiers.py FAST) but {what}: "
+                "move its module to FULL_ONLY"
+            )
+
+        return refused
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", refuse("started a process"))
+    monkeypatch.setattr(multiprocessing.process.BaseProcess, "start", refuse("started a process"))
+    for name in ("fork", "system", "posix_spawn", "posix_spawnp"):
+        monkeypatch.setattr(os, name, refuse("started a process"))
+    monkeypatch.setattr(zenoh, "open", refuse("opened a Zenoh session"))
+    # Making a socket is allowed (a launcher's plan asks the system for a free port by
+    # binding one); talking over it is not.
+    for name in ("connect", "connect_ex", "listen", "sendto", "sendmsg"):
+        monkeypatch.setattr(socket.socket, name, refuse("used the network"))

@@ -1,5 +1,7 @@
 """The published Section 5 (README.md, docs/section5.md, the figures' data) is what the
-code gives: ``swarm section5 --check`` in a test, and the checks it is made of."""
+code gives: ``swarm section5 --check --sample`` in a test (seeds 0-9: ``make test``'s
+budget; ``make check-published`` runs ``--check``, every published run, in CI), and the
+checks it is made of."""
 
 from __future__ import annotations
 
@@ -38,7 +40,8 @@ def _copy_published(into: Path) -> Path:
 
 @pytest.mark.timeout(900)
 def test_published_section5_is_what_the_code_gives() -> None:
-    """Seeds 0-9 of both variants (60 in-process runs) against everything published."""
+    """Seeds 0-9 of both variants (60 in-process runs) against everything published; the
+    other 540 published runs are checked by ``make check-published``."""
     fresh = section5.simulate(section5.tasks_for(tables.PAPER_SEEDS), parallel=2)
     assert len(fresh) == 2 * len(tables.SITES) * tables.PAPER_SEEDS
     assert section5.check_all(REPO, fresh) == []
@@ -124,3 +127,98 @@ def test_render_rewrites_the_blocks_from_the_published_runs(
     assert readme.read_text() == published
     _, runs = _published()
     assert section5.check_all(root, _paper_seeds(runs)) == []
+
+
+def _fake_simulate(
+    monkeypatch: pytest.MonkeyPatch, change: dict[tuple[str, int, int], dict[str, Any]]
+) -> list[list[section5.Task]]:
+    """``simulate`` gives the published runs, but for the fields ``change`` says; it records
+    the tasks it was asked for."""
+    _, runs = _published()
+    by_key = {(r["variant"], r["n"], r["seed"]): r for r in runs}
+    asked: list[list[section5.Task]] = []
+
+    def simulate(tasks: list[section5.Task], parallel: int, progress: Any = None) -> Any:
+        asked.append(list(tasks))
+        keys = [(task.variant, task.sites, task.seed) for task in tasks]
+        return [by_key[key] | change.get(key, {}) for key in keys]
+
+    monkeypatch.setattr(section5, "simulate", simulate)
+    return asked
+
+
+def test_check_runs_every_published_run_and_names_each_that_differs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    root = _copy_published(tmp_path)
+    _, runs = _published()
+    asked = _fake_simulate(
+        monkeypatch,
+        {
+            ("default", 8, 58): {"sim_time_s": 1.5},
+            ("linger", 5, 99): {"ended": "stalled"},
+        },
+    )
+    assert main(["section5", "--check", "--root", str(root)]) == 1
+    assert [(t.variant, t.sites, t.seed) for t in asked[0]] == [
+        (r["variant"], r["n"], r["seed"]) for r in runs
+    ]
+    out, err = capsys.readouterr()
+    drifted = [line for line in out.splitlines() if line.startswith("run ")]
+    assert len(drifted) == 2
+    assert drifted[0].startswith("run ('default', 8, 58): published -> now: sim_time_s ")
+    assert drifted[0].endswith("-> 1.5")
+    assert drifted[1] == "run ('linger', 5, 99): published -> now: ended 'consensus' -> 'stalled'"
+    assert f"checked {len(runs)} of the {len(runs)} published runs" in err
+    assert "NOT checked" not in err
+    assert "2 of them runs" in err
+
+
+def test_the_sample_checks_seeds_0_to_9_and_says_what_it_did_not_check(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    root = _copy_published(tmp_path)
+    meta, runs = _published()
+    # A drifted run beyond seed 9 goes unnoticed by the sample, which says so.
+    asked = _fake_simulate(monkeypatch, {("default", 8, 58): {"sim_time_s": 1.5}})
+    assert main(["section5", "--check", "--sample", "--root", str(root)]) == 0
+    assert len(asked[0]) == 2 * len(tables.SITES) * tables.PAPER_SEEDS
+    assert {task.seed for task in asked[0]} == set(range(tables.PAPER_SEEDS))
+    err = capsys.readouterr().err
+    unchecked = len(runs) - len(asked[0])
+    assert f"checked {len(asked[0])} of the {len(runs)} published runs" in err
+    assert (
+        f"NOT checked: {unchecked} published runs (seeds {tables.PAPER_SEEDS}-"
+        f"{meta['seeds'] - 1} of default and linger, n = 5, 8, 10)" in err
+    )
+    assert "matches the code" in err
+
+
+def test_a_runs_file_that_lacks_runs_or_has_other_settings_is_reported(tmp_path: Path) -> None:
+    root = _copy_published(tmp_path)
+    meta, runs = _published()
+    kept = [r for r in runs if (r["variant"], r["n"], r["seed"]) != ("linger", 10, 42)]
+    kept.append(kept[0])
+    spoiled = meta | {"robots": tables.ROBOTS + 1}
+    (root / section5.RUNS_FILE).write_text(section5.runs_json(kept, spoiled))
+    problems = section5.coverage_problems(*section5.read_runs(root))
+    assert problems == [
+        f"{section5.RUNS_FILE}: meta robots {tables.ROBOTS + 1}, the code {tables.ROBOTS}",
+        f"{section5.RUNS_FILE}: 1 run(s) missing: linger n=10 seed 42",
+        f"{section5.RUNS_FILE}: 1 run(s) twice",
+    ]
+    assert section5.check_all(root, [])[:3] == problems
+
+
+def test_the_published_runs_file_holds_every_run_it_promises() -> None:
+    meta, runs = _published()
+    assert section5.coverage_problems(meta, runs) == []
+    assert len(runs) == len(tables.VARIANTS) * len(tables.SITES) * meta["seeds"]
+
+
+def test_sample_goes_with_check(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    root = _copy_published(tmp_path)
+    with pytest.raises(SystemExit) as raised:
+        main(["section5", "--sample", "--root", str(root)])
+    assert raised.value.code == 2
+    assert "--sample goes with --check" in capsys.readouterr().err
