@@ -2,21 +2,22 @@
 # `make test`: lint, then the whole test suite (every tier; CI's budget for it: 15 minutes
 #   on 2 cores). tests/test_section5.py reruns only seeds 0-9 of Section 5.
 # `make test-fast`: the fast tier only: the tests of the pure layers, which start no process
-#   and open no Zenoh session or network connection (848 tests, 100 s wall on a quiet
+#   and open no Zenoh session or network connection (about 950 tests, 100 s wall on a quiet
 #   2-core machine; more when it is shared). The tier is FAST in tests/tiers.py, less the
 #   whole-swarm tests in SLOW; tests/test_tiers.py fails if a test module is in no tier,
 #   and tests/conftest.py fails a fast test that starts a process, connects, listens or
 #   sends on a socket, or opens a Zenoh session.
 # `make check-published`: every published Section 5 run again (all 600 of
 #   docs/section5-runs.json, `swarm section5 --check`; about 7 minutes of both cores), and
-#   the tables of README.md and docs/section5.md and the data of Figures 4 and 5 made from
-#   them. CI runs it after `make test`. Published from runs but NOT rerun by any check:
-#   the PNGs (drawn from the checked data); docs/section5.md's lag and settings-study
-#   blocks and docs/section5-lag.json (benchmarks/section5_study.py, section5_lag.py);
+#   the tables of docs/section5.md and the data of Figures 4 and 5 made from them. CI
+#   runs it after `make test`. Published from runs but NOT rerun by any check: the PNGs
+#   (drawn from the checked data); docs/section5.md's lag and settings-study blocks and
+#   docs/section5-lag.json (benchmarks/section5_study.py, section5_lag.py);
 #   docs/scale-runs.json but 3 of its 48 runs (tests/test_scale_doc.py reruns in process
-#   10 robots seeds 0 and 7, 50 robots seed 3, and renders docs/scale.md and README's
-#   table from the file); docs/byzantine.md, docs/robustness.md (each says the commit it
-#   was made at), docs/wellstirred.md's Figure 1 table, and docs/performance.md (timings).
+#   10 robots seeds 0 and 7, 50 robots seed 3, and renders docs/scale.md from the file);
+#   docs/byzantine.md, docs/robustness.md (each says the commit it was made at),
+#   docs/wellstirred.md's Figure 1 table, and docs/performance.md (timings).
+#   docs/testing.md says the same.
 # All of them create .venv and install the project on first use (and again when
 # pyproject.toml changes).
 PYTHON ?= python3

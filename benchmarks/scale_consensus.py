@@ -307,7 +307,7 @@ COMMANDS = f"""\
 # before the fix: this script in a checkout of main's code before it, given up at 3000 s
 .venv/bin/python benchmarks/scale_consensus.py --sizes 10 50 100 200 \\
     --seeds 0 1 2 3 4 5 6 7 8 9 --parallel 2 --timeout 3000 --save {BEFORE_FILE}
-# all together: the results file, this page, its figure and README's table
+# all together: the results file, this page and its figure
 .venv/bin/python benchmarks/scale_consensus.py --no-run \\
     --load small.json 500-01.json 500-2.json zenoh.json zenoh200.json zenoh500.json \\
     --save {RUNS_FILE} --before {BEFORE_FILE} --doc"""
@@ -326,8 +326,8 @@ def render_doc(runs: Sequence[Run], before: Sequence[Run], figure: str) -> str:
         "Sim times are exact: a lockstep run is deterministic, in one process or over "
         "Zenoh. Wall times are indicative only: the machine (2 cores) was shared with other "
         "work while they were measured, and in-process runs went two or three at a time. "
-        "`tests/test_scale_doc.py` checks that this page and README's table are what the "
-        "results file gives, and reruns the 10- and 50-robot seeds it can afford.\n",
+        "`tests/test_scale_doc.py` checks that this page is what the results file gives, "
+        "and reruns the 10- and 50-robot seeds it can afford.\n",
         f"![sim time to consensus against swarm size]({figure})\n",
         "## Per swarm size (in one process)\n",
         per_size(in_process) + "\n",
@@ -357,8 +357,8 @@ def render_doc(runs: Sequence[Run], before: Sequence[Run], figure: str) -> str:
             "## Before and after the fix of issue 10\n",
             "Before: main's code before the fix (parking rings a body length apart, and a "
             "fixed 120 s for any leg), the same script and seeds, runs given up at 3000 s of "
-            "sim time. The causes and the fixes are in [architecture.md](architecture.md) "
-            "(Departures: decided robots park; long legs).\n",
+            "sim time. The causes and the fixes are in [history.md](history.md) (issue 10: "
+            "parking lanes, long legs).\n",
             before_after(before, in_process) + "\n",
             HEADER + "\n" + "\n".join(row(run) for run in before) + "\n",
         ]
@@ -375,67 +375,16 @@ def unfinished_note(runs: Sequence[Run]) -> list[str]:
         for run in unfinished
     )
     return [
-        f"**Not every run ended in consensus**: {which}. What holds the last robots is in "
-        "[architecture.md](architecture.md) (Departures: what is still open at 500 "
-        "robots).\n"
+        f"**Not every run ended in consensus**: {which}. What held the last robots of "
+        "earlier runs, and how it was found, is in [history.md](history.md) (issue 10).\n"
     ]
-
-
-README_BLOCK = "scale"
-README_COMMAND = "benchmarks/scale_consensus.py --doc"
-
-
-def render_readme_block(runs: Sequence[Run]) -> str:
-    """README's table: per swarm size, in one process, with the Zenoh check beside it."""
-    in_process = [run for run in runs if run.mode == "in-process"]
-    zenoh = [run for run in runs if run.mode == "zenoh"]
-    twins = {(run.robots, run.seed): run for run in in_process}
-    same: list[str] = []
-    different: list[str] = []
-    for run in zenoh:
-        twin = twins.get((run.robots, run.seed))
-        if twin is not None:
-            agree = (twin.sim_time_s, twin.slowest_steps) == (run.sim_time_s, run.slowest_steps)
-            (same if agree else different).append(f"{run.robots} robots seed {run.seed}")
-    unfinished = [
-        f"{run.robots} robots seed {run.seed} ({run.ended or 'gave up'}, {run.undecided} undecided)"
-        for run in in_process
-        if not run.consensus
-    ]
-    lines = [
-        per_size(in_process),
-        "",
-        "In one process, 10 sites, default settings, lockstep; wall times on a shared 2-core "
-        "machine.",
-    ]
-    if unfinished:
-        lines.append(f"Not in consensus: {', '.join(unfinished)}.")
-    lines.append(
-        "Over Zenoh (`swarm run`), the same sim time and steps as in one process: "
-        f"{', '.join(same) or 'none'}"
-        + (f"; different: {', '.join(different)}" if different else "")
-        + ". Every run: [docs/scale.md](docs/scale.md)."
-    )
-    return "\n".join(lines)
 
 
 def write_doc(runs: Sequence[Run], before: Sequence[Run], path: Path) -> None:
-    from deploy.section5 import replace_block
-
     figure = path.with_suffix(".png")
     plot([run for run in runs if run.mode == "in-process"], figure)
     path.write_text(render_doc(runs, before, figure.name))
-    readme = path.parent.parent / "README.md"
-    readme.write_text(
-        replace_block(
-            readme.read_text(),
-            README_BLOCK,
-            render_readme_block(runs),
-            command=README_COMMAND,
-            edit="benchmarks/scale_consensus.py",
-        )
-    )
-    print(f"wrote {path}, {figure} and README.md's table", file=sys.stderr)
+    print(f"wrote {path} and {figure}", file=sys.stderr)
 
 
 def load_runs(path: Path) -> list[Run]:

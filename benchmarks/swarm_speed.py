@@ -28,11 +28,13 @@ The engines table (``--engines``) runs each swarm size with ``swarm run --engine
 inprocess`` and over Zenoh (``swarm run``), the same seed, one after the other
 (``--pairs`` such pairs, alternating), and prints both real-time factors, their ratio, the
 ratio of the CPU their processes spent per tick (each run less the same run stopped after
-one tick), the messaging floor, and whether the two agree robot for robot; ``--readme README.md``
-also writes that table into README between its ``swarm_speed:engines`` markers:
+one tick), the messaging floor, and whether the two agree robot for robot; ``--doc
+docs/performance.md`` also writes that table into the page between its
+``swarm_speed:engines`` markers (``--readme`` is the same option's old spelling, from when
+the table was in README.md):
 
     .venv/bin/python benchmarks/swarm_speed.py --robots --scale --engines 10 100 --pairs 3 \
-        --readme README.md
+        --doc docs/performance.md
 """
 
 from __future__ import annotations
@@ -262,8 +264,8 @@ def realtime_pacing(args: argparse.Namespace, extra: list[str]) -> None:
         )
 
 
-README_BEGIN = "<!-- swarm_speed:engines -->"
-README_END = "<!-- /swarm_speed:engines -->"
+TABLE_BEGIN = "<!-- swarm_speed:engines -->"
+TABLE_END = "<!-- /swarm_speed:engines -->"
 
 
 def results_of(summary: dict[str, Any]) -> list[dict[str, Any]]:
@@ -363,13 +365,13 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
     return rows
 
 
-def write_readme(path: Path, rows: list[str], command: str, args: argparse.Namespace) -> None:
-    """Replace the table between README's markers with this run's."""
+def write_table(path: Path, rows: list[str], command: str, args: argparse.Namespace) -> None:
+    """Replace the table between the page's markers with this run's."""
     text = path.read_text()
-    if README_BEGIN not in text or README_END not in text:
-        raise SystemExit(f"{path}: no {README_BEGIN} ... {README_END} markers")
-    head, rest = text.split(README_BEGIN, 1)
-    _, tail = rest.split(README_END, 1)
+    if TABLE_BEGIN not in text or TABLE_END not in text:
+        raise SystemExit(f"{path}: no {TABLE_BEGIN} ... {TABLE_END} markers")
+    head, rest = text.split(TABLE_BEGIN, 1)
+    _, tail = rest.split(TABLE_END, 1)
     table = [
         f"| swarm (lockstep, {args.sites} sites) | in one process | over Zenoh | ratio "
         "| CPU over Zenoh / in one process | messaging floor | over Zenoh / floor "
@@ -395,7 +397,7 @@ def write_readme(path: Path, rows: list[str], command: str, args: argparse.Names
             " A run cut at a sim time is compared on its robots' decisions up to the earlier"
             " of the two stops (over Zenoh the launcher notices the limit a tick or two late)."
         )
-    path.write_text(f"{head}{README_BEGIN}\n{chr(10).join(table)}\n\n{note}\n{README_END}{tail}")
+    path.write_text(f"{head}{TABLE_BEGIN}\n{chr(10).join(table)}\n\n{note}\n{TABLE_END}{tail}")
     print(f"wrote the engines table into {path}")
 
 
@@ -474,10 +476,16 @@ def main() -> None:
         help="swarm size of the real-time clock runs (default: 4)",
     )
     parser.add_argument(
-        "--readme", type=Path, default=None, help="write the engines table into this README"
+        "--doc",
+        "--readme",
+        dest="doc",
+        type=Path,
+        default=None,
+        help="write the engines table into this page (docs/performance.md), between its "
+        "swarm_speed:engines markers",
     )
     parser.add_argument(
-        "--machine-note", default="", help="said of the machine under the README table"
+        "--machine-note", default="", help="said of the machine under the engines table"
     )
     parser.add_argument(
         "swarm_args", nargs=argparse.REMAINDER, help="extra `swarm run` options after --"
@@ -492,11 +500,11 @@ def main() -> None:
         realtime_pacing(args, extra)
     if args.engines:
         rows = engines(args, extra)
-        if args.readme is not None:
+        if args.doc is not None:
             shown = [arg for arg in sys.argv[1:] if arg != args.machine_note]
             shown = [arg for arg in shown if arg != "--machine-note"]
             command = "benchmarks/swarm_speed.py " + shlex.join(shown)
-            write_readme(args.readme, rows, command, args)
+            write_table(args.doc, rows, command, args)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "experiment": ("deploy.experiment", "the paper's Section 5 protocol: many runs, one report"),
     "section5": (
         "deploy.section5",
-        "the paper's Section 5 numbers and figures, from in-process runs (README, docs)",
+        "the paper's Section 5 numbers and figures, from in-process runs (docs/section5.md)",
     ),
     "router": ("deploy.router", "a Zenoh router (a Python session; no zenohd needed)"),
     "view": ("viewer.replay", "replay a recording in the browser, on the live view's page"),

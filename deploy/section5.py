@@ -1,4 +1,4 @@
-"""``swarm section5``: every Section 5 number and figure of README.md and docs/section5.md.
+"""``swarm section5``: every Section 5 number and figure of docs/section5.md.
 
 Runs the paper's protocol in process (``deploy.inmemory.run_in_memory``: the same world,
 controllers and beacon as ``swarm run``, and in lockstep the same per-robot results):
@@ -7,7 +7,7 @@ ten robots, n = 5, 8 and 10, seeds 0..S-1, once with the default settings and on
 stand for the paper's ten runs per n.
 
 * without ``--write`` or ``--check`` it prints the tables;
-* ``--write`` puts them into README.md and docs/section5.md, between markers that name
+* ``--write`` puts them into docs/section5.md, between markers that name
   this command, and writes docs/section5-runs.json (every run, compact), the data behind
   Figures 4 and 5 (docs/fig4.json, docs/fig5.json, and ``-linger`` for the variant), the
   figures themselves and docs/section5-distribution.png;
@@ -40,7 +40,7 @@ from deploy import section5_tables as tables
 from plumbing import cliargs
 
 RUNS_FILE = "docs/section5-runs.json"
-MARKDOWN = {"README.md": ("summary",), "docs/section5.md": ("summary", "detail", "runs")}
+MARKDOWN = {"docs/section5.md": ("summary", "detail", "runs")}
 FIGURE_DATA = {
     ("default", 4): "docs/fig4.json",
     ("default", 5): "docs/fig5.json",
@@ -472,8 +472,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     mode.add_argument(
         "--write",
         action="store_true",
-        help="write README.md's and docs/section5.md's blocks, docs/section5-runs.json, "
-        "the figures and their data",
+        help="write docs/section5.md's blocks, docs/section5-runs.json, the figures and their data",
     )
     mode.add_argument(
         "--render",
@@ -506,7 +505,7 @@ def run(args: argparse.Namespace) -> int:
     if (args.write or args.check or args.render) and not all(
         (root / path).exists() for path in MARKDOWN
     ):
-        raise UsageError(f"{root} has no README.md and docs/section5.md: use --root")
+        raise UsageError(f"{root} has no docs/section5.md: use --root")
     if args.sample and not args.check:
         raise UsageError("--sample goes with --check")
 

@@ -3,7 +3,7 @@
 A *record* is one in-process run, compact: its variant (``default`` or ``linger``), n,
 seed, how it ended, whether the consensus was right, the sim time of the last decision,
 and per robot its steps (trips) to decision and its pool sizes. From a list of records
-this module renders the Markdown blocks of README.md and docs/section5.md and the data
+this module renders the Markdown blocks of docs/section5.md and the data
 behind Figures 4 and 5. The paper's own figures are quoted as text, never computed.
 """
 
@@ -133,7 +133,7 @@ def seeds_of(records: Sequence[dict[str, Any]]) -> int:
 
 
 def summary_table(records: Sequence[dict[str, Any]], meta: dict[str, Any]) -> str:
-    """README's Section 5 table: the paper, its ten seeds here, and the distribution.
+    """The Section 5 summary table: the paper, its ten seeds here, and the distribution.
 
     Rows for all seeds appear only when there are more than the paper's ten.
     """

@@ -1,5 +1,5 @@
-"""docs/scale.md and README's large-swarm table are what the results file gives, and the
-results file is what today's code gives, for the runs a test can afford (issue 10).
+"""docs/scale.md is what the results file gives, and the results file is what today's
+code gives, for the runs a test can afford (issue 10).
 
 The 100- to 500-robot runs take minutes to an hour each; they are rerun by the command
 docs/scale.md names (benchmarks/scale_consensus.py), not here.
@@ -13,7 +13,6 @@ import pytest
 from swarm_helpers import REPO
 
 from benchmarks import scale_consensus as scale
-from deploy.section5 import read_block
 
 
 def _runs() -> list[scale.Run]:
@@ -25,16 +24,6 @@ def test_the_page_is_what_the_results_give() -> None:
     before = scale.load_runs(REPO / scale.BEFORE_FILE)
     expected = scale.render_doc(runs, before, "scale.png")
     assert (REPO / "docs" / "scale.md").read_text() == expected
-
-
-def test_readme_table_is_what_the_results_give() -> None:
-    block = read_block(
-        (REPO / "README.md").read_text(),
-        scale.README_BLOCK,
-        command=scale.README_COMMAND,
-        edit="benchmarks/scale_consensus.py",
-    )
-    assert block == scale.render_readme_block(_runs())
 
 
 def test_every_size_and_seed_of_the_plan_is_in_the_results() -> None:

@@ -1,4 +1,4 @@
-"""The published Section 5 (README.md, docs/section5.md, the figures' data) is what the
+"""The published Section 5 (docs/section5.md, the figures' data) is what the
 code gives: ``swarm section5 --check --sample`` in a test (seeds 0-9: ``make test``'s
 budget; ``make check-published`` runs ``--check``, every published run, in CI), and the
 checks it is made of."""
@@ -60,7 +60,7 @@ def test_check_finds_a_run_that_changed(tmp_path: Path) -> None:
     assert any(problem.startswith("run ('default', 10, 0)") for problem in problems)
     assert "docs/fig4.json differs from the runs (or is missing)" in problems
     assert "docs/fig5.json differs from the runs (or is missing)" not in problems
-    assert any("README.md: block 'summary' differs" in problem for problem in problems)
+    assert any("docs/section5.md: block 'summary' differs" in problem for problem in problems)
     assert any("docs/section5.md: block 'runs' differs" in problem for problem in problems)
 
 
@@ -68,13 +68,13 @@ def test_check_finds_an_edited_table_and_missing_data(tmp_path: Path) -> None:
     root = _copy_published(tmp_path)
     _, runs = _published()
     fresh = _paper_seeds(runs)
-    readme = root / "README.md"
-    readme.write_text(readme.read_text().replace("seeds 0-9: within n/2", "seeds 0-9: ok"))
+    page = root / "docs" / "section5.md"
+    page.write_text(page.read_text().replace("seeds 0-9: within n/2", "seeds 0-9: ok"))
     (root / "docs" / "fig5-linger.json").unlink()
     problems = section5.check_all(root, fresh)
     assert len(problems) == 2
     assert problems[0] == "docs/fig5-linger.json differs from the runs (or is missing)"
-    assert problems[1].startswith("README.md: block 'summary' differs")
+    assert problems[1].startswith("docs/section5.md: block 'summary' differs")
 
 
 def test_blocks_are_replaced_between_their_markers() -> None:
@@ -111,7 +111,7 @@ def test_cli_needs_the_repository(tmp_path: Path, capsys: pytest.CaptureFixture[
     with pytest.raises(SystemExit) as raised:
         main(["section5", "--check", "--root", str(tmp_path)])
     assert raised.value.code == 2
-    assert "has no README.md and docs/section5.md" in capsys.readouterr().err
+    assert "has no docs/section5.md" in capsys.readouterr().err
 
 
 def test_render_rewrites_the_blocks_from_the_published_runs(
@@ -120,11 +120,11 @@ def test_render_rewrites_the_blocks_from_the_published_runs(
     """``--render`` runs nothing: it puts back what the runs file says."""
     monkeypatch.setattr(section5, "plot_all", lambda root, records: [])  # PNGs: not compared
     root = _copy_published(tmp_path)
-    readme = root / "README.md"
-    published = readme.read_text()
-    readme.write_text(published.replace("seeds 0-9: within n/2", "seeds 0-9: ok"))
+    page = root / "docs" / "section5.md"
+    published = page.read_text()
+    page.write_text(published.replace("seeds 0-9: within n/2", "seeds 0-9: ok"))
     assert main(["section5", "--render", "--root", str(root)]) == 0
-    assert readme.read_text() == published
+    assert page.read_text() == published
     _, runs = _published()
     assert section5.check_all(root, _paper_seeds(runs)) == []
 
