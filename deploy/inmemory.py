@@ -1,9 +1,9 @@
 """A whole lockstep run in one process, without Zenoh: for tests, sweeps and benchmarks.
 
 It drives the same World, the same controllers (through the port contract's
-``control_step`` on ``robot_agent.core.simulated``'s body and radio, as ``node.py`` does) and
-the same beacon logic as ``swarm run``, tick by tick in the same order, so a seed gives the
-same per-robot results here as over Zenoh.
+``control_step`` on ``robot_agent.core.simulated``'s body and radio, as the robot's
+endpoint does) and the same beacon logic as ``swarm run``, tick by tick in the same order,
+so a seed gives the same per-robot results here as over Zenoh.
 """
 
 from __future__ import annotations

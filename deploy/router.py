@@ -1,7 +1,8 @@
 """``python -m deploy.router``: a Zenoh router that several runs on one machine share.
 
-A Python Zenoh session in router mode (no zenohd needed), listening on loopback by
-default. ``swarm experiment`` starts one and points every run at it with ``--connect``;
+A Python Zenoh session in router mode (no zenohd needed), listening on loopback TCP by
+default. ``swarm experiment`` starts one on a Unix socket in a private directory (only its
+user can reach it) and points every run at it with ``--connect``;
 each run keeps to its own keys (``<root>/<run-id>/...``). It stops on SIGINT or SIGTERM.
 """
 

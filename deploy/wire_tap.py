@@ -94,7 +94,8 @@ class WireTap:
 
 
 def with_rejects(status: protocol.Status, rejected: int) -> protocol.Status:
-    """A status as ``node.py`` publishes it: the controller's rejects plus the host's."""
+    """A status as a robot publishes it (``RobotEndpoint.status``): the controller's rejects
+    plus its endpoint's."""
     return (
         msgspec.structs.replace(status, rejected=status.rejected + rejected) if rejected else status
     )

@@ -1,4 +1,4 @@
-"""Opening Zenoh sessions the same way in every process (an adapter, like node.py).
+"""Opening Zenoh sessions the same way in every process (an adapter, like robot_node.py).
 
 Multicast scouting is always off: a local run is deterministic and sandbox-safe, and
 multi-host swarms name their routers explicitly.

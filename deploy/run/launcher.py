@@ -1,9 +1,10 @@
 """``swarm run``: a whole swarm on this machine, to a stated ending.
 
-Starts the world server (the Zenoh router of the run, on a private socket), the recorder,
-the nest beacon and the robot processes (``supervisor.py``); follows what they publish
-(``follower.py``) and shows progress (``console.py``); kills and restarts robots when
-their ``--kill`` and ``--restart`` sim time comes (``faults.py``); stops when
+Starts the world server (the Zenoh router of the run, on a Unix socket in a private
+directory; TLS on loopback with ``--secure``; a client of the router ``--connect`` names),
+the recorder, the nest beacon and the robot processes (``supervisor.py``); follows what
+they publish (``follower.py``) and shows progress (``console.py``); kills and restarts
+robots when their ``--kill`` and ``--restart`` sim time comes (``faults.py``); stops when
 ``wire.endings.stop_reason`` says so; stops every process it started, by pid, however
 the run ends; prints a summary that says how it ended, hands it to the recorder
 (``recording.py``) and exits with that ending's code (``swarm run --help``).

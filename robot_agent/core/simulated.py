@@ -1,6 +1,7 @@
 """The ``Body`` and ``Radio`` of a robot whose body the world simulates: one adapter of the
-port contract (``ports.control_step``), used by ``node.py`` over Zenoh and by
-``deploy/inmemory.py`` in one process, so both run exactly the loop a port runs.
+port contract (``ports.control_step``), used by the robot's endpoint (``endpoint.py``, and
+so by the robot process over Zenoh) and by ``deploy/inmemory.py`` in one process, so both
+run exactly the loop a port runs.
 
 Each tick the world sends a ``Sense`` (time, pose, proximity), the radio medium's
 deliveries and, after a capture request, a camera frame (PNG). ``SimulatedBody`` reads

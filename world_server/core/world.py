@@ -1,6 +1,7 @@
 """The world of one run, without any I/O: layout, physics, camera and radio together.
 
-``server.py`` feeds it what arrives over Zenoh and publishes what it returns; tests and
+The coordinator (``coordinator.py``) feeds it what arrives, through the world server's
+Zenoh adapter, and has what it returns published; the in-process engine, tests and
 benchmarks drive it directly. One call to ``advance`` closes one control tick.
 """
 

@@ -1,7 +1,9 @@
 """``world-server``: the world of one run on Zenoh, from the command line.
 
-By default the server is the Zenoh router of a local run, listening on loopback. Its
-settings come from ``--config`` (what ``swarm run`` hands over) or its own options.
+By default the server is the Zenoh router of a local run: ``swarm run`` has it listen on a
+Unix socket in a private directory (TLS on loopback with ``--secure``); started by hand it
+listens on loopback TCP unless told otherwise. Its settings come from ``--config`` (what
+``swarm run`` hands over) or its own options.
 """
 
 from __future__ import annotations
