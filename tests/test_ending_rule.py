@@ -1,14 +1,12 @@
 """How a run ends, on its own (wire/endings.py): the rule both engines ask at every look,
-in every combination of conditions that hold at once; the endings' exit codes, the help
-made from them, and README's table of them."""
+in every combination of conditions that hold at once; the endings' exit codes and the help
+made from them (tests/test_docs.py checks that docs/running.md shows that help)."""
 
 from __future__ import annotations
 
 import itertools
-import re
 import signal
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -30,7 +28,6 @@ from wire.endings import (
 )
 from world_server.core.world import WorldConfig
 
-REPO = Path(__file__).resolve().parent.parent
 LIMIT, WALL_LIMIT = 100.0, 60.0
 # A look at a run that goes on: nothing holds.
 QUIET = Look(
@@ -136,18 +133,6 @@ def test_the_help_has_one_row_per_exit_code_in_order() -> None:
     assert codes == sorted(codes) == [0, 1, 2, 3, 4, 5, 130]
     named = {row[1] for row in rows if row[0].isdigit()}
     assert named == {*ENDINGS, "-"}
-
-
-def test_readmes_table_of_endings_says_what_the_enum_says() -> None:
-    """README's "How a run ends" table: each row's exit codes are its ending's."""
-    table = re.findall(r"^\| ([\d, ]+) \| `(\w+)` \|", (REPO / "README.md").read_text(), re.M)
-    documented = {name: [int(code) for code in codes.split(",")] for codes, name in table}
-    assert documented == {
-        ending.value: [ending.exit_code(stop) for stop in StopSignal]
-        if ending is Ending.INTERRUPTED
-        else [ending.exit_code()]
-        for ending in Ending
-    }
 
 
 # --- the in-process engine asks the same rule -------------------------------------------

@@ -28,6 +28,7 @@ FAST = frozenset(
         "test_controller",
         "test_coordinator",
         "test_decision",
+        "test_docs",
         "test_equations",
         "test_fuzz",
         "test_guard",
