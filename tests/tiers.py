@@ -32,6 +32,7 @@ FAST = frozenset(
         "test_equations",
         "test_fuzz",
         "test_guard",
+        "test_inbox",
         "test_layering",
         "test_names",
         "test_navigation",

@@ -13,7 +13,8 @@ once it serves, and like the recorder it holds the run secret: ``McapRecorder`` 
 every sample's tag before it builds a record, so a forged sample goes to the
 ``recorder/rejected`` channel, never to its key's. Zenoh callbacks put samples into a
 bounded queue (a sample that finds it full is dropped and counted: the view must not
-grow without bound while the machine is busy); one thread passes them to the recorder's
+grow without bound while the machine is busy: ``plumbing/inbox.py``, charged at what a
+sample really costs); one thread passes them to the recorder's
 logic. The SDK keeps at most ``BACKLOG`` messages per connected app and drops the oldest
 beyond that.
 """
@@ -24,7 +25,6 @@ import argparse
 import contextlib
 import logging
 import os
-import queue
 import signal
 import sys
 import threading
@@ -33,6 +33,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from plumbing import cliargs, run_keys
+from plumbing.inbox import BoundedInbox, message_bytes
 from plumbing.lifecycle import die_with_launcher
 from viewer.options import FOXGLOVE_PORT
 from wire import names, protocol
@@ -42,7 +43,8 @@ from world_server.recording.writer import McapRecorder, Sample
 
 log = logging.getLogger("foxglove-live")
 
-INBOX_LIMIT = 50_000  # samples waiting for the writer thread
+INBOX_BYTES = 64 * 2**20  # samples waiting for the writer thread, at most
+MAX_SAMPLE_BYTES = protocol.MAX_FRAME_BYTES + 1024  # a frame and its attachment
 BACKLOG = 4096  # messages the SDK buffers per connected app
 DEFAULT_NICENESS = 10
 DRAIN_SECONDS, SEND_SECONDS = 1.5, 0.3  # at a stop: to pass on what is queued, to send it
@@ -149,7 +151,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except RuntimeError as error:  # the SDK reports a port in use as a RuntimeError
         print(f"foxglove-live: cannot serve on {args.host}:{args.port}: {error}", file=sys.stderr)
         return 1
-    inbox: queue.Queue[Sample | None] = queue.Queue(maxsize=INBOX_LIMIT)
+    inbox: BoundedInbox[Sample | None] = BoundedInbox(INBOX_BYTES, MAX_SAMPLE_BYTES)
     dropped = [0]
     stopping = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -157,15 +159,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     def on_sample(sample: Any) -> None:
         attachment = sample.attachment
-        item = Sample(
-            str(sample.key_expr),
-            sample.payload.to_bytes(),
-            attachment.to_bytes() if attachment is not None else None,
-            time.time_ns(),
-        )
-        try:
-            inbox.put_nowait(item)
-        except queue.Full:
+        key, payload = str(sample.key_expr), sample.payload.to_bytes()
+        extra = attachment.to_bytes() if attachment is not None else None
+        if not inbox.put(
+            Sample(key, payload, extra, time.time_ns()), message_bytes(payload, extra, key)
+        ):
             dropped[0] += 1
             if dropped[0] == 1:
                 log.warning("falling behind the run: dropping samples (logged once)")
@@ -205,7 +203,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         subscriber.undeclare()
         # What arrived before the stop still reaches the app: a niced process on a busy
         # machine may lag the run, and the end of a run is what a person wants to see.
-        inbox.put(None)
+        inbox.put(None, control=True)
         writer.join(timeout=DRAIN_SECONDS)
         time.sleep(SEND_SECONDS)
     server.stop()
@@ -216,7 +214,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _forward(recorder: McapRecorder, inbox: queue.Queue[Sample | None]) -> None:
+def _forward(recorder: McapRecorder, inbox: BoundedInbox[Sample | None]) -> None:
     """The one thread that builds records, in arrival order."""
     while (item := inbox.get()) is not None:
         recorder.record(item)

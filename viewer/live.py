@@ -26,6 +26,7 @@ import contextlib
 import json
 import logging
 import os
+import queue
 import signal
 import sys
 import threading
@@ -34,6 +35,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from plumbing import cliargs, run_keys
+from plumbing.inbox import BoundedInbox, message_bytes
 from plumbing.lifecycle import die_with_launcher
 from viewer.core import model
 from viewer.core.decode import Decoded, Delivery, InvalidSampleError, decode_sample
@@ -49,6 +51,9 @@ log = logging.getLogger("viewer")
 MAX_DELIVERIES = 2000  # radio deliveries kept between two frames; older ones are dropped
 FLUSH_TIMEOUT = 2.0  # wall seconds to get the last frame to every page
 DEFAULT_NICENESS = 10  # like the recorder: nothing waits for the view
+# Finish queries waiting for the page's loop, at most (only the launcher's counts; the
+# rest are refused, and those beyond this at once).
+FINISH_QUERY_BYTES = 2**20
 
 
 class LiveSource:
@@ -245,7 +250,8 @@ async def _serve(args: argparse.Namespace, keyring: auth.Keyring | None) -> int:
     stop = asyncio.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(signum, stop.set)
-    finish_queries: asyncio.Queue[Any] = asyncio.Queue()
+    finish_queries: BoundedInbox[Any] = BoundedInbox(FINISH_QUERY_BYTES)
+    query_came = asyncio.Event()
     with session:
         try:
             info = fetch_world_info(session, keys, 10.0, keyring, names.VIEWER)
@@ -268,15 +274,26 @@ async def _serve(args: argparse.Namespace, keyring: auth.Keyring | None) -> int:
             session.declare_subscriber(key, on_sample)
             for key in (keys.world_state, keys.world_clock, keys.status("*"), keys.radio_rx("*"))
         ]
-        queryable = session.declare_queryable(
-            keys.viewer_finish,
-            lambda query: loop.call_soon_threadsafe(finish_queries.put_nowait, query),
-        )
+
+        def on_finish(query: Any) -> None:
+            payload = query.payload.to_bytes() if query.payload is not None else b""
+            attachment = query.attachment.to_bytes() if query.attachment is not None else None
+            size = message_bytes(payload, attachment, keys.viewer_finish)
+            if finish_queries.put(query, size):
+                loop.call_soon_threadsafe(query_came.set)
+            else:
+                source.refuse(f"{keys.viewer_finish}: no room for another finish query")
+                query.reply_err(b"the view has no room for the query")
+                query.drop()
+
+        queryable = session.declare_queryable(keys.viewer_finish, on_finish)
         server = ViewServer(source, fps=args.fps)
         port = await server.start(args.host, args.port)
         token = session.liveliness().declare_token(keys.alive(Role.VIEWER, 0))
         log.info("serving the live view on http://%s:%d/", args.host, port)
-        finisher = asyncio.create_task(_finish_on_query(finish_queries, source, server, keys))
+        finisher = asyncio.create_task(
+            _finish_on_query(finish_queries, query_came, source, server, keys)
+        )
         stop_waiter = asyncio.create_task(stop.wait())
         await asyncio.wait({finisher, stop_waiter}, return_when=asyncio.FIRST_COMPLETED)
         if not finisher.done():  # stopped by a signal before the launcher's summary came
@@ -294,13 +311,27 @@ async def _serve(args: argparse.Namespace, keyring: auth.Keyring | None) -> int:
     return 0
 
 
+async def _next_query(queries: BoundedInbox[Any], came: asyncio.Event) -> Any:
+    """The next finish query, once the Zenoh callback that queued it said so."""
+    while True:
+        try:
+            return queries.get(timeout=0)
+        except queue.Empty:
+            came.clear()
+        await came.wait()
+
+
 async def _finish_on_query(
-    queries: asyncio.Queue[Any], source: LiveSource, server: ViewServer, keys: protocol.Keys
+    queries: BoundedInbox[Any],
+    came: asyncio.Event,
+    source: LiveSource,
+    server: ViewServer,
+    keys: protocol.Keys,
 ) -> None:
     """Show how the run ended when the launcher says so; refuse (and count) anyone else."""
     key = keys.viewer_finish
     while True:
-        query = await queries.get()
+        query = await _next_query(queries, came)
         payload = query.payload.to_bytes() if query.payload is not None else b""
         attachment = query.attachment.to_bytes() if query.attachment is not None else None
         try:

@@ -22,7 +22,7 @@ import zenoh
 from deploy.run_plan import RunPlan
 from deploy.summary import RobotRecord
 from deploy.watchdog import Watchdog
-from plumbing.inbox import BoundedInbox
+from plumbing.inbox import BoundedInbox, message_bytes
 from wire import auth, names, protocol
 from world_server.core.body import EPUCK
 
@@ -49,7 +49,7 @@ class Heard:
 
     @property
     def size(self) -> int:
-        return len(self.payload) + len(self.attachment or b"")
+        return message_bytes(self.payload, self.attachment, self.key)
 
 
 def subscribe(session: zenoh.Session, keys: protocol.Keys, inbox: BoundedInbox[Any]) -> list[Any]:

@@ -86,7 +86,7 @@ class Swarm:
 
     def signalled(self, signum: int) -> None:
         """A stop signal, from the signals' relay: an event like any other."""
-        self.inbox.put(Signalled(signum))
+        self.inbox.put(Signalled(signum), control=True)
 
     @property
     def wall_deadline(self) -> float:

@@ -84,7 +84,8 @@ class BeaconNode:
         def on_world(sample: zenoh.Sample) -> None:
             present = sample.kind == zenoh.SampleKind.PUT
             kind = EventKind.WORLD if present else EventKind.NO_WORLD
-            self.inbox.put(Event(kind, keys.last_chunk(str(sample.key_expr)).encode()))
+            instance = keys.last_chunk(str(sample.key_expr)).encode()
+            self.inbox.put(Event(kind, instance), len(instance), once=True)
 
         self._declared = [
             session.liveliness().declare_subscriber(

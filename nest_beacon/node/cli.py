@@ -73,7 +73,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     keys = protocol.Keys(args.run_id, args.root)
     inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
     for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: inbox.put(Event(EventKind.STOP)))
+        signal.signal(signum, lambda *_: inbox.put(Event(EventKind.STOP), control=True))
     try:
         session = open_from_args(args)
     except zenoh.ZError as error:

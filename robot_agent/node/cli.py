@@ -166,7 +166,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     lock = threading.Lock()  # the robots of this process: one thread at a time
     for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: inbox.put(Event(-1, EventKind.STOP)))
+        signal.signal(signum, lambda *_: inbox.put(Event(-1, EventKind.STOP), control=True))
     sessions: list[zenoh.Session] = []
     nodes: list[RobotNode] = []
     host: HostBatch | None = None

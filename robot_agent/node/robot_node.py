@@ -132,17 +132,7 @@ class RobotNode:
             session.declare_subscriber(input_keys[InputKind.CAMERA], forward(EventKind.CAMERA)),
             session.declare_subscriber(input_keys[InputKind.RADIO_RX], forward(EventKind.RX)),
             session.liveliness().declare_subscriber(
-                keys.alive(Role.WORLD, "*"),
-                lambda sample: self.inbox.put(
-                    Event(
-                        robot,
-                        EventKind.WORLD
-                        if sample.kind == zenoh.SampleKind.PUT
-                        else EventKind.NO_WORLD,
-                        keys.last_chunk(str(sample.key_expr)).encode(),
-                    )
-                ),
-                history=True,
+                keys.alive(Role.WORLD, "*"), self._on_world, history=True
             ),
         ]
         output_keys = self.endpoint.output_keys
@@ -152,6 +142,14 @@ class RobotNode:
         self._fold_dropped()
         self._publish(self.endpoint.status(0))
         self._token = session.liveliness().declare_token(keys.alive(Role.ROBOT, robot))
+
+    def _on_world(self, sample: zenoh.Sample) -> None:
+        """A world server's token came or went: for the process's thread, charged."""
+        kind = EventKind.WORLD if sample.kind == zenoh.SampleKind.PUT else EventKind.NO_WORLD
+        instance = self.keys.last_chunk(str(sample.key_expr)).encode()
+        self.inbox.put(
+            Event(self.robot_id, kind, instance), len(instance), self.robot_id, once=True
+        )
 
     def close(self) -> None:
         self._token.undeclare()

@@ -14,7 +14,7 @@ from world_server.recording.writer import McapRecorder, Sample
 log = logging.getLogger("recorder")
 
 
-def _query_parts(query: Any) -> tuple[bytes, bytes | None]:
+def query_parts(query: Any) -> tuple[bytes, bytes | None]:
     payload = query.payload.to_bytes() if query.payload is not None else b""
     attachment = query.attachment.to_bytes() if query.attachment is not None else None
     return payload, attachment
@@ -25,7 +25,7 @@ def refused(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> bool:
 
     In a keyed run only the launcher that started the recorder holds the key to finish it.
     """
-    payload, attachment = _query_parts(query)
+    payload, attachment = query_parts(query)
     try:
         asker, _ = auth.query_open(recorder.keyring, keys.recorder_finish, payload, attachment)
         if recorder.keyring is not None and asker != names.LAUNCHER:
@@ -41,7 +41,7 @@ def refused(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> bool:
 
 def finish_on_query(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> None:
     """Close the recording with the query's summary, then answer the query."""
-    payload, attachment = _query_parts(query)
+    payload, attachment = query_parts(query)
     asker, nonce = auth.query_open(recorder.keyring, keys.recorder_finish, payload, attachment)
     summary: Any = None
     if payload:

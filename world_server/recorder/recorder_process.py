@@ -21,10 +21,11 @@ from pathlib import Path
 from typing import Any
 
 from plumbing import cliargs, run_keys, settings_cli
-from plumbing.inbox import BoundedInbox
+from plumbing.inbox import BoundedInbox, message_bytes
 from plumbing.lifecycle import die_with_launcher
 from wire import auth, names, protocol
 from wire.names import Role
+from world_server.recorder.finish import query_parts
 from world_server.recorder.options import RECORDER_OPTIONS, build_parser
 from world_server.recorder.write_loop import STOP, Finish, write_loop
 from world_server.recording.description import RunDescription
@@ -88,14 +89,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     # Anything bigger than a camera frame is junk: dropped on arrival, counted.
     inbox: BoundedInbox[Any] = BoundedInbox(INBOX_BYTES, MAX_SAMPLE_BYTES)
     for signum in (signal.SIGINT, signal.SIGTERM):  # the writer thread sees the stop later
-        signal.signal(signum, lambda *_: inbox.put(STOP))
+        signal.signal(signum, lambda *_: inbox.put(STOP, control=True))
 
     def on_sample(sample: zenoh.Sample) -> None:
         attachment = sample.attachment
         payload = sample.payload.to_bytes()
         extra = attachment.to_bytes() if attachment is not None else None
-        size = len(payload) + len(extra or b"")
-        inbox.put(Sample(str(sample.key_expr), payload, extra, time.time_ns()), size)
+        key = str(sample.key_expr)
+        inbox.put(Sample(key, payload, extra, time.time_ns()), message_bytes(payload, extra, key))
+
+    def on_finish(query: zenoh.Query) -> None:
+        """The finish query, after what came before it; refused at once if no room."""
+        payload, attachment = query_parts(query)
+        size = message_bytes(payload, attachment, keys.recorder_finish)
+        if not inbox.put(Finish(query), size, once=True):
+            query.reply_err(b"the recorder has no room for the query")
+            query.drop()
 
     try:
         session = open_from_args(args)
@@ -105,9 +114,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     with session, stream:
         subscriber = session.declare_subscriber(keys.all, on_sample)
-        queryable = session.declare_queryable(
-            keys.recorder_finish, lambda query: inbox.put(Finish(query))
-        )
+        queryable = session.declare_queryable(keys.recorder_finish, on_finish)
         info = _world_info(session, keys, args.info_timeout, keyring)
         recorder = McapRecorder(stream, keys, run, info, keyring=keyring)
         done = threading.Event()

@@ -59,14 +59,19 @@ LINK_SECONDS = 5.0  # sim seconds a pooling's radio links stay in the scene
 CHUNK_BYTES = 256 * 1024  # a crash loses at most the chunk being filled
 # Rejected samples: every one counted, the first REJECTED_KEPT kept, each cut to this size.
 REJECTED_KEPT, REJECTED_SAMPLE_BYTES = 100, 1024
+# Keys of the protocol a recorder routes, at most: a run has a few per robot (sense, act,
+# status, camera, radio, log) and a few of its own. A sample on a key beyond them is
+# rejected, so that samples on ever new keys cannot grow the recorder.
+KEYS_PER_ROBOT, KEYS_OF_A_RUN = 16, 256
 
 
 @dataclass
 class _Channel:
-    id: int
+    id: int | None  # None until its first message: a key that only carries junk gets none
     kind: str
     robot: int | None = None
     sequence: int = 0
+    topic: str = ""
 
 
 class Sample(NamedTuple):
@@ -118,6 +123,7 @@ class McapRecorder:
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, _Channel] = {}
         self._routes: dict[str, tuple[Callable[[Sample], None], str | None]] = {}
+        self._max_routes = KEYS_PER_ROBOT * run.robots + KEYS_OF_A_RUN
         self._host_prefix = f"{keys.prefix}/host/"
         self._decoders: dict[str, msgspec.json.Decoder[Any]] = {
             name: msgspec.json.Decoder(kind_type)
@@ -180,16 +186,23 @@ class McapRecorder:
     def _channel(self, topic: str, kind: str, robot: int | None = None) -> _Channel:
         channel = self._channels.get(topic)
         if channel is None:
-            if kind in foxglove.SCHEMA_NAMES:
-                schema_id = self._schema_id(kind, foxglove.schema(kind))
-            else:
-                schema_id = self._schema_id(schema_name(kind), message_schema(kind))
-            channel_id = self._writer.register_channel(topic, "json", schema_id)
-            channel = self._channels[topic] = _Channel(channel_id, kind, robot)
+            channel = _Channel(None, kind, robot, topic=topic)
+            self._register(channel)
         return channel
 
+    def _register(self, channel: _Channel) -> int:
+        kind = channel.kind
+        if kind in foxglove.SCHEMA_NAMES:
+            schema_id = self._schema_id(kind, foxglove.schema(kind))
+        else:
+            schema_id = self._schema_id(schema_name(kind), message_schema(kind))
+        channel.id = self._writer.register_channel(channel.topic, "json", schema_id)
+        self._channels[channel.topic] = channel
+        return channel.id
+
     def _write(self, channel: _Channel, log_ns: int, data: bytes, wall_ns: int) -> None:
-        self._writer.add_message(channel.id, log_ns, data, wall_ns, channel.sequence)
+        channel_id = self._register(channel) if channel.id is None else channel.id
+        self._writer.add_message(channel_id, log_ns, data, wall_ns, channel.sequence)
         channel.sequence += 1
         self.counts[channel.kind] = self.counts.get(channel.kind, 0) + 1
 
@@ -209,7 +222,12 @@ class McapRecorder:
             return
         route = self._routes.get(sample.key)
         if route is None:
-            route = self._routes[sample.key] = self._route(sample.key)
+            route = self._route(sample.key)
+            if route[1] is not None:  # a key of the protocol: kept, up to a run's number
+                if len(self._routes) >= self._max_routes:
+                    self.reject(sample, f"more keys than a run of {self.run.robots} has")
+                    return
+                self._routes[sample.key] = route
         handler, speaker = route
         try:
             if self.keyring is not None and speaker is not None:
@@ -256,14 +274,15 @@ class McapRecorder:
         return names.LAUNCHER  # log/<process>
 
     def _route(self, key: str) -> tuple[Callable[[Sample], None], str | None]:
-        """How to record a sample on ``key``, and whose tag it must carry."""
+        """How to record a sample on ``key``, and whose tag it must carry (None: the key
+        is none of the protocol's, and every sample on it is rejected)."""
         kind = classify(self.keys, key)
         if kind is None:
             return functools.partial(self.reject, reason="not a key of the protocol"), None
         speaker = self._speaker(key)
         if speaker is None or not names.is_identity(speaker):
             return functools.partial(self.reject, reason="no identity of the run"), None
-        channel = self._channel(key, kind, self.keys.robot_of(key))
+        channel = _Channel(None, kind, self.keys.robot_of(key), topic=key)
         handler = getattr(self, f"_on_{kind}")
         return functools.partial(handler, channel), speaker
 

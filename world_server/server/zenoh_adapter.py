@@ -15,7 +15,7 @@ from typing import Any, cast
 
 import zenoh
 
-from plumbing.inbox import BoundedInbox
+from plumbing.inbox import BoundedInbox, message_bytes
 from plumbing.trace import TraceWriter, now
 from plumbing.zenoh_session import reliable_publisher, reliable_put
 from wire import auth, batch, protocol
@@ -89,21 +89,25 @@ class WorldServer:
             attachment = sample.attachment
             payload = sample.payload.to_bytes()
             extra = attachment.to_bytes() if attachment is not None else None
-            size = len(payload) + len(extra or b"")
+            key = str(sample.key_expr)
             arrived = now() if self.timeline is not None else 0.0
-            event = Event(kind, str(sample.key_expr), payload, extra, arrived=arrived)
-            self.inbox.put(event, size, ARRIVAL)
+            event = Event(kind, key, payload, extra, arrived=arrived)
+            self.inbox.put(event, message_bytes(payload, extra, key), ARRIVAL)
 
         return callback
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         kind = EventKind.ALIVE if sample.kind == zenoh.SampleKind.PUT else EventKind.GONE
-        self.inbox.put(Event(kind, str(sample.key_expr)))
+        key = str(sample.key_expr)
+        self.inbox.put(Event(kind, key), message_bytes(b"", None, key), ARRIVAL, once=True)
 
     def _on_query(self, kind: EventKind, key: str) -> Any:
         def callback(query: zenoh.Query) -> None:
             payload, attachment = _query_bytes(query)
-            self.inbox.put(Event(kind, key, payload, attachment, query=query))
+            event = Event(kind, key, payload, attachment, query=query)
+            size = message_bytes(payload, attachment, key)
+            if not self.inbox.put(event, size, ARRIVAL, once=True):
+                query.drop()  # answered now, with nothing: the asker does not wait for it
 
         return callback
 
@@ -114,7 +118,8 @@ class WorldServer:
         try:
             identity, nonce = auth.query_open(self.keyring, key, payload, attachment)
         except auth.AuthError as error:
-            self.inbox.put(Event(EventKind.REFUSED, key, str(error).encode()))
+            reason = str(error).encode()
+            self.inbox.put(Event(EventKind.REFUSED, key, reason), len(reason), ARRIVAL)
             query.reply_err(UNAUTHENTICATED)
             return
         sealed = auth.reply_seal(self.keyring, identity, key, self._info_bytes, nonce)
@@ -144,7 +149,7 @@ class WorldServer:
             self._publishers[key] = reliable_publisher(session, key)
 
     def stop(self) -> None:
-        self.inbox.put(Event(EventKind.STOP))
+        self.inbox.put(Event(EventKind.STOP), control=True)
 
     # --- the loop ----------------------------------------------------------------------
 
