@@ -4,15 +4,14 @@ which identities there are and what each may do).
 
 Every certificate may authenticate a client (mutual TLS); a router's also names the
 hosts it serves as. Keys are P-256, accepted by rustls (Zenoh's TLS) and zenoh-pico's
-mbedTLS, and written readable by their owner only.
+mbedTLS. Everything is written readable by its owner only, in folders made 0700
+(plumbing/private_files.py), and a CA given by path is read with a size limit.
 """
 
 from __future__ import annotations
 
 import datetime
 import ipaddress
-import os
-import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -21,19 +20,14 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
+from plumbing.bounded_read import CERTIFICATE_BYTES, read_bounded
+from plumbing.private_files import make_private_folder, write_private
+
 # P-256 keys: small, fast to make, accepted by rustls (Zenoh's TLS) and zenoh-pico's mbedTLS.
 _CURVE = ec.SECP256R1()
 # A little slack before "now", so that a certificate made this instant is already valid
 # for a peer whose clock is slightly behind.
 _BACKDATE = datetime.timedelta(minutes=5)
-
-
-def _write_private(path: Path, data: bytes) -> None:
-    """A file only its owner can read, created that way (never readable for a moment)."""
-    descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(descriptor, "wb") as file:
-        file.write(data)
-    path.chmod(0o600)
 
 
 def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
@@ -56,7 +50,7 @@ def create_ca(
     for path in (certificate, key):
         if path.exists():
             raise FileExistsError(f"{path} exists; not replacing a certificate authority")
-        path.parent.mkdir(parents=True, exist_ok=True)
+        make_private_folder(path.parent)
     private = ec.generate_private_key(_CURVE)
     name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, common_name)])
     start, end = _validity(days)
@@ -86,8 +80,8 @@ def create_ca(
         .add_extension(x509.SubjectKeyIdentifier.from_public_key(private.public_key()), False)
         .sign(private, hashes.SHA256())
     )
-    _write_private(key, _key_pem(private))
-    certificate.write_bytes(ca.public_bytes(serialization.Encoding.PEM))
+    write_private(key, _key_pem(private))
+    write_private(certificate, ca.public_bytes(serialization.Encoding.PEM))
 
 
 def issue_certificate(
@@ -104,10 +98,12 @@ def issue_certificate(
     Every certificate may authenticate a client (mutual TLS); one with ``server_names``
     (host names or IP addresses) may also serve, for routers.
     """
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_private_folder(out_dir)
     key, certificate = out_dir / f"{common_name}.key", out_dir / f"{common_name}.pem"
-    authority = x509.load_pem_x509_certificate(ca_certificate.read_bytes())
-    signer = serialization.load_pem_private_key(ca_key.read_bytes(), password=None)
+    authority_pem = read_bounded(ca_certificate, CERTIFICATE_BYTES, "CA certificate")
+    authority = x509.load_pem_x509_certificate(authority_pem)
+    signer_pem = read_bounded(ca_key, CERTIFICATE_BYTES, "CA key")
+    signer = serialization.load_pem_private_key(signer_pem, password=None)
     if not isinstance(signer, ec.EllipticCurvePrivateKey):
         raise RuntimeError(f"{ca_key} is not an elliptic-curve key")
     private = ec.generate_private_key(_CURVE)
@@ -150,8 +146,8 @@ def issue_certificate(
         ]
         builder = builder.add_extension(x509.SubjectAlternativeName(alternatives), False)
     issued = builder.sign(signer, hashes.SHA256())
-    _write_private(key, _key_pem(private))
-    certificate.write_bytes(issued.public_bytes(serialization.Encoding.PEM))
+    write_private(key, _key_pem(private))
+    write_private(certificate, issued.public_bytes(serialization.Encoding.PEM))
     return key, certificate
 
 
@@ -165,9 +161,10 @@ def issue_all(
     days: int = 365,
 ) -> None:
     """Certificates for every router and client identity, plus ``ca.pem``."""
-    cert_dir.mkdir(parents=True, exist_ok=True)
+    make_private_folder(cert_dir)
     if ca_certificate.resolve() != (cert_dir / "ca.pem").resolve():
-        shutil.copyfile(ca_certificate, cert_dir / "ca.pem")
+        ca_pem = read_bounded(ca_certificate, CERTIFICATE_BYTES, "CA certificate")
+        write_private(cert_dir / "ca.pem", ca_pem)
     for router in routers:
         # Clients reach their own host's router on loopback; routers reach it by name.
         hosts = list(dict.fromkeys([router, "localhost", "127.0.0.1"]))

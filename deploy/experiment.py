@@ -38,6 +38,7 @@ from deploy.run_options import add_engine_option
 from deploy.run_switches import add_swarm_switches, switches_argv
 from plumbing import cliargs
 from plumbing.lifecycle import PARENT_ENV
+from plumbing.private_files import make_private_folder, open_private
 from wire import shape
 from wire.endings import Ending
 
@@ -251,8 +252,8 @@ def validate_run_options(spec: RunSpec) -> None:
 
 
 def _start(spec: RunSpec, logs: Path) -> _Running:
-    stdout = open(logs / f"{spec.run_id}.json", "wb")  # noqa: SIM115 (closed in _reap)
-    stderr = open(logs / f"{spec.run_id}.log", "wb")  # noqa: SIM115
+    stdout = open_private(logs / f"{spec.run_id}.json", "wb")  # closed in _reap
+    stderr = open_private(logs / f"{spec.run_id}.log", "wb")
     process = subprocess.Popen(
         [sys.executable, "-m", "deploy.cli", "run", *spec.argv],
         stdin=subprocess.DEVNULL,
@@ -388,7 +389,7 @@ def run(args: argparse.Namespace) -> int:
             "use another --out or --name"
         )
     logs = args.out / "logs"
-    logs.mkdir(parents=True, exist_ok=True)
+    make_private_folder(logs)
     group = ProcessGroup()
     # The shared router listens on a socket only this user can reach.
     directory = private_directory() if shared_router else None

@@ -40,6 +40,7 @@ import msgspec
 
 from deploy.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from deploy.watchdog import Watchdog
+from plumbing.private_files import make_private_folder, open_private, write_private
 from wire import protocol
 from wire.endings import ENDINGS
 from world_server.core.body import EPUCK
@@ -643,7 +644,19 @@ def _panels(summaries: Sequence[dict[str, Any]]) -> list[tuple[int, int, list[di
     ]
 
 
-def plot_boxes(summaries: Sequence[dict[str, Any]], path: Path, *, pools: bool) -> None:
+def save_figure(figure: Any, path: Path, *, private: bool = True) -> None:
+    """A figure as a PNG; only its owner can read it, like everything a report writes,
+    unless it is for publishing (``swarm section5``'s figures in docs/)."""
+    if not private:
+        figure.savefig(path, dpi=120)
+        return
+    with open_private(path, "wb") as stream:
+        figure.savefig(stream, dpi=120, format="png")
+
+
+def plot_boxes(
+    summaries: Sequence[dict[str, Any]], path: Path, *, pools: bool, private: bool = True
+) -> None:
     """Figure 4 (steps to decision, with the n/2 line) or Figure 5 (pool sizes)."""
     plt = _pyplot()
     panels = _panels(summaries)
@@ -678,7 +691,7 @@ def plot_boxes(summaries: Sequence[dict[str, Any]], path: Path, *, pools: bool) 
     if not panels:
         axes[0][0].text(0.5, 0.5, "no runs", ha="center", va="center")
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
+    save_figure(figure, path, private=private)
     plt.close(figure)
 
 
@@ -726,7 +739,7 @@ def plot_opinion(recording: Recording, robot: int, path: Path) -> None:
     axis.set_ylabel(f"robot {robot}'s probability")
     axis.set_title(f"run {recording.run_id}: robot {robot}'s opinion")
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
+    save_figure(figure, path)
     plt.close(figure)
 
 
@@ -789,7 +802,7 @@ def plot_trajectories(recording: Recording, path: Path) -> None:
     if 0 < len(robots) <= 10:
         axis.legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.0, 1.0))
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
+    save_figure(figure, path)
     plt.close(figure)
 
 
@@ -828,7 +841,7 @@ def write_report(
 ) -> Report:
     """Read every recording, write the figures and tables into ``out``; a recording
     without the launcher's summary takes it from ``launcher_summaries`` if there."""
-    out.mkdir(parents=True, exist_ok=True)
+    make_private_folder(out)
     recordings: list[Recording] = []
     unreadable: list[str] = []
     for path in paths:
@@ -878,17 +891,17 @@ def write_report(
         if per_run:
             for recording in recordings:
                 folder = out / "runs" / recording.run_id
-                folder.mkdir(parents=True, exist_ok=True)
+                make_private_folder(folder)
                 plot_opinion(recording, _robot(recording, robot), folder / "opinion.png")
                 plot_trajectories(recording, folder / "trajectories.png")
                 files += [str(folder / "opinion.png"), str(folder / "trajectories.png")]
     files += [str(out / "summary.csv"), str(out / "summary.json")]
     report = Report(runs, group_rows(runs, summaries), unreadable, files)
-    with open(out / "summary.csv", "w", newline="") as stream:
+    with open_private(out / "summary.csv", "w", newline="") as stream:
         writer = csv.DictWriter(stream, fieldnames=CSV_COLUMNS)
         writer.writeheader()
         writer.writerows(runs)
-    (out / "summary.json").write_text(json.dumps(report.as_json(), indent=2) + "\n")
+    write_private(out / "summary.json", json.dumps(report.as_json(), indent=2) + "\n")
     return report
 
 

@@ -73,6 +73,9 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(signum, lambda *_: stop.set())
     try:
         session = open_session("router", args.connect, listen, args.zenoh_config)
+    except ValueError as error:  # a configuration file that cannot be read
+        print(f"router: error: {error}", file=sys.stderr)
+        return 2
     except zenoh.ZError as error:
         print(f"router: cannot open Zenoh session: {error}", file=sys.stderr)
         return 1

@@ -22,6 +22,7 @@ from deploy.processes import free_port
 from deploy.run_switches import SWITCHES, RunSwitches, run_switches
 from deploy.watchdog import default_stall_window
 from nest_beacon.node.options import NestBeaconConfig
+from plumbing.private_files import make_private_folder
 from robot_agent.core import byzantine
 from robot_agent.node.options import RobotAgentConfig
 from viewer.options import VIEW_OPTIONS, Observer, observers
@@ -156,7 +157,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         check_recording_path(record)
     if args.trace is not None:
         try:  # now, so that a bad --trace is a usage error, not a crashed world server
-            args.trace.mkdir(parents=True, exist_ok=True)
+            make_private_folder(args.trace)
         except OSError as error:
             raise ValueError(f"--trace {args.trace}: {error.strerror}") from None
     arena_radius = make_layout(args.sites, args.robots, args.seed).arena_radius

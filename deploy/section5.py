@@ -345,7 +345,7 @@ def plot_all(root: Path, records: Sequence[dict[str, Any]]) -> list[Path]:
             for record in tables.select(records, variant, n, tables.PAPER_SEEDS)
         ]
         path = root / data_path.replace(".json", ".png")
-        plot_boxes(chosen, path, pools=figure == 5)
+        plot_boxes(chosen, path, pools=figure == 5, private=False)  # published
         written.append(path)
     path = root / DISTRIBUTION_FIGURE
     plot_distribution(records, path)

@@ -22,7 +22,6 @@ import argparse
 import json
 import os
 import re
-import shutil
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -31,6 +30,8 @@ from typing import Any
 
 from deploy.certificates import create_ca, is_ip, issue_all
 from plumbing import cliargs
+from plumbing.bounded_read import CERTIFICATE_BYTES, read_bounded
+from plumbing.private_files import make_private_folder, write_private
 from wire import names, protocol
 from wire.names import Role
 
@@ -406,10 +407,10 @@ def write_configs(plan: SwarmPlan, out: Path, cert_dir: PurePath) -> list[Path]:
         ("routers", plan.routers, router_config),
         ("clients", plan.client_identities(), client_config),
     ):
-        (out / folder).mkdir(parents=True, exist_ok=True)
+        make_private_folder(out / folder)
         for name in identities:
             path = out / folder / f"{name}.json5"
-            path.write_text(render(make(plan, name, cert_dir), f"{name}, {plan_title(plan)}"))
+            write_private(path, render(make(plan, name, cert_dir), f"{name}, {plan_title(plan)}"))
             written.append(path)
     return written
 
@@ -531,13 +532,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         elif not args.ca.is_file():
             parser.error(f"no CA certificate at {args.ca} (create one with --new-ca)")
         else:
-            local_certs.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(args.ca, local_certs / "ca.pem")
-    except (OSError, RuntimeError, ValueError) as error:
+            make_private_folder(local_certs)
+            write_private(local_certs / "ca.pem", read_bounded(args.ca, CERTIFICATE_BYTES))
+        cert_dir = args.cert_dir or PurePath(os.path.abspath(local_certs))
+        written = write_configs(plan, out, cert_dir)
+    except ValueError as error:  # a CA file that cannot be read, or is no CA
+        print(f"zenoh_acl: error: {error}", file=sys.stderr)
+        return 2
+    except (OSError, RuntimeError) as error:
         print(f"zenoh_acl: error: {error}", file=sys.stderr)
         return 1
-    cert_dir = args.cert_dir or PurePath(os.path.abspath(local_certs))
-    written = write_configs(plan, out, cert_dir)
     issued = "certificates in " + str(local_certs) if args.ca_key else "no certificates issued"
     print(f"wrote {len(written)} configurations under {out} ({issued})")
     return 0

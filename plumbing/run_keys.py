@@ -25,6 +25,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from plumbing import cliargs
+from plumbing.bounded_read import KEY_FILE_BYTES, read_bounded_text
+from plumbing.private_files import make_private_folder, write_private
 from wire import auth, names
 
 KEYS_ENV = "BESTOFN_RUN_KEYS"
@@ -77,11 +79,11 @@ def load(run: str, key_file: str | None, program: str) -> auth.Keyring | None:
     if text is None and key_file is not None:
         path = Path(key_file)
         try:
-            text = path.read_text()
+            text = read_bounded_text(path, KEY_FILE_BYTES, "key file")
             mode = path.stat().st_mode
         except OSError as error:
             raise ValueError(f"cannot read key file {key_file}: {error.strerror}") from None
-        if mode & (stat.S_IRWXG | stat.S_IRWXO):
+        if stat.S_ISREG(mode) and mode & (stat.S_IRWXG | stat.S_IRWXO):
             log.warning("key file %s can be read by other users (chmod 600 it)", key_file)
         source = key_file
     if text is None:
@@ -108,10 +110,7 @@ def from_args(
 
 def write(path: Path, keyring: auth.Keyring, run: str) -> None:
     """A key file only its owner can read."""
-    descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(descriptor, "w") as file:
-        file.write(to_text(keyring, run) + "\n")
-    path.chmod(0o600)
+    write_private(path, to_text(keyring, run) + "\n")
 
 
 # --- command line: key files for processes started by hand -------------------------------
@@ -135,18 +134,25 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Exit code 0; 2 (one line) if ``--out`` is not a folder that can be written, or
+    already holds a run's keys."""
     args = build_parser().parse_args(argv)
     out: Path = args.out
     if (out / "secret.json").exists():
         print(f"run_keys: error: {out / 'secret.json'} exists; not replacing it", file=sys.stderr)
-        return 1
-    out.mkdir(parents=True, exist_ok=True)
-    out.chmod(0o700)
+        return 2
     keyring = auth.Keyring(secret=new_secret())
-    write(out / "secret.json", keyring, args.run_id)
-    for robot in range(args.robots):
-        robot_keys = keyring.only([names.robot_identity(robot)])
-        write(out / f"robot-{robot}.json", robot_keys, args.run_id)
+    try:
+        make_private_folder(out)
+        out.chmod(0o700)  # a folder of keys: private even if it was there
+        write(out / "secret.json", keyring, args.run_id)
+        for robot in range(args.robots):
+            robot_keys = keyring.only([names.robot_identity(robot)])
+            write(out / f"robot-{robot}.json", robot_keys, args.run_id)
+    except OSError as error:
+        where = error.filename or out
+        print(f"run_keys: error: cannot write {where}: {error.strerror or error}", file=sys.stderr)
+        return 2
     print(f"wrote secret.json and {args.robots} robot key file(s) in {out}")
     return 0
 

@@ -3,7 +3,7 @@
 Times are ``time.monotonic()`` seconds: on Linux one clock for every process of the
 machine, so the world's and the robot hosts' lines can be laid side by side
 (``benchmarks/tick_timeline.py`` does). Off by default: a run without ``--trace`` pays one
-``None`` check per tick.
+``None`` check per tick. The file is its owner's only (plumbing/private_files.py).
 """
 
 from __future__ import annotations
@@ -13,6 +13,8 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
+from plumbing.private_files import open_private
+
 now = time.monotonic
 
 
@@ -20,7 +22,7 @@ class TraceWriter:
     """Appends one JSON object per line to a file; flushed when closed."""
 
     def __init__(self, path: str | Path) -> None:
-        self._file: IO[str] | None = open(path, "w", buffering=1 << 20)  # noqa: SIM115
+        self._file: IO[str] | None = open_private(path, "w", 1 << 20)
 
     def write(self, **fields: Any) -> None:
         if self._file is not None:

@@ -14,6 +14,13 @@ from pathlib import Path
 
 import zenoh
 
+from plumbing.bounded_read import (
+    CERTIFICATE_BYTES,
+    CONFIG_FILE_BYTES,
+    read_bounded,
+    read_bounded_text,
+)
+
 # Small Zenoh thread pools: a machine may host hundreds of sessions' processes. Only
 # set when the user has not chosen (an empty value makes zenoh panic).
 os.environ.setdefault(
@@ -26,13 +33,43 @@ os.environ.setdefault(
 CONNECT_TIMEOUT_MS = 30_000
 
 
+def read_config_file(config_file: str) -> zenoh.Config:
+    """A Zenoh configuration file (JSON5, or YAML by its name), read with a size limit;
+    ValueError (one line) if it cannot be read, is too big or is not a configuration."""
+    text = read_bounded_text(config_file, CONFIG_FILE_BYTES, "Zenoh configuration")
+    try:
+        if Path(config_file).suffix in (".yaml", ".yml"):  # read again, now known to be small
+            return zenoh.Config.from_file(config_file)
+        return zenoh.Config.from_json5(text)
+    except zenoh.ZError as error:
+        reason = str(error).splitlines()[0] if str(error) else "invalid"
+        raise ValueError(f"Zenoh configuration {config_file}: {reason}") from None
+
+
+def check_config_files(
+    parser: argparse.ArgumentParser, args: argparse.Namespace, robots: Sequence[int] = ()
+) -> None:
+    """A usage error (one line, exit code 2) unless ``--zenoh-config`` (each robot's,
+    where ``{id}`` stands for its id) is a configuration that can be read."""
+    config_file = args.zenoh_config
+    if not config_file:
+        return
+    files = [config_file.replace("{id}", str(robot)) for robot in robots] or [config_file]
+    for path in dict.fromkeys(files):
+        try:
+            read_config_file(path)
+        except ValueError as error:
+            parser.exit(2, f"{parser.prog}: error: {error}\n")
+
+
 def make_config(
     mode: str | None = "client",
     connect: Sequence[str] = (),
     listen: Sequence[str] = (),
     config_file: str | None = None,
 ) -> zenoh.Config:
-    config = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
+    """ValueError (one line) for a configuration file that cannot be read."""
+    config = read_config_file(config_file) if config_file else zenoh.Config()
     if mode is not None:
         config.insert_json5("mode", json.dumps(mode))
     if mode == "client" and not config_file:
@@ -108,16 +145,17 @@ def certificate_name(config_file: str) -> str | None:
     from cryptography.x509.oid import NameOID
 
     try:
-        config = zenoh.Config.from_file(config_file)
+        config = read_config_file(config_file)
         value = config.get_json("transport/link/tls/connect_certificate")
-    except zenoh.ZError:
+    except (zenoh.ZError, ValueError):
         return None
     path = json.loads(value) if value else None
     if not isinstance(path, str):
         return None
     try:
-        certificate = x509.load_pem_x509_certificate(Path(path).read_bytes())
-    except (OSError, ValueError):
+        pem = read_bounded(path, CERTIFICATE_BYTES, "certificate")
+        certificate = x509.load_pem_x509_certificate(pem)
+    except ValueError:
         return None
     names = certificate.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
     return str(names[0].value) if names else None

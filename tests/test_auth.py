@@ -131,7 +131,7 @@ def test_key_files_are_private_and_hold_only_their_keys(tmp_path: Path) -> None:
     assert robot.key("robot/1") == secret.key("robot/1")
     with pytest.raises(ValueError, match="not 'other'"):
         run_keys.from_text((tmp_path / "robot-1.json").read_text(), "other")
-    assert run_keys.main(["--run-id", "demo", "--robots", "2", "--out", str(tmp_path)]) == 1
+    assert run_keys.main(["--run-id", "demo", "--robots", "2", "--out", str(tmp_path)]) == 2
 
 
 def test_keys_from_the_launcher_leave_the_environment_at_once(

@@ -47,6 +47,7 @@ FAST = frozenset(
         "test_robot_endpoint",
         "test_settings",
         "test_tiers",
+        "test_user_files",
         "test_vectors",
         "test_watchdog",
         "test_wellstirred",

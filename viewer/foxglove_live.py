@@ -136,7 +136,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     import zenoh
 
     from plumbing.world_info import fetch_world_info
-    from plumbing.zenoh_session import open_from_args
+    from plumbing.zenoh_session import check_config_files, open_from_args
+
+    check_config_files(parser, args)
 
     keys = protocol.Keys(args.run_id, args.root)
     context = foxglove.Context()

@@ -226,6 +226,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.niceness:  # before Zenoh starts its threads, so that they inherit it
         with contextlib.suppress(AttributeError, OSError):
             os.nice(args.niceness)
+    from plumbing.zenoh_session import check_config_files
+
+    check_config_files(parser, args)
     try:
         return asyncio.run(_serve(args, keyring))
     except OSError as error:  # the port is taken, or the host is not an address here

@@ -36,6 +36,10 @@ import msgspec
 
 T = TypeVar("T")
 
+# A configuration as one JSON text (``--config``, ``--config-json``), at most: what swarm run
+# hands a process is a few kilobytes.
+MAX_TEXT_BYTES = 2**20
+
 _BOUNDS = ("ge", "gt", "le", "lt")
 _CONSTRAINTS = (*_BOUNDS, "pattern", "min_length", "max_length", "description")
 
@@ -278,9 +282,17 @@ def encode(config: object) -> str:
     return msgspec.json.encode(config).decode()
 
 
+def check_text_size(text: str | bytes) -> None:
+    """ValueError if a configuration's text is longer than any configuration can be."""
+    if len(text) > MAX_TEXT_BYTES:
+        raise ValueError(f"longer than {MAX_TEXT_BYTES} bytes: not a configuration")
+
+
 def decode(text: str | bytes, config_type: type[T]) -> T:
     """The ``config_type`` in ``text``; ValueError for bad JSON, an unknown field, a value
-    of the wrong type or out of range, or values that do not fit together."""
+    of the wrong type or out of range, or values that do not fit together, or a text
+    longer than ``MAX_TEXT_BYTES``."""
+    check_text_size(text)
     try:
         raw = msgspec.json.decode(text)
         _refuse_unknown(raw, config_type, "")

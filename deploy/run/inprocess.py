@@ -27,6 +27,7 @@ from deploy.run_plan import RunPlan, plan_from_args
 from deploy.wire_tap import WireTap
 from plumbing.cliargs import UsageError
 from plumbing.lifecycle import die_with_launcher
+from plumbing.private_files import make_private_folder, open_private
 from wire import protocol
 from wire.endings import Ending
 from world_server.core.world import World, WorldConfig
@@ -116,8 +117,8 @@ class _Recording:
     @classmethod
     def open(cls, path: Path, config: WorldConfig, plan: RunPlan) -> _Recording:
         try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            stream = path.open("wb")
+            make_private_folder(path.parent)
+            stream = open_private(path, "wb")
         except OSError as error:
             raise UsageError(f"--record {path}: {error.strerror}") from None
         run = RunDescription(plan.run_id, plan.seed, plan.robots, plan.sites, plan.config)

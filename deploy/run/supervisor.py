@@ -30,6 +30,7 @@ from deploy.run.follower import subscribe
 from deploy.run.log_relay import LogRelay
 from deploy.run_plan import RunPlan
 from plumbing.inbox import BoundedInbox
+from plumbing.private_files import make_private_folder
 from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import open_session
 from wire import auth, names, protocol
@@ -160,7 +161,7 @@ class Supervisor:
         if plan.record is None:
             return
         assert network is not None
-        plan.record.parent.mkdir(parents=True, exist_ok=True)
+        make_private_folder(plan.record.parent)
         self.recorder = self.group.start(
             "recorder",
             python_module(

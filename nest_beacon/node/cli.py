@@ -32,7 +32,7 @@ from plumbing import cliargs, run_keys, settings_cli
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.world_info import fetch_world_info
-from plumbing.zenoh_session import open_from_args
+from plumbing.zenoh_session import check_config_files, open_from_args
 from wire import names, protocol
 
 log = logging.getLogger("nest_beacon")
@@ -65,6 +65,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     name = config.name
     cliargs.configure_logging("nest-beacon", args.log_level)
     keyring = run_keys.from_args(parser, args, "nest-beacon")
+    check_config_files(parser, args)
     identity = names.beacon_identity(name)
     if keyring is not None and not (keyring.holds(identity) and keyring.holds(names.WORLD)):
         parser.exit(2, "nest-beacon: error: the beacon needs its own key and the world's\n")

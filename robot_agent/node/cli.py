@@ -27,7 +27,7 @@ from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.trace import open_trace
 from plumbing.world_info import ask, fetch_world_info
-from plumbing.zenoh_session import certificate_name, open_from_args
+from plumbing.zenoh_session import certificate_name, check_config_files, open_from_args
 from robot_agent.core import byzantine
 from robot_agent.core.endpoint import RobotEndpoint
 from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig, hosted_byzantine
@@ -157,6 +157,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.exit(2, f"robot-agent: error: {error}\n")
     cliargs.configure_logging("robot-agent", args.log_level)
     keyring = run_keys.from_args(parser, args, "robot-agent")
+    check_config_files(parser, args, fixed)
     for robot in fixed:
         if keyring is not None and not keyring.holds(names.robot_identity(robot)):
             parser.exit(2, f"robot-agent: error: the run keys hold no key for robot {robot}\n")

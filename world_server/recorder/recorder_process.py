@@ -23,6 +23,7 @@ from typing import Any
 from plumbing import cliargs, run_keys, settings_cli
 from plumbing.inbox import BoundedInbox, message_bytes
 from plumbing.lifecycle import die_with_launcher
+from plumbing.private_files import open_private
 from wire import auth, names, protocol
 from wire.names import Role
 from world_server.recorder.finish import query_parts
@@ -77,12 +78,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         _lower_priority(args.niceness)
     import zenoh
 
-    from plumbing.zenoh_session import open_from_args
+    from plumbing.zenoh_session import check_config_files, open_from_args
 
+    check_config_files(parser, args)
     keys = protocol.Keys(args.run_id, args.root)
     out = Path(args.out)
     try:
-        stream = out.open("wb")
+        stream = open_private(out, "wb")  # a recording holds the whole run: its owner's
     except OSError as error:
         print(f"recorder: cannot write {out}: {error}", file=sys.stderr)
         return 1

@@ -21,6 +21,7 @@ from world_server.core.layout import Layout
 
 def json_object(text: str) -> dict[str, Any]:
     """``--config-json``: a JSON object, or ValueError."""
+    settings.check_text_size(text)
     try:
         value = json.loads(text)
     except ValueError as error:

@@ -20,7 +20,7 @@ import zenoh
 from plumbing import cliargs, run_keys, settings_cli
 from plumbing.lifecycle import die_with_launcher
 from plumbing.trace import open_trace
-from plumbing.zenoh_session import open_from_args, session_mode
+from plumbing.zenoh_session import check_config_files, open_from_args, session_mode
 from wire import protocol
 from world_server.core.world import World, WorldConfig
 from world_server.server.options import WORLD_SERVER_OPTIONS, WorldServerConfig, world_server_config
@@ -71,6 +71,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.listen = [cliargs.LOCAL_ENDPOINT]
     cliargs.configure_logging("world-server", args.log_level)
     keyring = run_keys.from_args(parser, args, "world-server")
+    check_config_files(parser, args)
     if keyring is not None and keyring.secret is None:
         parser.exit(2, "world-server: error: the world server needs the run secret\n")
     world = World(config.world)
