@@ -4,7 +4,8 @@ ephemeral certificate authority with a certificate and an access control for eac
 * Run keys (wire/auth.py): a fresh secret per run. The world server, beacon and
   recorder get it; each robot process gets only the keys of the robots it hosts. Keys go
   through each child's environment or the fork call, never a command line.
-* The private directory (mode 0700, removed by ``close``) holds the router's Unix socket:
+* The private directory (mode 0700, removed by ``close``, and by its janitor however the
+  launcher ends: deploy/janitor.py) holds the router's Unix socket:
   a run's router is then reachable by this user only, not by every user of the machine as
   a loopback TCP port is. In secure mode it also holds the CA, the certificates and the
   Zenoh configurations, and the router listens on TLS on loopback instead, with the
@@ -14,8 +15,6 @@ ephemeral certificate authority with a certificate and an access control for eac
 
 from __future__ import annotations
 
-import contextlib
-import shutil
 import socket
 import tempfile
 import time
@@ -24,23 +23,25 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from deploy import certificates, zenoh_acl
+from deploy.janitor import PREFIX, PrivateDirectory
 from deploy.processes import free_port, wait_for_port
 from plumbing import run_keys
 from wire import auth, names, protocol
 
-DIRECTORY_PREFIX = "bestofn-"
+DIRECTORY_PREFIX = PREFIX
 SOCKET_NAME = "zenoh.sock"
 SOCKET_PATH_LIMIT = 100  # bytes: sun_path holds 108 with its terminating zero
 CERTIFICATE_DAYS = 1  # ephemeral: the run's certificates are removed with it anyway
 BEACON = names.DEFAULT_BEACON
 
 
-def private_directory() -> Path:
-    """A new directory only this user can enter (mkdtemp makes it 0700)."""
+def private_directory(*, janitor: bool = True) -> PrivateDirectory:
+    """A new directory only this user can enter (mkdtemp makes it 0700), removed when this
+    process ends however it ends (deploy/janitor.py)."""
     base = tempfile.gettempdir()
     if len(base) + len(DIRECTORY_PREFIX) + 10 + len(SOCKET_NAME) > SOCKET_PATH_LIMIT:
         base = "/tmp"  # a socket path must be short
-    return Path(tempfile.mkdtemp(prefix=DIRECTORY_PREFIX, dir=base))
+    return PrivateDirectory.create(base, janitor=janitor)
 
 
 def socket_endpoint(directory: Path) -> str:
@@ -67,8 +68,12 @@ class RunNetwork:
     endpoint: str  # what clients connect to
     router: bool  # the world server is the run's router (else it is a client of --connect)
     keyring: auth.Keyring | None  # None: an unauthenticated run (--no-keys)
-    directory: Path | None = None  # private; removed by close()
+    private: PrivateDirectory | None = None  # removed by close(), or by its janitor
     secure: bool = False
+
+    @property
+    def directory(self) -> Path | None:
+        return self.private.path if self.private is not None else None
 
     @classmethod
     def create(
@@ -80,14 +85,18 @@ class RunNetwork:
         keyed: bool = True,
         secure: bool = False,
         root: str = protocol.DEFAULT_ROOT,
+        janitor: bool = True,
     ) -> RunNetwork:
+        """The run's keys and, unless ``connect``, its private directory (with its janitor,
+        deploy/janitor.py), and in ``secure`` mode its certificates."""
         keyring = auth.Keyring(secret=run_keys.new_secret()) if keyed else None
         if connect is not None:
             return cls(run_id, connect, router=False, keyring=keyring)
-        directory = private_directory()
+        private = private_directory(janitor=janitor)
+        directory = private.path
         try:
             if not secure:
-                return cls(run_id, socket_endpoint(directory), True, keyring, directory)
+                return cls(run_id, socket_endpoint(directory), True, keyring, private)
             port = free_port()
             plan = zenoh_acl.SwarmPlan(
                 protocol.Keys(run_id, root), tuple(range(robots)), (BEACON,), port=port
@@ -106,9 +115,9 @@ class RunNetwork:
             ca_key.unlink()  # nothing more to sign: no process needs it
             zenoh_acl.write_configs(plan, directory, cert_dir)
             endpoint = f"tls/127.0.0.1:{port}"
-            return cls(run_id, endpoint, True, keyring, directory, secure=True)
+            return cls(run_id, endpoint, True, keyring, private, secure=True)
         except BaseException:
-            shutil.rmtree(directory, ignore_errors=True)
+            private.close()
             raise
 
     # --- what each process is given --------------------------------------------------
@@ -153,7 +162,6 @@ class RunNetwork:
 
     def close(self) -> None:
         """Remove the private directory: the socket, certificates and keys go with it."""
-        if self.directory is not None:
-            with contextlib.suppress(OSError):
-                shutil.rmtree(self.directory)
-            self.directory = None
+        if self.private is not None:
+            self.private.close()
+            self.private = None

@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -392,13 +391,13 @@ def run(args: argparse.Namespace) -> int:
     make_private_folder(logs)
     group = ProcessGroup()
     # The shared router listens on a socket only this user can reach.
-    directory = private_directory() if shared_router else None
+    private = private_directory() if shared_router else None
     try:
-        endpoint = socket_endpoint(directory) if directory is not None else None
+        endpoint = socket_endpoint(private.path) if private is not None else None
         specs = plan_runs(args, endpoint)
-        if directory is not None and endpoint is not None:
+        if private is not None and endpoint is not None:
             router = group.start("router", python_module("deploy.router", "--listen", endpoint))
-            if not wait_for_socket(directory / SOCKET_NAME, 30.0, router.alive):
+            if not wait_for_socket(private.path / SOCKET_NAME, 30.0, router.alive):
                 print(
                     f"swarm experiment: the router did not start:\n{router.tail()}",
                     file=sys.stderr,
@@ -409,8 +408,8 @@ def run(args: argparse.Namespace) -> int:
         elapsed = time.monotonic() - started
     finally:
         group.stop_all()
-        if directory is not None:
-            shutil.rmtree(directory, ignore_errors=True)
+        if private is not None:
+            private.close()
     failed = [result for result in results if not result.ok]
     for result in failed:
         print(

@@ -174,7 +174,7 @@ def test_a_bad_key_file_says_what_is_wrong(text: str, reason: str, tmp_path: Pat
 
 
 def test_a_local_run_listens_on_a_socket_only_its_user_can_reach() -> None:
-    network = RunNetwork.create("demo", 2)
+    network = RunNetwork.create("demo", 2, janitor=False)  # the janitor: test_private_runs
     try:
         assert network.directory is not None
         assert stat.S_IMODE(network.directory.stat().st_mode) == 0o700
@@ -190,7 +190,7 @@ def test_a_local_run_listens_on_a_socket_only_its_user_can_reach() -> None:
 
 
 def test_a_secure_run_has_a_certificate_per_process_and_no_ca_key_left() -> None:
-    network = RunNetwork.create("demo", 2, secure=True)
+    network = RunNetwork.create("demo", 2, secure=True, janitor=False)
     try:
         directory = network.directory
         assert directory is not None and network.endpoint.startswith("tls/127.0.0.1:")

@@ -1,16 +1,19 @@
 """Files at a user's paths: written readable by their owner only (plumbing/private_files.py),
 read with a size limit (plumbing/bounded_read.py); key files and configurations that fail
-say so in one line with exit code 2. The same against live processes:
-tests/test_private_runs.py."""
+say so in one line with exit code 2; the sweep of run directories whose launcher is gone
+(deploy/janitor.py). The same against live processes: tests/test_private_runs.py."""
 
 from __future__ import annotations
 
+import os
 import stat
+import sys
 from pathlib import Path
 
 import pytest
 
 from deploy import certificates
+from deploy.janitor import MAKER_FILE, PREFIX, PrivateDirectory, maker_alive, sweep
 from plumbing import run_keys
 from plumbing.bounded_read import read_bounded, read_bounded_text
 from plumbing.private_files import make_private_folder, open_private, write_private
@@ -140,3 +143,39 @@ def test_run_keys_out_an_existing_file_is_one_line_not_a_traceback(
     assert run_keys.main(["--run-id", "demo", "--robots", "2", "--out", str(existing)]) == 2
     error = capsys.readouterr().err
     assert error == f"run_keys: error: cannot write {existing}: not a folder\n"
+
+
+# --- run directories whose launcher is gone ------------------------------------------------
+
+
+def _dead_pid() -> int:
+    """A pid no process has now (the highest pid is rarely taken)."""
+    highest = int(Path("/proc/sys/kernel/pid_max").read_text())
+    for pid in range(highest - 1, highest - 1000, -1):
+        if not Path(f"/proc/{pid}").exists():
+            return pid
+    raise AssertionError("no free pid found")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_the_next_run_sweeps_directories_whose_launcher_is_gone(tmp_path: Path) -> None:
+    mine = PrivateDirectory.create(str(tmp_path), janitor=False)
+    assert mode_of(mine.path) == 0o700 and maker_alive(mine.path)
+    orphan = tmp_path / f"{PREFIX}orphan"
+    (orphan / "certs").mkdir(parents=True)
+    (orphan / "certs" / "robot-0.key").write_text("private")
+    (orphan / MAKER_FILE).write_text(f"{_dead_pid()} 12345\n")
+    reused = tmp_path / f"{PREFIX}reused"  # our pid, but another start time: another process
+    reused.mkdir()
+    (reused / MAKER_FILE).write_text(f"{os.getpid()} 1\n")
+    unknown = tmp_path / f"{PREFIX}unknown"  # no maker file: not ours to judge
+    unknown.mkdir()
+    other = tmp_path / "other"
+    other.mkdir()
+    assert sorted(sweep(tmp_path)) == [orphan, reused]
+    assert mine.path.exists() and unknown.exists() and other.exists()
+    second = PrivateDirectory.create(str(tmp_path), janitor=False)  # sweeps too
+    assert mine.path.exists()
+    second.close()
+    mine.close()
+    assert not mine.path.exists() and not second.path.exists()
