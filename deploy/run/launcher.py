@@ -309,6 +309,10 @@ def _finish_recording(swarm: Swarm, summary: dict[str, Any], quiet: bool) -> str
     recorder = supervisor.recorder
     if supervisor.session is None or recorder is None or not recorder.alive():
         return "it was not running"
+    if plan.connect is None and not supervisor.world_running():
+        # The world server was the run's router: nothing reaches the recorder any more.
+        # Stopped, it closes the file without the summary.
+        return "the world server, the run's router, is gone, so it cannot be reached"
     waiting = RecorderProgress(plan.record, recorder.alive, say(quiet))
     return finish_recording(
         supervisor.session, supervisor.keys, supervisor.keyring, waiting, summary

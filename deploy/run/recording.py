@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +44,7 @@ class RecorderProgress:
         self.started = self.grew_at = self.reported_at = clock()
         self.size = self._size()
         self.died = False
+        self.gave_up = False  # its file stopped growing for ``patience`` seconds
 
     def _size(self) -> int:
         try:
@@ -65,15 +66,22 @@ class RecorderProgress:
                 f"waiting for the recorder to write what it fell behind on: "
                 f"{self.size / 2**20:.0f} MB written, {now - self.started:.0f} s so far"
             )
-        return now - self.grew_at < self.patience
+        self.gave_up = now - self.grew_at >= self.patience
+        return not self.gave_up
 
-    def why_not(self) -> str:
+    def why_not(self, refused: Sequence[str] = ()) -> str:
+        """Why the recorder did not confirm, once its finish query came back without an
+        answer (``refused``: what came back instead)."""
         if self.died:
             return "exited before it confirmed the file"
-        return (
-            f"did not confirm the file: it did not grow for {self.patience:g} s "
-            f"({self.size / 2**20:.0f} MB written)"
-        )
+        if self.gave_up:
+            return (
+                f"did not confirm the file: it did not grow for {self.patience:g} s "
+                f"({self.size / 2**20:.0f} MB written)"
+            )
+        waited = self.clock() - self.started
+        said = f": {refused[0]}" if refused else ""
+        return f"its finish query came back unanswered after {waited:.1f} s{said}"
 
 
 def finish_recording(
@@ -86,7 +94,7 @@ def finish_recording(
     """Hand the summary to the recorder and wait until the file is complete: as long as
     the recorder is alive and its file grows (it writes what it fell behind on first).
     None once it confirmed; else why not."""
-    answers, _ = ask(
+    answers, refused = ask(
         session,
         keys.recorder_finish,
         keyring,
@@ -95,4 +103,4 @@ def finish_recording(
         timeout=RECORDER_LONGEST_WAIT,
         worth_waiting=waiting,
     )
-    return None if answers else waiting.why_not()
+    return None if answers else waiting.why_not(refused)
