@@ -125,6 +125,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     cliargs.configure_logging("foxglove-live", args.log_level)
+    from plumbing.zenoh_session import check_config_files, open_from_args
+
+    check_config_files(parser, args)  # before the keys' warning: one line if it fails
     keyring = run_keys.from_args(parser, args, "foxglove-live")
     if keyring is not None and keyring.secret is None:
         # Like the recorder, it checks every identity's tags: only the secret gives them all.
@@ -136,9 +139,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     import zenoh
 
     from plumbing.world_info import fetch_world_info
-    from plumbing.zenoh_session import check_config_files, open_from_args
-
-    check_config_files(parser, args)
 
     keys = protocol.Keys(args.run_id, args.root)
     context = foxglove.Context()

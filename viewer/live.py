@@ -219,6 +219,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     cliargs.configure_logging("viewer", args.log_level)
+    from plumbing.zenoh_session import check_config_files
+
+    check_config_files(parser, args)  # before the keys' warning: one line if it fails
     keyring = run_keys.from_args(parser, args, "viewer")
     if keyring is not None and keyring.secret is None:
         # It checks the world's and every robot's tags: only the secret gives all their keys.
@@ -226,9 +229,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.niceness:  # before Zenoh starts its threads, so that they inherit it
         with contextlib.suppress(AttributeError, OSError):
             os.nice(args.niceness)
-    from plumbing.zenoh_session import check_config_files
-
-    check_config_files(parser, args)
     try:
         return asyncio.run(_serve(args, keyring))
     except OSError as error:  # the port is taken, or the host is not an address here

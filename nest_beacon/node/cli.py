@@ -64,8 +64,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     config = process_config.beacon
     name = config.name
     cliargs.configure_logging("nest-beacon", args.log_level)
-    keyring = run_keys.from_args(parser, args, "nest-beacon")
     check_config_files(parser, args)
+    keyring = run_keys.from_args(parser, args, "nest-beacon")
     identity = names.beacon_identity(name)
     if keyring is not None and not (keyring.holds(identity) and keyring.holds(names.WORLD)):
         parser.exit(2, "nest-beacon: error: the beacon needs its own key and the world's\n")

@@ -156,8 +156,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as error:
         parser.exit(2, f"robot-agent: error: {error}\n")
     cliargs.configure_logging("robot-agent", args.log_level)
-    keyring = run_keys.from_args(parser, args, "robot-agent")
     check_config_files(parser, args, fixed)
+    keyring = run_keys.from_args(parser, args, "robot-agent")
     for robot in fixed:
         if keyring is not None and not keyring.holds(names.robot_identity(robot)):
             parser.exit(2, f"robot-agent: error: the run keys hold no key for robot {robot}\n")

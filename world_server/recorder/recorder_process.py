@@ -71,6 +71,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             2, f"recorder: error: --config is of run {run.run_id!r}, not --run-id {args.run_id!r}\n"
         )
     cliargs.configure_logging("recorder", args.log_level)
+    from plumbing.zenoh_session import check_config_files, open_from_args
+
+    check_config_files(parser, args)  # before the keys' warning: one line if it fails
     keyring = run_keys.from_args(parser, args, "recorder")
     if keyring is not None and keyring.secret is None:
         parser.exit(2, "recorder: error: the recorder needs the run secret\n")
@@ -78,9 +81,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         _lower_priority(args.niceness)
     import zenoh
 
-    from plumbing.zenoh_session import check_config_files, open_from_args
-
-    check_config_files(parser, args)
     keys = protocol.Keys(args.run_id, args.root)
     out = Path(args.out)
     try:

@@ -70,8 +70,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if session_mode(args) == "router" and not args.listen and not args.zenoh_config:
         args.listen = [cliargs.LOCAL_ENDPOINT]
     cliargs.configure_logging("world-server", args.log_level)
-    keyring = run_keys.from_args(parser, args, "world-server")
     check_config_files(parser, args)
+    keyring = run_keys.from_args(parser, args, "world-server")
     if keyring is not None and keyring.secret is None:
         parser.exit(2, "world-server: error: the world server needs the run secret\n")
     world = World(config.world)
