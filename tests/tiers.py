@@ -80,6 +80,8 @@ FULL_ONLY = {
     "test_multihost": "network namespaces and processes",
     "test_recording": "starts swarms and the recorder",
     "test_report": "runs `swarm report` in a process; plots",
+    "test_flood_memory": "floods a live swarm and reads its processes' memory",
+    "test_private_runs": "starts swarms, experiments and processes to check what they leave",
     "test_ending_rule": "in-process runs, and the signal numbers of the stop signals",
     "test_recording_reader": "writes recordings, whose metadata asks git and uname",
     "test_router": "starts Zenoh routers",
