@@ -19,6 +19,7 @@ from deploy.wire_tap import WireTap, with_rejects
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from robot_agent.core import byzantine
 from robot_agent.core.controller import Controller, ControllerConfig
+from robot_agent.core.parking import ParkingSlots
 from robot_agent.core.ports import RejectCounter, RobotController
 from robot_agent.core.simulated import SimulatedPorts
 from wire import names, protocol, shape
@@ -116,8 +117,14 @@ def run_in_memory(
             # The longest leg a robot may take before it gives up: across the arena.
             controller_config.leg_allowance(2 * world.layout.arena_radius),
             beacon_config.outages,
+            time_limit=timeout,
         )
-    watchdog = Watchdog(robots, stall_window, body_length=2 * world_config.spec.radius)
+    watchdog = Watchdog(
+        robots,
+        stall_window,
+        body_length=2 * world_config.spec.radius,
+        slot_of=ParkingSlots.of_world(world.info, controller_config).slot,
+    )
     honest = [robot for robot_id, robot in robots.items() if robot_id not in behaviours]
     deliveries: dict[str, list[tuple[str, bytes]]] = {}
     frames: dict[int, bytes] = {}

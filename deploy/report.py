@@ -30,6 +30,7 @@ import math
 import re
 import statistics
 import sys
+from array import array
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -116,6 +117,63 @@ class Declared:
     status_gaps: int = 0  # status updates a robot's trip or pooling counter skipped
 
 
+# Points of a robot's trail kept for the trajectories figure, at most: the trail is thinned
+# to every other point each time it fills, so a report's memory does not grow with the
+# length of the run (about 0.25 s of sim time between points in a 1000 s run).
+TRAIL_POINTS = 4096
+
+
+class Trail:
+    """A robot's path, thinned to at most ``TRAIL_POINTS`` evenly spaced points (every
+    ``stride``-th pose), plus its last pose."""
+
+    def __init__(self, limit: int = TRAIL_POINTS) -> None:
+        self.limit = max(2, limit)
+        self.xs: array[float] = array("d")
+        self.ys: array[float] = array("d")
+        self.stride = 1
+        self.seen = 0
+        self.last: tuple[float, float] | None = None
+
+    def add(self, x: float, y: float) -> None:
+        if self.seen % self.stride == 0:
+            if len(self.xs) >= self.limit:
+                del self.xs[1::2], self.ys[1::2]
+                self.stride *= 2
+            if self.seen % self.stride == 0:
+                self.xs.append(x)
+                self.ys.append(y)
+        self.seen += 1
+        self.last = (x, y)
+
+    def points(self) -> tuple[list[float], list[float]]:
+        """The kept points in order, ending with the last pose."""
+        xs, ys = list(self.xs), list(self.ys)
+        if self.last is not None and (not xs or (xs[-1], ys[-1]) != self.last):
+            xs.append(self.last[0])
+            ys.append(self.last[1])
+        return xs, ys
+
+
+@dataclass
+class RobotTrace:
+    """What a report keeps of one robot, whatever the length of the run: its summary
+    record, its last status, its progress (the stall watchdog's, for ``stuck``) and its
+    thinned trail."""
+
+    id: int
+    record: RobotRecord
+    progress: Watchdog
+    trail: Trail = field(default_factory=Trail)
+    last: protocol.Status | None = None
+
+    @classmethod
+    def new(cls, robot: int) -> RobotTrace:
+        # Robots are independent in the watchdog: one each, so robots can join as heard.
+        # Its window plays no part in ``stuck``.
+        return cls(robot, RobotRecord(robot), Watchdog([robot], 1.0, 2 * EPUCK.radius))
+
+
 @dataclass
 class Recording:
     """Everything a report needs from one MCAP file."""
@@ -125,8 +183,9 @@ class Recording:
     complete: bool = False  # the file ends with its footer
     problem: str | None = None  # why reading stopped early, if it did
     messages: Counter[str] = field(default_factory=Counter)  # by schema name
-    statuses: dict[int, list[protocol.Status]] = field(default_factory=dict)
-    paths: dict[int, list[tuple[float, float, float]]] = field(default_factory=dict)
+    robots_heard: dict[int, RobotTrace] = field(default_factory=dict)  # by robot id
+    opinion_robot: int | None = None  # whose every status is kept, for the opinion figure
+    opinions: list[protocol.Status] = field(default_factory=list)  # that robot's statuses
     sense: dict[int, TickSpan] = field(default_factory=dict)
     act: dict[int, TickSpan] = field(default_factory=dict)
     ack: TickSpan = field(default_factory=TickSpan)
@@ -205,6 +264,8 @@ class _Collector:
 
     def __init__(self, recording: Recording) -> None:
         self.recording = recording
+        # --robot: keep that robot's statuses for the opinion figure, and only its.
+        self.opinion_robot_fixed = recording.opinion_robot is not None
         self.status = msgspec.json.Decoder(protocol.Status)
         self.sense = msgspec.json.Decoder(protocol.Sense)
         self.act = msgspec.json.Decoder(protocol.Act)
@@ -221,7 +282,9 @@ class _Collector:
                 sense = self.sense.decode(message.data)
                 robot = _robot_of(topic)
                 recording.sense.setdefault(robot, TickSpan()).add(sense.tick)
-                recording.paths.setdefault(robot, []).append((sense.t, sense.x, sense.y))
+                trace = self._trace(robot)
+                trace.trail.add(sense.x, sense.y)
+                trace.progress.poses(sense.t, [(robot, sense.x, sense.y)])
                 recording.declared.rx += sense.rx
                 recording.declared.camera += sense.camera
             elif schema == "bestofn.Act":
@@ -248,14 +311,31 @@ class _Collector:
         except (msgspec.DecodeError, msgspec.ValidationError, ValueError):
             recording.messages["undecodable " + schema] += 1
 
+    def _trace(self, robot: int) -> RobotTrace:
+        trace = self.recording.robots_heard.get(robot)
+        if trace is None:
+            trace = self.recording.robots_heard[robot] = RobotTrace.new(robot)
+        return trace
+
     def _status(self, robot: int, status: protocol.Status) -> None:
-        history = self.recording.statuses.setdefault(robot, [])
-        if history:
-            previous = history[-1]
+        recording = self.recording
+        trace = self._trace(robot)
+        previous = trace.last
+        if previous is not None:
             skipped = max(status.trips - previous.trips - 1, 0)
             skipped += max(status.poolings - previous.poolings - 1, 0)
-            self.recording.declared.status_gaps += skipped
-        history.append(status)
+            recording.declared.status_gaps += skipped
+        trace.last = status
+        trace.record.update(status)
+        trace.progress.status(status)
+        # The opinion figure's robot: the one asked for, else the lowest id heard (a lower
+        # one heard later starts its history at its first status, so that is whole too).
+        if recording.opinion_robot is None or (
+            not self.opinion_robot_fixed and robot < recording.opinion_robot
+        ):
+            recording.opinion_robot, recording.opinions = robot, []
+        if robot == recording.opinion_robot:
+            recording.opinions.append(status)
 
 
 def _robot_of(topic: str) -> int:
@@ -263,13 +343,15 @@ def _robot_of(topic: str) -> int:
     return int(topic.rsplit("/", 2)[-2])
 
 
-def read_recording(path: Path) -> Recording:
+def read_recording(path: Path, opinion_robot: int | None = None) -> Recording:
     """Read one recording as far as it is readable (a truncated file too), one message at
-    a time.
+    a time, keeping per robot only what the report needs (``RobotTrace``): its memory
+    does not grow with the length of the run. ``opinion_robot``: the robot whose every
+    status is kept for the opinion figure (default: the lowest id).
 
     Raises ValueError if the file is not an MCAP file at all.
     """
-    recording = Recording(Path(path))
+    recording = Recording(Path(path), opinion_robot=opinion_robot)
     collector = _Collector(recording)
     reader = RecordingReader(path)
     for message in reader:
@@ -388,10 +470,9 @@ def recorded_ending(summary: dict[str, Any]) -> str | None:
 def rebuild_summary(recording: Recording) -> dict[str, Any]:
     """The ``swarm run --json`` summary, from the status messages in the recording."""
     records = {robot: RobotRecord(robot) for robot in range(recording.robots or 0)}
-    for robot, statuses in recording.statuses.items():
-        record = records.setdefault(robot, RobotRecord(robot))
-        for status in statuses:
-            record.update(status)
+    for robot, trace in recording.robots_heard.items():
+        if trace.last is not None:  # its statuses, not only its poses
+            records[robot] = trace.record
     num_sites = recording.sites or _sites_from_statuses(recording) or 2
     num_robots = recording.robots or len(records)
     seed = recording.seed or 0
@@ -403,7 +484,6 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
     )
     state = recording.last_state
     clock = recording.last_clock
-    watchdog = _replay_progress(recording, records)
     wall = 0.0
     if recording.first_clock_wall_ns is not None and recording.last_clock_wall_ns is not None:
         wall = (recording.last_clock_wall_ns - recording.first_clock_wall_ns) / 1e9
@@ -423,40 +503,27 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
             departures=state.departures if state else 0,
             observer_rejected=recording.undecodable,
             config=recording.config,
-            stuck=watchdog.stuck(),
+            stuck=_stuck(recording, records),
             byzantine=byzantine_in_config(recording.config),
         ),
         records.values(),
     )
 
 
-def _replay_progress(recording: Recording, records: dict[int, RobotRecord]) -> Watchdog:
-    """The stall watchdog fed with each undecided robot's statuses and poses, in time order
-    (robots are independent, so one at a time): where each is stuck, and since when."""
-    window = float(recording.config.get("stall_window") or 1.0)
-    watchdog = Watchdog(records, window, body_length=2 * EPUCK.radius)
-    for robot, record in records.items():
-        statuses = recording.statuses.get(robot, [])
-        if record.decided_site is not None:
-            watchdog.status(statuses[-1])  # decided: holds nothing up
-            continue
-        events = sorted(
-            [(status.t, 1, index) for index, status in enumerate(statuses)]
-            + [(t, 0, index) for index, (t, _, _) in enumerate(recording.paths.get(robot, []))]
-        )
-        for _, kind, index in events:
-            if kind:
-                watchdog.status(statuses[index])
-            else:
-                t, x, y = recording.paths[robot][index]
-                watchdog.poses(t, [(robot, x, y)])
-    return watchdog
+def _stuck(recording: Recording, records: Mapping[int, RobotRecord]) -> list[dict[str, Any]]:
+    """Where each undecided robot is stuck, and since when: each robot's watchdog, fed its
+    statuses and poses as they were read."""
+    stuck: list[dict[str, Any]] = []
+    for robot in sorted(records):
+        trace = recording.robots_heard.get(robot) or RobotTrace.new(robot)
+        stuck += trace.progress.stuck()
+    return stuck
 
 
 def _sites_from_statuses(recording: Recording) -> int | None:
-    for statuses in recording.statuses.values():
-        if statuses:
-            return len(statuses[0].opinion)
+    for trace in recording.robots_heard.values():
+        if trace.last is not None:
+            return len(trace.last.opinion)
     return None
 
 
@@ -707,7 +774,7 @@ def _site_colours(layout: dict[str, Any] | None, sites: int) -> dict[int, tuple[
 def plot_opinion(recording: Recording, robot: int, path: Path) -> None:
     """One robot's opinion of every site over sim time, poolings marked."""
     plt = _pyplot()
-    statuses = recording.statuses.get(robot, [])
+    statuses = recording.opinions if robot == recording.opinion_robot else []
     figure, axis = plt.subplots(figsize=(8, 4.2))
     layout = recording.layout
     if statuses:
@@ -775,12 +842,12 @@ def plot_trajectories(recording: Recording, path: Path) -> None:
                 va="center",
                 fontsize=7,
             )
-    cmap = plt.get_cmap("tab10" if len(recording.paths) <= 10 else "viridis")
-    robots = sorted(recording.paths)
+    trails = {robot: trace.trail for robot, trace in recording.robots_heard.items()}
+    robots = sorted(robot for robot, trail in trails.items() if trail.last is not None)
+    cmap = plt.get_cmap("tab10" if len(robots) <= 10 else "viridis")
     for index, robot in enumerate(robots):
-        points = recording.paths[robot]
         colour = cmap(index % 10 if len(robots) <= 10 else index / max(len(robots) - 1, 1))
-        xs, ys = [p[1] for p in points], [p[2] for p in points]
+        xs, ys = trails[robot].points()
         axis.plot(
             xs,
             ys,
@@ -846,7 +913,7 @@ def write_report(
     unreadable: list[str] = []
     for path in paths:
         try:
-            recording = read_recording(path)
+            recording = read_recording(path, robot)
         except (ValueError, OSError) as error:
             unreadable.append(str(error))
             if warn is not None:
@@ -916,7 +983,7 @@ def _example(recordings: Sequence[Recording], run_id: str | None) -> Recording:
 def _robot(recording: Recording, robot: int | None) -> int:
     if robot is not None:
         return robot
-    return min(recording.statuses, default=0)
+    return 0 if recording.opinion_robot is None else recording.opinion_robot
 
 
 # --- command line --------------------------------------------------------------------------

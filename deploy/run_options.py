@@ -52,10 +52,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=cliargs.positive_float,
         default=None,
         metavar="SIM_SECONDS",
-        help="end the run as stalled when no undecided robot made progress (a leg, a "
-        "comparison, a pooling, or two body lengths of travel) for this much sim time "
-        "(default: twice the time a robot may take for a leg across the arena, plus two "
-        "arena crossings at full speed, plus any --beacon-outage)",
+        help="end the run as stalled when, with some robot undecided, no robot at work "
+        "completed a step of its task (reached or looked at a site, heard the beacon at the "
+        "nest, pooled, decided; a decided robot: came closer to its parking slot, parked) "
+        "for this much sim time (default: twice the time a robot may take for a leg across "
+        "the arena, plus two arena crossings at full speed, plus every --beacon-outage that "
+        "ends before --timeout)",
+    )
+    swarm.add_argument(
+        "--world-stop-window",
+        type=cliargs.positive_float,
+        default=None,
+        metavar="SECONDS",
+        help="end the run as world_stopped when the world's clock has not advanced for this "
+        "many wall seconds, whatever the sim clock says: the world server hung or the "
+        "launcher lost it (default: twice the world's --stall-timeout plus 60 s; --engine "
+        "inprocess: the world is the launcher's own loop, it cannot stop on its own)",
     )
     add_swarm_switches(parser)
     processes = parser.add_argument_group("processes")

@@ -20,7 +20,7 @@ from typing import Any
 
 from deploy.processes import free_port
 from deploy.run_switches import SWITCHES, RunSwitches, run_switches
-from deploy.watchdog import default_stall_window
+from deploy.watchdog import default_stall_window, default_world_stop_window
 from nest_beacon.node.options import NestBeaconConfig
 from plumbing.private_files import make_private_folder
 from robot_agent.core import byzantine
@@ -64,6 +64,7 @@ class RunPlan:
     seed: int
     timeout: float
     stall_window: float
+    world_stop_window: float  # wall seconds without a new tick: the world stopped
     connect: str | None  # an existing router; None: the world server is the run's router
     record: Path | None
     switches: RunSwitches  # the world's, the robots' and the beacon's configs
@@ -167,6 +168,10 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         # The longest leg a robot may take before it gives up: across the arena.
         switches.controller.leg_allowance(2 * arena_radius),
         switches.beacon.outages,
+        time_limit=args.timeout,
+    )
+    world_stop_window = args.world_stop_window or default_world_stop_window(
+        switches.world.stall_timeout
     )
     # The run's configuration as its summary and recording keep it: the launcher's own
     # options and every setting in force, keyed like the options.
@@ -178,6 +183,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     config = {**launcher_options, **switches.record()}
     config["run_id"] = run_id
     config["stall_window"] = stall_window  # the one in force, also when defaulted
+    config["world_stop_window"] = world_stop_window
     config["byzantine"] = [f"{robot}:{how}" for robot, how in byzantine_robots.items()]
     recorded = RunDescription(run_id, args.seed, args.robots, args.sites, config)
     recorder_args = [
@@ -198,6 +204,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         seed=args.seed,
         timeout=args.timeout,
         stall_window=stall_window,
+        world_stop_window=world_stop_window,
         connect=args.connect,
         record=record,
         switches=switches,

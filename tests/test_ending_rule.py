@@ -50,6 +50,7 @@ CONDITIONS: list[tuple[str, dict[str, Any], Halt]] = [
     ("sim limit", {"sim_time": LIMIT}, Halt(Stop.TIMEOUT, TimeLimit.SIM)),
     ("stalled", {"stalled": True}, Halt(Stop.STALLED)),
     ("signal", {"signalled": True}, Halt(Stop.INTERRUPTED)),
+    ("world stopped", {"world_stopped": True}, Halt(Stop.WORLD_STOPPED)),
     ("wall limit", {"wall_time": WALL_LIMIT}, Halt(Stop.TIMEOUT, TimeLimit.WALL)),
 ]
 
@@ -92,7 +93,7 @@ def test_the_ending_from_why_the_run_stopped_and_what_the_robots_decided() -> No
     assert ending_of(Stop.DECIDED, all_decided=True, consensus=True) is Ending.CONSENSUS
     assert ending_of(Stop.DECIDED, all_decided=True, consensus=False) is Ending.SPLIT
     assert ending_of(Stop.DECIDED, all_decided=False, consensus=False) is Ending.STALLED
-    for stop in (Stop.STALLED, Stop.TIMEOUT, Stop.INTERRUPTED, Stop.CRASHED):
+    for stop in (Stop.STALLED, Stop.TIMEOUT, Stop.WORLD_STOPPED, Stop.INTERRUPTED, Stop.CRASHED):
         # Whatever the robots decided by then: the run did not stop because they had.
         assert ending_of(stop, all_decided=True, consensus=True) == stop.value
     assert ending_of(None, all_decided=False, consensus=False) is None
@@ -105,6 +106,7 @@ def test_each_ending_has_its_exit_code_and_an_interrupted_run_tells_the_signal()
         "split": 3,
         "stalled": 4,
         "timeout": 5,
+        "world_stopped": 6,
         "interrupted": 130,
         "crashed": 1,
     }
@@ -113,10 +115,19 @@ def test_each_ending_has_its_exit_code_and_an_interrupted_run_tells_the_signal()
     assert Ending.SPLIT.exit_code(signal.SIGTERM) == 3  # a signal only tells an interruption
     assert {0, 3, 4, 5} == RESULT_CODES
     assert [ending for ending in Ending if not ending.is_result] == [
+        Ending.WORLD_STOPPED,
         Ending.INTERRUPTED,
         Ending.CRASHED,
     ]
-    assert ENDINGS == ("consensus", "split", "stalled", "timeout", "interrupted", "crashed")
+    assert ENDINGS == (
+        "consensus",
+        "split",
+        "stalled",
+        "timeout",
+        "world_stopped",
+        "interrupted",
+        "crashed",
+    )
     assert Ending.named("split") is Ending.SPLIT
     assert Ending.named("aborted") is None and Ending.named(None) is None
 
@@ -130,7 +141,7 @@ def test_the_stop_signals_have_their_posix_numbers() -> None:
 def test_the_help_has_one_row_per_exit_code_in_order() -> None:
     rows = [line.split() for line in exit_codes_help().splitlines() if line.startswith("  ")]
     codes = [int(row[0]) for row in rows if row[0].isdigit()]
-    assert codes == sorted(codes) == [0, 1, 2, 3, 4, 5, 130]
+    assert codes == sorted(codes) == [0, 1, 2, 3, 4, 5, 6, 130]
     named = {row[1] for row in rows if row[0].isdigit()}
     assert named == {*ENDINGS, "-"}
 

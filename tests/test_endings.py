@@ -8,6 +8,7 @@ are forked, the fork server and multiprocessing's resource tracker.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -208,6 +209,90 @@ def test_a_run_that_stalls_ends_stalled_and_the_report_says_so(tmp_path: Path) -
     assert group["endings"] == {"stalled": 1} and group["aggregated_runs"] == 0
 
 
+def test_a_swarm_that_can_never_pool_ends_stalled_within_its_window() -> None:
+    """Issue 24's run: the beacon is silent to the time limit, so no robot ever pools.
+    The robots reach their sites, look at them and come home, where they jostle at the
+    nest centre, moving but completing nothing: the run ends stalled one stall window
+    after the last step any robot completed (it used to run to --wall-timeout), the same
+    as in one process, and says per robot the phase it is stuck in and since when."""
+    from deploy.inmemory import run_in_memory
+    from nest_beacon.core.beacon import BeaconConfig
+    from robot_agent.core.controller import ControllerConfig
+    from world_server.core.world import WorldConfig
+
+    run_id = unique_run_id("never-pools")
+    options = ["--robots", "6", "--sites", "6", "--seed", "1", "--timeout", "100000"]
+    code, summary, stderr = run_swarm(
+        [*options, "--beacon-outage", "0:100000", "--wall-timeout", "100", "--no-record"],
+        run_id,
+    )
+    assert code == 4, stderr
+    assert summary["ended"] == "stalled" and not summary["timed_out"]
+    window = summary["config"]["stall_window"]
+    assert window < 300.0  # the outage, lasting to the time limit, is not waited for
+    stuck = summary["stuck"]
+    assert [robot["id"] for robot in stuck] == list(range(6))
+    assert {robot["phase"] for robot in stuck} <= {"to_nest", "waiting"}
+    assert all(robot["trips"] == 0 for robot in stuck)
+    # Each is stuck in the phase it entered with its last step, or later (deaf at the nest).
+    assert all(robot["last_progress_s"] <= robot["phase_since_s"] for robot in stuck)
+    last = max(robot["last_progress_s"] for robot in stuck)
+    assert last + window <= summary["sim_time_s"] < last + window + 30.0
+    assert processes_of(run_id) == []
+    alone = run_in_memory(
+        WorldConfig(run="memory", seed=1, num_robots=6, num_sites=6),
+        ControllerConfig(),
+        BeaconConfig(outages=((0.0, 100000.0),)),
+        timeout=100000.0,
+    )
+    assert alone["ended"] == "stalled"
+    assert [robot["last_progress_s"] for robot in alone["stuck"]] == [
+        robot["last_progress_s"] for robot in stuck
+    ]
+
+
+def test_a_world_that_stops_ticking_ends_the_run_as_world_stopped() -> None:
+    """The world server frozen (SIGSTOP) for good: the sim clock stands still, so neither
+    the watchdog nor --timeout can end the run; the world-stop window does."""
+    from swarm_helpers import wait_for_processes
+
+    run_id = unique_run_id("world-stops")
+    process = subprocess.Popen(
+        swarm_command(
+            "run",
+            *("--run-id", run_id, "--json", "--quiet", "--verbose", "--no-record"),
+            *ENDLESS,
+            *("--world-stop-window", "3"),
+        ),
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    world: list[int] = []
+    try:
+        assert process.stderr is not None
+        for line in process.stderr:  # the world's log: tick 0 opens now
+            if b"starting with 4 robot(s)" in line:
+                break
+        time.sleep(1.0)
+        world = wait_for_processes(run_id, "world_server.server", 1, 10)
+        os.kill(world[0], signal.SIGSTOP)
+        stdout, _ = process.communicate(timeout=60)
+    finally:
+        for pid in world:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGCONT)
+        if process.poll() is None:
+            process.kill()
+        kill_leftovers(run_id)
+    summary = json.loads(stdout)
+    assert process.returncode == 6
+    assert summary["ended"] == "world_stopped" and not summary["timed_out"]
+    assert summary["config"]["world_stop_window"] == 3.0
+    assert len(summary["stuck"]) == 4
+    assert processes_of(run_id) == []
+
+
 @pytest.mark.parametrize(
     ("limit", "kind"),
     [(["--wall-timeout", "3"], "wall"), (["--timeout", "20"], "sim")],  # last wins
@@ -275,5 +360,6 @@ def test_the_help_documents_each_endings_exit_code() -> None:
     text = done.stdout.decode()
     for line in ("0    consensus", "1    crashed", "3    split", "4    stalled", "5    timeout"):
         assert line in text
+    assert "6    world_stopped" in text and "--world-stop-window" in text
     assert "130  interrupted" in text and "143 by SIGTERM" in text and "129 by SIGHUP" in text
     assert "--wall-timeout" in text and "--stall-window" in text

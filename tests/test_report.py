@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import json
 import subprocess
 import time
@@ -365,3 +366,38 @@ def test_messages_missing_from_a_recording_are_counted_and_warned_of(tmp_path: P
         f"{gappy}: 200 of the messages its publishers sent are not in it (a recorder that "
         "fell behind drops what it cannot hold); what is drawn from them has gaps"
     ]
+
+
+# --- bounded memory (issue 24) ----------------------------------------------------------
+
+
+def test_a_trail_keeps_at_most_its_limit_of_evenly_spaced_points_and_the_last() -> None:
+    trail = report.Trail(limit=8)
+    for index in range(1000):
+        trail.add(float(index), -float(index))
+    xs, ys = trail.points()
+    assert len(trail.xs) <= 8 and trail.seen == 1000
+    assert xs[0] == 0.0 and xs[-1] == 999.0 and ys[-1] == -999.0  # start and end kept
+    steps = {b - a for a, b in itertools.pairwise(xs[:-1])}
+    assert steps == {float(trail.stride)}  # evenly spaced, in order
+    short = report.Trail(limit=8)
+    for index in range(5):
+        short.add(float(index), 0.0)
+    assert short.points()[0] == [0.0, 1.0, 2.0, 3.0, 4.0]  # short trails whole
+
+
+def test_a_recording_is_read_keeping_one_robots_statuses_and_a_trace_each(
+    tmp_path: Path,
+) -> None:
+    """Every robot's summary record and progress are kept as they are read; all the
+    statuses only of the robot the opinion figure shows (the lowest id, or --robot)."""
+    make_recording(tmp_path / "a.mcap", "made-a")
+    recording = report.read_recording(tmp_path / "a.mcap")
+    assert sorted(recording.robots_heard) == list(range(ROBOTS))
+    assert recording.opinion_robot == 0
+    assert [status.trips for status in recording.opinions] == list(range(len(POOLS[0]) + 1))
+    for robot, trace in recording.robots_heard.items():
+        assert trace.record.pool_sizes == POOLS[robot]
+        assert trace.trail.seen == 400 and trace.trail.last == (0.399, 0.1 * robot)
+    chosen = report.read_recording(tmp_path / "a.mcap", opinion_robot=1)
+    assert chosen.opinion_robot == 1 and len(chosen.opinions) == len(POOLS[1]) + 1

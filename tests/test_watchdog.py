@@ -47,40 +47,61 @@ def test_robots_that_never_progress_stall_exactly_at_the_window() -> None:
     t = 0.0
     while t < WINDOW - 1.0:
         t += 1.0
-        # Wriggling on the spot, up to a little over a body length from where they stood
-        # (as a robot walled in by parked ones does): no progress.
-        watchdog.poses(t, [(0, 1.2 * BODY * (t % 2), 0.0), (1, 1.0, 0.02 * (t % 3))])
+        # Roaming far and wide, jostling at the nest: motion is not progress.
+        watchdog.poses(t, [(0, 10 * BODY * (t % 2), 0.0), (1, 1.0, 3 * BODY * (t % 3))])
         assert not watchdog.stalled(t)
     assert not watchdog.stalled(WINDOW - 0.01)
     assert watchdog.stalled(WINDOW)
 
 
-def test_robots_slowly_making_progress_never_stall() -> None:
-    """Each robot moves a little over two body lengths, or changes phase, just inside the
-    window: slow, but progress, for ten windows of sim time."""
-    watchdog = Watchdog(range(3), WINDOW, BODY)
+def test_robots_slowly_completing_steps_never_stall() -> None:
+    """Each robot completes a step of its task just inside the window: slow, but
+    progress, for ten windows of sim time."""
+    watchdog = Watchdog(range(2), WINDOW, BODY)
     step = 0.9 * WINDOW
     t = 0.0
-    phases: list[protocol.Phase] = ["to_site", "sensing", "to_nest", "waiting"]
+    # A trip's steps, each completed: reach a site, look at it, hear the beacon at the nest.
+    phases: list[protocol.Phase] = ["to_site", "sensing", "to_nest", "at_nest"]
+    moves = 0
     while t < 10 * WINDOW:
         t += step
-        moves = int(t / step)
-        watchdog.poses(t, [(0, 2.1 * BODY * moves, 0.0)])  # a crawl along x
-        watchdog.status(_status(1, t, phases[moves % len(phases)]))  # a leg done, slowly
-        watchdog.status(_status(2, t, "to_site", trips=moves))  # a pooling, slowly
+        moves += 1
+        watchdog.status(_status(0, t, phases[moves % len(phases)], trips=moves // 4))
+        watchdog.status(_status(1, t, "to_site", trips=moves))  # a pooling, slowly
         for now in (t, t + step - 0.01):
             assert not watchdog.stalled(now), now
-    # Only robot 2 keeps going from here; the others fall silent, and it still holds.
+    # Only robot 1 keeps going from here; robot 0 falls silent, and the run still goes on.
     quiet_from = t
     for _ in range(5):
         t += step
-        watchdog.status(_status(2, t, "to_site", trips=int(t)))
+        moves += 1
+        watchdog.status(_status(1, t, "to_site", trips=moves))
         assert not watchdog.stalled(t)
     assert watchdog.last_progress() == t
-    assert [entry["last_progress_s"] for entry in watchdog.stuck()[:2]] == [
-        pytest.approx(quiet_from),
-        pytest.approx(quiet_from),
-    ]
+    assert watchdog.stuck()[0]["last_progress_s"] == pytest.approx(quiet_from)
+
+
+@pytest.mark.parametrize(
+    ("before", "after", "progress"),
+    [
+        ("to_site", "sensing", True),  # reached a site
+        ("sensing", "to_site", True),  # looked at the first site of the pair
+        ("sensing", "to_nest", True),  # looked at the second (or gave it up)
+        ("to_nest", "at_nest", True),  # at the nest, heard the beacon
+        ("waiting", "at_nest", True),  # heard it at last
+        ("to_site", "to_nest", False),  # gave up a leg
+        ("to_nest", "waiting", False),  # at the nest centre, and the beacon is silent
+    ],
+)
+def test_which_phase_changes_complete_a_step(
+    before: protocol.Phase, after: protocol.Phase, progress: bool
+) -> None:
+    watchdog = Watchdog([0], WINDOW, BODY)
+    watchdog.status(_status(0, 5.0, before))
+    watchdog.status(_status(0, 50.0, after))
+    assert watchdog.last_progress() == (50.0 if progress else 0.0)
+    assert watchdog.stuck()[0]["phase"] == after
+    assert watchdog.stuck()[0]["phase_since_s"] == 50.0
 
 
 def test_the_same_status_again_is_no_progress() -> None:
@@ -94,8 +115,8 @@ def test_the_same_status_again_is_no_progress() -> None:
 def test_decided_and_departed_robots_hold_nothing_up() -> None:
     watchdog = Watchdog(range(3), WINDOW, BODY)
     watchdog.status(_status(0, 10.0, "to_decision", trips=2, decided=1))
-    watchdog.status(_status(1, 20.0, "to_nest"))
-    watchdog.status(_status(2, 30.0, "to_site"))
+    watchdog.status(_status(1, 20.0, "to_site", trips=1))
+    watchdog.status(_status(2, 30.0, "to_site", trips=1))
     watchdog.retired(2)  # killed or crashed, last seen at 30 s
     assert watchdog.undecided() == [1]
     assert not watchdog.stalled(119.9) and watchdog.stalled(120.0)
@@ -103,6 +124,29 @@ def test_decided_and_departed_robots_hold_nothing_up() -> None:
     assert watchdog.undecided() == [] and watchdog.last_progress() is None
     assert not watchdog.stalled(10_000.0)  # nobody left to wait for: not a stall
     assert watchdog.stuck() == []
+
+
+def test_a_decided_robot_progresses_as_it_nears_its_slot_until_parked() -> None:
+    """With the slots known, a robot still on its way to its slot keeps the run going
+    while it gets closer; pushed to and fro, or parked, it does not."""
+    slots = {(0, 1): (2.0, 0.0)}
+    watchdog = Watchdog(range(2), WINDOW, BODY, slot_of=lambda robot, site: slots[robot, site])
+    watchdog.status(_status(1, 1.0, "to_nest"))
+    watchdog.status(_status(1, 5.0, "at_nest"))  # undecided, and its last step
+    watchdog.status(_status(0, 10.0, "to_decision", trips=2, decided=1))
+    assert watchdog.last_progress() == 10.0
+    for t, x in [(20.0, 0.0), (60.0, 0.5), (100.0, 1.0)]:
+        watchdog.poses(t, [(0, x, 0.0)])
+    assert watchdog.last_progress() == 100.0
+    # Backing off and coming back no closer: no progress.
+    for t, x in [(120.0, 0.5), (150.0, 1.0 - 0.2 * BODY), (190.0, 0.3)]:
+        watchdog.poses(t, [(0, x, 0.0)])
+    assert watchdog.last_progress() == 100.0 and watchdog.stalled(200.0)
+    watchdog.poses(210.0, [(0, 1.9, 0.0)])
+    assert watchdog.last_progress() == 210.0
+    # Parked: done, it holds the run up no more; robot 1 made no progress since 5 s.
+    watchdog.status(_status(0, 220.0, "stopped", trips=2, decided=1))
+    assert watchdog.last_progress() == 5.0 and watchdog.stalled(220.0)
 
 
 def test_a_restarted_robot_starts_undecided_from_its_restart() -> None:
@@ -114,13 +158,24 @@ def test_a_restarted_robot_starts_undecided_from_its_restart() -> None:
     assert not watchdog.stalled(499.0) and watchdog.stalled(500.0)
 
 
-def test_each_stuck_robot_says_where_and_since_when() -> None:
+def test_each_stuck_robot_says_where_its_phase_and_since_when() -> None:
     watchdog = Watchdog(range(2), WINDOW, BODY)
-    watchdog.status(_status(0, 3.0, "waiting", trips=1))
+    watchdog.status(_status(0, 1.0, "to_nest", trips=1))
+    watchdog.status(_status(0, 3.0, "at_nest", trips=1))
+    watchdog.status(_status(0, 5.0, "to_site", trips=2))
+    watchdog.status(_status(0, 7.0, "to_nest", trips=2))  # a leg given up
     watchdog.status(_status(1, 4.0, "to_decision", trips=2, decided=0))
     watchdog.poses(10.0, [(0, 0.0123, -0.0456), (1, 1.0, 1.0)])
     assert watchdog.stuck() == [
-        {"id": 0, "phase": "waiting", "x": 0.012, "y": -0.046, "trips": 1, "last_progress_s": 3.0}
+        {
+            "id": 0,
+            "phase": "to_nest",
+            "phase_since_s": 7.0,
+            "x": 0.012,
+            "y": -0.046,
+            "trips": 2,
+            "last_progress_s": 5.0,
+        }
     ]
 
 
@@ -130,6 +185,11 @@ def test_the_default_window_grows_with_the_arena_and_the_beacons_outages() -> No
     assert default_stall_window(3.3, 0.13, 120.0) > small
     assert default_stall_window(0.75, 0.13, 120.0, [(0.0, 60.0), (100.0, 400.0)]) == (
         pytest.approx(small + 360.0)
+    )
+    # An outage lasting to the time limit is not waited for: no pooling can come after it.
+    outages = [(0.0, 60.0), (100.0, 1000.0)]
+    assert default_stall_window(0.75, 0.13, 120.0, outages, time_limit=1000.0) == (
+        pytest.approx(small + 60.0)
     )
     with pytest.raises(ValueError):
         Watchdog([0], 0.0, BODY)
@@ -141,7 +201,15 @@ def test_endings_from_why_the_run_stopped_and_what_the_robots_decided() -> None:
     assert ending_of(Stop.STALLED, all_decided=False, consensus=False) == "stalled"
     assert ending_of(None, all_decided=True, consensus=True) == "consensus"  # from a recording
     assert ending_of(None, all_decided=False, consensus=False) is None  # not known
-    assert set(ENDINGS) == {"consensus", "split", "stalled", "timeout", "interrupted", "crashed"}
+    assert set(ENDINGS) == {
+        "consensus",
+        "split",
+        "stalled",
+        "timeout",
+        "world_stopped",
+        "interrupted",
+        "crashed",
+    }
 
 
 # --- the in-process engine ------------------------------------------------------------

@@ -47,6 +47,7 @@ class Ending(StrEnum):
     SPLIT = "split"
     STALLED = "stalled"
     TIMEOUT = "timeout"
+    WORLD_STOPPED = "world_stopped"
     INTERRUPTED = "interrupted"
     CRASHED = "crashed"
 
@@ -70,7 +71,7 @@ class Ending(StrEnum):
     def is_result(self) -> bool:
         """Whether the run ran its course (to be counted and reported), rather than
         being cut short from outside or broken."""
-        return self not in (Ending.INTERRUPTED, Ending.CRASHED)
+        return self not in (Ending.WORLD_STOPPED, Ending.INTERRUPTED, Ending.CRASHED)
 
     @classmethod
     def named(cls, text: object) -> Ending | None:
@@ -83,11 +84,20 @@ class Ending(StrEnum):
 _CODES_AND_MEANINGS: Mapping[Ending, tuple[int, str]] = {
     Ending.CONSENSUS: (0, "every running robot decided, all on the same site"),
     Ending.SPLIT: (3, "every running robot decided, not all on the same site"),
-    Ending.STALLED: (4, "no undecided robot made progress for --stall-window sim seconds"),
+    Ending.STALLED: (
+        4,
+        "no robot at work completed a step of its task for --stall-window\n"
+        "sim seconds, with some robot undecided",
+    ),
     Ending.TIMEOUT: (
         5,
         "--timeout sim seconds or --wall-timeout wall seconds passed\n"
         '(the summary\'s "timeout_kind": sim or wall)',
+    ),
+    Ending.WORLD_STOPPED: (
+        6,
+        "the world's clock did not advance for --world-stop-window wall\n"
+        "seconds (the world server hung, or the launcher lost it)",
     ),
     Ending.INTERRUPTED: (
         SIGNAL_EXIT_BASE + StopSignal.SIGINT,
@@ -107,6 +117,7 @@ class Stop(StrEnum):
     DECIDED = "decided"
     STALLED = "stalled"
     TIMEOUT = "timeout"
+    WORLD_STOPPED = "world_stopped"
     INTERRUPTED = "interrupted"
     CRASHED = "crashed"
 
@@ -139,6 +150,7 @@ class Look:
     wall_limit: float | None = None  # --wall-timeout; None: no limit
     crashed: bool = False  # a process of the run other than a robot died on its own
     signalled: bool = False  # a stop signal came
+    world_stopped: bool = False  # the world's clock did not advance for its wall window
 
 
 def stop_reason(look: Look) -> Halt | None:
@@ -153,11 +165,13 @@ def stop_reason(look: Look) -> Halt | None:
     3. the sim time limit;
     4. the stall watchdog;
     5. a stop signal;
-    6. the wall time limit.
+    6. the world stopped ticking (no new sim time for its wall window);
+    7. the wall time limit.
 
     What the run did in sim time (2 to 4, the same at every look of a lockstep run) comes
-    before what happened outside it on the wall clock (5 and 6), whose coinciding with a
-    look is chance: a run that decided as the signal came ended in its decision.
+    before what happened outside it on the wall clock (5 to 7), whose coinciding with a
+    look is chance: a run that decided as the signal came ended in its decision. A stop
+    signal is someone's intent, and comes before what the wall clock alone says.
     """
     if look.crashed:
         return Halt(Stop.CRASHED)
@@ -171,6 +185,8 @@ def stop_reason(look: Look) -> Halt | None:
         return Halt(Stop.STALLED)
     if look.signalled:
         return Halt(Stop.INTERRUPTED)
+    if look.world_stopped:
+        return Halt(Stop.WORLD_STOPPED)
     if look.wall_limit is not None and look.wall_time >= look.wall_limit:
         return Halt(Stop.TIMEOUT, TimeLimit.WALL)
     return None

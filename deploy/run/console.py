@@ -50,12 +50,18 @@ def describe_ending(summary: dict[str, Any]) -> str:
     if ended is Ending.STALLED:
         window = summary["config"].get("stall_window")
         quiet = f" for {window:g} s of sim time" if window else ""
-        return f"ended stalled {at}: no undecided robot made progress{quiet}{undecided}"
+        return (
+            f"ended stalled {at}: no robot at work completed a step of its task{quiet}{undecided}"
+        )
     if ended is Ending.TIMEOUT:
         limit = "wall time limit (--wall-timeout)"
         if summary.get("timeout_kind") != TimeLimit.WALL:
             limit = "sim time limit (--timeout)"
         return f"ended at the {limit} {at}{undecided}"
+    if ended is Ending.WORLD_STOPPED:
+        window = summary["config"].get("world_stop_window")
+        quiet = f" for {window:g} wall seconds" if window else ""
+        return f"ended {at}: the world's clock did not advance{quiet}{undecided}"
     if ended is Ending.INTERRUPTED:
         return f"interrupted by {summary.get('signal', 'a signal')} {at}{undecided}"
     return f"ended crashed {at}: a process of the run died{undecided}"
@@ -111,17 +117,21 @@ STUCK_ROWS_SHOWN = 20
 
 
 def print_stuck(stuck: list[dict[str, Any]], console: Console) -> None:
-    """The undecided robots: where each is, in what phase, since when without progress."""
+    """The undecided robots: where each is, the phase it is in and since when, and when it
+    last completed a step of its task."""
     if not stuck:
         return
     table = Table(title=f"undecided robots ({len(stuck)})")
-    for column in ("robot", "phase", "position (m)", "trips", "last progress (sim s)"):
+    columns = ("robot", "phase", "in it since (sim s)", "position (m)", "trips")
+    for column in (*columns, "last progress (sim s)"):
         table.add_column(column, justify="right")
     for robot in stuck[:STUCK_ROWS_SHOWN]:
         position = "-" if robot["x"] is None else f"({robot['x']:.2f}, {robot['y']:.2f})"
+        since = robot.get("phase_since_s")  # absent from summaries before issue 24
         table.add_row(
             str(robot["id"]),
             robot["phase"] or "-",
+            "-" if since is None else f"{since:.1f}",
             position,
             str(robot["trips"]),
             f"{robot['last_progress_s']:.1f}",

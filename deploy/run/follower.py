@@ -23,8 +23,10 @@ from deploy.run_plan import RunPlan
 from deploy.summary import RobotRecord
 from deploy.watchdog import Watchdog
 from plumbing.inbox import BoundedInbox, message_bytes
+from robot_agent.core.parking import ParkingSlots
 from wire import auth, names, protocol
 from world_server.core.body import EPUCK
+from world_server.core.layout import make_layout
 
 log = logging.getLogger("swarm.run")
 
@@ -82,11 +84,23 @@ class Follower:
         self.clock = clock  # wall seconds: when the run started ticking
         self.byzantine = frozenset(plan.byzantine_robots)
         self.records = {robot: RobotRecord(robot) for robot in range(plan.robots)}
+        layout = make_layout(plan.sites, plan.robots, plan.seed)
+        slots = ParkingSlots(
+            [(site.x, site.y) for site in sorted(layout.sites, key=lambda site: site.id)],
+            arena_radius=layout.arena_radius,
+            nest_radius=layout.nest_radius,
+            robot_radius=EPUCK.radius,
+            config=plan.switches.controller,
+        )
         self.watchdog = Watchdog(
-            range(plan.robots), plan.stall_window, body_length=2 * EPUCK.radius
+            range(plan.robots),
+            plan.stall_window,
+            body_length=2 * EPUCK.radius,
+            slot_of=slots.slot,
         )
         self.sim_time = 0.0
         self.started_at: float | None = None  # the wall time of the first clock
+        self.ticked_at: float | None = None  # the wall time the sim clock last advanced
         self.last_state: protocol.WorldState | None = None
         self.beacon_rejected: dict[str, int] = {}  # the beacons' own counts, from their acks
         self.rejected = 0  # samples the launcher did not believe (or had no room for)
@@ -135,8 +149,11 @@ class Follower:
         elif heard.kind is Kind.CLOCK:
             auth.unseal(keyring, names.WORLD, key, payload, attachment)
             clock = protocol.decode(payload, protocol.Clock)
+            now = self.clock()
             if self.started_at is None:
-                self.started_at = self.clock()
+                self.started_at = now
+            if self.ticked_at is None or clock.t > self.sim_time:
+                self.ticked_at = now
             self.sim_time = clock.t
         else:
             auth.unseal(keyring, names.WORLD, key, payload, attachment)
@@ -167,6 +184,10 @@ class Follower:
     def started(self) -> bool:
         """The world has ticked: the robots have joined."""
         return self.started_at is not None
+
+    def world_stopped(self, window: float) -> bool:
+        """The world ticked, then its clock did not advance for ``window`` wall seconds."""
+        return self.ticked_at is not None and self.clock() - self.ticked_at >= window
 
     def decided(self) -> int:
         return sum(1 for record in self.records.values() if record.decided_site is not None)

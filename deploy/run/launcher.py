@@ -147,6 +147,7 @@ class Swarm:
                 wall_limit=self.plan.wall_timeout,
                 crashed=self.crash is not None,
                 signalled=signalled,
+                world_stopped=follower.world_stopped(self.plan.world_stop_window),
             )
         )
 

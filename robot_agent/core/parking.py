@@ -48,7 +48,7 @@ class Parking:
         self._robot_id = robot_id
         self._site_angles = list(site_angles)
         # Slots stop short of the nest, and backing off never goes further in than this.
-        self._inner_radius = world.nest.radius + 3 * world.robot_radius
+        self._inner_radius = inner_radius(world.nest.radius, world.robot_radius)
         self.slot: tuple[float, float] | None = None
         self.retries = 0  # how often it backed off and tried again (a diagnostic)
         # While backing off from a parking attempt: where to, and until when.
@@ -117,6 +117,56 @@ class Parking:
         return STOP
 
 
+def inner_radius(nest_radius: float, robot_radius: float) -> float:
+    """How far in parking slots go: short of the nest by a little more than a body."""
+    return nest_radius + 3 * robot_radius
+
+
+class ParkingSlots:
+    """Every robot's slot for every site, as ``Parking.begin`` chooses it, for whoever
+    follows a run from outside (the stall watchdog: a decided robot progresses when it
+    gets closer to its slot). The rings of each site are worked out once."""
+
+    def __init__(
+        self,
+        site_xy: Sequence[tuple[float, float]],
+        *,
+        arena_radius: float,
+        nest_radius: float,
+        robot_radius: float,
+        config: ControllerConfig,
+    ) -> None:
+        self._site_angles = [math.atan2(y, x) for x, y in site_xy]
+        self._geometry = {
+            "arena_radius": arena_radius,
+            "inner_radius": inner_radius(nest_radius, robot_radius),
+            "robot_radius": robot_radius,
+            "clearance": config.park_clearance,
+            "spacing": config.park_spacing,
+            "corridor": config.park_corridor,
+            "lane": config.park_lane,
+        }
+        self._rings: dict[int, list[tuple[float, list[float]]]] = {}
+
+    @classmethod
+    def of_world(cls, world: protocol.WorldInfo, config: ControllerConfig) -> ParkingSlots:
+        return cls(
+            [(site.x, site.y) for site in sorted(world.sites, key=lambda site: site.id)],
+            arena_radius=world.arena_radius,
+            nest_radius=world.nest.radius,
+            robot_radius=world.robot_radius,
+            config=config,
+        )
+
+    def slot(self, robot_id: int, site: int) -> tuple[float, float]:
+        """Where robot ``robot_id`` parks once it decided for ``site``."""
+        rings = self._rings.get(site)
+        if rings is None:
+            rings = parking_rings(self._site_angles, site, **self._geometry)
+            self._rings[site] = rings
+        return _slot_in_rings(rings, self._site_angles[site], robot_id)
+
+
 def parking_slot(
     site_angles: Sequence[float],
     site: int,
@@ -143,6 +193,13 @@ def parking_slot(
         corridor=corridor,
         lane=lane,
     )
+    return _slot_in_rings(rings, site_angles[site], robot_id)
+
+
+def _slot_in_rings(
+    rings: Sequence[tuple[float, Sequence[float]]], home: float, robot_id: int
+) -> tuple[float, float]:
+    """The ``robot_id``-th slot of ``rings`` (``home``: the site's angle)."""
     # More robots than slots down to the nest: the count starts again at the wall.
     remaining = robot_id % max(1, sum(len(slots) for _, slots in rings))
     for radius, slots in rings:
@@ -150,7 +207,7 @@ def parking_slot(
             return radius * math.cos(slots[remaining]), radius * math.sin(slots[remaining])
         remaining -= len(slots)
     # No ring has a single slot (an arena too small to park in): the wall by the site.
-    radius, home = rings[0][0], site_angles[site]
+    radius = rings[0][0]
     return radius * math.cos(home), radius * math.sin(home)
 
 
@@ -202,4 +259,4 @@ def parking_rings(
     return rings
 
 
-__all__ = ["Parking", "parking_rings", "parking_slot"]
+__all__ = ["Parking", "ParkingSlots", "inner_radius", "parking_rings", "parking_slot"]
