@@ -121,18 +121,19 @@ def run_in_memory(
     honest = [robot for robot_id, robot in robots.items() if robot_id not in behaviours]
     deliveries: dict[str, list[tuple[str, bytes]]] = {}
     frames: dict[int, bytes] = {}
+    robot_ids = list(robots)
+    robot_names = {robot_id: names.robot_name(robot_id) for robot_id in robot_ids}
     while True:
         acts: dict[int, protocol.Act] = {}
         transmissions: list[Transmission] = []
-        senses = []  # the world's readings of the tick, taken before any robot answers
-        for robot_id in robots:
-            rx = len(deliveries.get(names.robot_name(robot_id), []))
-            senses.append((robot_id, world.sense(robot_id, rx, robot_id in frames)))
+        # The world's readings of the tick, taken before any robot answers, all at once.
+        rx = {robot_id: len(deliveries.get(name, [])) for robot_id, name in robot_names.items()}
+        senses = list(zip(robot_ids, world.senses(robot_ids, rx, frames).messages(), strict=True))
         if wire is not None:
             wire.tick_opened(world, senses, frames)
         for robot_id, sense in senses:
             robot = robots[robot_id]
-            name = names.robot_name(robot_id)
+            name = robot_names[robot_id]
             radio = deliveries.get(name, [])
             answer = robot.ports.answer(robot.controller, sense, radio, frames.get(robot_id))
             acts[robot_id] = answer.act
