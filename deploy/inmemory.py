@@ -123,6 +123,7 @@ def run_in_memory(
     frames: dict[int, bytes] = {}
     robot_ids = list(robots)
     robot_names = {robot_id: names.robot_name(robot_id) for robot_id in robot_ids}
+    beacon_tick = 0  # the next tick the beacon answers (Ack.next_tick)
     while True:
         acts: dict[int, protocol.Act] = {}
         transmissions: list[Transmission] = []
@@ -147,13 +148,15 @@ def run_in_memory(
                 watchdog.status(status)
             if wire is not None:
                 wire.robot_answered(robot_id, answer, status)
-        beacon_messages = beacon.on_tick(world.t)
-        for message in beacon_messages:
-            transmissions.append(
-                Transmission(beacon_config.name, message.seq, protocol.encode(message))
-            )
-        if wire is not None:
-            wire.beacon_answered(beacon_config.name, world.tick, beacon_messages)
+        if world.tick >= beacon_tick:  # the ticks the beacon answers, as over Zenoh
+            beacon_messages = beacon.on_tick(world.t)
+            for message in beacon_messages:
+                transmissions.append(
+                    Transmission(beacon_config.name, message.seq, protocol.encode(message))
+                )
+            beacon_tick = beacon.next_tick(world.tick, world_config.dt)
+            if wire is not None:
+                wire.beacon_answered(beacon_config.name, world.tick, beacon_messages, beacon_tick)
         if on_tick is not None:
             on_tick(world)
         if world.tick % hooks.poses_every == 0:

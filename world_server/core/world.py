@@ -200,6 +200,9 @@ class World:
     def live_robots(self) -> list[int]:
         return sorted(self._live_robots)
 
+    def is_live(self, robot_id: int) -> bool:
+        return robot_id in self._live_robots
+
     def beacons(self) -> list[str]:
         return sorted(self._beacons)
 
