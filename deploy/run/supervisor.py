@@ -153,7 +153,8 @@ class Supervisor:
             fetch_world_info(self.session, self.keys, START_WAIT, self.keyring, names.LAUNCHER)
         except TimeoutError as error:
             raise StartError(str(error), world) from None
-        self._declared = subscribe(self.session, self.keys, self.inbox)
+        # The clock only when a fault falls due at a sim time; world/state says the rest.
+        self._declared = subscribe(self.session, self.keys, self.inbox, bool(self.plan.faults))
 
     def _start_recorder(self, stopping: Stopping) -> None:
         plan, network = self.plan, self.network
