@@ -11,10 +11,11 @@ measured the same way, for comparison:
     .venv/bin/python benchmarks/process_cpu.py --robots 100 --timeout 100
 
 Every option is passed to ``swarm run`` (``--no-record`` is added unless ``--record`` is
-given), except ``--doc PATH``: write the table into PATH too, between the generated-block
-markers that name this command (``deploy/section5.replace_block``), as docs/performance.md
-holds it. A process's last 50 ms before it exits
-can be missed; they are spent stopping.
+given; the in-process runs leave out the options of the processes' layout, such as
+``--robots-per-process``), except ``--doc PATH``: write the table into PATH too, between
+the generated-block markers that name this command (``deploy/section5.replace_block``), as
+docs/performance.md holds it. A process's last 50 ms before it exits can be missed; they
+are spent stopping.
 """
 
 from __future__ import annotations
@@ -107,6 +108,24 @@ def run_cpu(options: list[str]) -> tuple[dict[str, float], dict[str, object]]:
     return by_role, json.loads(output)
 
 
+# Options of the processes' layout: the in-process engine has no processes and refuses them.
+ZENOH_ONLY = {"--robots-per-process": 1, "--no-batch": 0, "--spawn": 1}
+
+
+def in_process_options(options: list[str]) -> list[str]:
+    """``options`` without those of the processes' layout (ZENOH_ONLY)."""
+    kept: list[str] = []
+    skip = 0
+    for option in options:
+        if skip:
+            skip -= 1
+        elif option in ZENOH_ONLY:
+            skip = ZENOH_ONLY[option]
+        else:
+            kept.append(option)
+    return kept
+
+
 def write_doc(path: Path, options: list[str], lines: list[str]) -> None:
     """Replace this command's generated block in ``path`` with ``lines``."""
     from deploy.section5 import replace_block
@@ -143,8 +162,9 @@ def main() -> None:
     dt = float(summary["config"]["dt"])  # type: ignore[index]
     first_tick = ["--timeout", str(dt)]
     start_stop, _ = run_cpu([*options, *first_tick])
-    in_process, alone = run_cpu([*options, "--engine", "inprocess"])
-    in_process_start_stop, _ = run_cpu([*options, "--engine", "inprocess", *first_tick])
+    alone_options = [*in_process_options(options), "--engine", "inprocess"]
+    in_process, alone = run_cpu(alone_options)
+    in_process_start_stop, _ = run_cpu([*alone_options, *first_tick])
     sim = float(summary["sim_time_s"])  # type: ignore[arg-type]
     ticks = round(sim / dt)
     lines: list[str] = []

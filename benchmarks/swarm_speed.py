@@ -59,6 +59,7 @@ sys.path.insert(0, str(REPO))
 
 import zenoh  # noqa: E402
 
+from benchmarks.process_cpu import in_process_options  # noqa: E402
 from deploy.processes import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
 from wire.endings import RESULT_CODES  # noqa: E402
@@ -307,10 +308,9 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
         # the load changes between pairs more than within one.
         fast_runs, slow_runs, ratios, same, stalls = [], [], [], True, 0
         pairs = []  # (in process, over Zenoh) summaries
+        alone = ["--engine", "inprocess", *in_process_options(options)]
         for _ in range(args.pairs):
-            in_process = swarm_summary(
-                robots, seed, args.sites, ["--engine", "inprocess", *options]
-            )
+            in_process = swarm_summary(robots, seed, args.sites, alone)
             distributed = swarm_summary(robots, seed, args.sites, options)
             if limit:
                 cut = min(in_process["sim_time_s"], distributed["sim_time_s"])
@@ -330,8 +330,11 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
         # that of the same run stopped after its first tick (starting and stopping).
         first_tick = ["--timeout", str(pairs[0][0]["config"]["dt"]), *extra]
         start_stop = [
-            swarm_summary(robots, seed, args.sites, ["--engine", engine, *first_tick])["cpu_s"]
-            for engine in ("inprocess", "zenoh")
+            swarm_summary(robots, seed, args.sites, options)["cpu_s"]
+            for options in (
+                ["--engine", "inprocess", *in_process_options(first_tick)],
+                first_tick,
+            )
         ]
         cpu_ratios = [
             ((distributed["cpu_s"] - start_stop[1]) / distributed["sim_time_s"])

@@ -128,18 +128,20 @@ def run_in_memory(
     honest = [robot for robot_id, robot in robots.items() if robot_id not in behaviours]
     deliveries: dict[str, list[tuple[str, bytes]]] = {}
     frames: dict[int, bytes] = {}
+    robot_ids = list(robots)
+    robot_names = {robot_id: names.robot_name(robot_id) for robot_id in robot_ids}
+    beacon_tick = 0  # the next tick the beacon answers (Ack.next_tick)
     while True:
         acts: dict[int, protocol.Act] = {}
         transmissions: list[Transmission] = []
-        senses = []  # the world's readings of the tick, taken before any robot answers
-        for robot_id in robots:
-            rx = len(deliveries.get(names.robot_name(robot_id), []))
-            senses.append((robot_id, world.sense(robot_id, rx, robot_id in frames)))
+        # The world's readings of the tick, taken before any robot answers, all at once.
+        rx = {robot_id: len(deliveries.get(name, [])) for robot_id, name in robot_names.items()}
+        senses = list(zip(robot_ids, world.senses(robot_ids, rx, frames).messages(), strict=True))
         if wire is not None:
             wire.tick_opened(world, senses, frames)
         for robot_id, sense in senses:
             robot = robots[robot_id]
-            name = names.robot_name(robot_id)
+            name = robot_names[robot_id]
             radio = deliveries.get(name, [])
             answer = robot.ports.answer(robot.controller, sense, radio, frames.get(robot_id))
             acts[robot_id] = answer.act
@@ -153,13 +155,15 @@ def run_in_memory(
                 watchdog.status(status)
             if wire is not None:
                 wire.robot_answered(robot_id, answer, status)
-        beacon_messages = beacon.on_tick(world.t)
-        for message in beacon_messages:
-            transmissions.append(
-                Transmission(beacon_config.name, message.seq, protocol.encode(message))
-            )
-        if wire is not None:
-            wire.beacon_answered(beacon_config.name, world.tick, beacon_messages)
+        if world.tick >= beacon_tick:  # the ticks the beacon answers, as over Zenoh
+            beacon_messages = beacon.on_tick(world.t)
+            for message in beacon_messages:
+                transmissions.append(
+                    Transmission(beacon_config.name, message.seq, protocol.encode(message))
+                )
+            beacon_tick = beacon.next_tick(world.tick, world_config.dt)
+            if wire is not None:
+                wire.beacon_answered(beacon_config.name, world.tick, beacon_messages, beacon_tick)
         if on_tick is not None:
             on_tick(world)
         if world.tick % hooks.poses_every == 0:

@@ -11,6 +11,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from deploy.run_plan import (
+    ONE_PROCESS_PER_ROBOT_UP_TO,
+    ROBOT_PROCESSES_PER_CORE,
+    ROBOTS_PER_PROCESS,
+)
 from deploy.run_switches import add_swarm_switches
 from plumbing import cliargs
 from viewer.options import add_view_options
@@ -76,9 +81,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=cliargs.int_range(1, 1000),
         default=None,
         metavar="K",
-        help="host K robots in each robot process, each robot still with "
-        "its own Zenoh session, keys and RNG (default: chosen from the "
-        "swarm size and the cores)",
+        help="host K robots in each robot process, each robot still with its own Zenoh "
+        f"session, keys and RNG (default: every robot its own process up to "
+        f"{ONE_PROCESS_PER_ROBOT_UP_TO} robots; a larger swarm in {ROBOT_PROCESSES_PER_CORE} "
+        f"processes per core of at least {ROBOTS_PER_PROCESS} robots each, which exchange "
+        "one batch of senses and acts per tick with the world)",
     )
     processes.add_argument(
         "--no-batch",

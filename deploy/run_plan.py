@@ -32,12 +32,16 @@ from world_server.core.layout import make_layout
 from world_server.recorder.options import DEFAULT_NICENESS
 from world_server.recording.description import RunDescription
 
-# Robot processes exchange one batch of senses and acts per tick with the world, so fewer,
-# fuller processes are faster: a process carries at least ROBOTS_PER_PROCESS robots (all of
-# a small swarm), and larger swarms spread over ROBOT_PROCESSES_PER_CORE per core
-# (benchmarks/swarm_speed.py, docs/performance.md).
+# Every robot is its own process up to ONE_PROCESS_PER_ROBOT_UP_TO robots, as a real swarm
+# is (a robot's crash costs that robot alone). A larger swarm is hosted: processes of at
+# least ROBOTS_PER_PROCESS robots each, ROBOT_PROCESSES_PER_CORE per core, which exchange
+# one batch of senses and acts per tick with the world; above the threshold that was
+# faster on a 2-core machine (benchmarks/swarm_speed.py, docs/performance.md).
+ONE_PROCESS_PER_ROBOT_UP_TO = 25
 ROBOTS_PER_PROCESS = 25
 ROBOT_PROCESSES_PER_CORE = 2
+# The recorder runs at nice 10 up to this many robots (recorder_niceness).
+NICE_RECORDER_UP_TO = 25
 
 
 class FaultAction(StrEnum):
@@ -80,6 +84,11 @@ class RunPlan:
     keyed: bool = True  # run keys: every message tagged and checked
     secure: bool = False  # TLS and access control
     trace: Path | None = None  # --trace DIR: the world's and robot hosts' tick timelines
+
+    @property
+    def robot_processes(self) -> int:
+        """How many processes the robots are started in."""
+        return math.ceil(self.robots / self.robots_per_process)
 
     def world_argv(self) -> list[str]:
         """The world server's run and configuration (its network options come later)."""
@@ -264,9 +273,11 @@ def byzantine_plan(
 
 
 def default_robots_per_process(robots: int, cores: int | None = None) -> int:
-    """All of a small swarm in one process; larger ones in ROBOT_PROCESSES_PER_CORE
-    processes per core of at least ROBOTS_PER_PROCESS robots each, which measured fastest
-    on a 2-core machine once senses and acts travel in batches (docs/performance.md)."""
+    """One robot per process up to ONE_PROCESS_PER_ROBOT_UP_TO robots; a larger swarm in
+    ROBOT_PROCESSES_PER_CORE processes per core of at least ROBOTS_PER_PROCESS robots each,
+    which measured faster on a 2-core machine (docs/performance.md)."""
+    if robots <= ONE_PROCESS_PER_ROBOT_UP_TO:
+        return 1
     cores = cores or os.cpu_count() or 1
     spread = math.ceil(robots / (ROBOT_PROCESSES_PER_CORE * cores))
     return max(1, min(robots, max(ROBOTS_PER_PROCESS, spread)))
@@ -278,7 +289,7 @@ def recorder_niceness(robots: int) -> int:
     A larger one keeps the cores busy: a recorder at nice 10 then gets so little CPU that
     it falls behind by more than the 256 MiB it may hold and drops samples (200 robots,
     two runs at a time: 29% of the senses); at normal priority it kept every one."""
-    return DEFAULT_NICENESS if robots <= ROBOTS_PER_PROCESS else 0
+    return DEFAULT_NICENESS if robots <= NICE_RECORDER_UP_TO else 0
 
 
 def refuse_unsupported(args: argparse.Namespace) -> None:

@@ -69,6 +69,7 @@ class RunOutcome:
     beacon_rejected: int = 0
     byzantine: Mapping[int, str] = field(default_factory=dict)  # robot -> how it misbehaves
     departures: int = 0  # robots and beacons whose liveliness went mid-run (world's count)
+    robot_processes: int = 0  # processes the robots were started in (0: in one process)
 
 
 def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[str, Any]:
@@ -100,6 +101,7 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
         "run_id": outcome.run_id,
         "num_robots": outcome.num_robots,
         "num_sites": outcome.num_sites,
+        "robot_processes": outcome.robot_processes,
         "seed": outcome.seed,
         "best_site": outcome.best_site,
         "consensus": consensus,

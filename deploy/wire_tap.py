@@ -68,14 +68,15 @@ class WireTap:
             self.put(self.keys.status(robot), protocol.encode(status), None)
 
     def beacon_answered(
-        self, name: str, tick: int, messages: Iterable[protocol.BeaconPayload]
+        self, name: str, tick: int, messages: Iterable[protocol.BeaconPayload], next_tick: int
     ) -> None:
+        """The beacon's answer to a tick it answers: its radio messages, its ack."""
         sent = 0
         for message in messages:
             meta = protocol.RadioTxMeta(v=protocol.VERSION, tick=tick, seq=message.seq)
             self.put(self.keys.radio_tx(name), protocol.encode(message), protocol.encode(meta))
             sent += 1
-        ack = protocol.Ack(v=protocol.VERSION, tick=tick, radio_tx=sent)
+        ack = protocol.Ack(v=protocol.VERSION, tick=tick, radio_tx=sent, next_tick=next_tick)
         self.put(self.keys.beacon_ack(name), protocol.encode(ack), None)
 
     def delivered(self, tick: int, deliveries: dict[str, list[Delivery]]) -> None:

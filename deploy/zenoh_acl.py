@@ -164,15 +164,13 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 keys.camera("*"),
                 keys.radio_rx("*"),
                 keys.world_clock,
+                keys.beacon_clock("*"),
                 keys.world_state,
             ],
         ),
         _rule("world-alive", "ingress", ["liveliness_token"], [keys.alive(Role.WORLD, "*")]),
         _rule("world-serve", "ingress", ["declare_queryable", "reply"], world_services),
         _rule("world-asked", "egress", ["query"], world_services),
-        # Beacons hear the clock.
-        _rule("beacon-subscribe-clock", "ingress", ["declare_subscriber"], [keys.world_clock]),
-        _rule("beacon-receive-clock", "egress", ["put"], [keys.world_clock]),
         # The launcher relays process logs and asks the recorder and the page to finish.
         _rule("launcher-log", "ingress", ["put"], [keys.log("*")]),
         _rule("launcher-finish", "ingress", ["query"], finishes),
@@ -263,14 +261,22 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 ["liveliness_token"],
                 [keys.alive(Role.BEACON, beacon)],
             ),
+            # Each beacon hears its own clock: the ticks it answers.
+            _rule(
+                f"{identity}-subscribe-clock",
+                "ingress",
+                ["declare_subscriber"],
+                [keys.beacon_clock(beacon)],
+            ),
+            _rule(f"{identity}-receive-clock", "egress", ["put"], [keys.beacon_clock(beacon)]),
         ]
         grant_client(
             identity,
             [
                 f"{identity}-speak",
                 f"{identity}-alive",
-                "beacon-subscribe-clock",
-                "beacon-receive-clock",
+                f"{identity}-subscribe-clock",
+                f"{identity}-receive-clock",
                 "robot-query-info",
                 "robot-answer-info",
                 "follow-world",

@@ -10,6 +10,9 @@ A key file, or the variable, is one JSON object::
 
     {"v": 1, "run": "<run id>", "secret": "<64 hex digits>"}               (infrastructure)
     {"v": 1, "run": "<run id>", "keys": {"robot/3": "<64 hex digits>"}}    (a robot)
+
+A process hosting robots 3 to 7 holds their keys and that of its host identity
+``host/3-7``, which seals the batches it exchanges with the world (wire/batch.py).
 """
 
 from __future__ import annotations
@@ -130,6 +133,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="number of robots (ids 0 to N-1)",
     )
     parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
+    parser.add_argument(
+        "--robots-per-process",
+        type=cliargs.int_range(2, names.MAX_ROBOTS),
+        default=None,
+        metavar="K",
+        help="also write host-<first>-<last>.json for processes of K robots each (0 to K-1, "
+        "K to 2K-1, ...): the keys of its robots and of its host identity",
+    )
     return parser
 
 
@@ -142,6 +153,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"run_keys: error: {out / 'secret.json'} exists; not replacing it", file=sys.stderr)
         return 2
     keyring = auth.Keyring(secret=new_secret())
+    hosts = 0
     try:
         make_private_folder(out)
         out.chmod(0o700)  # a folder of keys: private even if it was there
@@ -149,11 +161,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         for robot in range(args.robots):
             robot_keys = keyring.only([names.robot_identity(robot)])
             write(out / f"robot-{robot}.json", robot_keys, args.run_id)
+        if args.robots_per_process is not None:
+            for first in range(0, args.robots, args.robots_per_process):
+                last = min(first + args.robots_per_process, args.robots) - 1
+                identities = [names.robot_identity(robot) for robot in range(first, last + 1)]
+                host_keys = keyring.only([*identities, names.host_identity(first, last)])
+                write(out / f"host-{first}-{last}.json", host_keys, args.run_id)
+                hosts += 1
     except OSError as error:
         where = error.filename or out
         print(f"run_keys: error: cannot write {where}: {error.strerror or error}", file=sys.stderr)
         return 2
-    print(f"wrote secret.json and {args.robots} robot key file(s) in {out}")
+    print(
+        f"wrote secret.json, {args.robots} robot key file(s) and {hosts} host key file(s) in {out}"
+    )
     return 0
 
 

@@ -5,9 +5,10 @@
 
 One file per message type of ``wire/protocol.py``, plus ``udp_frame.json`` for the
 UDP radio's framing (``robot_agent/link/udp_radio.py``), ``auth.json`` for run keys and
-message tags (``wire/auth.py``) and ``tick.json`` for one lockstep tick of a robot
-on Zenoh: what arrives, what the port contract hands the controller, what goes out
-(``robot_agent/core/simulated.py``). Each message file holds:
+message tags (``wire/auth.py``), ``batch.json`` for the binary batches of a process
+hosting several robots and their host's tag (``wire/batch.py``) and ``tick.json`` for one
+lockstep tick of a robot on Zenoh: what arrives, what the port contract hands the
+controller, what goes out (``robot_agent/core/simulated.py``). Each message file holds:
 
 * ``valid``: messages with the exact bytes ``protocol.encode`` produces for them (as a
   UTF-8 string and as hex). A decoder must accept them; an encoder that wants to be
@@ -28,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import struct
 import sys
 import zlib
 from collections.abc import Callable
@@ -38,7 +40,7 @@ from typing import Any
 import msgspec
 
 from robot_agent.link.udp_radio import MAX_PAYLOAD_BYTES, encode_frame
-from wire import auth, names, protocol
+from wire import auth, batch, names, protocol
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
 
@@ -277,6 +279,11 @@ def act_vectors() -> TypeVectors:
 def ack_vectors() -> TypeVectors:
     vectors = TypeVectors("ack.json", protocol.Ack)
     data = vectors.add_valid("typical", protocol.Ack(v=1, tick=42, radio_tx=1))
+    vectors.add_valid(
+        "next_tick",
+        protocol.Ack(v=1, tick=45, radio_tx=1, rejected=2, next_tick=50),
+        note="the beacon answers tick 50 next: the world skips it on ticks 46-49",
+    )
     common_faults(vectors, data, b'"tick":42,', "tick")
     vectors.add_invalid(
         "negative_transmissions",
@@ -944,6 +951,126 @@ def auth_vectors() -> dict[str, Any]:
     }
 
 
+def batch_vectors() -> dict[str, Any]:
+    """Batches of a process hosting robots 3 to 4 (wire/batch.py), byte for byte: what each
+    decodes to (the robots' own messages), the host's tag over it, and bytes to refuse."""
+    keyring = auth.Keyring(secret=AUTH_SECRET)
+    identity = names.host_identity(3, 4)
+    senses = [
+        protocol.Sense(
+            v=1,
+            tick=42,
+            t=4.2,
+            x=0.31,
+            y=-0.12,
+            theta=1.5708,
+            prox=[0.0, 0.0, 0.0, 0.000015, 1.5e-6, 0.0, 0.25, 1.0],
+            rx=2,
+            camera=True,
+        ),
+        protocol.Sense(
+            v=1, tick=42, t=4.2, x=-0.5, y=0.25, theta=-3.0, prox=[0.0] * 8, rx=0, camera=False
+        ),
+    ]
+    sense_batch = batch.encode_senses(
+        4,
+        tick=42,
+        t=4.2,
+        robots=[3, 4],
+        values=[[sense.x, sense.y, sense.theta, *sense.prox] for sense in senses],
+        rx=[sense.rx for sense in senses],
+        camera=[sense.camera for sense in senses],
+    )
+    acts = [
+        (3, protocol.Act(v=1, tick=42, left=0.13, right=-0.065, capture=False, radio_tx=1)),
+        (4, protocol.Act(v=1, tick=42, left=0.0, right=0.0, capture=True, radio_tx=0)),
+    ]
+    act_batch = batch.encode_acts(4, acts)
+    valid = []
+    for name, kind, data, messages in (
+        ("senses", "senses", sense_batch, list(zip([3, 4], senses, strict=True))),
+        ("acts", "acts", act_batch, acts),
+    ):
+        key_expr = f"bestofn/demo/host/3/{'sense' if kind == 'senses' else 'act'}"
+        valid.append(
+            {
+                "name": name,
+                "kind": kind,
+                "hex": data.hex(),
+                "last": 4,
+                "entries": [
+                    {"robot": robot, "message": json.loads(protocol.encode(message))}
+                    for robot, message in messages
+                ],
+                "identity": identity,
+                "key_expr": key_expr,
+                "tag_hex": keyring.seal(identity, key_expr, data).hex(),
+            }
+        )
+    one_sense = batch.encode_senses(
+        4, tick=1, t=0.1, robots=[3], values=[[0.0] * 11], rx=[0], camera=[False]
+    )
+    one_act = batch.encode_acts(4, acts[:1])
+
+    def with_value(index: int, value: float) -> bytes:
+        offset = 28 + 8 * index
+        return one_sense[:offset] + struct.pack("<d", value) + one_sense[offset + 8 :]
+
+    invalid = [
+        ("senses", "wrong_magic", "a batch of senses starts with BNS1", b"BNA1" + one_sense[4:]),
+        ("senses", "cut_short", "one byte of the last row missing", one_sense[:-1]),
+        ("senses", "left_over", "a byte after the last row", one_sense + b"\x00"),
+        ("senses", "nan_x", "NaN is no coordinate", with_value(0, math.nan)),
+        ("senses", "infinite_theta", "an angle is finite", with_value(2, math.inf)),
+        ("senses", "proximity_above_1", "proximity readings are in [0, 1]", with_value(10, 1.5)),
+        (
+            "senses",
+            "camera_2",
+            "the camera flag is 0 or 1",
+            one_sense[:-1] + b"\x02",
+        ),
+        (
+            "senses",
+            "robot_twice",
+            "each robot once",
+            batch.encode_senses(
+                4,
+                tick=1,
+                t=0.1,
+                robots=[3, 3],
+                values=[[0.0] * 11] * 2,
+                rx=[0, 0],
+                camera=[False, False],
+            ),
+        ),
+        ("acts", "wrong_magic", "a batch of acts starts with BNA1", b"BNS1" + one_act[4:]),
+        ("acts", "cut_short", "one byte of the row missing", one_act[:-1]),
+        (
+            "acts",
+            "wheel_too_fast",
+            "wheel speeds are within +-10 m/s",
+            one_act[:24] + struct.pack("<d", 10.5) + one_act[32:],
+        ),
+        ("acts", "capture_2", "the capture flag is 0 or 1", one_act[:-3] + b"\x02" + one_act[-2:]),
+        (
+            "acts",
+            "too_many_transmissions",
+            "radio_tx is at most 1000",
+            one_act[:-2] + struct.pack("<H", 1001),
+        ),
+    ]
+    return {
+        "type": "Batch",
+        "decoder": "batch",
+        "secret_hex": AUTH_SECRET.hex(),
+        "valid": valid,
+        "invalid": [
+            {"name": name, "kind": kind, "reason": reason, "hex": data.hex()}
+            for kind, name, reason, data in invalid
+        ],
+    }
+
+
 def uniform_png(width: int, height: int, bgr: tuple[int, int, int]) -> bytes:
     """A one-colour 8-bit RGB PNG, its image data stored uncompressed (deflate level 0), so
     its bytes depend on no image library's encoder."""
@@ -1162,6 +1289,7 @@ def build() -> dict[str, str]:
     files["udp_frame.json"] = udp_frame_vectors()
     files["auth.json"] = auth_vectors()
     files["tick.json"] = tick_vectors()
+    files["batch.json"] = batch_vectors()
     return {
         name: json.dumps(content, indent=1, ensure_ascii=False) + "\n"
         for name, content in files.items()

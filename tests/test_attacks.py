@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import pytest
 import zenoh
 from mcap.reader import make_reader
@@ -171,7 +172,7 @@ def test_a_forged_clock_far_in_the_future_does_not_silence_the_beacon(keys: list
     with attacked_run(*SMALL, "--no-record", *keys) as run:
         run.wait_for_tick(10)
         forged = protocol.Clock(v=1, tick=run.tick + 1, t=1e9)
-        run.session.put(run.keys.world_clock, protocol.encode(forged))
+        run.session.put(run.keys.beacon_clock("nest"), protocol.encode(forged))
         code, summary, stderr = run.finish()
     assert_right_consensus(code, summary, stderr)
     assert summary is not None and summary["rejected"]["beacon"] == 1
@@ -192,78 +193,167 @@ def test_a_forged_sense_for_the_last_tick_does_not_freeze_a_robot(keys: list[str
     assert summary is not None and summary["per_robot"][0]["rejected"] == 2
 
 
-def test_forged_and_malformed_batches_are_refused_entry_by_entry_and_counted() -> None:
+def test_forged_and_malformed_batches_are_refused_and_counted() -> None:
     """One process hosts the three robots, so robot 0 leads it and the senses and acts go
-    as batches (``host/0/...``). Forged and malformed batches, both ways: each is refused
-    and counted once (a forged entry by the robot it names), and the run goes on."""
+    as batches (``host/0/...``), each sealed with the key of its host identity ``host/0-2``.
+    Forged and malformed batches, both ways: each is refused whole and counted once (by the
+    world, or by robot 0 for its process), and the run goes on."""
     with attacked_run(*SMALL, "--no-record", "--robots-per-process", "3") as run:
         run.wait_for_tick(10)
-        act = protocol.encode(
-            protocol.Act(v=1, tick=run.tick + 1, left=0.1, right=0.1, capture=False, radio_tx=0)
+        tick = run.tick + 1
+        act = protocol.Act(v=1, tick=tick, left=0.1, right=0.1, capture=False, radio_tx=0)
+        acts = batch.encode_acts(2, [(1, act)])
+        senses = batch.encode_senses(
+            2,
+            tick=tick,
+            t=0.1 * tick,
+            robots=[1],
+            values=[[0.0] * 11],
+            rx=[0],
+            camera=[False],
         )
-        forged_act = batch.Entry(1, act, b"\x00" * auth.TAG_BYTES)  # not robot 1's tag
-        sense = protocol.encode(
-            protocol.Sense(
-                v=1,
-                tick=run.tick + 1,
-                t=0.1 * (run.tick + 1),
-                x=0,
-                y=0,
-                theta=0,
-                prox=[0.0] * 8,
-                rx=0,
-                camera=False,
-            )
+        twice = batch.encode_senses(
+            2,
+            tick=tick,
+            t=0.1 * tick,
+            robots=[2, 2],
+            values=[[0.0] * 11] * 2,
+            rx=[0, 0],
+            camera=[False, False],
         )
+        forged_tag = b"\x00" * auth.TAG_BYTES
         to_world = [
-            (run.keys.host_act(0), batch.encode([forged_act])),  # the world: 1 (robot 1's tag)
-            (run.keys.host_act(0), b"BNB1\xff\xff"),  # 1: malformed
-            (run.keys.host_act(0), b"\x00" * (batch.MAX_BATCH_BYTES + 1)),  # 1: oversized
-            (run.keys.host_act(99_999), batch.encode([])),  # 1: no robot of the swarm
+            (run.keys.host_act(0), acts, forged_tag),  # the world: 1 (not host/0-2's tag)
+            (run.keys.host_act(0), b"BNA1\xff\xff", None),  # 1: malformed
+            (run.keys.host_act(0), b"\x00" * (batch.MAX_BATCH_BYTES + 1), None),  # 1: oversized
+            (run.keys.host_act(99_999), batch.encode_acts(99_999, []), None),  # 1: no robot
         ]
         to_host = [
-            (run.keys.host_sense(0), batch.encode([batch.Entry(1, sense, None)])),  # robot 1
-            (run.keys.host_sense(0), b"BNB1"),  # robot 0, the lead: malformed
-            (
-                run.keys.host_sense(0),
-                batch.encode([batch.Entry(2, sense, b"tag"), batch.Entry(2, sense, b"tag")]),
-            ),  # robot 0: robot 2 twice
-            (
-                run.keys.host_sense(0),
-                batch.encode([batch.Entry(7, sense, None)]),
-            ),  # robot 0: not hosted
+            (run.keys.host_sense(0), senses, None),  # robot 0, for its process: untagged
+            (run.keys.host_sense(0), senses, forged_tag),  # robot 0: a forged tag
+            (run.keys.host_sense(0), b"BNS1", None),  # robot 0: malformed
+            (run.keys.host_sense(0), twice, None),  # robot 0: robot 2 twice (and no tag)
         ]
-        for key, payload in [*to_world, *to_host]:
-            run.session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+        for key, payload, attachment in [*to_world, *to_host]:
+            run.session.put(
+                key,
+                payload,
+                attachment=attachment,
+                congestion_control=zenoh.CongestionControl.BLOCK,
+            )
         code, summary, stderr = run.finish()
     assert_right_consensus(code, summary, stderr)
     assert summary is not None
     assert summary["rejected"]["world"] == 4
-    assert [robot["rejected"] for robot in summary["per_robot"]] == [3, 1, 0]
+    assert [robot["rejected"] for robot in summary["per_robot"]] == [4, 0, 0]
 
 
-def test_a_copied_act_in_another_process_s_batch_does_not_divert_a_robot_s_senses() -> None:
-    """Robot 1's own act, authentic but already answered, copied by an eavesdropper into a
-    batch on robot 2's process key: it must not teach the world that robot 1 answers from
-    robot 2's process, or robot 1's senses would go where nobody hears them."""
+def test_a_copied_act_in_a_batch_of_the_attacker_s_does_not_divert_a_robot_s_senses() -> None:
+    """Robot 1's own act, authentic, copied by an eavesdropper into a batch on robot 2's
+    key (``host/2/act``): without host 2's key the batch is refused, and it must not teach
+    the world that robot 1 answers from there, or robot 1's senses would go where nobody
+    hears them."""
     with attacked_run(*SMALL, "--no-record", "--robots-per-process", "1") as run:
-        seen: list[tuple[bytes, bytes | None]] = []
+        seen: list[bytes] = []
 
         def on_act(sample: zenoh.Sample) -> None:
-            attachment = sample.attachment
-            seen.append((sample.payload.to_bytes(), attachment.to_bytes() if attachment else None))
+            seen.append(sample.payload.to_bytes())
 
         subscriber = run.session.declare_subscriber(run.keys.act(1), on_act)
         run.wait_for_tick(10)
         subscriber.undeclare()
-        payload, attachment = seen[-1]
-        copied = batch.encode([batch.Entry(1, payload, attachment)])
+        act = protocol.decode(seen[-1], protocol.Act)
+        copied = batch.encode_acts(2, [(1, msgspec.structs.replace(act, tick=run.tick))])
         run.session.put(
             run.keys.host_act(2), copied, congestion_control=zenoh.CongestionControl.BLOCK
         )
         code, summary, stderr = run.finish()
     assert_right_consensus(code, summary, stderr)
     assert summary is not None and summary["world"]["stalls"] == 0
+    assert summary["rejected"]["world"] == 1
+
+
+def test_a_host_that_speaks_for_a_robot_it_does_not_host_is_refused_for_that_robot(
+    tmp_path: Path,
+) -> None:
+    """The process of robots 0 and 1 (host/0-1), compromised: with its own key it puts robot
+    2's act for the tick under way into its batch, on every tick. The world refuses and
+    counts that entry each time, takes robot 2's answer from robot 2's own process, and
+    learns no route for robot 2 (its senses would go to a process that does not run it)."""
+    run_id = unique_run_id("host")
+    keys = protocol.Keys(run_id)
+    assert (
+        run_keys.main(
+            [
+                "--run-id",
+                run_id,
+                "--robots",
+                "3",
+                "--out",
+                str(tmp_path),
+                "--robots-per-process",
+                "2",
+            ]
+        )
+        == 0
+    )
+    secret = run_keys.from_text((tmp_path / "secret.json").read_text(), run_id)
+    host = run_keys.from_text((tmp_path / "host-0-1.json").read_text(), run_id)
+    identity = names.host_identity(0, 1)
+    common = ["--run-id", run_id, "--seed", str(SEED), "--mode", "client"]
+    with loopback_router() as (session, endpoint):
+        connect = ["--connect", endpoint]
+        started = [
+            subprocess.Popen(
+                python_module(
+                    "world_server.server",
+                    *common,
+                    *connect,
+                    *["--robots", "3", "--sites", str(SITES), "--stall-timeout", "2"],
+                    *["--key-file", str(tmp_path / "secret.json")],
+                ),
+                cwd=REPO,
+                stderr=subprocess.PIPE,
+            )
+        ]
+        for module, options, key_file in [
+            ("nest_beacon", [], "secret"),
+            ("robot_agent.node", ["--id", "0", "--id", "1"], "host-0-1"),  # one process
+            ("robot_agent.node", ["--id", "2"], "robot-2"),
+        ]:
+            key_option = ["--key-file", str(tmp_path / f"{key_file}.json")]
+            command = python_module(module, *common, *connect, *options, *key_option)
+            started.append(subprocess.Popen(command, cwd=REPO, stderr=subprocess.PIPE))
+        ticks: list[int] = []
+        forged: list[int] = []
+
+        def on_clock(sample: zenoh.Sample) -> None:
+            tick = protocol.decode(sample.payload.to_bytes(), protocol.Clock).tick
+            ticks.append(tick)
+            if tick < 5 or len(forged) >= 10:
+                return
+            act = protocol.Act(v=1, tick=tick, left=0.1, right=0.1, capture=False, radio_tx=0)
+            payload = batch.encode_acts(1, [(2, act)])
+            key = keys.host_act(0)
+            session.put(key, payload, attachment=host.seal(identity, key, payload))
+            forged.append(tick)
+
+        session.declare_subscriber(keys.world_clock, on_clock)
+        try:
+            assert _wait_until(lambda: len(forged) >= 10, 60), "the run never got going"
+            last = ticks[-1]
+            assert _wait_until(lambda: ticks[-1] >= last + 30, 60), "the world stopped ticking"
+            assert all(process.poll() is None for process in started), "a process exited"
+            answers, refused = ask(session, keys.world_stats, secret, names.LAUNCHER, timeout=5.0)
+            assert answers, refused
+            stats = protocol.decode(answers[0], protocol.WorldState)
+        finally:
+            stop_processes(started)
+            kill_leftovers(run_id)
+    errors = b"".join(process.stderr.read() for process in started if process.stderr)
+    assert b"Traceback" not in errors, errors.decode()[-3000:]
+    assert stats.rejected == len(forged)  # each forged entry, and nothing else
+    assert stats.stalls == 0  # robot 2 answered every tick from its own process
 
 
 # --- mislead ----------------------------------------------------------------------------

@@ -28,7 +28,7 @@ def clock(
     tick: int, *, keyring: auth.Keyring | None = RUN_KEYS, t: float | None = None
 ) -> tuple[bytes, bytes | None]:
     payload = protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * DT if t is None else t))
-    return payload, auth.seal(keyring, names.WORLD, KEYS.world_clock, payload)
+    return payload, auth.seal(keyring, names.WORLD, KEYS.beacon_clock("nest"), payload)
 
 
 def ack(message: Outgoing) -> protocol.Ack:
@@ -48,6 +48,8 @@ def test_each_tick_is_answered_and_a_transmission_sent_when_due() -> None:
     assert [(ack(answer[-1]).tick, ack(answer[-1]).radio_tx) for answer in answers] == [
         (tick, 1 if tick in (0, 5) else 0) for tick in range(7)
     ]
+    # Each ack names the next tick with a transmission due: the world skips those between.
+    assert [ack(answer[-1]).next_tick for answer in answers] == [5, 5, 5, 5, 5, 10, 10]
     sent = answers[5][0]
     assert sent.key == KEYS.radio_tx("nest")
     assert protocol.decode(sent.payload, protocol.BeaconPayload).seq == 2
@@ -79,12 +81,21 @@ def test_a_repeated_or_old_clock_is_not_answered_nor_counted() -> None:
     [
         clock(1, keyring=None),  # untagged
         clock(1, keyring=auth.Keyring(secret=bytes(32))),  # another run's world
-        (clock(1)[0], RUN_KEYS.seal(IDENTITY, KEYS.world_clock, clock(1)[0])),  # not the world
+        (clock(1)[0], RUN_KEYS.seal(IDENTITY, KEYS.beacon_clock("nest"), clock(1)[0])),  # beacon
         clock(1, t=0.5),  # sim time not its tick's
-        (b"[]", RUN_KEYS.seal(names.WORLD, KEYS.world_clock, b"[]")),  # no clock
-        clock(guard.TICK_WINDOW + 1),  # beyond the window of tick 0
+        (b"[]", RUN_KEYS.seal(names.WORLD, KEYS.beacon_clock("nest"), b"[]")),  # no clock
+        (clock(1)[0], RUN_KEYS.seal(names.WORLD, KEYS.world_clock, clock(1)[0])),  # another key
+        clock(guard.TICK_WINDOW + 5 + 1),  # beyond the window of tick 0 (and a period)
     ],
-    ids=["untagged", "other run", "not the world", "wrong time", "undecodable", "too far"],
+    ids=[
+        "untagged",
+        "other run",
+        "not the world",
+        "wrong time",
+        "undecodable",
+        "world clock",
+        "too far",
+    ],
 )
 def test_a_clock_that_fails_a_check_is_refused_and_counted_in_the_next_ack(
     bad: tuple[bytes, bytes | None],
@@ -94,6 +105,28 @@ def test_a_clock_that_fails_a_check_is_refused_and_counted_in_the_next_ack(
     assert endpoint.receive_clock(*bad) == []
     endpoint.count_dropped(2)  # what the transport dropped on arrival
     assert ack(endpoint.receive_clock(*clock(1))[-1]).rejected == 3
+
+
+@pytest.mark.parametrize(("period", "dt"), [(0.5, 0.1), (0.3, 0.1), (0.25, 0.05), (30.0, 0.1)])
+def test_the_next_tick_named_is_the_next_on_which_the_beacon_acts(period: float, dt: float) -> None:
+    """Stepped every tick, as the in-process engine may, the beacon transmits on exactly the
+    ticks its acks name, so skipping the others changes nothing it does."""
+    config = BeaconConfig(period=period, flaky=0.3)
+    every_tick = Beacon(config, random.Random(5))
+    transmitted = [tick for tick in range(2000) if every_tick.on_tick(tick * dt)]
+    named = Beacon(config, random.Random(5))
+    tick, answered, sent = 0, [], []
+    while tick < 2000:
+        answered.append(tick)
+        if named.on_tick(tick * dt):
+            sent.append(tick)
+        tick = named.next_tick(tick, dt)
+    assert sent == transmitted and (every_tick.seq, every_tick.skipped) == (
+        named.seq,
+        named.skipped,
+    )
+    period_ticks = round(period / dt)
+    assert answered[:4] == [0, period_ticks, 2 * period_ticks, 3 * period_ticks]
 
 
 def test_a_new_world_is_followed_from_its_tick_zero() -> None:
@@ -119,5 +152,5 @@ def test_the_same_world_back_is_rejoined_at_its_tick_and_a_replay_is_still_refus
     assert endpoint.receive_clock(*clock(10)) == []  # a replay
     far = 10 + 5 * guard.TICK_WINDOW
     assert ack(endpoint.receive_clock(*clock(far))[-1]).tick == far
-    assert endpoint.receive_clock(*clock(far + guard.TICK_WINDOW + 1)) == []
+    assert endpoint.receive_clock(*clock(far + endpoint.window + 1)) == []
     assert endpoint.rejected == 1  # bounded again from there

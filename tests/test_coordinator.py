@@ -24,7 +24,7 @@ from world_server.core.events import (
     Reply,
     ReplyError,
 )
-from world_server.core.roster import MAX_BEACONS, SUSPEND_AFTER
+from world_server.core.roster import MAX_BEACONS, SUSPEND_AFTER, Host
 from world_server.core.world import World, WorldConfig
 from world_server.server.timeline import TickTimeline
 
@@ -111,17 +111,29 @@ def act(
     return Event(EventKind.ACT, key, payload, attachment)
 
 
-def batch_of(lead: int, *acts: Event) -> Event:
-    entries = [
-        batch.Entry(KEYS.robot_of(event.key) or 0, event.payload, event.attachment)
-        for event in acts
+def batch_of(
+    first: int,
+    last: int,
+    *answers: tuple[int, int],
+    keyring: auth.Keyring | None = KEYRING,
+    identity: str | None = None,
+) -> Event:
+    """A batch of acts (robot, tick) from the process hosting robots ``first`` to ``last``,
+    sealed with its host identity's key (or ``identity``'s)."""
+    acts = [
+        (robot, protocol.Act(v=1, tick=tick, left=0.1, right=0.1, capture=False, radio_tx=0))
+        for robot, tick in answers
     ]
-    return Event(EventKind.ACTS, KEYS.host_act(lead), batch.encode(entries))
+    key = KEYS.host_act(first)
+    payload = batch.encode_acts(last, acts)
+    identity = identity or names.host_identity(first, last)
+    attachment = keyring.seal(identity, key, payload) if keyring else None
+    return Event(EventKind.ACTS, key, payload, attachment)
 
 
-def ack(name: str, tick: int, radio_tx: int = 0) -> Event:
+def ack(name: str, tick: int, radio_tx: int = 0, next_tick: int | None = None) -> Event:
     key = KEYS.beacon_ack(name)
-    payload = protocol.encode(protocol.Ack(v=1, tick=tick, radio_tx=radio_tx))
+    payload = protocol.encode(protocol.Ack(v=1, tick=tick, radio_tx=radio_tx, next_tick=next_tick))
     return Event(
         EventKind.ACK, key, payload, KEYRING.seal(names.beacon_identity(name), key, payload)
     )
@@ -317,22 +329,26 @@ def test_more_than_max_beacons_beacons_are_refused() -> None:
 
 def test_a_batch_route_is_learnt_from_current_acts_and_forgotten_when_the_lead_goes() -> None:
     h = started()
-    h.coordinator.handle(batch_of(0, act(0, 0), act(1, 0)), 0.0)
+    h.coordinator.handle(batch_of(0, 1, (0, 0), (1, 0)), 0.0)
     h.coordinator.handle(ack("nest", 0), 0.0)
-    assert h.world.tick == 1 and h.coordinator.roster.hosts == {0: 0, 1: 0}
+    host = Host(0, 1)
+    assert h.world.tick == 1 and h.coordinator.roster.hosts == {0: host, 1: host}
     batches = h.published(KEYS.host_sense(0))
     assert len(batches) == 1 and batches[0].steady
-    entries = batch.decode(batches[0].payload)
-    assert [entry.robot for entry in entries] == [0, 1]
-    for entry in entries:  # each entry is the robot's own message, its key's tag
-        robot_keyring = KEYRING.only([names.robot_identity(entry.robot)])
-        key = KEYS.sense(entry.robot)
-        auth.unseal(
-            robot_keyring, names.robot_identity(entry.robot), key, entry.payload, entry.attachment
-        )
-        assert protocol.decode(entry.payload, protocol.Sense).tick == 1
+    # One tag for the batch, the host's; the senses are the robots' own (made at once).
+    auth.unseal(
+        KEYRING.only([host.identity]),
+        host.identity,
+        KEYS.host_sense(0),
+        batches[0].payload,
+        batches[0].attachment,
+    )
+    senses = batch.decode_senses(batches[0].payload)
+    assert senses.last == 1 and senses.robots == [0, 1]
+    assert [sense.tick for sense in senses.senses] == [1, 1]
+    assert senses.senses == h.world.senses([0, 1], {}, ()).messages()
     assert len(h.published(KEYS.sense(1))) == 1  # tick 0's, on its own key
-    h.coordinator.handle(gone(Role.ROBOT, "0"), 0.0)  # the lead's process is gone
+    h.coordinator.handle(gone(Role.ROBOT, "0"), 0.0)  # the first robot's process is gone
     assert h.coordinator.roster.hosts == {}
     h.coordinator.handle(act(1, 1), 0.0)
     h.coordinator.handle(ack("nest", 1), 0.0)
@@ -341,18 +357,77 @@ def test_a_batch_route_is_learnt_from_current_acts_and_forgotten_when_the_lead_g
     assert protocol.decode(h.published(KEYS.sense(1))[-1].payload, protocol.Sense).tick == 2
 
 
-def test_an_old_act_copied_into_a_batch_teaches_no_route() -> None:
+def test_a_host_speaks_only_for_the_robots_it_hosts() -> None:
+    """Host 0-0's batch with robot 1's act in it: that entry is refused and counted, robot
+    0's is taken, and robot 1 is still waited for (the host is no robot 1 process)."""
     h = started()
-    stale = act(0, 0)
-    h.coordinator.handle(stale, 0.0)
+    h.coordinator.handle(batch_of(0, 0, (0, 0), (1, 0)), 0.0)
+    assert h.coordinator.counters.rejected == 1
+    assert h.coordinator.roster.hosts == {0: Host(0, 0)}
+    h.coordinator.handle(ack("nest", 0), 0.0)
+    assert h.world.tick == 0  # robot 1 has not answered
+    h.coordinator.handle(act(1, 0), 0.0)
+    assert h.world.tick == 1
+
+
+def test_an_old_batch_replayed_teaches_no_route() -> None:
+    h = started()
+    stale = batch_of(0, 1, (0, 0), (1, 0))
+    h.coordinator.handle(act(0, 0), 0.0)
     answer_all(h, 0, robots=(1,))
     assert h.world.tick == 1
-    # Robot 1's process replays robot 0's act of tick 0 in a batch of its own.
-    h.coordinator.handle(batch_of(1, stale), 0.0)
-    assert h.coordinator.roster.hosts == {} and h.coordinator.counters.late == 1
+    # Host 0-1's batch of tick 0, replayed after that tick closed: late, no route.
+    h.coordinator.handle(stale, 0.0)
+    assert h.coordinator.roster.hosts == {} and h.coordinator.counters.late == 2
     answer_all(h, 1)
-    assert h.published(KEYS.host_sense(1)) == []
+    assert h.published(KEYS.host_sense(0)) == []
     assert protocol.decode(h.published(KEYS.sense(0))[-1].payload, protocol.Sense).tick == 2
+
+
+# --- the beacon -----------------------------------------------------------------------
+
+
+def beacon_clocks(h: Harness) -> list[int]:
+    """The ticks the nest beacon was sent its clock for."""
+    published = h.published(KEYS.beacon_clock("nest"))
+    for message in published:
+        KEYRING.open(names.WORLD, message.key, message.payload, message.attachment)
+    return [protocol.decode(message.payload, protocol.Clock).tick for message in published]
+
+
+def test_the_beacon_takes_part_in_the_ticks_it_answers_only() -> None:
+    """Its ack names the next tick it answers: the world sends it no clock before then, and
+    closes the ticks in between on the robots' answers alone."""
+    h = started()
+    h.coordinator.handle(act(0, 0), 0.0)
+    h.coordinator.handle(act(1, 0), 0.0)
+    assert h.world.tick == 0  # the beacon's first answer is waited for
+    h.coordinator.handle(ack("nest", 0, next_tick=3), 0.0)
+    for tick in (1, 2):
+        assert h.world.tick == tick
+        answer_robots = [act(robot, tick) for robot in (0, 1)]
+        for event in answer_robots:
+            h.coordinator.handle(event, 0.0)
+    assert h.world.tick == 3
+    answer_all(h, 3)  # its answer to tick 3 names none: every tick again
+    answer_all(h, 4)
+    assert h.world.tick == 5 and h.coordinator.counters.stalls == 0
+    assert beacon_clocks(h) == [0, 3, 4, 5]
+    assert h.clocks() == [0, 1, 2, 3, 4, 5]  # world/clock, for observers, every tick
+    assert all(out.if_heard for out in h.published(KEYS.world_clock))
+
+
+def test_a_beacon_that_leaves_and_comes_back_is_sent_every_tick_until_it_answers() -> None:
+    h = started()
+    h.coordinator.handle(ack("nest", 0, next_tick=50), 0.0)
+    answer_all(h, 0, robots=(0, 1))  # its second ack of tick 0 is late, and harmless
+    assert h.world.tick == 1 and beacon_clocks(h) == [0]
+    h.coordinator.handle(gone(Role.BEACON, "nest"), 0.0)
+    h.coordinator.handle(alive(Role.BEACON, "nest"), 0.0)
+    for robot in (0, 1):
+        h.coordinator.handle(act(robot, 1), 0.0)
+    assert h.world.tick == 2 and beacon_clocks(h) == [0, 2]
+    assert "beacon/nest" in h.coordinator.intake.barrier.answers
 
 
 # --- real time ------------------------------------------------------------------------
@@ -404,8 +479,15 @@ def sealed(kind: EventKind, key: str, payload: bytes, identity: str) -> Event:
         sealed(EventKind.ACT, KEYS.act(7), ACT_PAYLOAD, "robot/7"),  # outside the swarm
         sealed(EventKind.ACT, KEYS.act(0), b"{not json", "robot/0"),
         act(0, 5),  # a tick that has not begun
-        batch_of(7, act(0, 0)),  # a lead outside the swarm
-        Event(EventKind.ACTS, KEYS.host_act(0), b"BNB1 cut short"),
+        batch_of(7, 7, (0, 0)),  # a first robot outside the swarm
+        batch_of(0, 7, (0, 0)),  # a last robot outside the swarm
+        batch_of(0, 1, (0, 0), keyring=None),  # no tag
+        batch_of(0, 1, (0, 0), keyring=OTHER_RUN),  # another run's key
+        batch_of(0, 1, (0, 0), identity="robot/0"),  # a robot's key, not its host's
+        batch_of(0, 0, (0, 0), identity=names.host_identity(0, 1)),  # another host's key
+        batch_of(0, 0, (1, 0)),  # host 0-0 speaking for robot 1
+        Event(EventKind.ACTS, KEYS.host_act(0), b"BNA1 cut short"),
+        ack("nest", 0, next_tick=0),  # the next tick it answers is not after this one
         Event(EventKind.ACK, KEYS.beacon_ack("7"), ack("nest", 0).payload),  # no beacon name
         Event(EventKind.ACK, KEYS.beacon_ack("nest"), ack("nest", 0).payload),  # untagged
         tx("99", 0, 1),  # no robot of the swarm

@@ -162,6 +162,7 @@ def test_a_tick_steps_once_all_its_inputs_are_in_whatever_their_order(keyed: boo
         in_order = [sender for message in order for sender in radio if radio[sender] is message]
         assert [item.sender for item in received] == in_order  # as they came
         assert robot.rejects.count == 0 and robot.assembly.pending == {}
+        assert step.act is not None
         acts.add(step.act.payload)
     assert len(acts) == 1  # the same act whatever the order
 
@@ -377,7 +378,9 @@ def test_what_a_robot_sends_is_sealed_so_that_its_receivers_believe_it() -> None
     sent = [protocol.decode(meta or b"", protocol.RadioTxMeta) for meta in opened[:2]]
     assert [(meta.tick, meta.seq) for meta in sent] == [(6, 1), (6, 2)]
     assert {message.key for message in step.transmissions} == {KEYS.radio_tx(names.robot_name(3))}
+    assert step.act is not None
     act = protocol.decode(step.act.payload, protocol.Act)
+    assert act == step.answer
     assert (act.tick, act.left, act.right, act.radio_tx) == (6, 0.01, -0.01, 2)
     assert step.act.key == KEYS.act(ROBOT) and opened[2] == b""
     assert step.status is not None and step.status.key == KEYS.status(ROBOT)
@@ -400,48 +403,122 @@ def test_an_unkeyed_robot_sends_bare_metadata() -> None:
     [sent] = step.transmissions
     meta = protocol.decode(sent.attachment or b"", protocol.RadioTxMeta)
     assert (meta.tick, meta.seq) == (1, 1)
-    assert step.act.attachment is None
+    assert step.act is not None and step.act.attachment is None
 
 
 # --- a process hosting several robots -----------------------------------------------------
 
+HOST = names.host_identity(3, 4)
 
-def test_a_batch_of_senses_reaches_each_hosted_robot_and_their_acts_leave_in_one_batch() -> None:
-    (lead, _, lead_world), (other, _, other_world) = endpoint(robot=3), endpoint(robot=4)
-    host = HostedRobots([lead, other])
-    assert (host.sense_key, host.act_key) == (KEYS.host_sense(3), KEYS.host_act(3))
-    stranger = WorldSide(WORLD_KEYS, robot=9).sense_entry(2)
-    senses = batch.encode(
-        [
-            batch.Entry(9, *stranger),
-            batch.Entry(3, *lead_world.sense_entry(2)),
-            batch.Entry(4, *other_world.sense_entry(2, rx=1)),
-        ]
+
+def hosted(keyed: bool = True) -> tuple[HostedRobots, RobotEndpoint, RobotEndpoint]:
+    """Robots 3 and 4 in one process, which holds its host identity's key."""
+    (lead, _, _), (other, _, _) = endpoint(keyed, robot=3), endpoint(keyed, robot=4)
+    return HostedRobots([lead, other], WORLD_KEYS.only([HOST]) if keyed else None), lead, other
+
+
+def sense_batch(
+    robots: Sequence[int],
+    tick: int,
+    *,
+    last: int = 4,
+    rx: int = 0,
+    keyring: auth.Keyring | None = WORLD_KEYS,
+    identity: str = HOST,
+) -> tuple[bytes, bytes | None]:
+    """A batch of senses as the world sends it to host 3-4 (sealed with ``identity``)."""
+    values = np.tile([0.1, 0.2, 0.3, *[0.0] * 8], (len(robots), 1))
+    payload = batch.encode_senses(
+        last,
+        tick=tick,
+        t=tick * DT,
+        robots=list(robots),
+        values=values,
+        rx=[rx if robot == 4 else 0 for robot in robots],
+        camera=[False] * len(robots),
     )
-    by_id = {3: lead, 4: other}
-    for robot, payload, attachment in host.senses(senses):
-        step = by_id[robot].receive(InputKind.SENSE, payload, attachment)
+    return payload, auth.seal(keyring, identity, KEYS.host_sense(3), payload)
+
+
+def step_all(host: HostedRobots, payload: bytes, attachment: bytes | None) -> None:
+    for robot, sense in host.senses(payload, attachment):
+        step = robot.receive_sense(sense)
         if step is not None:
             host.hold(step)
+
+
+def test_a_batch_of_senses_reaches_each_hosted_robot_and_their_acts_leave_in_one_batch() -> None:
+    host, lead, other = hosted()
+    assert (host.sense_key, host.act_key) == (KEYS.host_sense(3), KEYS.host_act(3))
+    assert lead.batched and other.batched  # their acts leave in the batch, not on their keys
+    step_all(host, *sense_batch([9, 3, 4], 2, rx=1))
     assert lead.rejects.count == 1  # the entry for a robot not hosted here
     acts = host.take_acts()
     assert acts is not None and acts.kind is OutputKind.HOST_ACT and acts.key == KEYS.host_act(3)
-    assert acts.attachment is None  # each entry carries its own robot's tag
-    [entry] = batch.decode(acts.payload)
-    assert entry.robot == 3
-    auth.unseal(WORLD_KEYS, "robot/3", KEYS.act(3), entry.payload, entry.attachment)
-    assert protocol.decode(entry.payload, protocol.Act).tick == 2
+    # One tag for the whole batch, the host's: no robot's key speaks for it.
+    auth.unseal(WORLD_KEYS, HOST, KEYS.host_act(3), acts.payload, acts.attachment)
+    with pytest.raises(auth.AuthError):
+        auth.unseal(WORLD_KEYS, "robot/3", KEYS.host_act(3), acts.payload, acts.attachment)
+    [(robot, act)] = batch.decode_acts(acts.payload).acts
+    assert (robot, act.tick, act.left, act.right) == (3, 2, 0.01, -0.01)
     assert host.take_acts() is None  # nothing held since
     # Robot 4 steps on its radio message: its act leaves in a batch of its own.
-    step = other.receive(*other_world.rx(2, seq=1))
-    assert step is not None
+    step = other.receive(*WorldSide(WORLD_KEYS, robot=4).rx(2, seq=1))
+    assert step is not None and step.act is None
     host.hold(step)
     acts = host.take_acts()
-    assert acts is not None and [entry.robot for entry in batch.decode(acts.payload)] == [4]
+    assert acts is not None and [robot for robot, _ in batch.decode_acts(acts.payload).acts] == [4]
 
 
-def test_a_bad_batch_is_refused_by_the_lead_robot() -> None:
-    (lead, _, _), (other, _, _) = endpoint(robot=3), endpoint(robot=4)
-    host = HostedRobots([lead, other])
-    assert list(host.senses(b"BNB1\x00\x01 cut short")) == []
+def test_a_batched_robot_senses_what_it_would_have_sensed_alone() -> None:
+    """The same sense, from a batch or on the robot's own key: the same reading, the same
+    act (a robot's results cannot depend on how its process talks to the world)."""
+    host, lead, _ = hosted()
+    alone, controller_alone, world = endpoint()
+    step_alone = alone.receive(*world.sense(5))
+    step_all(host, *sense_batch([3], 5))
+    acts = host.take_acts()
+    assert acts is not None and step_alone is not None
+    [(_, act)] = batch.decode_acts(acts.payload).acts
+    assert act == step_alone.answer
+    batched_controller = lead.controller
+    assert isinstance(batched_controller, Recording)
+    assert batched_controller.steps == controller_alone.steps
+
+
+@pytest.mark.parametrize(
+    "forged",
+    [
+        sense_batch([3, 4], 2, keyring=None),  # no tag
+        sense_batch([3, 4], 2, keyring=OTHER_RUN),  # another run's key
+        sense_batch([3, 4], 2, identity="robot/3"),  # a robot's key: not the host's
+        sense_batch([3, 4], 2, identity=names.host_identity(3, 5)),  # another host's key
+        sense_batch([3, 4], 2, last=5, identity=names.host_identity(3, 5)),  # another host's
+        (b"BNS1\x04\x00\x00\x00 cut short", None),  # not a batch
+    ],
+)
+def test_a_batch_without_this_host_s_tag_is_refused_whole_by_the_lead_robot(
+    forged: tuple[bytes, bytes | None],
+) -> None:
+    host, lead, other = hosted()
+    assert list(host.senses(*forged)) == []
     assert (lead.rejects.count, other.rejects.count) == (1, 0)
+
+
+def test_an_unkeyed_host_exchanges_bare_batches() -> None:
+    host, lead, _ = hosted(keyed=False)
+    step_all(host, *sense_batch([3, 4], 1, keyring=None))
+    acts = host.take_acts()
+    assert acts is not None and acts.attachment is None
+    assert [robot for robot, _ in batch.decode_acts(acts.payload).acts] == [3, 4]
+    assert lead.rejects.count == 0
+
+
+def test_only_robots_first_to_last_with_their_host_key_make_a_host() -> None:
+    three, four, five = (endpoint(robot=robot)[0] for robot in (3, 4, 5))
+    with pytest.raises(ValueError, match="first to last"):
+        HostedRobots([three, five], None)
+    with pytest.raises(ValueError, match="first to last"):
+        HostedRobots([four, three], None)
+    with pytest.raises(ValueError, match="no key"):
+        HostedRobots([three, four], WORLD_KEYS.only(["robot/3", "robot/4"]))

@@ -316,6 +316,24 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run(tmp_path: Path
     ]
 
 
+def test_the_process_layout_changes_no_robot_s_results() -> None:
+    """One process per robot (the default for a small swarm, each robot on its own keys)
+    and robots hosted three to a process (batches sealed by their host): the same seed,
+    the same results, robot for robot."""
+    common = ["--robots", "6", "--sites", "6", "--seed", "3", "--timeout", "900", "--no-record"]
+    results = {}
+    for per_process, processes in (("1", 6), ("3", 2)):
+        code, summary, stderr = run_swarm(
+            [*common, "--robots-per-process", per_process], unique_run_id(f"layout-{per_process}")
+        )
+        assert code == 0, stderr
+        assert summary["robot_processes"] == processes
+        # Everything of each robot but where it is when the run stops (the launcher notices
+        # the last decision a tick or two late, and the robots move on).
+        results[per_process] = [{**robot, "phase": None} for robot in summary["per_robot"]]
+    assert results["1"] == results["3"]
+
+
 def test_a_swarm_on_the_realtime_clock_reaches_the_right_consensus() -> None:
     """How closely the world keeps to the asked speed is a figure, not a check: measured by
     ``benchmarks/swarm_speed.py --realtime``."""

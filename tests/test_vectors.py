@@ -22,7 +22,7 @@ from robot_agent.link.udp_radio import (
     decode_frame,
     encode_frame,
 )
-from wire import names, protocol
+from wire import auth, batch, names, protocol
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
 ZENOH_PICO_BATCH = 2048  # bytes: one opinion and its attachment must fit one batch
@@ -35,7 +35,7 @@ def load(path: Path) -> dict[str, Any]:
 MESSAGE_FILES = {
     path.name: load(path)
     for path in sorted(VECTORS.glob("*.json"))
-    if path.name not in ("udp_frame.json", "auth.json", "tick.json")
+    if path.name not in ("udp_frame.json", "auth.json", "tick.json", "batch.json")
 }
 
 
@@ -148,6 +148,40 @@ def test_udp_frame_vectors_are_what_the_radio_sends(vector: dict[str, Any]) -> N
 def test_udp_frame_vectors_that_the_radio_drops(vector: dict[str, Any]) -> None:
     with pytest.raises(FrameError):
         decode_frame(bytes.fromhex(vector["hex"]))
+
+
+BATCH = load(VECTORS / "batch.json")
+
+
+@pytest.mark.parametrize("vector", BATCH["valid"], ids=[v["name"] for v in BATCH["valid"]])
+def test_batch_vectors_decode_to_the_robots_own_messages_under_their_host_s_tag(
+    vector: dict[str, Any],
+) -> None:
+    data = bytes.fromhex(vector["hex"])
+    decoded: list[tuple[int, msgspec.Struct]]
+    if vector["kind"] == "senses":
+        senses = batch.decode_senses(data)
+        last, decoded = senses.last, list(zip(senses.robots, senses.senses, strict=True))
+    else:
+        acts = batch.decode_acts(data)
+        last, decoded = acts.last, list(acts.acts)
+    assert last == vector["last"]
+    assert [(robot, msgspec.to_builtins(message)) for robot, message in decoded] == [
+        (entry["robot"], entry["message"]) for entry in vector["entries"]
+    ]
+    keyring = auth.Keyring(secret=bytes.fromhex(BATCH["secret_hex"]))
+    assert names.host_range(vector["identity"]) == (3, last)
+    attachment = bytes.fromhex(vector["tag_hex"])
+    assert keyring.open(vector["identity"], vector["key_expr"], data, attachment) == b""
+    with pytest.raises(auth.AuthError):  # a hosted robot's own key does not speak for it
+        keyring.open("robot/3", vector["key_expr"], data, attachment)
+
+
+@pytest.mark.parametrize("vector", BATCH["invalid"], ids=[v["name"] for v in BATCH["invalid"]])
+def test_batch_vectors_that_are_refused_whole(vector: dict[str, Any]) -> None:
+    decode = batch.decode_senses if vector["kind"] == "senses" else batch.decode_acts
+    with pytest.raises(batch.BatchError):
+        decode(bytes.fromhex(vector["hex"]))
 
 
 def test_the_files_are_exactly_what_the_generator_writes() -> None:

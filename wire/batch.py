@@ -1,18 +1,29 @@
-"""Batches: several robots' messages of one tick in one Zenoh message (no Zenoh here).
+"""Batches: a tick's senses and acts of the robots one process hosts, each way in one Zenoh
+message of a fixed binary layout (no Zenoh here).
 
-A process hosting several robots gets their senses from the world as one batch on
-``host/<lead>/sense`` and answers with one batch of their acts on ``host/<lead>/act``
-(``<lead>``: the first robot it hosts; docs/protocol.md). Each entry is exactly the message
-the robot would have sent or received on its own key: the JSON payload and the attachment
-sealed with that robot's run key over that robot's key expression (``robot/<id>/sense`` or
-``robot/<id>/act``), so a receiver checks every entry as if it had come alone, and one bad
-entry costs only itself. Batching saves Zenoh ``put`` calls and wake-ups, nothing else:
-what a robot decides cannot depend on it.
+A process hosting the robots ``first`` to ``last`` gets their senses from the world as one
+batch on ``host/<first>/sense`` and answers with one batch of their acts on
+``host/<first>/act`` (docs/protocol.md). The process is the trust boundary: its robots share
+its memory, and so its keys, so a batch carries one tag, of the host identity
+``host/<first>-<last>`` (``wire/names.py``), and the world takes from a batch of acts only
+entries of the robots ``first`` to ``last``. Batching saves Zenoh ``put`` calls, wake-ups,
+per-robot tags and JSON, nothing else: what a robot decides cannot depend on it (the
+numbers are the same 64-bit floats as in the JSON messages).
 
-Wire format (all integers big-endian)::
+Layout (little-endian; ``f64`` an IEEE 754 double)::
 
-    batch = "BNB1" u16(count) entry*count
-    entry = u32(robot) u16(len A) A u32(len P) P      A: attachment (empty: none), P: payload
+    senses = "BNS1" u32(last) u32(count) u64(tick) f64(t)
+             f64[count][11]   x, y, theta, prox[0..7] of each robot, row by row
+             u32[count]       robot ids
+             u16[count]       rx (radio deliveries of the tick)
+             u8[count]        camera (0 or 1: a frame comes this tick)
+    acts   = "BNA1" u32(last) u32(count)
+             count x (u32 robot, u64 tick, f64 left, f64 right, u8 capture, u16 radio_tx)
+
+A batch is refused whole (``BatchError``) unless it is exactly that: the magic, a count of
+at most MAX_ENTRIES, every byte accounted for, each robot once and below ``names.MAX_ROBOTS``,
+and every number within the bounds of the message it stands for (``protocol.Sense``,
+``protocol.Act``; NaN and infinities never are).
 """
 
 from __future__ import annotations
@@ -21,83 +32,178 @@ import struct
 from collections.abc import Sequence
 from typing import NamedTuple
 
+import numpy as np
+
 from wire import names, protocol, shape
 
-MAGIC = b"BNB1"
+SENSE_MAGIC = b"BNS1"
+ACT_MAGIC = b"BNA1"
 MAX_ENTRIES = shape.MAX_SWARM  # robots one host may carry: a whole swarm at most
-MAX_ATTACHMENT_BYTES = 1024  # a tag and, for what is batched today, no metadata
-MAX_BATCH_BYTES = 4 * 2**20
+SENSE_VALUES = 11  # x, y, theta and the 8 proximity readings
 
-_HEADER = struct.Struct(">4sH")
-_ROBOT_AND_ATTACHMENT = struct.Struct(">IH")
-_PAYLOAD_LENGTH = struct.Struct(">I")
+_SENSE_HEADER = struct.Struct("<4sIIQd")
+_SENSE_ROW_BYTES = 8 * SENSE_VALUES + 4 + 2 + 1
+_ACT_HEADER = struct.Struct("<4sII")
+_ACT_ROW = struct.Struct("<IQddBH")
+MAX_BATCH_BYTES = _SENSE_HEADER.size + MAX_ENTRIES * _SENSE_ROW_BYTES  # the larger kind
 
 
 class BatchError(protocol.ProtocolError):
     """A batch that is not exactly a valid one: the whole batch is dropped."""
 
 
-class Entry(NamedTuple):
-    robot: int
-    payload: bytes
-    attachment: bytes | None  # what the robot's own message would carry on its key
+class SenseBatch(NamedTuple):
+    """The senses of one tick for robots of one host, in the batch's order."""
+
+    last: int  # the host's last robot: with the key's first, its identity
+    robots: list[int]
+    senses: list[protocol.Sense]
 
 
-def encode(entries: Sequence[Entry]) -> bytes:
-    """One batch of ``entries`` (at most MAX_ENTRIES, each robot once)."""
-    if len(entries) > MAX_ENTRIES:
-        raise ValueError(f"a batch holds at most {MAX_ENTRIES} entries, not {len(entries)}")
-    parts = [_HEADER.pack(MAGIC, len(entries))]
-    for robot, payload, attachment in entries:
-        attachment = attachment or b""
-        parts.append(_ROBOT_AND_ATTACHMENT.pack(robot, len(attachment)))
-        parts.append(attachment)
-        parts.append(_PAYLOAD_LENGTH.pack(len(payload)))
-        parts.append(payload)
-    return b"".join(parts)
+class ActBatch(NamedTuple):
+    """Acts of robots of one host, in the batch's order."""
+
+    last: int
+    acts: list[tuple[int, protocol.Act]]  # (robot, its act)
 
 
-def decode(data: bytes) -> list[Entry]:
-    """The entries of a batch; BatchError unless ``data`` is exactly one valid batch: the
-    magic, a count within MAX_ENTRIES, robot ids of the protocol, each robot at most once,
-    attachments and payloads within their bounds, nothing left over."""
-    if len(data) > MAX_BATCH_BYTES:
-        raise BatchError(f"batch of {len(data)} bytes exceeds {MAX_BATCH_BYTES}")
-    if len(data) < _HEADER.size:
+# --- senses ------------------------------------------------------------------------------
+
+
+def encode_senses(
+    last: int,
+    *,
+    tick: int,
+    t: float,
+    robots: Sequence[int] | np.ndarray,
+    values: Sequence[Sequence[float]] | np.ndarray,
+    rx: Sequence[int] | np.ndarray,
+    camera: Sequence[bool] | np.ndarray,
+) -> bytes:
+    """One batch of senses: ``values`` is a (count, 11) array of each robot's x, y, theta
+    and 8 proximity readings, in the order of ``robots``."""
+    count = len(robots)
+    if count > MAX_ENTRIES:
+        raise ValueError(f"a batch holds at most {MAX_ENTRIES} entries, not {count}")
+    if np.shape(values) != (count, SENSE_VALUES) or len(rx) != count or len(camera) != count:
+        raise ValueError("one row of values, one rx and one camera flag per robot")
+    return b"".join(
+        (
+            _SENSE_HEADER.pack(SENSE_MAGIC, last, count, tick, t),
+            np.ascontiguousarray(values, dtype="<f8").tobytes(),
+            np.asarray(robots, dtype="<u4").tobytes(),
+            np.asarray(rx, dtype="<u2").tobytes(),
+            np.asarray(camera, dtype="u1").tobytes(),
+        )
+    )
+
+
+def decode_senses(data: bytes) -> SenseBatch:
+    """The senses of a batch; BatchError unless ``data`` is exactly one valid batch."""
+    if len(data) < _SENSE_HEADER.size:
         raise BatchError("batch shorter than its header")
-    magic, count = _HEADER.unpack_from(data, 0)
-    if magic != MAGIC:
-        raise BatchError("not a batch (wrong magic)")
+    magic, last, count, tick, t = _SENSE_HEADER.unpack_from(data, 0)
+    if magic != SENSE_MAGIC:
+        raise BatchError("not a batch of senses (wrong magic)")
+    _check_header(last, count, len(data) - _SENSE_HEADER.size, _SENSE_ROW_BYTES)
+    if tick > protocol.MAX_TICK or not 0.0 <= t <= protocol.MAX_SIM_TIME:
+        raise BatchError(f"tick {tick} at sim time {t!r} is out of range")
+    offset = _SENSE_HEADER.size
+    values = np.frombuffer(data, "<f8", count * SENSE_VALUES, offset).reshape(count, SENSE_VALUES)
+    offset += values.nbytes
+    robots = np.frombuffer(data, "<u4", count, offset).tolist()
+    rx = np.frombuffer(data, "<u2", count, offset + 4 * count).tolist()
+    camera = np.frombuffer(data, "u1", count, offset + 6 * count).tolist()
+    _check_robots(robots)
+    coords, angles, prox = values[:, :2], values[:, 2], values[:, 3:]
+    if not (
+        np.isfinite(values).all()
+        and (np.abs(coords) <= protocol.MAX_COORD).all()
+        and (np.abs(angles) <= protocol.MAX_ANGLE).all()
+        and ((prox >= 0.0) & (prox <= 1.0)).all()
+    ):
+        raise BatchError("a sense's pose or proximity reading is out of range")
+    if any(count > protocol.MAX_RX for count in rx) or any(flag > 1 for flag in camera):
+        raise BatchError("a sense's rx or camera flag is out of range")
+    senses = [
+        protocol.Sense(
+            v=protocol.VERSION,
+            tick=tick,
+            t=t,
+            x=row[0],
+            y=row[1],
+            theta=row[2],
+            prox=row[3:],
+            rx=deliveries,
+            camera=flag == 1,
+        )
+        for row, deliveries, flag in zip(values.tolist(), rx, camera, strict=True)
+    ]
+    return SenseBatch(last, robots, senses)
+
+
+# --- acts --------------------------------------------------------------------------------
+
+
+def encode_acts(last: int, acts: Sequence[tuple[int, protocol.Act]]) -> bytes:
+    """One batch of ``(robot, act)`` entries (at most MAX_ENTRIES, each robot once)."""
+    if len(acts) > MAX_ENTRIES:
+        raise ValueError(f"a batch holds at most {MAX_ENTRIES} entries, not {len(acts)}")
+    pack = _ACT_ROW.pack
+    rows = [
+        pack(robot, act.tick, act.left, act.right, act.capture, act.radio_tx) for robot, act in acts
+    ]
+    return _ACT_HEADER.pack(ACT_MAGIC, last, len(acts)) + b"".join(rows)
+
+
+def decode_acts(data: bytes) -> ActBatch:
+    """The acts of a batch; BatchError unless ``data`` is exactly one valid batch."""
+    if len(data) < _ACT_HEADER.size:
+        raise BatchError("batch shorter than its header")
+    magic, last, count = _ACT_HEADER.unpack_from(data, 0)
+    if magic != ACT_MAGIC:
+        raise BatchError("not a batch of acts (wrong magic)")
+    _check_header(last, count, len(data) - _ACT_HEADER.size, _ACT_ROW.size)
+    acts = []
+    wheel = protocol.MAX_WHEEL
+    rows = _ACT_ROW.iter_unpack(memoryview(data)[_ACT_HEADER.size :])
+    for robot, tick, left, right, capture, radio_tx in rows:
+        # A NaN fails every comparison, so it is refused here too.
+        if not (
+            -wheel <= left <= wheel
+            and -wheel <= right <= wheel
+            and tick <= protocol.MAX_TICK
+            and capture <= 1
+            and radio_tx <= protocol.MAX_TX
+        ):
+            raise BatchError(f"robot {robot}'s act is out of range")
+        act = protocol.Act(
+            v=protocol.VERSION,
+            tick=tick,
+            left=left,
+            right=right,
+            capture=capture == 1,
+            radio_tx=radio_tx,
+        )
+        acts.append((robot, act))
+    _check_robots([robot for robot, _ in acts])
+    return ActBatch(last, acts)
+
+
+# --- checks ------------------------------------------------------------------------------
+
+
+def _check_header(last: int, count: int, body: int, row: int) -> None:
+    if last >= names.MAX_ROBOTS:
+        raise BatchError(f"host's last robot {last} out of range")
     if count > MAX_ENTRIES:
         raise BatchError(f"batch of {count} entries exceeds {MAX_ENTRIES}")
-    offset = _HEADER.size
-    entries: list[Entry] = []
-    seen: set[int] = set()
-    for _ in range(count):
-        if offset + _ROBOT_AND_ATTACHMENT.size > len(data):
-            raise BatchError("batch cut short")
-        robot, attachment_length = _ROBOT_AND_ATTACHMENT.unpack_from(data, offset)
-        offset += _ROBOT_AND_ATTACHMENT.size
-        if robot >= names.MAX_ROBOTS:
-            raise BatchError(f"robot id {robot} out of range")
-        if robot in seen:
-            raise BatchError(f"robot {robot} twice in one batch")
-        seen.add(robot)
-        if attachment_length > MAX_ATTACHMENT_BYTES:
-            raise BatchError(f"attachment of {attachment_length} bytes")
-        attachment = data[offset : offset + attachment_length]
-        offset += attachment_length
-        if offset + _PAYLOAD_LENGTH.size > len(data):
-            raise BatchError("batch cut short")
-        (payload_length,) = _PAYLOAD_LENGTH.unpack_from(data, offset)
-        offset += _PAYLOAD_LENGTH.size
-        if payload_length > protocol.MAX_PAYLOAD_BYTES:
-            raise BatchError(f"payload of {payload_length} bytes")
-        if offset + payload_length > len(data):
-            raise BatchError("batch cut short")
-        payload = data[offset : offset + payload_length]
-        offset += payload_length
-        entries.append(Entry(robot, payload, attachment or None))
-    if offset != len(data):
-        raise BatchError(f"{len(data) - offset} bytes after the last entry")
-    return entries
+    if body != count * row:
+        raise BatchError(f"{body} bytes after the header, not {count} x {row}")
+
+
+def _check_robots(robots: list[int]) -> None:
+    if any(robot >= names.MAX_ROBOTS for robot in robots):
+        raise BatchError("a robot id out of range")
+    if len(set(robots)) != len(robots):
+        raise BatchError("a robot twice in one batch")

@@ -9,8 +9,10 @@ identities and certificate names.
 * A **beacon** has a name that is not all digits, so that it is never a robot's.
 * A **role** is what a process is to the run (``Role``); the liveliness tokens are
   ``alive/<role>/<id>``.
-* An **identity** says whose run key tags a message: ``robot/<id>``, ``beacon/<name>``, or
-  the role itself for the run's single processes (``world``, ``launcher``, ...).
+* An **identity** says whose run key tags a message: ``robot/<id>``, ``beacon/<name>``,
+  ``host/<first>-<last>`` (a process hosting the robots ``first`` to ``last``: the identity
+  says which robots it may speak for), or the role itself for the run's single processes
+  (``world``, ``launcher``, ...).
 * A **certificate name** (``--secure``: the common name of a process's TLS certificate) is
   the identity with ``-`` for ``/``: ``robot-7``, ``beacon-nest``, ``world``.
 """
@@ -18,6 +20,7 @@ identities and certificate names.
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from enum import StrEnum
 from typing import Annotated
 
@@ -53,9 +56,11 @@ VIEWER, FOXGLOVE, OBSERVER = Role.VIEWER.value, Role.FOXGLOVE.value, Role.OBSERV
 SINGLE_ROLES = (Role.WORLD, Role.LAUNCHER, Role.RECORDER, Role.VIEWER, Role.FOXGLOVE)
 
 _ROBOT_ID = "0|[1-9][0-9]{0,4}"  # below MAX_ROBOTS, one spelling per id
+HOST = "host"  # the identity of a process hosting robots: host/<first>-<last>
+_HOST = re.compile(f"{HOST}/({_ROBOT_ID})-({_ROBOT_ID})")
 _IDENTITY = re.compile(
     "(" + "|".join(role.value for role in SINGLE_ROLES) + ")"
-    f"|robot/({_ROBOT_ID})|beacon/({NAME_RE.pattern})"
+    f"|robot/({_ROBOT_ID})|beacon/({NAME_RE.pattern})|{_HOST.pattern}"
 )
 
 
@@ -123,19 +128,42 @@ def sender_identity(sender: str) -> str | None:
     return beacon_identity(sender) if is_beacon_name(sender) else None
 
 
+def host_identity(first: int, last: int) -> str:
+    """The identity of a process hosting the robots ``first`` to ``last`` (every id between
+    them): its run key seals the batches it exchanges with the world, and the world takes
+    from them only entries of those robots."""
+    if not 0 <= first <= last < MAX_ROBOTS:
+        raise ValueError(f"no process hosts robots {first} to {last}")
+    return f"{HOST}/{first}-{last}"
+
+
+def host_range(identity: str) -> tuple[int, int] | None:
+    """The robots (first, last) a host identity speaks for; None if it is not one."""
+    match = _HOST.fullmatch(identity)
+    if match is None:
+        return None
+    first, last = int(match[1]), int(match[2])
+    return (first, last) if first <= last else None
+
+
+def hosted_range(robots: Sequence[int]) -> tuple[int, int] | None:
+    """(first, last) if ``robots`` are every id from the first to the last once, in order,
+    as ``swarm run`` hosts them; None otherwise (such a process has no host identity)."""
+    if not robots or list(robots) != list(range(robots[0], robots[0] + len(robots))):
+        return None
+    return robots[0], robots[-1]
+
+
 def is_identity(identity: str) -> bool:
-    return _IDENTITY.fullmatch(identity) is not None
+    if _IDENTITY.fullmatch(identity) is None:
+        return False
+    return not identity.startswith(f"{HOST}/") or host_range(identity) is not None
 
 
 def check_identity(identity: str) -> str:
     if not is_identity(identity):
         raise ValueError(f"{identity!r} is not an identity of a run")
     return identity
-
-
-def role_of(identity: str) -> Role:
-    """The role of a valid identity."""
-    return Role(identity.partition("/")[0])
 
 
 # --- certificate names -----------------------------------------------------------------

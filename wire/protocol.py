@@ -30,13 +30,22 @@ MAX_PAYLOAD_BYTES = 64 * 1024
 MAX_FRAME_BYTES = 1024 * 1024
 OPINION_DIGITS = 9
 
-_Coord = Annotated[float, msgspec.Meta(ge=-1e6, le=1e6)]
-_Angle = Annotated[float, msgspec.Meta(ge=-1e3, le=1e3)]
-_SimTime = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
-_Tick = Annotated[int, msgspec.Meta(ge=0, le=2**53)]
+# The bounds, by name where the binary batches (wire/batch.py) check them too.
+MAX_COORD = 1e6  # metres, either sign
+MAX_ANGLE = 1e3  # radians, either sign
+MAX_SIM_TIME = 1e9  # seconds
+MAX_TICK = 2**53
+MAX_WHEEL = 10.0  # m/s, either sign
+MAX_RX = 10_000  # radio messages delivered to one robot in one tick
+MAX_TX = 1000  # radio messages one controller sends in one tick
+
+_Coord = Annotated[float, msgspec.Meta(ge=-MAX_COORD, le=MAX_COORD)]
+_Angle = Annotated[float, msgspec.Meta(ge=-MAX_ANGLE, le=MAX_ANGLE)]
+_SimTime = Annotated[float, msgspec.Meta(ge=0.0, le=MAX_SIM_TIME)]
+_Tick = Annotated[int, msgspec.Meta(ge=0, le=MAX_TICK)]
 _Count = Annotated[int, msgspec.Meta(ge=0, le=2**53)]
 _Unit = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
-_Wheel = Annotated[float, msgspec.Meta(ge=-10.0, le=10.0)]
+_Wheel = Annotated[float, msgspec.Meta(ge=-MAX_WHEEL, le=MAX_WHEEL)]
 _RobotId = Annotated[int, msgspec.Meta(ge=0, lt=names.MAX_ROBOTS)]
 _SiteId = Annotated[int, msgspec.Meta(ge=0, lt=MAX_OPTIONS)]
 _Positive = Annotated[float, msgspec.Meta(gt=0.0, le=1e6)]
@@ -155,7 +164,7 @@ class Sense(Message, frozen=True):
     y: _Coord
     theta: _Angle
     prox: Annotated[list[_Unit], msgspec.Meta(min_length=8, max_length=8)]
-    rx: Annotated[int, msgspec.Meta(ge=0, le=10_000)]
+    rx: Annotated[int, msgspec.Meta(ge=0, le=MAX_RX)]
     camera: bool
 
 
@@ -170,15 +179,20 @@ class Act(Message, frozen=True):
     left: _Wheel
     right: _Wheel
     capture: bool
-    radio_tx: Annotated[int, msgspec.Meta(ge=0, le=1000)]
+    radio_tx: Annotated[int, msgspec.Meta(ge=0, le=MAX_TX)]
 
 
 class Ack(Message, frozen=True):
-    """A body-less controller's (the nest beacon's) answer to tick ``tick``."""
+    """A body-less controller's (the nest beacon's) answer to tick ``tick``.
+
+    ``next_tick``: the next tick it answers, for it sends nothing before then; the world
+    neither waits for it nor sends it the clock until that tick. None: the next tick.
+    """
 
     tick: _Tick
-    radio_tx: Annotated[int, msgspec.Meta(ge=0, le=1000)]
+    radio_tx: Annotated[int, msgspec.Meta(ge=0, le=MAX_TX)]
     rejected: _Count = 0  # invalid messages the beacon dropped so far
+    next_tick: _Tick | None = None
 
 
 class CameraMeta(Message, frozen=True):
@@ -345,6 +359,10 @@ class Keys:
 
     def beacon_ack(self, beacon: str) -> str:
         return f"{self.prefix}/beacon/{beacon}/ack"
+
+    def beacon_clock(self, beacon: str) -> str:
+        """The clock of the ticks a beacon answers (``Ack.next_tick``), sent to it alone."""
+        return f"{self.prefix}/beacon/{beacon}/clock"
 
     def radio_tx(self, sender: int | str) -> str:
         return f"{self.prefix}/radio/tx/{sender}"

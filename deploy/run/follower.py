@@ -1,5 +1,7 @@
-"""Following a run from what its processes publish: the robots' status, the world's clock
-and state, the beacons' acks.
+"""Following a run from what its processes publish: the robots' status, the world's state
+(every ``--state-every`` ticks: its sim time and poses), the beacons' acks, and the world's
+clock only when faults are to fall due at a sim time: the launcher need not follow every
+tick, and costs the run nothing on the ticks in between.
 
 The subscription is thin (``subscribe``): Zenoh's callbacks only copy each sample, as it
 came, into the launcher's inbox. The launcher's main thread hands them to
@@ -54,8 +56,11 @@ class Heard:
         return message_bytes(self.payload, self.attachment, self.key)
 
 
-def subscribe(session: zenoh.Session, keys: protocol.Keys, inbox: BoundedInbox[Any]) -> list[Any]:
-    """Queue every status, clock, state and ack of the run in ``inbox``; the subscribers."""
+def subscribe(
+    session: zenoh.Session, keys: protocol.Keys, inbox: BoundedInbox[Any], clock: bool
+) -> list[Any]:
+    """Queue every status, state and ack of the run in ``inbox``, and every clock if
+    ``clock`` (a fault falls due at a sim time); the subscribers."""
 
     def queue_as(kind: Kind) -> Callable[[zenoh.Sample], None]:
         def callback(sample: zenoh.Sample) -> None:
@@ -67,10 +72,11 @@ def subscribe(session: zenoh.Session, keys: protocol.Keys, inbox: BoundedInbox[A
 
     watched = {
         Kind.STATUS: keys.status("*"),
-        Kind.CLOCK: keys.world_clock,
         Kind.STATE: keys.world_state,
         Kind.ACK: keys.beacon_ack("*"),
     }
+    if clock:
+        watched[Kind.CLOCK] = keys.world_clock
     return [session.declare_subscriber(key, queue_as(kind)) for kind, key in watched.items()]
 
 
@@ -98,8 +104,8 @@ class Follower:
             body_length=2 * EPUCK.radius,
             slot_of=slots.slot,
         )
-        self.sim_time = 0.0
-        self.started_at: float | None = None  # the wall time of the first clock
+        self.sim_time = 0.0  # the latest of the world's clock and state
+        self.started_at: float | None = None  # the wall time of the first clock or state
         self.ticked_at: float | None = None  # the wall time the sim clock last advanced
         self.last_state: protocol.WorldState | None = None
         self.beacon_rejected: dict[str, int] = {}  # the beacons' own counts, from their acks
@@ -148,18 +154,22 @@ class Follower:
             self.beacon_rejected[name] = max(self.beacon_rejected.get(name, 0), ack.rejected)
         elif heard.kind is Kind.CLOCK:
             auth.unseal(keyring, names.WORLD, key, payload, attachment)
-            clock = protocol.decode(payload, protocol.Clock)
-            now = self.clock()
-            if self.started_at is None:
-                self.started_at = now
-            if self.ticked_at is None or clock.t > self.sim_time:
-                self.ticked_at = now
-            self.sim_time = clock.t
+            self._ticked(protocol.decode(payload, protocol.Clock).t)
         else:
             auth.unseal(keyring, names.WORLD, key, payload, attachment)
             state = protocol.decode(payload, protocol.WorldState)
+            self._ticked(state.t)
             self.last_state = state
             self.watchdog.poses(state.t, ((pose.id, pose.x, pose.y) for pose in state.robots))
+
+    def _ticked(self, sim_time: float) -> None:
+        """The world said its sim time (its clock and its state may come in either order)."""
+        now = self.clock()
+        if self.started_at is None:
+            self.started_at = now
+        if self.ticked_at is None or sim_time > self.sim_time:
+            self.ticked_at = now
+        self.sim_time = max(self.sim_time, sim_time)
 
     # --- what happened to robots' processes -----------------------------------------
 

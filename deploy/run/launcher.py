@@ -278,6 +278,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
             timeout_kind=halt.limit if stop is Stop.TIMEOUT else None,
             stuck=follower.watchdog.stuck(),
             byzantine={robot: str(how) for robot, how in plan.byzantine_robots.items()},
+            robot_processes=plan.robot_processes,
         ),
         follower.records.values(),
     )

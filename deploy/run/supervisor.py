@@ -154,7 +154,8 @@ class Supervisor:
             fetch_world_info(self.session, self.keys, START_WAIT, self.keyring, names.LAUNCHER)
         except TimeoutError as error:
             raise StartError(str(error), world) from None
-        self._declared = subscribe(self.session, self.keys, self.inbox)
+        # The clock only when a fault falls due at a sim time; world/state says the rest.
+        self._declared = subscribe(self.session, self.keys, self.inbox, bool(self.plan.faults))
 
     def _start_recorder(self, stopping: Stopping) -> None:
         plan, network = self.plan, self.network
@@ -214,8 +215,12 @@ class Supervisor:
             *network.client_args(names.robot_certificate("{id}")),
         ]
         argv += self.plan.trace_args(name)
-        # Only the keys of its own robots: whatever it says can only be in their names.
-        env = network.env(names.robot_identity(robot) for robot in robots)
+        # Only the keys of its own robots, and of its host identity when it hosts several
+        # (the key of its batches): whatever it says can only be in their names.
+        identities = [names.robot_identity(robot) for robot in robots]
+        if len(robots) > 1 and self.plan.batch:
+            identities.append(names.host_identity(robots[0], robots[-1]))
+        env = network.env(identities)
         if self.plan.spawn == "fork":
             return self.group.fork(name, "robot_agent.node.cli", argv, env=env)
         return self.group.start(name, python_module("robot_agent.node", *argv), env=env)

@@ -81,6 +81,16 @@ class Beacon:
         self.seq += 1
         return [protocol.BeaconPayload(v=protocol.VERSION, id=self.config.name, seq=self.seq)]
 
+    def next_tick(self, tick: int, dt: float) -> int:
+        """The first tick after ``tick`` whose sim time (``tick * dt``, as the world counts
+        it) has a transmission due: ``on_tick`` does nothing on the ticks in between, so a
+        world in lockstep need not wait for the beacon on them."""
+        # A start below the answer (by a tick's margin for rounding), then step to it.
+        after = max(tick + 1, int((self.next_due - 1e-9) / dt) - 1)
+        while after * dt + 1e-9 < self.next_due:
+            after += 1
+        return after
+
     def follow_new_world(self) -> None:
         """A restarted world counts sim time from zero again: transmit on its next tick."""
         self.next_due = 0.0

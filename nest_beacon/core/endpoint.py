@@ -1,8 +1,11 @@
 """The nest beacon's end of the wire, whatever carries it (pure: no I/O, no clock).
 
-The beacon follows the world's clock (``world/clock``): for each tick it believes, it
-transmits when due (``Beacon.on_tick``) and answers the tick with an ``Ack``, so it takes
-part in the lockstep barrier like any controller. ``BeaconEndpoint`` takes each clock
+The beacon follows the world's clock on its own key (``beacon/<name>/clock``): for each
+tick it believes, it transmits when due (``Beacon.on_tick``) and answers the tick with an
+``Ack``, so it takes part in the lockstep barrier like any controller. The ack names the
+next tick it answers, the next with a transmission due (``Ack.next_tick``): the world sends
+it no clock and does not wait for it before then, so the beacon follows one tick in five
+(its period over the world's step), not every tick. ``BeaconEndpoint`` takes each clock
 message as (payload, attachment) and returns what to send as data: the tick's radio
 transmissions, then the ack, each sealed with the beacon's key.
 
@@ -18,6 +21,7 @@ from __future__ import annotations
 
 import enum
 import logging
+import math
 from typing import NamedTuple
 
 from nest_beacon.core.beacon import Beacon
@@ -53,10 +57,12 @@ class BeaconEndpoint:
         self.identity = names.beacon_identity(self.name)
         self.dt = dt
         self.keyring = keyring  # None: an unauthenticated run
-        self.ticks = guard.TickWindow()
+        # It answers a tick per period: the next one it believes may be that far ahead.
+        self.window = guard.TICK_WINDOW + math.ceil(beacon.config.period / dt)
+        self.ticks = guard.TickWindow(self.window)
         self.worlds = guard.WorldFollower()
         self.rejected = 0
-        self.clock_key = keys.world_clock  # the key of its one input
+        self.clock_key = keys.beacon_clock(self.name)  # the key of its one input
         self.output_keys = {
             OutputKind.RADIO_TX: keys.radio_tx(self.name),
             OutputKind.ACK: keys.beacon_ack(self.name),
@@ -95,6 +101,7 @@ class BeaconEndpoint:
                 tick=clock.tick,
                 radio_tx=len(outgoing),
                 rejected=self.rejected,
+                next_tick=self.beacon.next_tick(clock.tick, self.dt),
             )
         )
         ack_key = self.output_keys[OutputKind.ACK]
@@ -111,7 +118,7 @@ class BeaconEndpoint:
         seen = self.worlds.appeared(instance)
         if seen == "new":
             log.warning("beacon %s: a new world server appeared; following it", self.name)
-            self.ticks = guard.TickWindow()
+            self.ticks = guard.TickWindow(self.window)
             self.beacon.follow_new_world()
         elif seen == "back":  # its ticks went on while this beacon was cut off
             log.warning("beacon %s: the world server is back; following it", self.name)

@@ -1,8 +1,9 @@
 """The nest beacon on Zenoh: a thin adapter around its endpoint.
 
 ``nest_beacon.core.endpoint.BeaconEndpoint`` decides what a clock message is worth and
-what to send for its tick; ``BeaconNode`` subscribes to the world's clock and liveliness,
-hands them over, and publishes what comes back. The clock is answered in the Zenoh
+what to send for its tick; ``BeaconNode`` subscribes to the clock the world sends it
+(``beacon/<name>/clock``, on the ticks it answers) and to the world's liveliness, hands
+them over, and publishes what comes back. The clock is answered in the Zenoh
 callback that brings it, under the beacon's lock (a wake-up of the main thread per tick
 was most of the beacon's answer time, and it is in the lockstep barrier); the main
 thread handles what is rare (the world's liveliness, stop) from a bounded inbox.

@@ -15,7 +15,10 @@ any link that carries the same (key, payload, attachment) triples. The endpoint
   seen (the controller's clock never runs backwards); the same one back after an outage
   is rejoined at whatever tick it has reached;
 * returns what the robot sends for a step as data (``Step``): its radio transmissions, its
-  act and, when it changed, its status, each sealed with the robot's key.
+  act and, when it changed, its status, each sealed with the robot's key. A robot whose
+  process answers for it in batches (``hosting.HostedRobots``: ``batched``) takes its
+  senses from the batch, already checked against the process's key and decoded
+  (``receive_sense``), and leaves its act to the batch.
 
 Time comes only from the messages. ``arrived`` is an opaque mark a tracing transport may
 attach to an input (its clock's reading); it comes back in the ``Step`` untouched.
@@ -72,13 +75,15 @@ class Step(NamedTuple):
     tick: int
     arrived: float  # the latest mark of the tick's inputs (0.0 unless the transport marks)
     transmissions: tuple[Outgoing, ...]
-    act: Outgoing
+    answer: protocol.Act  # the act itself
+    act: Outgoing | None  # the act as sent on the robot's key; None: in its host's batch
     status: Outgoing | None
 
     @property
     def outgoing(self) -> list[Outgoing]:
+        act = [] if self.act is None else [self.act]
         status = [] if self.status is None else [self.status]
-        return [*self.transmissions, self.act, *status]
+        return [*self.transmissions, *act, *status]
 
 
 class RobotEndpoint:
@@ -105,6 +110,7 @@ class RobotEndpoint:
         self.worlds = guard.WorldFollower()  # the world server's instance (its Zenoh id)
         self.time_offset = 0.0  # keeps the controller's clock monotonic across world restarts
         self.last_t = 0.0
+        self.batched = False  # its process answers for it in batches (hosting.py)
         name = names.robot_name(robot_id)
         # The key each input comes on: its tag covers it.
         self.input_keys = {
@@ -143,6 +149,20 @@ class RobotEndpoint:
         if ready is None:
             return None
         return self._step(ready)
+
+    def receive_sense(self, sense: protocol.Sense, arrived: float = 0.0) -> Step | None:
+        """Take a sense from a batch of senses that passed its process's checks (its tag,
+        its decoding: ``hosting.HostedRobots``); the step it completes, if any."""
+        try:
+            refused = guard.time_refused(sense.tick, sense.t, self.dt)
+            if refused:
+                raise protocol.ProtocolError(refused)
+            held = self.assembly.add_sense(sense, arrived)
+        except protocol.ProtocolError as error:
+            self.reject(InputKind.SENSE, error)
+            return None
+        ready = self.assembly.take_ready(sense.tick) if held else None
+        return None if ready is None else self._step(ready)
 
     def _hold(
         self, kind: InputKind, payload: bytes, attachment: bytes | None, arrived: float
@@ -224,10 +244,16 @@ class RobotEndpoint:
             )
             for sent in answer.transmissions
         )
-        act = protocol.encode(answer.act)
-        act_message = Outgoing(OutputKind.ACT, self._act_key, act, self._seal(self._act_key, act))
+        act_message = None
+        if not self.batched:
+            act = protocol.encode(answer.act)
+            act_message = Outgoing(
+                OutputKind.ACT, self._act_key, act, self._seal(self._act_key, act)
+            )
         status = self.status(sense.tick) if self.controller.take_status_change() else None
-        return Step(self.robot_id, sense.tick, ready.arrived, transmissions, act_message, status)
+        return Step(
+            self.robot_id, sense.tick, ready.arrived, transmissions, answer.act, act_message, status
+        )
 
     def status(self, tick: int) -> Outgoing:
         """The robot's status at ``tick``, its rejections included, sealed."""

@@ -1,10 +1,12 @@
 """Several robots hosted by one process, answering in batches (pure: no I/O).
 
-The world sends the senses of all of them as one batch on ``host/<lead>/sense`` and takes
-the acts of the robots one input stepped as one batch on ``host/<lead>/act`` (``<lead>``:
-the first robot hosted; ``wire/batch.py``). Each entry is exactly the message the robot
-would have received or sent on its own key, sealed with its own key, so each robot's
-endpoint checks its sense as if it had come alone and one bad entry costs only itself.
+The process hosting the robots ``first`` to ``last`` is one trust boundary: its robots share
+its memory, and so its keys. So the world sends their senses as one batch on
+``host/<first>/sense`` and takes their acts as one batch on ``host/<first>/act``
+(``wire/batch.py``), each sealed once with the process's own key, that of the host identity
+``host/<first>-<last>`` (``wire/names.py``), which the world takes only for those robots.
+Everything else a robot sends or receives (radio, camera, status, and its senses until the
+world has learnt the batched path) stays on its own keys, sealed with its own key.
 """
 
 from __future__ import annotations
@@ -12,45 +14,65 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 
 from robot_agent.core.endpoint import Outgoing, OutputKind, RobotEndpoint, Step
-from wire import batch, protocol
+from wire import auth, batch, names, protocol
 
 
 class HostedRobots:
-    """Splits a batch of senses among the hosted robots and gathers their acts."""
+    """Checks and splits a batch of senses among the hosted robots, and gathers their acts
+    into batches."""
 
-    def __init__(self, endpoints: Sequence[RobotEndpoint]) -> None:
-        self.lead = endpoints[0]
-        self.hosted = {endpoint.robot_id for endpoint in endpoints}
+    def __init__(self, endpoints: Sequence[RobotEndpoint], keyring: auth.Keyring | None) -> None:
+        """``endpoints``: robots ``first`` to ``last``, each once, in order (ValueError
+        otherwise); ``keyring``: the host identity's key (None: an unauthenticated run)."""
+        hosted = names.hosted_range([endpoint.robot_id for endpoint in endpoints])
+        if hosted is None:
+            raise ValueError("a process answers in batches for robots first to last, in order")
+        self.first, self.last = hosted
+        self.identity = names.host_identity(self.first, self.last)
+        if keyring is not None and not keyring.holds(self.identity):
+            raise ValueError(f"no key for {self.identity}")
+        self.keyring = keyring
+        self.lead = endpoints[0]  # counts what is refused of the batches
+        self.by_id = {endpoint.robot_id: endpoint for endpoint in endpoints}
+        for endpoint in endpoints:
+            endpoint.batched = True
         keys = self.lead.keys
-        self.sense_key = keys.host_sense(self.lead.robot_id)
-        self.act_key = keys.host_act(self.lead.robot_id)
-        self._acts: list[batch.Entry] = []
+        self.sense_key = keys.host_sense(self.first)
+        self.act_key = keys.host_act(self.first)
+        self._acts: list[tuple[int, protocol.Act]] = []
 
-    def senses(self, payload: bytes) -> Iterator[batch.Entry]:
-        """The entries of a batch of senses, each for a robot hosted here, to hand to that
-        robot's endpoint as a sense; a bad batch, or an entry for a robot not hosted here,
-        is refused (counted by the lead robot) when it is reached."""
+    def senses(
+        self, payload: bytes, attachment: bytes | None
+    ) -> Iterator[tuple[RobotEndpoint, protocol.Sense]]:
+        """Each sense of a batch of senses with the robot it is for, to hand to that robot's
+        endpoint (``receive_sense``). A batch without this host's tag, or that is not exactly
+        a valid batch of this host's, is refused whole; an entry for a robot not hosted
+        here is refused when it is reached; both counted by the first robot."""
         try:
-            entries = batch.decode(payload)
-        except batch.BatchError as error:
+            auth.unseal(self.keyring, self.identity, self.sense_key, payload, attachment)
+            senses = batch.decode_senses(payload)
+            if senses.last != self.last:
+                raise batch.BatchError(f"a batch of host/{self.first}-{senses.last}'s")
+        except (auth.AuthError, protocol.ProtocolError) as error:
             self.lead.reject("host sense", error)
             return
-        for entry in entries:
-            if entry.robot in self.hosted:
-                yield entry
-            else:
-                stranger = protocol.ProtocolError(f"robot {entry.robot} is not hosted here")
+        for robot, sense in zip(senses.robots, senses.senses, strict=True):
+            endpoint = self.by_id.get(robot)
+            if endpoint is None:
+                stranger = protocol.ProtocolError(f"robot {robot} is not hosted here")
                 self.lead.reject("host sense", stranger)
+            else:
+                yield endpoint, sense
 
     def hold(self, step: Step) -> None:
         """Keep a step's act for the next batch (its other messages go out on their own)."""
-        act = step.act
-        self._acts.append(batch.Entry(step.robot, act.payload, act.attachment))
+        self._acts.append((step.robot, step.answer))
 
     def take_acts(self) -> Outgoing | None:
-        """The acts held since the last call, as one batch; None if there are none."""
+        """The acts held since the last call, as one sealed batch; None if there are none."""
         if not self._acts:
             return None
-        acts = Outgoing(OutputKind.HOST_ACT, self.act_key, batch.encode(self._acts), None)
+        payload = batch.encode_acts(self.last, self._acts)
         self._acts.clear()
-        return acts
+        attachment = auth.seal(self.keyring, self.identity, self.act_key, payload)
+        return Outgoing(OutputKind.HOST_ACT, self.act_key, payload, attachment)

@@ -99,6 +99,24 @@ def certificate_robot(config_file: str | None) -> int | None:
     return names.robot_of_certificate(certificate_name(config_file))
 
 
+def host_batch(
+    nodes: list[RobotNode], inbox: BoundedInbox[Event], keyring: auth.Keyring | None
+) -> HostBatch | None:
+    """The batched path of a process hosting ``nodes``, or None (with a warning) when it
+    cannot have one: its robots are not every id from the first to the last, or its run
+    keys hold no key for its host identity; each robot then answers on its own keys."""
+    hosted = names.hosted_range([node.robot_id for node in nodes])
+    identity = names.host_identity(*hosted) if hosted is not None else None
+    if identity is None or (keyring is not None and not keyring.holds(identity)):
+        log.warning(
+            "robots %s answer on their own keys: a batch needs robots first to last and "
+            "the key of their host identity",
+            ", ".join(str(node.robot_id) for node in nodes),
+        )
+        return None
+    return HostBatch(nodes, inbox, keyring.only([identity]) if keyring is not None else None)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="robot-agent",
@@ -127,7 +145,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--no-batch",
         action="store_true",
         help="answer on each robot's own keys even when hosting several robots (by default "
-        "a process hosting several robots exchanges one batch per step with the world)",
+        "a process hosting robots N to M exchanges one batch per step with the world, sealed "
+        "with the key of its host identity host/N-M)",
     )
     parser.add_argument(
         "--trace",
@@ -202,8 +221,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             node.start()
             nodes.append(node)
         if len(nodes) > 1 and not args.no_batch:
-            host = HostBatch(nodes, inbox)
-            host.start()
+            host = host_batch(nodes, inbox, keyring)
+            if host is not None:
+                host.start()
         log.info("robot(s) %s running", ", ".join(str(node.robot_id) for node in nodes))
         serve(nodes, inbox)
     except (zenoh.ZError, TimeoutError, NoKeyError) as error:

@@ -5,10 +5,10 @@ one robot or many. What a robot does with what it receives (checks, tick assembl
 control step, sealing what it sends) is ``robot_agent.core.endpoint.RobotEndpoint``;
 ``RobotNode`` subscribes to its inputs, hands them over and publishes what comes back.
 A process hosting several robots answers for all of them in one batch of acts per input
-that stepped them, on its first robot's session (``host/<lead>/act``, wire/batch.py;
+that stepped them, on its first robot's session (``host/<first>/act``, wire/batch.py;
 ``HostBatch`` around ``robot_agent.core.hosting.HostedRobots``); the world then sends
-their senses in one batch too. Each entry is sealed with its own robot's key, and every
-robot keeps its own keys for radio, status, camera and liveliness.
+their senses in one batch too. A batch is sealed once, with the process's own key (the
+host identity's); every robot keeps its own keys for radio, status, camera and liveliness.
 
 Threads: a robot's inputs (sense, batch of senses, radio, camera) are handled in the Zenoh
 callback that brings them, under one lock per process, so the robots of a process are
@@ -34,7 +34,7 @@ from plumbing.trace import TraceWriter, now
 from plumbing.zenoh_session import reliable_publisher
 from robot_agent.core.endpoint import InputKind, Outgoing, OutputKind, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
-from wire import protocol
+from wire import auth, protocol
 from wire.names import Role
 
 log = logging.getLogger("robot_agent")
@@ -177,6 +177,15 @@ class RobotNode:
         if step is not None:
             self._send(step, handled)
 
+    def take_sense(self, sense: protocol.Sense, arrived: float) -> None:
+        """Hand the endpoint its sense from its process's batch (checked there), and send
+        what the step it completes answers."""
+        self._fold_dropped()
+        handled = now() if self.trace is not None else 0.0
+        step = self.endpoint.receive_sense(sense, arrived)
+        if step is not None:
+            self._send(step, handled)
+
     def _fold_dropped(self) -> None:
         """Count in the robot's rejections what the inbox dropped on arrival (too big, or
         the inbox full); looked at without its lock, taken with it."""
@@ -196,7 +205,8 @@ class RobotNode:
                 "arrived": round(step.arrived, 6),
                 "handled": round(handled, 6),
             }
-        if self.host is not None:
+        if step.act is None:
+            assert self.host is not None  # a batched robot's act leaves in its host's batch
             self.host.hold(step, line)
         else:
             self._act.put(step.act.payload, attachment=step.act.attachment)
@@ -211,8 +221,9 @@ class RobotNode:
 
 class HostBatch:
     """The batched path of a process hosting several robots: the senses of all of them
-    arrive as one batch on ``host/<lead>/sense``, and the acts of the robots stepped on one
-    event leave as one batch on ``host/<lead>/act``, both on the lead robot's session.
+    arrive as one batch on ``host/<first>/sense``, and the acts of the robots stepped on one
+    event leave as one batch on ``host/<first>/act``, both on the first robot's session and
+    sealed with the process's key.
 
     The world learns the path from the first batch of acts, and until then (and after
     it restarts) sends each robot's sense on its own key, which every robot still
@@ -222,11 +233,18 @@ class HostBatch:
     a robot steps only once all of a tick's inputs are in, whatever order they came in.
     """
 
-    def __init__(self, nodes: Sequence[RobotNode], inbox: BoundedInbox[Event]) -> None:
+    def __init__(
+        self,
+        nodes: Sequence[RobotNode],
+        inbox: BoundedInbox[Event],
+        keyring: auth.Keyring | None,
+    ) -> None:
+        """``keyring``: the host identity's key (None: an unauthenticated run); ValueError
+        unless ``nodes`` are robots first to last in order and the key is there."""
         self.lead = nodes[0]
         self.by_id = {node.robot_id: node for node in nodes}
         self.inbox = inbox
-        self.robots = HostedRobots([node.endpoint for node in nodes])
+        self.robots = HostedRobots([node.endpoint for node in nodes], keyring)
         self.steps: list[dict[str, float]] = []  # --trace lines of the batched acts
         self.lock = self.lead.lock
         with self.lock:
@@ -238,15 +256,17 @@ class HostBatch:
 
         def callback(sample: zenoh.Sample) -> None:
             payload = sample.payload.to_bytes()
+            attachment = sample.attachment
+            extra = attachment.to_bytes() if attachment is not None else None
             arrived = now() if lead.trace is not None else 0.0
             if len(payload) > MAX_MESSAGE_BYTES:  # never valid: the inbox drops and counts it
-                event = Event(lead.robot_id, EventKind.BATCH, payload, None, arrived)
+                event = Event(lead.robot_id, EventKind.BATCH, payload, extra, arrived)
                 self.inbox.put(event, len(payload), lead.robot_id)
                 return
             with self.lock:
                 if self.lead.closed:
                     return
-                self.deliver(payload, arrived)
+                self.deliver(payload, extra, arrived)
                 self.flush()
 
         self._subscriber = lead.session.declare_subscriber(self.robots.sense_key, callback)
@@ -255,10 +275,10 @@ class HostBatch:
     def close(self) -> None:
         self._subscriber.undeclare()
 
-    def deliver(self, payload: bytes, arrived: float = 0.0) -> None:
-        """Hand each entry of a batch of senses to its robot, as if it came on its key."""
-        for robot, sense, attachment in self.robots.senses(payload):
-            self.by_id[robot].take(InputKind.SENSE, sense, attachment, arrived)
+    def deliver(self, payload: bytes, attachment: bytes | None, arrived: float = 0.0) -> None:
+        """Hand each sense of a batch of senses to its robot."""
+        for endpoint, sense in self.robots.senses(payload, attachment):
+            self.by_id[endpoint.robot_id].take_sense(sense, arrived)
 
     def hold(self, step: Step, line: dict[str, float] | None) -> None:
         self.robots.hold(step)
@@ -270,7 +290,7 @@ class HostBatch:
         acts = self.robots.take_acts()
         if acts is None:
             return
-        self._publisher.put(acts.payload)
+        self._publisher.put(acts.payload, attachment=acts.attachment)
         trace = self.lead.trace
         if trace is not None:
             answered = round(now(), 6)

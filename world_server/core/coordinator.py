@@ -11,15 +11,16 @@ answered it and every radio message they announced arrived, or when the stall de
 passes (a participant that misses SUSPEND_AFTER ticks in a row is not waited for until it
 answers again); with nobody left it idles, and the next token that comes back closes the
 tick at once. Real time closes a tick when the pacer says so, with whatever arrived.
-Closing advances the World and delivers the radio; opening sends the clock first, the
-camera frames, each robot's senses (in its process's batch if it answers in batches),
-and every ``state_every`` ticks the world's state.
+Closing advances the World and delivers the radio; opening sends the clock first (to
+each beacon that answers the tick, and on ``world/clock`` for observers), the camera
+frames, every robot's senses, made for all of them at once (in its process's batch, sealed
+with that process's key, if it answers in batches), and every ``state_every`` ticks the
+world's state.
 """
 
 from __future__ import annotations
 
 import logging
-from collections import Counter
 from collections.abc import Callable
 from enum import StrEnum
 
@@ -40,7 +41,7 @@ from world_server.core.events import (
     ReplyError,
 )
 from world_server.core.intake import TickIntake
-from world_server.core.roster import SUSPEND_AFTER, Roster
+from world_server.core.roster import SUSPEND_AFTER, Host, Roster
 from world_server.core.world import World
 
 log = logging.getLogger("world_server")
@@ -251,8 +252,16 @@ class Coordinator:
                 self._answered(event, names.robot_identity(robot))
 
     def _ack(self, event: Event) -> None:
-        who = self.intake.take_ack(event)
-        if who is not None and self.traced:
+        taken = self.intake.take_ack(event)
+        if taken is None:
+            return
+        who, ack = taken
+        name = who.partition("/")[2]
+        if ack.next_tick is None:
+            self.roster.beacon_next.pop(name, None)
+        else:
+            self.roster.beacon_next[name] = ack.next_tick
+        if self.traced:
             self._answered(event, who)
 
     def _answered(self, event: Event, who: str) -> None:
@@ -332,10 +341,15 @@ class Coordinator:
     def _open_tick(self, tick: int, rx_counts: dict[str, int], frames: dict[int, bytes]) -> None:
         if self.traced:
             self.outbox(Mark(Moment.OPEN_START))
-        # The clock first: the beacon, in the barrier too, answers while the senses go out.
+        # The clock first: a beacon that answers this tick does so while the senses go out.
+        # Each beacon is sent it only for the ticks it answers; world/clock is for observers.
         clock = protocol.encode(protocol.Clock(v=protocol.VERSION, tick=tick, t=self.world.t))
+        for beacon in self.roster.beacons_answering(tick):
+            key = self.keys.beacon_clock(beacon)
+            self.outbox(Publish(key, clock, self._seal(names.WORLD, key, clock), steady=True))
         key = self.keys.world_clock
-        self.outbox(Publish(key, clock, self._seal(names.WORLD, key, clock), steady=True))
+        sealed = self._seal(names.WORLD, key, clock)
+        self.outbox(Publish(key, clock, sealed, steady=True, if_heard=True))
         spec = self.world.config.camera
         for robot, frame in frames.items():
             meta = protocol.CameraMeta(
@@ -349,7 +363,7 @@ class Coordinator:
             attachment = self._seal(names.robot_identity(robot), key, frame, protocol.encode(meta))
             self.outbox(Publish(key, frame, attachment))
         batched = self._send_senses(rx_counts, frames)
-        self.intake.open(tick, self.roster.participants())
+        self.intake.open(tick, self.roster.participants(tick))
         if tick % self.state_every == 0:
             self._publish_state()
         if self.traced:
@@ -359,31 +373,43 @@ class Coordinator:
             self.outbox(Mark(Moment.OPENED))
 
     def _send_senses(self, rx_counts: dict[str, int], frames: dict[int, bytes]) -> int:
-        """Send every live robot its senses, on its own key or in its process's batch;
-        how many went in batches. A process's batch leaves as soon as its robots' senses
-        are made, so it steps them while the next process's are made."""
+        """Send every live robot its senses, made for all of them at once: on its own key,
+        or in its process's batch, sealed with that process's key; how many went in
+        batches. Batches go first, each as soon as it is made, so their processes step
+        while the rest are made."""
         robots = self.world.live_robots()
+        rx = {robot: rx_counts.get(names.robot_name(robot), 0) for robot in robots}
+        senses = self.world.senses(robots, rx, frames)
         hosts = self.roster.hosts
-        batches: dict[int, list[batch.Entry]] = {}
-        batch_sizes = Counter(hosts[robot] for robot in robots if robot in hosts)
-        for robot in robots:
-            sense = self.world.sense(
-                robot, rx_counts.get(names.robot_name(robot), 0), robot in frames
+        alone: list[int] = []  # indices in ``robots`` of those sensed on their own keys
+        batches: dict[Host, list[int]] = {}
+        for index, robot in enumerate(robots):
+            host = hosts.get(robot)
+            if host is None:
+                alone.append(index)
+            else:
+                batches.setdefault(host, []).append(index)
+        for host, rows in batches.items():
+            payload = batch.encode_senses(
+                host.last,
+                tick=senses.tick,
+                t=senses.t,
+                robots=[robots[row] for row in rows],
+                values=senses.values[rows],
+                rx=[senses.rx[row] for row in rows],
+                camera=[senses.camera[row] for row in rows],
             )
-            payload = protocol.encode(sense)
-            key = self.keys.sense(robot)
-            attachment = self._seal(names.robot_identity(robot), key, payload)
-            lead = hosts.get(robot)
-            if lead is None:
+            key = self.keys.host_sense(host.first)
+            self.outbox(Publish(key, payload, self._seal(host.identity, key, payload), steady=True))
+        if alone:
+            messages = senses.messages()
+            for index in alone:
+                robot = robots[index]
+                payload = protocol.encode(messages[index])
+                key = self.keys.sense(robot)
+                attachment = self._seal(names.robot_identity(robot), key, payload)
                 self.outbox(Publish(key, payload, attachment, steady=True))
-                continue
-            entries = batches.setdefault(lead, [])
-            entries.append(batch.Entry(robot, payload, attachment))
-            if len(entries) == batch_sizes[lead]:
-                self.outbox(
-                    Publish(self.keys.host_sense(lead), batch.encode(entries), None, steady=True)
-                )
-        return sum(len(entries) for entries in batches.values())
+        return len(robots) - len(alone)
 
     def _publish_state(self) -> None:
         state = protocol.encode(self.state())

@@ -18,7 +18,7 @@ class EventKind(StrEnum):
 
     ACT = "act"  # robot/<id>/act: one robot's answer to a tick
     ACTS = "acts"  # host/<lead>/act: a batch of the acts of a process's robots
-    ACK = "ack"  # beacon/<name>/ack: a beacon's answer to a tick
+    ACK = "ack"  # beacon/<name>/ack: a beacon's answer to a tick (the ticks it answers)
     TX = "tx"  # radio/tx/<sender>: a radio message for the medium
     ALIVE = "alive"  # a liveliness token appeared
     GONE = "gone"  # a liveliness token went
@@ -51,6 +51,8 @@ class Publish:
     # Sent tick after tick on this key (senses, batches, the clock, the state): worth a
     # publisher kept for the key; else one put (camera frames, radio deliveries).
     steady: bool = False
+    # Only for observers (world/clock): need not go out while nobody subscribes to it.
+    if_heard: bool = False
 
 
 @dataclass(frozen=True, slots=True)

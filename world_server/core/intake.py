@@ -16,7 +16,8 @@ import msgspec
 from wire import auth, batch, names, protocol
 from world_server.core.clock import Barrier
 from world_server.core.counters import Counters
-from world_server.core.events import Event, EventKind
+from world_server.core.events import Event
+from world_server.core.roster import Host
 from world_server.core.world import Transmission, World
 
 MAX_TX_PER_TICK = 1000  # radio messages one sender may send in one tick (Act.radio_tx's bound)
@@ -45,58 +46,69 @@ class TickIntake:
 
     def take_act(self, event: Event) -> int | None:
         """Take one robot's act; the robot, if its act was taken as its answer to the tick
-        under way. Only such an act teaches the world a batch route: an old act of robot r,
-        copied into a batch on another process's key, must not divert r's senses there."""
+        under way."""
         robot = self.keys.robot_of(event.key)
         if robot is None or not self.world.is_member(robot):
             self.counters.reject(event.key, "not a robot of the swarm")
             return None
-        who = names.robot_identity(robot)
-        if not self._authentic(event, who):
+        if not self._authentic(event, names.robot_identity(robot)):
             return None
         try:
             act = protocol.decode(event.payload, protocol.Act)
         except protocol.ProtocolError as error:
             self.counters.reject(event.key, error)
             return None
-        if not self.lockstep:
-            if robot not in self.world.live_robots():
-                return None
-            self.acts[robot] = act
-            return robot if act.tick == self.world.tick else None
-        self.counters.missed.pop(who, None)  # it is alive: wait for it again
-        if self.barrier.answer(act.tick, who, act.radio_tx):
-            self.acts[robot] = act
-            return robot
-        self._unexpected_answer(event.key, act.tick)
-        return None
+        return robot if self._answer(robot, act, event.key) else None
 
-    def take_acts(self, event: Event) -> dict[int, int]:
-        """Take a batch of acts from a process hosting several robots: each entry is
-        checked as the act it carries (its robot's tag on ``robot/<id>/act``). The batch
-        routes it teaches: robot -> the process's lead robot, for each robot whose act was
-        taken as its answer to the tick under way."""
-        lead = self.keys.robot_of(event.key, "host")
-        if lead is None or not self.world.is_member(lead):
+    def take_acts(self, event: Event) -> dict[int, Host]:
+        """Take a batch of acts from a process hosting the robots ``first`` to ``last``
+        (``host/<first>/act``, its identity's tag over it; wire/batch.py), each entry as
+        that robot's act; an entry of any other robot is refused and counted. The batch
+        routes it teaches: robot -> the process, for each robot whose act was taken as its
+        answer to the tick under way. Only such an act teaches a route: an old batch,
+        replayed, must not divert the senses of robots that answer elsewhere now."""
+        first = self.keys.robot_of(event.key, "host")
+        if first is None or not self.world.is_member(first):
             self.counters.reject(event.key, "not a robot of the swarm")
             return {}
         try:
-            entries = batch.decode(event.payload)
+            acts = batch.decode_acts(event.payload)
         except batch.BatchError as error:
             self.counters.reject(event.key, error)
             return {}
+        if not first <= acts.last or not self.world.is_member(acts.last):
+            self.counters.reject(event.key, f"no process hosts robots {first} to {acts.last}")
+            return {}
+        host = Host(first, acts.last)
+        if not self._authentic(event, host.identity):
+            return {}
         routes = {}
-        for robot, payload, attachment in entries:
-            entry = Event(
-                EventKind.ACT, self.keys.act(robot), payload, attachment, arrived=event.arrived
-            )
-            if self.take_act(entry) is not None:
-                routes[robot] = lead
+        for robot, act in acts.acts:
+            if not host.hosts(robot):
+                self.counters.reject(event.key, f"robot {robot} is not one {host.identity} hosts")
+            elif self._answer(robot, act, event.key):
+                routes[robot] = host
         return routes
 
-    def take_ack(self, event: Event) -> str | None:
-        """Take a beacon's answer; its identity if the tick under way took it (lockstep)
-        or it came from a beacon taking part (real time)."""
+    def _answer(self, robot: int, act: protocol.Act, key: str) -> bool:
+        """Take an authentic act of ``robot``: whether it is its answer to the tick under
+        way (in real time: whether it is for the current tick)."""
+        if not self.lockstep:
+            if not self.world.is_live(robot):
+                return False
+            self.acts[robot] = act
+            return act.tick == self.world.tick
+        who = names.robot_identity(robot)
+        self.counters.missed.pop(who, None)  # it is alive: wait for it again
+        if self.barrier.answer(act.tick, who, act.radio_tx):
+            self.acts[robot] = act
+            return True
+        self._unexpected_answer(key, act.tick)
+        return False
+
+    def take_ack(self, event: Event) -> tuple[str, protocol.Ack] | None:
+        """Take a beacon's answer: its identity and its ack if the tick under way took it
+        (lockstep) or it came from a beacon taking part (real time)."""
         name = self.keys.last_chunk(event.key.rsplit("/", 1)[0])
         if not names.is_beacon_name(name):
             self.counters.reject(event.key, f"no beacon of this run is called {name!r}")
@@ -109,6 +121,8 @@ class TickIntake:
             return None
         try:
             ack = protocol.decode(event.payload, protocol.Ack)
+            if ack.next_tick is not None and ack.next_tick <= ack.tick:
+                raise protocol.ProtocolError(f"next tick {ack.next_tick} is not after {ack.tick}")
         except protocol.ProtocolError as error:
             self.counters.reject(event.key, error)
             return None
@@ -116,7 +130,7 @@ class TickIntake:
         if self.lockstep and not self.barrier.answer(ack.tick, who, ack.radio_tx):
             self._unexpected_answer(event.key, ack.tick)
             return None
-        return who
+        return who, ack
 
     # --- radio -------------------------------------------------------------------------
 

@@ -111,6 +111,7 @@ class Physics:
         self._body_rows = 0  # bodies pymunk's batch API lists: the robots, then static ones
         self._prox: np.ndarray | None = None  # cache of proximity_all, cleared by step()
         self._poses: list[tuple[float, float, float]] | None = None  # likewise, of pose()
+        self._readings: np.ndarray | None = None  # likewise, of readings()
         self._read_buffer = batch.Buffer()
         self._write_buffer = batch.Buffer()
 
@@ -185,14 +186,34 @@ class Physics:
         return {robot_id: poses[self._index[robot_id]] for robot_id in self._sorted_ids}
 
     def _pose_list(self) -> list[tuple[float, float, float]]:
-        # Wrapped once per step for all robots, so pose() and poses() always agree.
+        # Wrapped once per step for all robots, so pose(), poses() and readings() agree.
         if self._poses is None:
             state = self._state
-            theta = np.arctan2(np.sin(state[:, 2]), np.cos(state[:, 2]))
             self._poses = list(
-                zip(state[:, 0].tolist(), state[:, 1].tolist(), theta.tolist(), strict=True)
+                zip(
+                    state[:, 0].tolist(),
+                    state[:, 1].tolist(),
+                    self._headings().tolist(),
+                    strict=True,
+                )
             )
         return self._poses
+
+    def _headings(self) -> np.ndarray:
+        """Every robot's heading in [-pi, pi], in insertion order."""
+        angle = self._state[:, 2]
+        return np.arctan2(np.sin(angle), np.cos(angle))
+
+    def readings(self, robot_ids: list[int]) -> np.ndarray:
+        """One row per robot of ``robot_ids``: its x, y, heading (as ``pose``) and its 8
+        proximity readings (as ``proximity``), made for every robot at once."""
+        if self._readings is None:
+            state = self._state
+            self._readings = np.column_stack(
+                (state[:, 0], state[:, 1], self._headings(), self._proximity_array())
+            )
+        index = self._index
+        return self._readings[[index[robot] for robot in robot_ids]]
 
     def wheels(self, robot_id: int) -> tuple[float, float]:
         """The wheel speeds in force (after clamping)."""
@@ -259,6 +280,7 @@ class Physics:
         self._state = rows[: len(self._ids), :3].copy()
         self._prox = None
         self._poses = None
+        self._readings = None
         self._velocity = rows[: len(self._ids), 3:].copy()
 
     # --- proximity ------------------------------------------------------------------

@@ -1,10 +1,13 @@
 """Who takes part in the world's ticks (no I/O): liveliness tokens, joins, departures,
-ids handed out on ``world/join``, and the batch routes of robots hosted together.
+ids handed out on ``world/join``, the batch routes of robots hosted together, and the
+ticks each beacon answers.
 
 A token that appears is a join that takes effect when the tick under way closes (or at
 once, before the start), so a tick's participants never change while it runs; a token
 that goes is a departure at once. A robot whose process answers in batches gets its
-senses in its process's batch (wire/batch.py) until its process's lead robot goes.
+senses in its process's batch (wire/batch.py) until its process's first robot goes. A
+beacon takes part in the ticks it answers: every tick until its first answer, then the
+tick each answer names (``Ack.next_tick``).
 """
 
 from __future__ import annotations
@@ -23,6 +26,21 @@ MAX_BEACONS = 16  # beacon tokens the world takes part in its barrier
 SUSPEND_AFTER = 3  # consecutive stalled ticks before the barrier stops waiting
 
 
+class Host(NamedTuple):
+    """A process hosting the robots ``first`` to ``last``, which answers in batches."""
+
+    first: int
+    last: int
+
+    @property
+    def identity(self) -> str:
+        """Whose key seals its batches (wire/names.py)."""
+        return names.host_identity(self.first, self.last)
+
+    def hosts(self, robot: int) -> bool:
+        return self.first <= robot <= self.last
+
+
 class Token(NamedTuple):
     """A robot's or a beacon's liveliness token: ``alive/<role>/<ident>``."""
 
@@ -37,9 +55,11 @@ class Roster:
         self.counters = counters
         self.pending: list[Token] = []  # joins to apply when the tick under way closes
         self.assigned: set[int] = set()  # ids handed out on world/join (or taken by a token)
-        # Robots whose process answers in batches: robot -> the process's lead robot.
-        # Learnt only from acts taken as the answer to the tick under way.
-        self.hosts: dict[int, int] = {}
+        # Robots whose process answers in batches: robot -> that process. Learnt only from
+        # acts taken as the answer to the tick under way.
+        self.hosts: dict[int, Host] = {}
+        # Beacon -> the next tick it answers (its last Ack's next_tick); absent: every tick.
+        self.beacon_next: dict[str, int] = {}
 
     def token(self, key: str, count: bool) -> Token | None:
         """The robot's or beacon's token ``key`` is; None for other roles (the world, the
@@ -78,7 +98,7 @@ class Roster:
         if token.role == Role.ROBOT:
             gone = int(token.ident)
             self.hosts = {
-                robot: lead for robot, lead in self.hosts.items() if gone not in (robot, lead)
+                robot: host for robot, host in self.hosts.items() if gone not in (robot, host.first)
             }
             if gone in self.world.live_robots():
                 self.counters.departures += 1
@@ -87,6 +107,7 @@ class Roster:
             )
             self.world.leave_robot(gone)
         elif token.ident in self.world.beacons():
+            self.beacon_next.pop(token.ident, None)
             self.counters.departures += 1
             log.warning("beacon %s left", token.ident)
             self.world.leave_beacon(token.ident)
@@ -124,11 +145,15 @@ class Roster:
             log.info("assigned id %d to a robot that asked for one", free)
         return free
 
-    def participants(self) -> list[str]:
-        """The identities a tick opened now waits for: every live robot and beacon but a
-        controller that went silent (hung, not gone), until it answers again, so one stuck
-        process cannot slow the swarm to its stall timeout."""
+    def beacons_answering(self, tick: int) -> list[str]:
+        """The beacons that answer ``tick``: each is sent its clock for it."""
+        return [name for name in self.world.beacons() if self.beacon_next.get(name, 0) <= tick]
+
+    def participants(self, tick: int) -> list[str]:
+        """The identities ``tick``, opened now, waits for: every live robot and every beacon
+        that answers it, but a controller that went silent (hung, not gone), until it
+        answers again, so one stuck process cannot slow the swarm to its stall timeout."""
         everyone = [names.robot_identity(robot) for robot in self.world.live_robots()]
-        everyone += [names.beacon_identity(name) for name in self.world.beacons()]
+        everyone += [names.beacon_identity(name) for name in self.beacons_answering(tick)]
         missed = self.counters.missed
         return [who for who in everyone if missed.get(who, 0) < SUSPEND_AFTER]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Container, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Annotated, ClassVar, Literal
 
@@ -84,6 +84,36 @@ class Transmission:
     sender: str
     seq: int
     payload: bytes
+
+
+@dataclass(frozen=True)
+class Senses:
+    """What the robots sense at the start of a tick, made for all of them at once."""
+
+    tick: int
+    t: float
+    robots: list[int]  # ascending ids
+    values: np.ndarray  # one row per robot: x, y, theta, then its 8 proximity readings
+    rx: list[int]  # radio deliveries of the tick, per robot
+    camera: list[bool]  # a frame comes this tick, per robot
+
+    def messages(self) -> list[protocol.Sense]:
+        """Each robot's ``Sense``, in the order of ``robots``."""
+        tick, t = self.tick, self.t
+        return [
+            protocol.Sense(
+                v=protocol.VERSION,
+                tick=tick,
+                t=t,
+                x=row[0],
+                y=row[1],
+                theta=row[2],
+                prox=row[3:],
+                rx=rx,
+                camera=camera,
+            )
+            for row, rx, camera in zip(self.values.tolist(), self.rx, self.camera, strict=True)
+        ]
 
 
 @dataclass(frozen=True)
@@ -170,24 +200,30 @@ class World:
     def live_robots(self) -> list[int]:
         return sorted(self._live_robots)
 
+    def is_live(self, robot_id: int) -> bool:
+        return robot_id in self._live_robots
+
     def beacons(self) -> list[str]:
         return sorted(self._beacons)
 
     # --- one tick ------------------------------------------------------------------
 
-    def sense(self, robot_id: int, rx: int, camera: bool) -> protocol.Sense:
-        x, y, theta = self.physics.pose(robot_id)
-        return protocol.Sense(
-            v=protocol.VERSION,
-            tick=self.tick,
-            t=self.t,
-            x=x,
-            y=y,
-            theta=theta,
-            prox=list(self.physics.proximity(robot_id)),
-            rx=rx,
-            camera=camera,
+    def senses(self, robots: list[int], rx: Mapping[int, int], frames: Container[int]) -> Senses:
+        """What ``robots`` sense now: with ``rx[robot]`` radio deliveries (none if absent)
+        and a camera frame for those in ``frames``; made with numpy over every body at once."""
+        return Senses(
+            self.tick,
+            self.t,
+            robots,
+            self.physics.readings(robots),
+            [rx.get(robot, 0) for robot in robots],
+            [robot in frames for robot in robots],
         )
+
+    def sense(self, robot_id: int, rx: int, camera: bool) -> protocol.Sense:
+        """One robot's ``Sense`` (``senses`` makes many at once)."""
+        frames = (robot_id,) if camera else ()
+        return self.senses([robot_id], {robot_id: rx}, frames).messages()[0]
 
     def advance(
         self, acts: Mapping[int, protocol.Act], transmissions: Sequence[Transmission]

@@ -63,6 +63,7 @@ MESSAGE_TYPES: dict[str, Any] = {
     "rejected": RejectedSample,
 }
 CAMERA = "camera"
+BEACON_CLOCK = "beacon_clock"  # checked, not recorded: world/clock's message again
 
 
 def schema_name(kind: str) -> str:
@@ -117,6 +118,8 @@ def classify(keys: protocol.Keys, key: str) -> str | None:
             return leaf
         case ["beacon", _, "ack"]:
             return "ack"
+        case ["beacon", _, "clock"]:
+            return BEACON_CLOCK
         case ["radio", ("tx" | "rx") as direction, _]:
             return f"radio_{direction}"
         case ["log", _]:

@@ -45,6 +45,7 @@ from world_server.core.layout import make_layout
 from world_server.recording import foxglove
 from world_server.recording.description import RunDescription, layout_description, versions
 from world_server.recording.records import (
+    BEACON_CLOCK,
     RUN_METADATA,
     START_METADATA,
     RejectedSample,
@@ -215,11 +216,15 @@ class McapRecorder:
     # --- samples -------------------------------------------------------------------
 
     def record(self, sample: Sample) -> None:
-        """Record one sample, in the order samples arrived; a batch (``host/<lead>/sense``
+        """Record one sample, in the order samples arrived; a batch (``host/<first>/sense``
         or ``act``, wire/batch.py) as the robots' own messages it carries."""
         if sample.key.startswith(self._host_prefix):
             self._record_batch(sample)
-            return
+        else:
+            self._record_one(sample)
+
+    def _record_one(self, sample: Sample, checked: bool = False) -> None:
+        """Record a sample whose tag is checked here, or was with its batch (``checked``)."""
         route = self._routes.get(sample.key)
         if route is None:
             route = self._route(sample.key)
@@ -230,7 +235,7 @@ class McapRecorder:
                 self._routes[sample.key] = route
         handler, speaker = route
         try:
-            if self.keyring is not None and speaker is not None:
+            if self.keyring is not None and speaker is not None and not checked:
                 try:
                     metadata = self.keyring.open(
                         speaker, sample.key, sample.payload, sample.attachment
@@ -245,25 +250,45 @@ class McapRecorder:
             self.reject(sample, f"recorder error: {error!r}")
 
     def _record_batch(self, sample: Sample) -> None:
+        """A batch, checked against its host's tag, as the JSON messages of its robots (the
+        same bytes as each robot's own message on its key)."""
         leaf = sample.key.rsplit("/", 1)[-1]
-        if self.keys.robot_of(sample.key, "host") is None or leaf not in ("sense", "act"):
+        first = self.keys.robot_of(sample.key, "host")
+        if first is None or leaf not in ("sense", "act"):
             self.reject(sample, "not a key of the protocol")
             return
         try:
-            entries = batch.decode(sample.payload)
-        except batch.BatchError as error:
+            entries: list[tuple[int, msgspec.Struct]]
+            if leaf == "sense":
+                senses = batch.decode_senses(sample.payload)
+                last, entries = senses.last, list(zip(senses.robots, senses.senses, strict=True))
+            else:
+                acts = batch.decode_acts(sample.payload)
+                last, entries = acts.last, list(acts.acts)
+            identity = names.host_identity(first, last)
+        except (protocol.ProtocolError, ValueError) as error:
             self.reject(sample, f"batch: {error}")
             return
+        if self.keyring is not None:
+            try:
+                self.keyring.open(identity, sample.key, sample.payload, sample.attachment)
+            except auth.AuthError as error:
+                self.reject(sample, f"{identity}: {error}")
+                return
         per_robot = self.keys.sense if leaf == "sense" else self.keys.act
-        for robot, payload, attachment in entries:
-            self.record(Sample(per_robot(robot), payload, attachment, sample.wall_ns))
+        for robot, message in entries:
+            if not first <= robot <= last:
+                self.reject(sample, f"batch: robot {robot} is not one {identity} hosts")
+                continue
+            entry = Sample(per_robot(robot), protocol.encode(message), None, sample.wall_ns)
+            self._record_one(entry, checked=True)
 
     def _speaker(self, key: str) -> str | None:
         """The identity whose key tags a sample on ``key`` (a key of the protocol), or None
         if no robot or beacon of a run can have the name it gives."""
         parts = key[len(self.keys.prefix) + 1 :].split("/")
         match parts:
-            case ["world", _]:
+            case ["world", _] | ["beacon", _, "clock"]:
                 return names.WORLD
             case ["robot", robot, _]:
                 return names.robot_identity(int(robot))  # classify() checked it is a number
@@ -282,6 +307,8 @@ class McapRecorder:
         speaker = self._speaker(key)
         if speaker is None or not names.is_identity(speaker):
             return functools.partial(self.reject, reason="no identity of the run"), None
+        if kind == BEACON_CLOCK:
+            return self._check_beacon_clock, speaker
         channel = _Channel(None, kind, self.keys.robot_of(key), topic=key)
         handler = getattr(self, f"_on_{kind}")
         return functools.partial(handler, channel), speaker
@@ -335,6 +362,11 @@ class McapRecorder:
         self.sim_ns = max(self.sim_ns, ns)
         self._write(channel, ns, sample.payload, sample.wall_ns)
         self._flush_poses(sample.wall_ns)
+
+    def _check_beacon_clock(self, sample: Sample) -> None:
+        """A beacon's clock is world/clock's message of that tick, recorded there: it is
+        only checked (a forged one counts as rejected), not recorded twice."""
+        self._decoded("clock", sample.payload, sample)
 
     def _on_sense(self, channel: _Channel, sample: Sample) -> None:
         sense = self._decoded("sense", sample.payload, sample)

@@ -1,21 +1,26 @@
 """The world server on Zenoh: a thin adapter around the coordinator (world_server/core).
 
-Zenoh callbacks only copy bytes into one inbox; a single thread owns the World and the
-coordinator: it waits on the inbox until the coordinator's deadline, feeds it what came
-(or wakes it), and publishes what it gives back, so there are no locks around the
-simulation. ``world/info`` is answered at once on Zenoh's thread: it needs nothing of the
-tick. What is checked, and how, is the coordinator's (``world_server/core/intake.py``).
+Each Zenoh callback hands what it brings to the coordinator at once, under one lock, and
+publishes what comes back: the answer that completes a tick closes it and opens the next
+in the callback that brought it, with no hand-off to another thread (a wake-up per answer
+was a large part of a tick: docs/performance.md). The process's own thread only wakes
+the coordinator at its deadlines (the stall timeout, real-time pacing, the start timeout)
+and stops it. ``world/info`` is answered without the lock: it needs nothing of the tick.
+What is checked, and how, is the coordinator's (``world_server/core/intake.py``).
+
+The callbacks run on zenoh-python's own threads, one per subscriber, not on Zenoh's
+network threads, so a tick's work in one of them holds up only the samples of that
+subscriber, which the tick waits for anyway.
 """
 
 from __future__ import annotations
 
-import queue
+import threading
 import time
 from typing import Any, cast
 
 import zenoh
 
-from plumbing.inbox import BoundedInbox, message_bytes
 from plumbing.trace import TraceWriter, now
 from plumbing.zenoh_session import reliable_publisher, reliable_put
 from wire import auth, batch, protocol
@@ -33,11 +38,9 @@ from world_server.core.world import World
 from world_server.server.options import WorldServerConfig
 from world_server.server.timeline import TickTimeline
 
-INBOX_BYTES = 256 * 2**20  # what may wait for the world's thread, at most
 # The largest valid message: a batch of acts (a radio payload and its attachment, alone).
 MAX_MESSAGE_BYTES = max(batch.MAX_BATCH_BYTES, protocol.MAX_PAYLOAD_BYTES + 1024)
-ARRIVAL = "arrival"  # the inbox's source of every message (its drops are counted so)
-MAX_WAIT = 0.5  # seconds the thread waits on the inbox at most, whatever the deadline
+MAX_WAIT = 0.5  # seconds the thread sleeps at most, whatever the deadline
 
 
 class WorldServer:
@@ -62,7 +65,9 @@ class WorldServer:
         self.session = session
         self.keys = keys
         self.keyring = keyring  # None: an unauthenticated run
-        self.inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
+        # Held while the coordinator takes an event or wakes: one thread at a time.
+        self.lock = threading.Lock()
+        self._stopping = threading.Event()  # set by stop(), from a signal handler too
         self.timeline = TickTimeline(trace) if trace is not None else None
         self.coordinator = Coordinator(
             world,
@@ -82,32 +87,35 @@ class WorldServer:
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._declared: list[Any] = []
 
-    # --- Zenoh side: callbacks copy bytes and return ----------------------------------
+    # --- Zenoh side: callbacks hand their input to the coordinator --------------------
+
+    def _feed(self, event: Event) -> None:
+        """Hand one event to the coordinator, which closes and opens ticks as it is due."""
+        with self.lock:
+            self.coordinator.handle(event, time.monotonic())
 
     def _on_sample(self, kind: EventKind) -> Any:
         def callback(sample: zenoh.Sample) -> None:
             attachment = sample.attachment
             payload = sample.payload.to_bytes()
             extra = attachment.to_bytes() if attachment is not None else None
-            key = str(sample.key_expr)
+            if len(payload) + len(extra or b"") > MAX_MESSAGE_BYTES:  # never a valid input
+                with self.lock:
+                    self.coordinator.dropped(1)
+                return
             arrived = now() if self.timeline is not None else 0.0
-            event = Event(kind, key, payload, extra, arrived=arrived)
-            self.inbox.put(event, message_bytes(payload, extra, key), ARRIVAL)
+            self._feed(Event(kind, str(sample.key_expr), payload, extra, arrived=arrived))
 
         return callback
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         kind = EventKind.ALIVE if sample.kind == zenoh.SampleKind.PUT else EventKind.GONE
-        key = str(sample.key_expr)
-        self.inbox.put(Event(kind, key), message_bytes(b"", None, key), ARRIVAL, once=True)
+        self._feed(Event(kind, str(sample.key_expr)))
 
     def _on_query(self, kind: EventKind, key: str) -> Any:
         def callback(query: zenoh.Query) -> None:
             payload, attachment = _query_bytes(query)
-            event = Event(kind, key, payload, attachment, query=query)
-            size = message_bytes(payload, attachment, key)
-            if not self.inbox.put(event, size, ARRIVAL, once=True):
-                query.drop()  # answered now, with nothing: the asker does not wait for it
+            self._feed(Event(kind, key, payload, attachment, query=query))
 
         return callback
 
@@ -118,8 +126,7 @@ class WorldServer:
         try:
             identity, nonce = auth.query_open(self.keyring, key, payload, attachment)
         except auth.AuthError as error:
-            reason = str(error).encode()
-            self.inbox.put(Event(EventKind.REFUSED, key, reason), len(reason), ARRIVAL)
+            self._feed(Event(EventKind.REFUSED, key, str(error).encode()))
             query.reply_err(UNAUTHENTICATED)
             return
         sealed = auth.reply_seal(self.keyring, identity, key, self._info_bytes, nonce)
@@ -127,6 +134,8 @@ class WorldServer:
 
     def declare(self) -> None:
         keys, session = self.keys, self.session
+        for key in (keys.world_clock, keys.world_state):
+            self._publishers[key] = reliable_publisher(session, key)
         self._declared = [
             session.declare_subscriber(keys.act("*"), self._on_sample(EventKind.ACT)),
             session.declare_subscriber(keys.host_act("*"), self._on_sample(EventKind.ACTS)),
@@ -145,34 +154,30 @@ class WorldServer:
             # The token names this world instance, so robots can tell a restarted world.
             session.liveliness().declare_token(keys.alive(Role.WORLD, str(session.info.zid()))),
         ]
-        for key in (keys.world_clock, keys.world_state):
-            self._publishers[key] = reliable_publisher(session, key)
 
     def stop(self) -> None:
-        self.inbox.put(Event(EventKind.STOP), control=True)
+        """Stop the loop (safe in a signal handler: it takes no lock)."""
+        self._stopping.set()
 
     # --- the loop ----------------------------------------------------------------------
 
     def run(self) -> int:
-        """Feed the coordinator until it stops (the stop event)."""
-        self.declare()
+        """Wake the coordinator at its deadlines until it is stopped; its inputs come in
+        the callbacks meanwhile."""
         coordinator = self.coordinator
-        coordinator.begin(time.monotonic())
-        while not coordinator.stopped:
-            deadline = coordinator.deadline
+        with self.lock:
+            coordinator.begin(time.monotonic())
+        self.declare()  # the callbacks feed it from now on
+        while True:
+            with self.lock:
+                deadline = coordinator.deadline
             wait = MAX_WAIT if deadline is None else deadline - time.monotonic()
-            try:
-                event: Event | None = self.inbox.get(timeout=min(max(0.0, wait), MAX_WAIT))
-            except queue.Empty:
-                event = None
-            dropped = self.inbox.take_dropped(ARRIVAL)
-            if dropped:
-                coordinator.dropped(dropped)
-            if event is None:
+            stopping = self._stopping.wait(min(max(0.0, wait), MAX_WAIT))
+            with self.lock:
+                if stopping:
+                    coordinator.stop()
+                    return 0
                 coordinator.wake(time.monotonic())
-            else:
-                coordinator.handle(event, time.monotonic())
-        return 0
 
     def _send(self, output: Output) -> None:
         """Publish, reply or note (``--trace``) what the coordinator gave back."""
@@ -185,6 +190,8 @@ class WorldServer:
                 publisher = self._publishers[output.key] = reliable_publisher(
                     self.session, output.key
                 )
+            if output.if_heard and not publisher.matching_status:
+                return
             publisher.put(output.payload, attachment=output.attachment)
         elif isinstance(output, Reply):
             query = cast(zenoh.Query, output.query)
