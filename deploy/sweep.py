@@ -96,6 +96,8 @@ class SweepResult(Generic[R]):
 
 # (finished so far, total, the task's index, its failure or None)
 Progress = Callable[[int, int, int, Failure | None], None]
+# (the task's index, its result): told as each result arrives, before the progress
+OnResult = Callable[[int, Any], None]
 
 
 def add_executor_options(parser: argparse.ArgumentParser, *, default_parallel: int = 2) -> None:
@@ -152,19 +154,25 @@ def run_sweep(
     tasks: Sequence[T],
     executor: ExecutorSpec,
     progress: Progress | None = None,
+    on_result: OnResult | None = None,
 ) -> SweepResult[R]:
     """``function(task)`` for every task, on ``executor``; results in task order.
 
     ``function`` must be importable by the workers (a module-level function of an
-    installed module); its result must be picklable and must not be None.
+    installed module); its result must be picklable and must not be None. ``on_result``
+    sees each result as it arrives (to keep it before the sweep ends), ``progress`` each
+    finished task.
     """
     if not tasks:
         return SweepResult([])
+    tally: _Tally[R] = _Tally(len(tasks), progress, on_result)
     if executor.dask is not None:
-        return _on_dask(function, tasks, executor, progress)
-    if executor.parallel == 1:
-        return _here(function, tasks, progress)
-    return _on_local_processes(function, tasks, executor, progress)
+        _on_dask(function, tasks, executor, tally)
+    elif executor.parallel == 1:
+        _here(function, tasks, tally)
+    else:
+        _on_local_processes(function, tasks, executor, tally)
+    return tally.finish()
 
 
 def _describe_error(error: BaseException) -> str:
@@ -175,14 +183,17 @@ def _describe_error(error: BaseException) -> str:
 class _Tally(Generic[R]):
     """The results as they come, and progress."""
 
-    def __init__(self, total: int, progress: Progress | None) -> None:
+    def __init__(self, total: int, progress: Progress | None, on_result: OnResult | None) -> None:
         self.results: list[R | None] = [None] * total
         self.failures: list[Failure] = []
         self.done = 0
         self._progress = progress
+        self._on_result = on_result
 
     def result(self, index: int, value: R) -> None:
         self.results[index] = value
+        if self._on_result is not None:
+            self._on_result(index, value)
         self._advance(index, None)
 
     def failure(self, index: int, error: str, attempts: int) -> None:
@@ -202,16 +213,14 @@ class _Tally(Generic[R]):
 # --- in this process -----------------------------------------------------------------------
 
 
-def _here(
-    function: Callable[[T], R], tasks: Sequence[T], progress: Progress | None
-) -> SweepResult[R]:
-    tally: _Tally[R] = _Tally(len(tasks), progress)
+def _here(function: Callable[[T], R], tasks: Sequence[T], tally: _Tally[R]) -> None:
     for index, task in enumerate(tasks):
         try:
-            tally.result(index, function(task))
+            value = function(task)
         except Exception as error:  # a run's own error: reported, the sweep goes on
             tally.failure(index, _describe_error(error), 1)
-    return tally.finish()
+        else:
+            tally.result(index, value)
 
 
 # --- local processes -----------------------------------------------------------------------
@@ -236,13 +245,12 @@ def _on_local_processes(
     function: Callable[[T], R],
     tasks: Sequence[T],
     executor: ExecutorSpec,
-    progress: Progress | None,
-) -> SweepResult[R]:
+    tally: _Tally[R],
+) -> None:
     """A process pool; when a worker dies the pool breaks, and the tasks that had started
     are retried one at a time, each alone in a fresh pool (a task that kills its worker
     alone is tried ``retries`` more times, then reported)."""
     context = multiprocessing.get_context("spawn")
-    tally: _Tally[R] = _Tally(len(tasks), progress)
     deaths = [0] * len(tasks)
     waiting: deque[int] = deque(range(len(tasks)))
     suspects: deque[int] = deque()
@@ -270,7 +278,6 @@ def _on_local_processes(
                     tally.failure(index, "its worker process died", deaths[index])
                 else:
                     suspects.append(index)
-    return tally.finish()
 
 
 def _run_pool(
@@ -296,11 +303,13 @@ def _run_pool(
         for future in concurrent.futures.as_completed(futures):
             index = futures[future]
             try:
-                tally.result(index, future.result())
+                value = future.result()
             except BrokenProcessPool:
                 unfinished.append(index)
             except Exception as error:  # the run's own error, raised in the worker
                 tally.failure(index, _describe_error(error), 1)
+            else:
+                tally.result(index, value)
     started: set[int] = set()
     while not started_queue.empty():
         try:
@@ -317,15 +326,14 @@ def _on_dask(
     function: Callable[[T], R],
     tasks: Sequence[T],
     executor: ExecutorSpec,
-    progress: Progress | None,
-) -> SweepResult[R]:
+    tally: _Tally[R],
+) -> None:
     """Every task a Dask future; a worker's death is the scheduler's to handle (it moves
     the worker's tasks elsewhere, and gives up on a task that has killed ``retries`` + 1
     workers: ``KilledWorker``, reported here)."""
     import dask
     from distributed import Client, LocalCluster, as_completed
 
-    tally: _Tally[R] = _Tally(len(tasks), progress)
     with dask.config.set({"distributed.scheduler.allowed-failures": executor.retries}):
         cluster = None
         if executor.dask == LOCAL_DASK:
@@ -346,15 +354,16 @@ def _on_dask(
                 for future in as_completed(futures):
                     index = futures[future]
                     try:
-                        tally.result(index, future.result())
+                        value = future.result()
                     except Exception as error:  # KilledWorker, or the run's own error
                         killed = type(error).__name__ == "KilledWorker"
                         attempts = executor.retries + 1 if killed else 1
                         tally.failure(index, _describe_error(error), attempts)
+                    else:
+                        tally.result(index, value)
         finally:
             if cluster is not None:
                 cluster.close()
-    return tally.finish()
 
 
 def print_progress(label: str) -> Progress:
@@ -374,6 +383,7 @@ __all__ = [
     "LOCAL_DASK",
     "ExecutorSpec",
     "Failure",
+    "OnResult",
     "Progress",
     "SweepResult",
     "add_executor_options",

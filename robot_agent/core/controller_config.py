@@ -98,7 +98,7 @@ class ControllerConfig:
     listen: Annotated[
         Seconds,
         Meta(description="dmvd, dmmd, dc: sim seconds of listening at the end of dissemination"),
-        Flag(),
+        Flag(name="listen-window"),
     ] = 3.0
     neighbours: Annotated[
         int,
