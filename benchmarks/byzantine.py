@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures
+import dataclasses
+import json
 import math
 import random
 import statistics
@@ -39,10 +41,12 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from deploy import sweep  # noqa: E402
 from robot_agent.core import byzantine  # noqa: E402
 from wire import protocol  # noqa: E402
 
@@ -341,6 +345,250 @@ def write_page(path: Path, section: str) -> None:
     path.write_text(head + section + tail)
 
 
+# --- the defence study (issue 25): --defence trimmed against liars ---------------------
+
+DEFENCE_RESULTS = REPO / "docs" / "byzantine-defence-runs.jsonl"
+DEFENCE_FIGURE = "byzantine-defence.png"
+DEFENCE_BEGIN, DEFENCE_END = "<!-- defence:begin -->", "<!-- defence:end -->"
+# Liars per swarm size: 0-3 of 10; 10% and 20% of 50.
+DEFENCE_LIARS = {10: (0, 1, 2, 3), 50: (0, 5, 10)}
+# The defences per swarm size: the paper's pooling, and trimmed pooling with F the liars
+# it is set to tolerate (one of 10; 10% of 50, and 20% of 50).
+DEFENCE_SETTINGS = {10: ("none", "trimmed:1"), 50: ("none", "trimmed:5", "trimmed:10")}
+
+
+@dataclass(frozen=True)
+class DefenceTask:
+    defence: str  # none, or trimmed:F
+    robots: int
+    liars: int
+    seed: int
+    sites: int = 10
+    timeout: float = 2400.0
+
+    @property
+    def key(self) -> str:
+        return f"{self.defence}/N{self.robots}/L{self.liars}/n{self.sites}/s{self.seed}"
+
+    def options(self) -> list[str]:
+        """The defence as ``swarm run`` options."""
+        if self.defence == "none":
+            return []
+        name, _, trim = self.defence.partition(":")
+        return ["--defence", name, "--trim", trim]
+
+
+def liar_ids(seed: int, robots: int, count: int) -> list[int]:
+    """The liars of run ``seed``: ``byzantine_ids`` for 10 robots (the same robots as the
+    study above), else a seeded draw of 20% of the robots, nested in ``count``."""
+    if robots == 10 and count <= MAX_BYZANTINE:
+        return byzantine_ids(seed, robots, count)
+    most = max(count, robots // 5)
+    drawn = random.Random(protocol.derive_seed(seed, "benchmark", "liars")).sample(
+        range(robots), most
+    )
+    return sorted(drawn[:count])
+
+
+def run_defence(task: DefenceTask) -> dict[str, object]:
+    """One run in memory with ``task.liars`` liars (each claiming the run's liar site)."""
+    from deploy.inmemory import run_in_memory
+    from robot_agent.node import cli as node
+    from robot_agent.node import options
+    from world_server.server import cli as server
+
+    common = ["--seed", str(task.seed), "--robots", str(task.robots), "--sites", str(task.sites)]
+    world_config = server.config_from_args(
+        server.build_parser().parse_args([*common, "--run-id", "byzantine"])
+    )
+    controller_config = options.controller_config(
+        node.build_parser().parse_args(["--id", "0", *task.options()])
+    )
+    liars = {
+        robot: byzantine.Behaviour("liar") for robot in liar_ids(task.seed, task.robots, task.liars)
+    }
+    started = time.perf_counter()
+    summary = run_in_memory(
+        world_config, controller_config, timeout=task.timeout, byzantine_robots=liars
+    )
+    honest = [robot["decided_site"] for robot in summary["per_robot"] if not robot["byzantine"]]
+    if summary["correct"]:
+        verdict = "correct"
+    elif summary["consensus"]:
+        verdict = "wrong"
+    elif all(site is not None for site in honest):
+        verdict = "split"
+    else:
+        verdict = "undecided"
+    liar_site = byzantine.default_liar_site(task.sites, summary["best_site"], task.seed)
+    return {
+        "key": task.key,
+        **dataclasses.asdict(task),
+        "liar_ids": sorted(liars),
+        "verdict": verdict,
+        "liar_won": verdict == "wrong" and summary["chosen_site"] == liar_site,
+        "liar_site_decided": sum(site == liar_site for site in honest),
+        "honest": len(honest),
+        "sim_time_s": summary["sim_time_s"],
+        "wall_s": round(time.perf_counter() - started, 2),
+    }
+
+
+def defence_tasks(seeds: int, seeds_50: int, sizes: Sequence[int]) -> list[DefenceTask]:
+    tasks = [
+        DefenceTask(defence, robots, liars, seed)
+        for robots in sizes
+        for seed in range(seeds if robots <= 10 else seeds_50)
+        for liars in DEFENCE_LIARS[robots]
+        for defence in DEFENCE_SETTINGS[robots]
+    ]
+    return sorted(tasks, key=lambda task: (task.robots, task.seed))
+
+
+def load_defence(path: Path) -> dict[str, dict[str, Any]]:
+    found: dict[str, dict[str, Any]] = {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            if line.strip():
+                record = json.loads(line)
+                found[record["key"]] = record
+    return found
+
+
+def run_defence_study(args: argparse.Namespace) -> int:
+    from benchmarks import byzantine as this  # importable by the workers, unlike __main__
+    from deploy import sweep
+
+    done = load_defence(args.defence_results)
+    tasks = [
+        task
+        for task in defence_tasks(args.seeds, args.seeds_50, args.sizes)
+        if task.key not in done
+    ]
+    print(f"defence study: {len(tasks)} runs to make", file=sys.stderr)
+    args.defence_results.parent.mkdir(parents=True, exist_ok=True)
+    with args.defence_results.open("a") as results:
+
+        def keep(index: int, result: dict[str, object]) -> None:
+            results.write(json.dumps(result, separators=(",", ":")) + "\n")
+            results.flush()
+
+        outcome = sweep.run_sweep(
+            this.run_defence,
+            tasks,
+            sweep.executor_from_args(args),
+            sweep.print_progress("defence study"),
+            on_result=keep,
+        )
+    return 1 if outcome.failures else 0
+
+
+def defence_rows(results: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    groups: dict[tuple[int, int, str], list[dict[str, Any]]] = {}
+    for record in results.values():
+        groups.setdefault((record["robots"], record["liars"], record["defence"]), []).append(record)
+    rows = []
+    for (robots, liars, defence), runs in sorted(groups.items()):
+        verdicts = [run["verdict"] for run in runs]
+        times = [run["sim_time_s"] for run in runs if run["verdict"] == "correct"]
+        rows.append(
+            {
+                "robots": robots,
+                "liars": liars,
+                "defence": defence,
+                "runs": len(runs),
+                "correct": verdicts.count("correct"),
+                "wrong": verdicts.count("wrong"),
+                "liar_won": sum(run["liar_won"] for run in runs),
+                "split": verdicts.count("split"),
+                "undecided": verdicts.count("undecided"),
+                "median": statistics.median(times) if times else math.nan,
+                "mean": statistics.fmean(times) if times else math.nan,
+            }
+        )
+    order = {
+        key: index for index, key in enumerate(("none", "trimmed:1", "trimmed:5", "trimmed:10"))
+    }
+    return sorted(rows, key=lambda r: (r["robots"], r["liars"], order.get(r["defence"], 99)))
+
+
+def defence_label(defence: str) -> str:
+    if defence == "none":
+        return "none (the paper's pooling)"
+    return f"trimmed, F = {defence.partition(':')[2]}"
+
+
+def defence_table(rows: Sequence[dict[str, Any]]) -> str:
+    lines = [
+        "| robots | liars | defence | runs | correct | wrong consensus (the liars' site) "
+        "| split | undecided | sim s to consensus, median (mean), correct runs |",
+        "|---:|---:|---|---:|---:|---:|---:|---:|---|",
+    ]
+    for row in rows:
+        share = row["correct"] / row["runs"]
+        time_text = "-" if math.isnan(row["median"]) else f"{row['median']:.0f} ({row['mean']:.0f})"
+        lines.append(
+            f"| {row['robots']} | {row['liars']} | {defence_label(row['defence'])} | {row['runs']} "
+            f"| {row['correct']} ({share:.0%}) | {row['wrong']} ({row['liar_won']}) "
+            f"| {row['split']} | {row['undecided']} | {time_text} |"
+        )
+    return "\n".join(lines)
+
+
+def plot_defence(rows: Sequence[dict[str, Any]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sizes = sorted({row["robots"] for row in rows})
+    fig, axes = plt.subplots(1, len(sizes), figsize=(5 * len(sizes), 3.8), squeeze=False)
+    for axis, robots in zip(axes[0], sizes, strict=True):
+        for defence in sorted({r["defence"] for r in rows if r["robots"] == robots}):
+            mine = [r for r in rows if r["robots"] == robots and r["defence"] == defence]
+            axis.plot(
+                [100 * r["liars"] / robots for r in mine],
+                [r["correct"] / r["runs"] for r in mine],
+                "o-",
+                label=defence_label(defence),
+            )
+        axis.axhline(0.9, linestyle=":", color="grey")
+        axis.set_title(f"{robots} robots, n = 10")
+        axis.set_xlabel("liars (% of the robots)")
+        axis.set_ylabel("share of runs: honest robots all chose the best")
+        axis.set_ylim(-0.05, 1.05)
+        axis.grid(alpha=0.3)
+        axis.legend(fontsize="small")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_defence(args: argparse.Namespace) -> None:
+    rows = defence_rows(load_defence(args.defence_results))
+    section = "\n".join(
+        [
+            DEFENCE_BEGIN,
+            "",
+            f"Made by `.venv/bin/python benchmarks/byzantine.py --study defence --write` at "
+            f"commit {commit()} from `docs/{args.defence_results.name}` (one run per line).",
+            "",
+            defence_table(rows),
+            "",
+            DEFENCE_END,
+        ]
+    )
+    page = args.out / "byzantine.md"
+    text = page.read_text()
+    if DEFENCE_BEGIN not in text or DEFENCE_END not in text:
+        raise SystemExit(f"{page} lacks the markers {DEFENCE_BEGIN} and {DEFENCE_END}")
+    head, rest = text.split(DEFENCE_BEGIN, 1)
+    _, tail = rest.split(DEFENCE_END, 1)
+    page.write_text(head + section + tail)
+    plot_defence(rows, args.out / DEFENCE_FIGURE)
+    print(defence_table(rows))
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=20, help="seeds 0..S-1 (default: 20)")
@@ -350,10 +598,22 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--timeout", type=float, default=1200.0, help="sim seconds per run (default: 1200)"
     )
-    parser.add_argument("--parallel", type=int, default=2, help="processes (default: 2)")
     parser.add_argument(
         "--out", type=Path, default=REPO / "docs", help="where byzantine.md/.png go (docs/)"
     )
+    parser.add_argument(
+        "--study",
+        choices=["modes", "defence"],
+        default="modes",
+        help="modes: the Byzantine modes against distrust (the first table); defence: "
+        "--defence trimmed against 0-3 liars of 10 and 10%%, 20%% of 50",
+    )
+    parser.add_argument("--seeds-50", type=int, default=30, help="defence study, 50 robots")
+    parser.add_argument("--sizes", type=int, nargs="+", choices=[10, 50], default=[10, 50])
+    parser.add_argument("--defence-results", type=Path, default=DEFENCE_RESULTS)
+    parser.add_argument("--write", action="store_true", help="defence study: write the page")
+    parser.add_argument("--no-run", action="store_true", help="defence study: only --write")
+    sweep.add_executor_options(parser)
     return parser
 
 
@@ -361,6 +621,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     args.argv = argv
+    if args.study == "defence":
+        failed = 0 if args.no_run else run_defence_study(args)
+        if args.write:
+            write_defence(args)
+        return failed
     tasks = tasks_for(args)
     print(f"{len(tasks)} runs, {args.parallel} at a time", file=sys.stderr)
     started = time.perf_counter()

@@ -40,6 +40,7 @@ sys.path.insert(0, str(REPO))
 
 from nest_beacon.core.beacon import BeaconConfig  # noqa: E402
 from robot_agent.core import ports  # noqa: E402
+from robot_agent.core.beliefs import Beliefs  # noqa: E402
 from robot_agent.core.controller import Controller, ControllerConfig  # noqa: E402
 from world_server.core.body import EpuckSpec  # noqa: E402
 from world_server.core.world import WorldConfig  # noqa: E402
@@ -131,6 +132,7 @@ class Observed(Controller):
 
     def _pool_and_decide(self, reading: ports.BodyReading) -> None:
         since = self._nest_arrival - 1e-9
+        assert isinstance(self._beliefs, Beliefs)  # the study runs the paper's strategy
         heard = self._beliefs.heard
         partners = sorted(robot for robot, (when, _) in heard.items() if when >= since)
         partner_masks = [support_mask(heard[robot][1]) for robot in partners]

@@ -8,7 +8,12 @@ is its own TLS router with its own certificates and access control instead (a sh
 router would have to trust every run's certificate authority). A progress bar follows
 the runs; at the end ``swarm report`` turns the recordings into the figures and the
 summary table in DIR. With ``--engine inprocess`` each run is ``swarm run --engine
-inprocess`` (one process, no router), ``--parallel`` of them at a time. Each run's stderr
+inprocess`` (one process, no router), handed to an executor (``deploy/sweep.py``):
+``--parallel`` local worker processes, or ``--dask [ADDRESS]``; each worker starts the run
+as a child process of its own (its signals and output are its own) and sends back its
+summary and log, which are written into DIR here. It records into DIR itself when it
+can see DIR (a worker on this machine); a worker elsewhere records to a file of its own
+and sends the recording back too. Each run's stderr
 and JSON summary are kept in ``DIR/logs/``.
 
 Every run ends in a stated way (its summary's ``ended``): each gets ``--wall-timeout``
@@ -26,12 +31,14 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any, NoReturn
 
+from deploy import sweep
 from deploy.cli import UsageError
 from deploy.run_options import add_engine_option
 from deploy.run_switches import add_swarm_switches, switches_argv
@@ -76,14 +83,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=shape.DEFAULT_SEED,
         help=f"seed of the first run; run i uses seed + i - 1 (default: {shape.DEFAULT_SEED})",
     )
-    parser.add_argument(
-        "--parallel",
-        type=cliargs.int_range(1, 64),
-        default=2,
-        metavar="J",
-        help="runs at a time (default: 2, the fastest for ten-robot runs on "
-        "2 cores; see docs/recording.md)",
-    )
+    sweep.add_executor_options(parser)
     parser.add_argument(
         "--out",
         type=Path,
@@ -307,6 +307,116 @@ def _describe(result: RunResult) -> str:
     )
 
 
+@dataclass(frozen=True)
+class InprocessRun:
+    """What a worker sends back for one ``--engine inprocess`` run."""
+
+    returncode: int | None
+    stdout: str
+    stderr: str
+    recording: bytes | None
+    wall_s: float
+    note: str = ""
+
+
+def run_inprocess_spec(spec: RunSpec, run_timeout: float = RUN_WALL_TIMEOUT) -> InprocessRun:
+    """One ``swarm run --engine inprocess`` in a child process of this worker: its output,
+    and its recording if the worker cannot see the experiment's directory (it then records
+    to a file of its own)."""
+    with tempfile.TemporaryDirectory(prefix="swarm-experiment-") as directory:
+        in_place = spec.recording.parent.is_dir()
+        recording = spec.recording if in_place else Path(directory) / "run.mcap"
+        argv = list(spec.argv)
+        argv[argv.index("--record") + 1] = str(recording)
+        started = time.monotonic()
+        note = ""
+        process = subprocess.Popen(
+            [sys.executable, "-m", "deploy.cli", "run", *argv],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env={**os.environ, PARENT_ENV: str(os.getpid())},  # the run dies with its worker
+        )
+        try:
+            stdout, stderr = process.communicate(timeout=run_timeout + BACKSTOP)
+        except subprocess.TimeoutExpired:
+            process.send_signal(signal.SIGINT)
+            try:
+                stdout, stderr = process.communicate(timeout=STOP_GRACE)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                stdout, stderr = process.communicate()
+            note = f"stopped from outside after {run_timeout + BACKSTOP:g} wall seconds"
+        return InprocessRun(
+            process.returncode,
+            stdout.decode(errors="replace"),
+            stderr.decode(errors="replace"),
+            None if in_place or not recording.is_file() else recording.read_bytes(),
+            time.monotonic() - started,
+            note,
+        )
+
+
+def _inprocess_task(task: tuple[RunSpec, float]) -> InprocessRun:
+    return run_inprocess_spec(*task)
+
+
+def run_all_inprocess(
+    specs: Sequence[RunSpec],
+    executor: sweep.ExecutorSpec,
+    logs: Path,
+    run_timeout: float,
+    quiet: bool,
+) -> list[RunResult]:
+    """Every ``--engine inprocess`` run on ``executor``; each run's log, summary and
+    recording written here as it comes, a progress bar on stderr."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    results: list[RunResult] = [RunResult(spec) for spec in specs]
+    progress = Progress(
+        TextColumn("[bold]runs"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[info]}"),
+        console=Console(stderr=True),
+        disable=quiet,
+    )
+
+    def keep(index: int, run: InprocessRun) -> None:
+        spec = specs[index]
+        stdout = run.stdout
+        if run.recording is not None:  # recorded elsewhere: it is here now
+            spec.recording.write_bytes(run.recording)
+        result = RunResult(spec, run.returncode, wall_s=run.wall_s, note=run.note)
+        text = stdout.strip()
+        if text:
+            try:
+                result.summary = json.loads(text.splitlines()[-1])
+            except ValueError:
+                result.note = result.note or "no JSON summary"
+        if result.summary is not None and run.recording is not None:
+            result.summary["recording"] = str(spec.recording)
+            stdout = json.dumps(result.summary) + "\n"
+        (logs / f"{spec.run_id}.json").write_text(stdout)
+        (logs / f"{spec.run_id}.log").write_text(run.stderr)
+        results[index] = result
+
+    with progress:
+        bar = progress.add_task("runs", total=len(specs), info=f"on {executor.describe()}")
+
+        def advance(done: int, total: int, index: int, failure: sweep.Failure | None) -> None:
+            if failure is not None:
+                results[index] = RunResult(
+                    specs[index], note=f"{failure.error} ({failure.attempts} tries)"
+                )
+            progress.update(bar, completed=done, info=_describe(results[index]))
+
+        tasks = [(spec, run_timeout) for spec in specs]
+        sweep.run_sweep(_inprocess_task, tasks, executor, advance, on_result=keep)
+    return results
+
+
 def run_all(
     specs: Sequence[RunSpec], parallel: int, logs: Path, run_timeout: float, quiet: bool
 ) -> list[RunResult]:
@@ -376,6 +486,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} exists and is not a directory")
+    executor = sweep.executor_from_args(args)
+    on_executor = args.engine == "inprocess" and not args.secure
+    if args.dask is not None and not on_executor:
+        raise UsageError("--dask runs in-process runs: add --engine inprocess")
     # In-process runs need no network; a secure run is its own TLS router.
     shared_router = args.engine == "zenoh" and not args.secure
     # The shared router's socket does not exist yet: check the runs with a stand-in.
@@ -404,7 +518,10 @@ def run(args: argparse.Namespace) -> int:
                 )
                 return 1
         started = time.monotonic()
-        results = run_all(specs, args.parallel, logs, args.run_timeout, args.quiet)
+        if on_executor:
+            results = run_all_inprocess(specs, executor, logs, args.run_timeout, args.quiet)
+        else:
+            results = run_all(specs, args.parallel, logs, args.run_timeout, args.quiet)
         elapsed = time.monotonic() - started
     finally:
         group.stop_all()
@@ -418,7 +535,7 @@ def run(args: argparse.Namespace) -> int:
         )
     print(
         f"swarm experiment: {len(results) - len(failed)}/{len(specs)} runs recorded in "
-        f"{elapsed:.0f}s wall ({args.parallel} at a time)",
+        f"{elapsed:.0f}s wall (on {executor.describe()})",
         file=sys.stderr,
     )
     recordings = [result.spec.recording for result in results if result.spec.recording.is_file()]

@@ -3,8 +3,9 @@
 Runs the paper's protocol in process (``deploy.inmemory.run_in_memory``: the same world,
 controllers and beacon as ``swarm run``, and in lockstep the same per-robot results):
 ten robots, n = 5, 8 and 10, seeds 0..S-1, once with the default settings and once with
-``--linger 10`` (the paper's suggested fix), ``--parallel`` runs at a time. Seeds 0-9
-stand for the paper's ten runs per n.
+``--linger 10`` (the paper's suggested fix), on an executor (``deploy/sweep.py``:
+``--parallel`` local processes, or ``--dask [ADDRESS]``; each run's record is the same
+on every executor). Seeds 0-9 stand for the paper's ten runs per n.
 
 * without ``--write`` or ``--check`` it prints the tables;
 * ``--write`` puts them into docs/section5.md, between markers that name
@@ -26,9 +27,7 @@ stand for the paper's ten runs per n.
 from __future__ import annotations
 
 import argparse
-import concurrent.futures
 import json
-import multiprocessing
 import subprocess
 import sys
 from collections.abc import Iterable, Sequence
@@ -37,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from deploy import section5_tables as tables
+from deploy import sweep
 from plumbing import cliargs
 
 RUNS_FILE = "docs/section5-runs.json"
@@ -105,24 +105,26 @@ def tasks_for(seeds: int) -> list[Task]:
     ]
 
 
-def simulate(tasks: Sequence[Task], parallel: int, progress: Any = None) -> list[dict[str, Any]]:
-    """Every task's record, in task order; ``parallel`` worker processes (1: here)."""
-    if parallel <= 1:
-        records = []
-        for index, task in enumerate(tasks, start=1):
-            records.append(run_task(task))
-            if progress is not None:
-                progress(index, len(tasks))
-        return records
-    # spawn: workers that share nothing with a caller that may hold threads (pytest, Zenoh)
-    context = multiprocessing.get_context("spawn")
-    with concurrent.futures.ProcessPoolExecutor(max_workers=parallel, mp_context=context) as pool:
-        records = []
-        for index, record in enumerate(pool.map(run_task, tasks, chunksize=1), start=1):
-            records.append(record)
-            if progress is not None:
-                progress(index, len(tasks))
-        return records
+def simulate(
+    tasks: Sequence[Task], executor: sweep.ExecutorSpec | int, progress: Any = None
+) -> list[dict[str, Any]]:
+    """Every task's record, in task order, on ``executor`` (a number: that many local
+    processes; 1: here). ``progress(done, total)`` as runs finish. A run that gives no
+    record (its worker died too often, or it raised) is an error: every published run
+    must be made."""
+    spec = executor if isinstance(executor, sweep.ExecutorSpec) else sweep.ExecutorSpec(executor)
+
+    def report(done: int, total: int, index: int, failure: sweep.Failure | None) -> None:
+        if progress is not None:
+            progress(done, total)
+
+    result = sweep.run_sweep(run_task, tasks, spec, report)
+    if result.failures:
+        named = ", ".join(
+            f"{tasks[f.index]} ({f.error}, {f.attempts} tries)" for f in result.failures[:5]
+        )
+        raise RuntimeError(f"{len(result.failures)} Section 5 run(s) gave no record: {named}")
+    return result.completed()
 
 
 # --- the published files -------------------------------------------------------------------
@@ -461,13 +463,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="seeds 0..S-1 per n and variant (default: 10, the paper's ten runs; "
         "the published distribution uses 100)",
     )
-    parser.add_argument(
-        "--parallel",
-        type=cliargs.int_range(1, 64),
-        default=2,
-        metavar="J",
-        help="worker processes (default: 2)",
-    )
+    sweep.add_executor_options(parser)
     mode = parser.add_mutually_exclusive_group()
     mode.add_argument(
         "--write",
@@ -515,12 +511,13 @@ def run(args: argparse.Namespace) -> int:
 
     if args.render:
         return _render(root)
+    executor = sweep.executor_from_args(args)
     if args.check:
-        return _check(root, args.sample, args.parallel, progress)
+        return _check(root, args.sample, executor, progress)
     # The code that runs is this package's, wherever --root points: its state, before the
     # runs (edits made while they run do not count).
     commit, dirty = git_state(CODE_ROOT, published_paths())
-    records = simulate(tasks_for(args.seeds), args.parallel, progress)
+    records = simulate(tasks_for(args.seeds), executor, progress)
     meta = {
         "command": f"swarm section5 --seeds {args.seeds} --write",
         "commit": commit,
@@ -541,7 +538,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check(root: Path, sample: bool, parallel: int, progress: Any) -> int:
+def _check(root: Path, sample: bool, executor: sweep.ExecutorSpec, progress: Any) -> int:
     """Run the published runs again (seeds 0-9 with ``sample``); print every difference and
     what was not checked; 1 if anything differs."""
     from deploy.cli import UsageError
@@ -551,7 +548,7 @@ def _check(root: Path, sample: bool, parallel: int, progress: Any) -> int:
     except ValueError as error:
         raise UsageError(str(error)) from error
     tasks = tasks_for(tables.PAPER_SEEDS) if sample else published_tasks(published)
-    fresh = simulate(tasks, parallel, progress)
+    fresh = simulate(tasks, executor, progress)
     problems = check_all(root, fresh)
     for problem in problems:
         print(problem)

@@ -1,4 +1,6 @@
-"""``swarm wellstirred``: the paper's Section 4 model, its Figure 1 table and Figures 1-2.
+"""``swarm wellstirred``: the paper's Section 4 model, its Figure 1 table and Figures 1-2;
+with ``--strategy dmvd|dmmd|dc``, a strategy it is compared with in the same model
+(``wellstirred/voting.py``, docs/strategies.md).
 
 Prints one table per n (rows per pool size k, the n/2 exhaustive-search baseline and
 k*, the smallest k whose mean is at or below n/2) or, with ``--json``, exactly one JSON
@@ -21,6 +23,7 @@ from rich.table import Table
 
 from plumbing import cliargs
 from plumbing.cliargs import UsageError
+from robot_agent.core.voting import STRATEGIES
 from wellstirred.model import (
     FIGURE1_OPTIONS,
     FIGURE1_POOLS,
@@ -33,6 +36,7 @@ from wellstirred.model import (
     optimal_pool,
     sweep,
 )
+from wellstirred.voting import vote_sweep
 
 # Figure 2 of the paper: one agent's opinion for these pool sizes.
 FIGURE2_POOLS = (2, 3)
@@ -77,6 +81,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--seed", type=cliargs.seed, default=0, help="(default: %(default)s)")
     parser.add_argument(
+        "--strategy",
+        choices=STRATEGIES,
+        default="paper",
+        help="paper: negative updating and pooling (Section 4); dmvd, dmmd, dc: the voter, "
+        "majority and direct-comparison strategies in the same model, k the group of "
+        "dmmd (docs/strategies.md) (default: %(default)s)",
+    )
+    parser.add_argument(
         "--population",
         type=cliargs.positive_int,
         default=None,
@@ -119,6 +131,9 @@ def run(args: argparse.Namespace) -> int:
     options = sorted(set(args.options))
     pools = sorted(set(args.pool))
     _check(args, pools)
+    if args.strategy != "paper" and pools[0] < 2:
+        pools = [k for k in pools if k >= 2]
+        print("swarm wellstirred: k = 1 left out (an agent alone hears nobody)", file=sys.stderr)
     cells = _run_sweep(args, options, pools)
     if args.json:
         print(json.dumps([_record(cell, args.exact) for cell in cells]))
@@ -137,6 +152,8 @@ def _check(args: argparse.Namespace, pools: Sequence[int]) -> None:
     """Checks that need more than one argument: one line, exit code 2."""
     if args.population is not None and args.population < pools[-1]:
         raise UsageError(f"--population {args.population} is smaller than --pool {pools[-1]}")
+    if args.strategy != "paper":
+        _check_voting(args, pools)
     if args.exact and args.alpha != 0.0:
         raise UsageError("--exact needs --alpha 0: with alpha > 0 there is no exact chain")
     # The exact chain exists where the population is the pool; refuse what it cannot do
@@ -157,6 +174,25 @@ def _check(args: argparse.Namespace, pools: Sequence[int]) -> None:
             raise UsageError(f"{flag}: directory {path.parent} does not exist")
 
 
+def _check_voting(args: argparse.Namespace, pools: Sequence[int]) -> None:
+    """What a voting strategy does not have: evidence reliability, a decision threshold,
+    an exact chain, full opinions to trace."""
+    for given, flag in (
+        (args.alpha != 0.0, "--alpha"),
+        (args.threshold != 1.0, "--threshold"),
+        (args.exact, "--exact"),
+        (args.method != "auto", "--method"),
+        (args.plot_opinion is not None, "--plot-opinion"),
+    ):
+        if given:
+            raise UsageError(f"{flag} is for --strategy paper: a vote is one option")
+    if pools[-1] < 2:
+        raise UsageError(
+            f"--strategy {args.strategy} needs a --pool of 2 or more: an agent and at "
+            "least one neighbour"
+        )
+
+
 def _run_sweep(args: argparse.Namespace, options: list[int], pools: list[int]) -> list[Cell]:
     console = Console(stderr=True)
     progress = Progress(
@@ -175,6 +211,17 @@ def _run_sweep(args: argparse.Namespace, options: list[int], pools: list[int]) -
             done = f"done n={cell.model.options}, k={cell.model.pool}"
             progress.update(task, advance=1, description=f"well-stirred sweep ({done})")
 
+        if args.strategy != "paper":
+            return vote_sweep(
+                args.strategy,
+                options,
+                pools,
+                runs=args.runs,
+                seed=args.seed,
+                population=args.population,
+                steps=args.steps,
+                on_cell=advance,
+            )
         return sweep(
             options,
             pools,
@@ -192,7 +239,9 @@ def _run_sweep(args: argparse.Namespace, options: list[int], pools: list[int]) -
 
 def _record(cell: Cell, with_exact: bool) -> dict[str, Any]:
     model, summary = cell.model, cell.summary
-    record: dict[str, Any] = {
+    strategy = getattr(model, "strategy", "paper")
+    record: dict[str, Any] = {} if strategy == "paper" else {"strategy": strategy}
+    record |= {
         "options": model.options,
         "pool": model.pool,
         "population": model.agents,

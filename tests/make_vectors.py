@@ -753,7 +753,7 @@ def opinion_vectors() -> TypeVectors:
     vectors.add_invalid(
         "unknown_kind",
         BAD_ENUM,
-        "kind is opinion or beacon",
+        "kind is opinion, beacon or vote",
         changed(data, b'"kind":"opinion"', b'"kind":"rumour"'),
         at="$.kind",
     )
@@ -800,6 +800,53 @@ def opinion_vectors() -> TypeVectors:
         "a robot id is an integer",
         changed(data, b'"id":3', b'"id":"3"'),
         at="$.id",
+    )
+    return vectors
+
+
+def vote_vectors() -> TypeVectors:
+    vectors = TypeVectors("vote_payload.json", protocol.VotePayload, decoder="radio")
+    data = vectors.add_valid(
+        "typical",
+        protocol.VotePayload(v=1, id=3, trip=2, decided=False, site=4, quality=0.75),
+        note="--strategy dmvd, dmmd or dc: the site a robot favours and its quality estimate",
+    )
+    vectors.add_valid(
+        "decided",
+        protocol.VotePayload(v=1, id=12, trip=7, decided=True, site=0, quality=1.0),
+    )
+    vectors.add_accepted(
+        "kind_last",
+        b'{"v":1,"id":3,"trip":2,"decided":false,"site":4,"quality":0.75,"kind":"vote"}',
+        data,
+    )
+    common_faults(vectors, data, b',"quality":0.75', "quality")
+    vectors.add_invalid(
+        "quality_above_1",
+        OUT_OF_RANGE,
+        "a quality is in [0, 1]",
+        changed(data, b'"quality":0.75', b'"quality":1.5'),
+        at="$.quality",
+    )
+    vectors.add_invalid(
+        "negative_site",
+        OUT_OF_RANGE,
+        "a site id is non-negative",
+        changed(data, b'"site":4', b'"site":-1'),
+        at="$.site",
+    )
+    vectors.add_invalid(
+        "site_too_large",
+        OUT_OF_RANGE,
+        f"a site id is below {protocol.MAX_OPTIONS}",
+        changed(data, b'"site":4', f'"site":{protocol.MAX_OPTIONS}'.encode()),
+        at="$.site",
+    )
+    vectors.add_invalid(
+        "opinion_in_a_vote",
+        UNKNOWN_FIELD,
+        "a vote has a site, not an opinion",
+        changed(data, b'"site":4', b'"opinion":[0.5,0.5]'),
     )
     return vectors
 
@@ -1279,6 +1326,7 @@ BUILDERS: tuple[Callable[[], TypeVectors], ...] = (
     radio_rx_meta_vectors,
     log_line_vectors,
     opinion_vectors,
+    vote_vectors,
     beacon_vectors,
 )
 

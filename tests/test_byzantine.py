@@ -52,7 +52,8 @@ def _drive(
         if inject is not None:
             radio.inbox.append(("5", inject))
         command = ports.control_step(robot, body, radio, swarm.rejects[0])
-        sent += command.broadcasts
+        assert all(isinstance(p, protocol.OpinionPayload) for p in command.broadcasts)
+        sent += [p for p in command.broadcasts if isinstance(p, protocol.OpinionPayload)]
         swarm.world.advance()
     raise AssertionError("the robot never got there")
 

@@ -328,7 +328,9 @@ def test_robot_broadcasts_at_the_nest_every_period_for_the_dwell() -> None:
     robot, body, radio = swarm.controllers[0], swarm.bodies[0], swarm.radios[0]
     while robot.trips < 1:
         command = ports.control_step(robot, body, radio, swarm.rejects[0])
-        sent += [(swarm.world.t, payload) for payload in command.broadcasts]
+        sent += [
+            (swarm.world.t, p) for p in command.broadcasts if isinstance(p, protocol.OpinionPayload)
+        ]
         swarm.world.advance()
     times = [t for t, _ in sent]
     intervals = [b - a for a, b in itertools.pairwise(times)]
@@ -361,7 +363,11 @@ def test_lingering_robot_broadcasts_its_decision_before_leaving() -> None:
         phase = robot.phase
         command = ports.control_step(robot, body, radio, swarm.rejects[0])
         if phase == "lingering":
-            lingering += [(swarm.world.t, payload) for payload in command.broadcasts]
+            lingering += [
+                (swarm.world.t, p)
+                for p in command.broadcasts
+                if isinstance(p, protocol.OpinionPayload)
+            ]
         swarm.world.advance()
     assert robot.phase == "stopped"
     assert lingering, "no broadcasts while lingering"

@@ -15,6 +15,7 @@ EXAMPLES = EXAMPLE.findall(DOC.read_text())
 TYPES = {
     "OpinionPayload": protocol.RadioPayload,
     "BeaconPayload": protocol.RadioPayload,
+    "VotePayload": protocol.RadioPayload,
 }
 
 
@@ -28,7 +29,7 @@ def test_the_document_shows_every_message_type() -> None:
         and value is not protocol.Message
     }
     assert defined <= shown, f"messages without an example: {defined - shown}"
-    assert {"OpinionPayload", "BeaconPayload"} <= shown
+    assert {"OpinionPayload", "BeaconPayload", "VotePayload"} <= shown
 
 
 @pytest.mark.parametrize(("name", "text"), EXAMPLES, ids=[name for name, _ in EXAMPLES])

@@ -71,7 +71,13 @@ def test_every_message_type_has_vectors_of_every_kind() -> None:
         name
         for name, value in vars(protocol).items()
         if isinstance(value, type)
-        and issubclass(value, protocol.Message | protocol.OpinionPayload | protocol.BeaconPayload)
+        and issubclass(
+            value,
+            protocol.Message
+            | protocol.OpinionPayload
+            | protocol.BeaconPayload
+            | protocol.VotePayload,
+        )
         and value is not protocol.Message
     }
     covered = {content["type"] for content in MESSAGE_FILES.values()}

@@ -28,6 +28,7 @@ FAST = frozenset(
         "test_controller",
         "test_coordinator",
         "test_decision",
+        "test_defence",
         "test_docs",
         "test_equations",
         "test_fuzz",
@@ -49,8 +50,10 @@ FAST = frozenset(
         "test_tiers",
         "test_user_files",
         "test_vectors",
+        "test_voting",
         "test_watchdog",
         "test_wellstirred",
+        "test_wellstirred_voting",
         "test_world",
     }
 )

@@ -45,7 +45,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -57,6 +57,7 @@ __all__ = [
     "MAX_EXACT_OPTIONS",
     "MAX_EXACT_POOL",
     "Cell",
+    "CellModel",
     "ExactTime",
     "Method",
     "Model",
@@ -135,11 +136,37 @@ class Model:
         return self.options / 2
 
 
+class CellModel(Protocol):
+    """What a sweep's table and figures read of a cell's model: ``Model`` (the paper's
+    strategy) or ``wellstirred.voting.VoteModel`` (the strategies it is compared with)."""
+
+    @property
+    def options(self) -> int: ...
+
+    @property
+    def pool(self) -> int: ...
+
+    @property
+    def agents(self) -> int: ...
+
+    @property
+    def alpha(self) -> float: ...
+
+    @property
+    def steps(self) -> int: ...
+
+    @property
+    def exhaustive_steps(self) -> float: ...
+
+    @property
+    def survivors_exact(self) -> bool: ...
+
+
 @dataclass(frozen=True)
 class Outcome:
     """Per-run results: the consensus time (``steps`` for a failure) and whether it succeeded."""
 
-    model: Model
+    model: CellModel
     times: np.ndarray = field(repr=False)
     success: np.ndarray = field(repr=False)
 
@@ -188,7 +215,7 @@ class ExactTime:
 class Cell:
     """One parameter set of a sweep with its simulated runs and, if asked, the exact time."""
 
-    model: Model
+    model: CellModel
     outcome: Outcome = field(repr=False)
     summary: Summary
     exact: ExactTime | None = None

@@ -255,7 +255,28 @@ class BeaconPayload(
     seq: _Count
 
 
-RadioPayload = OpinionPayload | BeaconPayload
+class VotePayload(
+    msgspec.Struct,
+    tag_field="kind",
+    tag="vote",
+    kw_only=True,
+    forbid_unknown_fields=True,
+    frozen=True,
+):
+    """A voting robot's broadcast at the nest (``--strategy dmvd``, ``dmmd`` or ``dc``): the
+    one site it favours and its own estimate of that site's quality."""
+
+    v: Literal[1]
+    id: _RobotId
+    trip: _Count
+    decided: bool
+    site: _SiteId
+    quality: _Unit
+
+
+RadioPayload = OpinionPayload | BeaconPayload | VotePayload
+# What a robot broadcasts: its opinion (the paper's strategy) or its vote (the others).
+RobotBroadcast = OpinionPayload | VotePayload
 
 
 # --- robot -> anyone -----------------------------------------------------------------
@@ -437,12 +458,14 @@ def _decode(decoder: msgspec.json.Decoder[M], payload: bytes | bytearray | memor
         raise ProtocolError(str(error)) from None
 
 
-_radio_decoder: msgspec.json.Decoder[OpinionPayload | BeaconPayload] = msgspec.json.Decoder(
-    RadioPayload
+_radio_decoder: msgspec.json.Decoder[OpinionPayload | BeaconPayload | VotePayload] = (
+    msgspec.json.Decoder(RadioPayload)
 )
 
 
-def decode_radio(payload: bytes | bytearray | memoryview) -> OpinionPayload | BeaconPayload:
+def decode_radio(
+    payload: bytes | bytearray | memoryview,
+) -> OpinionPayload | BeaconPayload | VotePayload:
     message = _decode(_radio_decoder, payload)
     if isinstance(message, OpinionPayload) and abs(sum(message.opinion) - 1.0) > 1e-6:
         raise ProtocolError(f"opinion sums to {sum(message.opinion)!r}, not 1")

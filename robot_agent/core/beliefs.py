@@ -1,16 +1,20 @@
-"""What one robot believes: its opinion over the sites and, once it has one, its decision.
+"""What one robot believes under the paper's strategy: its opinion over the sites and,
+once it has one, its decision.
 
 A comparison of the two sites of a pair updates the opinion by Definition 1 (negative
-updating); at the nest it is pooled (MProdOp, Definition 2, or ``config.pooling``) with the
-latest opinion of every neighbour heard since the robot arrived, and then tested for a
-decision. The arithmetic is ``robot_agent/core/decision.py``'s; this is the state it acts on.
+updating); at the nest it is pooled (MProdOp, Definition 2, or ``config.pooling``; with
+``config.defence``, that defence's pool, ``defence.py``) with the latest opinion of every
+neighbour heard since the robot arrived, and then tested for a decision. The arithmetic
+is ``robot_agent/core/decision.py``'s; this is the state it acts on. It is the
+controller's ``strategies.Strategy`` for ``--strategy paper``.
 """
 
 from __future__ import annotations
 
+import random
 from typing import TYPE_CHECKING
 
-from robot_agent.core import decision
+from robot_agent.core import decision, defence
 from wire import protocol
 
 if TYPE_CHECKING:
@@ -32,10 +36,45 @@ class Beliefs:
         # The latest opinion of each robot, with when it was heard; pooling takes those
         # heard since arriving at the nest.
         self.heard: dict[int, tuple[float, list[float]]] = {}
+        self._pooler = defence.make_pooler(config.defence, config.pooling, config.trim)
 
     def hear(self, robot_id: int, t: float, opinion: list[float]) -> None:
         """Robot ``robot_id``'s opinion (validated over our sites), heard at sim time ``t``."""
         self.heard[robot_id] = (t, opinion)
+        self._pooler.hear(robot_id, opinion)
+
+    def hear_payload(self, robot_id: int, t: float, payload: object) -> bool:
+        """A neighbour's broadcast; False (not taken) unless it is an opinion over our
+        sites (wrong length, negative, NaN, or a vote)."""
+        if not isinstance(payload, protocol.OpinionPayload):
+            return False
+        try:
+            opinion = decision.validate_opinion(payload.opinion, len(self.opinion))
+        except ValueError:
+            return False
+        self.hear(robot_id, t, opinion)
+        return True
+
+    def next_sites(self, rng: random.Random) -> list[int]:
+        """The pair of the next trip, drawn by weight from the opinion."""
+        return list(decision.choose_pair(self.opinion, rng))
+
+    def exploration(self, rng: random.Random) -> float:
+        """The paper's robot leaves a site as soon as it has seen it."""
+        return 0.0
+
+    def nest_visit(self, arrival: float, rng: random.Random) -> tuple[float, float]:
+        """``dwell`` seconds at the nest, pooling what was heard since arriving."""
+        return arrival + self._config.dwell, arrival
+
+    def broadcast(self, robot_id: int) -> protocol.OpinionPayload:
+        return protocol.OpinionPayload(
+            v=protocol.VERSION,
+            id=robot_id,
+            trip=self.trips,
+            decided=self.decided_site is not None,
+            opinion=protocol.wire_opinion(self.opinion),
+        )
 
     def compare(self, qualities: dict[int, float]) -> bool:
         """Negative update from the two sites' qualities (in visiting order); whether the
@@ -51,14 +90,15 @@ class Beliefs:
         self.opinion = updated
         return True
 
-    def pool(self, since: float, t: float) -> None:
+    def pool(self, since: float, t: float, rng: random.Random | None = None) -> None:
         """Pool with every neighbour heard since ``since``, count the trip, and decide at
-        sim time ``t`` if an option reaches the threshold (``decided_site``)."""
+        sim time ``t`` if an option reaches the threshold (``decided_site``). Draws
+        nothing from ``rng``."""
         neighbours = [
             opinion for _, (heard, opinion) in sorted(self.heard.items()) if heard >= since
         ]
         pool = [self.opinion, *neighbours]
-        pooled = decision.POOLING_OPERATORS[self._config.pooling](pool)
+        pooled = self._pooler.pool(pool)
         if pooled is not None:  # None: contradictory evidence, keep our own opinion
             self.opinion = pooled
         self.heard = {}

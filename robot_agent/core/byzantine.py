@@ -6,9 +6,10 @@ interface alone (constructor arguments, ``step``'s command), so the robot drives
 and keeps the nest's rhythm exactly like an honest one:
 
 * ``liar=SITE``: every opinion it broadcasts is one-hot on SITE, flagged as decided (what
-  an honest robot certain of SITE would send). It never settles, so it keeps coming back
-  to lie: its controller is built with alpha = 0.5 (Definition 1's worthless evidence)
-  and hears no opinions, so its own opinion stays uniform, it never decides, and it
+  an honest robot certain of SITE would send); under a voting strategy every vote is for
+  SITE with the highest quality, 1. It never settles, so it keeps coming back to lie: its
+  controller is built with alpha = 0.5 (Definition 1's worthless evidence; a voting
+  robot: a settle count out of reach) and hears no opinions, so it never decides and
   moves like a robot still undecided for the whole run.
 * ``inverted``: its camera reads every site's quality q as 1 - q, so each comparison
   eliminates the better site of the pair. Otherwise honest: it pools, decides and
@@ -29,7 +30,7 @@ from typing import Literal, cast, get_args
 import msgspec
 import numpy as np
 
-from robot_agent.core import ports, vision
+from robot_agent.core import ports, vision, voting
 from robot_agent.core.controller import Controller, ControllerConfig, QualityEstimator
 from wire import protocol
 
@@ -143,18 +144,22 @@ class Liar:
         if not 0 <= site < num_sites:
             raise ValueError(f"a liar's site {site} is outside 0..{num_sites - 1}")
         self._controller = controller
+        self._site = site
         self._claim = protocol.wire_opinion(one_hot(site, num_sites))
 
     def step(self, reading: ports.BodyReading, received: Sequence[ports.Received]) -> ports.Command:
-        beacon_only = [m for m in received if not isinstance(m.payload, protocol.OpinionPayload)]
+        beacon_only = [m for m in received if isinstance(m.payload, protocol.BeaconPayload)]
         command = self._controller.step(reading, beacon_only)
         if not command.broadcasts:
             return command
-        lies = tuple(
-            msgspec.structs.replace(payload, decided=True, opinion=self._claim)
-            for payload in command.broadcasts
+        return dataclasses.replace(
+            command, broadcasts=tuple(self._lie(payload) for payload in command.broadcasts)
         )
-        return dataclasses.replace(command, broadcasts=lies)
+
+    def _lie(self, payload: protocol.RobotBroadcast) -> protocol.RobotBroadcast:
+        if isinstance(payload, protocol.VotePayload):
+            return msgspec.structs.replace(payload, decided=True, site=self._site, quality=1.0)
+        return msgspec.structs.replace(payload, decided=True, opinion=self._claim)
 
     def status(self, tick: int) -> protocol.Status:
         return self._controller.status(tick)
@@ -203,7 +208,12 @@ def build_controller(
         return Silent(Controller(robot_id, world, config, rng))
     if behaviour.site is None:
         raise ValueError("a liar needs the site it claims (liar=SITE)")
-    liar_config = dataclasses.replace(config, alpha=_LIAR_ALPHA, threshold=_LIAR_THRESHOLD)
+    if config.strategy in voting.VOTING:
+        liar_config = voting.never_settles(config)
+    else:  # its own evidence worthless; no defence, which needs alpha = 0, for what it hears
+        liar_config = dataclasses.replace(
+            config, alpha=_LIAR_ALPHA, threshold=_LIAR_THRESHOLD, defence="none"
+        )
     return Liar(Controller(robot_id, world, liar_config, rng), behaviour.site, len(world.sites))
 
 

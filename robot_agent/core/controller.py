@@ -24,7 +24,10 @@ phase, what the robot does on entering it and each control period in it; a phase
 handler senses, then fires at most the events its phase has. The rest is done by parts
 the controller uses:
 
-* ``beliefs.Beliefs``: the opinion, its negative updates and pooling, the decision;
+* ``strategies.Strategy``: what the robot believes and decides, by ``config.strategy``:
+  ``beliefs.Beliefs`` (the paper's opinion, its negative updates and pooling, the
+  decision) or ``voting.VoteBeliefs`` (the strategies it is compared with: one site a
+  trip, sensed for ``exploration`` seconds, a dissemination of random length at the nest);
 * ``motion.Motion``: legs of travel on the navigator, with the guards a crowded arena
   needs (a viewpoint taken by another robot counts as reached once the robot has been
   stalled close to it; a leg that takes longer than ``leg_allowance`` is given up);
@@ -43,8 +46,7 @@ import math
 import random
 from collections.abc import Callable, Sequence
 
-from robot_agent.core import decision, phases, ports, vision
-from robot_agent.core.beliefs import Beliefs
+from robot_agent.core import phases, ports, strategies, vision
 from robot_agent.core.controller_config import ControllerConfig
 from robot_agent.core.motion import STOP, TIME_EPSILON, Motion, along_radius, distance
 from robot_agent.core.navigation import Navigator, NavParams
@@ -114,7 +116,7 @@ class Controller:
             robot_id,
             [math.atan2(site.y, site.x) for site in sites],
         )
-        self._beliefs = Beliefs(self._n, config)
+        self._beliefs = strategies.make_strategy(self._n, config, robot_id)
         self._rejected = 0
 
         # Trip state.
@@ -126,6 +128,10 @@ class Controller:
         self._qualities: dict[int, float] = {}  # sites seen this trip, in visiting order
         self._last_beacon: float | None = None
         self._nest_arrival = 0.0
+        self._dwell_end = 0.0  # when the robot pools, and from when what it heard counts
+        self._listen_from = 0.0
+        self._explore_until = 0.0  # a site is sensed at least until then
+        self._exploring = False  # the site is seen and the robot stays until _explore_until
         self._next_broadcast = 0.0
         self._linger_end = 0.0
         # For each phase of the table: what the robot does on entering it, and each
@@ -252,18 +258,15 @@ class Controller:
             else:
                 self._hear_opinion(message.sender, payload)
 
-    def _hear_opinion(self, sender: str, payload: protocol.OpinionPayload) -> None:
+    def _hear_opinion(self, sender: str, payload: protocol.RobotBroadcast) -> None:
         if sender == self._name and payload.id == self.robot_id:
             return  # our own broadcast echoed back
         if sender != names.robot_name(payload.id):
             self._rejected += 1  # a robot claiming someone else's id
             return
-        try:
-            opinion = decision.validate_opinion(payload.opinion, self._n)
-        except ValueError:
-            self._rejected += 1  # wrong length, negative, NaN: not an opinion over our sites
+        if not self._beliefs.hear_payload(payload.id, self._t, payload):
+            self._rejected += 1  # not an opinion over our sites, or another strategy's
             return
-        self._beliefs.hear(payload.id, self._t, opinion)
 
     def _hears_beacon(self, since: float) -> bool:
         heard = self._last_beacon
@@ -273,18 +276,11 @@ class Controller:
             and self._t - heard <= self.config.beacon_timeout + TIME_EPSILON
         )
 
-    def _broadcasts(self) -> tuple[protocol.OpinionPayload, ...]:
+    def _broadcasts(self) -> tuple[protocol.RobotBroadcast, ...]:
         if self._t + TIME_EPSILON < self._next_broadcast:
             return ()
         self._next_broadcast = self._t + self.config.broadcast_period
-        payload = protocol.OpinionPayload(
-            v=protocol.VERSION,
-            id=self.robot_id,
-            trip=self._beliefs.trips,
-            decided=self._beliefs.decided_site is not None,
-            opinion=protocol.wire_opinion(self._beliefs.opinion),
-        )
-        return (payload,)
+        return (self._beliefs.broadcast(self.robot_id),)
 
     # --- each control period in a phase: sense, then fire what happened -------------
 
@@ -300,18 +296,28 @@ class Controller:
         return ports.Command(left, right)
 
     def _sense(self, reading: ports.BodyReading) -> ports.Command:
+        if self._exploring:  # seen: the strategy keeps the robot at its site a while
+            if self._t + TIME_EPSILON >= self._explore_until:
+                self._exploring = False
+                self._compare(reading)
+            return STOP
         look = self._sensing.step(reading)
         if look.quality is not None:
             self._qualities[self._pair.pop(0)] = look.quality
             if self._pair:
                 self._fire("sensed_first_site", reading)
+            elif self._t + TIME_EPSILON < self._explore_until:
+                self._exploring = True
             else:
-                if self._beliefs.compare(self._qualities):
-                    self._changed = True
-                self._fire("compared", reading)
+                self._compare(reading)
         elif look.gave_up:
             self._fire("site_unseen", reading)
         return look.command
+
+    def _compare(self, reading: ports.BodyReading) -> None:
+        if self._beliefs.compare(self._qualities):
+            self._changed = True
+        self._fire("compared", reading)
 
     def _drive_home(self, reading: ports.BodyReading) -> ports.Command:
         if self._hears_beacon(self._motion.leg_start):
@@ -337,12 +343,12 @@ class Controller:
 
     def _dwell(self, reading: ports.BodyReading) -> ports.Command:
         broadcasts = self._broadcasts()  # the opinion as it was before pooling
-        if self._t + TIME_EPSILON >= self._nest_arrival + self.config.dwell:
+        if self._t + TIME_EPSILON >= self._dwell_end:
             self._pool_and_decide(reading)
         return ports.Command(0.0, 0.0, broadcasts=broadcasts)
 
     def _pool_and_decide(self, reading: ports.BodyReading) -> None:
-        self._beliefs.pool(self._nest_arrival - TIME_EPSILON, self._t)
+        self._beliefs.pool(self._listen_from - TIME_EPSILON, self._t, self._rng)
         self._changed = True
         if self._beliefs.decided_site is None:
             self._choose_pair(reading)
@@ -371,12 +377,17 @@ class Controller:
     # --- on entering a phase -------------------------------------------------------
 
     def _choose_pair(self, reading: ports.BodyReading) -> None:
-        """The pair of sites of the next trip, drawn by weight from the opinion."""
-        first, second = decision.choose_pair(self._beliefs.opinion, self._rng)
-        # Visit the nearer viewpoint first; the pair itself is what the rng chose.
-        if distance(reading, self._viewpoints[second]) < distance(reading, self._viewpoints[first]):
-            first, second = second, first
-        self._pair = [first, second]
+        """The sites of the next trip, as the strategy draws them (the paper's: a pair by
+        weight from the opinion)."""
+        sites = self._beliefs.next_sites(self._rng)
+        # Visit the nearer viewpoint first; the sites themselves are what the rng chose.
+        if len(sites) == 2:
+            first, second = sites
+            if distance(reading, self._viewpoints[second]) < distance(
+                reading, self._viewpoints[first]
+            ):
+                sites = [second, first]
+        self._pair = sites
         self._qualities = {}
 
     def _start_leg(self, reading: ports.BodyReading) -> None:
@@ -384,6 +395,7 @@ class Controller:
 
     def _start_sensing(self, reading: ports.BodyReading) -> None:
         self._sensing.begin(reading, self._site_xy[self._pair[0]])
+        self._explore_until = self._t + self._beliefs.exploration(self._rng)
 
     def _head_home(self, reading: ports.BodyReading) -> None:
         self._pair = []  # whatever is left of the pair is given up
@@ -392,6 +404,7 @@ class Controller:
     def _arrive_at_nest(self, reading: ports.BodyReading) -> None:
         self._nest_arrival = self._t
         self._next_broadcast = self._t
+        self._dwell_end, self._listen_from = self._beliefs.nest_visit(self._t, self._rng)
 
     def _start_lingering(self, reading: ports.BodyReading) -> None:
         self._linger_end = self._t + self.config.linger

@@ -11,7 +11,7 @@ from typing import Annotated, Any, ClassVar
 
 from msgspec import Meta
 
-from robot_agent.core import decision
+from robot_agent.core import decision, defence, voting
 from wire import settings
 from wire.settings import Flag
 
@@ -73,6 +73,62 @@ class ControllerConfig:
         ),
         Flag(),
     ] = 0.0
+    strategy: Annotated[
+        voting.StrategyName,
+        Meta(
+            description="the decision strategy: paper (negative updating and pooling), or "
+            "one the paper is compared with (docs/strategies.md): dmvd (voter), dmmd "
+            "(majority), dc (direct comparison)"
+        ),
+        Flag(),
+    ] = "paper"
+    exploration: Annotated[
+        Seconds,
+        Meta(description="dmvd, dmmd, dc: mean sim seconds sensing a site (sigma)"),
+        Flag(),
+    ] = 10.0
+    dissemination: Annotated[
+        Seconds,
+        Meta(
+            description="dmvd, dmmd, dc: mean sim seconds broadcasting at the nest per unit "
+            "of quality (g; dc: the mean itself)"
+        ),
+        Flag(),
+    ] = 10.0
+    listen: Annotated[
+        Seconds,
+        Meta(description="dmvd, dmmd, dc: sim seconds of listening at the end of dissemination"),
+        Flag(name="listen-window"),
+    ] = 3.0
+    neighbours: Annotated[
+        int,
+        Meta(ge=1, le=1000, description="dmvd, dmmd, dc: the last G votes heard are used"),
+        Flag(),
+    ] = 2
+    settle: Annotated[
+        int,
+        Meta(
+            ge=1,
+            le=voting.NEVER_SETTLE,
+            description="dmvd, dmmd, dc: decide after this many updates in a row that kept "
+            "the site with no vote heard for another",
+        ),
+        Flag(),
+    ] = 3
+    defence: Annotated[
+        defence.DefenceName,
+        Meta(
+            description="a defence against liars (docs/byzantine.md): none, or trimmed (a "
+            "site is ruled out by peers' reports only when more than --trim peers rule it "
+            "out; paper strategy, alpha 0)"
+        ),
+        Flag(),
+    ] = "none"
+    trim: Annotated[
+        int,
+        Meta(ge=0, le=1000, description="--defence trimmed: the F of W-MSR, liars tolerated"),
+        Flag(),
+    ] = 1
     view_distance: Annotated[
         Metres, Meta(description="metres from the wall to the robot centre when sensing")
     ] = 0.15
@@ -141,6 +197,12 @@ class ControllerConfig:
             raise ValueError(
                 f"with alpha = {self.alpha} > 0 no option ever reaches probability 1: "
                 "set threshold below 1 (e.g. 0.99)"
+            )
+        if self.defence != "none" and (self.strategy != "paper" or self.alpha != 0.0):
+            raise ValueError(
+                f"defence {self.defence} works on the paper's strategy with alpha = 0 (its "
+                "opinions are sets of sites still possible); got strategy "
+                f"{self.strategy}, alpha {self.alpha}"
             )
 
     def leg_allowance(self, length: float) -> float:

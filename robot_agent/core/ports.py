@@ -40,7 +40,7 @@ class Received:
     """A radio message that passed validation."""
 
     sender: str
-    payload: protocol.OpinionPayload | protocol.BeaconPayload
+    payload: protocol.OpinionPayload | protocol.BeaconPayload | protocol.VotePayload
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,7 @@ class Command:
     left: float  # wheel speeds, m/s
     right: float
     capture: bool = False  # request a camera frame (arrives with a later reading)
-    broadcasts: tuple[protocol.OpinionPayload, ...] = ()
+    broadcasts: tuple[protocol.RobotBroadcast, ...] = ()
 
 
 class RobotController(Protocol):

@@ -1,0 +1,93 @@
+"""The controller's plug-in seam: what a decision strategy decides in the Section 5 trip.
+
+The controller (``controller.py``) drives, senses, keeps the nest's rhythm and talks on
+the radio; a ``Strategy`` says which sites a trip visits, what a sensed quality does to
+the robot's belief, how long it stays at a site and at the nest, what it broadcasts,
+what it takes from what it hears, and when it has decided. ``make_strategy`` picks one by
+``config.strategy``:
+
+* ``paper``: ``beliefs.Beliefs``, the paper's negative updating and pooling (with
+  ``config.defence``'s pooler, ``defence.py``); two sites a trip, no extra time at a site,
+  ``dwell`` seconds at the nest;
+* ``dmvd``, ``dmmd``, ``dc``: ``voting.VoteBeliefs`` (Valentini et al.); one site a trip,
+  sensed for an exponential time, an exponential dissemination at the nest.
+
+Pure, like everything in ``robot_agent/core``.
+"""
+
+from __future__ import annotations
+
+import random
+from typing import TYPE_CHECKING, Protocol
+
+from robot_agent.core.beliefs import Beliefs
+from robot_agent.core.voting import VoteBeliefs
+from wire import protocol
+
+if TYPE_CHECKING:
+    from robot_agent.core.controller_config import ControllerConfig
+
+
+class Strategy(Protocol):
+    """One robot's belief and decision under a strategy (read by the status, driven by the
+    controller's trip)."""
+
+    @property
+    def opinion(self) -> list[float]: ...
+
+    @property
+    def trips(self) -> int: ...
+
+    @property
+    def pool_sizes(self) -> list[int]: ...
+
+    @property
+    def comparison(self) -> protocol.Comparison | None: ...
+
+    @property
+    def decided_site(self) -> int | None: ...
+
+    @property
+    def decision_time(self) -> float | None: ...
+
+    @property
+    def decision_trips(self) -> int | None: ...
+
+    def next_sites(self, rng: random.Random) -> list[int]:
+        """The sites the next trip visits (one or two), as drawn."""
+        ...
+
+    def compare(self, qualities: dict[int, float]) -> bool:
+        """The trip's sensed qualities, in visiting order; whether the opinion changed."""
+        ...
+
+    def exploration(self, rng: random.Random) -> float:
+        """Sim seconds to stay sensing a site once there (0: until its quality is seen)."""
+        ...
+
+    def nest_visit(self, arrival: float, rng: random.Random) -> tuple[float, float]:
+        """For a robot at the nest since ``arrival``: when it pools, and from when what it
+        heard counts."""
+        ...
+
+    def hear_payload(self, robot_id: int, t: float, payload: object) -> bool:
+        """A neighbour's broadcast heard at ``t``; False if it is not one to take."""
+        ...
+
+    def broadcast(self, robot_id: int) -> protocol.RobotBroadcast:
+        """What the robot broadcasts at the nest."""
+        ...
+
+    def pool(self, since: float, t: float, rng: random.Random) -> None:
+        """Combine with what was heard since ``since``, count the trip, decide at ``t``."""
+        ...
+
+
+def make_strategy(num_sites: int, config: ControllerConfig, robot_id: int) -> Strategy:
+    """Robot ``robot_id``'s strategy for ``config.strategy``."""
+    if config.strategy == "paper":
+        return Beliefs(num_sites, config)
+    return VoteBeliefs(num_sites, config, robot_id)
+
+
+__all__ = ["Strategy", "make_strategy"]
