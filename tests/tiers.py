@@ -33,6 +33,7 @@ FAST = frozenset(
         "test_fuzz",
         "test_guard",
         "test_layering",
+        "test_link",
         "test_names",
         "test_navigation",
         "test_parking",
