@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from deploy.outside import add_outside_options
 from deploy.run_switches import add_swarm_switches
 from plumbing import cliargs
 from viewer.options import add_view_options
@@ -126,6 +127,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "docs/performance.md)",
     )
     add_view_options(parser.add_argument_group("watching"))
+    add_outside_options(parser)
 
 
 def add_engine_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
