@@ -327,8 +327,8 @@ def test_a_newer_session_replaces_the_old_one_which_the_run_sees_leave_and_join(
     restarted = LinkClient(ROBOT, KEY, nonce=counting_nonces(77))
     pair.client = restarted
     pair.connect()
-    assert pair.peer_events == [Opened(ROBOT), Closed(ROBOT, "a newer session replaced it"),
-                                Opened(ROBOT)]  # fmt: skip
+    replaced = Closed(ROBOT, "a newer session replaced it")
+    assert pair.peer_events == [Opened(ROBOT), replaced, Opened(ROBOT)]
     assert pair.peer.sessions == 2
 
 

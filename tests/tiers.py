@@ -77,6 +77,7 @@ FULL_ONLY = {
     "test_faults": "starts swarms with faults",
     "test_inprocess": "starts swarms to compare with the in-process engine",
     "test_multihost": "network namespaces and processes",
+    "test_outside": "starts swarms with robots outside the emulator over UDP and serial links",
     "test_recording": "starts swarms and the recorder",
     "test_report": "runs `swarm report` in a process; plots",
     "test_ending_rule": "in-process runs, and the signal numbers of the stop signals",

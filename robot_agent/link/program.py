@@ -40,7 +40,7 @@ from pathlib import Path
 
 from robot_agent.core import byzantine
 from robot_agent.core.controller_config import ControllerConfig
-from robot_agent.core.endpoint import InputKind, Outgoing, OutputKind, RobotEndpoint
+from robot_agent.core.endpoint import InputKind, Outgoing, RobotEndpoint
 from robot_agent.link.client import LinkClient, Lost, Received, Welcomed
 from robot_agent.link.transport import LinkClosedError, Transport, open_transport
 from wire import auth, link, names, protocol, settings
@@ -48,6 +48,10 @@ from wire import auth, link, names, protocol, settings
 log = logging.getLogger("robot_agent.link")
 
 ASK_EVERY = 1.0  # seconds between questions for the map until one is answered
+# Seconds between two sendings of the robot's latest status. The robot process publishes a
+# status when it changes, over Zenoh, which does not lose it; a link may lose frames, and
+# a status lost (a decision) would be lost for good. A repeat changes nothing anywhere.
+STATUS_EVERY = 2.0
 MAX_WAIT = 0.2  # seconds the loop waits at most (a stop signal is seen within it)
 REOPEN_EVERY = 1.0  # seconds between attempts to reopen a transport that closed
 DRAIN_WAIT = 2.0  # seconds to let a paced serial line send the goodbye
@@ -57,11 +61,6 @@ INPUT_OF = {
     link.DataKind.SENSE: InputKind.SENSE,
     link.DataKind.RADIO_RX: InputKind.RADIO_RX,
     link.DataKind.CAMERA: InputKind.CAMERA,
-}
-OUTPUT_OF = {
-    OutputKind.RADIO_TX: link.DataKind.RADIO_TX,
-    OutputKind.ACT: link.DataKind.ACT,
-    OutputKind.STATUS: link.DataKind.STATUS,
 }
 
 
@@ -109,6 +108,8 @@ class LinkRobot:
     worlds: set[str] = field(default_factory=set)  # world instances the bridge reports
     asking: Asking | None = None
     ended: bool = False
+    last_status: Outgoing | None = None
+    status_again_at: float = 0.0
     dropped: Counter[str] = field(default_factory=Counter)  # inputs it could not use
 
     @classmethod
@@ -124,7 +125,8 @@ class LinkRobot:
     @property
     def deadline(self) -> float:
         asked = self.asking.again_at if self.asking is not None else math.inf
-        return min(self.client.deadline, asked)
+        status = self.status_again_at if self.last_status is not None else math.inf
+        return min(self.client.deadline, asked, status)
 
     # --- fed by the loop -----------------------------------------------------------
 
@@ -133,6 +135,8 @@ class LinkRobot:
             self._take(event, now)
         if self.asking is not None and now >= self.asking.again_at and self.client.open:
             self._ask(now)
+        if self.last_status is not None and now >= self.status_again_at and self.client.open:
+            self._send_status(self.last_status, now)
 
     def receive(self, data: bytes, now: float) -> None:
         for event in self.client.receive(data, now):
@@ -161,7 +165,7 @@ class LinkRobot:
         if self.endpoint is None:
             self._ask(now)
         else:  # back after a lost link: say where it is, and so be present again
-            self._send_status(self.endpoint.status(self.endpoint.last_tick))
+            self._send_status(self.endpoint.status(max(0, self.endpoint.last_tick)), now)
 
     def _lost(self, event: Lost) -> None:
         self.asking = None
@@ -176,7 +180,7 @@ class LinkRobot:
     def _received(self, event: Received, now: float) -> None:
         kind = event.kind
         if kind is link.DataKind.INFO_REPLY:
-            self._answered(event.payload, event.attachment)
+            self._answered(event.payload, event.attachment, now)
         elif kind is link.DataKind.INFO_ERROR:
             log.warning("the world refused the question for the map: %r", event.payload[:200])
         elif kind in (link.DataKind.WORLD_UP, link.DataKind.WORLD_DOWN):
@@ -186,8 +190,13 @@ class LinkRobot:
                 self.dropped[kind.name.lower()] += 1
                 return
             step = self.endpoint.receive(input_kind, event.payload, event.attachment)
-            for message in step.outgoing if step is not None else []:
-                self.client.send(OUTPUT_OF[message.kind], message.payload, message.attachment)
+            if step is None:
+                return
+            for message in step.transmissions:
+                self.client.send(link.DataKind.RADIO_TX, message.payload, message.attachment)
+            self.client.send(link.DataKind.ACT, step.act.payload, step.act.attachment)
+            if step.status is not None:
+                self._send_status(step.status, now)
 
     def _world(self, kind: link.DataKind, payload: bytes) -> None:
         instance = payload.decode(errors="replace")[: names.MAX_NAME_LENGTH]
@@ -215,7 +224,7 @@ class LinkRobot:
         self.client.send(link.DataKind.INFO_QUERY, b"", attachment)
         self.asking = Asking(nonce, now + ASK_EVERY)
 
-    def _answered(self, payload: bytes, attachment: bytes | None) -> None:
+    def _answered(self, payload: bytes, attachment: bytes | None, now: float) -> None:
         if self.asking is None or self.endpoint is not None:
             return  # an answer to a question no longer asked
         keys = self._keys()
@@ -238,7 +247,7 @@ class LinkRobot:
         self.endpoint = self._build(keys, info)
         for instance in sorted(self.worlds):
             self.endpoint.world_appeared(instance)
-        self._send_status(self.endpoint.status(0))
+        self._send_status(self.endpoint.status(0), now)
 
     def _build(self, keys: protocol.Keys, info: protocol.WorldInfo) -> RobotEndpoint:
         """The robot as every robot of the run is built (robot_agent/node/cli.py): the
@@ -259,8 +268,11 @@ class LinkRobot:
             self.robot, keys=keys, controller=controller, world=info, keyring=self.keyring
         )
 
-    def _send_status(self, status: Outgoing) -> None:
-        self.client.send(OUTPUT_OF[status.kind], status.payload, status.attachment)
+    def _send_status(self, status: Outgoing, now: float) -> None:
+        """Send the robot's status, and again every STATUS_EVERY until it changes."""
+        self.client.send(link.DataKind.STATUS, status.payload, status.attachment)
+        self.last_status = status
+        self.status_again_at = now + STATUS_EVERY
 
     # --- what it did ---------------------------------------------------------------
 
