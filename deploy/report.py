@@ -136,6 +136,7 @@ class Recording:
     last_state: protocol.WorldState | None = None
     first_clock_wall_ns: int | None = None
     last_clock_wall_ns: int | None = None
+    links: dict[int, protocol.LinkStats] = field(default_factory=dict)  # robots outside
 
     @property
     def undecodable(self) -> int:
@@ -210,6 +211,7 @@ class _Collector:
         self.ack = msgspec.json.Decoder(protocol.Ack)
         self.clock = msgspec.json.Decoder(protocol.Clock)
         self.state = msgspec.json.Decoder(protocol.WorldState)
+        self.link = msgspec.json.Decoder(protocol.LinkStats)
 
     def message(self, message: RecordedMessage) -> None:
         recording = self.recording
@@ -244,6 +246,9 @@ class _Collector:
                 state = self.state.decode(message.data)
                 recording.state_ticks.append(state.tick)
                 recording.last_state = state
+            elif schema == "bestofn.LinkStats":
+                stats = self.link.decode(message.data)
+                recording.links[stats.robot] = stats
         except (msgspec.DecodeError, msgspec.ValidationError, ValueError):
             recording.messages["undecodable " + schema] += 1
 
@@ -391,6 +396,9 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
         record = records.setdefault(robot, RobotRecord(robot))
         for status in statuses:
             record.update(status)
+    for robot, stats in recording.links.items():  # robots outside the emulator
+        record = records.setdefault(robot, RobotRecord(robot))
+        record.outside = stats.transport
     num_sites = recording.sites or _sites_from_statuses(recording) or 2
     num_robots = recording.robots or len(records)
     seed = recording.seed or 0
@@ -424,6 +432,7 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
             config=recording.config,
             stuck=watchdog.stuck(),
             byzantine=byzantine_in_config(recording.config),
+            links=recording.links,
         ),
         records.values(),
     )
@@ -516,6 +525,7 @@ def report_row(summary: dict[str, Any], recording: Path | str) -> dict[str, Any]
         "pool_min": pool_stats["min"],
         "pool_max": pool_stats["max"],
         "poolings": len(pools),
+        "links": summary.get("links") or {},  # robots outside the emulator
         "recording": str(recording),
     }
 
@@ -1018,6 +1028,19 @@ def print_report(report: Report, console: Any) -> None:
             else f"{row['pool_mean']:.1f} {row['pool_min']}-{row['pool_max']}",
         )
     console.print(table)
+    for row in report.runs:
+        for robot, link in (row.get("links") or {}).items():
+            rtt = (
+                "-"
+                if link.get("rtt_ms") is None
+                else f"{link['rtt_ms']:.2f} ms median, {link['rtt_p95_ms']:.2f} ms p95"
+            )
+            console.print(
+                f"{row['run_id']}: robot {robot} outside over {link['transport']}: round trip "
+                f"{rtt}, loss {100 * link['loss']:.0f}%, {link['sessions']} session(s), "
+                f"{link['refused']} frame(s) refused",
+                highlight=False,
+            )
     for group in report.groups:
         endings = ", ".join(f"{count} {name}" for name, count in group["endings"].items())
         aggregated = group["aggregated_runs"]
