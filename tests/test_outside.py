@@ -151,6 +151,7 @@ def test_a_secure_run_encrypts_the_link_and_decides_as_all_emulated(tmp_path: Pa
         code, summary, stderr = run.finish()
     assert code == 0, stderr
     assert summary is not None and decisions(summary) == decisions(reference)
+    assert summary["links"]["2"]["sessions"] == 1  # the bridge's figures pass the access rules
     sessions = [frame for frame in relay.captured if frame[3] != link.FrameType.HELLO]
     assert sessions and all(frame[4] & link.ENCRYPTED for frame in sessions)
 
