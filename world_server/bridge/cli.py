@@ -197,11 +197,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         served = ", ".join(f"{linked.robot} on {linked.address}" for linked in robots)
         log.info("serving robot(s) %s", served)
         # The loop runs in its own thread so that this one stays free for the signals.
-        worker = threading.Thread(target=bridge.run, daemon=True)
+        failed: list[BaseException] = []
+
+        def serve() -> None:
+            try:
+                bridge.run()
+            except BaseException as error:  # said below; the launcher starts a new bridge
+                failed.append(error)
+                raise
+
+        worker = threading.Thread(target=serve, daemon=True)
         worker.start()
         while worker.is_alive():
             worker.join(0.2)
         bridge.close()
+        if failed:
+            print(f"bridge: the loop failed: {failed[0]!r}", file=sys.stderr)
+            return 1
     except zenoh.ZError as error:
         print(f"bridge: {error}", file=sys.stderr)
         return 1
