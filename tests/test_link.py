@@ -403,3 +403,86 @@ def test_a_frame_is_held_for_the_delay_and_no_less() -> None:
     direction.put(b"x", "a", now=1.0)
     assert direction.due(1.049) == [] and direction.deadline == pytest.approx(1.05)
     assert direction.due(1.05) == [(b"x", "a")]
+
+
+# --- the program, end to end in memory -----------------------------------------------------
+
+
+def test_the_program_asks_for_the_map_says_it_is_there_and_steps_a_sealed_sense() -> None:
+    """The robot program (``robot-agent --link`` without its loop) against the bridge's end
+    and a world that answers: the map is asked and checked, the first status comes before
+    anything else, and a sense sealed for the robot is answered by an act sealed by it."""
+    from robot_agent.link.program import LinkRobot
+    from wire import auth, names
+
+    secret = auth.Keyring(secret=bytes(32))  # the world's
+    keys = protocol.Keys("demo")
+    identity = names.robot_identity(ROBOT)
+    robot = LinkRobot.create(ROBOT, "demo", secret.only([identity]))
+    key = robot.client.key
+    peer = LinkPeer(
+        ROBOT,
+        key,
+        msgspec.structs.replace(welcome(), controller=msgspec.Raw(b"{}")),
+        transport="udp",
+        address="x",
+    )
+    info = protocol.WorldInfo(
+        v=1,
+        run="demo",
+        seed=3,
+        dt=0.1,
+        arena_radius=0.75,
+        nest=protocol.Nest(0.0, 0.0, 0.2),
+        sites=[protocol.Site(0, 0.75, 0.0), protocol.Site(1, -0.75, 0.0)],
+        robot_radius=0.037,
+        wheel_base=0.053,
+        max_wheel_speed=0.13,
+        camera=protocol.CameraSpec(width=64, height=48, fov=0.84),
+        clock="lockstep",
+    )
+    relayed: list[Message] = []
+
+    def exchange() -> None:
+        while True:
+            up, down = robot.client.take_outgoing(), peer.take_outgoing()
+            if not up and not down:
+                return
+            for frame in up:
+                for event in peer.receive(frame, SOURCE, 0.0):
+                    if isinstance(event, Message):
+                        relayed.append(event)
+                        world(event)
+            for frame, _ in down:
+                robot.receive(frame, 0.0)
+
+    def world(message: Message) -> None:
+        if message.kind is link.DataKind.INFO_QUERY:
+            asker, nonce = auth.query_open(
+                secret, keys.world_info, message.payload, message.attachment
+            )
+            payload = protocol.encode(info)
+            sealed = auth.reply_seal(secret, asker, keys.world_info, payload, nonce)
+            peer.send(link.DataKind.INFO_REPLY, payload, sealed)
+
+    robot.wake(0.0)
+    exchange()
+    assert [m.kind for m in relayed] == [link.DataKind.INFO_QUERY, link.DataKind.STATUS]
+    status = relayed[-1]
+    secret.open(identity, keys.status(ROBOT), status.payload, status.attachment)
+    assert protocol.decode(status.payload, protocol.Status).tick == 0
+    sense = protocol.encode(
+        protocol.Sense(
+            v=1, tick=0, t=0.0, x=0.3, y=0.0, theta=0.0, prox=[0.0] * 8, rx=0, camera=False
+        )
+    )
+    peer.send(link.DataKind.SENSE, sense, secret.seal(identity, keys.sense(ROBOT), sense))
+    exchange()
+    act = next(m for m in relayed if m.kind is link.DataKind.ACT)
+    secret.open(identity, keys.act(ROBOT), act.payload, act.attachment)  # sealed by the robot
+    assert protocol.decode(act.payload, protocol.Act).tick == 0
+    # A sense forged by anyone without the robot's key is refused by the program itself.
+    forged = sense.replace(b'"x":0.3', b'"x":0.4')
+    peer.send(link.DataKind.SENSE, forged, secret.seal(identity, keys.sense(ROBOT), sense))
+    exchange()
+    assert robot.endpoint is not None and robot.endpoint.rejects.count == 1
