@@ -196,6 +196,7 @@ class Recording:
     last_state: protocol.WorldState | None = None
     first_clock_wall_ns: int | None = None
     last_clock_wall_ns: int | None = None
+    links: dict[int, protocol.LinkStats] = field(default_factory=dict)  # robots outside
 
     @property
     def undecodable(self) -> int:
@@ -272,6 +273,7 @@ class _Collector:
         self.ack = msgspec.json.Decoder(protocol.Ack)
         self.clock = msgspec.json.Decoder(protocol.Clock)
         self.state = msgspec.json.Decoder(protocol.WorldState)
+        self.link = msgspec.json.Decoder(protocol.LinkStats)
 
     def message(self, message: RecordedMessage) -> None:
         recording = self.recording
@@ -308,6 +310,9 @@ class _Collector:
                 state = self.state.decode(message.data)
                 recording.state_ticks.append(state.tick)
                 recording.last_state = state
+            elif schema == "bestofn.LinkStats":
+                stats = self.link.decode(message.data)
+                recording.links[stats.robot] = stats
         except (msgspec.DecodeError, msgspec.ValidationError, ValueError):
             recording.messages["undecodable " + schema] += 1
 
@@ -473,6 +478,9 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
     for robot, trace in recording.robots_heard.items():
         if trace.last is not None:  # its statuses, not only its poses
             records[robot] = trace.record
+    for robot, stats in recording.links.items():  # robots outside the emulator
+        record = records.setdefault(robot, RobotRecord(robot))
+        record.outside = stats.transport
     num_sites = recording.sites or _sites_from_statuses(recording) or 2
     num_robots = recording.robots or len(records)
     seed = recording.seed or 0
@@ -505,6 +513,7 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
             config=recording.config,
             stuck=_stuck(recording, records),
             byzantine=byzantine_in_config(recording.config),
+            links=recording.links,
         ),
         records.values(),
     )
@@ -584,6 +593,7 @@ def report_row(summary: dict[str, Any], recording: Path | str) -> dict[str, Any]
         "pool_min": pool_stats["min"],
         "pool_max": pool_stats["max"],
         "poolings": len(pools),
+        "links": summary.get("links") or {},  # robots outside the emulator
         "recording": str(recording),
     }
 
@@ -1098,6 +1108,19 @@ def print_report(report: Report, console: Any) -> None:
             else f"{row['pool_mean']:.1f} {row['pool_min']}-{row['pool_max']}",
         )
     console.print(table)
+    for row in report.runs:
+        for robot, link in (row.get("links") or {}).items():
+            rtt = (
+                "-"
+                if link.get("rtt_ms") is None
+                else f"{link['rtt_ms']:.2f} ms median, {link['rtt_p95_ms']:.2f} ms p95"
+            )
+            console.print(
+                f"{row['run_id']}: robot {robot} outside over {link['transport']}: round trip "
+                f"{rtt}, loss {100 * link['loss']:.0f}%, {link['sessions']} session(s), "
+                f"{link['refused']} frame(s) refused",
+                highlight=False,
+            )
     for group in report.groups:
         endings = ", ".join(f"{count} {name}" for name, count in group["endings"].items())
         aggregated = group["aggregated_runs"]

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from deploy.outside import add_outside_options
 from deploy.run_plan import (
     ONE_PROCESS_PER_ROBOT_UP_TO,
     ROBOT_PROCESSES_PER_CORE,
@@ -145,6 +146,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "docs/performance.md)",
     )
     add_view_options(parser.add_argument_group("watching"))
+    add_outside_options(parser)
 
 
 def add_engine_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:

@@ -9,6 +9,7 @@ Here rather than in ``deploy/run/`` for the same reason as ``deploy/run_options.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import time
@@ -18,6 +19,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
+from deploy.outside import OutsidePlan, outside_plan
 from deploy.processes import free_port
 from deploy.run_switches import SWITCHES, RunSwitches, run_switches
 from deploy.watchdog import default_stall_window, default_world_stop_window
@@ -42,6 +44,9 @@ ROBOTS_PER_PROCESS = 25
 ROBOT_PROCESSES_PER_CORE = 2
 # The recorder runs at nice 10 up to this many robots (recorder_niceness).
 NICE_RECORDER_UP_TO = 25
+# Wall seconds the world waits for its robots beyond the launcher's wait for the outside
+# ones: the launcher, not the world, gives up on a robot that never connects.
+OUTSIDE_START_MARGIN = 30.0
 
 
 class FaultAction(StrEnum):
@@ -84,6 +89,17 @@ class RunPlan:
     keyed: bool = True  # run keys: every message tagged and checked
     secure: bool = False  # TLS and access control
     trace: Path | None = None  # --trace DIR: the world's and robot hosts' tick timelines
+    outside: OutsidePlan | None = None  # --external: robots served to programs outside
+
+    @property
+    def external(self) -> list[int]:
+        return self.outside.ids if self.outside is not None else []
+
+    @property
+    def emulated(self) -> list[int]:
+        """The robots the run starts processes for (all but the outside ones)."""
+        outside = set(self.external)
+        return [robot for robot in range(self.robots) if robot not in outside]
 
     @property
     def robot_processes(self) -> int:
@@ -92,7 +108,11 @@ class RunPlan:
 
     def world_argv(self) -> list[str]:
         """The world server's run and configuration (its network options come later)."""
-        return ["--run-id", self.run_id, "--config", settings.encode(self.switches.world)]
+        world = self.switches.world
+        if self.outside is not None:  # it waits for the outside robots as long as we do
+            start = max(world.start_timeout, self.outside.wait + OUTSIDE_START_MARGIN)
+            world = dataclasses.replace(world, start_timeout=start)
+        return ["--run-id", self.run_id, "--config", settings.encode(world)]
 
     def beacon_argv(self) -> list[str]:
         beacon = NestBeaconConfig(seed=self.seed, beacon=self.switches.beacon)
@@ -125,6 +145,7 @@ NOT_CONFIG = {
     "verbose",
     "trace",
     "no_batch",
+    "link_keys",  # where the outside robots' keys go
     *VIEW_OPTIONS,
 }
 
@@ -150,6 +171,12 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
                 f"{fault.robot} in a swarm of {args.robots}"
             )
     byzantine_robots = byzantine_plan(robot_faults.byzantine, args.robots, args.sites, args.seed)
+    outside = outside_plan(args, args.robots)
+    for robot in outside.ids if outside is not None else []:
+        if any(fault.robot == robot for fault in faults):
+            raise ValueError(f"--kill and --restart act on a process: robot {robot} is outside")
+        if robot in byzantine_robots:
+            raise ValueError(f"--byzantine {robot}: the robot is outside; its program decides")
     # A fault acts on one robot's process: one robot per process unless told otherwise.
     per_process = args.robots_per_process or (
         1 if faults else default_robots_per_process(args.robots)
@@ -194,6 +221,9 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     config["stall_window"] = stall_window  # the one in force, also when defaulted
     config["world_stop_window"] = world_stop_window
     config["byzantine"] = [f"{robot}:{how}" for robot, how in byzantine_robots.items()]
+    config["links"] = (
+        [f"{linked.robot}={linked.address}" for linked in outside.robots] if outside else []
+    )
     recorded = RunDescription(run_id, args.seed, args.robots, args.sites, config)
     recorder_args = [
         "--run-id",
@@ -229,6 +259,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         keyed=not args.no_keys,
         secure=args.secure,
         trace=args.trace,
+        outside=outside,
     )
 
 
@@ -306,6 +337,7 @@ def refuse_unsupported(args: argparse.Namespace) -> None:
         (args.view is not None, "--view", "the live page follows a run over Zenoh"),
         (args.foxglove is not None, "--foxglove", "Foxglove live follows a run over Zenoh"),
         (args.trace is not None, "--trace", "the timeline is of the processes' messages"),
+        (bool(args.external), "--external", "no program outside can reach it"),
     ]
     for refuse, option, reason in refused:
         if refuse:

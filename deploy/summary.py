@@ -7,6 +7,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+import msgspec
+
 from robot_agent.core import byzantine
 from wire import protocol
 from wire.endings import Ending, Stop, TimeLimit, ending_of
@@ -23,6 +25,8 @@ class RobotRecord:
     restarts: int = 0
     crashed: bool = False
     killed: bool = False  # on purpose (--kill), not restarted
+    outside: str | None = None  # the link's transport of a robot outside the emulator
+    departed: bool = False  # outside, and its link was down when the run ended
     restarting: bool = False  # a fresh process was started and has not reported yet
     _poolings_before_restart: int = 0
 
@@ -70,6 +74,7 @@ class RunOutcome:
     byzantine: Mapping[int, str] = field(default_factory=dict)  # robot -> how it misbehaves
     departures: int = 0  # robots and beacons whose liveliness went mid-run (world's count)
     robot_processes: int = 0  # processes the robots were started in (0: in one process)
+    links: Mapping[int, protocol.LinkStats] = field(default_factory=dict)  # outside robots
 
 
 def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[str, Any]:
@@ -81,7 +86,10 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
     survivors = [
         record
         for record in robots
-        if not record.killed and not record.crashed and record.id not in outcome.byzantine
+        if not record.killed
+        and not record.crashed
+        and not record.departed
+        and record.id not in outcome.byzantine
     ]
     decided = [record.decided_site for record in survivors]
     consensus = (
@@ -135,6 +143,10 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
             for record in robots
         ],
     }
+    if outcome.links:
+        summary["links"] = {
+            str(robot): link_summary(stats) for robot, stats in outcome.links.items()
+        }
     if ended is Ending.TIMEOUT:
         kind = outcome.timeout_kind
         summary["timeout_kind"] = None if kind is None else kind.value
@@ -173,6 +185,29 @@ def robot_summary(record: RobotRecord) -> dict[str, Any]:
         "restarts": record.restarts,
         "killed": record.killed,
         "crashed": record.crashed,
+        "outside": record.outside,
+        "departed": record.departed,
+    }
+
+
+def link_summary(stats: protocol.LinkStats) -> dict[str, Any]:
+    """An outside robot's link as the summary shows it: transport, round trip (median and
+    95th percentile, ms), loss, and what went through and was refused."""
+    refused = msgspec.structs.asdict(stats.refused)
+    return {
+        "transport": stats.transport,
+        "address": stats.address,
+        "connected": stats.connected,
+        "sessions": stats.sessions,
+        "rtt_ms": stats.rtt_ms,
+        "rtt_p95_ms": stats.rtt_p95_ms,
+        "loss": stats.loss,
+        "pings": stats.pings,
+        "frames_in": stats.frames_in,
+        "frames_out": stats.frames_out,
+        "impaired": stats.impaired,
+        "refused": sum(refused.values()),
+        "refused_by": {reason: count for reason, count in refused.items() if count},
     }
 
 

@@ -42,6 +42,9 @@ DEFAULT_ROUTER = "router"
 # queryable) of their own; OBSERVER is any other reader.
 OBSERVER, LAUNCHER, RECORDER, WORLD = names.OBSERVER, names.LAUNCHER, names.RECORDER, names.WORLD
 VIEWER, FOXGLOVE = names.VIEWER, names.FOXGLOVE
+# The bridge to robots outside the emulator: its own session publishes the links' figures;
+# it speaks for each robot on a session with that robot's certificate.
+BRIDGE = names.BRIDGE
 # Zenoh 1.10's ACL message types (the config parser rejects any other name).
 ALL_MESSAGES = (
     "put",
@@ -98,6 +101,7 @@ class SwarmPlan:
             RECORDER,
             VIEWER,
             FOXGLOVE,
+            BRIDGE,
         ]
 
 
@@ -185,6 +189,9 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         _rule("viewer-asked", "egress", ["query"], [keys.viewer_finish]),
         # Foxglove live only listens, and says it serves.
         _rule("foxglove-alive", "ingress", ["liveliness_token"], [keys.alive(Role.FOXGLOVE, 0)]),
+        # The bridge publishes its links' figures and says it serves.
+        _rule("bridge-speak", "ingress", ["put"], [keys.link_stats("*")]),
+        _rule("bridge-alive", "ingress", ["liveliness_token"], [keys.alive(Role.BRIDGE, 0)]),
         # Routers of the other hosts relay everyone's traffic; each checks its own clients.
         _rule("router-relay-in", "ingress", ALL_MESSAGES, everything),
         _rule("router-relay-out", "egress", ALL_MESSAGES, everything),
@@ -288,6 +295,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
     grant_client(RECORDER, [*reading, "recorder-serve", "recorder-asked", "recorder-alive"])
     grant_client(VIEWER, [*reading, "viewer-serve", "viewer-asked", "viewer-alive"])
     grant_client(FOXGLOVE, [*reading, "foxglove-alive"])
+    grant_client(BRIDGE, ["bridge-speak", "bridge-alive", "follow-world", "follow-world-token"])
     grant("routers", ["router-relay-in", "router-relay-out"], plan.routers)
     return {
         "enabled": True,

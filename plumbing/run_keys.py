@@ -18,7 +18,6 @@ A process hosting robots 3 to 7 holds their keys and that of its host identity
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
 import secrets
@@ -41,35 +40,15 @@ def new_secret() -> bytes:
 
 
 def to_text(keyring: auth.Keyring, run: str) -> str:
-    content: dict[str, object] = {"v": 1, "run": run}
-    if keyring.secret is not None:
-        content["secret"] = keyring.secret.hex()
-    else:
-        content["keys"] = {
-            identity: (keyring.key(identity) or b"").hex() for identity in keyring.identities
-        }
-    return json.dumps(content, separators=(",", ":"))
+    return auth.keyring_to_text(keyring, run)
 
 
 def from_text(text: str, run: str) -> auth.Keyring:
     """The keyring in ``text``; ValueError says what is wrong (never echoes a key)."""
-    try:
-        content = json.loads(text)
-    except ValueError:
-        raise ValueError("not JSON") from None
-    if not isinstance(content, dict) or content.get("v") != 1:
-        raise ValueError('not a run key object ({"v": 1, ...})')
-    if content.get("run") != run:
-        raise ValueError(f"the keys are for run {content.get('run')!r}, not {run!r}")
-    try:
-        if "secret" in content:
-            return auth.Keyring(secret=bytes.fromhex(content["secret"]))
-        keys = content.get("keys")
-        if not isinstance(keys, dict) or not keys:
-            raise ValueError('neither "secret" nor "keys"')
-        return auth.Keyring(keys={str(name): bytes.fromhex(value) for name, value in keys.items()})
-    except (TypeError, AttributeError):
-        raise ValueError("keys must be hexadecimal strings") from None
+    found, keyring = auth.keyring_from_text(text)
+    if found != run:
+        raise ValueError(f"the keys are for run {found!r}, not {run!r}")
+    return keyring
 
 
 def load(run: str, key_file: str | None, program: str) -> auth.Keyring | None:

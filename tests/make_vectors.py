@@ -40,7 +40,7 @@ from typing import Any
 import msgspec
 
 from robot_agent.link.udp_radio import MAX_PAYLOAD_BYTES, encode_frame
-from wire import auth, batch, names, protocol
+from wire import auth, batch, link, names, protocol
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
 
@@ -299,6 +299,68 @@ def ack_vectors() -> TypeVectors:
         changed(data, b'"tick"', b'"tick\xff"'),
     )
     return vectors
+
+
+def link_stats_vectors() -> TypeVectors:
+    vectors = TypeVectors("link_stats.json", protocol.LinkStats)
+    data = vectors.add_valid("typical", LINK_STATS)
+    vectors.add_valid(
+        "never_connected",
+        protocol.LinkStats(
+            v=1,
+            robot=9,
+            transport="serial",
+            address="serial:/dev/ttyUSB0@921600",
+            connected=False,
+            sessions=0,
+            rtt_ms=None,
+            rtt_p95_ms=None,
+            pings=0,
+            loss=0.0,
+            frames_in=0,
+            frames_out=0,
+            bytes_in=0,
+            bytes_out=0,
+            impaired=0,
+            refused=protocol.LinkRefusals(),
+        ),
+    )
+    common_faults(vectors, data, b'"sessions":1,', "sessions")
+    vectors.add_invalid(
+        "loss_above_one",
+        OUT_OF_RANGE,
+        "loss is a share of the pings, in [0, 1]",
+        changed(data, b'"loss":0.05', b'"loss":1.5'),
+        at="$.loss",
+    )
+    vectors.add_invalid(
+        "unknown_transport",
+        BAD_ENUM,
+        "a link is udp or serial",
+        changed(data, b'"transport":"udp"', b'"transport":"tcp"'),
+        at="$.transport",
+    )
+    return vectors
+
+
+LINK_STATS = protocol.LinkStats(
+    v=1,
+    robot=8,
+    transport="udp",
+    address="udp://127.0.0.1:47800",
+    connected=True,
+    sessions=1,
+    rtt_ms=0.85,
+    rtt_p95_ms=2.1,
+    pings=120,
+    loss=0.05,
+    frames_in=4012,
+    frames_out=4410,
+    bytes_in=612000,
+    bytes_out=1840000,
+    impaired=0,
+    refused=protocol.LinkRefusals(forged=2, replayed=1),
+)
 
 
 def join_reply_vectors() -> TypeVectors:
@@ -1115,6 +1177,207 @@ def batch_vectors() -> dict[str, Any]:
             {"name": name, "kind": kind, "reason": reason, "hex": data.hex()}
             for kind, name, reason, data in invalid
         ],
+LINK_ROBOT = 8
+LINK_ROBOT_NONCE = bytes.fromhex("0102030405060708")
+LINK_BRIDGE_NONCE = bytes.fromhex("1112131415161718")
+
+
+def link_frame_vectors() -> dict[str, Any]:
+    """Frames of the link to a robot outside the emulator (wire/link.py, docs/protocol.md):
+    the keys, a session's frames both ways (plain and encrypted), their serial encoding,
+    and frames a receiver refuses, each with the reason it is counted under."""
+    keyring = auth.Keyring(secret=AUTH_SECRET)
+    robot_key = keyring.key(names.robot_identity(LINK_ROBOT))
+    assert robot_key is not None
+    key = link.link_key(robot_key)
+    cipher_key = link.session_key(key, LINK_ROBOT_NONCE, LINK_BRIDGE_NONCE)
+    keys = protocol.Keys("demo")
+    act = protocol.encode(
+        protocol.Act(v=1, tick=42, left=0.13, right=0.1, capture=False, radio_tx=0)
+    )
+    act_tag = keyring.seal("robot/8", keys.act(LINK_ROBOT), act)
+    sense = protocol.encode(
+        protocol.Sense(
+            v=1, tick=42, t=4.2, x=0.31, y=-0.12, theta=1.5708, prox=[0.0] * 8, rx=0, camera=False
+        )
+    )
+    sense_tag = keyring.seal("robot/8", keys.sense(LINK_ROBOT), sense)
+    welcome = link.LinkWelcome(
+        v=1,
+        run="demo",
+        root="bestofn",
+        cipher="none",
+        ping_every=0.5,
+        silence=3.0,
+        controller=msgspec.Raw(b'{"dwell":3.0}'),
+    )
+
+    def frame(
+        kind: link.FrameType,
+        from_bridge: bool,
+        seq: int,
+        body: bytes = b"",
+        *,
+        bridge_nonce: bytes = LINK_BRIDGE_NONCE,
+        encrypted: bool = False,
+    ) -> link.Frame:
+        return link.Frame(
+            kind, from_bridge, LINK_ROBOT, LINK_ROBOT_NONCE, bridge_nonce, seq, body, encrypted
+        )
+
+    act_body = link.encode_data(link.DataKind.ACT, act, act_tag)
+    cases = [
+        ("hello", frame(link.FrameType.HELLO, False, 0, bridge_nonce=link.NO_NONCE)),
+        ("welcome", frame(link.FrameType.WELCOME, True, 0, link.encode_welcome(welcome))),
+        ("ping_from_the_robot", frame(link.FrameType.PING, False, 1, bytes(8))),
+        ("act", frame(link.FrameType.DATA, False, 2, act_body)),
+        (
+            "sense",
+            frame(
+                link.FrameType.DATA,
+                True,
+                1,
+                link.encode_data(link.DataKind.SENSE, sense, sense_tag),
+            ),
+        ),
+        ("ping_from_the_bridge", frame(link.FrameType.PING, True, 2, (1).to_bytes(8, "big"))),
+        ("pong", frame(link.FrameType.PONG, False, 3, (1).to_bytes(8, "big"))),
+        ("bye_run_ended", frame(link.FrameType.BYE, True, 3, bytes((link.ByeReason.RUN_ENDED,)))),
+        ("act_encrypted", frame(link.FrameType.DATA, False, 2, act_body, encrypted=True)),
+    ]
+    valid = []
+    for name, item in cases:
+        data = link.seal(item, key, cipher_key if item.encrypted else None)
+        vector: dict[str, Any] = {
+            "name": name,
+            "type": item.type.name,
+            "from_bridge": item.from_bridge,
+            "robot": item.robot,
+            "robot_nonce_hex": item.robot_nonce.hex(),
+            "bridge_nonce_hex": item.bridge_nonce.hex(),
+            "seq": item.seq,
+            "encrypted": item.encrypted,
+            "body_hex": item.body.hex(),
+            "hex": data.hex(),
+            "serial_hex": link.serial_encode(data).hex(),
+        }
+        if item.type is link.FrameType.DATA:
+            kind, payload, attachment = link.decode_data(item.body)
+            vector["data"] = {
+                "kind": kind.name,
+                "kind_byte": int(kind),
+                "attachment_hex": (attachment or b"").hex(),
+                "payload_utf8": payload.decode(),
+            }
+        if item.type is link.FrameType.WELCOME:
+            vector["body_utf8"] = item.body.decode()
+        valid.append(vector)
+    act_frame = link.seal(cases[3][1], key)
+    resealed: list[tuple[str, str, link.Refusal, link.Frame]] = [
+        (
+            "hello_with_a_body",
+            "a hello has no body",
+            link.Refusal.MALFORMED,
+            frame(link.FrameType.HELLO, False, 0, b"x", bridge_nonce=link.NO_NONCE),
+        ),
+        (
+            "ping_of_seven_bytes",
+            "a ping carries 8 bytes",
+            link.Refusal.MALFORMED,
+            frame(link.FrameType.PING, False, 4, bytes(7)),
+        ),
+        (
+            "bye_of_an_unknown_reason",
+            "a bye's reason is 1, 2 or 3",
+            link.Refusal.MALFORMED,
+            frame(link.FrameType.BYE, True, 4, b"\x09"),
+        ),
+        (
+            "data_of_an_unknown_kind",
+            "data kinds are 1-7 (to the robot) and 16-19 (from it)",
+            link.Refusal.MALFORMED,
+            frame(link.FrameType.DATA, False, 4, b"\x63\x00\x00{}"),
+        ),
+        (
+            "attachment_past_the_body",
+            "the attachment length runs past the body",
+            link.Refusal.MALFORMED,
+            frame(link.FrameType.DATA, False, 4, b"\x10\x00\x20short"),
+        ),
+        (
+            "data_with_sequence_number_zero",
+            "frames of a session count from 1",
+            link.Refusal.MALFORMED,
+            frame(link.FrameType.DATA, False, 0, act_body),
+        ),
+        (
+            "welcome_from_the_robot",
+            "only the bridge welcomes",
+            link.Refusal.UNEXPECTED,
+            frame(link.FrameType.WELCOME, False, 0, link.encode_welcome(welcome)),
+        ),
+    ]
+    flipped = bytearray(act_frame)
+    flipped[-1] ^= 0x01
+    changed_body = bytearray(act_frame)
+    changed_body[link.HEADER_BYTES + 10] ^= 0x20
+    encrypted = bytearray.fromhex(valid[-1]["hex"])
+    encrypted[link.HEADER_BYTES] ^= 0x01
+    raw: list[tuple[str, str, link.Refusal, bytes]] = [
+        ("shorter_than_a_frame", "a frame has at least 49 bytes", link.Refusal.MALFORMED,
+         act_frame[:48]),
+        ("bad_magic", "a frame starts with 'BL'", link.Refusal.MALFORMED, b"BX" + act_frame[2:]),
+        ("version_2", "the frame version is 1", link.Refusal.MALFORMED,
+         act_frame[:2] + b"\x02" + act_frame[3:]),
+        ("unknown_type", "frame types are 1 to 6", link.Refusal.MALFORMED,
+         act_frame[:3] + b"\x07" + act_frame[4:]),
+        ("unknown_flag", "flags other than 0x01 and 0x02 are 0", link.Refusal.MALFORMED,
+         act_frame[:4] + b"\x04" + act_frame[5:]),
+        ("robot_id_out_of_range", "robot ids are below 100000", link.Refusal.MALFORMED,
+         act_frame[:5] + (100_000).to_bytes(4, "big") + act_frame[9:]),
+        ("tag_changed", "the tag does not check out", link.Refusal.FORGED, bytes(flipped)),
+        ("body_changed", "the tag covers the body", link.Refusal.FORGED, bytes(changed_body)),
+        ("direction_changed", "the tag covers the flags: a robot's frame cannot be reflected",
+         link.Refusal.FORGED, act_frame[:4] + b"\x01" + act_frame[5:]),
+        ("ciphertext_changed", "Poly1305 covers the ciphertext", link.Refusal.FORGED,
+         bytes(encrypted)),
+        ("oversize", f"a frame has at most {link.MAX_FRAME_BYTES} bytes", link.Refusal.OVERSIZE,
+         act_frame + bytes(link.MAX_FRAME_BYTES)),
+    ]  # fmt: skip
+    invalid = [
+        {"name": name, "category": refusal.value, "reason": reason, "hex": data.hex()}
+        for name, reason, refusal, data in raw
+    ]
+    invalid += [
+        {
+            "name": name,
+            "category": refusal.value,
+            "reason": reason,
+            "hex": link.seal(item, key).hex(),
+        }
+        for name, reason, refusal, item in resealed
+    ]
+    good = link.serial_encode(act_frame)
+    bad_crc = bytearray(good)
+    bad_crc[-3] ^= 0x01
+    serial_invalid = [
+        {"name": "crc_wrong", "category": "corrupt", "hex": bytes(bad_crc).hex()},
+        {"name": "not_cobs", "category": "corrupt", "hex": "05010200"},
+        {"name": "shorter_than_a_crc", "category": "corrupt", "hex": "03010200"},
+    ]
+    return {
+        "type": "LinkFrame",
+        "decoder": "link_frame",
+        "frame_version": link.VERSION,
+        "robot": LINK_ROBOT,
+        "robot_key_hex": robot_key.hex(),
+        "link_key_label_utf8": link.LINK_KEY_LABEL.decode(),
+        "link_key_hex": key.hex(),
+        "session_key_label_utf8": link.SESSION_KEY_LABEL.decode(),
+        "session_key_hex": cipher_key.hex(),
+        "valid": valid,
+        "invalid": invalid,
+        "serial_invalid": serial_invalid,
     }
 
 
@@ -1314,6 +1577,7 @@ def _compact(value: Any) -> bytes:
 
 BUILDERS: tuple[Callable[[], TypeVectors], ...] = (
     world_info_vectors,
+    link_stats_vectors,
     join_reply_vectors,
     clock_vectors,
     world_state_vectors,
@@ -1336,6 +1600,7 @@ def build() -> dict[str, str]:
     files = {vectors.file: vectors.content() for vectors in (make() for make in BUILDERS)}
     files["udp_frame.json"] = udp_frame_vectors()
     files["auth.json"] = auth_vectors()
+    files["link_frame.json"] = link_frame_vectors()
     files["tick.json"] = tick_vectors()
     files["batch.json"] = batch_vectors()
     return {

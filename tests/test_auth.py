@@ -209,6 +209,7 @@ def test_a_secure_run_has_a_certificate_per_process_and_no_ca_key_left() -> None
                 "recorder",
                 "viewer",
                 "foxglove",
+                "bridge",
             )
         )
         assert not (directory / "ca.key").exists()

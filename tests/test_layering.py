@@ -38,6 +38,7 @@ ADAPTERS = [
     "world_server/server",
     "world_server/recording",
     "world_server/recorder",
+    "world_server/bridge",
     "nest_beacon/node",
     "plumbing",
 ]
@@ -80,9 +81,11 @@ ALLOWED: dict[str, set[str]] = {
     "world_server/server": {"wire", "world_server/core", "plumbing"},
     "world_server/recording": {"wire", "world_server/core"},
     "world_server/recorder": {"wire", "world_server/core", "world_server/recording", "plumbing"},
+    # The bridge is the other end of the robots' links: it uses their transports.
+    "world_server/bridge": {"wire", "plumbing", "robot_agent/link"},
     "nest_beacon/node": {"wire", "nest_beacon/core", "plumbing"},
-    "robot_agent": {"robot_agent/node"},
-    "world_server": {"world_server/server", "world_server/recorder"},
+    "robot_agent": {"robot_agent/node", "robot_agent/link"},
+    "world_server": {"world_server/server", "world_server/recorder", "world_server/bridge"},
     "nest_beacon": {"nest_beacon/node"},
     "viewer": {
         "wire",

@@ -22,7 +22,7 @@ from robot_agent.link.udp_radio import (
     decode_frame,
     encode_frame,
 )
-from wire import auth, batch, names, protocol
+from wire import auth, batch, link, names, protocol
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
 ZENOH_PICO_BATCH = 2048  # bytes: one opinion and its attachment must fit one batch
@@ -35,7 +35,8 @@ def load(path: Path) -> dict[str, Any]:
 MESSAGE_FILES = {
     path.name: load(path)
     for path in sorted(VECTORS.glob("*.json"))
-    if path.name not in ("udp_frame.json", "auth.json", "tick.json", "batch.json")
+    if path.name
+    not in ("udp_frame.json", "auth.json", "tick.json", "batch.json", "link_frame.json")
 }
 
 
@@ -188,6 +189,67 @@ def test_batch_vectors_that_are_refused_whole(vector: dict[str, Any]) -> None:
     decode = batch.decode_senses if vector["kind"] == "senses" else batch.decode_acts
     with pytest.raises(batch.BatchError):
         decode(bytes.fromhex(vector["hex"]))
+LINK = load(VECTORS / "link_frame.json")
+LINK_KEY = bytes.fromhex(LINK["link_key_hex"])
+SESSION_KEY = bytes.fromhex(LINK["session_key_hex"])
+
+
+def test_the_link_keys_derive_from_the_robot_key() -> None:
+    robot_key = bytes.fromhex(LINK["robot_key_hex"])
+    assert link.link_key(robot_key) == LINK_KEY
+    nonces = bytes.fromhex("0102030405060708"), bytes.fromhex("1112131415161718")
+    assert link.session_key(LINK_KEY, *nonces) == SESSION_KEY
+
+
+@pytest.mark.parametrize("vector", LINK["valid"], ids=[v["name"] for v in LINK["valid"]])
+def test_link_frame_vectors_read_and_seal_to_their_bytes(vector: dict[str, Any]) -> None:
+    data = bytes.fromhex(vector["hex"])
+    cipher = SESSION_KEY if vector["encrypted"] else None
+    frame = link.open_frame(data, LINK_KEY, cipher)
+    link.check_body(frame)
+    assert frame == link.Frame(
+        link.FrameType[vector["type"]],
+        vector["from_bridge"],
+        vector["robot"],
+        bytes.fromhex(vector["robot_nonce_hex"]),
+        bytes.fromhex(vector["bridge_nonce_hex"]),
+        vector["seq"],
+        bytes.fromhex(vector["body_hex"]),
+        vector["encrypted"],
+    )
+    assert link.seal(frame, LINK_KEY, cipher) == data
+    serial = bytes.fromhex(vector["serial_hex"])
+    assert link.serial_encode(data) == serial
+    assert link.Deframer().feed(serial) == [data]
+    if "data" in vector:
+        kind, payload, attachment = link.decode_data(frame.body)
+        assert (kind.name, int(kind)) == (vector["data"]["kind"], vector["data"]["kind_byte"])
+        assert payload.decode() == vector["data"]["payload_utf8"]
+        assert (attachment or b"").hex() == vector["data"]["attachment_hex"]
+    if frame.type is link.FrameType.WELCOME:
+        assert link.decode_welcome(frame.body).run == "demo"
+
+
+@pytest.mark.parametrize("vector", LINK["invalid"], ids=[v["name"] for v in LINK["invalid"]])
+def test_link_frame_vectors_that_a_receiver_refuses_for_their_reason(
+    vector: dict[str, Any],
+) -> None:
+    data = bytes.fromhex(vector["hex"])
+    with pytest.raises(link.LinkError) as refused:
+        cipher = SESSION_KEY if len(data) > 4 and data[4] & link.ENCRYPTED else None
+        frame = link.open_frame(data, LINK_KEY, cipher)
+        link.check_body(frame)
+        if frame.type is link.FrameType.DATA:
+            link.decode_data(frame.body)
+    assert refused.value.refusal.value == vector["category"]
+
+
+@pytest.mark.parametrize(
+    "vector", LINK["serial_invalid"], ids=[v["name"] for v in LINK["serial_invalid"]]
+)
+def test_serial_vectors_that_a_receiver_refuses_as_corrupt(vector: dict[str, Any]) -> None:
+    (found,) = link.Deframer().feed(bytes.fromhex(vector["hex"]))
+    assert isinstance(found, link.LinkError) and found.refusal.value == vector["category"]
 
 
 def test_the_files_are_exactly_what_the_generator_writes() -> None:

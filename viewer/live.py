@@ -77,6 +77,7 @@ class LiveSource:
         self._lock = threading.Lock()
         # Newest message per key, waiting for the next frame (bounded by the number of keys).
         self._pending_status: dict[int, protocol.Status] = {}
+        self.links: dict[int, protocol.LinkStats] = {}  # robots outside: their links
         self._pending_state: protocol.WorldState | None = None
         self._deliveries: collections.deque[Delivery] = collections.deque(maxlen=MAX_DELIVERIES)
 
@@ -110,6 +111,8 @@ class LiveSource:
             elif isinstance(message, protocol.WorldState):
                 if self._pending_state is None or message.tick >= self._pending_state.tick:
                     self._pending_state = message
+            elif isinstance(message, protocol.LinkStats):
+                self.links[message.robot] = message
             elif isinstance(message, protocol.Clock):
                 if self._first_clock_wall is None:
                     self._first_clock_wall = time.monotonic()
@@ -156,6 +159,7 @@ class LiveSource:
             ended = self.ended
             rejected = self.rejected
             poolings = list(self.poolings)
+            links = dict(self.links)
         t = clock.t if clock is not None else 0.0
         elapsed = time.monotonic() - started if started is not None else 0.0
         return model.frame(
@@ -168,6 +172,7 @@ class LiveSource:
             deliveries=deliveries,
             real_time_factor=t / elapsed if elapsed > 0.5 else None,
             ended=ended,
+            links=links,
             extra={"rejected": rejected},
         )
 
@@ -275,7 +280,13 @@ async def _serve(args: argparse.Namespace, keyring: auth.Keyring | None) -> int:
 
         subscribers = [
             session.declare_subscriber(key, on_sample)
-            for key in (keys.world_state, keys.world_clock, keys.status("*"), keys.radio_rx("*"))
+            for key in (
+                keys.world_state,
+                keys.world_clock,
+                keys.status("*"),
+                keys.radio_rx("*"),
+                keys.link_stats("*"),
+            )
         ]
 
         def on_finish(query: Any) -> None:

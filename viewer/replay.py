@@ -69,6 +69,9 @@ class Timeline:
     deliveries: list[tuple[float, str, int]] = field(default_factory=list)
     poolings: list[model.Pooling] = field(default_factory=list)
     decisions: list[tuple[float, int]] = field(default_factory=list)
+    # Robots outside the emulator: their links' figures as the bridge reported them.
+    link_times: dict[int, list[float]] = field(default_factory=dict)
+    links: dict[int, list[protocol.LinkStats]] = field(default_factory=dict)
 
     @property
     def start(self) -> float:
@@ -103,6 +106,7 @@ class _Loader:
             "bestofn.Clock": msgspec.json.Decoder(protocol.Clock),
             "bestofn.RadioRxRecord": msgspec.json.Decoder(_RadioRx),
             "bestofn.Sense": msgspec.json.Decoder(protocol.Sense),
+            "bestofn.LinkStats": msgspec.json.Decoder(protocol.LinkStats),
         }
 
     def message(self, message: RecordedMessage) -> None:
@@ -137,6 +141,9 @@ class _Loader:
                 t = value.meta.tick * timeline.dt
                 timeline.deliveries.append((t, value.meta.sender, receiver))
                 self.tracker.on_delivery(receiver, value.meta.sender, t)
+        elif isinstance(value, protocol.LinkStats):
+            timeline.link_times.setdefault(value.robot, []).append(message.log_time / 1e9)
+            timeline.links.setdefault(value.robot, []).append(value)
         elif isinstance(value, protocol.Sense):
             robot = _robot_in(topic)
             if robot is not None:
@@ -243,6 +250,16 @@ def poses_at(timeline: Timeline, t: float) -> dict[int, tuple[float, float, floa
     return poses
 
 
+def links_at(timeline: Timeline, t: float) -> dict[int, protocol.LinkStats]:
+    """Each outside robot's link as last reported by sim time ``t`` (its first report
+    before that)."""
+    found = {}
+    for robot, times in timeline.link_times.items():
+        index = max(bisect.bisect_right(times, t) - 1, 0)
+        found[robot] = timeline.links[robot][index]
+    return found
+
+
 def counters_at(timeline: Timeline, t: float) -> protocol.WorldState | None:
     index = bisect.bisect_right(timeline.state_times, t)
     return timeline.states[index - 1] if index else None
@@ -329,6 +346,7 @@ class ReplaySource:
             deliveries=deliveries,
             real_time_factor=real_time_factor_at(timeline, t),
             ended=self._ending() if at_end else None,
+            links=links_at(timeline, t),
             extra={
                 "replay": {
                     "playing": self.playing,

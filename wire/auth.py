@@ -24,6 +24,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import hmac
+import json
 import struct
 from collections.abc import Iterable, Mapping
 from typing import Any
@@ -233,3 +234,44 @@ def reply_open(
         return
     if keyring.open(identity, key_expr, payload, attachment) != nonce:
         raise AuthError("the reply answers another query")
+
+
+# --- key files -----------------------------------------------------------------------------
+# A key file (or the launcher's variable) is one JSON object: the run secret for the run's
+# infrastructure, or some identities' keys for a robot:
+#     {"v": 1, "run": "<run id>", "secret": "<64 hex digits>"}
+#     {"v": 1, "run": "<run id>", "keys": {"robot/3": "<64 hex digits>"}}
+
+
+def keyring_to_text(keyring: Keyring, run: str) -> str:
+    content: dict[str, object] = {"v": 1, "run": run}
+    if keyring.secret is not None:
+        content["secret"] = keyring.secret.hex()
+    else:
+        content["keys"] = {
+            identity: (keyring.key(identity) or b"").hex() for identity in keyring.identities
+        }
+    return json.dumps(content, separators=(",", ":"))
+
+
+def keyring_from_text(text: str) -> tuple[str, Keyring]:
+    """The run and the keyring in a key file's ``text``; ValueError says what is wrong
+    (never echoes a key)."""
+    try:
+        content = json.loads(text)
+    except ValueError:
+        raise ValueError("not JSON") from None
+    if not isinstance(content, dict) or content.get("v") != 1:
+        raise ValueError('not a run key object ({"v": 1, ...})')
+    run = content.get("run")
+    if not isinstance(run, str):
+        raise ValueError("the keys name no run")
+    try:
+        if "secret" in content:
+            return run, Keyring(secret=bytes.fromhex(content["secret"]))
+        keys = content.get("keys")
+        if not isinstance(keys, dict) or not keys:
+            raise ValueError('neither "secret" nor "keys"')
+        return run, Keyring(keys={str(name): bytes.fromhex(value) for name, value in keys.items()})
+    except (TypeError, AttributeError):
+        raise ValueError("keys must be hexadecimal strings") from None

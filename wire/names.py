@@ -48,12 +48,14 @@ class Role(StrEnum):
     VIEWER = "viewer"  # the live page (an observer: it only listens and asks)
     FOXGLOVE = "foxglove"  # Foxglove live (an observer)
     OBSERVER = "observer"  # --secure: a certificate for any other reader
+    BRIDGE = "bridge"  # serves robots outside the emulator over their links
 
 
 # The identities of the run's single processes: the role is the identity.
 WORLD, LAUNCHER, RECORDER = Role.WORLD.value, Role.LAUNCHER.value, Role.RECORDER.value
 VIEWER, FOXGLOVE, OBSERVER = Role.VIEWER.value, Role.FOXGLOVE.value, Role.OBSERVER.value
-SINGLE_ROLES = (Role.WORLD, Role.LAUNCHER, Role.RECORDER, Role.VIEWER, Role.FOXGLOVE)
+BRIDGE = Role.BRIDGE.value
+SINGLE_ROLES = (Role.WORLD, Role.LAUNCHER, Role.RECORDER, Role.VIEWER, Role.FOXGLOVE, Role.BRIDGE)
 
 _ROBOT_ID = "0|[1-9][0-9]{0,4}"  # below MAX_ROBOTS, one spelling per id
 HOST = "host"  # the identity of a process hosting robots: host/<first>-<last>

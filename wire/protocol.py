@@ -320,6 +320,44 @@ class LogLine(Message, frozen=True):
     line: Annotated[str, msgspec.Meta(max_length=4096)]
 
 
+class LinkRefusals(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """Link frames a bridge refused, by reason (wire/link.py ``Refusal``)."""
+
+    malformed: _Count = 0
+    oversize: _Count = 0
+    corrupt: _Count = 0
+    forged: _Count = 0
+    replayed: _Count = 0
+    unexpected: _Count = 0
+    rate: _Count = 0
+
+
+_Millis = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
+
+
+class LinkStats(Message, frozen=True):
+    """A robot outside the emulator, as its bridge sees its link (published on change and
+    every second): whether its program is connected, the round trip of the bridge's pings
+    (median and 95th percentile of the last ones, in wall milliseconds), the share of pings
+    never answered, what went through and what was refused."""
+
+    robot: _RobotId
+    transport: Literal["udp", "serial"]
+    address: Annotated[str, msgspec.Meta(max_length=256)]  # where the bridge serves it
+    connected: bool
+    sessions: _Count  # sessions opened so far (a reconnection opens another)
+    rtt_ms: _Millis | None
+    rtt_p95_ms: _Millis | None
+    pings: _Count  # pings answered or given up
+    loss: _Unit  # of those, the share never answered
+    frames_in: _Count
+    frames_out: _Count
+    bytes_in: _Count
+    bytes_out: _Count
+    impaired: _Count  # frames dropped on purpose (--link-loss)
+    refused: LinkRefusals
+
+
 # --- keys ----------------------------------------------------------------------------
 
 
@@ -393,6 +431,10 @@ class Keys:
 
     def log(self, process: str) -> str:
         return f"{self.prefix}/log/{process}"
+
+    def link_stats(self, robot: int | str) -> str:
+        """A robot outside the emulator: its link's figures, from the bridge (LinkStats)."""
+        return f"{self.prefix}/link/{robot}/stats"
 
     @property
     def recorder_finish(self) -> str:

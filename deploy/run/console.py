@@ -76,8 +76,9 @@ def print_summary(summary: dict[str, Any], console: Console) -> None:
     for column in ("robot", "decided site", "steps", "decision time (s)", "pool sizes"):
         table.add_column(column, justify="right")
     for robot in robots:
+        outside = robot.get("outside")
         table.add_row(
-            str(robot["id"]),
+            str(robot["id"]) + (f" (outside, {outside})" if outside else ""),
             "-" if robot["decided_site"] is None else str(robot["decided_site"]),
             "-" if robot["steps"] is None else str(robot["steps"]),
             "-" if robot["decision_time_s"] is None else f"{robot['decision_time_s']:.1f}",
@@ -108,6 +109,14 @@ def print_summary(summary: dict[str, Any], console: Console) -> None:
             f"[yellow]{departures} robot(s) or beacon(s) left while the world ran (killed, "
             "crashed, or their connection lost): a lockstep run is then not the seed's "
             "deterministic one[/]"
+        )
+    for robot, link in (summary.get("links") or {}).items():
+        rtt = "-" if link["rtt_ms"] is None else f"{link['rtt_ms']:.2f}/{link['rtt_p95_ms']:.2f} ms"
+        console.print(
+            f"robot {robot} outside over {link['transport']} ({link['address']}): round trip "
+            f"{rtt} (median/p95), loss {100 * link['loss']:.0f}%, {link['sessions']} "
+            f"session(s), {link['refused']} frame(s) refused",
+            highlight=False,
         )
     if summary.get("recording"):
         console.print(f"recording: {summary['recording']} (swarm report, or open in Foxglove)")

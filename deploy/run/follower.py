@@ -40,6 +40,7 @@ class Kind(StrEnum):
     CLOCK = "clock"  # world/clock
     STATE = "state"  # world/state
     ACK = "ack"  # beacon/<name>/ack
+    LINK = "link"  # link/<id>/stats: a robot outside the emulator, from the bridge
 
 
 @dataclass(frozen=True)
@@ -74,6 +75,7 @@ def subscribe(
         Kind.STATUS: keys.status("*"),
         Kind.STATE: keys.world_state,
         Kind.ACK: keys.beacon_ack("*"),
+        Kind.LINK: keys.link_stats("*"),
     }
     if clock:
         watched[Kind.CLOCK] = keys.world_clock
@@ -98,6 +100,12 @@ class Follower:
             robot_radius=EPUCK.radius,
             config=plan.switches.controller,
         )
+        self.outside = (
+            {linked.robot: linked for linked in plan.outside.robots} if plan.outside else {}
+        )
+        for robot, linked in self.outside.items():
+            self.records[robot].outside = linked.address.transport
+        self.links: dict[int, protocol.LinkStats] = {}  # the bridge's latest of each link
         self.watchdog = Watchdog(
             range(plan.robots),
             plan.stall_window,
@@ -152,6 +160,15 @@ class Follower:
             name = identity.partition("/")[2]
             ack = protocol.decode(payload, protocol.Ack)
             self.beacon_rejected[name] = max(self.beacon_rejected.get(name, 0), ack.rejected)
+        elif heard.kind is Kind.LINK:
+            robot = self.keys.robot_of(key, "link")
+            if robot not in self.outside:
+                raise protocol.ProtocolError(f"robot {robot} is not outside the emulator")
+            auth.unseal(keyring, names.BRIDGE, key, payload, attachment)
+            stats = protocol.decode(payload, protocol.LinkStats)
+            if stats.robot != robot:
+                raise protocol.ProtocolError(f"the link of robot {stats.robot} on {key}")
+            self.links[robot] = stats
         elif heard.kind is Kind.CLOCK:
             auth.unseal(keyring, names.WORLD, key, payload, attachment)
             self._ticked(protocol.decode(payload, protocol.Clock).t)
@@ -187,6 +204,18 @@ class Follower:
         if restarting:
             record.restarted()
             self.watchdog.restarted(robot, self.sim_time)
+
+    def outside_present(self) -> list[int]:
+        """The outside robots whose program is connected now (as the bridge last said)."""
+        return [
+            robot for robot in self.outside if robot in self.links and self.links[robot].connected
+        ]
+
+    def departed(self) -> None:
+        """The run ends: an outside robot whose link is down is not among those that
+        decide, as a robot whose process went."""
+        for robot in self.outside:
+            self.records[robot].departed = robot not in self.outside_present()
 
     # --- what the launcher asks -----------------------------------------------------
 

@@ -132,7 +132,7 @@ class Swarm:
         for robot in supervisor.crashed_robots():
             follower.crashed(robot)
         self.crash = supervisor.infrastructure_crash()
-        live = supervisor.live_robots()
+        live = supervisor.live_robots() + follower.outside_present()
         # Robots join once the world ticks; a restart to come will make progress.
         waiting = not follower.started or self.faults.restart_pending()
         all_decided = not waiting and follower.all_decided(live)
@@ -250,6 +250,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
             f"{swarm.crash.process.returncode}):\n{swarm.crash.tail()}",
             file=sys.stderr,
         )
+    follower.departed()  # before the bridge stops and every link goes
     stats = swarm.stop()
     robot_crashes = [record.id for record in follower.records.values() if record.crashed]
     stop = halt.stop
@@ -271,6 +272,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
             world_rejected=stats.rejected if stats else 0,
             stalls=stats.stalls if stats else 0,
             departures=swarm.departures,
+            links=follower.links,
             observer_rejected=follower.rejected,
             beacon_rejected=sum(follower.beacon_rejected.values()),
             config=plan.config,

@@ -19,12 +19,14 @@ import os
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import zenoh
 
 from deploy import zenoh_acl
 from deploy.credentials import RunNetwork
+from deploy.outside import link_keys_env, write_key_files
 from deploy.processes import Child, ProcessGroup, python_module, wait_for_port
 from deploy.run.follower import subscribe
 from deploy.run.log_relay import LogRelay
@@ -33,7 +35,7 @@ from plumbing.inbox import BoundedInbox
 from plumbing.private_files import make_private_folder
 from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import open_session
-from wire import auth, names, protocol
+from wire import auth, names, protocol, settings
 from wire.names import Role
 
 log = logging.getLogger("swarm.run")
@@ -41,6 +43,7 @@ log = logging.getLogger("swarm.run")
 RUN_ID_ENV = "BESTOFN_RUN_ID"
 CONNECT_WAIT = 5.0  # wall seconds to wait for the router given by --connect
 START_WAIT = 30.0  # wall seconds a process of the run may take to show up
+BRIDGE_RESTARTS = 5  # a bridge that dies on its own is started again this many times
 STATS_ATTEMPTS, STATS_RETRY_PAUSE = 5, 0.2
 # Processes that only watch: they stay to the end, and their crash does not end the run.
 OBSERVERS = ("viewer", "foxglove")
@@ -74,6 +77,9 @@ class Supervisor:
         self.robot_children: dict[int, Child] = {}
         self.world: Child | None = None
         self.recorder: Child | None = None
+        self.bridge: Child | None = None
+        self.bridge_restarts = 0
+        self.key_files: dict[int, Path] = {}  # the outside robots' keys
         self.network: RunNetwork | None = None  # made when the run starts
         self.session: zenoh.Session | None = None
         self._declared: list[Any] = []
@@ -99,18 +105,22 @@ class Supervisor:
             self._start_recorder,
             self._start_observers,
             self._start_beacon,
+            self._start_bridge,
         )
         for step in steps:
             if stopping():
                 return False
             step(stopping)
-        for first in range(0, plan.robots, plan.robots_per_process):
+        emulated = plan.emulated
+        for first in range(0, len(emulated), plan.robots_per_process):
             if stopping():
                 return False
-            robots = list(range(first, min(first + plan.robots_per_process, plan.robots)))
+            robots = emulated[first : first + plan.robots_per_process]
             child = self.start_robots(robots)
             for robot in robots:
                 self.robot_children[robot] = child
+        if plan.outside is not None and not stopping():
+            self._wait_for_outside(stopping)
         return not stopping()
 
     def _start_world(self, stopping: Stopping) -> None:
@@ -204,6 +214,90 @@ class Supervisor:
             env=network.env(),
         )
 
+    def _start_bridge(self, stopping: Stopping) -> None:
+        """The bridge to the outside robots (--external), their key files, and the command
+        that starts each of their programs."""
+        plan, network = self.plan, self.network
+        if plan.outside is None:
+            return
+        assert network is not None and network.keyring is not None  # --external needs keys
+        directory = plan.outside.keys_dir or network.directory
+        assert directory is not None  # --connect runs give --link-keys (run_plan checks)
+        self.key_files = write_key_files(directory, network.keyring, plan.run_id, plan.external)
+        self.bridge = self._launch_bridge()
+        if not self._wait_alive(Role.BRIDGE, 0, self.bridge, stopping):
+            _unless(stopping, StartError("the bridge did not start", self.bridge))
+            return
+        outside = ", ".join(map(str, plan.external))
+        lines = [
+            f"swarm run: robot(s) {outside} run outside the emulator; start each with:",
+            *(f"  {plan.outside.command(robot, path)}" for robot, path in self.key_files.items()),
+            f"swarm run: waiting up to {plan.outside.wait:g} s for them to connect",
+        ]
+        print("\n".join(lines), file=sys.stderr, flush=True)
+
+    def _launch_bridge(self) -> Child:
+        plan, network = self.plan, self.network
+        assert plan.outside is not None and network is not None and network.keyring is not None
+        argv = plan.outside.bridge_argv(
+            plan.run_id, plan.seed, settings.encode(plan.switches.controller), plan.secure
+        )
+        argv += network.client_args(zenoh_acl.BRIDGE)
+        robot_config = network.config_of(names.robot_certificate("{id}"))
+        if robot_config is not None:  # --secure: each robot's session, its certificate
+            argv += ["--robot-zenoh-config", str(robot_config)]
+        env = {
+            **network.env([names.BRIDGE]),
+            **link_keys_env(network.keyring, plan.run_id, plan.external),
+        }
+        return self.group.start("bridge", python_module("world_server.bridge", *argv), env=env)
+
+    def _wait_for_outside(self, stopping: Stopping) -> None:
+        """Wait until every outside robot is present (its program connected and spoke), for
+        at most --link-wait; StartError naming the robots that did not, and their links."""
+        plan, bridge = self.plan, self.bridge
+        assert plan.outside is not None and self.session is not None and bridge is not None
+        deadline = time.monotonic() + plan.outside.wait
+        missing = list(plan.external)
+        while missing and time.monotonic() < deadline and not stopping():
+            if not bridge.alive():
+                raise StartError("the bridge died", bridge)
+            missing = [
+                robot
+                for robot in missing
+                if not list(
+                    self.session.liveliness().get(self.keys.alive(Role.ROBOT, robot), timeout=1.0)
+                )
+            ]
+            if missing:
+                time.sleep(0.1)
+        if missing and not stopping():
+            named = "; ".join(
+                f"robot {robot} on {plan.outside.address_of(robot)}" for robot in missing
+            )
+            raise StartError(
+                f"outside robot(s) did not connect within {plan.outside.wait:g} s: {named}"
+            )
+
+    def restart_bridge(self) -> bool:
+        """Start the bridge again if it died on its own (its robots find it again: their
+        programs say hello until answered); False once it died too often."""
+        bridge = self.bridge
+        if bridge is None or bridge.alive() or bridge.expected_exit:
+            return True
+        if self.bridge_restarts >= BRIDGE_RESTARTS:
+            return False
+        self.bridge_restarts += 1
+        log.warning(
+            "the bridge died (exit code %s): starting it again (%d of %d)",
+            bridge.process.returncode,
+            self.bridge_restarts,
+            BRIDGE_RESTARTS,
+        )
+        bridge.expected_exit = True  # replaced, not a crash of the run
+        self.bridge = self._launch_bridge()
+        return True
+
     def start_robots(self, robots: list[int]) -> Child:
         """One process for ``robots`` (each with its own Zenoh session inside it)."""
         name = f"robot-{robots[0]}" + (f"-{robots[-1]}" if len(robots) > 1 else "")
@@ -238,8 +332,11 @@ class Supervisor:
     # --- during the run --------------------------------------------------------------
 
     def infrastructure_crash(self) -> Child | None:
-        """A process other than a robot's or an observer that died on its own."""
+        """A process other than a robot's or an observer that died on its own (the bridge
+        only once it died more often than it is restarted)."""
         for child in self.group.crashed():
+            if child.name == "bridge" and self.restart_bridge():
+                continue
             if not child.name.startswith("robot-") and child.name not in OBSERVERS:
                 return child
         return None

@@ -5,8 +5,9 @@ validated message of a key the view uses, or None (a key it does not use). A sam
 used key that is not a valid message raises InvalidSampleError: counted by the caller,
 never drawn. In a keyed run the tag at the start of the attachment is checked first,
 against the identity whose key tags that key (docs/protocol.md): ``world/state`` and
-``world/clock`` the world's, ``robot/<id>/status`` robot ``<id>``'s, ``radio/rx/<id>``
-the *receiving* robot's (the world tags what it sends a robot with that robot's key).
+``world/clock`` the world's, ``link/<id>/stats`` the bridge's, ``robot/<id>/status``
+robot ``<id>``'s, ``radio/rx/<id>`` the *receiving* robot's (the world tags what it sends
+a robot with that robot's key).
 Only then is the tag stripped and the metadata and payload decoded.
 """
 
@@ -26,7 +27,7 @@ class Delivery:
     meta: protocol.RadioRxMeta
 
 
-Decoded = protocol.Clock | protocol.WorldState | protocol.Status | Delivery
+Decoded = protocol.Clock | protocol.WorldState | protocol.Status | protocol.LinkStats | Delivery
 
 
 class InvalidSampleError(Exception):
@@ -38,6 +39,9 @@ def speaker(keys: protocol.Keys, key: str) -> str | None:
     """The identity whose tag a sample on ``key`` must carry, if the view uses the key."""
     if key in (keys.world_state, keys.world_clock):
         return names.WORLD
+    outside = keys.robot_of(key, "link")
+    if outside is not None and key == keys.link_stats(outside):
+        return names.BRIDGE
     robot = keys.robot_of(key)
     if robot is not None and key == keys.status(robot):
         return names.robot_identity(robot)
@@ -82,6 +86,12 @@ def decode_sample(
             return protocol.decode(payload, protocol.WorldState)
         if key == keys.world_clock:
             return protocol.decode(payload, protocol.Clock)
+        outside = keys.robot_of(key, "link")
+        if outside is not None:
+            stats = protocol.decode(payload, protocol.LinkStats)
+            if stats.robot != outside:
+                raise InvalidSampleError(f"the link of robot {stats.robot} on {key}")
+            return stats
         receiver = _receiver(keys, key)
         if receiver is not None:
             if not metadata:

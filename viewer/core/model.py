@@ -229,9 +229,11 @@ def frame(
     deliveries: Sequence[tuple[str, int]] = (),
     real_time_factor: float | None = None,
     ended: Mapping[str, Any] | None = None,
+    links: Mapping[int, protocol.LinkStats] | None = None,
     extra: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """One moment of the run as the page draws it."""
+    """One moment of the run as the page draws it; ``links``: the robots outside the
+    emulator, as their bridge last reported their links."""
     rows = [row for robot, view in sorted(robots.items()) if (row := robot_row(robot, view, scene))]
     statuses = [view.status for view in robots.values() if view.status is not None]
     radio = counters.radio if counters is not None else protocol.RadioCounters()
@@ -257,7 +259,21 @@ def frame(
         ],
         "rx": [[sender, receiver] for sender, receiver in deliveries],
         "ended": dict(ended) if ended is not None else None,
+        "links": {str(robot): link_row(stats) for robot, stats in sorted((links or {}).items())},
         **(extra or {}),
+    }
+
+
+def link_row(stats: protocol.LinkStats) -> dict[str, Any]:
+    """An outside robot's link as the page shows it."""
+    refused = stats.refused
+    return {
+        "transport": stats.transport,
+        "connected": stats.connected,
+        "rtt_ms": stats.rtt_ms,
+        "rtt_p95_ms": stats.rtt_p95_ms,
+        "loss": stats.loss,
+        "refused": sum(getattr(refused, reason) for reason in refused.__struct_fields__),
     }
 
 

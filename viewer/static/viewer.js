@@ -79,6 +79,7 @@ function updateHeader() {
     $(`radio-${name}`).textContent = frame.radio[name];
   }
   $("ended").textContent = frame.ended ? `ended: ${frame.ended.text}` : "";
+  $("links").textContent = describeLinks(frame.links || {});
   const refused = frame.rejected ?? 0;  // the live view's own count (a replay has none)
   $("view-rejected").textContent = refused ? `view refused ${refused}` : "";
   canvas.dataset.robots = frame.robots.length;
@@ -87,7 +88,21 @@ function updateHeader() {
   canvas.dataset.frames = framesReceived;
   canvas.dataset.deliveries = deliveriesReceived;
   canvas.dataset.rejected = refused;
+  canvas.dataset.outside = Object.keys(frame.links || {}).length;
   if (frame.replay) updateReplayControls(frame.replay);
+}
+
+// Robots outside the emulator: each link's transport, round trip and loss, as the bridge
+// last reported them.
+function describeLinks(links) {
+  return Object.entries(links).map(([robot, link]) => {
+    if (!link.connected) return `robot ${robot} (${link.transport}): not connected`;
+    const rtt = link.rtt_ms === null ? "–" :
+      `${link.rtt_ms.toFixed(1)}/${link.rtt_p95_ms.toFixed(1)} ms`;
+    const refused = link.refused ? `, refused ${link.refused}` : "";
+    return `robot ${robot} (${link.transport}): rtt ${rtt}, loss ` +
+      `${(100 * link.loss).toFixed(0)}%${refused}`;
+  }).join("; ");
 }
 
 function setUpLegend() {
@@ -264,6 +279,16 @@ function drawRobot(row) {
     context.beginPath(); context.arc(x, y, r + 2 * Math.max(2, r * 0.35) + 1, 0, 2 * Math.PI);
     context.stroke();
   }
+  // Outside the emulator (hardware in the loop): a square around it, dashed while its
+  // link is down.
+  const link = (frame.links || {})[String(row[ROW.id])];
+  if (link) {
+    const side = 2 * (r + 2 * Math.max(2, r * 0.35) + 3);
+    context.strokeStyle = "#0d47a1"; context.lineWidth = 1.5;
+    context.setLineDash(link.connected ? [] : [3, 3]);
+    context.strokeRect(x - side / 2, y - side / 2, side, side);
+    context.setLineDash([]);
+  }
   // Heading.
   const theta = row[ROW.theta];
   context.strokeStyle = "#111"; context.lineWidth = 1.5;
@@ -297,7 +322,9 @@ function robotAt(event) {
 function describe(row) {
   const phase = row[ROW.phase] >= 0 ? hello.phases[row[ROW.phase]].label : "unknown";
   const decided = row[ROW.decided] >= 0 ? `decided site ${row[ROW.decided]}` : "undecided";
-  return `robot ${row[ROW.id]}: ${phase}\n${decided}\nleads site ${row[ROW.lead]} ` +
+  const link = (frame.links || {})[String(row[ROW.id])];
+  const outside = link ? ` (outside, ${link.transport})` : "";
+  return `robot ${row[ROW.id]}${outside}: ${phase}\n${decided}\nleads site ${row[ROW.lead]} ` +
     `(p = ${row[ROW.leadP].toFixed(2)})\ntrips ${row[ROW.trips]}, last pool ${row[ROW.pool]}`;
 }
 

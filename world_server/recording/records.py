@@ -58,6 +58,7 @@ MESSAGE_TYPES: dict[str, Any] = {
     "status": protocol.Status,
     "ack": protocol.Ack,
     "log": protocol.LogLine,
+    "link": protocol.LinkStats,
     "radio_tx": RadioTxRecord,
     "radio_rx": RadioRxRecord,
     "rejected": RejectedSample,
@@ -124,4 +125,6 @@ def classify(keys: protocol.Keys, key: str) -> str | None:
             return f"radio_{direction}"
         case ["log", _]:
             return "log"
+        case ["link", robot, "stats"] if names.robot_of_name(robot) is not None:
+            return "link"
     return None

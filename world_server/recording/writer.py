@@ -136,6 +136,7 @@ class McapRecorder:
                 ("ack", protocol.Ack),
                 ("status", protocol.Status),
                 ("log", protocol.LogLine),
+                ("link", protocol.LinkStats),
                 ("camera meta", protocol.CameraMeta),
                 ("radio_tx meta", protocol.RadioTxMeta),
                 ("radio_rx meta", protocol.RadioRxMeta),
@@ -296,6 +297,8 @@ class McapRecorder:
                 return names.beacon_identity(name) if names.is_beacon_name(name) else None
             case ["radio", _, name]:
                 return names.sender_identity(name)
+            case ["link", _, _]:
+                return names.BRIDGE
         return names.LAUNCHER  # log/<process>
 
     def _route(self, key: str) -> tuple[Callable[[Sample], None], str | None]:
@@ -496,6 +499,11 @@ class McapRecorder:
         self._write(channel, self.sim_ns, sample.payload, sample.wall_ns)
         message = foxglove.log_message(self.sim_ns, line.process, line.line)
         self._write_derived("log", foxglove.LOG, self.sim_ns, message, sample.wall_ns)
+
+    def _on_link(self, channel: _Channel, sample: Sample) -> None:
+        """A robot outside the emulator: its link's figures, at the sim time they came."""
+        if self._decoded("link", sample.payload, sample) is not None:
+            self._write(channel, self.sim_ns, sample.payload, sample.wall_ns)
 
     # --- the end -------------------------------------------------------------------
 

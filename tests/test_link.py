@@ -1,0 +1,488 @@
+"""The link between a robot outside the emulator and the bridge, without sockets: frames
+(wire/link.py), the robot's end of a session (``LinkClient``) against the bridge's
+(``LinkPeer``) in memory, refusals of what is forged, replayed, oversized or out of place,
+and the impairment that makes a link worse on purpose."""
+
+from __future__ import annotations
+
+import itertools
+import random
+from collections.abc import Callable
+
+import msgspec
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from robot_agent.link.client import LinkClient, Lost, Received, Welcomed
+from wire import link, protocol
+from world_server.bridge.impairment import ImpairedDirection, LinkImpairment
+from world_server.bridge.peer import (
+    FRAME_BURST,
+    MAX_FROM_ROBOT_BYTES,
+    PING_TIMEOUT,
+    Closed,
+    LinkPeer,
+    Message,
+    Opened,
+)
+
+ROBOT_KEY = bytes(range(32))
+KEY = link.link_key(ROBOT_KEY)
+ROBOT = 8
+SOURCE = ("127.0.0.1", 40000)
+
+
+def welcome(cipher: link.Cipher = "none") -> link.LinkWelcome:
+    return link.LinkWelcome(
+        v=1,
+        run="demo",
+        root="bestofn",
+        cipher=cipher,
+        ping_every=0.5,
+        silence=3.0,
+        controller=msgspec.Raw(b'{"dwell":3.0}'),
+    )
+
+
+def counting_nonces(start: int) -> Callable[[], bytes]:
+    counter = itertools.count(start)
+    return lambda: next(counter).to_bytes(link.NONCE_BYTES, "big")
+
+
+class Pair:
+    """A program's client and the bridge's peer, wired back to back in memory."""
+
+    def __init__(self, cipher: link.Cipher = "none") -> None:
+        self.client = LinkClient(ROBOT, KEY, nonce=counting_nonces(1))
+        self.peer = LinkPeer(
+            ROBOT,
+            KEY,
+            welcome(cipher),
+            transport="udp",
+            address="udp://127.0.0.1:47800",
+            nonce=counting_nonces(1000),
+        )
+        self.now = 0.0
+        self.to_peer: list[bytes] = []  # frames the client sent, as the wire saw them
+        self.to_client: list[bytes] = []
+        self.client_events: list[object] = []
+        self.peer_events: list[object] = []
+
+    def exchange(self) -> None:
+        """Deliver everything queued both ways until nothing moves."""
+        while True:
+            up = self.client.take_outgoing()
+            down = [frame for frame, _ in self.peer.take_outgoing()]
+            if not up and not down:
+                return
+            for frame in up:
+                self.to_peer.append(frame)
+                self.peer_events += self.peer.receive(frame, SOURCE, self.now)
+            for frame in down:
+                self.to_client.append(frame)
+                self.client_events += self.client.receive(frame, self.now)
+
+    def connect(self) -> None:
+        self.client.wake(self.now)
+        self.exchange()
+
+
+# --- frames --------------------------------------------------------------------------------
+
+
+def frame(kind: link.FrameType = link.FrameType.DATA, **changes: object) -> link.Frame:
+    fields: dict[str, object] = {
+        "type": kind,
+        "from_bridge": False,
+        "robot": ROBOT,
+        "robot_nonce": b"\x01" * 8,
+        "bridge_nonce": b"\x02" * 8,
+        "seq": 1,
+        "body": link.encode_data(link.DataKind.ACT, b'{"v":1}', b"t" * 16),
+    }
+    fields.update(changes)
+    return link.Frame(**fields)  # type: ignore[arg-type]
+
+
+def test_a_frame_is_its_header_body_and_tag_and_reads_back() -> None:
+    sent = frame()
+    data = link.seal(sent, KEY)
+    assert data[:2] == b"BL" and data[2] == 1 and data[3] == link.FrameType.DATA
+    assert data[4] == 0  # from the robot, not encrypted
+    assert int.from_bytes(data[5:9], "big") == ROBOT
+    assert len(data) == link.HEADER_BYTES + len(sent.body) + link.TAG_BYTES
+    assert link.open_frame(data, KEY) == sent
+    assert link.decode_data(sent.body) == (link.DataKind.ACT, b'{"v":1}', b"t" * 16)
+
+
+def test_an_encrypted_frame_hides_its_body_and_checks_out_only_under_its_session_key() -> None:
+    session = link.session_key(KEY, b"\x01" * 8, b"\x02" * 8)
+    sent = frame(encrypted=True)
+    data = link.seal(sent, KEY, session)
+    assert sent.body not in data and data[4] == link.ENCRYPTED
+    assert link.open_frame(data, KEY, session) == sent
+    other = link.session_key(KEY, b"\x01" * 8, b"\x03" * 8)
+    with pytest.raises(link.LinkError) as refused:
+        link.open_frame(data, KEY, other)
+    assert refused.value.refusal is link.Refusal.FORGED
+
+
+@pytest.mark.parametrize(
+    ("change", "refusal"),
+    [
+        (lambda data: data[:20], link.Refusal.MALFORMED),
+        (lambda data: b"XX" + data[2:], link.Refusal.MALFORMED),
+        (lambda data: data[:2] + b"\x02" + data[3:], link.Refusal.MALFORMED),
+        (lambda data: data[:3] + b"\x09" + data[4:], link.Refusal.MALFORMED),
+        (lambda data: data[:4] + b"\x80" + data[5:], link.Refusal.MALFORMED),
+        (lambda data: data[:-1] + bytes([data[-1] ^ 1]), link.Refusal.FORGED),
+        (lambda data: data[:40] + b"!" + data[41:], link.Refusal.FORGED),
+        (lambda data: data + b"\0" * link.MAX_FRAME_BYTES, link.Refusal.OVERSIZE),
+    ],
+)
+def test_a_frame_changed_in_any_way_is_refused_for_its_reason(
+    change: object, refusal: link.Refusal
+) -> None:
+    data = change(link.seal(frame(), KEY))  # type: ignore[operator]
+    with pytest.raises(link.LinkError) as refused:
+        link.open_frame(data, KEY)
+    assert refused.value.refusal is refusal
+
+
+def test_the_link_key_is_not_the_robot_key_and_cannot_tag_as_the_robot() -> None:
+    assert link.link_key(ROBOT_KEY) != ROBOT_KEY and len(KEY) == 32
+    data = link.seal(frame(), ROBOT_KEY)
+    with pytest.raises(link.LinkError):
+        link.open_frame(data, KEY)
+
+
+@given(st.binary(max_size=3000))
+def test_any_bytes_are_a_frame_or_a_link_error(data: bytes) -> None:
+    try:
+        opened = link.open_frame(data, KEY)
+    except link.LinkError as error:
+        assert error.refusal in link.Refusal
+    else:
+        assert isinstance(opened, link.Frame)
+
+
+@given(st.lists(st.binary(min_size=1, max_size=600), min_size=1, max_size=8), st.data())
+def test_serial_framing_cuts_any_split_stream_back_into_its_frames(
+    frames: list[bytes], data: st.DataObject
+) -> None:
+    stream = b"".join(link.serial_encode(item) for item in frames)
+    assert stream.count(0) == len(frames)  # COBS: the only zeros end frames
+    cuts = sorted(data.draw(st.lists(st.integers(0, len(stream)), max_size=6)))
+    deframer = link.Deframer()
+    found: list[bytes | link.LinkError] = []
+    for start, end in itertools.pairwise([0, *cuts, len(stream)]):
+        found += deframer.feed(stream[start:end])
+    assert found == frames
+
+
+def test_serial_framing_refuses_a_bad_crc_and_finds_the_next_frame() -> None:
+    good = link.serial_encode(b"hello")
+    bad = bytearray(link.serial_encode(b"world"))
+    bad[2] ^= 0x40
+    found = link.Deframer().feed(bytes(bad) + good)
+    assert isinstance(found[0], link.LinkError) and found[0].refusal is link.Refusal.CORRUPT
+    assert found[1:] == [b"hello"]
+
+
+def test_serial_framing_drops_a_run_longer_than_any_frame_until_the_next_zero() -> None:
+    deframer = link.Deframer()
+    found = deframer.feed(b"\x01" * (link.MAX_ENCODED_BYTES + 10))
+    assert found == [] and len(deframer.buffer) < link.MAX_ENCODED_BYTES
+    found = deframer.feed(b"\x01\x00" + link.serial_encode(b"next"))
+    assert isinstance(found[0], link.LinkError) and found[0].refusal is link.Refusal.OVERSIZE
+    assert found[1:] == [b"next"]
+
+
+def test_the_replay_window_takes_each_number_once_and_allows_reordering() -> None:
+    window = link.ReplayWindow()
+    for seq in (1, 3, 2, 10, 5):
+        assert window.refuses(seq) is None
+        window.take(seq)
+    assert all(window.refuses(seq) is not None for seq in (1, 2, 3, 5, 10))
+    assert window.refuses(4) is None
+    window.take(200)
+    assert window.refuses(4) is not None  # too far behind
+    assert window.refuses(199) is None
+
+
+def test_a_paced_line_hands_a_frame_on_when_its_last_byte_would_arrive() -> None:
+    pacer = link.LinePacer(115200)
+    assert pacer.done_at(1152, 0.0) == pytest.approx(0.1)  # 11520 bits
+    assert pacer.done_at(1152, 0.05) == pytest.approx(0.2)  # waits for the line
+    assert pacer.done_at(10, 1.0) == pytest.approx(1.0 + 100 / 115200)
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("udp://127.0.0.1:47800", link.LinkAddress("udp", host="127.0.0.1", port=47800)),
+        ("udp://[::1]:9", link.LinkAddress("udp", host="::1", port=9)),
+        ("serial:/dev/ttyUSB0", link.LinkAddress("serial", path="/dev/ttyUSB0")),
+        ("serial:/dev/pts/4@921600", link.LinkAddress("serial", path="/dev/pts/4", baud=921600)),
+    ],
+)
+def test_link_addresses_read_and_print_back(text: str, expected: link.LinkAddress) -> None:
+    address = link.parse_address(text)
+    assert address == expected
+    assert link.parse_address(str(address)) == address
+
+
+@pytest.mark.parametrize(
+    "text", ["tcp://1.2.3.4:5", "udp://nohost", "udp://:5", "serial:", "serial:/dev/x@fast"]
+)
+def test_a_bad_link_address_is_a_value_error(text: str) -> None:
+    with pytest.raises(ValueError, match=r"link|UDP|serial"):
+        link.parse_address(text)
+
+
+# --- sessions ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("cipher", ["none", "chacha20-poly1305"])
+def test_hello_welcome_and_the_first_frame_open_a_session_both_ends_agree_on(
+    cipher: link.Cipher,
+) -> None:
+    pair = Pair(cipher)
+    pair.connect()
+    assert [type(event) for event in pair.client_events] == [Welcomed]
+    assert pair.peer_events == [Opened(ROBOT)]
+    assert pair.client.open and pair.peer.connected
+    assert pair.client.cipher_key == pair.peer.session.cipher_key  # type: ignore[union-attr]
+    assert (pair.client.cipher_key is None) == (cipher == "none")
+    # Messages both ways, in order, as they were sent.
+    assert pair.client.send(link.DataKind.STATUS, b"status", b"t" * 16)
+    pair.peer.send(link.DataKind.SENSE, b"sense", b"s" * 16)
+    pair.exchange()
+    assert pair.peer_events[-1] == Message(ROBOT, link.DataKind.STATUS, b"status", b"t" * 16)
+    assert pair.client_events[-1] == Received(link.DataKind.SENSE, b"sense", b"s" * 16)
+
+
+def test_a_replayed_or_forged_frame_is_refused_and_counted_and_changes_nothing() -> None:
+    pair = Pair()
+    pair.connect()
+    pair.client.send(link.DataKind.ACT, b"act", b"t" * 16)
+    pair.exchange()
+    events = len(pair.peer_events)
+    act = pair.to_peer[-1]
+    assert pair.peer.receive(act, SOURCE, 0.0) == []  # replayed
+    forged = act[:-1] + bytes([act[-1] ^ 1])
+    assert pair.peer.receive(forged, SOURCE, 0.0) == []
+    hello = pair.to_peer[0]
+    assert pair.peer.receive(hello, SOURCE, 0.0) == []  # a hello already answered
+    assert len(pair.peer_events) == events and pair.peer.connected
+    assert pair.peer.refused == {"replayed": 2, "forged": 1}
+    # The program refuses a replayed frame of the bridge's just the same.
+    assert pair.client.receive(pair.to_client[-1], 0.0) == []
+    assert pair.client.refused == {"replayed": 1}
+
+
+def test_a_frame_of_another_robot_direction_or_kind_is_refused() -> None:
+    pair = Pair()
+    pair.connect()
+    other_key = link.link_key(bytes(32))
+    stranger = link.seal(frame(robot=9), other_key)
+    assert pair.peer.receive(stranger, SOURCE, 0.0) == []
+    session = pair.peer.session
+    assert session is not None
+    # Authentic, of this session, but a message only the world sends a robot.
+    wrong_kind = frame(
+        robot_nonce=session.robot_nonce,
+        bridge_nonce=session.bridge_nonce,
+        seq=99,
+        body=link.encode_data(link.DataKind.SENSE, b"x", None),
+    )
+    assert pair.peer.receive(link.seal(wrong_kind, KEY), SOURCE, 0.0) == []
+    assert pair.peer.refused == {"unexpected": 2}
+
+
+def test_an_oversized_frame_from_a_robot_is_refused_before_its_tag_is_checked() -> None:
+    pair = Pair()
+    pair.connect()
+    assert pair.peer.receive(b"BL" + bytes(MAX_FROM_ROBOT_BYTES), SOURCE, 0.0) == []
+    assert pair.peer.refused == {"oversize": 1}
+
+
+def test_a_replayed_hello_opens_nothing_and_the_live_session_goes_on() -> None:
+    pair = Pair()
+    pair.connect()
+    # Someone replays the program's hello to a bridge that forgot it (a restarted one):
+    # it is welcomed, but nobody can make the frame that would take the session.
+    fresh = LinkPeer(
+        ROBOT, KEY, welcome(), transport="udp", address="x", nonce=counting_nonces(5000)
+    )
+    assert fresh.receive(pair.to_peer[0], ("10.0.0.1", 1), 0.0) == []
+    assert fresh.pending is not None and not fresh.connected
+    assert [target for _, target in fresh.take_outgoing()] == [("10.0.0.1", 1)]
+
+
+def test_a_newer_session_replaces_the_old_one_which_the_run_sees_leave_and_join() -> None:
+    pair = Pair()
+    pair.connect()
+    restarted = LinkClient(ROBOT, KEY, nonce=counting_nonces(77))
+    pair.client = restarted
+    pair.connect()
+    replaced = Closed(ROBOT, "a newer session replaced it")
+    assert pair.peer_events == [Opened(ROBOT), replaced, Opened(ROBOT)]
+    assert pair.peer.sessions == 2
+
+
+def test_the_bridge_pings_measures_round_trips_and_counts_unanswered_pings_as_lost() -> None:
+    pair = Pair()
+    pair.connect()  # at 0: the first ping is due at once
+    for pair.now in (0.0, 0.5, 1.0, 1.5):  # pings 1 to 4; only the second gets through
+        pair.peer.wake(pair.now)
+        if pair.now == 0.5:
+            pair.now = 0.54
+            pair.exchange()
+        else:
+            pair.peer.take_outgoing()
+    pair.now = 1.5 + PING_TIMEOUT
+    pair.peer.last_heard = pair.now  # (not silent: only the pings are lost)
+    pair.peer.wake(pair.now)
+    stats = pair.peer.stats()
+    assert stats.rtt_ms == pytest.approx(40.0)
+    assert stats.pings == 4 and stats.loss == pytest.approx(0.75)
+    assert stats.connected and stats.sessions == 1 and stats.transport == "udp"
+    protocol.decode(protocol.encode(stats), protocol.LinkStats)
+
+
+def test_silence_ends_the_session_at_both_ends_and_the_program_says_hello_again() -> None:
+    pair = Pair()
+    pair.connect()
+    pair.now = 3.5
+    assert pair.peer.wake(pair.now) == [Closed(ROBOT, "silent for 3 s")]
+    lost = pair.client.wake(pair.now)
+    assert [type(event) for event in lost] == [Lost] and not pair.client.open
+    pair.client_events.clear()
+    pair.peer_events.clear()
+    pair.connect()
+    assert pair.peer_events == [Opened(ROBOT)] and pair.client.sessions == 2
+
+
+def test_a_bye_that_the_run_ended_tells_the_program_to_stop() -> None:
+    pair = Pair()
+    pair.connect()
+    pair.peer.close(link.ByeReason.RUN_ENDED)
+    pair.exchange()
+    assert pair.client_events[-1] == Lost("the bridge said bye (run_ended)", ended=True)
+
+
+def test_a_robot_that_floods_its_link_is_held_to_the_rate_bound() -> None:
+    pair = Pair()
+    pair.connect()
+    for _ in range(int(FRAME_BURST) + 50):
+        pair.client.send(link.DataKind.ACT, b"a", None)
+    pair.exchange()
+    assert pair.peer.refused["rate"] >= 40
+
+
+# --- impairment ----------------------------------------------------------------------------
+
+
+def test_an_impaired_direction_delays_jitters_and_loses_frames_in_order_and_seeded() -> None:
+    impairment = LinkImpairment(delay=0.05, jitter=0.01, loss=0.2)
+    runs = []
+    for _ in range(2):
+        direction = ImpairedDirection.seeded(impairment, seed=3, robot=8, direction="up")
+        kept = [n for n in range(1000) if direction.put(bytes([n % 256]), n, now=n * 0.001)]
+        released = direction.due(10.0)
+        assert [where for _, where in released] == kept  # in order
+        runs.append(kept)
+    assert runs[0] == runs[1]  # seeded
+    assert 150 < 1000 - len(runs[0]) < 250
+
+
+def test_a_frame_is_held_for_the_delay_and_no_less() -> None:
+    direction = ImpairedDirection(LinkImpairment(delay=0.05), random.Random(0))
+    direction.put(b"x", "a", now=1.0)
+    assert direction.due(1.049) == [] and direction.deadline == pytest.approx(1.05)
+    assert direction.due(1.05) == [(b"x", "a")]
+
+
+# --- the program, end to end in memory -----------------------------------------------------
+
+
+def test_the_program_asks_for_the_map_says_it_is_there_and_steps_a_sealed_sense() -> None:
+    """The robot program (``robot-agent --link`` without its loop) against the bridge's end
+    and a world that answers: the map is asked and checked, the first status comes before
+    anything else, and a sense sealed for the robot is answered by an act sealed by it."""
+    from robot_agent.link.program import LinkRobot
+    from wire import auth, names
+
+    secret = auth.Keyring(secret=bytes(32))  # the world's
+    keys = protocol.Keys("demo")
+    identity = names.robot_identity(ROBOT)
+    robot = LinkRobot.create(ROBOT, "demo", secret.only([identity]))
+    key = robot.client.key
+    peer = LinkPeer(
+        ROBOT,
+        key,
+        msgspec.structs.replace(welcome(), controller=msgspec.Raw(b"{}")),
+        transport="udp",
+        address="x",
+    )
+    info = protocol.WorldInfo(
+        v=1,
+        run="demo",
+        seed=3,
+        dt=0.1,
+        arena_radius=0.75,
+        nest=protocol.Nest(0.0, 0.0, 0.2),
+        sites=[protocol.Site(0, 0.75, 0.0), protocol.Site(1, -0.75, 0.0)],
+        robot_radius=0.037,
+        wheel_base=0.053,
+        max_wheel_speed=0.13,
+        camera=protocol.CameraSpec(width=64, height=48, fov=0.84),
+        clock="lockstep",
+    )
+    relayed: list[Message] = []
+
+    def exchange() -> None:
+        while True:
+            up, down = robot.client.take_outgoing(), peer.take_outgoing()
+            if not up and not down:
+                return
+            for frame in up:
+                for event in peer.receive(frame, SOURCE, 0.0):
+                    if isinstance(event, Message):
+                        relayed.append(event)
+                        world(event)
+            for frame, _ in down:
+                robot.receive(frame, 0.0)
+
+    def world(message: Message) -> None:
+        if message.kind is link.DataKind.INFO_QUERY:
+            asker, nonce = auth.query_open(
+                secret, keys.world_info, message.payload, message.attachment
+            )
+            payload = protocol.encode(info)
+            sealed = auth.reply_seal(secret, asker, keys.world_info, payload, nonce)
+            peer.send(link.DataKind.INFO_REPLY, payload, sealed)
+
+    robot.wake(0.0)
+    exchange()
+    assert [m.kind for m in relayed] == [link.DataKind.INFO_QUERY, link.DataKind.STATUS]
+    status = relayed[-1]
+    secret.open(identity, keys.status(ROBOT), status.payload, status.attachment)
+    assert protocol.decode(status.payload, protocol.Status).tick == 0
+    sense = protocol.encode(
+        protocol.Sense(
+            v=1, tick=0, t=0.0, x=0.3, y=0.0, theta=0.0, prox=[0.0] * 8, rx=0, camera=False
+        )
+    )
+    peer.send(link.DataKind.SENSE, sense, secret.seal(identity, keys.sense(ROBOT), sense))
+    exchange()
+    act = next(m for m in relayed if m.kind is link.DataKind.ACT)
+    secret.open(identity, keys.act(ROBOT), act.payload, act.attachment)  # sealed by the robot
+    assert protocol.decode(act.payload, protocol.Act).tick == 0
+    # A sense forged by anyone without the robot's key is refused by the program itself.
+    forged = sense.replace(b'"x":0.3', b'"x":0.4')
+    peer.send(link.DataKind.SENSE, forged, secret.seal(identity, keys.sense(ROBOT), sense))
+    exchange()
+    assert robot.endpoint is not None and robot.endpoint.rejects.count == 1

@@ -1,0 +1,214 @@
+"""Robots outside the emulator against live runs (``swarm run --external``): the same run
+bit for bit over UDP and over a serial line, a robot that never connects, one whose program
+is killed and restarted, a bridge that dies and is found again, a link made worse on
+purpose in real time, an encrypted link (``--secure``), and forged, replayed and oversized
+frames sent at a live link."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+from pathlib import Path
+
+import pytest
+from outside_helpers import Relay, decisions, in_process, outside_run, pty_pair, udp_link
+from swarm_helpers import processes_of
+
+from wire import link
+
+pytestmark = pytest.mark.timeout(300)
+
+SMALL = ["--robots", "4", "--sites", "3", "--timeout", "600", "--no-record"]
+
+
+def test_two_robots_outside_over_udp_decide_exactly_as_all_emulated(tmp_path: Path) -> None:
+    """Lockstep: robots 8 and 9 run as programs outside, on their own clocks and sockets,
+    and every robot's results equal those of the all-emulated run of the same seed."""
+    options = ["--robots", "10", "--sites", "5", "--seed", "0", "--timeout", "900", "--no-record"]
+    reference = in_process(options)
+    address = udp_link()
+    with outside_run(tmp_path, *options, "--external", "8,9", "--link", address) as run:
+        run.start(address, 8)
+        run.start(address, 9)
+        code, summary, stderr = run.finish()
+        programs = run.program_summaries()
+    assert code == 0, stderr
+    assert summary is not None
+    assert decisions(summary) == decisions(reference)
+    assert summary["sim_time_s"] == reference["sim_time_s"]
+    assert [r["outside"] for r in summary["per_robot"]] == [None] * 8 + ["udp", "udp"]
+    assert summary["world"]["departures"] == 0
+    links = summary["links"]
+    assert set(links) == {"8", "9"}
+    assert all(item["sessions"] == 1 and item["refused"] == 0 for item in links.values())
+    assert all(item["rtt_ms"] is not None and item["loss"] == 0 for item in links.values())
+    # Each program says how it ended: the bridge told it the run was over.
+    decided = [robot["decided_site"] for robot in summary["per_robot"][8:]]
+    assert [each["decided_site"] for each in programs] == decided
+    assert "robot-agent --link" in stderr and "--key-file" in stderr
+    assert oct((tmp_path / "keys" / "robot-8.key").stat().st_mode & 0o777) == "0o600"
+
+
+def test_one_robot_outside_over_a_serial_line_decides_exactly_as_all_emulated(
+    tmp_path: Path,
+) -> None:
+    options = [*SMALL, "--seed", "1"]
+    reference = in_process(options)
+    with pty_pair(tmp_path) as (bridge_end, robot_end):
+        served = f"3=serial:{bridge_end}@921600"
+        with outside_run(tmp_path, *options, "--external", "3", "--link", served) as run:
+            run.start(f"serial:{robot_end}@921600", 3)
+            code, summary, stderr = run.finish()
+    assert code == 0, stderr
+    assert summary is not None
+    assert decisions(summary) == decisions(reference)
+    assert summary["links"]["3"]["transport"] == "serial"
+    assert summary["links"]["3"]["refused"] == 0
+
+
+def test_an_outside_robot_that_never_connects_ends_the_run_naming_it(tmp_path: Path) -> None:
+    address = udp_link()
+    options = [*SMALL, "--external", "3", "--link", address, "--link-wait", "2"]
+    with outside_run(tmp_path, *options) as run:
+        code, summary, stderr = run.finish(timeout=120)
+        run_id = run.run_id
+    assert code == 1 and summary is None
+    assert f"robot 3 on {address}" in stderr and "did not connect within 2 s" in stderr
+    assert processes_of(run_id) == []
+
+
+def test_a_killed_program_is_a_departure_and_its_restart_rejoins_and_decides(
+    tmp_path: Path,
+) -> None:
+    address = udp_link()
+    options = [*SMALL, "--seed", "0", "--external", "3", "--link", address]
+    with outside_run(tmp_path, *options) as run, Relay.to(address) as relay:
+        first = run.start(relay.address, 3)
+        relay.wait_for(100)  # frames from the program: well into the run, far from its end
+        first.kill()
+        first.wait()
+        run.start(relay.address, 3)
+        code, summary, stderr = run.finish()
+    assert code == 0, stderr
+    assert summary is not None and summary["ended"] == "consensus"
+    assert summary["world"]["departures"] >= 1  # the link went: the world saw it leave
+    assert summary["links"]["3"]["sessions"] == 2
+    assert summary["per_robot"][3]["decided_site"] == summary["chosen_site"]
+
+
+def test_a_bridge_that_dies_is_started_again_and_its_robot_finds_it(tmp_path: Path) -> None:
+    """In real time (a lockstep run this small would be over before the robot noticed)."""
+    address = udp_link()
+    options = [*SMALL, "--seed", "2", "--clock", "realtime", "--speed", "2"]
+    options += ["--external", "3", "--link", address]
+    with outside_run(tmp_path, *options) as run, Relay.to(address) as relay:
+        started = run.start(relay.address, 3)
+        relay.wait_for(100)
+        bridges = [pid for pid in processes_of(run.run_id) if _is_bridge(pid)]
+        assert len(bridges) == 1
+        os.kill(bridges[0], signal.SIGKILL)
+        code, summary, stderr = run.finish()
+        (program,) = run.program_summaries()
+    assert code == 0, stderr
+    assert summary is not None and summary["ended"] == "consensus", stderr
+    assert program["sessions"] == 2  # it said hello again until the new bridge answered
+    assert summary["per_robot"][3]["decided_site"] == summary["chosen_site"]
+    assert started.returncode == 0
+
+
+def _is_bridge(pid: int) -> bool:
+    try:
+        return b"world_server.bridge" in Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return False
+
+
+def test_a_real_time_swarm_with_a_bad_link_reaches_the_right_consensus(tmp_path: Path) -> None:
+    """50 ms each way and 20% of the frames lost on the outside robot's link: the figures
+    say so, and the swarm still decides for the best site."""
+    address = udp_link()
+    options = [*SMALL, "--seed", "0", "--clock", "realtime", "--speed", "2"]
+    impaired = ["--link-delay", "50", "--link-loss", "0.2"]
+    with outside_run(tmp_path, *options, *impaired, "--external", "3", "--link", address) as run:
+        run.start(address, 3)
+        code, summary, stderr = run.finish()
+    assert code == 0, stderr
+    assert summary is not None and summary["correct"]
+    figures = summary["links"]["3"]
+    assert figures["rtt_ms"] >= 100  # two delays of 50 ms
+    assert 0 < figures["loss"] < 1 and figures["impaired"] > 0
+    assert summary["config"]["link_delay"] == 50.0 and summary["config"]["link_loss"] == 0.2
+
+
+def test_a_secure_run_encrypts_the_link_and_decides_as_all_emulated(tmp_path: Path) -> None:
+    options = [*SMALL, "--seed", "1"]
+    reference = in_process(options)
+    address = udp_link()
+    secure = ["--secure", "--external", "2", "--link", address]
+    with outside_run(tmp_path, *options, *secure) as run, Relay.to(address) as relay:
+        run.start(relay.address, 2)
+        code, summary, stderr = run.finish()
+    assert code == 0, stderr
+    assert summary is not None and decisions(summary) == decisions(reference)
+    assert summary["links"]["2"]["sessions"] == 1  # the bridge's figures pass the access rules
+    sessions = [frame for frame in relay.captured if frame[3] != link.FrameType.HELLO]
+    assert sessions and all(frame[4] & link.ENCRYPTED for frame in sessions)
+
+
+def test_forged_replayed_and_oversized_frames_are_refused_counted_and_change_nothing(
+    tmp_path: Path,
+) -> None:
+    options = [*SMALL, "--seed", "3"]
+    reference = in_process(options)
+    address = udp_link()
+    attacked = ["--external", "3", "--link", address]
+    with outside_run(tmp_path, *options, *attacked) as run, Relay.to(address) as relay:
+        run.start(relay.address, 3)
+        relay.wait_for(60)
+        captured = list(relay.captured)
+        for frame in captured[:30]:  # the hello, acts, statuses, pongs: all seen before
+            relay.inject(frame)
+        last = bytearray(captured[-1])
+        for position in range(40, 50):  # a bit changed in the body: the tag fails
+            forged = bytearray(last)
+            forged[position] ^= 0x01
+            relay.inject(bytes(forged))
+        for _ in range(5):  # a robot's frame is never this big
+            relay.inject(bytes(last[: link.HEADER_BYTES]) + bytes(40_000))
+        code, summary, stderr = run.finish()
+    assert code == 0, stderr
+    assert summary is not None
+    assert decisions(summary) == decisions(reference)
+    refused = summary["links"]["3"]["refused_by"]
+    assert refused["replayed"] >= 30 and refused["forged"] >= 10 and refused["oversize"] >= 5
+    assert summary["world"]["departures"] == 0 and summary["links"]["3"]["sessions"] == 1
+
+
+def test_a_mixed_run_is_recorded_reported_and_replayed_with_its_outside_robots(
+    tmp_path: Path,
+) -> None:
+    from deploy.report import read_recording, rebuild_summary, run_summary
+    from viewer.replay import ReplaySource, load
+
+    path = tmp_path / "mixed.mcap"
+    options = ["--robots", "3", "--sites", "3", "--seed", "0", "--record", str(path)]
+    address = udp_link()
+    with outside_run(tmp_path, *options, "--external", "2", "--link", address) as run:
+        run.start(address, 2)
+        code, summary, stderr = run.finish()
+    assert code == 0, stderr
+    assert summary is not None
+    recording = read_recording(path)
+    assert recording.complete and recording.messages["bestofn.LinkStats"] > 0
+    assert recording.messages.get("bestofn.RejectedSample", 0) == 0
+    reported = run_summary(recording)
+    assert reported["links"]["2"]["transport"] == "udp"
+    rebuilt = rebuild_summary(recording)
+    assert [robot["outside"] for robot in rebuilt["per_robot"]] == [None, None, "udp"]
+    assert decisions(rebuilt) == decisions(summary)
+    assert json.loads(recording.description["config"])["links"] == [f"2={address}"]
+    replay = ReplaySource(load(path))
+    replay.command({"op": "seek", "t": 10.0})
+    frame = replay.frame()
+    assert frame["links"]["2"]["transport"] == "udp"
