@@ -1177,6 +1177,9 @@ def batch_vectors() -> dict[str, Any]:
             {"name": name, "kind": kind, "reason": reason, "hex": data.hex()}
             for kind, name, reason, data in invalid
         ],
+    }
+
+
 LINK_ROBOT = 8
 LINK_ROBOT_NONCE = bytes.fromhex("0102030405060708")
 LINK_BRIDGE_NONCE = bytes.fromhex("1112131415161718")

@@ -189,6 +189,8 @@ def test_batch_vectors_that_are_refused_whole(vector: dict[str, Any]) -> None:
     decode = batch.decode_senses if vector["kind"] == "senses" else batch.decode_acts
     with pytest.raises(batch.BatchError):
         decode(bytes.fromhex(vector["hex"]))
+
+
 LINK = load(VECTORS / "link_frame.json")
 LINK_KEY = bytes.fromhex(LINK["link_key_hex"])
 SESSION_KEY = bytes.fromhex(LINK["session_key_hex"])

@@ -194,7 +194,9 @@ class LinkRobot:
                 return
             for message in step.transmissions:
                 self.client.send(link.DataKind.RADIO_TX, message.payload, message.attachment)
-            self.client.send(link.DataKind.ACT, step.act.payload, step.act.attachment)
+            act = step.act
+            assert act is not None, "a robot alone sends its act itself, never in a batch"
+            self.client.send(link.DataKind.ACT, act.payload, act.attachment)
             if step.status is not None:
                 self._send_status(step.status, now)
 
