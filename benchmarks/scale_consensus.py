@@ -10,9 +10,10 @@ same world, controllers and beacon as ``swarm run``, and the same per-robot resu
 through real processes instead: ``swarm run --json --no-record --quiet`` (hosting
 ``--robots-per-process`` robots per process above 50 robots).
 
-``--save FILE`` keeps the results (JSON), ``--load FILE...`` adds earlier ones, and
-``--doc`` writes docs/scale.md with the tables and a box plot of sim time to consensus
-against swarm size (docs/scale.png); ``--before FILE`` adds a before/after table from the
+``--save FILE`` keeps the results (JSON), ``--load FILE...`` adds earlier ones (a later
+run of the same size and seed replaces an earlier one), and ``--doc`` writes docs/scale.md
+with the tables and a box plot of sim time to consensus against swarm size
+(docs/scale.png), and README's per-size table; ``--before FILE`` adds a before/after table from the
 results of another checkout (main's code before the fix of issue 10, run with this
 script). The commands that made docs/scale.md are listed there (``COMMANDS``).
 
@@ -43,8 +44,18 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 SITES = 10
-# The plan of issue 10: ten seeds of every size up to 200 robots, three of 500.
-DEFAULT_PLAN = {10: range(10), 50: range(10), 100: range(10), 200: range(10), 500: range(3)}
+# The plan of issue 24: ten seeds of every size up to 500 robots, three of 1000.
+DEFAULT_PLAN = {
+    10: range(10),
+    50: range(10),
+    100: range(10),
+    200: range(10),
+    500: range(10),
+    1000: range(3),
+}
+# What docs/scale.md publishes at least: issue 10's plan (ten seeds up to 200 robots, three
+# of 500); issue 24's further 500- and 1000-robot seeds join it as their runs finish.
+PUBLISHED_PLAN = {10: range(10), 50: range(10), 100: range(10), 200: range(10), 500: range(3)}
 DEFAULT_TIMEOUT = 6000.0  # sim seconds: well beyond the slowest run of the plan
 ROBOTS_PER_PROCESS = 50  # --zenoh: hosted robots per process above this swarm size
 ZENOH_STALL_TIMEOUT = 300.0  # --zenoh: wall seconds the world waits for a silent robot
@@ -310,7 +321,16 @@ COMMANDS = f"""\
 # all together: the results file, this page and its figure
 .venv/bin/python benchmarks/scale_consensus.py --no-run \\
     --load small.json 500-01.json 500-2.json zenoh.json zenoh200.json zenoh500.json \\
-    --save {RUNS_FILE} --before {BEFORE_FILE} --doc"""
+    --save {RUNS_FILE} --before {BEFORE_FILE} --doc
+# issue 24: the other seeds of 500 robots and 1000 robots, one run per command, two
+# commands at a time (niced), each given up at 12000 s of sim time
+.venv/bin/python benchmarks/scale_consensus.py --sizes 500 --seeds 3 --timeout 12000 \\
+    --save r500-s3.json                   # and so on, for seeds 4 to 9
+.venv/bin/python benchmarks/scale_consensus.py --sizes 1000 --seeds 0 --timeout 12000 \\
+    --save r1000-s0.json                  # and so on, for seeds 1 and 2
+# added to the results file, which then makes this page, its figure and README's table
+.venv/bin/python benchmarks/scale_consensus.py --no-run --load {RUNS_FILE} r500-s*.json \\
+    r1000-s*.json --save {RUNS_FILE} --before {BEFORE_FILE} --doc"""
 
 
 def render_doc(runs: Sequence[Run], before: Sequence[Run], figure: str) -> str:
@@ -391,6 +411,34 @@ def load_runs(path: Path) -> list[Run]:
     return [Run(**item) for item in json.loads(path.read_text())]
 
 
+def merged(runs: Sequence[Run]) -> list[Run]:
+    """One run per (mode, size, seed): a later one (of a later --load file, or run now)
+    replaces an earlier one, so a results file can be loaded and saved over with more."""
+    latest = {(run.mode, run.robots, run.seed): run for run in runs}
+    return sorted(latest.values(), key=lambda run: (run.mode, run.robots, run.seed))
+
+
+README = "README.md"
+README_BEGIN = "<!-- scale_consensus:per-size -->"
+README_END = "<!-- /scale_consensus:per-size -->"
+
+
+def readme_block(runs: Sequence[Run]) -> str:
+    """README's table: the per-size table of docs/scale.md, in one process."""
+    return per_size([run for run in runs if run.mode == "in-process"])
+
+
+def write_readme(runs: Sequence[Run], path: Path) -> None:
+    """Replace the table between README's markers with the one these runs give."""
+    text = path.read_text()
+    head, begin, rest = text.partition(README_BEGIN)
+    _, end, tail = rest.partition(README_END)
+    if not begin or not end:
+        raise SystemExit(f"{path} has no {README_BEGIN} ... {README_END} block")
+    path.write_text(f"{head}{begin}\n{readme_block(runs)}\n{end}{tail}")
+    print(f"wrote the table of {path}", file=sys.stderr)
+
+
 # --- command line --------------------------------------------------------------------
 
 
@@ -404,7 +452,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--save", type=Path, help="write the results here (JSON)")
     parser.add_argument("--load", type=Path, nargs="+", default=[], help="results to add")
     parser.add_argument("--before", type=Path, help="results of the code before the fix")
-    parser.add_argument("--doc", action="store_true", help="write docs/scale.md and .png")
+    parser.add_argument(
+        "--doc", action="store_true", help="write docs/scale.md and .png, and README's table"
+    )
     parser.add_argument("--no-run", action="store_true", help="only --load, no new runs")
     args = parser.parse_args(argv)
 
@@ -422,7 +472,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                     runs.append(run)
         else:
             runs += run_plan(plan, args.timeout, args.parallel)
-    runs.sort(key=lambda run: (run.mode, run.robots, run.seed))
+    runs = merged(runs)
     print(HEADER)
     for run in runs:
         print(row(run) + ("" if run.mode == "in-process" else " (zenoh)"))
@@ -436,6 +486,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         print(before_after(before, [run for run in runs if run.mode == "in-process"]))
     if args.doc:
         write_doc(runs, before, REPO / "docs" / "scale.md")
+        write_readme(runs, REPO / README)
     if any(not math.isfinite(run.sim_time_s) for run in runs):
         raise SystemExit("a run reported a non-finite sim time")
 
