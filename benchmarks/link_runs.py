@@ -232,7 +232,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             for kind, params in jobs
         }
         for future in concurrent.futures.as_completed(futures):
-            row = {"kind": futures[future], **future.result()}
+            try:
+                row = {"kind": futures[future], **future.result()}
+            except (RuntimeError, subprocess.SubprocessError, json.JSONDecodeError) as error:
+                # One run that failed is a row of its own: the others still count.
+                row = {"kind": futures[future], "error": str(error)[-500:]}
             rows.append(row)
             print(json.dumps(row), flush=True)
     report(rows)
@@ -242,6 +246,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def report(rows: list[dict[str, Any]]) -> None:
+    failed = [row for row in rows if "error" in row]
+    if failed:
+        print(f"{len(failed)} run(s) failed: " + "; ".join(row["error"][-200:] for row in failed))
+    rows = [row for row in rows if "error" not in row]
     lock = [row for row in rows if row["kind"] == "lockstep"]
     for transport in ("udp", "serial"):
         chosen = sorted((r for r in lock if r["transport"] == transport), key=lambda r: r["seed"])
