@@ -39,6 +39,7 @@ sys.path.insert(0, str(REPO))
 from deploy.outside import free_udp_port  # noqa: E402
 
 IMPAIRED = ["--link-delay", "50", "--link-loss", "0.2"]
+LOCKSTEP_STALL_TIMEOUT = 300.0  # wall seconds (docs/scale.md does the same on a busy machine)
 
 
 def decisions(summary: dict[str, Any]) -> list[tuple[object, ...]]:
@@ -142,7 +143,9 @@ class PtyPair:
 
 def lockstep(seed: int, robots: int, sites: int, serial: bool) -> dict[str, Any]:
     options = ["--robots", str(robots), "--sites", str(sites), "--seed", str(seed)]
-    options += ["--timeout", "3000"]
+    # A world that waits long for a robot starved by a busy machine stays in lockstep (a
+    # stall closes a tick without a robot: no longer the seed's run, whatever the link).
+    options += ["--timeout", "3000", "--stall-timeout", str(LOCKSTEP_STALL_TIMEOUT)]
     reference = in_process(options)
     pty = PtyPair() if serial else None
     try:
@@ -255,9 +258,11 @@ def report(rows: list[dict[str, Any]]) -> None:
         chosen = sorted((r for r in lock if r["transport"] == transport), key=lambda r: r["seed"])
         if chosen:
             same = [r["seed"] for r in chosen if r["same"]]
+            stalled = [r["seed"] for r in chosen if r["stalls"]]
             print(
                 f"lockstep over {transport}: {len(same)} of {len(chosen)} seeds the same run "
-                f"bit for bit (seeds {[r['seed'] for r in chosen]})"
+                f"bit for bit (seeds {[r['seed'] for r in chosen]}; with lockstep stalls: "
+                f"{stalled})"
             )
     real = [row for row in rows if row["kind"] == "realtime"]
     groups = sorted({(row["speed"], row["impaired"]) for row in real})
