@@ -12,6 +12,7 @@
 
     .venv/bin/python benchmarks/link_runs.py --lockstep --seeds 0-9 --serial-seeds 0 1 2
     .venv/bin/python benchmarks/link_runs.py --realtime --seeds 0-9 --speeds 1 2 --parallel 3
+    .venv/bin/python benchmarks/link_runs.py --realtime --seeds 1,3 --speeds 1 --links clean
 
 Every process is stopped by pid when its run ends; runs are independent, so ``--parallel``
 runs several at once (real-time runs mostly wait on their clock).
@@ -193,16 +194,19 @@ def realtime(seed: int, robots: int, sites: int, speed: float, impaired: bool) -
         "rtt_ms": [item["rtt_ms"] for item in links.values()],
         "rtt_p95_ms": [item["rtt_p95_ms"] for item in links.values()],
         "loss": [item["loss"] for item in links.values()],
+        "sessions": [item["sessions"] for item in links.values()],  # more than 1: reconnected
         "departures": summary["world"]["departures"],
         "stalls": summary["world"]["stalls"],
     }
 
 
 def seeds(text: str) -> list[int]:
-    if "-" in text:
-        first, last = text.split("-")
-        return list(range(int(first), int(last) + 1))
-    return [int(text)]
+    """``0-9``, ``1,3`` or ``0-4,7``."""
+    chosen: list[int] = []
+    for part in text.split(","):
+        first, _, last = part.partition("-")
+        chosen += range(int(first), int(last or first) + 1)
+    return chosen
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -212,6 +216,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seeds", type=seeds, default=[0])
     parser.add_argument("--serial-seeds", type=int, nargs="*", default=[])
     parser.add_argument("--speeds", type=float, nargs="+", default=[1.0, 2.0])
+    parser.add_argument(
+        "--links",
+        nargs="+",
+        choices=("clean", "impaired"),
+        default=["clean", "impaired"],
+        help="real time: on a clean link, on one made worse on purpose, or both",
+    )
     parser.add_argument("--robots", type=int, default=10)
     parser.add_argument("--sites", type=int, default=10)
     parser.add_argument("--parallel", type=int, default=1)
@@ -224,7 +235,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.realtime:
         jobs += [
             ("realtime", (seed, args.robots, args.sites, speed, impaired))
-            for impaired in (False, True)
+            for impaired in (link == "impaired" for link in args.links)
             for speed in args.speeds
             for seed in args.seeds
         ]
