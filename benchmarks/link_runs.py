@@ -12,6 +12,7 @@
 
     .venv/bin/python benchmarks/link_runs.py --lockstep --seeds 0-9 --serial-seeds 0 1 2
     .venv/bin/python benchmarks/link_runs.py --realtime --seeds 0-9 --speeds 1 2 --parallel 3
+    .venv/bin/python benchmarks/link_runs.py --realtime --seeds 1,3 --speeds 1 --links clean
 
 Every process is stopped by pid when its run ends; runs are independent, so ``--parallel``
 runs several at once (real-time runs mostly wait on their clock).
@@ -39,6 +40,7 @@ sys.path.insert(0, str(REPO))
 from deploy.outside import free_udp_port  # noqa: E402
 
 IMPAIRED = ["--link-delay", "50", "--link-loss", "0.2"]
+LOCKSTEP_STALL_TIMEOUT = 300.0  # wall seconds (docs/scale.md does the same on a busy machine)
 
 
 def decisions(summary: dict[str, Any]) -> list[tuple[object, ...]]:
@@ -142,7 +144,9 @@ class PtyPair:
 
 def lockstep(seed: int, robots: int, sites: int, serial: bool) -> dict[str, Any]:
     options = ["--robots", str(robots), "--sites", str(sites), "--seed", str(seed)]
-    options += ["--timeout", "3000"]
+    # A world that waits long for a robot starved by a busy machine stays in lockstep (a
+    # stall closes a tick without a robot: no longer the seed's run, whatever the link).
+    options += ["--timeout", "3000", "--stall-timeout", str(LOCKSTEP_STALL_TIMEOUT)]
     reference = in_process(options)
     pty = PtyPair() if serial else None
     try:
@@ -190,16 +194,19 @@ def realtime(seed: int, robots: int, sites: int, speed: float, impaired: bool) -
         "rtt_ms": [item["rtt_ms"] for item in links.values()],
         "rtt_p95_ms": [item["rtt_p95_ms"] for item in links.values()],
         "loss": [item["loss"] for item in links.values()],
+        "sessions": [item["sessions"] for item in links.values()],  # more than 1: reconnected
         "departures": summary["world"]["departures"],
         "stalls": summary["world"]["stalls"],
     }
 
 
 def seeds(text: str) -> list[int]:
-    if "-" in text:
-        first, last = text.split("-")
-        return list(range(int(first), int(last) + 1))
-    return [int(text)]
+    """``0-9``, ``1,3`` or ``0-4,7``."""
+    chosen: list[int] = []
+    for part in text.split(","):
+        first, _, last = part.partition("-")
+        chosen += range(int(first), int(last or first) + 1)
+    return chosen
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -209,6 +216,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seeds", type=seeds, default=[0])
     parser.add_argument("--serial-seeds", type=int, nargs="*", default=[])
     parser.add_argument("--speeds", type=float, nargs="+", default=[1.0, 2.0])
+    parser.add_argument(
+        "--links",
+        nargs="+",
+        choices=("clean", "impaired"),
+        default=["clean", "impaired"],
+        help="real time: on a clean link, on one made worse on purpose, or both",
+    )
     parser.add_argument("--robots", type=int, default=10)
     parser.add_argument("--sites", type=int, default=10)
     parser.add_argument("--parallel", type=int, default=1)
@@ -221,7 +235,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.realtime:
         jobs += [
             ("realtime", (seed, args.robots, args.sites, speed, impaired))
-            for impaired in (False, True)
+            for impaired in (link == "impaired" for link in args.links)
             for speed in args.speeds
             for seed in args.seeds
         ]
@@ -232,7 +246,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             for kind, params in jobs
         }
         for future in concurrent.futures.as_completed(futures):
-            row = {"kind": futures[future], **future.result()}
+            try:
+                row = {"kind": futures[future], **future.result()}
+            except (RuntimeError, subprocess.SubprocessError, json.JSONDecodeError) as error:
+                # One run that failed is a row of its own: the others still count.
+                row = {"kind": futures[future], "error": str(error)[-500:]}
             rows.append(row)
             print(json.dumps(row), flush=True)
     report(rows)
@@ -242,14 +260,20 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def report(rows: list[dict[str, Any]]) -> None:
+    failed = [row for row in rows if "error" in row]
+    if failed:
+        print(f"{len(failed)} run(s) failed: " + "; ".join(row["error"][-200:] for row in failed))
+    rows = [row for row in rows if "error" not in row]
     lock = [row for row in rows if row["kind"] == "lockstep"]
     for transport in ("udp", "serial"):
         chosen = sorted((r for r in lock if r["transport"] == transport), key=lambda r: r["seed"])
         if chosen:
             same = [r["seed"] for r in chosen if r["same"]]
+            stalled = [r["seed"] for r in chosen if r["stalls"]]
             print(
                 f"lockstep over {transport}: {len(same)} of {len(chosen)} seeds the same run "
-                f"bit for bit (seeds {[r['seed'] for r in chosen]})"
+                f"bit for bit (seeds {[r['seed'] for r in chosen]}; with lockstep stalls: "
+                f"{stalled})"
             )
     real = [row for row in rows if row["kind"] == "realtime"]
     groups = sorted({(row["speed"], row["impaired"]) for row in real})

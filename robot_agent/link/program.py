@@ -40,7 +40,7 @@ from pathlib import Path
 
 from robot_agent.core import byzantine
 from robot_agent.core.controller_config import ControllerConfig
-from robot_agent.core.endpoint import InputKind, Outgoing, RobotEndpoint
+from robot_agent.core.endpoint import InputKind, Outgoing, OutputKind, RobotEndpoint
 from robot_agent.link.client import LinkClient, Lost, Received, Welcomed
 from robot_agent.link.transport import LinkClosedError, Transport, open_transport
 from wire import auth, link, names, protocol, settings
@@ -55,12 +55,17 @@ STATUS_EVERY = 2.0
 MAX_WAIT = 0.2  # seconds the loop waits at most (a stop signal is seen within it)
 REOPEN_EVERY = 1.0  # seconds between attempts to reopen a transport that closed
 DRAIN_WAIT = 2.0  # seconds to let a paced serial line send the goodbye
-# A robot's inputs that came before it could step (none, normally: the bridge makes it
-# present only once it has sent its first status): at most this many are dropped quietly.
+# The link's kind of each input the robot's endpoint takes, and of each message it sends.
+# Inputs that come before the robot can step (none, normally: the bridge makes it present
+# only once it has sent its first status) are dropped and counted.
 INPUT_OF = {
     link.DataKind.SENSE: InputKind.SENSE,
     link.DataKind.RADIO_RX: InputKind.RADIO_RX,
     link.DataKind.CAMERA: InputKind.CAMERA,
+}
+OUTPUT_OF = {
+    OutputKind.RADIO_TX: link.DataKind.RADIO_TX,
+    OutputKind.ACT: link.DataKind.ACT,
 }
 
 
@@ -192,13 +197,11 @@ class LinkRobot:
             step = self.endpoint.receive(input_kind, event.payload, event.attachment)
             if step is None:
                 return
-            for message in step.transmissions:
-                self.client.send(link.DataKind.RADIO_TX, message.payload, message.attachment)
-            act = step.act
-            assert act is not None, "a robot alone sends its act itself, never in a batch"
-            self.client.send(link.DataKind.ACT, act.payload, act.attachment)
-            if step.status is not None:
-                self._send_status(step.status, now)
+            for message in step.outgoing:  # its transmissions, its act, its status if new
+                if message.kind is OutputKind.STATUS:
+                    self._send_status(message, now)
+                else:
+                    self.client.send(OUTPUT_OF[message.kind], message.payload, message.attachment)
 
     def _world(self, kind: link.DataKind, payload: bytes) -> None:
         instance = payload.decode(errors="replace")[: names.MAX_NAME_LENGTH]
