@@ -365,3 +365,13 @@ def test_messages_missing_from_a_recording_are_counted_and_warned_of(tmp_path: P
         f"{gappy}: 200 of the messages its publishers sent are not in it (a recorder that "
         "fell behind drops what it cannot hold); what is drawn from them has gaps"
     ]
+
+
+def test_acks_are_expected_at_the_ticks_the_beacon_named() -> None:
+    """A beacon answers the ticks it names (Ack.next_tick), not every tick: only a gap
+    after the tick named counts as missing acks, at the beacon's step."""
+    acks = report.AckTicks()
+    for tick, next_tick in ((0, 5), (5, 10), (20, 25), (25, None), (26, None), (28, None)):
+        acks.answered(tick, next_tick)
+    # Missing: 10 and 15 (10 named, then every 5), and 27 (the next tick named).
+    assert (acks.count, acks.expected) == (6, 9)
