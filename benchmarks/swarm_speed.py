@@ -30,8 +30,8 @@ inprocess`` and over Zenoh (``swarm run``), the same seed, one after the other
 ratio of the CPU their processes spent per tick (each run less the same run stopped after
 one tick), the messaging floor, and whether the two agree robot for robot; ``--doc
 docs/performance.md`` also writes that table into the page between its
-``swarm_speed:engines`` markers (``--readme`` is the same option's old spelling, from when
-the table was in README.md):
+``swarm_speed:engines`` markers (``--readme`` is the same option's old spelling; give it
+again for another page, such as README.md):
 
     .venv/bin/python benchmarks/swarm_speed.py --robots --scale --engines 10 100 --pairs 3 \
         --doc docs/performance.md
@@ -483,9 +483,10 @@ def main() -> None:
         "--readme",
         dest="doc",
         type=Path,
-        default=None,
+        action="append",
+        default=[],
         help="write the engines table into this page (docs/performance.md), between its "
-        "swarm_speed:engines markers",
+        "swarm_speed:engines markers; repeat it for several pages (README.md too)",
     )
     parser.add_argument(
         "--machine-note", default="", help="said of the machine under the engines table"
@@ -503,11 +504,12 @@ def main() -> None:
         realtime_pacing(args, extra)
     if args.engines:
         rows = engines(args, extra)
-        if args.doc is not None:
+        if args.doc:
             shown = [arg for arg in sys.argv[1:] if arg != args.machine_note]
             shown = [arg for arg in shown if arg != "--machine-note"]
             command = "benchmarks/swarm_speed.py " + shlex.join(shown)
-            write_table(args.doc, rows, command, args)
+            for page in args.doc:
+                write_table(page, rows, command, args)
 
 
 if __name__ == "__main__":

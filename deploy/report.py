@@ -108,6 +108,32 @@ class TickSpan:
 
 
 @dataclass
+class AckTicks(TickSpan):
+    """The ticks a beacon answered, each with the next it said it would answer
+    (``Ack.next_tick``; None: the next tick): enough to tell whether any went missing."""
+
+    next_of: dict[int, int | None] = field(default_factory=dict)
+
+    def answered(self, tick: int, next_tick: int | None) -> None:
+        self.add(tick)
+        self.next_of[tick] = next_tick
+
+    @property
+    def expected(self) -> int:
+        """The acks due from the first to the last: each names the next. Where the next
+        recorded one is later than named, those missing in between are counted as many as
+        fit at the step of the last named (a beacon answers at its period)."""
+        ticks = sorted(self.next_of)
+        expected = len(ticks)
+        for tick, following in itertools.pairwise(ticks):
+            due = self.next_of[tick]
+            due = tick + 1 if due is None else due
+            if following > due:
+                expected += math.ceil((following - due) / max(1, due - tick))
+        return expected
+
+
+@dataclass
 class Declared:
     """What publishers said they sent, read from the recorded messages themselves."""
 
@@ -188,7 +214,7 @@ class Recording:
     opinions: list[protocol.Status] = field(default_factory=list)  # that robot's statuses
     sense: dict[int, TickSpan] = field(default_factory=dict)
     act: dict[int, TickSpan] = field(default_factory=dict)
-    ack: TickSpan = field(default_factory=TickSpan)
+    ack: AckTicks = field(default_factory=AckTicks)
     clock: TickSpan = field(default_factory=TickSpan)
     state_ticks: list[int] = field(default_factory=list)
     declared: Declared = field(default_factory=Declared)
@@ -297,7 +323,7 @@ class _Collector:
                 self._status(_robot_of(topic), self.status.decode(message.data))
             elif schema == "bestofn.Ack":
                 ack = self.ack.decode(message.data)
-                recording.ack.add(ack.tick)
+                recording.ack.answered(ack.tick, ack.next_tick)
                 recording.declared.tx += ack.radio_tx
             elif schema == "bestofn.Clock":
                 clock = self.clock.decode(message.data)
@@ -647,7 +673,8 @@ def audit(recording: Recording) -> dict[str, dict[str, int]]:
 
     ``expected`` comes from the recording itself: each tick's Sense says how many radio
     deliveries and camera frames the world published for it; each Act and Ack says how many
-    radio messages its controller sent; clock, sense, act and ack ticks must be contiguous;
+    radio messages its controller sent; clock, sense and act ticks must be contiguous, and
+    each ack must be followed by one at the tick it named (``Ack.next_tick``);
     a robot's trip and pooling counters step by one per status update.
     """
     counts = recording.messages

@@ -159,4 +159,5 @@ def test_every_generated_block_names_a_command_that_writes_it_here(document: Pat
     if "<!-- swarm_speed:engines -->" in text:
         assert text.count("<!-- swarm_speed:engines -->") == 1
         assert text.count("<!-- /swarm_speed:engines -->") == 1
-        assert relative == "docs/performance.md", "benchmarks/swarm_speed.py --doc writes there"
+        # benchmarks/swarm_speed.py --doc writes there (issue 26: README's speed block too)
+        assert relative in ("docs/performance.md", "README.md"), relative

@@ -401,3 +401,13 @@ def test_a_recording_is_read_keeping_one_robots_statuses_and_a_trace_each(
         assert trace.trail.seen == 400 and trace.trail.last == (0.399, 0.1 * robot)
     chosen = report.read_recording(tmp_path / "a.mcap", opinion_robot=1)
     assert chosen.opinion_robot == 1 and len(chosen.opinions) == len(POOLS[1]) + 1
+
+
+def test_acks_are_expected_at_the_ticks_the_beacon_named() -> None:
+    """A beacon answers the ticks it names (Ack.next_tick), not every tick: only a gap
+    after the tick named counts as missing acks, at the beacon's step."""
+    acks = report.AckTicks()
+    for tick, next_tick in ((0, 5), (5, 10), (20, 25), (25, None), (26, None), (28, None)):
+        acks.answered(tick, next_tick)
+    # Missing: 10 and 15 (10 named, then every 5), and 27 (the next tick named).
+    assert (acks.count, acks.expected) == (6, 9)
