@@ -33,6 +33,7 @@ from wellstirred.model import (
     FIGURE1_POOLS,
     Cell,
     Method,
+    Model,
     exact_consensus_time,
     sweep,
 )
@@ -100,7 +101,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
 
     start = time.perf_counter()
-    exact = [exact_consensus_time(cell.model).mean for cell in fast_cells]
+    models = [cell.model for cell in fast_cells]
+    exact = [exact_consensus_time(model).mean for model in models if isinstance(model, Model)]
     exact_time = time.perf_counter() - start
     print(f"exact chain for all {cells_count} cells: {exact_time:.3f} s")
 

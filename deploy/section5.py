@@ -106,13 +106,13 @@ def tasks_for(seeds: int) -> list[Task]:
 
 
 def simulate(
-    tasks: Sequence[Task], executor: sweep.ExecutorSpec | int, progress: Any = None
+    tasks: Sequence[Task], parallel: sweep.ExecutorSpec | int, progress: Any = None
 ) -> list[dict[str, Any]]:
-    """Every task's record, in task order, on ``executor`` (a number: that many local
-    processes; 1: here). ``progress(done, total)`` as runs finish. A run that gives no
+    """Every task's record, in task order, on the executor ``parallel`` (a number: that
+    many local processes; 1: here). ``progress(done, total)`` as runs finish. A run that gives no
     record (its worker died too often, or it raised) is an error: every published run
     must be made."""
-    spec = executor if isinstance(executor, sweep.ExecutorSpec) else sweep.ExecutorSpec(executor)
+    spec = parallel if isinstance(parallel, sweep.ExecutorSpec) else sweep.ExecutorSpec(parallel)
 
     def report(done: int, total: int, index: int, failure: sweep.Failure | None) -> None:
         if progress is not None:

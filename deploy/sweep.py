@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures
+import logging
 import multiprocessing
 import queue
 import sys
@@ -337,6 +338,9 @@ def _on_dask(
     with dask.config.set({"distributed.scheduler.allowed-failures": executor.retries}):
         cluster = None
         if executor.dask == LOCAL_DASK:
+            # Our own cluster's chatter (a busy worker slow to exit at the end, ...) is
+            # not the sweep's news: its errors are.
+            logging.getLogger("distributed").setLevel(logging.ERROR)
             cluster = LocalCluster(
                 n_workers=executor.parallel,
                 threads_per_worker=1,

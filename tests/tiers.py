@@ -95,6 +95,7 @@ FULL_ONLY = {
     "test_section5": "60 in-process runs",
     "test_secure": "starts secure swarms",
     "test_swarm": "starts swarms",
+    "test_sweep": "worker processes and a Dask cluster on loopback, some of them killed",
     "test_trace": "starts a traced swarm",
     "test_udp_radio": "UDP sockets and robot processes",
     "test_viewer": "starts swarms, the viewer and a browser",
