@@ -78,6 +78,28 @@ def _replies(handler: Any, worth_waiting: Callable[[], bool] | None) -> Iterator
             return
 
 
+PROOF_TIMEOUT = 2.0  # seconds a world server has to answer for its token
+
+
+def world_proved(
+    session: zenoh.Session,
+    keys: protocol.Keys,
+    keyring: auth.Keyring | None,
+    identity: str,
+    instance: str,
+    *,
+    timeout: float = PROOF_TIMEOUT,
+) -> bool:
+    """Whether the world server ``instance`` (a liveliness token ``alive/world/<instance>``
+    says it is there) answers ``world/info`` for that instance: a token is only a hint,
+    anyone can declare one, but in a keyed run only the world can make the answer pass.
+    The query also proves the asker present to the world (its tag)."""
+    answers, _ = ask(
+        session, keys.world_info, keyring, identity, payload=instance.encode(), timeout=timeout
+    )
+    return bool(answers)
+
+
 def fetch_world_info(
     session: zenoh.Session,
     keys: protocol.Keys,
