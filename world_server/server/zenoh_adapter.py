@@ -22,6 +22,7 @@ from typing import Any, cast
 import zenoh
 
 from plumbing.trace import TraceWriter, now
+from plumbing.world_info import NOT_THIS_INSTANCE
 from plumbing.zenoh_session import reliable_publisher, reliable_put
 from wire import auth, batch, protocol
 from wire.names import Role
@@ -41,7 +42,6 @@ from world_server.server.timeline import TickTimeline
 # The largest valid message: a batch of acts (a radio payload and its attachment, alone).
 MAX_MESSAGE_BYTES = max(batch.MAX_BATCH_BYTES, protocol.MAX_PAYLOAD_BYTES + 1024)
 MAX_WAIT = 0.5  # seconds the thread sleeps at most, whatever the deadline
-NOT_THIS_INSTANCE = b"not this world instance"
 
 
 class WorldServer:
@@ -136,7 +136,7 @@ class WorldServer:
             query.reply_err(UNAUTHENTICATED)
             return
         if payload and payload != self.instance.encode():
-            query.reply_err(NOT_THIS_INSTANCE)
+            query.reply_err(NOT_THIS_INSTANCE.encode())
         else:
             sealed = auth.reply_seal(self.keyring, identity, key, self._info_bytes, nonce)
             query.reply(key, self._info_bytes, attachment=sealed)
