@@ -528,6 +528,10 @@ def test_real_time_refuses_replayed_acts_and_radio_and_those_of_ticks_to_come() 
     assert len(h.coordinator.intake.transmissions) == 2
     h.coordinator.handle(act(0, 3), 0.34)  # its next act: fresh
     assert h.coordinator.intake.acts[0].tick == 3 and h.coordinator.counters.rejected == 6
+    h.coordinator.handle(ack("nest", 3, next_tick=8), 0.34)
+    h.coordinator.handle(ack("nest", 0, next_tick=1), 0.34)  # an old ack: refused
+    assert h.coordinator.roster.beacon_next == {"nest": 8}
+    assert h.coordinator.counters.rejected == 7
 
 
 # --- refusals -------------------------------------------------------------------------

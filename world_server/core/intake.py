@@ -44,8 +44,9 @@ class TickIntake:
         self.transmissions: list[Transmission] = []
         self.sent_this_tick: dict[str, int] = {}  # radio messages per sender in this tick
         self.seqs_this_tick: set[tuple[str, int]] = set()  # (sender, seq): each once
-        # Real time: the (tick, seq) of each sender's last act and radio message taken.
+        # Real time: the (tick, seq) of each sender's last act, ack and radio message taken.
         self.last_act: dict[int, tuple[int, int]] = {}
+        self.last_ack: dict[str, tuple[int, int]] = {}
         self.last_tx: dict[str, tuple[int, int]] = {}
 
     # --- acts --------------------------------------------------------------------------
@@ -139,6 +140,10 @@ class TickIntake:
         if self.lockstep and not self.barrier.answer(ack.tick, who, ack.radio_tx):
             self._unexpected_answer(event.key, ack.tick)
             return None
+        if not self.lockstep:
+            if not self._fresh(event.key, (ack.tick, 0), self.last_ack.get(name)):
+                return None
+            self.last_ack[name] = (ack.tick, 0)
         return who, ack
 
     # --- radio -------------------------------------------------------------------------
