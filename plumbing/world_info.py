@@ -78,6 +78,37 @@ def _replies(handler: Any, worth_waiting: Callable[[], bool] | None) -> Iterator
             return
 
 
+PROOF_TIMEOUT = 2.0  # seconds a world server has to answer for its token
+PROOF_ATTEMPTS = 5  # tries before a token counts as no world's (the world may be busy)
+NOT_THIS_INSTANCE = "not this world instance"  # a world's answer for another's token
+
+
+def world_proved(
+    session: zenoh.Session,
+    keys: protocol.Keys,
+    keyring: auth.Keyring | None,
+    identity: str,
+    instance: str,
+    *,
+    timeout: float = PROOF_TIMEOUT,
+    attempts: int = PROOF_ATTEMPTS,
+) -> bool:
+    """Whether the world server ``instance`` (a liveliness token ``alive/world/<instance>``
+    says it is there) answers ``world/info`` for that instance: a token is only a hint,
+    anyone can declare one, but in a keyed run only the world can make the answer pass.
+    The query also proves the asker present to the world (its tag). Asked ``attempts``
+    times before giving up: a busy world may not answer in time, and a refusal (the
+    world's ``NOT_THIS_INSTANCE``) carries no tag, so anyone could send one. Another
+    world's answer comes at once, so a fake token costs a few quick questions."""
+    for _ in range(attempts):
+        answers, _ = ask(
+            session, keys.world_info, keyring, identity, payload=instance.encode(), timeout=timeout
+        )
+        if answers:
+            return True
+    return False
+
+
 def fetch_world_info(
     session: zenoh.Session,
     keys: protocol.Keys,

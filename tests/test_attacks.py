@@ -37,7 +37,7 @@ from swarm_helpers import (
 
 from deploy.processes import python_module
 from plumbing import run_keys
-from plumbing.world_info import ask
+from plumbing.world_info import ask, fetch_world_info
 from robot_agent.core import tick_assembly
 from robot_agent.node import robot_node as node
 from wire import auth, batch, names, protocol
@@ -579,6 +579,9 @@ def test_a_sender_that_leaves_with_its_transmission_queued_does_not_crash_the_wo
             if role == "beacon":
                 assert _wait_until(lambda: len(ticks) > 3, 60), "the run never started"
                 joined_at.append(ticks[-1])
+            # As every robot and beacon does: prove itself present (world/info with its key),
+            # then declare its token, which the world takes only with that proof.
+            fetch_world_info(session, keys, 60.0, keyring, identity)
             token = session.liveliness().declare_token(keys.alive(Role(role), name))
             assert _wait_until(lambda: bool(sent), 60), "the test's sender never took part"
             tick = sent[0]

@@ -143,6 +143,17 @@ def test_a_new_world_is_followed_from_its_tick_zero() -> None:
     assert endpoint.rejected == 0
 
 
+def test_world_tokens_no_world_answers_for_are_counted_and_change_nothing() -> None:
+    endpoint = beacon()
+    endpoint.world_appeared("real")
+    assert endpoint.receive_clock(*clock(5))
+    for index in range(30):
+        endpoint.world_unproven(f"fake{index}")
+        endpoint.world_vanished(f"fake{index}")
+    assert endpoint.receive_clock(*clock(5)) == []  # still a replay: the ticks are kept
+    assert endpoint.worlds.followed == "real" and endpoint.rejected == 30
+
+
 def test_the_same_world_back_is_rejoined_at_its_tick_and_a_replay_is_still_refused() -> None:
     endpoint = beacon()
     endpoint.world_appeared("world")

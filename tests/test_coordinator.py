@@ -77,6 +77,10 @@ def harness(
         keyring=KEYRING,
         traced=traced,
     )
+    # Every robot and the nest beacon prove themselves present first, as their processes do
+    # (they ask world/info before they declare their tokens): their tokens then join.
+    for identity in [*(names.robot_identity(robot) for robot in range(robots)), "beacon/nest"]:
+        coordinator.take(query(EventKind.INFO, KEYS.world_info, identity), 0.0)
     return Harness(coordinator, outputs)
 
 
@@ -314,14 +318,56 @@ def test_departures_are_counted_once_for_robots_and_beacons_taking_part() -> Non
     assert h.world.tick == 1 and h.coordinator.counters.stalls == 0
 
 
+def present(h: Harness, identity: str) -> None:
+    """``identity`` proves itself present: an authenticated world/info query."""
+    h.coordinator.handle(query(EventKind.INFO, KEYS.world_info, identity), 0.0)
+
+
 def test_more_than_max_beacons_beacons_are_refused() -> None:
     h = harness(expect_beacons=MAX_BEACONS)
     h.coordinator.begin(0.0)
     for index in range(MAX_BEACONS + 1):
+        present(h, f"beacon/b{index}")
         h.coordinator.handle(alive(Role.BEACON, f"b{index}"), 0.0)
     h.coordinator.handle(alive(Role.BEACON, "b0"), 0.0)  # one of them again: still in
     assert len(h.world.beacons()) == MAX_BEACONS and f"b{MAX_BEACONS}" not in h.world.beacons()
     assert h.coordinator.counters.rejected == 1
+
+
+def test_tokens_without_proof_of_presence_never_join_nor_fill_the_beacons() -> None:
+    """Twenty beacon tokens of an attacker with no key, then the real beacon: the fakes
+    are hints that never join (nor count toward MAX_BEACONS, nor hold a tick up); the
+    real one joins once it asks world/info with its key, in either order."""
+    h = harness(expect_beacons=1)
+    h.coordinator.begin(0.0)
+    for index in range(20):
+        h.coordinator.handle(alive(Role.BEACON, f"fake{index}"), 0.0)
+    forged = query(EventKind.INFO, KEYS.world_info, "beacon/fake0", keyring=OTHER_RUN)
+    h.coordinator.handle(forged, 0.0)  # a proof without the key: refused, counted
+    h.coordinator.handle(alive(Role.ROBOT, "0"), 0.0)
+    h.coordinator.handle(alive(Role.ROBOT, "1"), 0.0)
+    assert h.world.beacons() == [] and h.coordinator.phase == "waiting"
+    h.coordinator.handle(alive(Role.BEACON, "real"), 0.0)
+    assert h.world.beacons() == []  # a token alone: a hint
+    present(h, "beacon/real")
+    assert h.world.beacons() == ["real"] and h.coordinator.phase == "running"
+    assert h.coordinator.counters.rejected == 1
+    answers = [act(0, 0), act(1, 0), ack("real", 0)]
+    for event in answers:
+        h.coordinator.handle(event, 0.0)
+    assert h.world.tick == 1 and h.coordinator.counters.stalls == 0
+
+
+def test_a_robot_token_joins_only_once_its_robot_proved_present() -> None:
+    h = harness(3, expect_robots=3)
+    h.coordinator.roster.proven.discard("robot/2")  # the harness proved every robot
+    h.coordinator.begin(0.0)
+    for robot in range(3):
+        h.coordinator.handle(alive(Role.ROBOT, str(robot)), 0.0)
+    h.coordinator.handle(alive(Role.BEACON, "nest"), 0.0)
+    assert h.world.live_robots() == [0, 1] and h.coordinator.phase == "waiting"
+    present(h, "robot/2")
+    assert h.world.live_robots() == [0, 1, 2] and h.coordinator.phase == "running"
 
 
 # --- batch routes ---------------------------------------------------------------------
@@ -457,6 +503,35 @@ def test_real_time_ignores_the_acts_of_robots_not_taking_part() -> None:
     h.coordinator.handle(act(1, 0), 0.01)
     assert h.coordinator.intake.acts == {}
     assert (h.coordinator.counters.rejected, h.coordinator.counters.late) == (0, 0)
+
+
+def test_real_time_refuses_replayed_acts_and_radio_and_those_of_ticks_to_come() -> None:
+    """Case 4 of issue 23: in real time an authentic act or radio message replayed (not
+    after its sender's last) is refused and counted, as is one for a tick the world has
+    not reached; one far behind the world is late."""
+    h = started(1, now=0.0, clock="realtime")
+    for now in (0.11, 0.21, 0.31):
+        h.coordinator.wake(now)
+    assert h.world.tick == 3
+    h.coordinator.handle(act(0, 2, wheels=0.5), 0.32)
+    h.coordinator.handle(tx("0", 2, 1), 0.32)
+    h.coordinator.handle(tx("0", 3, 2), 0.32)
+    assert h.coordinator.intake.acts[0].tick == 2
+    taken = [(t.sender, t.seq) for t in h.coordinator.intake.transmissions]
+    assert taken == [("0", 1), ("0", 2)] and h.coordinator.counters.rejected == 0
+    for replay in (act(0, 2, wheels=-0.5), act(0, 1), tx("0", 2, 1), tx("0", 3, 2)):
+        h.coordinator.handle(replay, 0.33)
+    h.coordinator.handle(act(0, 4), 0.33)  # a tick to come
+    h.coordinator.handle(tx("0", 4, 3), 0.33)
+    assert h.coordinator.counters.rejected == 6 and h.world.radio.counters.rejected == 3
+    assert h.coordinator.intake.acts[0].left == 0.5  # the replays did not steer it
+    assert len(h.coordinator.intake.transmissions) == 2
+    h.coordinator.handle(act(0, 3), 0.34)  # its next act: fresh
+    assert h.coordinator.intake.acts[0].tick == 3 and h.coordinator.counters.rejected == 6
+    h.coordinator.handle(ack("nest", 3, next_tick=8), 0.34)
+    h.coordinator.handle(ack("nest", 0, next_tick=1), 0.34)  # an old ack: refused
+    assert h.coordinator.roster.beacon_next == {"nest": 8}
+    assert h.coordinator.counters.rejected == 7
 
 
 # --- refusals -------------------------------------------------------------------------

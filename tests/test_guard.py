@@ -33,6 +33,19 @@ def test_sim_time_must_be_the_ticks() -> None:
     assert guard.time_refused(42, 1e9, 0.1) is not None
 
 
+def test_in_real_time_a_message_must_come_after_its_senders_last_and_not_from_the_future() -> None:
+    assert guard.realtime_refused((10, 1), None, 10) is None
+    assert guard.realtime_refused((10, 2), (10, 1), 10) is None
+    assert guard.realtime_refused((11, 0), (10, 5), 12) is None
+    replay = guard.realtime_refused((10, 1), (10, 1), 12)
+    older = guard.realtime_refused((9, 7), (10, 1), 12)
+    future = guard.realtime_refused((13, 1), (10, 1), 12)
+    assert replay is not None and not replay[1] and older is not None and not older[1]
+    assert future is not None and not future[1]
+    lagging = guard.realtime_refused((10, 2), (10, 1), 10 + guard.TICK_WINDOW + 1)
+    assert lagging is not None and lagging[1]  # authentic, new, but far behind: late
+
+
 def test_a_second_world_token_is_no_restart_while_the_followed_world_lives() -> None:
     follower = guard.WorldFollower()
     assert not follower.appeared("real")  # the first one is followed

@@ -260,6 +260,21 @@ def test_a_new_world_restarts_the_ticks_and_time_goes_on() -> None:
     assert robot.rejects.count == 0
 
 
+def test_world_tokens_no_world_answers_for_are_counted_and_shift_nothing() -> None:
+    """Case 2 of issue 23: fake world tokens come and go; the node asks each to prove
+    itself, none does, and the robot keeps following its world, its clock unshifted."""
+    robot, controller, world = endpoint()
+    robot.world_appeared("real")
+    assert robot.receive(*world.sense(1)) is not None
+    for index in range(30):
+        robot.world_unproven(f"fake{index}")
+        robot.world_vanished(f"fake{index}")
+    assert robot.worlds.followed == "real" and not robot.worlds.lost
+    assert robot.receive(*world.sense(2)) is not None
+    assert [reading.t for reading, _ in controller.steps] == pytest.approx([0.1, 0.2])
+    assert robot.rejects.count == 30
+
+
 def test_the_same_world_back_is_rejoined_at_its_tick_and_a_replay_is_still_refused() -> None:
     robot, controller, world = endpoint()
     robot.world_appeared("world")

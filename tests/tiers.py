@@ -31,6 +31,7 @@ FAST = frozenset(
         "test_defence",
         "test_docs",
         "test_equations",
+        "test_follower_freshness",
         "test_fuzz",
         "test_guard",
         "test_inbox",
@@ -76,6 +77,7 @@ SLOW = {
 
 FULL_ONLY = {
     "test_attacks": "attacks live runs over Zenoh",
+    "test_attacks_presence": "attacks live runs over Zenoh (presence and freshness)",
     "test_byzantine": "a real run with Byzantine robots",
     "test_endings": "starts swarms",
     "test_experiment": "runs `swarm experiment` in a process",

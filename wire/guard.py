@@ -42,6 +42,24 @@ class TickWindow:
         return tick > self.last
 
 
+def realtime_refused(
+    sent: tuple[int, int], last: tuple[int, int] | None, tick: int, window: int = TICK_WINDOW
+) -> tuple[str, bool] | None:
+    """Why a sender's message stamped ``sent`` = (its tick, its number in that tick's
+    order) is not fresh in a real-time world at ``tick`` whose last message from that
+    sender was ``last``, and whether it is only late (an honest sender that lags); None
+    if it is fresh. A sender's messages come in order, so one not after its last is a
+    replay; one for a tick the world has not reached cannot be; one more than ``window``
+    ticks behind the world is late."""
+    if sent[0] > tick:
+        return f"tick {sent[0]} is ahead of the world's tick {tick}", False
+    if last is not None and sent <= last:
+        return f"stamped {sent}, not after the last taken {last}: a replay", False
+    if sent[0] < tick - window:
+        return f"tick {sent[0]} is more than {window} behind the world's tick {tick}", True
+    return None
+
+
 def time_refused(tick: int, t: float, dt: float) -> str | None:
     """Why sim time ``t`` cannot be that of ``tick`` in a world of step ``dt``, or None."""
     expected = tick * dt

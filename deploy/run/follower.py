@@ -7,7 +7,8 @@ The subscription is thin (``subscribe``): Zenoh's callbacks only copy each sampl
 came, into the launcher's inbox. The launcher's main thread hands them to
 ``Follower.take``, which does the checks and the bookkeeping, with no I/O and its clock
 given: a sample is believed only if its sender's tag says so and it makes sense (a
-robot's status on its own key, not older than its last), and what is not believed is
+robot's status on its own key, not older than its last; a world state not older than
+the last), and what is not believed is
 counted and, once per kind, logged.
 """
 
@@ -175,6 +176,13 @@ class Follower:
         else:
             auth.unseal(keyring, names.WORLD, key, payload, attachment)
             state = protocol.decode(payload, protocol.WorldState)
+            last = self.last_state
+            if last is not None and state.tick < last.tick:
+                # Authentic but old: someone replaying what it heard, not the world, whose
+                # ticks only go forward (a replayed state's poses would look like progress).
+                raise protocol.ProtocolError(
+                    f"world state of tick {state.tick}, older than the last ({last.tick})"
+                )
             self._ticked(state.t)
             self.last_state = state
             self.watchdog.poses(state.t, ((pose.id, pose.x, pose.y) for pose in state.robots))

@@ -113,8 +113,10 @@ class BeaconEndpoint:
         self.rejected += count
 
     def world_appeared(self, instance: str) -> None:
-        """A world server's liveliness token: the first is followed; when the followed one
-        is gone, another is a new world; the followed one again is the same world back."""
+        """A world server's liveliness token, proved the world's (it answered for it with
+        the run's key: ``plumbing.world_info.world_proved``): the first is followed; when
+        the followed one is gone, another is a new world; the followed one again is the
+        same world back."""
         seen = self.worlds.appeared(instance)
         if seen == "new":
             log.warning("beacon %s: a new world server appeared; following it", self.name)
@@ -123,6 +125,11 @@ class BeaconEndpoint:
         elif seen == "back":  # its ticks went on while this beacon was cut off
             log.warning("beacon %s: the world server is back; following it", self.name)
             self.ticks.rejoin()
+
+    def world_unproven(self, instance: str) -> None:
+        """A world server's token that no world answered for: someone else's, ignored and
+        counted (it must not make the beacon forget its ticks)."""
+        self._reject(protocol.ProtocolError(f"no world answers for world token {instance!r}"))
 
     def world_vanished(self, instance: str) -> None:
         self.worlds.vanished(instance)

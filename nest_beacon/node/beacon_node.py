@@ -6,7 +6,8 @@ what to send for its tick; ``BeaconNode`` subscribes to the clock the world send
 them over, and publishes what comes back. The clock is answered in the Zenoh
 callback that brings it, under the beacon's lock (a wake-up of the main thread per tick
 was most of the beacon's answer time, and it is in the lockstep barrier); the main
-thread handles what is rare (the world's liveliness, stop) from a bounded inbox.
+thread handles what is rare (the world's liveliness, stop) from a bounded inbox; a world
+token is followed only once its world answers for it (a token is only a hint).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import zenoh
 
 from nest_beacon.core.endpoint import BeaconEndpoint
 from plumbing.inbox import BoundedInbox
+from plumbing.world_info import world_proved
 from plumbing.zenoh_session import reliable_publisher
 from wire import protocol
 from wire.names import Role
@@ -113,10 +115,21 @@ class BeaconNode:
                 with self.lock:
                     self.stopped = True
                 return
+            if event is not None and event.kind == EventKind.WORLD and not self._proved(event):
+                with self.lock:
+                    self.endpoint.world_unproven(event.payload.decode(errors="replace"))
+                continue
             with self.lock:
                 if event is not None:
                     self.handle(event)
                 self.endpoint.count_dropped(self.inbox.take_dropped(None))
+
+    def _proved(self, event: Event) -> bool:
+        """Whether a world token is a world's: it answers for it, asked as this beacon
+        (which also proves the beacon present to it). Asked outside the lock."""
+        endpoint = self.endpoint
+        instance = event.payload.decode(errors="replace")
+        return world_proved(self.session, self.keys, endpoint.keyring, endpoint.identity, instance)
 
     def handle(self, event: Event) -> None:
         """One event, under the lock."""

@@ -203,8 +203,10 @@ class RobotEndpoint:
     # --- the world server ----------------------------------------------------------
 
     def world_appeared(self, instance: str) -> None:
-        """A world server's liveliness token: the first is followed; when the followed one
-        is gone, another is a new world; the followed one again is the same world back."""
+        """A world server's liveliness token, proved the world's (it answered for it with
+        the run's key: ``plumbing.world_info.world_proved``): the first is followed; when
+        the followed one is gone, another is a new world; the followed one again is the
+        same world back. A token alone is a hint anyone can give: see world_unproven."""
         seen = self.worlds.appeared(instance)
         if seen == "new":
             log.warning("robot %d: a new world server appeared; resuming", self.robot_id)
@@ -220,6 +222,11 @@ class RobotEndpoint:
                 instance,
                 self.worlds.followed,
             )
+
+    def world_unproven(self, instance: str) -> None:
+        """A world server's token that no world answered for: someone else's, ignored and
+        counted (it must neither shift the robot's clock nor take it off its world)."""
+        self.reject("world token", protocol.ProtocolError(f"no world answers for {instance!r}"))
 
     def world_vanished(self, instance: str) -> None:
         """A world server's token went: if it was the followed one, wait for it."""

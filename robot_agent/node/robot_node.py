@@ -15,7 +15,8 @@ callback that brings them, under one lock per process, so the robots of a proces
 stepped by one thread at a time and a tick's step needs no wake-up of another thread (that
 hand-off was a large part of a lockstep tick: docs/performance.md). Nothing queues for
 them: an input waits in Zenoh until the robots are free. The process's own thread handles
-what is rare (the world's liveliness, stop) from a bounded inbox, under the same lock, and
+what is rare (the world's liveliness, stop) from a bounded inbox, under the same lock (a
+world token is followed only once its world answers for it: it is only a hint), and
 the inbox still takes what is too big to be a valid input, to drop and count it.
 """
 
@@ -31,6 +32,7 @@ import zenoh
 
 from plumbing.inbox import BoundedInbox
 from plumbing.trace import TraceWriter, now
+from plumbing.world_info import world_proved
 from plumbing.zenoh_session import reliable_publisher
 from robot_agent.core.endpoint import InputKind, Outgoing, OutputKind, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
@@ -149,6 +151,18 @@ class RobotNode:
         instance = self.keys.last_chunk(str(sample.key_expr)).encode()
         self.inbox.put(
             Event(self.robot_id, kind, instance), len(instance), self.robot_id, once=True
+        )
+
+    def world_proved(self, instance: bytes) -> bool:
+        """Whether the world token ``instance`` is a world's: it answers for it, asked as
+        this robot (which also proves the robot present to it). Asked outside the lock."""
+        endpoint = self.endpoint
+        return world_proved(
+            self.session,
+            self.keys,
+            endpoint.keyring,
+            endpoint.identity,
+            instance.decode(errors="replace"),
         )
 
     def close(self) -> None:
@@ -308,5 +322,9 @@ def serve(nodes: Sequence[RobotNode], inbox: BoundedInbox[Event]) -> None:
         if event.kind == EventKind.STOP:
             return
         node = by_id[event.robot]
+        if event.kind == EventKind.WORLD and not node.world_proved(event.payload):
+            with node.lock:
+                node.endpoint.world_unproven(event.payload.decode(errors="replace"))
+            continue
         with node.lock:
             node.handle(event)

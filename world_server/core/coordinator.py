@@ -90,7 +90,7 @@ class Coordinator:
         self.expect_beacons = expect_beacons
         self.traced = traced
         self.counters = Counters()
-        self.roster = Roster(world, keys, self.counters)
+        self.roster = Roster(world, keys, self.counters, proof=keyring is not None)
         self.intake = TickIntake(world, keys, self.counters, keyring)
         self.phase = Phase.WAITING
         self.start_deadline = 0.0
@@ -105,6 +105,7 @@ class Coordinator:
             EventKind.GONE: self._gone,
             EventKind.STATS: self._stats,
             EventKind.JOIN: self._join,
+            EventKind.INFO: self._info,
             EventKind.REFUSED: lambda event: self.counters.reject(
                 event.key, event.payload.decode(errors="replace")
             ),
@@ -297,6 +298,15 @@ class Coordinator:
             self.outbox(ReplyError(event.query, NO_ID_LEFT))
             return
         self._reply(event, asker, protocol.encode(protocol.JoinReply(v=protocol.VERSION, id=robot)))
+
+    def _info(self, event: Event) -> None:
+        """A world/info query (answered by the transport): its asker proved itself present."""
+        try:
+            identity, _ = auth.query_open(self.keyring, event.key, event.payload, event.attachment)
+        except auth.AuthError as error:
+            self.counters.reject(event.key, error)
+            return
+        self.roster.proved(identity)
 
     def _stats(self, event: Event) -> None:
         asker = self._asker(event)

@@ -24,6 +24,7 @@ class EventKind(StrEnum):
     GONE = "gone"  # a liveliness token went
     STATS = "stats"  # a query of world/stats
     JOIN = "join"  # a query of world/join: an id for a robot started with --id auto
+    INFO = "info"  # a query of world/info (answered by the transport): its asker is present
     REFUSED = "refused"  # something the transport refused on its own side: counted here
     STOP = "stop"  # the process is told to stop
 

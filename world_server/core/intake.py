@@ -1,10 +1,13 @@
 """What the world takes in during a tick, each input checked here and nowhere else (no I/O).
 
 Trust: a message is taken only with its sender's run-key tag (in a keyed run), from a
-robot of the swarm or a beacon, for the tick under way (lockstep); a radio sender sends
-at most MAX_TX_PER_TICK messages in a tick, each sequence number once. An input that
-fails a check is rejected and counted (``Counters``; a radio message also by the radio);
-a sender's own message that comes after its tick, or after it left, is counted late.
+robot of the swarm or a beacon, for the tick under way (lockstep), or (real time) for a
+tick the world has reached, not too far behind it and after the sender's last message
+taken (``wire.guard.realtime_refused``: an authentic message replayed is refused); a
+radio sender sends at most MAX_TX_PER_TICK messages in a tick, each sequence number once.
+An input that fails a check is rejected and counted (``Counters``; a radio message also
+by the radio); a sender's own message that comes after its tick, or after it left (or
+in real time lags more than a tick window), is counted late.
 What is taken waits here for the tick to close: acts by robot, radio transmissions, and
 the barrier's book of who answered (lockstep).
 """
@@ -13,7 +16,7 @@ from __future__ import annotations
 
 import msgspec
 
-from wire import auth, batch, names, protocol
+from wire import auth, batch, guard, names, protocol
 from world_server.core.clock import Barrier
 from world_server.core.counters import Counters
 from world_server.core.events import Event
@@ -41,6 +44,10 @@ class TickIntake:
         self.transmissions: list[Transmission] = []
         self.sent_this_tick: dict[str, int] = {}  # radio messages per sender in this tick
         self.seqs_this_tick: set[tuple[str, int]] = set()  # (sender, seq): each once
+        # Real time: the (tick, seq) of each sender's last act, ack and radio message taken.
+        self.last_act: dict[int, tuple[int, int]] = {}
+        self.last_ack: dict[str, tuple[int, int]] = {}
+        self.last_tx: dict[str, tuple[int, int]] = {}
 
     # --- acts --------------------------------------------------------------------------
 
@@ -96,6 +103,9 @@ class TickIntake:
         if not self.lockstep:
             if not self.world.is_live(robot):
                 return False
+            if not self._fresh(key, (act.tick, 0), self.last_act.get(robot)):
+                return False
+            self.last_act[robot] = (act.tick, 0)
             self.acts[robot] = act
             return act.tick == self.world.tick
         who = names.robot_identity(robot)
@@ -130,6 +140,10 @@ class TickIntake:
         if self.lockstep and not self.barrier.answer(ack.tick, who, ack.radio_tx):
             self._unexpected_answer(event.key, ack.tick)
             return None
+        if not self.lockstep:
+            if not self._fresh(event.key, (ack.tick, 0), self.last_ack.get(name)):
+                return None
+            self.last_ack[name] = (ack.tick, 0)
         return who, ack
 
     # --- radio -------------------------------------------------------------------------
@@ -164,6 +178,11 @@ class TickIntake:
             # Its own, but it has left (or not joined yet): late, like an act after a tick.
             self.counters.late += 1
             return
+        if not self.lockstep:
+            stamp = (meta.tick, meta.seq)
+            if not self._fresh(event.key, stamp, self.last_tx.get(sender), radio=True):
+                return
+            self.last_tx[sender] = stamp
         self.sent_this_tick[sender] = self.sent_this_tick.get(sender, 0) + 1
         self.seqs_this_tick.add((sender, meta.seq))
         if self.lockstep:
@@ -214,6 +233,24 @@ class TickIntake:
             self.counters.reject(event.key, error)
             return False
         return True
+
+    def _fresh(
+        self, key: str, stamp: tuple[int, int], last: tuple[int, int] | None, radio: bool = False
+    ) -> bool:
+        """Real time: whether a sender's authentic message stamped ``stamp`` is fresh; a
+        replay or a tick to come is rejected (by the radio too, for a radio message), a
+        message of a sender lagging too far is late."""
+        refused = guard.realtime_refused(stamp, last, self.world.tick)
+        if refused is None:
+            return True
+        reason, late = refused
+        if late:
+            self.counters.late += 1
+        elif radio:
+            self._reject_tx(key, reason)
+        else:
+            self.counters.reject(key, reason)
+        return False
 
     def _unexpected_answer(self, key: str, tick: int) -> None:
         """An answer the barrier did not take: stale, repeated, or from a newcomer (late),

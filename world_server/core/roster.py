@@ -4,7 +4,11 @@ ticks each beacon answers.
 
 A token that appears is a join that takes effect when the tick under way closes (or at
 once, before the start), so a tick's participants never change while it runs; a token
-that goes is a departure at once. A robot whose process answers in batches gets its
+that goes is a departure at once. In a keyed run a token is only a hint: anyone on the
+router can declare one. It joins once its identity has proved itself present with an
+authenticated query of ``world/info`` (each robot and beacon asks it as it starts and
+whenever a world server appears), so tokens without keys never take part, never fill
+MAX_BEACONS and never hold a tick up. A robot whose process answers in batches gets its
 senses in its process's batch (wire/batch.py) until its process's first robot goes. A
 beacon takes part in the ticks it answers: every tick until its first answer, then the
 tick each answer names (``Ack.next_tick``).
@@ -23,6 +27,7 @@ from world_server.core.world import World
 log = logging.getLogger("world_server")
 
 MAX_BEACONS = 16  # beacon tokens the world takes part in its barrier
+MAX_HINTS = 1024  # tokens of identities not proved present that the world keeps in mind
 SUSPEND_AFTER = 3  # consecutive stalled ticks before the barrier stops waiting
 
 
@@ -47,12 +52,29 @@ class Token(NamedTuple):
     role: Role  # Role.ROBOT or Role.BEACON
     ident: str
 
+    @property
+    def identity(self) -> str:
+        """Whose key proves it (wire/names.py)."""
+        if self.role == Role.ROBOT:
+            return names.robot_identity(int(self.ident))
+        return names.beacon_identity(self.ident)
+
 
 class Roster:
-    def __init__(self, world: World, keys: protocol.Keys, counters: Counters) -> None:
+    def __init__(
+        self, world: World, keys: protocol.Keys, counters: Counters, proof: bool = False
+    ) -> None:
+        """``proof``: a token joins only once its identity proved itself present (a keyed
+        run); otherwise (no keys to prove anything with) a token joins on its own."""
         self.world = world
         self.keys = keys
         self.counters = counters
+        self.proof = proof
+        # Identities that proved themselves present (an authenticated world/info query),
+        # kept for the run: a restarted process proves itself again, but maybe before its
+        # old token's departure arrives. Only holders of a key of the run can add to it.
+        self.proven: set[str] = set()
+        self.hinted: set[Token] = set()  # tokens present whose identity is not proven yet
         self.pending: list[Token] = []  # joins to apply when the tick under way closes
         self.assigned: set[int] = set()  # ids handed out on world/join (or taken by a token)
         # Robots whose process answers in batches: robot -> that process. Learnt only from
@@ -81,8 +103,30 @@ class Roster:
         return Token(role, ident)
 
     def appeared(self, key: str) -> None:
+        """A token appeared: a join, once its identity is proven present (keyed runs)."""
         token = self.token(key, count=True)
-        if token is not None:
+        if token is None:
+            return
+        if not self.proof or token.identity in self.proven:
+            self.pending.append(token)
+        elif len(self.hinted) < MAX_HINTS:
+            self.hinted.add(token)
+        else:
+            self.counters.reject(key, f"more than {MAX_HINTS} tokens not proved present")
+
+    def proved(self, identity: str) -> None:
+        """``identity`` asked an authenticated query: it is present; its token, if it has
+        one, joins. The world and the other services need no proof: they do not join."""
+        role, _, ident = identity.partition("/")
+        if role not in (Role.ROBOT, Role.BEACON) or identity in self.proven:
+            return
+        if role == Role.ROBOT:
+            robot = names.robot_of_name(ident)
+            if robot is None or not self.world.is_member(robot):
+                return
+        self.proven.add(identity)
+        for token in [token for token in self.hinted if token.identity == identity]:
+            self.hinted.discard(token)
             self.pending.append(token)
 
     def went(self, key: str) -> Token | None:
@@ -94,6 +138,7 @@ class Roster:
         token = self.token(key, count=False)
         if token is None:
             return None
+        self.hinted.discard(token)
         self.pending = [join for join in self.pending if join != token]
         if token.role == Role.ROBOT:
             gone = int(token.ident)

@@ -22,6 +22,7 @@ from typing import Any, cast
 import zenoh
 
 from plumbing.trace import TraceWriter, now
+from plumbing.world_info import NOT_THIS_INSTANCE
 from plumbing.zenoh_session import reliable_publisher, reliable_put
 from wire import auth, batch, protocol
 from wire.names import Role
@@ -86,6 +87,8 @@ class WorldServer:
         # Publishers kept per key, for what goes out tick after tick (Publish.steady).
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._declared: list[Any] = []
+        # This world's instance: its liveliness token's last chunk, its Zenoh id.
+        self.instance = str(session.info.zid())
 
     # --- Zenoh side: callbacks hand their input to the coordinator --------------------
 
@@ -120,7 +123,10 @@ class WorldServer:
         return callback
 
     def _on_info(self, query: zenoh.Query) -> None:
-        """Answer ``world/info`` at once (on Zenoh's thread: it needs nothing of the tick)."""
+        """Answer ``world/info`` at once (on Zenoh's thread: it needs nothing of the tick),
+        then tell the coordinator its asker is present. A query that names a world
+        instance (its payload) is answered only by that instance: a robot or beacon asks
+        so to prove that a world token it saw is this world's (docs/security.md)."""
         key = self.keys.world_info
         payload, attachment = _query_bytes(query)
         try:
@@ -129,8 +135,12 @@ class WorldServer:
             self._feed(Event(EventKind.REFUSED, key, str(error).encode()))
             query.reply_err(UNAUTHENTICATED)
             return
-        sealed = auth.reply_seal(self.keyring, identity, key, self._info_bytes, nonce)
-        query.reply(key, self._info_bytes, attachment=sealed)
+        if payload and payload != self.instance.encode():
+            query.reply_err(NOT_THIS_INSTANCE.encode())
+        else:
+            sealed = auth.reply_seal(self.keyring, identity, key, self._info_bytes, nonce)
+            query.reply(key, self._info_bytes, attachment=sealed)
+        self._feed(Event(EventKind.INFO, key, payload, attachment))
 
     def declare(self) -> None:
         keys, session = self.keys, self.session
@@ -152,7 +162,7 @@ class WorldServer:
                 keys.world_join, self._on_query(EventKind.JOIN, keys.world_join)
             ),
             # The token names this world instance, so robots can tell a restarted world.
-            session.liveliness().declare_token(keys.alive(Role.WORLD, str(session.info.zid()))),
+            session.liveliness().declare_token(keys.alive(Role.WORLD, self.instance)),
         ]
 
     def stop(self) -> None:
