@@ -1002,7 +1002,8 @@ def write_report(
     files += [str(out / "summary.csv"), str(out / "summary.json")]
     report = Report(runs, group_rows(runs, summaries), unreadable, files)
     with open_private(out / "summary.csv", "w", newline="") as stream:
-        writer = csv.DictWriter(stream, fieldnames=CSV_COLUMNS)
+        # A run's links (a mapping per outside robot) are for summary.json, not a CSV cell.
+        writer = csv.DictWriter(stream, fieldnames=CSV_COLUMNS, extrasaction="ignore")
         writer.writeheader()
         writer.writerows(runs)
     write_private(out / "summary.json", json.dumps(report.as_json(), indent=2) + "\n")

@@ -393,6 +393,8 @@ def test_a_swarm_frozen_longer_than_the_lease_resumes_and_decides(frozen: str) -
         # the beacon answers, and the stall window in sim time may pass before they come
         # back (then the run ends stalled, saying so). Here only the wall clock limits.
         *("--wall-timeout", "100", "--stall-window", "100000", "--timeout", "100000"),
+        # The ten robots in one process, so that one SIGSTOP freezes the robot side whole.
+        *("--robots-per-process", str(robots)),
     )
     launcher = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     lines: list[bytes] = []
