@@ -44,7 +44,7 @@ from deploy.run_options import add_engine_option
 from deploy.run_switches import add_swarm_switches, switches_argv
 from plumbing import cliargs
 from plumbing.lifecycle import PARENT_ENV
-from plumbing.private_files import make_private_folder, open_private
+from plumbing.private_files import make_private_folder, open_private, write_private
 from wire import shape
 from wire.endings import Ending
 
@@ -387,7 +387,7 @@ def run_all_inprocess(
         spec = specs[index]
         stdout = run.stdout
         if run.recording is not None:  # recorded elsewhere: it is here now
-            spec.recording.write_bytes(run.recording)
+            write_private(spec.recording, run.recording)
         result = RunResult(spec, run.returncode, wall_s=run.wall_s, note=run.note)
         text = stdout.strip()
         if text:
@@ -398,8 +398,8 @@ def run_all_inprocess(
         if result.summary is not None and run.recording is not None:
             result.summary["recording"] = str(spec.recording)
             stdout = json.dumps(result.summary) + "\n"
-        (logs / f"{spec.run_id}.json").write_text(stdout)
-        (logs / f"{spec.run_id}.log").write_text(run.stderr)
+        write_private(logs / f"{spec.run_id}.json", stdout)
+        write_private(logs / f"{spec.run_id}.log", run.stderr)
         results[index] = result
 
     with progress:
