@@ -335,7 +335,13 @@ def _on_dask(
     import dask
     from distributed import Client, LocalCluster, as_completed
 
-    with dask.config.set({"distributed.scheduler.allowed-failures": executor.retries}):
+    settings = {
+        "distributed.scheduler.allowed-failures": executor.retries,
+        # One task per worker thread at a time, none queued on a worker: a worker that dies
+        # then charges its death to the task it ran alone, not to innocent ones queued there.
+        "distributed.scheduler.worker-saturation": 1.0,
+    }
+    with dask.config.set(settings):
         cluster = None
         if executor.dask == LOCAL_DASK:
             # Our own cluster's chatter (a busy worker slow to exit at the end, ...) is
