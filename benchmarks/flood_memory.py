@@ -1,9 +1,13 @@
 """How much memory a flooded run takes, process by process, against the caps that
 docs/security.md states.
 
-A live ``swarm run`` (10 robots, 10 sites, seed 3, recorded) on a Zenoh router this
-benchmark starts (``swarm router``, loopback TCP), with an attacker's session on that
-router that holds no keys: the place of any client of the run's router. The attacker
+A live ``swarm run`` (10 robots hosted in one robot process, 10 sites, seed 3, recorded)
+on a Zenoh router this benchmark starts (``swarm router``, loopback TCP), with an
+attacker's session on that router that holds no keys: the place of any client of the
+run's router. The robots stay in one process (``--robots-per-process 10``; the default
+since issue 26 is a process per robot up to 25 robots), as when the figures of
+docs/security.md were first measured, so that they compare and the batch path (sealed
+by the host identity) is the one flooded. The attacker
 hears the run's authentic messages and, from ``--flood-at`` sim seconds on, sends copies
 of them back on their own keys as fast as Zenoh takes them, for ``--flood-for`` wall
 seconds, then lets the run end. Each process's peak resident set (VmHWM) is read from
@@ -11,22 +15,23 @@ seconds, then lets the run end. Each process's peak resident set (VmHWM) is read
 
 * ``clean``: no flood (what each process takes anyway);
 * ``replayed-acts-realtime`` (issue 23, case 4): ``--clock realtime``, old acts and radio
-  transmissions replayed (freshness checks that refuse them are another issue's; the
-  inboxes must hold them meanwhile);
+  transmissions replayed (the freshness checks of world_server/core/intake.py and
+  wire/guard.py refuse them);
 * ``replayed-acts-statuses`` (case 5): lockstep, old acts and statuses replayed;
-* ``empty``: empty messages on the acts' and statuses' keys (the old inbox did not count
-  them at all);
+* ``empty``: empty messages on the acts' and statuses' keys;
 * ``junk-1mb``: 1 MiB of random bytes on the status keys;
-* ``junk-largest``: the largest junk each inbox still takes in: a 4 MiB "batch of acts"
-  for the world, 1 MiB on a camera key for the recorder, 60 KiB on the status keys for
-  the launcher.
+* ``junk-largest``: the largest junk each process still takes in before it drops it: a
+  4 MiB "batch of acts" for the world, 1 MiB on a camera key for the recorder, 60 KiB on
+  the status keys for the launcher.
 
-It also prints what one queued message holds beyond its bytes in each process's inbox
+It also prints what one queued message holds beyond its bytes in each inbox there is
 (tracemalloc), the overhead ``plumbing.inbox`` charges for, and (``--fill``) what an inbox
 filled to its cap with small messages adds to a process's resident set, charged as now
 and as before issue 23 (payload and attachment only): a flood only fills an inbox when
 its process falls behind, which on a given machine it may not, so this is the bound a
-flood reaches at worst.
+flood reaches at worst. The world server has no inbox since issue 26 (each Zenoh
+callback hands its input to the coordinator at once, under one lock): there is none of
+its to fill or measure, and the benchmark says so.
 
     .venv/bin/python benchmarks/flood_memory.py                    # every case
     .venv/bin/python benchmarks/flood_memory.py --cases clean empty --flood-for 10
@@ -251,6 +256,7 @@ def run_case(case: str, args: argparse.Namespace, workdir: Path) -> dict[str, An
     command = [
         *(sys.executable, "-m", "deploy.cli", "run", "--run-id", run_id, "--json", "--quiet"),
         *("--robots", "10", "--sites", "10", "--seed", str(args.seed)),
+        *("--robots-per-process", "10"),
         *("--connect", endpoint, "--record", str(workdir / f"{case}.mcap")),
         *("--wall-timeout", str(args.wall_timeout), *clock),
     ]
@@ -356,18 +362,17 @@ def per_robot(summary: dict[str, Any] | None) -> list[tuple[Any, ...]] | None:
 
 
 def queued_overheads() -> dict[str, float]:
-    """Bytes one queued message holds beyond its payload, attachment and key, per inbox."""
+    """Bytes one queued message holds beyond its payload, attachment and key, per inbox
+    (the world has none: ``NO_INBOX``)."""
     from deploy.run.follower import Heard, Kind
     from nest_beacon.node.beacon_node import Event as BeaconEvent
     from nest_beacon.node.beacon_node import EventKind as BeaconKind
     from robot_agent.node.robot_node import Event as RobotEvent
     from robot_agent.node.robot_node import EventKind as RobotKind
-    from world_server.core.events import Event, EventKind
     from world_server.recording.writer import Sample
 
     key = "bestofn/flood-0000/robot/7/act"
     makers: dict[str, Callable[[bytes, bytes], Any]] = {
-        "world": lambda p, a: Event(EventKind.ACT, key[:-1] + "t", p, a),
         "recorder": lambda p, a: Sample(key[:-1] + "t", p, a, time.time_ns()),
         "launcher": lambda p, a: Heard(Kind.STATUS, key[:-1] + "t", p, a),
         "robot": lambda p, a: RobotEvent(1, RobotKind.RX, p, a),
@@ -382,13 +387,17 @@ def queued_overheads() -> dict[str, float]:
             held.put((0, make(os.urandom(120), os.urandom(16))))
         grown = tracemalloc.get_traced_memory()[0] - before
         tracemalloc.stop()
-        keyed = len(key) if name in ("world", "recorder", "launcher") else 0
+        keyed = len(key) if name in ("recorder", "launcher") else 0
         found[name] = grown / 20_000 - 136 - keyed
     return found
 
 
+# Why the world is not among the inboxes measured or filled: it has none (issue 26).
+NO_INBOX = (
+    "the world server has no inbox (issue 26): each Zenoh callback hands its input to the "
+    "coordinator at once, under one lock, so there is none to measure or fill"
+)
 FILLED = {  # the inboxes a flood can fill: their caps, and a small message of each
-    "world": ("world_server.server.zenoh_adapter", "INBOX_BYTES", "robot/3/act", 120),
     "recorder": ("world_server.recorder.recorder_process", "INBOX_BYTES", "robot/3/status", 300),
     "launcher": ("deploy.run.launcher", "EVENTS_BYTES", "robot/3/status", 300),
 }
@@ -407,16 +416,13 @@ def fill_one(process: str, charged_as: str) -> None:
     inbox: Any = inbox_module.BoundedInbox(cap)
     key = f"bestofn/flood-00000000/{leaf}"
     from deploy.run.follower import Heard, Kind
-    from world_server.core.events import Event, EventKind
     from world_server.recording.writer import Sample
 
     def queued(key: str, payload: bytes, tag: bytes) -> Any:
         """What the process's Zenoh callback queues for such a message."""
         if process == "recorder":
             return Sample(key, payload, tag, time.time_ns())
-        if process == "launcher":
-            return Heard(Kind.STATUS, key, payload, tag)
-        return Event(EventKind.ACT, key, payload, tag)
+        return Heard(Kind.STATUS, key, payload, tag)
 
     def rss_mb() -> float:
         for line in Path("/proc/self/status").read_text().splitlines():
@@ -438,6 +444,7 @@ def fill_one(process: str, charged_as: str) -> None:
 
 def fill_all() -> None:
     print("An inbox filled to its cap with small messages (a fresh process each):")
+    print(f"  {NO_INBOX}")
     for process in FILLED:
         for charged_as in ("before", "now"):
             done = subprocess.run(
@@ -473,6 +480,7 @@ def main() -> int:
     print(f"charged per queued message: {charged} bytes + its bytes")
     for name, bytes_ in queued_overheads().items():
         print(f"  measured in the {name}'s inbox: {bytes_:.0f} bytes beyond its bytes")
+    print(f"  {NO_INBOX}")
     if args.fill:
         fill_all()
     results = []

@@ -1,8 +1,10 @@
 """A flooded run stays under the memory caps docs/security.md states, process by process
 (issue 23, part 5), in the manner of tests/test_attacks.py: a live ``swarm run`` on a
 router the test holds, and the test's session on it, without keys, replaying the run's own
-authentic acts and statuses as fast as Zenoh takes them, and the largest junk each inbox
-still takes in. benchmarks/flood_memory.py measures the same on a 10-robot run.
+authentic acts and statuses as fast as Zenoh takes them, and the largest junk each process
+still takes in before it drops it (the world has no inbox since issue 26: it checks each
+input in the callback that brings it). benchmarks/flood_memory.py measures the same on a
+10-robot run.
 """
 
 from __future__ import annotations
