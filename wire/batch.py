@@ -126,20 +126,26 @@ def decode_senses(data: bytes) -> SenseBatch:
     if any(count > protocol.MAX_RX for count in rx) or any(flag > 1 for flag in camera):
         raise BatchError("a sense's rx or camera flag is out of range")
     senses = [
-        protocol.Sense(
-            v=protocol.VERSION,
-            tick=tick,
-            t=t,
-            x=row[0],
-            y=row[1],
-            theta=row[2],
-            prox=row[3:],
-            rx=deliveries,
-            camera=flag == 1,
-        )
+        sense_of_row(tick, t, row, deliveries, flag == 1)
         for row, deliveries, flag in zip(values.tolist(), rx, camera, strict=True)
     ]
     return SenseBatch(last, robots, senses)
+
+
+def sense_of_row(tick: int, t: float, row: list[float], rx: int, camera: bool) -> protocol.Sense:
+    """One robot's ``Sense`` from its row of a batch (x, y, theta, then proximity): the one
+    place a row becomes a message, for the world's senses and a decoded batch alike."""
+    return protocol.Sense(
+        v=protocol.VERSION,
+        tick=tick,
+        t=t,
+        x=row[0],
+        y=row[1],
+        theta=row[2],
+        prox=row[3:],
+        rx=rx,
+        camera=camera,
+    )
 
 
 # --- acts --------------------------------------------------------------------------------

@@ -16,7 +16,7 @@ from typing import Annotated, ClassVar, Literal
 import numpy as np
 from msgspec import Meta
 
-from wire import names, protocol, settings, shape
+from wire import batch, names, protocol, settings, shape
 from wire.settings import Flag
 from world_server.core.body import EpuckSpec
 from world_server.core.camera import CameraNoise, CameraRenderer
@@ -101,17 +101,7 @@ class Senses:
         """Each robot's ``Sense``, in the order of ``robots``."""
         tick, t = self.tick, self.t
         return [
-            protocol.Sense(
-                v=protocol.VERSION,
-                tick=tick,
-                t=t,
-                x=row[0],
-                y=row[1],
-                theta=row[2],
-                prox=row[3:],
-                rx=rx,
-                camera=camera,
-            )
+            batch.sense_of_row(tick, t, row, rx, camera)
             for row, rx, camera in zip(self.values.tolist(), self.rx, self.camera, strict=True)
         ]
 
