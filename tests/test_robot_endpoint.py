@@ -230,6 +230,27 @@ def test_in_real_time_a_sense_steps_at_once_with_earlier_ticks_radio_first() -> 
     assert robot.assembly.pending == {} and robot.assembly.pending_bytes == 0
 
 
+def test_in_real_time_a_frame_of_a_skipped_tick_reaches_the_next_step() -> None:
+    """A robot that fell behind skips to its newest sense; the frame it asked for came
+    with a sense it skipped, and must not be lost (it would cost a capture timeout)."""
+    robot, controller, world = endpoint(clock="realtime")
+    assert robot.receive(*world.frame(3)) is None  # its sense (tick 3) is skipped
+    step = robot.receive(*world.sense(5))
+    assert step is not None and step.tick == 5
+    [(reading, _)] = controller.steps
+    assert reading.frame is not None
+    assert robot.assembly.pending == {} and robot.assembly.pending_bytes == 0
+
+
+def test_in_lockstep_a_frame_of_an_older_tick_is_not_taken_for_this_one() -> None:
+    robot, controller, world = endpoint()
+    assert robot.receive(*world.frame(3)) is None
+    step = robot.receive(*world.sense(5))
+    assert step is not None and step.tick == 5
+    [(reading, _)] = controller.steps
+    assert reading.frame is None
+
+
 def test_inputs_carry_their_latest_arrival_mark_to_the_step() -> None:
     robot, _, world = endpoint()
     assert robot.receive(*world.rx(1, seq=1), arrived=7.5) is None

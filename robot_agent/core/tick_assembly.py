@@ -9,7 +9,8 @@ is at. ``TickAssembly`` holds them per tick until the tick can be stepped:
   ticks that never completed are forgotten (an input was dropped, and the world went on
   without this robot's answer: its stall is counted there);
 * real time: as soon as the sense is in, with the radio of earlier ticks that never
-  completed merged in front of its own.
+  completed merged in front of its own, and the latest of their camera frames if its own
+  tick has none (a robot that fell behind skips to its newest sense: robot_node.py).
 
 It believes a tick only within the window of ``wire.guard.TickWindow`` and holds at most
 ``PENDING_BYTES`` / ``PENDING_MESSAGES`` for ticks not reached; an input for a tick already
@@ -119,6 +120,9 @@ class TickAssembly:
         else:
             earlier = sorted(old for old in self.pending if old < tick)
             inputs.rx[:0] = [item for old in earlier for item in self.pending[old].rx]
+            if inputs.frame is None:  # a frame of a tick whose sense was skipped still counts
+                frames = [self.pending[old].frame for old in earlier]
+                inputs.frame = next((f for f in reversed(frames) if f is not None), None)
             self._drop(earlier)
         self._drop([tick])
         self.ticks.acted(tick)

@@ -38,6 +38,7 @@ from robot_agent.node.robot_node import (
     Event,
     EventKind,
     HostBatch,
+    LatestSenses,
     RobotNode,
     serve,
 )
@@ -191,6 +192,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     nodes: list[RobotNode] = []
     host: HostBatch | None = None
     trace = open_trace(args.trace)
+    latest: LatestSenses | None = None  # real time: newest senses only (robot_node.py)
     try:
         for requested in args.ids:
             session = open_from_args(args, requested)
@@ -217,7 +219,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                 world=info,
                 keyring=keyring.only([identity]) if keyring is not None else None,
             )
-            node = RobotNode(endpoint, session=session, inbox=inbox, lock=lock, trace=trace)
+            if info.clock == "realtime" and latest is None:
+                latest = LatestSenses()
+                latest.start()
+            node = RobotNode(
+                endpoint, session=session, inbox=inbox, lock=lock, trace=trace, latest=latest
+            )
             node.start()
             nodes.append(node)
         if len(nodes) > 1 and not args.no_batch:
@@ -233,6 +240,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         with lock:  # once held, no callback is stepping a robot, and none will after
             for node in nodes:
                 node.closed = True
+        if latest is not None:
+            latest.stop()
+            if latest.skipped:
+                log.info("stepped the newest sense, skipping %d older ones", latest.skipped)
         if host is not None:
             host.close()
         for node in nodes:

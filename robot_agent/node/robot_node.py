@@ -18,6 +18,14 @@ them: an input waits in Zenoh until the robots are free. The process's own threa
 what is rare (the world's liveliness, stop) from a bounded inbox, under the same lock (a
 world token is followed only once its world answers for it: it is only a hint), and
 the inbox still takes what is too big to be a valid input, to drop and count it.
+
+In real time the world does not wait, so a robot must act on its newest reading, not work
+through a backlog: there a sense (or a batch of senses) is not stepped in its callback but
+left for the process's ``LatestSenses`` thread, which steps only the newest of each robot
+(or host); a sense replaced before the thread came to it is skipped, its radio and frame
+still taken with the next (robot_agent/core/tick_assembly.py). Stepping every sense in its
+callback, ten robot processes at 10x on two shared cores answered a median 0.5 s late and
+took 5x the sim time to agree (benchmarks/realtime_lag.py, docs/performance.md).
 """
 
 from __future__ import annotations
@@ -77,6 +85,52 @@ class Event:
     arrived: float = 0.0  # monotonic time the callback took it (only when tracing)
 
 
+class LatestSenses:
+    """Real time: the newest sense of each robot (or host), stepped by one thread.
+
+    ``offer`` replaces what waits for the same source, so a robot that fell behind steps its
+    newest sense next and skips the ones in between; ``skipped`` counts them. The thread is
+    the process's: ``start`` it once, ``stop`` joins it.
+    """
+
+    def __init__(self) -> None:
+        self._ready = threading.Condition()
+        self._waiting: dict[object, Callable[[], None]] = {}
+        self._stopped = False
+        self.skipped = 0
+        self._thread = threading.Thread(target=self._run, name="latest-senses", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def offer(self, source: object, step: Callable[[], None]) -> None:
+        """Have ``step`` run next for ``source``, instead of what still waits for it."""
+        with self._ready:
+            if source in self._waiting:
+                self.skipped += 1
+            self._waiting[source] = step
+            self._ready.notify()
+
+    def stop(self) -> None:
+        with self._ready:
+            self._stopped = True
+            self._ready.notify()
+        if self._thread.is_alive():
+            self._thread.join(timeout=10.0)
+
+    def _run(self) -> None:
+        while True:
+            with self._ready:
+                while not self._waiting and not self._stopped:
+                    self._ready.wait()
+                if self._stopped:
+                    return
+                steps = list(self._waiting.values())
+                self._waiting.clear()
+            for step in steps:
+                step()
+
+
 class RobotNode:
     """One robot on Zenoh: its session, subscribers and publishers around its endpoint."""
 
@@ -88,6 +142,7 @@ class RobotNode:
         inbox: BoundedInbox[Event],
         lock: threading.Lock | None = None,
         trace: TraceWriter | None = None,
+        latest: LatestSenses | None = None,
     ) -> None:
         self.endpoint = endpoint
         self.robot_id = endpoint.robot_id
@@ -102,6 +157,8 @@ class RobotNode:
         self._declared: list[object] = []
         self.trace = trace  # --trace: one line per step (plumbing/trace.py)
         self.host: HostBatch | None = None  # set when its acts go out in its process's batch
+        # Real time: where its senses wait to be stepped, newest only (None: in the callback).
+        self.latest = latest
 
     def start(self) -> None:
         """Subscribe first, then announce liveliness, so no tick is missed."""
@@ -120,12 +177,19 @@ class RobotNode:
                 if size > MAX_MESSAGE_BYTES:  # never valid: the inbox drops and counts it
                     self.inbox.put(Event(robot, kind, payload, extra, arrived), size, robot)
                     return
-                with self.lock:
-                    if self.closed:
-                        return
-                    self.take(input_kind, payload, extra, arrived)
-                    if self.host is not None:
-                        self.host.flush()
+
+                def deliver() -> None:
+                    with self.lock:
+                        if self.closed:
+                            return
+                        self.take(input_kind, payload, extra, arrived)
+                        if self.host is not None:
+                            self.host.flush()
+
+                if kind == EventKind.SENSE and self.latest is not None:
+                    self.latest.offer(robot, deliver)
+                else:
+                    deliver()
 
             return callback
 
@@ -277,11 +341,18 @@ class HostBatch:
                 event = Event(lead.robot_id, EventKind.BATCH, payload, extra, arrived)
                 self.inbox.put(event, len(payload), lead.robot_id)
                 return
-            with self.lock:
-                if self.lead.closed:
-                    return
-                self.deliver(payload, extra, arrived)
-                self.flush()
+
+            def deliver() -> None:
+                with self.lock:
+                    if self.lead.closed:
+                        return
+                    self.deliver(payload, extra, arrived)
+                    self.flush()
+
+            if lead.latest is not None:
+                lead.latest.offer("host", deliver)  # a process has one host
+            else:
+                deliver()
 
         self._subscriber = lead.session.declare_subscriber(self.robots.sense_key, callback)
         self._publisher = reliable_publisher(lead.session, self.robots.act_key)

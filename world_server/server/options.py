@@ -26,7 +26,14 @@ class WorldServerConfig:
     world: WorldConfig = field(default_factory=WorldConfig)
     speed: Annotated[
         float,
-        Meta(ge=0.01, le=1000.0, description="real-time speed factor, realtime clock only"),
+        Meta(
+            ge=0.01,
+            le=1000.0,
+            description="real-time speed factor, realtime clock only; the world does not "
+            "wait, so a robot answering later than a tick of wall time (dt / speed) drives on "
+            "an old reading: many robot processes on few cores need a low factor "
+            "(benchmarks/realtime_lag.py)",
+        ),
         Flag(),
     ] = 1.0
     stall_timeout: Annotated[
