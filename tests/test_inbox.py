@@ -19,6 +19,7 @@ from nest_beacon.node.beacon_node import EventKind as BeaconKind
 from plumbing.inbox import ITEM_OVERHEAD_BYTES, BoundedInbox, message_bytes
 from robot_agent.node.robot_node import Event as RobotEvent
 from robot_agent.node.robot_node import EventKind as RobotKind
+from robot_agent.node.robot_node import LatestSenses
 from wire import protocol
 from world_server.core.events import Event, EventKind
 from world_server.recording import writer
@@ -126,3 +127,35 @@ def test_the_recorder_keeps_no_more_keys_than_a_run_has_and_no_channel_for_junk(
     channels = {channel.topic for channel in recorder._channels.values()}
     assert keys.status(0) in channels
     assert not [topic for topic in channels if "/junk/" in topic or topic.endswith("/2/status")]
+
+
+# --- a real-time robot's newest sense ------------------------------------------------------
+
+
+def test_a_real_time_robot_steps_only_its_newest_sense_and_counts_the_skipped() -> None:
+    """What waits for a robot is replaced by its newer sense; each robot (or host) keeps its
+    place; a step that fails is logged and the others still run."""
+    ran: list[str] = []
+    latest = LatestSenses()
+
+    def step(name: str) -> Callable[[], None]:
+        return lambda: ran.append(name)
+
+    def fails() -> None:
+        raise RuntimeError("a broken step")
+
+    latest.offer(1, step("robot 1, tick 5"))
+    latest.offer(2, fails)
+    latest.offer(1, step("robot 1, tick 6"))  # the thread has not come to tick 5: skipped
+    latest.offer("host", step("host, tick 6"))
+    latest.start()
+    deadline = time.monotonic() + 10.0
+    while len(ran) < 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    latest.offer(2, step("robot 2, tick 7"))
+    while len(ran) < 3 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    latest.stop()
+    assert ran == ["robot 1, tick 6", "host, tick 6", "robot 2, tick 7"]
+    assert latest.skipped == 1
+    assert not latest._thread.is_alive()
