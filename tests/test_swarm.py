@@ -334,6 +334,9 @@ def test_the_process_layout_changes_no_robot_s_results() -> None:
     assert results["1"] == results["3"]
 
 
+HOSTED_FOUR = ["--robots-per-process", "4"]
+
+
 def test_a_swarm_on_the_realtime_clock_reaches_the_right_consensus() -> None:
     """How closely the world keeps to the asked speed is a figure, not a check: measured by
     ``benchmarks/swarm_speed.py --realtime``. Its robots are hosted in one process: at 25x
@@ -341,8 +344,7 @@ def test_a_swarm_on_the_realtime_clock_reaches_the_right_consensus() -> None:
     stall the run (benchmarks/realtime_lag.py); one process per robot in real time is run
     at 1-2x by test_secure and test_outside."""
     code, summary, stderr = run_swarm(
-        [*SMALL, "--seed", "1", "--clock", "realtime", "--speed", "10"]
-        + ["--robots-per-process", "4"],
+        [*SMALL, "--seed", "1", "--clock", "realtime", "--speed", "10", *HOSTED_FOUR],
         unique_run_id("realtime"),
     )
     assert code == 0, stderr
