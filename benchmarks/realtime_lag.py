@@ -104,8 +104,8 @@ def main() -> None:
     medians: dict[str, list[float]] = {}
     with tempfile.TemporaryDirectory() as folder:
         for attempt in range(args.repeat):
-            for name, layout in layouts.items():
-                recording = Path(folder) / f"{attempt}-{len(medians.get(name, []))}.mcap"
+            for index, (name, layout) in enumerate(layouts.items()):
+                recording = Path(folder) / f"{attempt}-{index}.mcap"
                 started = time.monotonic()
                 summary, steal = run([*shape, *layout], recording)
                 delays = answer_delays(recording)
