@@ -339,10 +339,11 @@ HOSTED_FOUR = ["--robots-per-process", "4"]
 
 def test_a_swarm_on_the_realtime_clock_reaches_the_right_consensus() -> None:
     """How closely the world keeps to the asked speed is a figure, not a check: measured by
-    ``benchmarks/swarm_speed.py --realtime``. Its robots are hosted in one process: at 25x
-    (a tick every 4 ms), four robot processes on 2 shared cores answered late enough to
-    stall the run (benchmarks/realtime_lag.py); one process per robot in real time is run
-    at 1-2x by test_secure and test_outside."""
+    ``benchmarks/swarm_speed.py --realtime``. Its robots are hosted in one process: as four
+    robot processes at 25x (a tick every 4 ms) on 2 shared cores they answered late enough
+    for the run to end stalled in a fresh-clone ``make test`` (docs/performance.md, "Real
+    time"); one process per robot in real time is run at 1-2x by test_secure and
+    test_outside."""
     code, summary, stderr = run_swarm(
         [*SMALL, "--seed", "1", "--clock", "realtime", "--speed", "10", *HOSTED_FOUR],
         unique_run_id("realtime"),

@@ -701,8 +701,8 @@ def test_a_forged_status_and_finish_are_neither_drawn_nor_believed_but_counted(
     with loopback_router() as (session, endpoint):
         subscriber = session.declare_subscriber(keys.world_clock, on_clock)
         # Ten robots hosted in one process: ten robot processes at 100 ticks a second on
-        # 2 shared cores answer up to a second late and take 4-12x the sim time to agree
-        # (docs/performance.md); this test is about the page, not the process layout.
+        # 2 shared cores answered late and took 4-13x the sim time to agree, or stalled
+        # (docs/performance.md, "Real time"); this test is about the page, not the layout.
         process = _start(
             run_id,
             *["--connect", endpoint, "--no-record", "--clock", "realtime", "--speed", "10"],
