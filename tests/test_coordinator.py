@@ -505,6 +505,31 @@ def test_real_time_ignores_the_acts_of_robots_not_taking_part() -> None:
     assert (h.coordinator.counters.rejected, h.coordinator.counters.late) == (0, 0)
 
 
+@pytest.mark.parametrize("clock", ["lockstep", "realtime"])
+def test_a_radio_message_of_a_sender_that_leaves_before_its_tick_closes_is_late(
+    clock: Literal["lockstep", "realtime"],
+) -> None:
+    """Taken, then its sender's token goes before the tick closes: nothing transmits it and
+    it is no forgery, so it is late (as when the sender has left before it arrives), and
+    the world and the radio refuse nothing (a stop-29 CI run saw the radio count it alone)."""
+    h = started(2, now=0.0, clock=clock)
+    h.coordinator.handle(tx("1", 0, 1), 0.01)
+    h.coordinator.handle(tx("0", 0, 1), 0.01)
+    assert len(h.coordinator.intake.transmissions) == 2
+    h.coordinator.handle(gone(Role.ROBOT, "1"), 0.02)
+    assert [t.sender for t in h.coordinator.intake.transmissions] == ["0"]
+    if clock == "lockstep":
+        h.coordinator.handle(act(0, 0, radio_tx=1), 0.03)
+        h.coordinator.handle(ack("nest", 0), 0.03)
+    else:
+        h.coordinator.wake(0.11)
+    assert h.world.tick == 1
+    radio = h.world.radio.counters
+    assert (radio.sent, radio.rejected) == (1, 0)
+    assert (h.coordinator.counters.rejected, h.coordinator.counters.late) == (0, 1)
+    assert h.coordinator.state().radio.rejected == h.coordinator.state().rejected == 0
+
+
 def test_real_time_refuses_replayed_acts_and_radio_and_those_of_ticks_to_come() -> None:
     """Case 4 of issue 23: in real time an authentic act or radio message replayed (not
     after its sender's last) is refused and counted, as is one for a tick the world has

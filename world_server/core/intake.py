@@ -199,9 +199,14 @@ class TickIntake:
     # --- the tick ----------------------------------------------------------------------
 
     def leave(self, who: str, robot: int | None = None) -> None:
-        """``who`` left: the tick under way does not wait for it (nor moves its robot)."""
+        """``who`` left: the tick under way does not wait for it, nor moves its robot, nor
+        transmits what it sent this tick (late, like a message that comes after it left:
+        there is no transmitter any more, and none of it is a forgery)."""
         if robot is not None:
             self.acts.pop(robot, None)
+        kept = [tx for tx in self.transmissions if names.sender_identity(tx.sender) != who]
+        self.counters.late += len(self.transmissions) - len(kept)
+        self.transmissions = kept
         self.barrier.leave(who)
 
     def close(self) -> tuple[dict[int, protocol.Act], list[Transmission]]:
