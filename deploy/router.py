@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 import threading
 from collections.abc import Sequence
 
 from plumbing import cliargs
 from plumbing.lifecycle import die_with_launcher
+from plumbing.stop_signals import on_stop_signals
 
 log = logging.getLogger("router")
 
@@ -69,8 +69,7 @@ def run(args: argparse.Namespace) -> int:
 
     listen = args.listen or ([] if args.zenoh_config else [cliargs.LOCAL_ENDPOINT])
     stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
+    on_stop_signals(lambda _: stop.set())
     try:
         session = open_session("router", args.connect, listen, args.zenoh_config)
     except ValueError as error:  # a configuration file that cannot be read

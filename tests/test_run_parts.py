@@ -21,6 +21,7 @@ from deploy.run.launcher import Swarm
 from deploy.run.log_relay import LogRelay
 from deploy.run.signals import StopSignals
 from deploy.run_plan import Fault, FaultAction, RunPlan, plan_from_args
+from plumbing import stop_signals
 from wire import protocol
 from wire.endings import Halt, Stop, TimeLimit
 
@@ -43,6 +44,29 @@ def test_a_stop_signal_becomes_one_event_and_later_ones_change_nothing() -> None
         assert signals.received == signal.SIGHUP
     assert heard == [signal.SIGHUP]  # the relay was joined: nothing more can come
     assert signal.getsignal(signal.SIGHUP) is before
+
+
+def test_stop_signals_that_come_while_the_lock_notify_takes_is_held_stop_the_process() -> None:
+    """What hung a world server after its launcher's SIGKILL: signals arriving while the
+    main thread held the lock its handler took. Here the main thread holds the lock
+    ``notify`` takes while three SIGTERMs come: notify runs in the relay, once, when the
+    lock is free (a handler calling it directly would wait for itself for good)."""
+    lock = threading.Lock()
+    heard: list[int] = []
+    passed_on = threading.Event()
+
+    def notify(signum: int) -> None:
+        with lock:
+            heard.append(signum)
+        passed_on.set()
+
+    with stop_signals.StopSignals(notify):
+        with lock:
+            for _ in range(3):
+                os.kill(os.getpid(), signal.SIGTERM)
+            assert not passed_on.wait(0.2)  # the relay waits for the lock
+        assert passed_on.wait(10.0)
+    assert heard == [signal.SIGTERM]
 
 
 def test_the_group_joins_each_childs_pump_once_it_read_the_last_line() -> None:

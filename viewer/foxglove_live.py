@@ -25,7 +25,6 @@ import argparse
 import contextlib
 import logging
 import os
-import signal
 import sys
 import threading
 import time
@@ -35,6 +34,7 @@ from typing import Any
 from plumbing import cliargs, run_keys
 from plumbing.inbox import BoundedInbox, message_bytes
 from plumbing.lifecycle import die_with_launcher
+from plumbing.stop_signals import on_stop_signals
 from viewer.options import FOXGLOVE_PORT
 from wire import names, protocol
 from wire.names import Role
@@ -156,8 +156,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     inbox: BoundedInbox[Sample | None] = BoundedInbox(INBOX_BYTES, MAX_SAMPLE_BYTES)
     dropped = [0]
     stopping = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stopping.set())
+    on_stop_signals(lambda _: stopping.set())
 
     def on_sample(sample: Any) -> None:
         attachment = sample.attachment

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import logging
 import random
-import signal
 import sys
 from collections.abc import Sequence
 
@@ -31,6 +30,7 @@ from nest_beacon.node.options import NEST_BEACON_OPTIONS, NestBeaconConfig
 from plumbing import cliargs, run_keys, settings_cli
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
+from plumbing.stop_signals import on_stop_signals
 from plumbing.world_info import fetch_world_info
 from plumbing.zenoh_session import check_config_files, open_from_args
 from wire import names, protocol
@@ -73,8 +73,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     beacon = Beacon(config, rng)
     keys = protocol.Keys(args.run_id, args.root)
     inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: inbox.put(Event(EventKind.STOP), control=True))
+    on_stop_signals(lambda _: inbox.put(Event(EventKind.STOP), control=True))
     try:
         session = open_from_args(args)
     except zenoh.ZError as error:

@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import logging
 import random
-import signal
 import sys
 import threading
 import time
@@ -25,6 +24,7 @@ import zenoh
 from plumbing import cliargs, run_keys, settings_cli
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
+from plumbing.stop_signals import on_stop_signals
 from plumbing.trace import open_trace
 from plumbing.world_info import ask, fetch_world_info
 from plumbing.zenoh_session import certificate_name, check_config_files, open_from_args
@@ -186,8 +186,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         INBOX_BYTES + INBOX_BYTES_PER_ROBOT * len(args.ids), MAX_MESSAGE_BYTES
     )
     lock = threading.Lock()  # the robots of this process: one thread at a time
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: inbox.put(Event(-1, EventKind.STOP), control=True))
+    on_stop_signals(lambda _: inbox.put(Event(-1, EventKind.STOP), control=True))
     sessions: list[zenoh.Session] = []
     nodes: list[RobotNode] = []
     host: HostBatch | None = None

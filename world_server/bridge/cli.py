@@ -23,6 +23,7 @@ import zenoh
 
 from plumbing import cliargs, run_keys
 from plumbing.lifecycle import die_with_launcher
+from plumbing.stop_signals import on_stop_signals
 from plumbing.zenoh_session import open_from_args, open_session, session_mode
 from wire import link, names
 from world_server.bridge import keys as link_keys
@@ -190,9 +191,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         except (OSError, ValueError) as error:
             print(f"bridge: cannot open the links: {error}", file=sys.stderr)
             return 1
-        signal.signal(signal.SIGINT, lambda *_: bridge.stop(link.ByeReason.RUN_ENDED))
-        signal.signal(signal.SIGTERM, lambda *_: bridge.stop(link.ByeReason.RUN_ENDED))
-        signal.signal(signal.SIGHUP, lambda *_: bridge.stop(link.ByeReason.GOING_AWAY))
+        on_stop_signals(
+            lambda signum: bridge.stop(
+                link.ByeReason.GOING_AWAY if signum == signal.SIGHUP else link.ByeReason.RUN_ENDED
+            ),
+            (signal.SIGINT, signal.SIGTERM, signal.SIGHUP),
+        )
         bridge.declare()
         served = ", ".join(f"{linked.robot} on {linked.address}" for linked in robots)
         log.info("serving robot(s) %s", served)

@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import signal
 import sys
 import threading
 import time
@@ -24,6 +23,7 @@ from plumbing import cliargs, run_keys, settings_cli
 from plumbing.inbox import BoundedInbox, message_bytes
 from plumbing.lifecycle import die_with_launcher
 from plumbing.private_files import open_private
+from plumbing.stop_signals import on_stop_signals
 from wire import auth, names, protocol
 from wire.names import Role
 from world_server.recorder.finish import query_parts
@@ -90,8 +90,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     # Anything bigger than a camera frame is junk: dropped on arrival, counted.
     inbox: BoundedInbox[Any] = BoundedInbox(INBOX_BYTES, MAX_SAMPLE_BYTES)
-    for signum in (signal.SIGINT, signal.SIGTERM):  # the writer thread sees the stop later
-        signal.signal(signum, lambda *_: inbox.put(STOP, control=True))
+    on_stop_signals(lambda _: inbox.put(STOP, control=True))  # the writer sees it later
 
     def on_sample(sample: zenoh.Sample) -> None:
         attachment = sample.attachment

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 import threading
 from collections.abc import Sequence
@@ -19,6 +18,7 @@ import zenoh
 
 from plumbing import cliargs, run_keys, settings_cli
 from plumbing.lifecycle import die_with_launcher
+from plumbing.stop_signals import on_stop_signals
 from plumbing.trace import open_trace
 from plumbing.zenoh_session import check_config_files, open_from_args, session_mode
 from wire import protocol
@@ -92,8 +92,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             keyring=keyring,
             trace=open_trace(args.trace),
         )
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(signum, lambda *_: server.stop())
+        on_stop_signals(lambda _: server.stop())
         log.info(
             "run %s: %d sites, arena radius %.2f m, best site %d, listening on %s",
             args.run_id,

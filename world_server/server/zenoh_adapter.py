@@ -166,7 +166,8 @@ class WorldServer:
         ]
 
     def stop(self) -> None:
-        """Stop the loop (safe in a signal handler: it takes no lock)."""
+        """Stop the loop (from any thread; not from a signal handler: ``Event.set`` takes a
+        lock, plumbing/stop_signals.py)."""
         self._stopping.set()
 
     # --- the loop ----------------------------------------------------------------------
