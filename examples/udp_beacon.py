@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import json
 import random
-import signal
 import sys
 import threading
 import time
@@ -21,6 +20,7 @@ from dataclasses import asdict
 
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from plumbing import cliargs
+from plumbing.stop_signals import on_stop_signals
 from robot_agent.link.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 from wire import protocol
 
@@ -107,8 +107,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         BeaconConfig(name=args.name, period=args.period)
     except ValueError as error:
         parser.exit(2, f"udp_beacon: error: {error}\n")
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: STOP.set())
+    # Not STOP.set() in a handler: it could wait for the lock of the STOP.wait it interrupts.
+    on_stop_signals(lambda _: STOP.set())
     try:
         summary = run(args)
     except (ValueError, OSError) as error:

@@ -20,7 +20,6 @@ import argparse
 import json
 import math
 import random
-import signal
 import sys
 import threading
 import time
@@ -30,6 +29,7 @@ from dataclasses import asdict
 import numpy as np
 
 from plumbing import cliargs
+from plumbing.stop_signals import on_stop_signals
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.link.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
@@ -315,8 +315,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: STOP.set())
+    # Not STOP.set() in a handler: it takes a lock the interrupted code may hold.
+    on_stop_signals(lambda _: STOP.set())
     try:
         summary = run(args)
     except (ValueError, OSError) as error:
