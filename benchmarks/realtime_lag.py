@@ -31,6 +31,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from wire import protocol  # noqa: E402
+from wire.link import percentile  # noqa: E402
 from world_server.recording.reader import RecordingReader  # noqa: E402
 
 PERCENTILES = (50, 90, 99)
@@ -52,11 +53,6 @@ def answer_delays(recording: Path) -> list[float]:
             if sent is not None:
                 delays.append((message.publish_time - sent) / 1e9)
     return delays
-
-
-def percentile(values: list[float], share: int) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, len(ordered) * share // 100)]
 
 
 def cpu_times() -> tuple[float, float]:
@@ -113,7 +109,7 @@ def main() -> None:
                 if not delays:
                     print(f"{name} | {attempt + 1} | no answers recorded", flush=True)
                     continue
-                ms = [percentile(delays, share) * 1000 for share in PERCENTILES]
+                ms = [(percentile(delays, share / 100) or 0.0) * 1000 for share in PERCENTILES]
                 medians.setdefault(name, []).append(ms[1])
                 print(
                     f"{name} | {attempt + 1} | {ms[0]:.1f} / {ms[1]:.1f} / {ms[2]:.1f} "
