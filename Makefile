@@ -18,24 +18,33 @@
 #   docs/byzantine.md, docs/robustness.md (each says the commit it was made at),
 #   docs/wellstirred.md's Figure 1 table, and docs/performance.md (timings).
 #   docs/testing.md says the same.
-# All of them create .venv and install the project on first use (and again when
-# pyproject.toml changes).
+# All of them create .venv and install the project on first use (and again when the
+# lock changes): the exact versions and hashes of requirements/run.lock (make run) or
+# requirements/test.lock (the rest), then the project itself without dependencies.
+# `make lock` writes both locks again from pyproject.toml's ranges (docs/testing.md says
+# when, and that published numbers are made again after).
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
+RUN_LOCK := requirements/run.lock
+TEST_LOCK := requirements/test.lock
+UV_VERSION := 0.13.9
+LOCK_OPTIONS := --generate-hashes --universal --fork-strategy fewest --python-version 3.11
 
-.PHONY: run test test-fast check-published explore lint bench clean
+.PHONY: run test test-fast check-published explore lint bench lock clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-$(VENV)/.installed: pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e .
+$(VENV)/.installed: $(RUN_LOCK) pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet --require-hashes -r $(RUN_LOCK)
+	$(BIN)/python -m pip install --quiet --no-deps -e .
 	touch $@
 
-$(VENV)/.installed-test: pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+$(VENV)/.installed-test: $(TEST_LOCK) pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet --require-hashes -r $(TEST_LOCK)
+	$(BIN)/python -m pip install --quiet --no-deps -e .
 	touch $@ $(VENV)/.installed
 
 run: $(VENV)/.installed
@@ -66,6 +75,11 @@ lint: $(VENV)/.installed-test
 bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/wellstirred.py
 	$(BIN)/python benchmarks/swarm_speed.py
+
+lock: | $(BIN)/python
+	$(BIN)/python -m pip install --quiet uv==$(UV_VERSION)
+	$(BIN)/uv pip compile pyproject.toml $(LOCK_OPTIONS) -o $(RUN_LOCK)
+	$(BIN)/uv pip compile pyproject.toml --extra test $(LOCK_OPTIONS) -o $(TEST_LOCK)
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache .mypy_cache

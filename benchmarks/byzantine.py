@@ -33,7 +33,6 @@ import concurrent.futures
 import dataclasses
 import json
 import math
-import random
 import statistics
 import subprocess
 import sys
@@ -48,7 +47,7 @@ sys.path.insert(0, str(REPO))
 
 from deploy import sweep  # noqa: E402
 from robot_agent.core import byzantine  # noqa: E402
-from wire import protocol  # noqa: E402
+from wire.rng import Stream  # noqa: E402
 
 MODES = ("liar", "inverted", "silent")
 MAX_BYZANTINE = 3
@@ -99,9 +98,7 @@ class Outcome:
 
 def byzantine_ids(seed: int, robots: int, count: int) -> list[int]:
     """The ``count`` Byzantine robots of run ``seed``: a seeded draw, nested in ``count``."""
-    drawn = random.Random(protocol.derive_seed(seed, "benchmark", "byzantine")).sample(
-        range(robots), MAX_BYZANTINE
-    )
+    drawn = Stream.named(seed, "benchmark", "byzantine").sample(range(robots), MAX_BYZANTINE)
     return sorted(drawn[:count])
 
 
@@ -384,9 +381,7 @@ def liar_ids(seed: int, robots: int, count: int) -> list[int]:
     if robots == 10 and count <= MAX_BYZANTINE:
         return byzantine_ids(seed, robots, count)
     most = max(count, robots // 5)
-    drawn = random.Random(protocol.derive_seed(seed, "benchmark", "liars")).sample(
-        range(robots), most
-    )
+    drawn = Stream.named(seed, "benchmark", "liars").sample(range(robots), most)
     return sorted(drawn[:count])
 
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from robot_agent.core.vision import decode_frame, estimate_quality
 from wire import protocol
+from wire.rng import Stream
 from world_server.core.camera import CameraNoise, CameraRenderer
 from world_server.core.layout import make_layout
 
@@ -72,7 +73,7 @@ def accuracy(spec: protocol.CameraSpec, site_counts: list[int]) -> None:
         frames_per_site = max(1, 200 // num_sites)
         for noise in noises:
             renderer = CameraRenderer(layout, spec, noise=noise, seed=3)
-            rng = np.random.default_rng(1)
+            rng = Stream(1)
             errors, missing = [], 0
             for site in layout.sites:
                 for _ in range(frames_per_site if noise.pixel_sigma > 0 else 1):
@@ -130,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
             pose[1] + 0.08 * math.sin(site.angle) - 0.05 * math.cos(site.angle),
         )
     )
-    rng = np.random.default_rng(0)
+    rng = Stream(0)
 
     image = renderer.render(*pose, rng=rng)
     data = renderer.encode(image)

@@ -54,6 +54,7 @@ sys.path.insert(0, str(REPO))
 from robot_agent.core import ports  # noqa: E402
 from robot_agent.core.controller import Controller  # noqa: E402
 from wire.endings import RESULT_CODES  # noqa: E402
+from wire.rng import Stream, seed_of  # noqa: E402
 
 DROP_LEVELS = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8]
 QUICK_DROP_LEVELS = [0.0, 0.3, 0.6, 0.8]
@@ -363,11 +364,9 @@ def sensing_table(sigmas: Sequence[float], args: argparse.Namespace, frames: int
     Frames are rendered and read as in a run (world camera, robot vision) from the nominal
     viewpoint, facing the panel, no robot in the way; seed 0's layout.
     """
-    import numpy as np
 
     from robot_agent.core import vision
     from robot_agent.core.controller import ControllerConfig
-    from wire import protocol
     from world_server.core.camera import CameraNoise, CameraRenderer
     from world_server.core.layout import make_layout
     from world_server.core.world import DEFAULT_CAMERA
@@ -390,9 +389,9 @@ def sensing_table(sigmas: Sequence[float], args: argparse.Namespace, frames: int
             layout,
             DEFAULT_CAMERA,
             noise=CameraNoise(sigma, args.lighting),
-            seed=protocol.derive_seed(0, "camera"),
+            seed=seed_of(0, "camera"),
         )
-        rng = np.random.default_rng(protocol.derive_seed(0, "frames"))
+        rng = Stream.named(0, "frames")
         readings: list[list[float]] = []
         missed = 0
         for site in (best, second):

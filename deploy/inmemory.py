@@ -8,7 +8,6 @@ so a seed gives the same per-robot results here as over Zenoh.
 
 from __future__ import annotations
 
-import random
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -24,6 +23,7 @@ from robot_agent.core.ports import RejectCounter, RobotController
 from robot_agent.core.simulated import SimulatedPorts
 from wire import names, protocol, shape
 from wire.endings import Look, Stop, stop_reason
+from wire.rng import Stream
 from world_server.core.world import Transmission, World, WorldConfig
 
 # The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
@@ -93,7 +93,7 @@ def run_in_memory(
     beacon_config = beacon_config or BeaconConfig()
     beacon = Beacon(
         beacon_config,
-        random.Random(protocol.derive_seed(world_config.seed, "beacon", beacon_config.name)),
+        Stream.named(world_config.seed, "beacon", beacon_config.name),
     )
     world.join_beacon(beacon_config.name)
     behaviours = byzantine.resolve_liar_sites(
@@ -102,7 +102,7 @@ def run_in_memory(
     robots: dict[int, _Robot] = {}
     for robot_id in range(world_config.num_robots):
         world.join_robot(robot_id)
-        rng = random.Random(protocol.derive_seed(world_config.seed, "robot", robot_id))
+        rng = Stream.named(world_config.seed, "robot", robot_id)
         behaviour = behaviours.get(robot_id)
         controller = (
             controller_factory(robot_id, world.info, controller_config, rng)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import random
 import sys
 import threading
 import time
@@ -23,6 +22,7 @@ from plumbing import cliargs
 from plumbing.stop_signals import on_stop_signals
 from robot_agent.link.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 from wire import protocol
+from wire.rng import Stream
 
 STOP = threading.Event()
 
@@ -30,7 +30,7 @@ STOP = threading.Event()
 def run(args: argparse.Namespace) -> dict[str, object]:
     beacon = Beacon(
         BeaconConfig(name=args.name, period=args.period),
-        random.Random(protocol.derive_seed(args.seed, "beacon", args.name)),
+        Stream.named(args.seed, "beacon", args.name),
     )
     with UdpRadio(
         args.name, address=args.address, port=args.port, interface=args.interface

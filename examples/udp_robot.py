@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import random
 import sys
 import threading
 import time
@@ -34,6 +33,7 @@ from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.link.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 from wire import names, protocol
+from wire.rng import Stream
 
 PANEL_FRACTION = 0.7  # of each site's share of the wall that its coloured panel covers
 CAMERA_REACH = 0.3  # metres: a panel further away is too small to judge
@@ -203,7 +203,7 @@ def run(args: argparse.Namespace) -> dict[str, object]:
     body = StubBody(clock, world, args.qualities, pose)
     config = ControllerConfig(dwell=args.dwell)
     # The determinism rule: every random draw comes from this one seeded stream.
-    rng = random.Random(protocol.derive_seed(args.seed, "robot", args.id))
+    rng = Stream.named(args.seed, "robot", args.id)
     controller = Controller(args.id, world, config, rng)
     rejects = ports.RejectCounter()
     with UdpRadio(

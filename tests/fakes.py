@@ -28,8 +28,10 @@ import numpy as np
 
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
-from robot_agent.core.navigation import EPUCK_PROX_ANGLES, wrap_angle
+from robot_agent.core.navigation import EPUCK_PROX_ANGLES
 from wire import names, protocol
+from wire.numeric import wrap_angle
+from wire.rng import Stream
 
 if TYPE_CHECKING:
     from world_server.core.physics import Physics
@@ -209,7 +211,7 @@ class FakeWorld:
     dropped: int = 0
 
     def __post_init__(self) -> None:
-        self._drop_rng = random.Random(protocol.derive_seed(self.seed, "fake-radio"))
+        self._drop_rng = Stream.named(self.seed, "fake-radio")
         self._beacon_seq = 0
         self._next_beacon = 0.0
         self._physics: Physics | None = None
@@ -397,7 +399,7 @@ def make_swarm(
     controllers, bodies, radios, rejects = [], [], [], []
     for robot in range(num_robots):
         body, radio = world.add_robot(robot, start_poses[robot])
-        rng = random.Random(protocol.derive_seed(seed, "robot", robot))
+        rng = Stream.named(seed, "robot", robot)
         controllers.append(Controller(robot, info, config or ControllerConfig(), rng))
         bodies.append(body)
         radios.append(radio)

@@ -22,6 +22,11 @@ controller, what goes out (``robot_agent/core/simulated.py``). Each message file
 ``radio`` is ``protocol.decode_radio(bytes)``, which also checks that an opinion sums
 to 1 (within 1e-6). docs/porting.md explains how a port in another language uses them.
 ``tests/test_vectors.py`` checks the files against the codec and against this script.
+
+``numeric.json`` and ``rng.json`` are the portable numeric kernel's and the generator's
+(``wire/numeric.py``, ``wire/rng.py``, docs/kernel.md): inputs and outputs as the hex of
+their IEEE-754 bits, so that a port compares bit for bit; ``tests/test_numeric.py``
+checks them.
 """
 
 from __future__ import annotations
@@ -40,7 +45,8 @@ from typing import Any
 import msgspec
 
 from robot_agent.link.udp_radio import MAX_PAYLOAD_BYTES, encode_frame
-from wire import auth, batch, link, names, protocol
+from wire import auth, batch, link, names, numeric, protocol
+from wire.rng import Stream, seed_of
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
 
@@ -1574,6 +1580,193 @@ def tick_vectors() -> dict[str, Any]:
     }
 
 
+def _bits(value: float) -> str:
+    """A double as the 16 hex digits of its IEEE-754 bits (big-endian); a NaN as "nan"
+    (its payload is not specified)."""
+    return "nan" if math.isnan(value) else struct.pack(">d", value).hex()
+
+
+def _u64(value: int) -> str:
+    """A 64-bit unsigned integer as 16 hex digits (JSON numbers lose bits past 2^53)."""
+    return f"{value:016x}"
+
+
+def numeric_inputs() -> dict[str, list[tuple[float, ...]]]:
+    """Inputs of each kernel function: edges, then values drawn from a fixed stream."""
+    stream = Stream(20260101)
+    angles = [
+        0.0,
+        -0.0,
+        0.5,
+        -0.75,
+        numeric.PI / 4,
+        numeric.HALF_PI,
+        numeric.PI,
+        -numeric.PI,
+        3.0 * numeric.HALF_PI,
+        numeric.TWO_PI,
+        1e-9,
+        100.0,
+        -1234.5,
+        7.5e5,
+        numeric.MAX_ANGLE,
+    ]
+    angles += [stream.uniform(-20.0, 20.0) for _ in range(40)]
+    tangents = [0.0, -0.0, 0.4375, 0.6875, 1.0, 1.1875, 2.4375, 1e-30, 1e30, -3.0, math.inf]
+    tangents += [stream.uniform(-1.0, 1.0) * 10.0 ** stream.uniform(-6.0, 6.0) for _ in range(30)]
+    points = [
+        (0.0, 0.0),
+        (-0.0, 0.0),
+        (0.0, -0.0),
+        (-0.0, -0.0),
+        (0.0, 1.0),
+        (1.0, 0.0),
+        (0.0, -1.0),
+        (-1.0, 0.0),
+        (1.0, 1.0),
+        (-1.0, -1e-300),
+        (1e300, 1e-300),
+        (math.inf, 1.0),
+        (1.0, -math.inf),
+        (math.inf, -math.inf),
+    ]
+    points += [(stream.uniform(-3.0, 3.0), stream.uniform(-3.0, 3.0)) for _ in range(40)]
+    exponents = [
+        0.0,
+        -0.0,
+        1.0,
+        -1.0,
+        0.3465,
+        -0.3466,
+        1.5,
+        700.0,
+        709.78,
+        709.8,
+        -745.0,
+        -745.2,
+        -708.5,
+        1e-12,
+        math.inf,
+        -math.inf,
+    ]
+    exponents += [stream.uniform(-50.0, 50.0) for _ in range(30)]
+    positives = [
+        1.0,
+        2.0,
+        0.5,
+        numeric.SQRT_HALF,
+        2.0 * numeric.SQRT_HALF,
+        0.7071067811865476,
+        1e-300,
+        5e-324,
+        1.7976931348623157e308,
+        0.0,
+        -1.0,
+        math.inf,
+    ]
+    positives += [
+        math.ldexp(1.0 + stream.random(), int(stream.uniform(-60.0, 60.0))) for _ in range(30)
+    ]
+    powers = [(0.5, 2.0), (0.25, 0.5), (1.0, 7.0), (0.0, 3.0), (0.3, 0.0), (2.0, -1.0)]
+    powers += [(stream.random(), stream.uniform(0.1, 5.0)) for _ in range(20)]
+    return {
+        "sincos": [(x,) for x in angles],
+        "atan": [(x,) for x in tangents],
+        "atan2": points,
+        "exp": [(x,) for x in exponents],
+        "log": [(x,) for x in positives],
+        "power": powers,
+        "wrap_angle": [(x,) for x in angles],
+    }  # fmt: skip
+
+
+def numeric_vectors() -> dict[str, Any]:
+    functions: dict[str, Callable[..., float | tuple[float, ...]]] = {
+        "sincos": numeric.sincos,
+        "atan": numeric.atan,
+        "atan2": numeric.atan2,
+        "exp": numeric.exp,
+        "log": numeric.log,
+        "power": numeric.power,
+        "wrap_angle": numeric.wrap_angle,
+    }
+    cases: dict[str, list[dict[str, Any]]] = {}
+    for name, inputs in numeric_inputs().items():
+        cases[name] = []
+        for arguments in inputs:
+            result = functions[name](*arguments)
+            outputs = result if isinstance(result, tuple) else (result,)
+            cases[name].append(
+                {
+                    "in": [_bits(value) for value in arguments],
+                    "out": [_bits(value) for value in outputs],
+                    "readable": [repr(value) for value in (*arguments, *outputs)],
+                }
+            )
+    return {
+        "type": "NumericKernel",
+        "about": "inputs and outputs of wire/numeric.py as the hex of their IEEE-754 bits "
+        "(big-endian; any NaN is \"nan\"); sincos gives (sin, cos); atan2 takes (y, x); "
+        "power takes (x, y)",
+        "cases": cases,
+    }
+
+
+def rng_vectors() -> dict[str, Any]:
+    """Each case: a seed, the calls made on one stream in order, and what they return."""
+    cases: list[dict[str, Any]] = []
+
+    def case(name: str, seed: int, calls: list[tuple[str, list[Any]]]) -> None:
+        stream = Stream(seed)
+        drawn: list[Any] = []
+        for method, arguments in calls:
+            arguments = json.loads(json.dumps(arguments))  # shuffle works on its own copy
+            value = getattr(stream, method)(*arguments)
+            if method == "shuffle":
+                value = arguments[0]
+            elif method == "fork":
+                value = _u64(value.state)
+            elif method == "next_u64":
+                value = _u64(value)
+            drawn.append(_bits(value) if isinstance(value, float) else value)
+        cases.append(
+            {
+                "name": name,
+                "seed": _u64(seed),
+                "calls": [[method, arguments] for method, arguments in calls],
+                "returns": drawn,
+                "state_after": _u64(stream.state),
+            }
+        )
+
+    case("next_u64 from 0", 0, [("next_u64", [])] * 5)
+    case("next_u64 from 1234567 (SplitMix64's reference seed)", 1234567, [("next_u64", [])] * 5)
+    case("next_u64 near the top", 2**64 - 1, [("next_u64", [])] * 3)
+    case("random", 42, [("random", [])] * 6)
+    case("uniform", 7, [("uniform", [-1.0, 1.0]), ("uniform", [0.5, 3.25])] * 3)
+    case("randrange", 99, [("randrange", [n]) for n in (1, 2, 3, 5, 10, 100, 1000, 2**40 + 1)])
+    case("choice", 5, [("choice", [[-1, 1]])] * 6 + [("choice", [["a", "b", "c"]])] * 3)
+    case("shuffle", 11, [("shuffle", [list(range(10))]), ("shuffle", [list(range(3))])])
+    case("sample", 13, [("sample", [list(range(20)), 5]), ("sample", [[4, 8, 15], 3])])
+    case("expovariate", 17, [("expovariate", [1.0]), ("expovariate", [0.5])] * 3)
+    case("normal", 19, [("normal", [])] * 6)
+    case("fork", 23, [("fork", []), ("next_u64", [])])
+    seeds = [
+        {"run_seed": run, "parts": list(parts), "seed": _u64(seed_of(run, *parts))}
+        for run, parts in ((0, ("robot", 3)), (42, ("robot", 0)), (7, ("radio", "drop")),
+                           (0, ("layout",)), (2**63 - 1, ("beacon", "nest")))
+    ]  # fmt: skip
+    return {
+        "type": "Stream",
+        "about": "wire/rng.py: each case seeds a Stream, makes the calls in order and "
+        "lists what each returned (floats as the hex of their IEEE-754 bits; 64-bit "
+        "integers (seeds, states, next_u64) as 16 hex digits; shuffle: the list after it; "
+        "fork: the new stream's state); seed_of: run seed and parts to seed",
+        "cases": cases,
+        "seed_of": seeds,
+    }
+
+
 def _compact(value: Any) -> bytes:
     return json.dumps(value, separators=(",", ":"), ensure_ascii=False).encode()
 
@@ -1606,6 +1799,8 @@ def build() -> dict[str, str]:
     files["link_frame.json"] = link_frame_vectors()
     files["tick.json"] = tick_vectors()
     files["batch.json"] = batch_vectors()
+    files["numeric.json"] = numeric_vectors()
+    files["rng.json"] = rng_vectors()
     return {
         name: json.dumps(content, indent=1, ensure_ascii=False) + "\n"
         for name, content in files.items()

@@ -3,13 +3,12 @@ clocks it answers, what it refuses and counts, and what it sends."""
 
 from __future__ import annotations
 
-import random
-
 import pytest
 
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from nest_beacon.core.endpoint import BeaconEndpoint, Outgoing, OutputKind
 from wire import auth, guard, names, protocol
+from wire.rng import Stream
 
 SECRET = bytes(range(32))
 KEYS = protocol.Keys("beacon")
@@ -21,7 +20,7 @@ IDENTITY = names.beacon_identity("nest")
 def beacon(keyed: bool = True) -> BeaconEndpoint:
     config = BeaconConfig(period=0.5)  # every five ticks
     keyring = RUN_KEYS.only([IDENTITY, names.WORLD]) if keyed else None
-    return BeaconEndpoint(Beacon(config, random.Random(0)), KEYS, DT, keyring)
+    return BeaconEndpoint(Beacon(config, Stream(0)), KEYS, DT, keyring)
 
 
 def clock(
@@ -112,9 +111,9 @@ def test_the_next_tick_named_is_the_next_on_which_the_beacon_acts(period: float,
     """Stepped every tick, as the in-process engine may, the beacon transmits on exactly the
     ticks its acks name, so skipping the others changes nothing it does."""
     config = BeaconConfig(period=period, flaky=0.3)
-    every_tick = Beacon(config, random.Random(5))
+    every_tick = Beacon(config, Stream(5))
     transmitted = [tick for tick in range(2000) if every_tick.on_tick(tick * dt)]
-    named = Beacon(config, random.Random(5))
+    named = Beacon(config, Stream(5))
     tick, answered, sent = 0, [], []
     while tick < 2000:
         answered.append(tick)

@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 
 from robot_agent.core.vision import decode_frame, estimate_quality
 from wire import protocol
+from wire.rng import Stream
 from world_server.core.camera import (
     FLOOR_BGR,
     WALL_BGR,
@@ -200,14 +201,14 @@ def test_an_occluding_robot_gives_none_or_the_right_value(num_sites: int) -> Non
 def test_two_occluders_from_perturbed_poses_never_give_a_wrong_value() -> None:
     layout = layout_for(100)
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS)
-    rng = np.random.default_rng(5)
+    rng = Stream(5)
     for site in layout.sites[:20]:
         pose = layout.sensing_pose(
             site.id, VIEW_DISTANCE, rng.uniform(-0.03, 0.03), rng.uniform(-0.17, 0.17)
         )
         candidates = occluder_positions(layout, site.id)
         for _ in range(10):
-            chosen = rng.choice(len(candidates), size=2, replace=False)
+            chosen = rng.sample(range(len(candidates)), 2)
             others = [candidates[i] for i in chosen]
             estimate = estimate_quality(renderer.render(*pose, others=others))
             assert estimate is None or abs(estimate - site.quality) < tolerance(100)
@@ -261,10 +262,10 @@ def test_noise_off_frames_are_deterministic_and_survive_png() -> None:
     first = CameraRenderer(layout, SPEC, ROBOT_RADIUS, seed=1)
     second = CameraRenderer(layout, SPEC, ROBOT_RADIUS, seed=2)
     pose = layout.sensing_pose(4, sideways=0.01, heading_error=0.05)
-    frame = first.render(*pose, rng=np.random.default_rng(1))
+    frame = first.render(*pose, rng=Stream(1))
     assert frame.shape == (48, 64, 3)
     assert frame.dtype == np.uint8
-    assert np.array_equal(frame, first.render(*pose, rng=np.random.default_rng(2)))
+    assert np.array_equal(frame, first.render(*pose, rng=Stream(2)))
     assert np.array_equal(frame, second.render(*pose))
     assert np.array_equal(decode_frame(first.encode(frame), expected_size=(64, 48)), frame)
 
@@ -282,9 +283,9 @@ def test_pixel_noise_is_fresh_per_frame_and_reproducible_from_the_rng() -> None:
     layout = layout_for(5)
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS, CameraNoise(pixel_sigma=10.0))
     pose = layout.sensing_pose(0)
-    a = renderer.render(*pose, rng=np.random.default_rng(3))
-    b = renderer.render(*pose, rng=np.random.default_rng(3))
-    c = renderer.render(*pose, rng=np.random.default_rng(4))
+    a = renderer.render(*pose, rng=Stream(3))
+    b = renderer.render(*pose, rng=Stream(3))
+    c = renderer.render(*pose, rng=Stream(4))
     assert np.array_equal(a, b)
     assert not np.array_equal(a, c)
     again = CameraRenderer(layout, SPEC, ROBOT_RADIUS, CameraNoise(pixel_sigma=10.0))
@@ -294,7 +295,7 @@ def test_pixel_noise_is_fresh_per_frame_and_reproducible_from_the_rng() -> None:
 def estimate_errors(layout: Layout, noise: CameraNoise, frames: int) -> np.ndarray:
     """Signed estimate errors over every site and ``frames`` noisy frames of each."""
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS, noise, seed=3)
-    rng = np.random.default_rng(17)
+    rng = Stream(17)
     errors = []
     for site in layout.sites:
         for _ in range(frames):
@@ -511,7 +512,7 @@ def column_rays_hit_disc(
 def test_robots_appear_exactly_when_a_column_ray_meets_them() -> None:
     layout = layout_for(10)
     renderer = CameraRenderer(layout, SPEC, ROBOT_RADIUS)
-    rng = np.random.default_rng(23)
+    rng = Stream(23)
     pose = (0.1, -0.2, 0.7)
     clear = renderer.render(*pose)
     seen = 0

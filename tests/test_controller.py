@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import random
 import statistics
 from typing import Any
 
@@ -23,8 +22,9 @@ from fakes import (
 
 from robot_agent.core import ports, vision
 from robot_agent.core.controller import Controller, ControllerConfig
-from robot_agent.core.navigation import wrap_angle
 from wire import protocol
+from wire.numeric import wrap_angle
+from wire.rng import Stream
 from world_server.core.camera import CameraRenderer
 from world_server.core.layout import make_layout
 
@@ -80,7 +80,7 @@ def test_config_insists_on_a_reachable_threshold_when_alpha_is_positive() -> Non
 
 def test_controller_checks_its_world() -> None:
     info = make_world_info(4)
-    rng = random.Random(0)
+    rng = Stream(0)
     gappy = [*info.sites[:2], protocol.Site(7, info.sites[2].x, info.sites[2].y)]
     gappy_world = msgspec.structs.replace(info, sites=gappy)
     with pytest.raises(ValueError, match="site ids"):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import random
 from collections import Counter
 from typing import Any
 
@@ -21,6 +20,7 @@ from robot_agent.core.decision import (
     validate_alpha,
     validate_opinion,
 )
+from wire.rng import Stream
 
 # --- strategies ------------------------------------------------------------------------
 
@@ -73,7 +73,7 @@ def test_bad_opinions_say_what_is_wrong(opinion: Any, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         mprodop([opinion])
     with pytest.raises(ValueError, match=message):
-        choose_pair(opinion, random.Random(0))
+        choose_pair(opinion, Stream(0))
     with pytest.raises(ValueError, match=message):
         decided_option(opinion)
 
@@ -201,7 +201,7 @@ def test_product_stays_a_distribution(pool: list[list[float]]) -> None:
 
 
 @given(pools(), st.randoms(use_true_random=False))
-def test_pooling_is_commutative(pool: list[list[float]], rng: random.Random) -> None:
+def test_pooling_is_commutative(pool: list[list[float]], rng: Stream) -> None:
     shuffled = list(pool)
     rng.shuffle(shuffled)
     first, second = mprodop(pool), mprodop(shuffled)
@@ -241,7 +241,7 @@ def test_pooling_preserves_evidence(data: st.DataObject, alpha: float) -> None:
 
 @given(opinions(), st.randoms(use_true_random=False))
 def test_pair_is_two_distinct_options_the_first_with_weight(
-    opinion: list[float], rng: random.Random
+    opinion: list[float], rng: Stream
 ) -> None:
     first, second = choose_pair(opinion, rng)
     assert first != second
@@ -253,7 +253,7 @@ def test_pair_is_two_distinct_options_the_first_with_weight(
 
 def test_pair_frequencies_follow_the_weights_without_replacement() -> None:
     weights = [0.5, 0.3, 0.2, 0.0]
-    rng = random.Random(7)
+    rng = Stream(7)
     draws = 60_000
     counts = Counter(choose_pair(weights, rng) for _ in range(draws))
     for (i, j), count in counts.items():
@@ -264,7 +264,7 @@ def test_pair_frequencies_follow_the_weights_without_replacement() -> None:
 
 
 def test_a_certain_opinion_pairs_its_option_with_a_uniform_other() -> None:
-    rng = random.Random(3)
+    rng = Stream(3)
     counts = Counter(choose_pair([0.0, 1.0, 0.0, 0.0], rng) for _ in range(3000))
     assert {pair[0] for pair in counts} == {1}
     assert set(counts) == {(1, 0), (1, 2), (1, 3)}

@@ -14,7 +14,7 @@ from robot_agent.core import byzantine, defence, ports
 from robot_agent.core.beliefs import Beliefs
 from robot_agent.core.controller import ControllerConfig
 from robot_agent.core.decision import mprodop, negative_update, uniform_opinion
-from wire import protocol
+from wire.rng import Stream
 
 TRIMMED = ControllerConfig(defence="trimmed", trim=1)
 
@@ -124,7 +124,7 @@ def test_one_liar_does_not_win_against_a_defended_swarm() -> None:
         0,
         swarm.controllers[0].world,
         TRIMMED,
-        random.Random(protocol.derive_seed(11, "robot", 0)),
+        Stream.named(11, "robot", 0),
         byzantine.Behaviour("liar", liar_site),
     )
     honest = swarm.controllers[1:]

@@ -316,7 +316,7 @@ def test_robots_that_decide_on_different_sites_end_split() -> None:
     )
     assert code == 3, stderr
     assert summary["ended"] == "split" and summary["stuck"] == []
-    assert [robot["decided_site"] for robot in summary["per_robot"]] == [0, 1, 0, 1]
+    assert [robot["decided_site"] for robot in summary["per_robot"]] == [1, 1, 0, 1]
 
 
 def test_an_unwritable_recording_path_is_refused_before_anything_starts() -> None:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import random
 
 import pytest
 from hypothesis import assume, given
@@ -19,6 +18,7 @@ from wellstirred.equations import (
     pooled_opinion,
     pooled_opinion_alpha0,
 )
+from wire.rng import Stream
 
 
 def test_evidence_probability() -> None:
@@ -92,7 +92,7 @@ def test_equation_3_refuses_enumerations_that_are_too_large() -> None:
 
 def _monte_carlo_pool(n: int, k: int, alpha: float, samples: int, seed: int) -> list[list[float]]:
     """Samples of the pooled opinion after one round, built from the primitives."""
-    rng = random.Random(seed)
+    rng = Stream(seed)
     results = []
     for _ in range(samples):
         updated = []

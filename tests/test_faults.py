@@ -5,7 +5,6 @@ from __future__ import annotations
 import base64
 import json
 import os
-import random
 import signal
 import subprocess
 import sys
@@ -33,6 +32,7 @@ from swarm_helpers import (
 
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from wire import protocol
+from wire.rng import Stream
 from world_server.core.camera import CameraNoise
 from world_server.core.layout import make_layout
 from world_server.core.radio import sender_order
@@ -181,7 +181,7 @@ def _red_shares(noise: CameraNoise) -> dict[int, float]:
 def _beacon_ticks(recording: Recording, config: BeaconConfig) -> list[int]:
     """The ticks a beacon of ``config`` transmits in, given the clocks the recorded one
     answered (its seeded draws, replayed with nest_beacon's own logic)."""
-    beacon = Beacon(config, random.Random(protocol.derive_seed(SEED, "beacon", config.name)))
+    beacon = Beacon(config, Stream.named(SEED, "beacon", config.name))
     return [
         clock.tick
         for clock in recording.clocks

@@ -4,7 +4,6 @@ an exception escaping a process, never a corrupted opinion."""
 from __future__ import annotations
 
 import math
-import random
 from collections.abc import Callable
 from dataclasses import astuple, dataclass
 from typing import Any
@@ -20,6 +19,7 @@ from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import RobotEndpoint
 from robot_agent.node.robot_node import Event, EventKind, RobotNode
 from wire import auth, protocol
+from wire.rng import Stream
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event as WorldEvent
 from world_server.core.events import EventKind as WorldEventKind
@@ -102,7 +102,7 @@ def _node() -> tuple[RobotNode, Controller, _Publisher]:
     """A robot node with recorders in place of its Zenoh publishers: handling an input
     publishes through those, never through the session."""
     info = _world_info()
-    controller = Controller(1, info, ControllerConfig(), random.Random(1))
+    controller = Controller(1, info, ControllerConfig(), Stream(1))
     endpoint = RobotEndpoint(1, keys=protocol.Keys("fuzz"), controller=controller, world=info)
     # The session is never used: see the publishers below.
     node = RobotNode(endpoint, session=None, inbox=BoundedInbox())  # type: ignore[arg-type]

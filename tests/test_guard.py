@@ -4,14 +4,13 @@ world's handling of replays, foreign ids and senders that leave."""
 
 from __future__ import annotations
 
-import random
-
 import pytest
 
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import InputKind, RobotEndpoint
 from robot_agent.core.tick_assembly import PENDING_BYTES
 from wire import auth, guard, protocol
+from wire.rng import Stream
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event as WorldEvent
 from world_server.core.events import EventKind
@@ -83,7 +82,7 @@ def test_a_receiver_that_rejoins_takes_a_far_tick_once_and_never_an_old_one() ->
 
 def _robot(keyring: auth.Keyring | None) -> RobotEndpoint:
     info = World(WorldConfig(num_sites=4, num_robots=2)).info
-    controller = Controller(1, info, ControllerConfig(), random.Random(1))
+    controller = Controller(1, info, ControllerConfig(), Stream(1))
     return RobotEndpoint(
         1, keys=protocol.Keys("guard"), controller=controller, world=info, keyring=keyring
     )

@@ -32,7 +32,7 @@ def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, dict[str,
 @pytest.mark.parametrize(
     ("options", "ended", "code"),
     [
-        (["--seed", "0", "--threshold", "0.5"], "consensus", 0),
+        (["--seed", "1", "--threshold", "0.5"], "consensus", 0),
         # Deciding at 0.5 with three sites: one comparison each, and the robots disagree.
         (["--seed", "2", "--threshold", "0.5"], "split", 3),
         (
@@ -170,7 +170,7 @@ def test_an_experiment_runs_in_process_runs_in_parallel_and_reports_their_ending
     command = swarm_command(
         "experiment",
         *("--engine", "inprocess", "--robots", "3", "--sites", "3", "--runs", "3"),
-        *("--parallel", "2", "--seed", "2", "--timeout", "60", "--out", str(out)),
+        *("--parallel", "2", "--seed", "4", "--timeout", "60", "--out", str(out)),
         *("--name", "inproc", "--json", "--quiet"),
     )
     try:
@@ -179,7 +179,7 @@ def test_an_experiment_runs_in_process_runs_in_parallel_and_reports_their_ending
         kill_leftovers("inproc-N3")
     assert done.returncode == 0, done.stderr.decode()
     report = json.loads(done.stdout)
-    # Seeds 2, 3 and 4 (deterministic): two consensus runs and one at the sim time limit.
+    # Seeds 4, 5 and 6 (deterministic): two consensus runs and one at the sim time limit.
     endings = {"inproc-N3-n3-r01": "consensus", "inproc-N3-n3-r02": "timeout"}
     endings["inproc-N3-n3-r03"] = "consensus"
     for run_id, ended in endings.items():

@@ -74,7 +74,7 @@ ALLOWED: dict[str, set[str]] = {
     "world_server/core": {"wire"},
     "nest_beacon/core": {"wire"},
     "viewer/core": {"wire", "world_server/core"},
-    "wellstirred": {"robot_agent/core"},
+    "wellstirred": {"robot_agent/core", "wire"},
     "plumbing": {"wire"},
     "robot_agent/node": {"wire", "robot_agent/core", "plumbing"},
     "robot_agent/link": {"wire", "robot_agent/core"},

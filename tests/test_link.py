@@ -6,7 +6,6 @@ and the impairment that makes a link worse on purpose."""
 from __future__ import annotations
 
 import itertools
-import random
 from collections.abc import Callable
 
 import msgspec
@@ -16,6 +15,7 @@ from hypothesis import strategies as st
 
 from robot_agent.link.client import LinkClient, Lost, Received, Welcomed
 from wire import link, protocol
+from wire.rng import Stream
 from world_server.bridge.impairment import ImpairedDirection, LinkImpairment
 from world_server.bridge.peer import (
     FRAME_BURST,
@@ -399,7 +399,7 @@ def test_an_impaired_direction_delays_jitters_and_loses_frames_in_order_and_seed
 
 
 def test_a_frame_is_held_for_the_delay_and_no_less() -> None:
-    direction = ImpairedDirection(LinkImpairment(delay=0.05), random.Random(0))
+    direction = ImpairedDirection(LinkImpairment(delay=0.05), Stream(0))
     direction.put(b"x", "a", now=1.0)
     assert direction.due(1.049) == [] and direction.deadline == pytest.approx(1.05)
     assert direction.due(1.05) == [(b"x", "a")]

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import itertools
 import math
-import random
 from typing import Any
 
 import pytest
 from bodies import epuck_nav_params
 from fakes import MAX_SPEED, ROBOT_RADIUS, proximity, unicycle
 
-from robot_agent.core.navigation import Navigator, NavParams, wrap_angle
+from robot_agent.core.navigation import Navigator, NavParams
+from wire.numeric import wrap_angle
+from wire.rng import Stream
 from world_server.core.body import EpuckSpec
 from world_server.core.layout import make_layout
 from world_server.core.physics import Physics
@@ -44,7 +45,7 @@ def drive(
     return False, pose, path
 
 
-def random_point(rng: random.Random, max_radius: float) -> tuple[float, float]:
+def random_point(rng: Stream, max_radius: float) -> tuple[float, float]:
     radius = max_radius * math.sqrt(rng.random())
     angle = rng.uniform(-math.pi, math.pi)
     return radius * math.cos(angle), radius * math.sin(angle)
@@ -75,7 +76,7 @@ def test_params_are_validated(field: str, value: Any) -> None:
 
 
 def test_inputs_are_validated() -> None:
-    navigator = Navigator(epuck_nav_params(), random.Random(0))
+    navigator = Navigator(epuck_nav_params(), Stream(0))
     with pytest.raises(ValueError, match="8 proximity readings"):
         navigator.drive_to(0.0, 0.0, 0.0, (0.0,) * 7, (0.1, 0.0), 0.01)
     with pytest.raises(ValueError, match="tolerance"):
@@ -86,11 +87,11 @@ def test_inputs_are_validated() -> None:
 
 @pytest.mark.timeout(30)
 def test_reaches_goals_from_many_start_poses() -> None:
-    rng = random.Random(1)
+    rng = Stream(1)
     for trial in range(60):
         start = (*random_point(rng, ARENA_RADIUS - 0.1), rng.uniform(-math.pi, math.pi))
         goal = random_point(rng, ARENA_RADIUS - 0.15)
-        navigator = Navigator(epuck_nav_params(), random.Random(trial))
+        navigator = Navigator(epuck_nav_params(), Stream(trial))
         arrived, pose, path = drive(navigator, start, goal)
         assert arrived, f"trial {trial}: from {start} to {goal}, stopped at {pose}"
         assert math.hypot(pose[0] - goal[0], pose[1] - goal[1]) <= 0.015
@@ -104,7 +105,7 @@ def test_reaches_viewpoints_near_the_wall_from_the_nest() -> None:
         angle = 2 * math.pi * index / 12
         goal = (view_radius * math.cos(angle), view_radius * math.sin(angle))
         start = (0.05 * math.cos(3 * angle), 0.05 * math.sin(3 * angle), -angle)
-        arrived, _, path = drive(Navigator(epuck_nav_params(), random.Random(index)), start, goal)
+        arrived, _, path = drive(Navigator(epuck_nav_params(), Stream(index)), start, goal)
         assert arrived
         # A straight run, not a wander: at most 40% longer than the straight line.
         length = sum(math.dist(a[:2], b[:2]) for a, b in itertools.pairwise(path))
@@ -112,7 +113,7 @@ def test_reaches_viewpoints_near_the_wall_from_the_nest() -> None:
 
 
 def test_turns_to_headings_on_the_spot() -> None:
-    rng = random.Random(2)
+    rng = Stream(2)
     navigator = Navigator(epuck_nav_params(), rng)
     for _ in range(100):
         theta = rng.uniform(-math.pi, math.pi)
@@ -134,7 +135,7 @@ def test_goes_round_an_obstacle_on_either_side_without_touching_it() -> None:
     obstacle = (0.0, 0.0, ROBOT_RADIUS)
     sides = set()
     for seed in range(16):
-        navigator = Navigator(epuck_nav_params(), random.Random(seed))
+        navigator = Navigator(epuck_nav_params(), Stream(seed))
         arrived, _, path = drive(navigator, (-0.4, 0.0, 0.0), (0.4, 0.0), obstacles=(obstacle,))
         assert arrived
         clearance = min(math.hypot(x, y) for x, y, _ in path) - 2 * ROBOT_RADIUS
@@ -149,7 +150,7 @@ def test_same_rng_same_wheel_speeds() -> None:
     obstacles = ((0.1, 0.02, ROBOT_RADIUS), (0.3, -0.1, ROBOT_RADIUS))
     runs = []
     for _ in range(2):
-        navigator = Navigator(epuck_nav_params(), random.Random(5))
+        navigator = Navigator(epuck_nav_params(), Stream(5))
         runs.append(drive(navigator, (-0.3, 0.0, 0.2), (0.5, 0.0), obstacles=obstacles)[2])
     assert runs[0] == runs[1]
 
@@ -162,10 +163,8 @@ def test_head_on_robots_pass_each_other_on_physics() -> None:
         goals = {0: (0.4, 0.0), 1: (-0.4, 0.0)}
         for robot, pose in starts.items():
             physics.add_robot(robot, *pose)
-        rng = random.Random(seed)
-        navigators = {
-            robot: Navigator(epuck_nav_params(), random.Random(rng.random())) for robot in goals
-        }
+        rng = Stream(seed)
+        navigators = {robot: Navigator(epuck_nav_params(), rng.fork()) for robot in goals}
         arrived = dict.fromkeys(goals, False)
         for _ in range(600):
             for robot, navigator in navigators.items():
@@ -191,7 +190,7 @@ def nest_site_cycles(
     """
     layout = make_layout(sites, robots, seed)
     physics = Physics(layout.arena_radius)
-    rng = random.Random(seed)
+    rng = Stream(seed)
     view_radius = layout.arena_radius - 0.15
     viewpoints = [
         (view_radius * math.cos(site.angle), view_radius * math.sin(site.angle))
@@ -203,7 +202,7 @@ def nest_site_cycles(
     arrivals: list[list[float]] = [[] for _ in range(robots)]
     for robot in range(robots):
         physics.add_robot(robot, *layout.start_poses[robot])
-        navigators.append(Navigator(epuck_nav_params(), random.Random(rng.getrandbits(64))))
+        navigators.append(Navigator(epuck_nav_params(), rng.fork()))
         goals.append(rng.choice(viewpoints))
     for tick in range(round(minutes * 60 / DT)):
         t = tick * DT

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import random
 
 import cv2
 import numpy as np
@@ -20,6 +19,7 @@ from bodies import epuck_nav_params
 
 from robot_agent.core.controller import ControllerConfig, parking_rings, parking_slot
 from robot_agent.core.navigation import Navigator
+from wire.rng import Stream
 from world_server.core.layout import make_layout
 from world_server.core.physics import Physics
 
@@ -177,7 +177,7 @@ def test_a_robot_caught_in_an_empty_wall_slot_finds_its_way_back_to_the_nest(
         if robot not in {22, 24} and math.dist((x, y), start) < 1.0:
             physics.add_robot(robot, x, y, math.atan2(y, x))
     physics.add_robot(130, *start, 0.3)
-    navigator = Navigator(epuck_nav_params(), random.Random(navigator_seed))
+    navigator = Navigator(epuck_nav_params(), Stream(navigator_seed))
     for _ in range(600):  # 60 s of sim time
         x, y, theta = physics.pose(130)
         if math.hypot(x, y) < layout.arena_radius - 1.0:
@@ -213,7 +213,7 @@ def test_robots_pressed_in_behind_the_wall_row_push_their_way_out(navigator_seed
     for robot, (x, y) in pressed_in.items():
         physics.add_robot(robot, x, y, math.atan2(-y, -x))
     navigators = {
-        robot: Navigator(epuck_nav_params(), random.Random(navigator_seed * 1000 + robot))
+        robot: Navigator(epuck_nav_params(), Stream(navigator_seed * 1000 + robot))
         for robot in pressed_in
     }
     still_in = set(pressed_in)

@@ -36,7 +36,15 @@ MESSAGE_FILES = {
     path.name: load(path)
     for path in sorted(VECTORS.glob("*.json"))
     if path.name
-    not in ("udp_frame.json", "auth.json", "tick.json", "batch.json", "link_frame.json")
+    not in (
+        "udp_frame.json",
+        "auth.json",
+        "tick.json",
+        "batch.json",
+        "link_frame.json",
+        "numeric.json",
+        "rng.json",
+    )
 }
 
 

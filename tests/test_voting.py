@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import dataclasses
-import random
 
 import pytest
 from fakes import make_swarm
@@ -14,6 +13,7 @@ from robot_agent.core.beliefs import Beliefs
 from robot_agent.core.controller import ControllerConfig
 from robot_agent.core.voting import Vote, VoteBeliefs, majority, update
 from wire import protocol
+from wire.rng import Stream
 
 
 def vote(robot: int, site: int, quality: float = 0.5, t: float = 10.0, order: int = 0) -> Vote:
@@ -29,38 +29,38 @@ def vote_payload(robot: int, site: int, quality: float = 0.5) -> protocol.VotePa
 
 @pytest.mark.parametrize("strategy", voting.VOTING)
 def test_with_no_votes_a_robot_keeps_its_site_and_draws_nothing(strategy: str) -> None:
-    rng = random.Random(3)
-    state = rng.getstate()
+    rng = Stream(3)
+    state = rng.state
     assert update(strategy, 2, 0.4, [], rng) == 2  # type: ignore[arg-type]
-    assert rng.getstate() == state
+    assert rng.state == state
 
 
 def test_the_voter_copies_one_neighbour_drawn_at_random() -> None:
     votes = [vote(1, 0), vote(2, 3)]
-    chosen = {update("dmvd", 4, 0.9, votes, random.Random(seed)) for seed in range(50)}
+    chosen = {update("dmvd", 4, 0.9, votes, Stream(seed)) for seed in range(50)}
     assert chosen == {0, 3}  # never its own site 4, whatever its quality
 
 
 def test_the_majority_counts_the_robot_itself() -> None:
-    rng = random.Random(0)
+    rng = Stream(0)
     assert majority(2, [2, 5], rng) == 2
     assert majority(2, [5, 5], rng) == 5
     assert majority(2, [5, 2, 5, 7], rng) == 5
 
 
 def test_a_majority_tie_is_drawn_among_the_tied_sites_only() -> None:
-    outcomes = {majority(1, [4, 6], random.Random(seed)) for seed in range(60)}
+    outcomes = {majority(1, [4, 6], Stream(seed)) for seed in range(60)}
     assert outcomes == {1, 4, 6}
-    outcomes = {majority(1, [1, 4, 4, 6], random.Random(seed)) for seed in range(60)}
+    outcomes = {majority(1, [1, 4, 4, 6], Stream(seed)) for seed in range(60)}
     assert outcomes == {1, 4}
 
 
 def test_direct_comparison_switches_only_to_a_higher_estimate() -> None:
     better, worse = [vote(1, 3, quality=0.8)], [vote(1, 3, quality=0.2)]
-    assert update("dc", 0, 0.5, better, random.Random(0)) == 3
-    assert update("dc", 0, 0.5, worse, random.Random(0)) == 0
-    assert update("dc", 0, 0.8, better, random.Random(0)) == 0  # equal: no switch
-    assert update("dc", 0, None, worse, random.Random(0)) == 3  # no estimate yet: 0
+    assert update("dc", 0, 0.5, better, Stream(0)) == 3
+    assert update("dc", 0, 0.5, worse, Stream(0)) == 0
+    assert update("dc", 0, 0.8, better, Stream(0)) == 0  # equal: no switch
+    assert update("dc", 0, None, worse, Stream(0)) == 3  # no estimate yet: 0
 
 
 def test_the_swarm_starts_spread_evenly_over_the_sites() -> None:
@@ -89,7 +89,7 @@ def test_the_strategy_is_chosen_by_the_setting() -> None:
 
 def test_a_voting_robot_explores_the_one_site_it_favours() -> None:
     mine = beliefs(robot=7)
-    assert mine.site == 2 and mine.next_sites(random.Random(0)) == [2]
+    assert mine.site == 2 and mine.next_sites(Stream(0)) == [2]
     assert mine.opinion == [0.0, 0.0, 1.0, 0.0, 0.0]
     assert mine.compare({2: 0.75}) is False  # an estimate, not a change of site
     assert mine.quality == 0.75
@@ -102,7 +102,7 @@ def test_dissemination_is_modulated_by_the_estimate_except_for_direct_comparison
     for strategy, quality, mean in (("dmvd", 0.5, 5.0), ("dmmd", 1.0, 10.0), ("dc", 0.5, 10.0)):
         mine = beliefs(strategy)
         mine.quality = quality
-        rng = random.Random(1)
+        rng = Stream(1)
         lengths = []
         for _ in range(draws):
             end, listen_from = mine.nest_visit(100.0, rng)
@@ -113,7 +113,7 @@ def test_dissemination_is_modulated_by_the_estimate_except_for_direct_comparison
 
 def test_exploration_lasts_an_exponential_time_with_mean_sigma() -> None:
     mine = beliefs(exploration=8.0)
-    rng = random.Random(2)
+    rng = Stream(2)
     times = [mine.exploration(rng) for _ in range(4000)]
     assert min(times) >= 0.0
     assert sum(times) / len(times) == pytest.approx(8.0, rel=0.06)
@@ -135,7 +135,7 @@ def test_the_rule_takes_the_last_g_votes_heard_in_the_listening_window() -> None
     mine.hear_payload(1, 20.0, vote_payload(1, 2))  # in it, but not among the last two
     mine.hear_payload(2, 21.0, vote_payload(2, 1))
     mine.hear_payload(3, 21.5, vote_payload(3, 1))
-    mine.pool(since=19.0, t=22.0, rng=random.Random(0))
+    mine.pool(since=19.0, t=22.0, rng=Stream(0))
     assert mine.site == 1  # site 1 twice against its own 0 once
     assert mine.pool_sizes == [3] and mine.trips == 1
     assert mine.quality is None  # site 1 is yet to be explored
@@ -143,14 +143,14 @@ def test_the_rule_takes_the_last_g_votes_heard_in_the_listening_window() -> None
 
 def test_a_robot_decides_after_settle_updates_without_dissent() -> None:
     mine = beliefs("dmvd", robot=0, settle=3)
-    rng = random.Random(0)
+    rng = Stream(0)
     mine.hear_payload(1, 1.0, vote_payload(1, 0))
     mine.pool(0.0, 2.0, rng)
     mine.pool(0.0, 3.0, rng)  # hearing nobody is no dissent
     assert mine.decided_site is None and mine.settled == 2
     mine.hear_payload(2, 3.5, vote_payload(2, 0))
     mine.hear_payload(3, 3.6, vote_payload(3, 4))  # dissent, though not drawn
-    mine.pool(3.0, 4.0, random.Random(5))
+    mine.pool(3.0, 4.0, Stream(5))
     assert mine.settled == 0  # whatever it drew
     for t in (5.0, 6.0, 7.0):
         mine.pool(t - 0.5, t, rng)
@@ -162,12 +162,12 @@ def test_a_robot_decides_after_settle_updates_without_dissent() -> None:
 def test_the_paper_strategy_draws_nothing_for_exploration_or_the_nest() -> None:
     """The default path draws no extra random number: runs stay what they were."""
     paper = strategies.make_strategy(5, ControllerConfig(), 0)
-    rng = random.Random(9)
-    state = rng.getstate()
+    rng = Stream(9)
+    state = rng.state
     assert paper.exploration(rng) == 0.0
     assert paper.nest_visit(12.0, rng) == (15.0, 12.0)  # dwell 3 s, pooling all of it
     paper.pool(12.0, 15.0, rng)
-    assert rng.getstate() == state
+    assert rng.state == state
 
 
 def test_a_liar_under_a_voting_strategy_never_settles() -> None:

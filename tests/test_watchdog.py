@@ -236,7 +236,7 @@ def test_an_in_process_run_that_stalls_ends_stalled_with_its_stuck_robot() -> No
 
 @pytest.mark.timeout(120)
 def test_in_process_endings_consensus_split_and_timeout() -> None:
-    agreed = run_in_memory(_world(0, robots=4), ControllerConfig(threshold=0.5), timeout=600)
+    agreed = run_in_memory(_world(1, robots=4), ControllerConfig(threshold=0.5), timeout=600)
     assert agreed["ended"] == "consensus" and "stuck" not in agreed
     # Deciding at 0.5 with three sites: one comparison each, and the robots disagree.
     split = run_in_memory(_world(2, robots=4), ControllerConfig(threshold=0.5), timeout=600)

@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import random
 import signal
 import sys
 import threading
@@ -43,6 +42,7 @@ from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.link.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 from wire import names, protocol
+from wire.rng import Stream
 
 STOP = threading.Event()  # set by SIGTERM: finish the step, print the summary, exit
 
@@ -118,9 +118,7 @@ def run_robot(args: argparse.Namespace) -> dict[str, object]:
     angle = 2 * math.pi * args.id / args.robots
     body, _ = world.add_robot(args.id, (ring * math.cos(angle), ring * math.sin(angle), angle))
     config = ControllerConfig(dwell=args.dwell)
-    controller = Controller(
-        args.id, info, config, random.Random(protocol.derive_seed(args.seed, "robot", args.id))
-    )
+    controller = Controller(args.id, info, config, Stream.named(args.seed, "robot", args.id))
     rejects = ports.RejectCounter()
     best_site = max(range(args.sites), key=world.qualities.__getitem__)
     with open_radio(args, names.robot_name(args.id)) as udp:
@@ -159,7 +157,7 @@ def run_robot(args: argparse.Namespace) -> dict[str, object]:
 def run_beacon(args: argparse.Namespace) -> dict[str, object]:
     beacon = Beacon(
         BeaconConfig(name=args.name, period=args.period),
-        random.Random(protocol.derive_seed(args.seed, "beacon", args.name)),
+        Stream.named(args.seed, "beacon", args.name),
     )
     with open_radio(args, args.name) as udp:
         clock = await_start(args, args.dt)

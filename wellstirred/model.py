@@ -50,6 +50,7 @@ from typing import Literal, Protocol
 import numpy as np
 
 from robot_agent.core.decision import validate_alpha
+from wire import numeric
 
 __all__ = [
     "FIGURE1_OPTIONS",
@@ -335,11 +336,11 @@ def exact_consensus_time(model: Model) -> ExactTime:
     for t in range(steps + 1):
         survival.append(float(distribution[decided + 1 :].sum()))
         if t < steps:
-            distribution = distribution @ transitions
+            distribution = _vector_matrix(distribution, transitions)
     # E[T] by first-step analysis; every step eliminates at least one option.
     expected = np.zeros(n + 1)
     for m in range(decided + 1, n + 1):
-        expected[m] = 1.0 + transitions[m, :m] @ expected[:m]
+        expected[m] = 1.0 + float((transitions[m, :m] * expected[:m]).sum())
     return ExactTime(
         model=model,
         survival=tuple(survival),
@@ -384,15 +385,41 @@ def survivor_transitions(n: int, k: int) -> np.ndarray:
     transitions[1, 1] = 1.0
     for m in range(2, n + 1):
         pairs = m * (m - 1) / 2
-        h *= ((m - 2) / m) ** draws  # old ranks' probabilities shrink from 1/C(m-1,2) scale
+        h *= _powers((m - 2) / m, k)  # old ranks' probabilities shrink from 1/C(m-1,2) scale
         p_new = (m - 1) / pairs
-        added = np.where(later, binomial * p_new ** np.where(later, gap, 0), 0.0)
-        h[1:] += h[:-1] @ added
+        added = np.where(later, binomial * _powers(p_new, k)[np.where(later, gap, 0)], 0.0)
+        h[1:] += _matrix_product(h[:-1], added)
         distinct = h[:, k]
         for d in range(1, min(k, m - 1) + 1):
             transitions[m, m - d] = distinct[d]
     transitions.setflags(write=False)
     return transitions
+
+
+# The chain's products are summed by numpy in a fixed order, never handed to BLAS (whose
+# kernel, and so whose rounding, depends on the CPU), and powers are repeated products
+# (numpy's float power takes a CPU-dependent path): the exact times are the same bits on
+# every machine.
+
+
+def _powers(base: float, top: int) -> np.ndarray:
+    """base^0, base^1, ..., base^top, each the one before times base."""
+    factors = np.full(top + 1, base)
+    factors[0] = 1.0
+    powers: np.ndarray = np.cumprod(factors)
+    return powers
+
+
+def _vector_matrix(vector: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """vector @ matrix, each column summed over the rows in order."""
+    product: np.ndarray = (vector[:, None] * matrix).sum(axis=0)
+    return product
+
+
+def _matrix_product(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """left @ right, each entry summed over the inner index in order."""
+    product: np.ndarray = (left[:, :, None] * right[None, :, :]).sum(axis=1)
+    return product
 
 
 def _decided_survivors(threshold: float, n: int) -> int:
@@ -582,8 +609,7 @@ def _pool(updated: np.ndarray, pool: int, rng: np.random.Generator) -> np.ndarra
     a pool whose product is all zeros keeps its members' own (normalised) opinions.
     """
     runs, agents, n = updated.shape
-    with np.errstate(divide="ignore"):
-        logs = np.log(updated)
+    logs = numeric.log_array(updated)
     if pool == agents:
         pooled, contradicted = _normalised_product(logs.sum(axis=1))
         # Every agent adopts the same vector: a read-only broadcast view suffices, since
@@ -618,7 +644,7 @@ def _normalised_product(log_sums: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """exp(log_sums) normalised over the last axis, and where it was all zeros."""
     top = log_sums.max(axis=-1, keepdims=True)
     contradicted = np.isneginf(top[..., 0])
-    shifted = np.exp(log_sums - np.where(np.isneginf(top), 0.0, top))
+    shifted = numeric.exp_array(log_sums - np.where(np.isneginf(top), 0.0, top))
     totals = shifted.sum(axis=-1, keepdims=True)
     return shifted / np.where(totals > 0.0, totals, 1.0), contradicted
 

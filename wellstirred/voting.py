@@ -36,6 +36,7 @@ import numpy as np
 
 from robot_agent.core.voting import VOTING, StrategyName
 from wellstirred.model import Cell, Outcome, qualities, summarise
+from wire import numeric
 
 __all__ = ["VoteModel", "simulate_votes", "vote_cell_rng", "vote_sweep"]
 
@@ -185,7 +186,7 @@ def _step(
     heard = model.heard
     # Weighted draws without replacement: the ``heard`` largest of log(weight) + Gumbel
     # noise per listener, with the listener itself left out.
-    keys = np.log(weight_of[opinions])[:, None, :] + rng.gumbel(size=(runs, agents, agents))
+    keys = numeric.log_array(weight_of[opinions])[:, None, :] + _gumbel(rng, (runs, agents, agents))
     keys[:, np.arange(agents), np.arange(agents)] = -np.inf
     if heard == 1:
         chosen = keys.argmax(axis=-1)[..., None]
@@ -205,3 +206,10 @@ def _step(
     pick = np.where(top, rng.random(group.shape), -1.0).argmax(axis=-1)
     majority: np.ndarray = np.take_along_axis(group, pick[..., None], axis=-1)[..., 0]
     return majority
+
+
+def _gumbel(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+    """Standard Gumbel draws, -log(-log(1 - u)) with u uniform on [0, 1), with the portable
+    kernel's logarithm (numpy's own ``gumbel`` calls the C library's)."""
+    gumbel: np.ndarray = -numeric.log_array(-numeric.log_array(1.0 - rng.random(shape)))
+    return gumbel

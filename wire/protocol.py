@@ -11,7 +11,7 @@ negative counts and over-long vectors are rejected at the edge, never passed on.
 
 from __future__ import annotations
 
-import hashlib
+import math
 from typing import Annotated, Any, Literal, TypeVar
 
 import msgspec
@@ -509,8 +509,8 @@ def decode_radio(
     payload: bytes | bytearray | memoryview,
 ) -> OpinionPayload | BeaconPayload | VotePayload:
     message = _decode(_radio_decoder, payload)
-    if isinstance(message, OpinionPayload) and abs(sum(message.opinion) - 1.0) > 1e-6:
-        raise ProtocolError(f"opinion sums to {sum(message.opinion)!r}, not 1")
+    if isinstance(message, OpinionPayload) and abs(math.fsum(message.opinion) - 1.0) > 1e-6:
+        raise ProtocolError(f"opinion sums to {math.fsum(message.opinion)!r}, not 1")
     return message
 
 
@@ -525,13 +525,3 @@ def json_schema(kind: Any) -> dict[str, Any]:
 
 
 # --- seeds ---------------------------------------------------------------------------
-
-
-def derive_seed(run_seed: int, *parts: int | str) -> int:
-    """A 64-bit seed for one consumer of randomness (a robot, the radio, the layout).
-
-    Derived by hashing, so every process computes the same value from the run seed and
-    a name, on any platform and Python version.
-    """
-    text = ":".join([str(run_seed), *map(str, parts)]).encode()
-    return int.from_bytes(hashlib.blake2b(text, digest_size=8).digest(), "little")

@@ -7,13 +7,13 @@ so users can test robots against a beacon that comes and goes.
 
 from __future__ import annotations
 
-import random
 from dataclasses import dataclass, field
 from typing import Annotated, ClassVar
 
 from msgspec import Meta
 
 from wire import names, protocol, settings
+from wire.rng import Stream
 from wire.settings import Flag
 
 SimTime = Annotated[float, Meta(ge=0.0)]
@@ -65,7 +65,7 @@ class BeaconConfig:
 @dataclass
 class Beacon:
     config: BeaconConfig
-    rng: random.Random
+    rng: Stream
     seq: int = 0
     next_due: float = 0.0
     skipped: int = field(default=0)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import random
 import sys
 from collections.abc import Sequence
 
@@ -34,6 +33,7 @@ from plumbing.stop_signals import on_stop_signals
 from plumbing.world_info import fetch_world_info
 from plumbing.zenoh_session import check_config_files, open_from_args
 from wire import names, protocol
+from wire.rng import Stream
 
 log = logging.getLogger("nest_beacon")
 
@@ -69,7 +69,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     identity = names.beacon_identity(name)
     if keyring is not None and not (keyring.holds(identity) and keyring.holds(names.WORLD)):
         parser.exit(2, "nest-beacon: error: the beacon needs its own key and the world's\n")
-    rng = random.Random(protocol.derive_seed(process_config.seed, "beacon", name))
+    rng = Stream.named(process_config.seed, "beacon", name)
     beacon = Beacon(config, rng)
     keys = protocol.Keys(args.run_id, args.root)
     inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)

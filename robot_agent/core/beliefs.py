@@ -11,11 +11,11 @@ controller's ``strategies.Strategy`` for ``--strategy paper``.
 
 from __future__ import annotations
 
-import random
 from typing import TYPE_CHECKING
 
 from robot_agent.core import decision, defence
 from wire import protocol
+from wire.rng import Stream
 
 if TYPE_CHECKING:
     from robot_agent.core.controller import ControllerConfig
@@ -55,15 +55,15 @@ class Beliefs:
         self.hear(robot_id, t, opinion)
         return True
 
-    def next_sites(self, rng: random.Random) -> list[int]:
+    def next_sites(self, rng: Stream) -> list[int]:
         """The pair of the next trip, drawn by weight from the opinion."""
         return list(decision.choose_pair(self.opinion, rng))
 
-    def exploration(self, rng: random.Random) -> float:
+    def exploration(self, rng: Stream) -> float:
         """The paper's robot leaves a site as soon as it has seen it."""
         return 0.0
 
-    def nest_visit(self, arrival: float, rng: random.Random) -> tuple[float, float]:
+    def nest_visit(self, arrival: float, rng: Stream) -> tuple[float, float]:
         """``dwell`` seconds at the nest, pooling what was heard since arriving."""
         return arrival + self._config.dwell, arrival
 
@@ -90,7 +90,7 @@ class Beliefs:
         self.opinion = updated
         return True
 
-    def pool(self, since: float, t: float, rng: random.Random | None = None) -> None:
+    def pool(self, since: float, t: float, rng: Stream | None = None) -> None:
         """Pool with every neighbour heard since ``since``, count the trip, and decide at
         sim time ``t`` if an option reaches the threshold (``decided_site``). Draws
         nothing from ``rng``."""

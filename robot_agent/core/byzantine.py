@@ -22,7 +22,6 @@ Pure: no Zenoh, no clock, no randomness beyond the controller's own RNG.
 from __future__ import annotations
 
 import dataclasses
-import random
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal, cast, get_args
@@ -33,6 +32,7 @@ import numpy as np
 from robot_agent.core import ports, vision, voting
 from robot_agent.core.controller import Controller, ControllerConfig, QualityEstimator
 from wire import protocol
+from wire.rng import Stream
 
 Mode = Literal["liar", "inverted", "silent"]
 MODES: tuple[str, ...] = get_args(Mode)
@@ -99,7 +99,7 @@ def default_liar_site(num_sites: int, best_site: int, seed: int) -> int:
     different sites contradict each other and cancel out under MProdOp); whoever starts
     the run knows the best site, the robot does not."""
     others = [site for site in range(num_sites) if site != best_site]
-    return random.Random(protocol.derive_seed(seed, "byzantine", "liar-site")).choice(others)
+    return Stream.named(seed, "byzantine", "liar-site").choice(others)
 
 
 def resolve_liar_sites(
@@ -196,7 +196,7 @@ def build_controller(
     robot_id: int,
     world: protocol.WorldInfo,
     config: ControllerConfig,
-    rng: random.Random,
+    rng: Stream,
     behaviour: Behaviour | None = None,
 ) -> ports.RobotController:
     """Robot ``robot_id``'s controller: honest when ``behaviour`` is None, else Byzantine."""

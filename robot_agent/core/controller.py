@@ -3,7 +3,7 @@
 Each control period the transport calls ``step(reading, received)`` with what the body
 sensed and the radio messages that arrived, and applies the returned ``Command`` (wheel
 speeds, a camera request, opinion broadcasts). The controller reads no clock (time is
-``reading.t``), draws randomness only from the ``random.Random`` it is given, and does no
+``reading.t``), draws randomness only from the ``wire.rng.Stream`` it is given, and does no
 I/O, so the same code runs over Zenoh, in tests, or on a real robot (``ports.control_step``).
 
 One cycle ("trip"):
@@ -42,8 +42,6 @@ arrival is noted, and broadcasts at the nest are paced by ``broadcast_period``.
 
 from __future__ import annotations
 
-import math
-import random
 from collections.abc import Callable, Sequence
 
 from robot_agent.core import phases, ports, strategies, vision
@@ -52,7 +50,8 @@ from robot_agent.core.motion import STOP, TIME_EPSILON, Motion, along_radius, di
 from robot_agent.core.navigation import Navigator, NavParams
 from robot_agent.core.parking import Parking, parking_rings, parking_slot
 from robot_agent.core.sensing import QualityEstimator, Sensing
-from wire import names, protocol
+from wire import names, numeric, protocol
+from wire.rng import Stream
 
 
 class Controller:
@@ -63,7 +62,7 @@ class Controller:
         robot_id: int,
         world: protocol.WorldInfo,
         config: ControllerConfig,
-        rng: random.Random,
+        rng: Stream,
         *,
         estimate_quality: QualityEstimator = vision.estimate_quality,
         nav_params: NavParams | None = None,
@@ -107,14 +106,14 @@ class Controller:
             control_period=world.dt,
         )
         # Its own stream, so obstacle encounters do not shift the pair choices.
-        self._motion = Motion(Navigator(params, random.Random(rng.getrandbits(64))), config)
+        self._motion = Motion(Navigator(params, rng.fork()), config)
         self._sensing = Sensing(self._motion, config, rng, estimate_quality)
         self._parking = Parking(
             self._motion,
             world,
             config,
             robot_id,
-            [math.atan2(site.y, site.x) for site in sites],
+            [numeric.atan2(site.y, site.x) for site in sites],
         )
         self._beliefs = strategies.make_strategy(self._n, config, robot_id)
         self._rejected = 0

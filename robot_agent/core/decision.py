@@ -18,9 +18,11 @@ from __future__ import annotations
 import math
 import numbers
 import operator
-import random
 from collections.abc import Callable, Sequence
 from typing import Literal, SupportsIndex
+
+from wire import numeric
+from wire.rng import Stream
 
 __all__ = [
     "LOGLINEAR_NEIGHBOUR_WEIGHT",
@@ -187,7 +189,7 @@ def loglinear_pool(
     # Sums of logarithms: products of many small probabilities neither underflow nor
     # overflow. Each opinion is scaled by its peak, which normalisation cancels.
     terms = [
-        (weight, values, math.log(max(values)))
+        (weight, values, numeric.log(max(values)))
         for weight, values in zip(weights, pool, strict=True)
         if weight > 0.0  # a weight of 0 ignores the opinion entirely, zeros included
     ]
@@ -198,12 +200,12 @@ def loglinear_pool(
             if values[index] == 0.0:
                 total = -math.inf
                 break
-            total += weight * (math.log(values[index]) - log_peak)
+            total += weight * (numeric.log(values[index]) - log_peak)
         logs.append(total)
     top = max(logs)
     if top == -math.inf:
         return None
-    return normalised([math.exp(value - top) for value in logs])
+    return normalised([numeric.exp(value - top) for value in logs])
 
 
 PoolingName = Literal["mprodop", "loglinear"]
@@ -215,7 +217,7 @@ POOLING_OPERATORS: dict[str, Callable[[Sequence[Sequence[float]]], list[float] |
 pooling agent's own opinion."""
 
 
-def choose_pair(opinion: Sequence[float], rng: random.Random) -> tuple[int, int]:
+def choose_pair(opinion: Sequence[float], rng: Stream) -> tuple[int, int]:
     """Two distinct options drawn without replacement, with probability = opinion.
 
     If fewer than two options have positive weight, the second is drawn uniformly from
@@ -279,7 +281,7 @@ def _validated_pool(opinions: Sequence[Sequence[float]], operator: str) -> list[
     return pool
 
 
-def _weighted_index(weights: Sequence[float], rng: random.Random) -> int:
+def _weighted_index(weights: Sequence[float], rng: Stream) -> int:
     total = math.fsum(weights)
     target = rng.random() * total
     running = 0.0

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from robot_agent.core import ports
 from robot_agent.core.navigation import Navigator
+from wire import numeric
 
 if TYPE_CHECKING:
     from robot_agent.core.controller import ControllerConfig
@@ -86,13 +87,16 @@ class Motion:
 
 
 def along_radius(x: float, y: float, radius: float) -> tuple[float, float]:
-    """The point at ``radius`` from the centre on the ray through (x, y)."""
-    angle = math.atan2(y, x)
-    return radius * math.cos(angle), radius * math.sin(angle)
+    """The point at ``radius`` from the centre on the ray through (x, y) (on the +x axis
+    for the centre itself)."""
+    length = numeric.hypot(x, y)
+    if length == 0.0:
+        return radius, 0.0
+    return radius * (x / length), radius * (y / length)
 
 
 def distance(reading: ports.BodyReading, point: tuple[float, float]) -> float:
-    return math.hypot(reading.x - point[0], reading.y - point[1])
+    return numeric.hypot(reading.x - point[0], reading.y - point[1])
 
 
 __all__ = ["STOP", "TIME_EPSILON", "Motion", "along_radius", "distance"]

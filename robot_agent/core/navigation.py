@@ -26,10 +26,13 @@ Three things break the deadlocks and dithering that crowds produce:
 from __future__ import annotations
 
 import math
-import random
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
+
+from wire import numeric
+from wire.numeric import wrap_angle
+from wire.rng import Stream
 
 # e-puck sensors ps0..ps7 in the robot's frame (radians, 0 = ahead, counter-clockwise
 # positive). Mirrors world_server.core.physics.EPUCK_PROX_ANGLES, which robot_agent must not
@@ -111,19 +114,21 @@ class NavParams:
         return 2.0 * self.max_speed / self.wheel_base
 
 
-def wrap_angle(angle: float) -> float:
-    """``angle`` in [-pi, pi]."""
-    return math.atan2(math.sin(angle), math.cos(angle))
-
-
 class Navigator:
     """Stateful go-to-goal steering; call one method once per control period."""
 
-    def __init__(self, params: NavParams, rng: random.Random) -> None:
+    def __init__(self, params: NavParams, rng: Stream) -> None:
         self.params = params
         self._rng = rng
-        self._cos = [math.cos(angle) for angle in params.prox_angles]
-        self._sin = [math.sin(angle) for angle in params.prox_angles]
+        directions = [numeric.sincos(angle) for angle in params.prox_angles]
+        self._cos = [cos for _, cos in directions]
+        self._sin = [sin for sin, _ in directions]
+        # The sensors that look ahead: they slow the robot down.
+        self._front = [
+            index
+            for index, angle in enumerate(params.prox_angles)
+            if abs(wrap_angle(angle)) <= params.front_half_angle
+        ]
         self._stuck_window = max(2, round(params.stuck_time / params.control_period))
         self._escape_steps_total = max(1, round(params.escape_time / params.control_period))
         self._goal: tuple[float, float] | None = None
@@ -176,7 +181,7 @@ class Navigator:
             self.reset()
             self._goal = goal
         dx, dy = goal[0] - x, goal[1] - y
-        distance = math.hypot(dx, dy)
+        distance = numeric.hypot(dx, dy)
         if distance <= tolerance:
             self._trail.clear()
             self._escape_steps = 0
@@ -187,9 +192,9 @@ class Navigator:
             bearing = wrap_angle(self._escape_heading - theta)
         else:
             self._pushing = False
-            bearing = wrap_angle(math.atan2(dy, dx) - theta)
+            bearing = wrap_angle(numeric.atan2(dy, dx) - theta)
             if self._is_stuck(x, y):
-                self._start_escape(x, y, theta, math.atan2(dy, dx))
+                self._start_escape(x, y, theta, numeric.atan2(dy, dx))
                 bearing = wrap_angle(self._escape_heading - theta)
         self._trail.append((x, y))
 
@@ -198,7 +203,7 @@ class Navigator:
         cap = self.params.max_speed * min(1.0, distance / self.params.slow_radius)
         cap = max(cap, self.params.min_speed)
         cap = min(cap, distance / self.params.control_period)
-        forward = cap * max(0.0, math.cos(heading_error))
+        forward = cap * max(0.0, numeric.cos(heading_error))
         if not self._pushing:
             forward *= 1.0 - self._front_reading(proximity)
         left, right = self._wheels(forward, self._turn_rate(heading_error))
@@ -231,9 +236,13 @@ class Navigator:
         # Where the obstacles are, in the world frame, averaged over the last few calls: the
         # 8 rays leave gaps, so as the robot turns the raw direction jumps from ray to ray
         # and would make it swing back and forth on the spot.
-        ahead = sum(r * c for r, c in zip(proximity, self._cos, strict=True))
-        left = sum(r * s for r, s in zip(proximity, self._sin, strict=True))
-        cos_theta, sin_theta = math.cos(theta), math.sin(theta)
+        # Summed one by one, in sensor order: Python's sum() of floats rounds otherwise
+        # since 3.12, and a port adds in this order too.
+        ahead = left = 0.0
+        for reading, cos, sin in zip(proximity, self._cos, self._sin, strict=True):
+            ahead += reading * cos
+            left += reading * sin
+        sin_theta, cos_theta = numeric.sincos(theta)
         memory = self.params.obstacle_memory
         self._obstacle = (
             memory * self._obstacle[0] + (1 - memory) * (ahead * cos_theta - left * sin_theta),
@@ -241,7 +250,7 @@ class Navigator:
         )
         if self._obstacle == (0.0, 0.0):
             return bearing
-        obstacle = wrap_angle(math.atan2(self._obstacle[1], self._obstacle[0]) - theta)
+        obstacle = wrap_angle(numeric.atan2(self._obstacle[1], self._obstacle[0]) - theta)
         goal_vs_obstacle = wrap_angle(bearing - obstacle)
         if abs(goal_vs_obstacle) >= math.pi / 2:
             return bearing  # the goal lies away from the obstacle: nothing in the way
@@ -256,13 +265,7 @@ class Navigator:
         return wrap_angle(obstacle + self._avoid_side * (math.pi / 2 + push))
 
     def _front_reading(self, proximity: Sequence[float]) -> float:
-        limit = self.params.front_half_angle
-        front = [
-            r
-            for r, angle in zip(proximity, self.params.prox_angles, strict=True)
-            if abs(wrap_angle(angle)) <= limit
-        ]
-        return max(front, default=0.0)
+        return max([proximity[index] for index in self._front], default=0.0)
 
     def _turn_rate(self, error: float) -> float:
         rate = self.params.turn_gain * abs(error)
@@ -284,11 +287,11 @@ class Navigator:
         if len(self._trail) < self._stuck_window:
             return False
         old_x, old_y = self._trail[0]
-        return math.hypot(x - old_x, y - old_y) < self.params.stuck_distance
+        return numeric.hypot(x - old_x, y - old_y) < self.params.stuck_distance
 
     def _start_escape(self, x: float, y: float, theta: float, goal_heading: float) -> None:
         origin = self._escape_origin
-        if origin is not None and math.hypot(x - origin[0], y - origin[1]) < (
+        if origin is not None and numeric.hypot(x - origin[0], y - origin[1]) < (
             self.params.robot_radius
         ):
             self._fruitless_escapes += 1

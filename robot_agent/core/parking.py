@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 from robot_agent.core import ports
 from robot_agent.core.motion import STOP, TIME_EPSILON, Motion, along_radius, distance
-from wire import protocol
+from wire import numeric, protocol
 
 if TYPE_CHECKING:
     from robot_agent.core.controller import ControllerConfig
@@ -107,7 +107,7 @@ class Parking:
         for ``stall_timeout`` seconds, then try the slot again with a fresh leg."""
         self.retries += 1
         radius = max(
-            self._inner_radius, math.hypot(reading.x, reading.y) - self._config.near_distance
+            self._inner_radius, numeric.hypot(reading.x, reading.y) - self._config.near_distance
         )
         self._backoff = (
             along_radius(reading.x, reading.y, radius),
@@ -136,7 +136,7 @@ class ParkingSlots:
         robot_radius: float,
         config: ControllerConfig,
     ) -> None:
-        self._site_angles = [math.atan2(y, x) for x, y in site_xy]
+        self._site_angles = [numeric.atan2(y, x) for x, y in site_xy]
         self._geometry = {
             "arena_radius": arena_radius,
             "inner_radius": inner_radius(nest_radius, robot_radius),
@@ -204,11 +204,13 @@ def _slot_in_rings(
     remaining = robot_id % max(1, sum(len(slots) for _, slots in rings))
     for radius, slots in rings:
         if remaining < len(slots):
-            return radius * math.cos(slots[remaining]), radius * math.sin(slots[remaining])
+            sin, cos = numeric.sincos(slots[remaining])
+            return radius * cos, radius * sin
         remaining -= len(slots)
     # No ring has a single slot (an arena too small to park in): the wall by the site.
     radius = rings[0][0]
-    return radius * math.cos(home), radius * math.sin(home)
+    sin, cos = numeric.sincos(home)
+    return radius * cos, radius * sin
 
 
 def parking_rings(

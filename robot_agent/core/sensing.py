@@ -11,7 +11,6 @@ site up.
 from __future__ import annotations
 
 import math
-import random
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -20,6 +19,8 @@ import numpy as np
 
 from robot_agent.core import ports
 from robot_agent.core.motion import STOP, TIME_EPSILON, Motion
+from wire import numeric
+from wire.rng import Stream
 
 if TYPE_CHECKING:
     from robot_agent.core.controller import ControllerConfig
@@ -43,7 +44,7 @@ class Sensing:
         self,
         motion: Motion,
         config: ControllerConfig,
-        rng: random.Random,
+        rng: Stream,
         estimate_quality: QualityEstimator,
     ) -> None:
         self._motion = motion
@@ -101,7 +102,7 @@ class Sensing:
 
     def _site_heading(self, reading: ports.BodyReading) -> float:
         """Facing the site's panel from where the robot stands (radially at the viewpoint)."""
-        return math.atan2(self._site[1] - reading.y, self._site[0] - reading.x)
+        return numeric.atan2(self._site[1] - reading.y, self._site[0] - reading.x)
 
 
 __all__ = ["Look", "QualityEstimator", "Sensing"]

@@ -17,12 +17,12 @@ Pure, like everything in ``robot_agent/core``.
 
 from __future__ import annotations
 
-import random
 from typing import TYPE_CHECKING, Protocol
 
 from robot_agent.core.beliefs import Beliefs
 from robot_agent.core.voting import VoteBeliefs
 from wire import protocol
+from wire.rng import Stream
 
 if TYPE_CHECKING:
     from robot_agent.core.controller_config import ControllerConfig
@@ -53,7 +53,7 @@ class Strategy(Protocol):
     @property
     def decision_trips(self) -> int | None: ...
 
-    def next_sites(self, rng: random.Random) -> list[int]:
+    def next_sites(self, rng: Stream) -> list[int]:
         """The sites the next trip visits (one or two), as drawn."""
         ...
 
@@ -61,11 +61,11 @@ class Strategy(Protocol):
         """The trip's sensed qualities, in visiting order; whether the opinion changed."""
         ...
 
-    def exploration(self, rng: random.Random) -> float:
+    def exploration(self, rng: Stream) -> float:
         """Sim seconds to stay sensing a site once there (0: until its quality is seen)."""
         ...
 
-    def nest_visit(self, arrival: float, rng: random.Random) -> tuple[float, float]:
+    def nest_visit(self, arrival: float, rng: Stream) -> tuple[float, float]:
         """For a robot at the nest since ``arrival``: when it pools, and from when what it
         heard counts."""
         ...
@@ -78,7 +78,7 @@ class Strategy(Protocol):
         """What the robot broadcasts at the nest."""
         ...
 
-    def pool(self, since: float, t: float, rng: random.Random) -> None:
+    def pool(self, since: float, t: float, rng: Stream) -> None:
         """Combine with what was heard since ``since``, count the trip, decide at ``t``."""
         ...
 

@@ -11,6 +11,10 @@ Of the coloured regions in view, only the one the robot faces counts: the region
 containing the image centre, or failing that the nearest one that reaches the central
 half of the image. A region must also be tall, as a panel seen from sensing distance is;
 far-away panels across the arena and slivers above an occluding robot give ``None``.
+
+Every step is integer arithmetic on the pixels until the one division at the end, so the
+estimate is the same bits on every CPU and in a port (docs/camera.md states each step;
+OpenCV finds the connected regions, which is exact).
 """
 
 from __future__ import annotations
@@ -29,13 +33,12 @@ _JPEG_SOF_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
 # JPEG markers with no length field.
 _JPEG_STANDALONE = frozenset(range(0xD0, 0xD8)) | {0x01}
 
-# (R + B) / 2 - G on 0..255 after a 3x3 blur: greys give 0, a panel's inside 127 (dimmed by
-# lighting to 80 or so), a grey pixel beside a panel edge at most a third of that.
+# (R + B) / 2 - G on 0..255, averaged over a pixel's 3x3 neighbourhood: greys give 0, a
+# panel's inside 127.5 (dimmed by lighting to 80 or so), a grey pixel beside a panel edge
+# at most a third of that.
 SITE_CHROMA_THRESHOLD = 60.0
 MIN_REGION_HEIGHT_FRACTION = 0.3  # of the image height; a sensed panel spans most of it
 MIN_REGION_PIXELS = 12
-_CHROMA_WEIGHTS = np.array([[0.5, -1.0, 0.5]])  # BGR -> (R + B) / 2 - G
-_ERODE_KERNEL = np.ones((3, 3), np.uint8)
 
 
 def decode_frame(
@@ -101,35 +104,64 @@ def estimate_quality(
         raise ValueError(f"frame must be H x W x 3 with H, W >= 3, got shape {frame.shape}")
     height, width = frame.shape[:2]
 
-    # Classify on a 3x3 box blur so pixel noise does not speckle the mask, then erode (the
-    # image border counting as outside) so the pixels kept are inside a panel, one pixel
-    # clear of its edges, where the blur mixes in the grey around it.
-    smooth = cv2.blur(frame, (3, 3))
-    # (R + B) / 2 - G per pixel, saturated to 0..255 (negative values cannot pass anyway).
-    chroma = cv2.transform(smooth, _CHROMA_WEIGHTS)
-    _, mask = cv2.threshold(chroma, chroma_threshold, 1, cv2.THRESH_BINARY)
-    mask = cv2.erode(mask, _ERODE_KERNEL, borderType=cv2.BORDER_CONSTANT, borderValue=0)
-    _, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(
+    # Classify on 3x3 neighbourhood sums so pixel noise does not speckle the mask, then
+    # erode (the image border counting as outside) so the pixels kept are inside a panel,
+    # one pixel clear of its edges, where the neighbourhood mixes in the grey around it.
+    sums = neighbourhood_sums(frame)
+    blue, green, red = sums[..., 0], sums[..., 1], sums[..., 2]
+    # The neighbourhood's mean (R + B) / 2 - G above the threshold, times 18 on both sides.
+    mask = (red + blue - 2 * green) > 18.0 * chroma_threshold
+    mask = _eroded(mask).view(np.uint8)
+    count, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(
         mask, 4, cv2.CV_32S, cv2.CCL_DEFAULT
     )
+    # Each region's first pixel in row-major order: the tie-break between equally near ones.
+    values, first_pixels = np.unique(labels, return_index=True)
+    first = np.zeros(count, dtype=np.int64)
+    first[values] = first_pixels
 
-    region = _facing_region(stats, width, height, min_height_fraction)
+    region = _facing_region(stats, first, width, height, min_height_fraction)
     if region is None:
         return None
-    region_mask = (labels == region).view(np.uint8)
-    blue_mean, _, red_mean, _ = cv2.mean(frame, mask=region_mask)
-    if red_mean + blue_mean <= 0.0:
+    inside = labels == region
+    red_sum = int(frame[..., 2][inside].sum(dtype=np.int64))
+    blue_sum = int(frame[..., 0][inside].sum(dtype=np.int64))
+    if red_sum + blue_sum == 0:
         return None
-    return red_mean / (red_mean + blue_mean)
+    return red_sum / (red_sum + blue_sum)
+
+
+def neighbourhood_sums(frame: np.ndarray) -> np.ndarray:
+    """Per pixel and channel, the sum of the 3x3 neighbourhood (int32), the image mirrored
+    at its border without repeating the edge row or column (OpenCV's BORDER_REFLECT_101)."""
+    height, width = frame.shape[:2]
+    padded = np.pad(frame.astype(np.int32), ((1, 1), (1, 1), (0, 0)), mode="reflect")
+    sums = np.zeros((height, width, frame.shape[2]), dtype=np.int32)
+    for dy in range(3):
+        for dx in range(3):
+            sums += padded[dy : dy + height, dx : dx + width]
+    return sums
+
+
+def _eroded(mask: np.ndarray) -> np.ndarray:
+    """A pixel stays set when its whole 3x3 neighbourhood is set; outside the image is unset."""
+    height, width = mask.shape
+    padded = np.pad(mask, 1, mode="constant", constant_values=False)
+    kept = np.ones((height, width), dtype=bool)
+    for dy in range(3):
+        for dx in range(3):
+            kept &= padded[dy : dy + height, dx : dx + width]
+    return kept
 
 
 def _facing_region(
-    stats: np.ndarray, width: int, height: int, min_height_fraction: float
+    stats: np.ndarray, first: np.ndarray, width: int, height: int, min_height_fraction: float
 ) -> int | None:
-    """Label of the coloured region the robot faces, from connectedComponentsWithStats."""
+    """Label of the coloured region the robot faces, from connectedComponentsWithStats
+    (``first``: each label's first pixel in row-major order, which breaks ties)."""
     centre_x, centre_y = width / 2, height / 2
     band_left, band_right = width / 4, 3 * width / 4
-    best: tuple[float, float, int] | None = None
+    best: tuple[float, float, int, int] | None = None
     for label in range(1, len(stats)):
         left, top, region_width, region_height, area = (int(v) for v in stats[label])
         right, bottom = left + region_width, top + region_height
@@ -139,10 +171,10 @@ def _facing_region(
             continue  # at the image edge: a neighbouring site, not the one faced
         dx = max(left - centre_x, centre_x - right, 0.0)
         dy = max(top - centre_y, centre_y - bottom, 0.0)
-        candidate = (dx, dy, label)
+        candidate = (dx, dy, int(first[label]), label)
         if best is None or candidate < best:
             best = candidate
-    return None if best is None else best[2]
+    return None if best is None else best[3]
 
 
 def _header_size(data: bytes) -> tuple[int, int]:

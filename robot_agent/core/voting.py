@@ -43,12 +43,12 @@ voter's and comparison's neighbour, a majority's tie).
 from __future__ import annotations
 
 import dataclasses
-import random
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
 from wire import protocol
+from wire.rng import Stream
 
 if TYPE_CHECKING:
     from robot_agent.core.controller_config import ControllerConfig
@@ -81,7 +81,7 @@ def update(
     site: int,
     quality: float | None,
     votes: Sequence[Vote],
-    rng: random.Random,
+    rng: Stream,
 ) -> int:
     """The site a robot favours after its decision rule, from the site it favours, its
     estimate of that site's quality (None: none yet) and its neighbours' ``votes``. No
@@ -99,7 +99,7 @@ def update(
     raise ValueError(f"{strategy!r} is not a voting strategy; use one of {', '.join(VOTING)}")
 
 
-def majority(site: int, neighbours: Sequence[int], rng: random.Random) -> int:
+def majority(site: int, neighbours: Sequence[int], rng: Stream) -> int:
     """The site most of ``site`` and ``neighbours`` name; a tie: one of the tied at random
     (drawn only when there is a tie)."""
     counts: dict[int, int] = {}
@@ -137,7 +137,7 @@ class VoteBeliefs:
         """The site favoured, as an opinion: certain of it (the status reports this)."""
         return [1.0 if index == self.site else 0.0 for index in range(self._num_sites)]
 
-    def next_sites(self, rng: random.Random) -> list[int]:
+    def next_sites(self, rng: Stream) -> list[int]:
         """Exploration visits the one site the robot favours."""
         return [self.site]
 
@@ -148,11 +148,11 @@ class VoteBeliefs:
                 self.quality = quality
         return False
 
-    def exploration(self, rng: random.Random) -> float:
+    def exploration(self, rng: Stream) -> float:
         """Sim seconds to sense the site: exponential with mean sigma."""
         return self._config.exploration * rng.expovariate(1.0)
 
-    def nest_visit(self, arrival: float, rng: random.Random) -> tuple[float, float]:
+    def nest_visit(self, arrival: float, rng: Stream) -> tuple[float, float]:
         """When dissemination ends and when listening starts, for a robot at the nest
         since ``arrival``: exponential with mean rho-hat * g (DC: g), then ``listen``."""
         if self._strategy == "dc":
@@ -181,7 +181,7 @@ class VoteBeliefs:
             quality=0.0 if self.quality is None else self.quality,
         )
 
-    def pool(self, since: float, t: float, rng: random.Random) -> None:
+    def pool(self, since: float, t: float, rng: Stream) -> None:
         """The decision rule on the last G votes heard since ``since``; count the trip, and
         decide at sim time ``t`` once the site has settled."""
         window = sorted(

@@ -26,7 +26,6 @@ import argparse
 import json
 import logging
 import math
-import random
 import secrets
 import selectors
 import signal
@@ -44,6 +43,7 @@ from robot_agent.core.endpoint import InputKind, Outgoing, OutputKind, RobotEndp
 from robot_agent.link.client import LinkClient, Lost, Received, Welcomed
 from robot_agent.link.transport import LinkClosedError, Transport, open_transport
 from wire import auth, link, names, protocol, settings
+from wire.rng import Stream
 
 log = logging.getLogger("robot_agent.link")
 
@@ -260,7 +260,7 @@ class LinkRobot:
         welcome = self.client.welcome
         assert welcome is not None
         config = settings.decode(bytes(welcome.controller), ControllerConfig)
-        rng = random.Random(protocol.derive_seed(info.seed, "robot", self.robot))
+        rng = Stream.named(info.seed, "robot", self.robot)
         controller = byzantine.build_controller(self.robot, info, config, rng)
         log.info(
             "robot %d: %d sites, clock %s, seed %d: running",

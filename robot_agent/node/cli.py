@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import random
 import sys
 import threading
 import time
@@ -43,6 +42,7 @@ from robot_agent.node.robot_node import (
     serve,
 )
 from wire import auth, names, protocol
+from wire.rng import Stream
 
 log = logging.getLogger("robot_agent")
 
@@ -203,7 +203,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 robot = ask_for_id(session, keys, args.info_timeout, keyring)
             identity = names.robot_identity(robot)
             info = fetch_world_info(session, keys, args.info_timeout, keyring, identity)
-            rng = random.Random(protocol.derive_seed(agent.seed, "robot", robot))
+            rng = Stream.named(agent.seed, "robot", robot)
             try:
                 controller = byzantine.build_controller(
                     robot, info, config, rng, misbehaving.get(robot)

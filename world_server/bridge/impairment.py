@@ -12,11 +12,10 @@ from __future__ import annotations
 
 import heapq
 import itertools
-import random
 from collections.abc import Hashable
 from dataclasses import dataclass, field
 
-from wire import protocol
+from wire.rng import Stream
 
 MAX_HELD = 10_000  # frames one direction holds at most (past that one is lost, counted)
 
@@ -41,7 +40,7 @@ class ImpairedDirection:
     """One direction of one link: frames in, frames out when their time comes."""
 
     impairment: LinkImpairment
-    rng: random.Random
+    rng: Stream
     held: list[tuple[float, int, bytes, Hashable]] = field(default_factory=list)
     last_release: float = 0.0
     dropped: int = 0
@@ -51,7 +50,7 @@ class ImpairedDirection:
     def seeded(
         cls, impairment: LinkImpairment, seed: int, robot: int, direction: str
     ) -> ImpairedDirection:
-        return cls(impairment, random.Random(protocol.derive_seed(seed, "link", robot, direction)))
+        return cls(impairment, Stream.named(seed, "link", robot, direction))
 
     def put(self, frame: bytes, where: Hashable, now: float) -> bool:
         """Hold a frame; False if it is lost."""

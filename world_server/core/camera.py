@@ -15,6 +15,9 @@ Pure numpy/OpenCV, no Zenoh. The scene (see ``docs/camera.md``):
 Rendering casts one ray per image column (a 2-D ray cast is exact here because every
 object is a vertical extrusion), then fills each column's rows from the hit's depth with
 perspective. The image is built as a small label map and coloured with one palette lookup.
+All geometry is plain arithmetic on the heading's sine and cosine from the portable kernel
+(``wire.numeric``), and the noise comes from the run's generator (``wire.rng``), so a frame
+is the same on every CPU.
 """
 
 from __future__ import annotations
@@ -28,7 +31,8 @@ import cv2
 import numpy as np
 from msgspec import Meta
 
-from wire import protocol, settings
+from wire import numeric, protocol, settings
+from wire.rng import Stream
 from wire.settings import Flag
 from world_server.core.body import EPUCK
 from world_server.core.layout import Layout
@@ -108,11 +112,10 @@ class CameraNoise:
         settings.check(self)
 
 
-def _lit_panel_colours(
-    qualities: np.ndarray, lighting: float, rng: np.random.Generator
-) -> np.ndarray:
-    """Each site's panel colour (BGR, uint8) after its fixed lighting variation."""
-    brightness, balance = rng.uniform(-1.0, 1.0, size=(2, len(qualities)))
+def _lit_panel_colours(qualities: np.ndarray, lighting: float, rng: Stream) -> np.ndarray:
+    """Each site's panel colour (BGR, uint8) after its fixed lighting variation: every
+    site's brightness draw, then every site's balance draw, each uniform on (-1, 1)."""
+    brightness, balance = (-1.0 + 2.0 * rng.random_array(2 * len(qualities))).reshape(2, -1)
     gain = 1.0 + lighting * brightness
     red = 255.0 * qualities * gain * (1.0 + lighting * balance)
     blue = 255.0 * (1.0 - qualities) * gain * (1.0 - lighting * balance)
@@ -145,31 +148,33 @@ class CameraRenderer:
         self.camera_forward = robot_radius if camera_forward is None else camera_forward
         self._arena_radius = layout.arena_radius
         width, height = spec.width, spec.height
-        self._focal = (width / 2) / math.tan(spec.fov / 2)  # pixels, same both ways
-        self._cos_half_fov = math.cos(spec.fov / 2)
-        self._sin_half_fov = math.sin(spec.fov / 2)
-        # Column c's ray leaves at this angle to the heading (left of the image = +angle).
+        self._sin_half_fov, self._cos_half_fov = numeric.sincos(spec.fov / 2)
+        self._focal = (width / 2) * self._cos_half_fov / self._sin_half_fov  # pixels
+        # Column c's ray in the camera's frame (x ahead, y to the left): (focal, offset)
+        # made a unit vector, so no angle is ever taken.
         column_offsets = width / 2 - (np.arange(width) + 0.5)
-        self._column_angles = np.arctan(column_offsets / self._focal)
-        self._column_cos = np.cos(self._column_angles)
+        length = np.sqrt(self._focal * self._focal + column_offsets * column_offsets)
+        self._column_cos = self._focal / length
+        self._column_sin = column_offsets / length
         self._row_centres = (np.arange(height) + 0.5)[:, None]
 
-        # Sites sorted by wall angle, for a binary search of the hit point's angle.
+        # Each site's direction from the centre and the cosine of its panel's half width:
+        # a wall point is on the panel when the cosine of its angle to the site is larger.
         sites = layout.sites
-        angles = np.array([site.angle % (2 * math.pi) for site in sites])
-        order = np.argsort(angles)
-        self._site_angles = angles[order]
-        self._site_half_widths = np.array([sites[i].half_width for i in order])
-        self._site_labels = SITE_LABEL0 + order
+        directions = [numeric.sincos(site.angle) for site in sites]
+        self._site_cos = np.array([cos for _, cos in directions])
+        self._site_sin = np.array([sin for sin, _ in directions])
+        self._site_min_cos = np.array([numeric.cos(site.half_width) for site in sites])
+        self._site_labels = SITE_LABEL0 + np.arange(len(sites))
         qualities = np.array([site.quality for site in sites])
         for quality in qualities:
             site_colour_bgr(float(quality))  # validates every quality once
-        lighting_rng = np.random.default_rng(protocol.derive_seed(seed, "camera", "lighting"))
+        lighting_rng = Stream.named(seed, "camera", "lighting")
         panels = _lit_panel_colours(qualities, noise.lighting, lighting_rng)
         fixed = np.array([BACKGROUND_BGR, FLOOR_BGR, WALL_BGR, ROBOT_BGR], dtype=np.uint8)
         self._palette = np.concatenate([fixed, panels])
         # Pixel noise when render() gets no rng: a deterministic stream of this renderer's own.
-        self._default_rng = np.random.default_rng(protocol.derive_seed(seed, "camera", "pixels"))
+        self._default_rng = Stream.named(seed, "camera", "pixels")
 
     def panel_colour_bgr(self, site_id: int) -> tuple[int, int, int]:
         """The colour site ``site_id``'s panel is drawn with, lighting variation included."""
@@ -182,7 +187,7 @@ class CameraRenderer:
         y: float,
         theta: float,
         others: Sequence[tuple[float, float]] = (),
-        rng: np.random.Generator | None = None,
+        rng: Stream | None = None,
     ) -> np.ndarray:
         """The H x W x 3 uint8 BGR frame seen by a robot at (x, y) heading ``theta``.
 
@@ -193,16 +198,19 @@ class CameraRenderer:
         """
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(theta)):
             raise ValueError(f"camera pose must be finite, got ({x}, {y}, {theta})")
-        cam_x, cam_y = self._camera_position(x, y, theta)
-        ray_angles = theta + self._column_angles
-        dir_x, dir_y = np.cos(ray_angles), np.sin(ray_angles)
+        heading = numeric.sincos(theta)
+        sin_theta, cos_theta = heading
+        cam_x, cam_y = self._camera_position(x, y, heading)
+        dir_x = cos_theta * self._column_cos - sin_theta * self._column_sin
+        dir_y = sin_theta * self._column_cos + cos_theta * self._column_sin
 
         # Wall: the camera is inside the circle, so each ray leaves it at the far root.
         along = cam_x * dir_x + cam_y * dir_y
-        inside = cam_x * cam_x + cam_y * cam_y - self._arena_radius**2
+        inside = cam_x * cam_x + cam_y * cam_y - self._arena_radius * self._arena_radius
         wall_distance = -along + np.sqrt(np.maximum(along * along - inside, 0.0))
-        hit_angles = np.arctan2(cam_y + wall_distance * dir_y, cam_x + wall_distance * dir_x)
-        wall_labels = self._wall_labels(hit_angles)
+        wall_labels = self._wall_labels(
+            cam_x + wall_distance * dir_x, cam_y + wall_distance * dir_y
+        )
         wall_depth = np.maximum(wall_distance * self._column_cos, NEAR_CLIP)
 
         rows = self._row_centres
@@ -214,7 +222,7 @@ class CameraRenderer:
         )
 
         robot_depth = self._nearest_robot_depth(
-            others, own=(x, y), camera=(cam_x, cam_y), theta=theta, directions=(dir_x, dir_y)
+            others, own=(x, y), camera=(cam_x, cam_y), heading=heading, directions=(dir_x, dir_y)
         )
         if robot_depth is not None:
             robot_top = horizon - self._focal * (ROBOT_HEIGHT - CAMERA_HEIGHT) / robot_depth
@@ -237,27 +245,29 @@ class CameraRenderer:
 
     # --- helpers ---------------------------------------------------------------------
 
-    def _camera_position(self, x: float, y: float, theta: float) -> tuple[float, float]:
-        """The lens position, kept strictly inside the arena so every ray meets the wall."""
-        cam_x = x + self.camera_forward * math.cos(theta)
-        cam_y = y + self.camera_forward * math.sin(theta)
-        distance = math.hypot(cam_x, cam_y)
+    def _camera_position(
+        self, x: float, y: float, heading: tuple[float, float]
+    ) -> tuple[float, float]:
+        """The lens position, kept strictly inside the arena so every ray meets the wall
+        (``heading``: the sine and cosine of the robot's heading)."""
+        sin_theta, cos_theta = heading
+        cam_x = x + self.camera_forward * cos_theta
+        cam_y = y + self.camera_forward * sin_theta
+        distance = numeric.hypot(cam_x, cam_y)
         limit = self._arena_radius - INSIDE_MARGIN
         if distance > limit:
             cam_x, cam_y = cam_x * limit / distance, cam_y * limit / distance
         return cam_x, cam_y
 
-    def _wall_labels(self, hit_angles: np.ndarray) -> np.ndarray:
-        """Per column: the label of the site panel hit, or plain wall."""
-        angles = np.mod(hit_angles, 2 * math.pi)
-        count = len(self._site_angles)
-        after = np.searchsorted(self._site_angles, angles) % count
-        before = (after - 1) % count
-        gap_after = np.abs(_wrap(angles - self._site_angles[after]))
-        gap_before = np.abs(_wrap(angles - self._site_angles[before]))
-        nearest = np.where(gap_after < gap_before, after, before)
-        gap = np.minimum(gap_after, gap_before)
-        on_panel = gap <= self._site_half_widths[nearest]
+    def _wall_labels(self, hit_x: np.ndarray, hit_y: np.ndarray) -> np.ndarray:
+        """Per column: the label of the site panel the wall point (hit_x, hit_y) is on, or
+        plain wall. The nearest site is the one whose direction has the largest cosine to
+        the point's (the first of equals)."""
+        length = np.sqrt(hit_x * hit_x + hit_y * hit_y)
+        unit_x, unit_y = (hit_x / length)[:, None], (hit_y / length)[:, None]
+        cosines = unit_x * self._site_cos + unit_y * self._site_sin  # columns x sites
+        nearest = np.argmax(cosines, axis=1)
+        on_panel = cosines[np.arange(len(nearest)), nearest] >= self._site_min_cos[nearest]
         return np.where(on_panel, self._site_labels[nearest], _WALL)
 
     def _nearest_robot_depth(
@@ -266,7 +276,7 @@ class CameraRenderer:
         *,
         own: tuple[float, float],
         camera: tuple[float, float],
-        theta: float,
+        heading: tuple[float, float],
         directions: tuple[np.ndarray, np.ndarray],
     ) -> np.ndarray | None:
         """Per column: depth of the nearest robot body hit (inf where none), or None."""
@@ -280,8 +290,9 @@ class CameraRenderer:
         # no farther than a radius outside the view cone's edges (a cheap superset; the
         # exact ray test follows).
         rel_x, rel_y = centres[:, 0] - cam_x, centres[:, 1] - cam_y
-        ahead = rel_x * math.cos(theta) + rel_y * math.sin(theta)
-        across = np.abs(rel_y * math.cos(theta) - rel_x * math.sin(theta))
+        sin_theta, cos_theta = heading
+        ahead = rel_x * cos_theta + rel_y * sin_theta
+        across = np.abs(rel_y * cos_theta - rel_x * sin_theta)
         beyond_edge = across * self._cos_half_fov - ahead * self._sin_half_fov
         visible = (ahead > -self.robot_radius) & (beyond_edge <= self.robot_radius)
         centres = centres[not_self & visible]
@@ -290,7 +301,7 @@ class CameraRenderer:
         lens_x = (cam_x - centres[:, 0])[:, None]
         lens_y = (cam_y - centres[:, 1])[:, None]
         along = lens_x * dir_x + lens_y * dir_y  # bodies x columns
-        outside = lens_x * lens_x + lens_y * lens_y - self.robot_radius**2
+        outside = lens_x * lens_x + lens_y * lens_y - self.robot_radius * self.robot_radius
         discriminant = along * along - outside
         entry = -along - np.sqrt(np.maximum(discriminant, 0.0))
         hit = (discriminant >= 0.0) & (entry > 0.0)
@@ -302,12 +313,9 @@ class CameraRenderer:
         depths: np.ndarray = np.maximum(nearest * self._column_cos, NEAR_CLIP)
         return depths
 
-    def _add_pixel_noise(self, image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        noise = rng.standard_normal(image.shape, dtype=np.float32)
-        noisy = image.astype(np.float32) + noise * np.float32(self.noise.pixel_sigma)
+    def _add_pixel_noise(self, image: np.ndarray, rng: Stream) -> np.ndarray:
+        """Every channel of every pixel, in row-major order, plus sigma times one normal
+        draw; rounded half to even and clipped to 0..255."""
+        noise = rng.normal_array(image.size).reshape(image.shape)
+        noisy = image.astype(np.float64) + self.noise.pixel_sigma * noise
         return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
-
-
-def _wrap(angle: np.ndarray) -> np.ndarray:
-    """Angles folded into [-pi, pi)."""
-    return (angle + math.pi) % (2 * math.pi) - math.pi

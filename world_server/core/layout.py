@@ -8,10 +8,10 @@ seeded permutation, so the best site's id differs from run to run.
 from __future__ import annotations
 
 import math
-import random
 from dataclasses import dataclass
 
-from wire import protocol
+from wire import numeric, protocol
+from wire.rng import Stream
 from world_server.core.body import EPUCK
 
 BASE_ARENA_RADIUS = 0.75  # the paper's 1.5 m disc
@@ -59,8 +59,9 @@ class Layout:
         (for tests and benchmarks of imperfect poses)."""
         angle = self.site(site_id).angle
         radius = self.arena_radius - distance
-        x = radius * math.cos(angle) - sideways * math.sin(angle)
-        y = radius * math.sin(angle) + sideways * math.cos(angle)
+        sin, cos = numeric.sincos(angle)
+        x = radius * cos - sideways * sin
+        y = radius * sin + sideways * cos
         return x, y, angle + heading_error
 
     def info_sites(self) -> list[protocol.Site]:
@@ -93,7 +94,7 @@ def make_layout(
         raise ValueError(f"need at least 1 robot, got {num_robots}")
     arena_radius = arena_radius_for(num_robots, num_sites)
     nest_radius = nest_radius_for(num_robots)
-    rng = random.Random(protocol.derive_seed(seed, "layout"))
+    rng = Stream.named(seed, "layout")
     ranks = list(range(1, num_sites + 1))
     rng.shuffle(ranks)
     spacing = 2 * math.pi / num_sites
@@ -102,8 +103,8 @@ def make_layout(
         SiteSpec(
             id=index,
             angle=index * spacing,
-            x=arena_radius * math.cos(index * spacing),
-            y=arena_radius * math.sin(index * spacing),
+            x=arena_radius * numeric.cos(index * spacing),
+            y=arena_radius * numeric.sin(index * spacing),
             half_width=half_width,
             quality=quality_of_rank(rank, num_sites),
             rank=rank,
@@ -131,6 +132,7 @@ def start_poses(
             if len(poses) == num_robots:
                 break
             angle = offset + slot * 2 * math.pi / slots
-            poses.append((radius * math.cos(angle), radius * math.sin(angle), angle))
+            sin, cos = numeric.sincos(angle)
+            poses.append((radius * cos, radius * sin, angle))
         ring += 1
     return tuple(poses)

@@ -11,7 +11,11 @@ compare against.
 
 Determinism: bodies are added in call order and pymunk iterates them in that order; every
 public result is keyed or sorted by robot id. The same calls in the same order give
-bit-identical poses on the same machine and build. No clock and no randomness here.
+bit-identical poses on any x86-64 CPU with the same pymunk build: every sine and cosine
+here comes from the portable kernel (``wire.numeric``), every sum is written out in a
+fixed order, and inside Chipmunk a body's angle reaches nothing but the rotation of its
+shapes' offsets, which are zero for these centred discs (so libm's CPU-dependent cos and
+sin, which Chipmunk calls, cannot move a robot). No clock and no randomness here.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import numpy as np
 import pymunk
 from pymunk import batch
 
+from wire import numeric
 from world_server.core.body import EPUCK, EpuckSpec
 
 ROBOT_MASS = 0.15  # kg, about an e-puck
@@ -33,6 +38,10 @@ MIN_WALL_SEGMENTS = 64
 # into whatever it meets before the solver pushes back: 2.6 mm into a wall at 0.13 m/s,
 # 5.2 mm between two robots meeting head-on. Shorter substeps cost time linearly.
 MAX_SUBSTEP = 0.02  # seconds
+# A body's angle accumulates its turns; past this many radians it is wrapped back into
+# [-pi, pi], which keeps it inside the portable kernel's range and its precision high.
+ANGLE_BOUND = 64 * math.pi
+ALL_PAIRS_UP_TO = 48  # robots: up to here proximity compares every pair, past it a grid
 
 # Row layouts of pymunk's batch buffers: x, y, angle, vx, vy, omega / fx, fy, torque.
 _STATE_FIELDS = (
@@ -54,7 +63,7 @@ def wall_segment_count(arena_radius: float, sag: float = WALL_SAG) -> int:
 
 def wrap_angle(angle: float) -> float:
     """``angle`` in [-pi, pi] (a helper for callers and tests)."""
-    return math.atan2(math.sin(angle), math.cos(angle))
+    return numeric.wrap_angle(angle)
 
 
 class Physics:
@@ -95,7 +104,9 @@ class Physics:
             self.space.use_spatial_hash(2.0 * spec.radius, 4096)
         self._add_wall(wall_segments or wall_segment_count(arena_radius))
 
-        self._prox_angles = np.asarray(spec.prox_angles, dtype=np.float64)
+        directions = [numeric.sincos(angle) for angle in spec.prox_angles]
+        self._prox_sin = np.array([sin for sin, _ in directions])
+        self._prox_cos = np.array([cos for _, cos in directions])
         # Mass, mass, moment of inertia: turns a velocity change per second into a force.
         self._inertia = np.array(
             [ROBOT_MASS, ROBOT_MASS, pymunk.moment_for_circle(ROBOT_MASS, 0.0, spec.radius)]
@@ -112,6 +123,13 @@ class Physics:
         self._prox: np.ndarray | None = None  # cache of proximity_all, cleared by step()
         self._poses: list[tuple[float, float, float]] | None = None  # likewise, of pose()
         self._readings: np.ndarray | None = None  # likewise, of readings()
+        self._directions: tuple[np.ndarray, np.ndarray] | None = None  # sin, cos of angles
+        # Per robot, the last angle whose sine and cosine were taken, and them: a robot
+        # standing still (waiting, sensing, parked) keeps its angle, and the kernel's sine
+        # is the physics' largest cost in a small swarm.
+        self._direction_angle = np.zeros(0)
+        self._direction_sin = np.zeros(0)
+        self._direction_cos = np.zeros(0)
         self._read_buffer = batch.Buffer()
         self._write_buffer = batch.Buffer()
 
@@ -119,14 +137,11 @@ class Physics:
 
     def _add_wall(self, segments: int) -> None:
         # Vertices sit far enough out that each chord's inner face touches the circle.
-        vertex_radius = (self.arena_radius + WALL_THICKNESS) / math.cos(math.pi / segments)
-        corners = [
-            (
-                vertex_radius * math.cos(2 * math.pi * k / segments),
-                vertex_radius * math.sin(2 * math.pi * k / segments),
-            )
-            for k in range(segments)
-        ]
+        vertex_radius = (self.arena_radius + WALL_THICKNESS) / numeric.cos(math.pi / segments)
+        corners = []
+        for k in range(segments):
+            sin, cos = numeric.sincos(2 * math.pi * k / segments)
+            corners.append((vertex_radius * cos, vertex_radius * sin))
         wall = []
         for k in range(segments):
             segment = pymunk.Segment(
@@ -146,7 +161,7 @@ class Physics:
             raise ValueError(f"robot ids are >= 0, got {robot_id}")
         if not all(math.isfinite(value) for value in (x, y, theta)):
             raise ValueError(f"robot {robot_id}: pose must be finite, got {(x, y, theta)!r}")
-        if math.hypot(x, y) > self.arena_radius - self.spec.radius:
+        if numeric.hypot(x, y) > self.arena_radius - self.spec.radius:
             raise ValueError(f"robot {robot_id} at ({x}, {y}) does not fit inside the arena")
         radius = self.spec.radius
         body = pymunk.Body(ROBOT_MASS, float(self._inertia[2]))
@@ -201,8 +216,25 @@ class Physics:
 
     def _headings(self) -> np.ndarray:
         """Every robot's heading in [-pi, pi], in insertion order."""
-        angle = self._state[:, 2]
-        return np.arctan2(np.sin(angle), np.cos(angle))
+        return numeric.wrap_angle_array(self._state[:, 2])
+
+    def _heading_directions(self) -> tuple[np.ndarray, np.ndarray]:
+        """Sine and cosine of every robot's angle, in insertion order (once per state; use
+        them before the next step, which updates them in place)."""
+        if self._directions is None:
+            angle = self._state[:, 2]
+            if len(self._direction_angle) != len(angle):
+                self._direction_angle = np.full(len(angle), np.nan)
+                self._direction_sin = np.zeros(len(angle))
+                self._direction_cos = np.zeros(len(angle))
+            changed = np.flatnonzero(angle != self._direction_angle)
+            if changed.size:
+                sin, cos = numeric.sincos_array(angle[changed])
+                self._direction_sin[changed] = sin
+                self._direction_cos[changed] = cos
+                self._direction_angle[changed] = angle[changed]
+            self._directions = (self._direction_sin, self._direction_cos)
+        return self._directions
 
     def readings(self, robot_ids: list[int]) -> np.ndarray:
         """One row per robot of ``robot_ids``: its x, y, heading (as ``pose``) and its 8
@@ -260,15 +292,17 @@ class Physics:
         forces = np.zeros((self._body_rows, 3))
         for _ in range(substeps):
             # The heading changes every substep, so the target velocity follows it.
-            angle = self._state[:, 2]
-            forces[:robots, 0] = speed * np.cos(angle) - self._velocity[:, 0]
-            forces[:robots, 1] = speed * np.sin(angle) - self._velocity[:, 1]
+            sin, cos = self._heading_directions()
+            forces[:robots, 0] = speed * cos - self._velocity[:, 0]
+            forces[:robots, 1] = speed * sin - self._velocity[:, 1]
             forces[:robots, 2] = turn_rate - self._velocity[:, 2]
             forces[:robots] *= self._inertia / substep
             self._write_buffer.set_float_buf(forces.reshape(-1))
             batch.set_space_bodies(self.space, _FORCE_FIELDS, self._write_buffer)
             self.space.step(substep)
             self._read_state()
+        if not np.abs(self._state[:, 2]).max() <= ANGLE_BOUND:
+            self._wrap_angles()
 
     def _read_state(self) -> None:
         self._read_buffer.clear()
@@ -281,7 +315,20 @@ class Physics:
         self._prox = None
         self._poses = None
         self._readings = None
+        self._directions = None
         self._velocity = rows[: len(self._ids), 3:].copy()
+
+    def _wrap_angles(self) -> None:
+        """Wraps every angle past ``ANGLE_BOUND`` into [-pi, pi], in pymunk and here (a
+        step turns a robot by well under a radian, so checking after each is enough)."""
+        for index in np.flatnonzero(~(np.abs(self._state[:, 2]) <= ANGLE_BOUND)).tolist():
+            angle = numeric.wrap_angle(float(self._state[index, 2]))
+            self._bodies[index].angle = angle
+            self._state[index, 2] = angle
+        self._poses = None
+        self._readings = None
+        self._prox = None
+        self._directions = None
 
     # --- proximity ------------------------------------------------------------------
 
@@ -307,14 +354,17 @@ class Physics:
         radius = self.spec.radius
         reach = self.spec.prox_range
         centres = self._state[:, :2]
-        ray_angles = self._state[:, 2:3] + self._prox_angles  # (robots, 8)
-        ray_x = np.cos(ray_angles)
-        ray_y = np.sin(ray_angles)
+        # Each sensor's direction: the robot's heading turned by the sensor's angle.
+        sin, cos = self._heading_directions()
+        sin, cos = sin[:, None], cos[:, None]
+        ray_x = cos * self._prox_cos - sin * self._prox_sin  # (robots, 8)
+        ray_y = sin * self._prox_cos + cos * self._prox_sin
 
         # Wall: the ray from a centre p inside the circle |q| = R leaves it at distance
         # s = -b + sqrt(b^2 - (|p|^2 - R^2)), with b = p . u.
         along = centres[:, :1] * ray_x + centres[:, 1:2] * ray_y
-        inside = (self.arena_radius**2 - np.einsum("ij,ij->i", centres, centres))[:, None]
+        squared = centres[:, 0] * centres[:, 0] + centres[:, 1] * centres[:, 1]
+        inside = (self.arena_radius * self.arena_radius - squared)[:, None]
         to_wall = -along + np.sqrt(np.maximum(along * along + inside, 0.0))
         readings: np.ndarray = np.clip(1.0 - (to_wall - radius) / reach, 0.0, 1.0)
 
@@ -323,9 +373,8 @@ class Physics:
             offset = centres[others] - centres[owners]  # (pairs, 2)
             along = offset[:, :1] * ray_x[owners] + offset[:, 1:2] * ray_y[owners]
             # Ray meets the other disc where s^2 - 2 b s + |c|^2 - r^2 = 0.
-            discriminant = (
-                along * along - (np.einsum("ij,ij->i", offset, offset) - radius**2)[:, None]
-            )
+            squared = offset[:, 0] * offset[:, 0] + offset[:, 1] * offset[:, 1]
+            discriminant = along * along - (squared - radius * radius)[:, None]
             root = np.sqrt(np.maximum(discriminant, 0.0))
             near = along - root
             far = along + root
@@ -345,13 +394,21 @@ class Physics:
         """Ordered pairs (i, j), i != j, of bodies closer than ``cutoff``; i ascending.
 
         A uniform grid with cells of side ``cutoff``: each body looks only in its own and
-        the 8 neighbouring cells, so the cost grows with the bodies, not their square.
+        the 8 neighbouring cells, so the cost grows with the bodies, not their square. A
+        small swarm compares every pair instead, in fewer numpy calls.
         """
         count = len(self._ids)
         if count < 2:
             empty = np.zeros(0, dtype=np.intp)
             return empty, empty
         centres = self._state[:, :2]
+        if count <= ALL_PAIRS_UP_TO:
+            dx = centres[:, 0][:, None] - centres[:, 0]
+            dy = centres[:, 1][:, None] - centres[:, 1]
+            close = dx * dx + dy * dy < cutoff * cutoff
+            np.fill_diagonal(close, False)
+            owners, others = np.nonzero(close)
+            return owners, others
         cells = np.floor((centres + self.arena_radius) / cutoff).astype(np.int64) + 1
         width = math.ceil(2 * self.arena_radius / cutoff) + 3  # padded: no wrap-around
         keys = cells[:, 0] * width + cells[:, 1]
@@ -366,7 +423,8 @@ class Physics:
         run_starts = np.repeat(np.cumsum(counts) - counts, counts)
         others = order[np.repeat(first, counts) + np.arange(total) - run_starts]
         offset = centres[others] - centres[owners]
-        close = (owners != others) & (np.einsum("ij,ij->i", offset, offset) < cutoff * cutoff)
+        squared = offset[:, 0] * offset[:, 0] + offset[:, 1] * offset[:, 1]
+        close = (owners != others) & (squared < cutoff * cutoff)
         return owners[close], others[close]
 
     def proximity_raycast(self, robot_id: int) -> tuple[float, ...]:
@@ -381,7 +439,7 @@ class Physics:
         own = pymunk.ShapeFilter(group=robot_id + 1)
         readings = []
         for sensor_angle in self.spec.prox_angles:
-            ux, uy = math.cos(angle + sensor_angle), math.sin(angle + sensor_angle)
+            uy, ux = numeric.sincos(angle + sensor_angle)
             start = (x + radius * ux, y + radius * uy)
             end = (x + (radius + reach) * ux, y + (radius + reach) * uy)
             hit = self.space.segment_query_first(start, end, 0.0, own)

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import functools
 import math
-import random
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Annotated, ClassVar, Literal
@@ -37,7 +36,8 @@ from typing import Annotated, ClassVar, Literal
 import numpy as np
 from msgspec import Meta
 
-from wire import names, protocol, settings
+from wire import names, numeric, protocol, settings
+from wire.rng import Stream
 from wire.settings import Flag
 
 SenderKind = Literal["robot", "beacon"]
@@ -180,7 +180,7 @@ class RadioConfig:
         fraction = distance / reach
         if start >= 1.0 or fraction <= start:
             return 0.0
-        return math.pow(min(1.0, (fraction - start) / (1.0 - start)), self.range_loss_exponent)
+        return numeric.power(min(1.0, (fraction - start) / (1.0 - start)), self.range_loss_exponent)
 
 
 @dataclass(frozen=True)
@@ -210,7 +210,7 @@ class _ReceiverIndex:
         high = np.searchsorted(self.sorted_x, x + reach, side="right")
         candidates = np.sort(self.by_x[low:high])
         offsets = self.coords[candidates] - (x, y)
-        distances = np.sqrt(np.einsum("ij,ij->i", offsets, offsets))
+        distances = np.sqrt(offsets[:, 0] * offsets[:, 0] + offsets[:, 1] * offsets[:, 1])
         close = distances <= reach
         return candidates[close], distances[close]
 
@@ -224,7 +224,7 @@ class RadioMedium:
         self.config = config
         # One stream per fault, so enabling one fault leaves the others' draws unchanged.
         self._streams = {
-            name: random.Random(protocol.derive_seed(seed, "radio", name))
+            name: Stream.named(seed, "radio", name)
             for name in ("drop", "burst", "range", "jitter", "duplicate", "reorder")
         }
         self._link_bad: dict[tuple[str, str], bool] = {}
@@ -366,12 +366,12 @@ class RadioMedium:
             probability = config.range_loss_probability(distance, reach)
             if streams["range"].random() < probability:
                 lost = True
-        extra_delay = streams["jitter"].randint(0, config.jitter) if config.jitter else 0
+        extra_delay = streams["jitter"].randrange(config.jitter + 1) if config.jitter else 0
         duplicate_delay = None
         if config.duplicate > 0.0:
             stream = streams["duplicate"]
             duplicated = stream.random() < config.duplicate
-            delay = stream.randint(0, config.duplicate_delay)
+            delay = stream.randrange(config.duplicate_delay + 1)
             if duplicated:
                 duplicate_delay = delay
         return lost, extra_delay, duplicate_delay

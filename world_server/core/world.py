@@ -8,7 +8,6 @@ benchmarks drive it directly. One call to ``advance`` closes one control tick.
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Container, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Annotated, ClassVar, Literal
@@ -16,7 +15,8 @@ from typing import Annotated, ClassVar, Literal
 import numpy as np
 from msgspec import Meta
 
-from wire import batch, names, protocol, settings, shape
+from wire import batch, names, numeric, protocol, settings, shape
+from wire.rng import Stream, seed_of
 from wire.settings import Flag
 from world_server.core.body import EpuckSpec
 from world_server.core.camera import CameraNoise, CameraRenderer
@@ -124,15 +124,15 @@ class World:
         radio = dataclasses.replace(
             config.radio, beacon_range=config.beacon_range or self.layout.nest_radius
         )
-        self.radio = RadioMedium(radio, protocol.derive_seed(config.seed, "radio"))
+        self.radio = RadioMedium(radio, seed_of(config.seed, "radio"))
         self.camera = CameraRenderer(
             self.layout,
             config.camera,
             robot_radius=config.spec.radius,
             noise=config.camera_noise,
-            seed=protocol.derive_seed(config.seed, "camera"),
+            seed=seed_of(config.seed, "camera"),
         )
-        self._camera_rng = np.random.default_rng(protocol.derive_seed(config.seed, "frames"))
+        self._camera_rng = Stream.named(config.seed, "frames")
         self.tick = 0
         # Bodies of the expected swarm are created now, in id order: pymunk's contact
         # solving depends on the order bodies were added, and the order in which robot
@@ -262,7 +262,7 @@ class World:
         others = [
             (ox, oy)
             for other, (ox, oy, _) in sorted(self.physics.poses().items())
-            if other != robot_id and math.hypot(ox - x, oy - y) < OCCLUSION_RANGE
+            if other != robot_id and numeric.hypot(ox - x, oy - y) < OCCLUSION_RANGE
         ]
         return self.camera.render(x, y, theta, others, rng=self._camera_rng)
 

@@ -1,0 +1,93 @@
+"""The in-process engine's speed against another revision of this repository, in one run.
+
+For each swarm size and seed it runs ``swarm run --engine inprocess`` (lockstep, no
+recording) once with the working tree and once with a baseline revision checked out into
+a temporary worktree, alternating which goes first, and reports the wall time per tick of
+each (the run's own ``wall_time_s`` over its ticks: start-up is left out) and their
+ratio. Per tick, because a change to the numeric kernel changes how long a run lasts in
+sim time; ``--horizon`` caps every run at the same sim time so both do similar work.
+
+    .venv/bin/python benchmarks/engine_speed.py --baseline 00d94b4 --robots 10 100 \
+        --seeds 0 1 2 3 4 --horizon 200
+
+Check ``cat /proc/loadavg`` before and after: on a busy machine the figures mean little.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def run_once(tree: Path, robots: int, seed: int, horizon: float) -> dict[str, Any]:
+    """One in-process run from ``tree``'s code; its summary."""
+    environment = dict(os.environ, PYTHONPATH=str(tree))
+    command = [sys.executable, "-m", "deploy.cli", "run", "--engine", "inprocess"]
+    command += ["--robots", str(robots), "--seed", str(seed), "--timeout", str(horizon)]
+    command += ["--no-record", "--json", "--quiet"]
+    done = subprocess.run(
+        command, cwd=tree, env=environment, capture_output=True, text=True, check=False
+    )
+    if not done.stdout.strip():
+        raise SystemExit(f"engine_speed: {' '.join(command)} in {tree} failed:\n{done.stderr}")
+    summary: dict[str, Any] = json.loads(done.stdout)
+    return summary
+
+
+def per_tick_ms(summary: dict[str, Any]) -> float:
+    ticks = max(1.0, summary["sim_time_s"] / summary["config"]["dt"])
+    return 1000.0 * summary["wall_time_s"] / ticks
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--baseline", required=True, help="git revision to compare with")
+    parser.add_argument("--robots", type=int, nargs="+", default=[10, 100])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    parser.add_argument("--horizon", type=float, default=200.0, help="sim seconds at most")
+    args = parser.parse_args(argv)
+    print(f"load average before: {Path('/proc/loadavg').read_text().split()[:3]}")
+    with tempfile.TemporaryDirectory(prefix="engine-speed-") as scratch:
+        baseline = Path(scratch) / "baseline"
+        subprocess.run(
+            ["git", "-C", str(REPO), "worktree", "add", "--detach", str(baseline), args.baseline],
+            check=True,
+            capture_output=True,
+        )
+        try:
+            print("| robots | seeds | baseline ms/tick | working tree ms/tick | ratio |")
+            print("|---:|---:|---:|---:|---:|")
+            for robots in args.robots:
+                old: list[float] = []
+                new: list[float] = []
+                for index, seed in enumerate(args.seeds):
+                    order = [(baseline, old), (REPO, new)]
+                    for tree, times in order if index % 2 == 0 else reversed(order):
+                        times.append(per_tick_ms(run_once(tree, robots, seed, args.horizon)))
+                old_ms, new_ms = statistics.median(old), statistics.median(new)
+                print(
+                    f"| {robots} | {len(args.seeds)} | {old_ms:.3f} | {new_ms:.3f} "
+                    f"| {new_ms / old_ms:.3f} |",
+                    flush=True,
+                )
+        finally:
+            subprocess.run(
+                ["git", "-C", str(REPO), "worktree", "remove", "--force", str(baseline)],
+                check=False,
+                capture_output=True,
+            )
+    print(f"load average after: {Path('/proc/loadavg').read_text().split()[:3]}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
