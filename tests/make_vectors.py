@@ -1672,10 +1672,10 @@ def numeric_inputs() -> dict[str, list[tuple[float, ...]]]:
     return {
         "sincos": [(x,) for x in angles],
         "atan": [(x,) for x in tangents],
-        "atan2": points,
+        "atan2": [tuple(point) for point in points],
         "exp": [(x,) for x in exponents],
         "log": [(x,) for x in positives],
-        "power": powers,
+        "power": [tuple(pair) for pair in powers],
         "wrap_angle": [(x,) for x in angles],
     }  # fmt: skip
 
@@ -1706,7 +1706,7 @@ def numeric_vectors() -> dict[str, Any]:
     return {
         "type": "NumericKernel",
         "about": "inputs and outputs of wire/numeric.py as the hex of their IEEE-754 bits "
-        "(big-endian; any NaN is \"nan\"); sincos gives (sin, cos); atan2 takes (y, x); "
+        '(big-endian; any NaN is "nan"); sincos gives (sin, cos); atan2 takes (y, x); '
         "power takes (x, y)",
         "cases": cases,
     }

@@ -10,6 +10,7 @@ import math
 import statistics
 import struct
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -71,7 +72,7 @@ def test_exp_and_log_are_within_an_ulp_of_the_c_library(x: float, y: float) -> N
 
 def test_a_sample_of_every_function_agrees_with_the_c_library_to_an_ulp() -> None:
     stream = Stream(3)
-    worst: dict[str, float] = Counter()
+    worst: dict[str, float] = dict.fromkeys(("sin", "cos", "atan2", "exp", "log"), 0.0)
     for _ in range(20000):
         x = stream.uniform(-30.0, 30.0)
         y = stream.uniform(-30.0, 30.0)
@@ -231,7 +232,7 @@ def load(name: str) -> dict[str, Any]:
 
 
 def test_every_numeric_vector_holds() -> None:
-    functions = {
+    functions: dict[str, Callable[..., float | tuple[float, float]]] = {
         "sincos": numeric.sincos,
         "atan": numeric.atan,
         "atan2": numeric.atan2,

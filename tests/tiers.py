@@ -86,7 +86,7 @@ FULL_ONLY = {
     "test_inprocess": "starts swarms to compare with the in-process engine",
     "test_multihost": "network namespaces and processes",
     "test_outside": "starts swarms with robots outside the emulator over UDP and serial links",
-    "test_portable_runs": "a few swarms twice, in fresh interpreters, with and without SIMD dispatch",
+    "test_portable_runs": "swarms in fresh interpreters, with SIMD dispatch and without",
     "test_recording": "starts swarms and the recorder",
     "test_report": "runs `swarm report` in a process; plots",
     "test_flood_memory": "floods a live swarm and reads its processes' memory",

@@ -93,6 +93,10 @@ AT = (
     float.fromhex("0x1.0ad3ae322da11p-6"),
 )
 ATAN_BIG = float.fromhex("0x1p66")  # from here on atan(x) rounds to +-pi/2
+# The same constants by name: the functions read these (a name is faster than an index).
+ATAN_HI_0, ATAN_HI_1, ATAN_HI_2, ATAN_HI_3 = ATAN_HI
+ATAN_LO_0, ATAN_LO_1, ATAN_LO_2, ATAN_LO_3 = ATAN_LO
+AT0, AT1, AT2, AT3, AT4, AT5, AT6, AT7, AT8, AT9, AT10 = AT
 
 # exp and log (fdlibm's e_exp.c and e_log.c).
 LN2_HI = float.fromhex("0x1.62e42feep-1")  # 32 significant bits: k * LN2_HI exact
@@ -128,18 +132,23 @@ def sincos(x: float) -> tuple[float, float]:
 
     x = n pi/2 + (y0 + y1) with |y0 + y1| <= pi/4 (about), by Cody and Waite's reduction in
     two rounds (good to 118 bits); then fdlibm's kernels on (y0, y1), swapped and negated
-    by n mod 4. One function, not three, because the physics calls it most of all.
+    by n mod 4. Written out in one function (and again in ``cos``), because the physics
+    and the navigator call it more than anything else.
     """
     if not -MAX_ANGLE <= x <= MAX_ANGLE:  # also false for NaN
         raise ValueError(f"angle {x!r} is outside the kernel's range +-{MAX_ANGLE}")
     fn = math.floor(x * INV_PIO2 + 0.5)
-    r = x - fn * PIO2_1
-    w = fn * PIO2_2
-    t = r
-    r = t - w
-    w = fn * PIO2_2T - ((t - r) - w)
-    y0 = r - w
-    y1 = (r - y0) - w
+    if fn == 0.0:
+        # What the reduction below gives for n = 0, without its operations.
+        y0, y1 = x, 0.0
+    else:
+        r = x - fn * PIO2_1
+        w = fn * PIO2_2
+        t = r
+        r = t - w
+        w = fn * PIO2_2T - ((t - r) - w)
+        y0 = r - w
+        y1 = (r - y0) - w
     z = y0 * y0
     w = z * z
     v = z * y0
@@ -164,7 +173,33 @@ def sin(x: float) -> float:
 
 
 def cos(x: float) -> float:
-    return sincos(x)[1]
+    """``sincos(x)[1]``, computing only the kernel it needs (the navigator's one call)."""
+    if not -MAX_ANGLE <= x <= MAX_ANGLE:  # also false for NaN
+        raise ValueError(f"angle {x!r} is outside the kernel's range +-{MAX_ANGLE}")
+    fn = math.floor(x * INV_PIO2 + 0.5)
+    if fn == 0.0:
+        y0, y1 = x, 0.0
+    else:
+        r = x - fn * PIO2_1
+        w = fn * PIO2_2
+        t = r
+        r = t - w
+        w = fn * PIO2_2T - ((t - r) - w)
+        y0 = r - w
+        y1 = (r - y0) - w
+    z = y0 * y0
+    w = z * z
+    quadrant = int(fn) & 3
+    if quadrant & 1:
+        v = z * y0
+        r = S2 + z * (S3 + z * S4) + z * w * (S5 + z * S6)
+        s = y0 - ((z * (0.5 * y1 - v * r) - y1) - v * S1)
+        return -s if quadrant == 1 else s
+    r = z * (C1 + z * (C2 + z * C3)) + w * w * (C4 + z * (C5 + z * C6))
+    hz = 0.5 * z
+    w = 1.0 - hz
+    c = w + (((1.0 - w) - hz) + (z * r - y0 * y1))
+    return c if quadrant == 0 else -c
 
 
 # Below this many elements a loop of ``sincos`` is faster than numpy's per-call overhead.
@@ -212,38 +247,47 @@ def sincos_array(x: FloatArray) -> tuple[FloatArray, FloatArray]:
 # --- atan and atan2 ------------------------------------------------------------------------
 
 
-def atan(x: float) -> float:
-    """The arc tangent, in [-pi/2, pi/2]."""
-    if math.isnan(x):
-        return x
-    negative = x < 0.0
-    a = -x if negative else x
-    if a >= ATAN_BIG:
-        z = ATAN_HI[3]
-        return -z if negative else z
-    if a < 0.4375:
-        part = -1
-        t = x
-    elif a < 0.6875:
-        part, t = 0, (2.0 * a - 1.0) / (2.0 + a)
-    elif a < 1.1875:
-        part, t = 1, (a - 1.0) / (a + 1.0)
-    elif a < 2.4375:
-        part, t = 2, (a - 1.5) / (1.0 + 1.5 * a)
-    else:
-        part, t = 3, -1.0 / a
-    z = t * t
-    w = z * z
-    s1 = z * (AT[0] + w * (AT[2] + w * (AT[4] + w * (AT[6] + w * (AT[8] + w * AT[10])))))
-    s2 = w * (AT[1] + w * (AT[3] + w * (AT[5] + w * (AT[7] + w * AT[9]))))
-    if part < 0:
-        return t - t * (s1 + s2)
-    z = ATAN_HI[part] - ((t * (s1 + s2) - ATAN_LO[part]) - t)
-    return -z if negative else z
-
-
 def atan2(y: float, x: float) -> float:
-    """The angle of the point (x, y), in [-pi, pi]; signed zeros as in C's atan2."""
+    """The angle of the point (x, y), in [-pi, pi]; signed zeros as in C's atan2.
+
+    z = atan(a) for a = |y / x| by fdlibm's reduction to one of five intervals and its odd
+    polynomial of degree 23 in two halves; then pi - (z - PI_LO) if x < 0; with the sign
+    of y. Written out in one function: the navigator calls it every step.
+    """
+    ax = abs(x)
+    ay = abs(y)
+    if not (0.0 < ax < math.inf and 0.0 < ay < math.inf):  # true for NaN too
+        return _atan2_special(y, x)
+    a = ay / ax
+    if a >= ATAN_BIG:
+        z = ATAN_HI_3
+    elif a < 0.4375:
+        zz = a * a
+        w = zz * zz
+        s1 = zz * (AT0 + w * (AT2 + w * (AT4 + w * (AT6 + w * (AT8 + w * AT10)))))
+        s2 = w * (AT1 + w * (AT3 + w * (AT5 + w * (AT7 + w * AT9))))
+        z = a - a * (s1 + s2)
+    else:
+        if a < 0.6875:
+            hi, lo, t = ATAN_HI_0, ATAN_LO_0, (2.0 * a - 1.0) / (2.0 + a)
+        elif a < 1.1875:
+            hi, lo, t = ATAN_HI_1, ATAN_LO_1, (a - 1.0) / (a + 1.0)
+        elif a < 2.4375:
+            hi, lo, t = ATAN_HI_2, ATAN_LO_2, (a - 1.5) / (1.0 + 1.5 * a)
+        else:
+            hi, lo, t = ATAN_HI_3, ATAN_LO_3, -1.0 / a
+        zz = t * t
+        w = zz * zz
+        s1 = zz * (AT0 + w * (AT2 + w * (AT4 + w * (AT6 + w * (AT8 + w * AT10)))))
+        s2 = w * (AT1 + w * (AT3 + w * (AT5 + w * (AT7 + w * AT9))))
+        z = hi - ((t * (s1 + s2) - lo) - t)
+    if x < 0.0:
+        z = PI - (z - PI_LO)
+    return z if y > 0.0 else -z
+
+
+def _atan2_special(y: float, x: float) -> float:
+    """``atan2`` where x or y is zero, infinite or NaN."""
     if math.isnan(x) or math.isnan(y):
         return x + y
     x_negative = math.copysign(1.0, x) < 0.0
@@ -257,12 +301,17 @@ def atan2(y: float, x: float) -> float:
         else:
             z = PI if x_negative else 0.0
         return math.copysign(z, y)
-    if math.isinf(y):
-        return math.copysign(HALF_PI, y)
-    z = atan(abs(y / x))
-    if x_negative:
-        z = PI - (z - PI_LO)
-    return math.copysign(z, y)
+    return math.copysign(HALF_PI, y)  # y is infinite, x finite
+
+
+def atan(x: float) -> float:
+    """The arc tangent, in [-pi/2, pi/2]: atan2(|x|, 1) with the sign of x (the same
+    steps for a = |x|); NaN for NaN, +-0 for +-0, +-pi/2 for +-inf."""
+    if math.isnan(x) or x == 0.0:
+        return x
+    if math.isinf(x):
+        return math.copysign(ATAN_HI_3, x)
+    return math.copysign(atan2(abs(x), 1.0), x)
 
 
 # --- exp, log, power ---------------------------------------------------------------------

@@ -123,6 +123,7 @@ class Navigator:
         directions = [numeric.sincos(angle) for angle in params.prox_angles]
         self._cos = [cos for _, cos in directions]
         self._sin = [sin for sin, _ in directions]
+        self._sensors = len(params.prox_angles)
         # The sensors that look ahead: they slow the robot down.
         self._front = [
             index
@@ -173,15 +174,17 @@ class Navigator:
         zero. A goal that is occupied by another body is never reached: the caller decides
         when close is close enough.
         """
-        self._check_proximity(proximity)
+        if len(proximity) != self._sensors:
+            self._check_proximity(proximity)
         if not tolerance > 0:
             raise ValueError(f"tolerance must be positive, got {tolerance!r}")
+        params = self.params
         goal = (float(goal[0]), float(goal[1]))
         if goal != self._goal:
             self.reset()
             self._goal = goal
         dx, dy = goal[0] - x, goal[1] - y
-        distance = numeric.hypot(dx, dy)
+        distance = math.sqrt(dx * dx + dy * dy)  # numeric.hypot, written out
         if distance <= tolerance:
             self._trail.clear()
             self._escape_steps = 0
@@ -200,10 +203,17 @@ class Navigator:
 
         # A push goes through whatever is in the way.
         heading_error = bearing if self._pushing else self._steer(bearing, proximity, theta)
-        cap = self.params.max_speed * min(1.0, distance / self.params.slow_radius)
-        cap = max(cap, self.params.min_speed)
-        cap = min(cap, distance / self.params.control_period)
-        forward = cap * max(0.0, numeric.cos(heading_error))
+        # The min() and max() of these lines are written as comparisons: the same values
+        # (Python's min and max keep the first of equals), without a call each.
+        ratio = distance / params.slow_radius
+        cap = params.max_speed * (ratio if ratio < 1.0 else 1.0)
+        cap = params.min_speed if params.min_speed > cap else cap
+        reach = distance / params.control_period
+        cap = reach if reach < cap else cap
+        # No forward speed while facing more than a right angle away (the cosine is then
+        # negative, so this skips only the work, not a value).
+        facing = numeric.cos(heading_error) if -1.58 < heading_error < 1.58 else 0.0
+        forward = cap * (facing if facing > 0.0 else 0.0)
         if not self._pushing:
             forward *= 1.0 - self._front_reading(proximity)
         left, right = self._wheels(forward, self._turn_rate(heading_error))
@@ -265,20 +275,33 @@ class Navigator:
         return wrap_angle(obstacle + self._avoid_side * (math.pi / 2 + push))
 
     def _front_reading(self, proximity: Sequence[float]) -> float:
-        return max([proximity[index] for index in self._front], default=0.0)
+        nearest = 0.0  # max(front readings, default=0.0), as comparisons
+        first = True
+        for index in self._front:
+            reading = proximity[index]
+            if first or reading > nearest:
+                nearest, first = reading, False
+        return nearest
 
     def _turn_rate(self, error: float) -> float:
-        rate = self.params.turn_gain * abs(error)
-        rate = max(rate, self.params.min_turn_rate)
-        rate = min(rate, abs(error) / self.params.control_period, self.params.max_turn_rate)
+        params = self.params
+        size = abs(error)
+        rate = params.turn_gain * size
+        rate = params.min_turn_rate if params.min_turn_rate > rate else rate
+        settle = size / params.control_period  # min(rate, settle, max_turn_rate)
+        rate = settle if settle < rate else rate
+        rate = params.max_turn_rate if params.max_turn_rate < rate else rate
         return math.copysign(rate, error)
 
     def _wheels(self, forward: float, turn_rate: float) -> tuple[float, float]:
         """Wheel speeds for a forward speed and a turn rate; turning wins at the limit."""
         limit = self.params.max_speed
         spin = turn_rate * self.params.wheel_base / 2.0
-        spin = min(max(spin, -limit), limit)
-        forward = min(max(forward, 0.0), limit - abs(spin))
+        spin = -limit if -limit > spin else spin
+        spin = limit if limit < spin else spin
+        forward = 0.0 if forward < 0.0 else forward
+        room = limit - abs(spin)
+        forward = room if room < forward else forward
         return forward - spin, forward + spin
 
     # --- getting unstuck -----------------------------------------------------------

@@ -21,6 +21,7 @@ sin, which Chipmunk calls, cannot move a robot). No clock and no randomness here
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import pymunk
@@ -262,6 +263,26 @@ class Physics:
         limit = self.spec.max_wheel_speed
         self._left[index] = min(max(left, -limit), limit)
         self._right[index] = min(max(right, -limit), limit)
+
+    def set_all_wheels(
+        self, robot_ids: Sequence[int], left: Sequence[float], right: Sequence[float]
+    ) -> None:
+        """``set_wheels`` for many robots at once (the same clamping, done with numpy)."""
+        if not robot_ids:
+            return
+        lefts = np.asarray(left, dtype=np.float64)
+        rights = np.asarray(right, dtype=np.float64)
+        if not (np.isfinite(lefts).all() and np.isfinite(rights).all()):
+            bad = next(
+                robot
+                for robot, pair in zip(robot_ids, zip(left, right, strict=True), strict=True)
+                if not (math.isfinite(pair[0]) and math.isfinite(pair[1]))
+            )
+            raise ValueError(f"robot {bad}: wheel speeds must be finite")
+        index = [self._index[robot] for robot in robot_ids]
+        limit = self.spec.max_wheel_speed
+        self._left[index] = np.minimum(np.maximum(lefts, -limit), limit)
+        self._right[index] = np.minimum(np.maximum(rights, -limit), limit)
 
     def substeps_for(self, dt: float) -> int:
         """How many pymunk steps ``step(dt)`` takes."""

@@ -235,9 +235,12 @@ class World:
             self.radio.transmit(
                 self.tick, message.sender, message.seq, message.payload, position, kind, receivers
             )
-        for robot, act in sorted(acts.items()):
-            if robot in self._live_robots:
-                self.physics.set_wheels(robot, act.left, act.right)
+        moving = [(robot, act) for robot, act in sorted(acts.items()) if robot in self._live_robots]
+        self.physics.set_all_wheels(
+            [robot for robot, _ in moving],
+            [act.left for _, act in moving],
+            [act.right for _, act in moving],
+        )
         self.physics.step(self.config.dt)
         self.tick += 1
         frames = {
