@@ -39,7 +39,13 @@ from typing import Any
 
 import msgspec
 
-from deploy.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
+from deploy.summary import (
+    RobotRecord,
+    RunOutcome,
+    build_summary,
+    byzantine_in_config,
+    run_digest,
+)
 from deploy.watchdog import Watchdog
 from plumbing.private_files import make_private_folder, open_private, write_private
 from wire import protocol
@@ -619,6 +625,7 @@ def report_row(summary: dict[str, Any], recording: Path | str) -> dict[str, Any]
         "pool_min": pool_stats["min"],
         "pool_max": pool_stats["max"],
         "poolings": len(pools),
+        "digest": run_digest(summary["per_robot"]),
         "links": summary.get("links") or {},  # robots outside the emulator
         "recording": str(recording),
     }
@@ -1115,6 +1122,7 @@ def print_report(report: Report, console: Any) -> None:
     table.add_column("run", no_wrap=True)
     for column in ("N", "n", "ended", "consensus", "swarm steps", "robot steps", "pool size"):
         table.add_column(column, justify="right", no_wrap=True)
+    table.add_column("digest", no_wrap=True)
     for row in report.runs:
         ended = row["ended"]
         if ended == "timeout" and row.get("timeout_kind"):
@@ -1134,6 +1142,7 @@ def print_report(report: Report, console: Any) -> None:
             "-"
             if row["pool_mean"] is None
             else f"{row['pool_mean']:.1f} {row['pool_min']}-{row['pool_max']}",
+            row["digest"],
         )
     console.print(table)
     for row in report.runs:

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 import statistics
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -143,6 +145,7 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
             for record in robots
         ],
     }
+    summary["digest"] = run_digest(summary["per_robot"])
     if outcome.links:
         summary["links"] = {
             str(robot): link_summary(stats) for robot, stats in outcome.links.items()
@@ -153,6 +156,23 @@ def build_summary(outcome: RunOutcome, records: Iterable[RobotRecord]) -> dict[s
     if ended is not Ending.CONSENSUS:
         summary["stuck"] = list(outcome.stuck)
     return summary
+
+
+# What a run's digest covers, robot by robot: what it decided, when, after how many steps,
+# and the size of every pool it joined. Two runs are the same run exactly when these are.
+DIGEST_FIELDS = ("id", "decided_site", "decision_time_s", "steps", "pool_sizes")
+
+
+def run_digest(per_robot: Sequence[Mapping[str, Any]]) -> str:
+    """16 hex digits of the SHA-256 of the runs' per-robot results (``DIGEST_FIELDS`` of
+    each robot, by id, as compact JSON): equal for the same run on any engine, process
+    layout or machine, and different, but for a 2^-64 chance, for any other."""
+    rows = [
+        [robot[field] for field in DIGEST_FIELDS]
+        for robot in sorted(per_robot, key=lambda robot: int(robot["id"]))
+    ]
+    text = json.dumps(rows, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def byzantine_in_config(config: dict[str, Any]) -> dict[int, str]:

@@ -248,7 +248,10 @@ def test_nothing_published_is_missing_from_the_recording(run: Run) -> None:
         assert counts["recorded"] == counts["expected"], kind
     assert audit["radio/rx/*"]["recorded"] == run.summary["radio"]["delivered"] > 0
     assert audit["robot/*/camera"]["recorded"] > 0
-    assert report.rebuild_summary(recording)["per_robot"] == run.summary["per_robot"]
+    rebuilt = report.rebuild_summary(recording)
+    assert rebuilt["per_robot"] == run.summary["per_robot"]
+    # The recording's run is the run: the same digest, from its status messages alone.
+    assert rebuilt["digest"] == run.summary["digest"]
 
 
 @pytest.mark.timeout(180)

@@ -21,6 +21,7 @@ from swarm_helpers import REPO, swarm_command
 
 from deploy import report
 from deploy.cli import main
+from deploy.summary import run_digest
 from wire import protocol
 from world_server.core.layout import make_layout
 from world_server.recording.description import RunDescription
@@ -146,6 +147,8 @@ def test_the_table_has_each_runs_steps_and_pool_sizes(
     assert row["pool_mean"] == pytest.approx(15 / 7, abs=1e-3)
     assert (row["pool_min"], row["pool_max"], row["poolings"]) == (1, 3, 7)
     assert row["robots_within_half_n"] == 2 and row["within_half_n"] is False
+    assert row["digest"] == run_digest(report.rebuild_summary(report.read_recording(
+        tmp_path / "a.mcap"))["per_robot"])  # fmt: skip
     (group,) = result["groups"]
     assert group["runs"] == group["correct_runs"] == 1 and group["runs_within_half_n"] == 0
     with open(tmp_path / "out" / "summary.csv") as stream:
@@ -154,6 +157,23 @@ def test_the_table_has_each_runs_steps_and_pool_sizes(
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["runs"] == [row]
     for name in report.FIGURES:
         assert (tmp_path / "out" / name).read_bytes().startswith(PNG_MAGIC)
+
+
+def test_a_runs_digest_is_its_per_robot_results_and_nothing_else() -> None:
+    robots = [
+        {"id": 1, "decided_site": 2, "decision_time_s": 88.1, "steps": 3, "pool_sizes": [2, 1],
+         "phase": "stopped", "trips": 3},
+        {"id": 0, "decided_site": 2, "decision_time_s": 91.6, "steps": 4, "pool_sizes": [2],
+         "phase": "stopped", "trips": 4},
+    ]  # fmt: skip
+    digest = run_digest(robots)
+    assert len(digest) == 16 and int(digest, 16) >= 0
+    assert run_digest(list(reversed(robots))) == digest  # by id, whatever the order
+    # What the digest does not cover (where a robot is when the run stops) leaves it alone.
+    assert run_digest([{**robots[0], "phase": "to_nest", "trips": 9}, robots[1]]) == digest
+    for field, other in (("decided_site", 1), ("decision_time_s", 88.2), ("steps", 4),
+                         ("pool_sizes", [2, 2])):  # fmt: skip
+        assert run_digest([{**robots[0], field: other}, robots[1]]) != digest, field
 
 
 def test_the_launchers_summary_is_used_when_recorded(

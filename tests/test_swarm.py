@@ -299,6 +299,7 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run(tmp_path: Path
 
     assert decisions(over_zenoh) == decisions(in_memory)
     assert over_zenoh["sim_time_s"] == in_memory["sim_time_s"]
+    assert over_zenoh["digest"] == in_memory["digest"]
     # `swarm run --engine inprocess`: the same summary, field for field, robot for robot.
     code_in_process, in_process, stderr = run_swarm(
         [*common, "--timeout", "900", "--no-record", "--engine", "inprocess"],
@@ -307,7 +308,7 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run(tmp_path: Path
     assert code_in_process == code, stderr
     assert in_process.keys() == over_zenoh.keys()
     assert in_process["config"].keys() == over_zenoh["config"].keys()
-    for field in ("ended", "consensus", "chosen_site", "correct", "sim_time_s", "stuck"):
+    for field in ("ended", "consensus", "chosen_site", "correct", "sim_time_s", "stuck", "digest"):
         assert in_process.get(field) == over_zenoh.get(field), field
     # Everything of each robot but where it is when the run stops: over Zenoh the
     # launcher notices the last decision a few ticks later, and the robots move on.
@@ -322,6 +323,7 @@ def test_the_process_layout_changes_no_robot_s_results() -> None:
     the same results, robot for robot."""
     common = ["--robots", "6", "--sites", "6", "--seed", "3", "--timeout", "900", "--no-record"]
     results = {}
+    digests = {}
     for per_process, processes in (("1", 6), ("3", 2)):
         code, summary, stderr = run_swarm(
             [*common, "--robots-per-process", per_process], unique_run_id(f"layout-{per_process}")
@@ -331,7 +333,9 @@ def test_the_process_layout_changes_no_robot_s_results() -> None:
         # Everything of each robot but where it is when the run stops (the launcher notices
         # the last decision a tick or two late, and the robots move on).
         results[per_process] = [{**robot, "phase": None} for robot in summary["per_robot"]]
+        digests[per_process] = summary["digest"]
     assert results["1"] == results["3"]
+    assert digests["1"] == digests["3"]
 
 
 HOSTED_FOUR = ["--robots-per-process", "4"]

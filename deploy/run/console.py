@@ -101,7 +101,7 @@ def print_summary(summary: dict[str, Any], console: Console) -> None:
         f"sim {summary['sim_time_s']:.1f}s in {summary['wall_time_s']:.1f}s wall "
         f"({summary['real_time_factor']:.0f}x); radio sent {summary['radio']['sent']}, "
         f"delivered {summary['radio']['delivered']}, dropped {summary['radio']['dropped']}, "
-        f"rejected {summary['radio']['rejected']}"
+        f"rejected {summary['radio']['rejected']}; digest {summary['digest']}"
     )
     departures = summary["world"].get("departures", 0)
     if departures:
