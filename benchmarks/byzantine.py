@@ -1,6 +1,6 @@
 """Byzantine robots against the swarm's defences (issue 9): correct runs vs their number.
 
-Whole lockstep runs in one process each (``deploy.inmemory.run_in_memory``: the same
+Whole lockstep runs in one process each (``deploy.inprocess.engine.run_in_process``: the same
 world, controllers and beacon as ``swarm run``, and the same per-robot results), 10
 robots, for 0 to 3 Byzantine robots of each mode (``liar``: broadcasts certainty of one
 site, the same non-best site for every liar of a run; ``inverted``: eliminates the better
@@ -45,7 +45,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from deploy import sweep  # noqa: E402
+from deploy.reports import sweep  # noqa: E402
 from robot_agent.core import byzantine  # noqa: E402
 from wire.rng import Stream  # noqa: E402
 
@@ -104,7 +104,7 @@ def byzantine_ids(seed: int, robots: int, count: int) -> list[int]:
 
 def run_task(task: Task) -> Outcome:
     """One run in memory (in a worker process)."""
-    from deploy.inmemory import run_in_memory
+    from deploy.inprocess.engine import run_in_process
     from robot_agent.node import cli as node
     from robot_agent.node import options
     from world_server.server import cli as server
@@ -122,7 +122,7 @@ def run_task(task: Task) -> Outcome:
         for robot in byzantine_ids(task.seed, task.robots, task.count)
     }
     started = time.perf_counter()
-    summary = run_in_memory(
+    summary = run_in_process(
         world_config, controller_config, timeout=task.timeout, byzantine_robots=chosen
     )
     wall = time.perf_counter() - started
@@ -387,7 +387,7 @@ def liar_ids(seed: int, robots: int, count: int) -> list[int]:
 
 def run_defence(task: DefenceTask) -> dict[str, object]:
     """One run in memory with ``task.liars`` liars (each claiming the run's liar site)."""
-    from deploy.inmemory import run_in_memory
+    from deploy.inprocess.engine import run_in_process
     from robot_agent.node import cli as node
     from robot_agent.node import options
     from world_server.server import cli as server
@@ -403,7 +403,7 @@ def run_defence(task: DefenceTask) -> dict[str, object]:
         robot: byzantine.Behaviour("liar") for robot in liar_ids(task.seed, task.robots, task.liars)
     }
     started = time.perf_counter()
-    summary = run_in_memory(
+    summary = run_in_process(
         world_config, controller_config, timeout=task.timeout, byzantine_robots=liars
     )
     honest = [robot["decided_site"] for robot in summary["per_robot"] if not robot["byzantine"]]
@@ -452,7 +452,7 @@ def load_defence(path: Path) -> dict[str, dict[str, Any]]:
 
 def run_defence_study(args: argparse.Namespace) -> int:
     from benchmarks import byzantine as this  # importable by the workers, unlike __main__
-    from deploy import sweep
+    from deploy.reports import sweep
 
     done = load_defence(args.defence_results)
     tasks = [

@@ -63,9 +63,9 @@ sys.path.insert(0, str(REPO))
 
 import zenoh  # noqa: E402
 
-from deploy.processes import free_port  # noqa: E402
-from deploy.run.supervisor import RUN_ID_ENV  # noqa: E402
+from deploy.launcher.supervisor import RUN_ID_ENV  # noqa: E402
 from plumbing import inbox as inbox_module  # noqa: E402
+from plumbing.tcp import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session  # noqa: E402
 from wire import batch, protocol  # noqa: E402
 
@@ -364,7 +364,7 @@ def per_robot(summary: dict[str, Any] | None) -> list[tuple[Any, ...]] | None:
 def queued_overheads() -> dict[str, float]:
     """Bytes one queued message holds beyond its payload, attachment and key, per inbox
     (the world has none: ``NO_INBOX``)."""
-    from deploy.run.follower import Heard, Kind
+    from deploy.launcher.follower import Heard, Kind
     from nest_beacon.node.beacon_node import Event as BeaconEvent
     from nest_beacon.node.beacon_node import EventKind as BeaconKind
     from robot_agent.node.robot_node import Event as RobotEvent
@@ -399,7 +399,7 @@ NO_INBOX = (
 )
 FILLED = {  # the inboxes a flood can fill: their caps, and a small message of each
     "recorder": ("world_server.recorder.recorder_process", "INBOX_BYTES", "robot/3/status", 300),
-    "launcher": ("deploy.run.launcher", "EVENTS_BYTES", "robot/3/status", 300),
+    "launcher": ("deploy.launcher.launcher", "EVENTS_BYTES", "robot/3/status", 300),
 }
 
 
@@ -415,7 +415,7 @@ def fill_one(process: str, charged_as: str) -> None:
         inbox_module.ITEM_OVERHEAD_BYTES = 0
     inbox: Any = inbox_module.BoundedInbox(cap)
     key = f"bestofn/flood-00000000/{leaf}"
-    from deploy.run.follower import Heard, Kind
+    from deploy.launcher.follower import Heard, Kind
     from world_server.recording.writer import Sample
 
     def queued(key: str, payload: bytes, tag: bytes) -> Any:

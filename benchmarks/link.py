@@ -29,7 +29,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from benchmarks.link_runs import PtyPair, outside_run  # noqa: E402
-from deploy.outside import free_udp_port  # noqa: E402
+from deploy.launcher.outside import free_udp_port  # noqa: E402
 
 TRANSPORTS = ("none", "udp", "serial@115200", "serial@921600")
 DT = 0.1  # sim seconds a tick

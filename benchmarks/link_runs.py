@@ -37,7 +37,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from deploy.outside import free_udp_port  # noqa: E402
+from deploy.launcher.outside import free_udp_port  # noqa: E402
 
 IMPAIRED = ["--link-delay", "50", "--link-loss", "0.2"]
 LOCKSTEP_STALL_TIMEOUT = 300.0  # wall seconds (docs/scale.md does the same on a busy machine)

@@ -128,7 +128,7 @@ def in_process_options(options: list[str]) -> list[str]:
 
 def write_doc(path: Path, options: list[str], lines: list[str]) -> None:
     """Replace this command's generated block in ``path`` with ``lines``."""
-    from deploy.section5 import replace_block
+    from deploy.reports.section5 import replace_block
 
     name = " ".join(options)
     command = f"benchmarks/process_cpu.py {name} --doc {path}"

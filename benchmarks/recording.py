@@ -8,7 +8,7 @@
 2. Published vs recorded, for every recorded run: each message kind's count in the file
    against the count its publishers declared or must have sent (Sense.rx, Sense.camera,
    Act/Ack.radio_tx, contiguous ticks, the world's own radio counters); see
-   ``deploy.report.audit``.
+   ``deploy.reports.report.audit``.
 3. Capacity: a recorder process on a loopback router, flooded with ``--flood`` sense
    messages from one publisher as fast as Zenoh takes them; the time until its finish
    query is answered gives the messages per second it records, and the file must hold all.
@@ -36,8 +36,8 @@ from wire.names import Role
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from deploy import report  # noqa: E402
-from deploy.processes import free_port  # noqa: E402
+from deploy.reports import report  # noqa: E402
+from plumbing.tcp import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
 from wire import protocol  # noqa: E402
 from wire.endings import RESULT_CODES  # noqa: E402

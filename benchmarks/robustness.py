@@ -1,6 +1,6 @@
 """Robustness of the swarm's decision to radio loss and camera noise (issue 5).
 
-Sweeps whole lockstep runs in one process each (``deploy.inmemory.run_in_memory``: the
+Sweeps whole lockstep runs in one process each (``deploy.inprocess.engine.run_in_process``: the
 same world, controllers and beacon as ``swarm run``, and the same per-robot results), 10
 robots and 10 sites by default, several seeds per point. Every point is described by the
 command-line options of ``swarm run`` and built through the same parsers, so any point
@@ -141,7 +141,7 @@ def observing_controller(log: list[tuple[int, Any]]) -> type[Controller]:
 
 def run_task(task: Task) -> Outcome:
     """Run one task in memory (in a worker process) and judge its comparisons."""
-    from deploy.inmemory import run_in_memory
+    from deploy.inprocess.engine import run_in_process
     from robot_agent.node import cli as node
     from robot_agent.node import options
     from world_server.server import cli as server
@@ -161,7 +161,7 @@ def run_task(task: Task) -> Outcome:
 
     log: list[tuple[int, Any]] = []
     started = time.perf_counter()
-    summary = run_in_memory(
+    summary = run_in_process(
         world_config,
         controller_config,
         timeout=task.timeout,

@@ -4,7 +4,7 @@ Runs whole lockstep swarms (10 sites, default settings) to consensus or ``--time
 seconds, one run per (size, seed), and prints per run: consensus, correct, the sim time
 at which the last robot decided, the wall time, the slowest robot's steps (the most
 pooling rounds any robot needed before it decided) and how many robots were left
-undecided. By default each run is in one process (``deploy.inmemory.run_in_memory``: the
+undecided. By default each run is in one process (``deploy.inprocess.engine.run_in_process``: the
 same world, controllers and beacon as ``swarm run``, and the same per-robot results);
 ``--parallel K`` runs K of them at once. ``--zenoh`` runs the given sizes and seeds
 through real processes instead: ``swarm run --json --no-record --quiet`` (hosting
@@ -101,13 +101,13 @@ def from_summary(robots: int, seed: int, mode: str, summary: dict[str, Any], wal
 
 def run_in_process(task: tuple[int, int, float]) -> Run:
     """One lockstep run in this process (a worker of the pool)."""
-    from deploy.inmemory import run_in_memory
+    from deploy.inprocess.engine import run_in_process
     from robot_agent.core.controller import ControllerConfig
     from world_server.core.world import WorldConfig
 
     robots, seed, timeout = task
     started = time.perf_counter()
-    summary = run_in_memory(
+    summary = run_in_process(
         WorldConfig(num_robots=robots, num_sites=SITES, seed=seed),
         ControllerConfig(),
         timeout=timeout,

@@ -288,7 +288,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     text = tables(summaries)
     print(text)
     if args.write:
-        from deploy.section5 import replace_block
+        from deploy.reports.section5 import replace_block
 
         plot(summaries, args.figure)
         args.json.write_text(json.dumps(summaries, indent=1) + "\n")

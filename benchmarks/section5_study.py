@@ -1,6 +1,6 @@
 """Section 5 study: how the settings the paper leaves open move time to consensus (issue 14).
 
-Runs whole lockstep runs in one process each (``deploy.inmemory.run_in_memory``: the same
+Runs whole lockstep runs in one process each (``deploy.inprocess.engine.run_in_process``: the same
 world, controllers and beacon as ``swarm run``, the same per-robot results), ten robots,
 n = 5, 8 and 10, seeds 0..S-1, for each *setting*: a comma-separated list of
 ``field=value`` overrides of the defaults, e.g. ``dwell=5,broadcast_period=1``. A field
@@ -179,13 +179,13 @@ def observed_factory(registry: dict[str, Any]) -> type[Controller]:
 
 def run_one(task: tuple[str, int, int, int]) -> dict[str, Any]:
     """One run of (setting, n, seed, robots), observed; the JSON line of the study."""
-    from deploy.inmemory import run_in_memory
+    from deploy.inprocess.engine import run_in_process
 
     setting, sites, seed, robots = task
     world, controller, beacon = configs(setting, sites, seed, robots)
     registry: dict[str, Any] = {"controllers": [], "poolings": [], "decisions": []}
     started = time.perf_counter()
-    summary = run_in_memory(
+    summary = run_in_process(
         world, controller, beacon, controller_factory=observed_factory(registry)
     )
     wall = time.perf_counter() - started
@@ -372,7 +372,7 @@ def markdown(settings: Sequence[str], robots: int, out: Path) -> str:
 
 def write_markdown(settings: Sequence[str], robots: int, out: Path, doc: Path) -> None:
     """Put the study table into ``doc`` between the markers naming this script."""
-    from deploy.section5 import replace_block
+    from deploy.reports.section5 import replace_block
 
     command = "benchmarks/section5_study.py --write"
     table = markdown(settings, robots, out)

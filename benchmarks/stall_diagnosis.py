@@ -1,6 +1,6 @@
 """Where are the robots that never decide, and what holds them? (issue 10)
 
-Runs one lockstep swarm in one process (``deploy.inmemory.run_in_memory``: the same
+Runs one lockstep swarm in one process (``deploy.inprocess.engine.run_in_process``: the same
 world, controllers and beacon as ``swarm run``) and watches it: once a second of sim time
 it samples every robot's pose and phase. At the end (``--until`` sim seconds, or
 consensus) it prints, for every robot still undecided: its phase, trips, position, what
@@ -29,7 +29,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from deploy.inmemory import run_in_memory  # noqa: E402
+from deploy.inprocess.engine import run_in_process  # noqa: E402
 from robot_agent.core.controller import Controller, ControllerConfig  # noqa: E402
 from world_server.core.world import World, WorldConfig  # noqa: E402
 
@@ -82,7 +82,7 @@ def watch_run(robots: int, sites: int, seed: int, until: float) -> tuple[Watch, 
         if round(world.t) % 250 == 0:
             print(f"  t = {world.t:6.0f} s: {undecided} undecided", flush=True)
 
-    summary = run_in_memory(
+    summary = run_in_process(
         WorldConfig(num_robots=robots, num_sites=sites, seed=seed),
         ControllerConfig(),
         timeout=until,

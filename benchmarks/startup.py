@@ -22,7 +22,8 @@ from wire.names import Role
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from deploy.processes import ProcessGroup, free_port, python_module, wait_for_port  # noqa: E402
+from deploy.launcher.processes import ProcessGroup, python_module  # noqa: E402
+from plumbing.tcp import free_port, wait_for_port  # noqa: E402
 from plumbing.zenoh_session import open_session  # noqa: E402
 from wire import protocol  # noqa: E402
 

@@ -7,12 +7,12 @@ it comes, and a task already there is not run again):
   N = 100 agents shuffled into pools of k = 3) and for DMVD, DMMD and DC
   (``wellstirred.voting``: the same 100 agents, dmmd's group of 3: itself and 2
   neighbours), n = 5, 10, 20, 50 and 100, 100 runs per point, 2000 steps at most;
-* ``swarm``: whole lockstep runs in one process each (``deploy.inmemory.run_in_memory``:
+* ``swarm``: whole lockstep runs in one process each (``deploy.inprocess.engine.run_in_process``:
   the same world, controllers and beacon as ``swarm run``), every ``--strategy``, n = 5, 8,
   10 and 20 sites, 10 robots (``--seeds``, default 100 per point) and 50 robots
   (``--seeds-50``, default 20), without and with 20% message loss (``--drop 0.2``).
 
-The runs go to an executor (``deploy/sweep.py``: ``--parallel J`` local processes, or
+The runs go to an executor (``deploy/reports/sweep.py``: ``--parallel J`` local processes, or
 ``--dask [ADDRESS]``). ``--write`` renders docs/strategies.md's tables and
 docs/strategies.png from the results file (it runs nothing that is missing: it says what
 is). Any swarm run can be replayed with real processes: ``swarm run --robots R --sites n
@@ -39,7 +39,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from deploy import sweep  # noqa: E402
+from deploy.reports import sweep  # noqa: E402
 from robot_agent.core.voting import STRATEGIES, StrategyName  # noqa: E402
 
 RESULTS = REPO / "docs" / "strategies-runs.jsonl"
@@ -123,7 +123,7 @@ def run_cell(task: CellTask) -> dict[str, Any]:
 
 def run_swarm(task: RunTask) -> dict[str, Any]:
     """One swarm run in process: how it ended, for the honest robots."""
-    from deploy.inmemory import run_in_memory
+    from deploy.inprocess.engine import run_in_process
     from robot_agent.core.controller_config import ControllerConfig
     from world_server.core.radio import RadioConfig
     from world_server.core.world import WorldConfig
@@ -137,7 +137,7 @@ def run_swarm(task: RunTask) -> dict[str, Any]:
     )
     controller = ControllerConfig(strategy=task.strategy)
     started = time.perf_counter()
-    summary = run_in_memory(world, controller, timeout=task.timeout)
+    summary = run_in_process(world, controller, timeout=task.timeout)
     robots = summary["per_robot"]
     steps = [robot["steps"] for robot in robots if robot["steps"] is not None]
     return {
@@ -382,7 +382,7 @@ def plot(results: dict[str, dict[str, Any]], path: Path) -> None:
 
 
 def write_page(results: dict[str, dict[str, Any]], page: Path, figure: Path) -> None:
-    from deploy.section5 import replace_block
+    from deploy.reports.section5 import replace_block
 
     text = page.read_text()
     for name, content in render(results).items():

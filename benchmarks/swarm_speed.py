@@ -60,7 +60,7 @@ sys.path.insert(0, str(REPO))
 import zenoh  # noqa: E402
 
 from benchmarks.process_cpu import in_process_options  # noqa: E402
-from deploy.processes import free_port  # noqa: E402
+from plumbing.tcp import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
 from wire.endings import RESULT_CODES  # noqa: E402
 

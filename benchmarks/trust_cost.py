@@ -8,7 +8,7 @@ ratios to the unkeyed run:
 * the default: every message tagged and checked with run keys (wire/auth.py),
   the router on a Unix socket in a private directory;
 * ``--secure``: run keys, and TLS on loopback with a certificate per process and the
-  access control (deploy/credentials.py).
+  access control (deploy/security/credentials.py).
 
 It checks that the three give the same per-robot results (lockstep is deterministic;
 keys must not change a decision). Then the transport: the same seeds (keyed) through a
@@ -38,7 +38,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from benchmarks.swarm_speed import messaging_floor  # noqa: E402
-from deploy.processes import free_port  # noqa: E402
+from plumbing.tcp import free_port  # noqa: E402
 from wire import auth, protocol  # noqa: E402
 
 MODES = {"unkeyed": ["--no-keys"], "keyed": [], "secure": ["--secure"]}
@@ -99,7 +99,9 @@ def transport(args: argparse.Namespace) -> None:
         "unix": f"unixsock-stream/{folder / 'router.sock'}",
     }
     routers = [
-        subprocess.Popen([sys.executable, "-m", "deploy.router", "--listen", endpoint], cwd=REPO)
+        subprocess.Popen(
+            [sys.executable, "-m", "deploy.launcher.router", "--listen", endpoint], cwd=REPO
+        )
         for endpoint in endpoints.values()
     ]
     try:

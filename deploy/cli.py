@@ -17,15 +17,21 @@ __all__ = ["SUBCOMMANDS", "UsageError", "main"]
 
 # name -> (module, one-line help)
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    "wellstirred": ("deploy.wellstirred", "the paper's Section 4 well-stirred model"),
-    "run": ("deploy.run.launcher", "run a swarm of robot processes to consensus"),
-    "report": ("deploy.report", "the paper's Section 5 figures and a summary from recordings"),
-    "experiment": ("deploy.experiment", "the paper's Section 5 protocol: many runs, one report"),
+    "wellstirred": ("deploy.reports.wellstirred", "the paper's Section 4 well-stirred model"),
+    "run": ("deploy.launcher.launcher", "run a swarm of robot processes to consensus"),
+    "report": (
+        "deploy.reports.report",
+        "the paper's Section 5 figures and a summary from recordings",
+    ),
+    "experiment": (
+        "deploy.launcher.experiment",
+        "the paper's Section 5 protocol: many runs, one report",
+    ),
     "section5": (
-        "deploy.section5",
+        "deploy.reports.section5",
         "the paper's Section 5 numbers and figures, from in-process runs (docs/section5.md)",
     ),
-    "router": ("deploy.router", "a Zenoh router (a Python session; no zenohd needed)"),
+    "router": ("deploy.launcher.router", "a Zenoh router (a Python session; no zenohd needed)"),
     "view": ("viewer.replay", "replay a recording in the browser, on the live view's page"),
 }
 

@@ -4,12 +4,12 @@
 A name counts as the repository's when it is unmistakably so:
 
 * ``path``: a path that starts with a top-level folder of the repository
-  (``deploy/run/launcher.py``), anywhere in the text, code blocks included;
+  (``deploy/launcher/launcher.py``), anywhere in the text, code blocks included;
 * ``link``: the target of a Markdown link (``[x](protocol.md#keys)``), its heading too;
 * ``file``: a ``.py`` or ``.md`` file name in code quotes (``robot_node.py``);
 * ``module``: ``python -m`` and a dotted module of the code (``world_server.recorder``);
 * ``attribute``: in code quotes, a dotted module of the code and one of its names
-  (``deploy.report.read_recording``), a module's short name and one of its names
+  (``deploy.reports.report.read_recording``), a module's short name and one of its names
   (``names.check_name``), or a class of the code and one of its attributes
   (``World.advance``);
 * ``name``: a CamelCase name in code quotes (``RobotEndpoint``), defined somewhere in the
@@ -126,7 +126,7 @@ class Code:
 
     @cached_property
     def modules(self) -> dict[str, ast.Module]:
-        """Every Python module by its path without ``.py`` (``deploy/run/launcher``)."""
+        """Every Python module by its path without ``.py`` (``deploy/launcher/launcher``)."""
         return {
             str(path.relative_to(REPO).with_suffix("")): ast.parse(path.read_text())
             for path in self.files

@@ -21,7 +21,7 @@ from typing import Any
 import pytest
 from swarm_helpers import REPO, kill_leftovers, stop_processes, swarm_command, unique_run_id
 
-from deploy.outside import free_udp_port
+from deploy.launcher.outside import free_udp_port
 
 
 def decisions(summary: dict[str, Any]) -> list[tuple[object, ...]]:

@@ -20,8 +20,8 @@ from typing import Any
 
 import zenoh
 
-from deploy.processes import free_port
-from deploy.run.supervisor import RUN_ID_ENV
+from deploy.launcher.supervisor import RUN_ID_ENV
+from plumbing.tcp import free_port
 from plumbing.zenoh_session import open_session
 
 REPO = Path(__file__).resolve().parent.parent

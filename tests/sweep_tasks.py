@@ -9,13 +9,13 @@ from typing import Any
 
 def small_run(task: tuple[str, int]) -> dict[str, Any]:
     """A whole lockstep run in memory: 3 robots, 3 sites, ``task`` = (strategy, seed)."""
-    from deploy.inmemory import run_in_memory
+    from deploy.inprocess.engine import run_in_process
     from robot_agent.core.controller_config import ControllerConfig
     from world_server.core.world import WorldConfig
 
     strategy, seed = task
     world = WorldConfig(run="sweep-test", seed=seed, num_sites=3, num_robots=3)
-    summary = run_in_memory(world, ControllerConfig(strategy=strategy), timeout=1200.0)  # type: ignore[arg-type]
+    summary = run_in_process(world, ControllerConfig(strategy=strategy), timeout=1200.0)  # type: ignore[arg-type]
     return {
         "ended": summary["ended"],
         "sim_time_s": summary["sim_time_s"],

@@ -35,7 +35,7 @@ from swarm_helpers import (
     unique_run_id,
 )
 
-from deploy.processes import python_module
+from deploy.launcher.processes import python_module
 from plumbing import run_keys
 from plumbing.world_info import ask, fetch_world_info
 from robot_agent.core import tick_assembly

@@ -1,5 +1,5 @@
 """Run keys and message tags (wire/auth.py), key files and the launcher's hand-over of
-keys (plumbing/run_keys.py), and a run's private directory (deploy/credentials.py)."""
+keys (plumbing/run_keys.py), and a run's private directory (deploy/security/credentials.py)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from deploy.credentials import RunNetwork
+from deploy.security.credentials import RunNetwork
 from plumbing import run_keys
 from wire import auth
 

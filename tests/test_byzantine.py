@@ -14,8 +14,8 @@ from fakes import FakeSwarm, make_swarm
 from mcap.reader import make_reader
 from swarm_helpers import run_swarm, unique_run_id
 
+from deploy.analysis.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from deploy.cli import main as swarm_main
-from deploy.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from robot_agent.core import byzantine, decision, ports
 from robot_agent.core.byzantine import Behaviour, ByzantineRobot
 from robot_agent.core.controller import ControllerConfig
@@ -206,9 +206,9 @@ def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     from deploy.cli import build_parser
-    from deploy.credentials import RunNetwork
-    from deploy.run.supervisor import Supervisor
-    from deploy.run_plan import plan_from_args
+    from deploy.launcher.plan import plan_from_args
+    from deploy.launcher.supervisor import Supervisor
+    from deploy.security.credentials import RunNetwork
     from plumbing.inbox import BoundedInbox
 
     parser = build_parser(["run"])
@@ -248,7 +248,7 @@ def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot(
 
 def test_swarm_experiment_passes_byzantine_and_kill_switches_on_to_each_run() -> None:
     from deploy.cli import build_parser
-    from deploy.experiment import plan_runs, validate_run_options
+    from deploy.launcher.experiment import plan_runs, validate_run_options
 
     parser = build_parser(["experiment"])
     args = parser.parse_args(
@@ -343,7 +343,7 @@ def test_a_real_run_with_a_liar_and_an_inverted_robot_matches_the_in_process_run
     """Robot 1 lies (its default site), robot 2 reads qualities inverted; two robots per
     process. The recording shows robot 1's one-hot broadcasts; the results are the
     in-process engine's, robot by robot."""
-    from deploy.inmemory import run_in_memory
+    from deploy.inprocess.engine import run_in_process
     from world_server.server import cli as server
 
     seed, robots, sites = 1, 4, 5
@@ -353,7 +353,7 @@ def test_a_real_run_with_a_liar_and_an_inverted_robot_matches_the_in_process_run
         server.build_parser().parse_args([*common, "--run-id", "memory"])
     )
     controller_config = options.controller_config(node.build_parser().parse_args(["--id", "0"]))
-    in_memory = run_in_memory(
+    in_memory = run_in_process(
         world_config, controller_config, timeout=900, byzantine_robots=switches
     )
     path = tmp_path / "byzantine.mcap"

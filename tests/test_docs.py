@@ -65,10 +65,10 @@ def test_the_historical_exceptions_are_still_needed(code: Code) -> None:
 def test_the_reference_checks_catch_what_is_gone(code: Code) -> None:
     """The checks themselves: each kind of stale name is caught, and live ones pass."""
     text = (
-        "`deploy/launcher.py`, `deploy/run/launcher.py`, [x](nowhere.md), "
+        "`deploy/launcher.py`, `deploy/launcher/launcher.py`, [x](nowhere.md), "
         "[y](protocol.md#keys), [z](protocol.md#no-such-heading), `node.py`, "
         "`robot_node.py`, `python -m world_server.recorder`, `python -m deploy.nothing`, "
-        "`deploy.report.read_recording`, `deploy.report.no_such_function`, "
+        "`deploy.reports.report.read_recording`, `deploy.reports.report.no_such_function`, "
         "`WorldServer._open_tick`, `World.advance`, `protocol.check_name`, "
         "`names.check_name`, `Interrupted`, `RobotEndpoint`, `runs/<run-id>.mcap`, "
         "`tests/vectors/<type>.json`, `viewer/finish`, `summary.json`"
@@ -83,12 +83,12 @@ def test_the_reference_checks_catch_what_is_gone(code: Code) -> None:
         "protocol.md#no-such-heading",
         "node.py",
         "deploy.nothing",
-        "deploy.report.no_such_function",
+        "deploy.reports.report.no_such_function",
         "WorldServer._open_tick",
         "protocol.check_name",
         "Interrupted",
     }
-    assert {"deploy/run/launcher.py", "RobotEndpoint", "World.advance"} <= found.keys()
+    assert {"deploy/launcher/launcher.py", "RobotEndpoint", "World.advance"} <= found.keys()
 
 
 def _commands_in_readme() -> set[str]:

@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from deploy.inmemory import EngineHooks, run_in_memory
+from deploy.inprocess.engine import EngineHooks, run_in_process
 from robot_agent.core.controller import ControllerConfig
 from wire.endings import (
     ENDINGS,
@@ -155,20 +155,20 @@ def _four_robots() -> WorldConfig:
 
 @pytest.mark.timeout(60)
 def test_the_in_process_engine_stops_on_a_signal_or_the_wall_limit_at_once() -> None:
-    signalled = run_in_memory(
+    signalled = run_in_process(
         _four_robots(), ControllerConfig(), hooks=EngineHooks(stop_signal=lambda: True)
     )
     assert signalled["ended"] == "interrupted" and "timeout_kind" not in signalled
     assert signalled["sim_time_s"] == pytest.approx(0.0)
     assert [robot["id"] for robot in signalled["stuck"]] == [0, 1, 2, 3]
-    walled = run_in_memory(
+    walled = run_in_process(
         _four_robots(),
         ControllerConfig(),
         hooks=EngineHooks(since_launch=lambda: 10.0, wall_timeout=10.0),
     )
     assert (walled["ended"], walled["timeout_kind"]) == ("timeout", "wall")
     # Both at once: the signal comes first (wire.endings.stop_reason).
-    both = run_in_memory(
+    both = run_in_process(
         _four_robots(),
         ControllerConfig(),
         hooks=EngineHooks(stop_signal=lambda: True, since_launch=lambda: 10.0, wall_timeout=1.0),

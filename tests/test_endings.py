@@ -28,8 +28,8 @@ from swarm_helpers import (
     unique_run_id,
 )
 
-from deploy import report
-from deploy.processes import free_port
+from deploy.reports import report
+from plumbing.tcp import free_port
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -215,7 +215,7 @@ def test_a_swarm_that_can_never_pool_ends_stalled_within_its_window() -> None:
     nest centre, moving but completing nothing: the run ends stalled one stall window
     after the last step any robot completed (it used to run to --wall-timeout), the same
     as in one process, and says per robot the phase it is stuck in and since when."""
-    from deploy.inmemory import run_in_memory
+    from deploy.inprocess.engine import run_in_process
     from nest_beacon.core.beacon import BeaconConfig
     from robot_agent.core.controller import ControllerConfig
     from world_server.core.world import WorldConfig
@@ -239,7 +239,7 @@ def test_a_swarm_that_can_never_pool_ends_stalled_within_its_window() -> None:
     last = max(robot["last_progress_s"] for robot in stuck)
     assert last + window <= summary["sim_time_s"] < last + window + 30.0
     assert processes_of(run_id) == []
-    alone = run_in_memory(
+    alone = run_in_process(
         WorldConfig(run="memory", seed=1, num_robots=6, num_sites=6),
         ControllerConfig(),
         BeaconConfig(outages=((0.0, 100000.0),)),

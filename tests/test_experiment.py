@@ -18,8 +18,8 @@ from swarm_helpers import (
     unique_run_id,
 )
 
-from deploy import report
 from deploy.cli import main
+from deploy.reports import report
 
 
 @pytest.mark.timeout(300)

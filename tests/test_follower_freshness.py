@@ -7,8 +7,8 @@ from __future__ import annotations
 import pytest
 
 from deploy.cli import build_parser
-from deploy.run.follower import Follower, Heard, Kind
-from deploy.run_plan import plan_from_args
+from deploy.launcher.follower import Follower, Heard, Kind
+from deploy.launcher.plan import plan_from_args
 from wire import auth, names, protocol
 
 KEYRING = auth.Keyring(secret=bytes(range(32)))

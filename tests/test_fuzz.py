@@ -12,8 +12,8 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from deploy.run.follower import Follower, Heard, Kind
-from deploy.run_plan import plan_from_args
+from deploy.launcher.follower import Follower, Heard, Kind
+from deploy.launcher.plan import plan_from_args
 from plumbing.inbox import BoundedInbox
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import RobotEndpoint

@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from deploy.run.follower import Heard, Kind
+from deploy.launcher.follower import Heard, Kind
 from nest_beacon.node.beacon_node import Event as BeaconEvent
 from nest_beacon.node.beacon_node import EventKind as BeaconKind
 from plumbing.inbox import ITEM_OVERHEAD_BYTES, BoundedInbox, message_bytes

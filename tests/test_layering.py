@@ -31,6 +31,8 @@ PURE = [
     "nest_beacon/core",
     "viewer/core",
     "wellstirred",
+    "deploy/analysis",
+    "deploy/inprocess",
 ]
 ADAPTERS = [
     "robot_agent/node",
@@ -42,7 +44,9 @@ ADAPTERS = [
     "nest_beacon/node",
     "plumbing",
 ]
-OUTER = ["deploy", "deploy/run", "viewer"]
+# The rooms of the ``swarm`` command: the launcher (``swarm run`` and what starts runs),
+# security (keys, certificates, access control), reports (what is made of runs).
+OUTER = ["deploy", "deploy/launcher", "deploy/security", "deploy/reports", "viewer"]
 # The package roots that hold only layers and a ``__main__`` that starts one.
 ROOTS = ["robot_agent", "world_server", "nest_beacon"]
 FOLDERS = PURE + ADAPTERS + OUTER + ROOTS
@@ -94,8 +98,20 @@ ALLOWED: dict[str, set[str]] = {
         "world_server/core",
         "world_server/recording",
     },
-    "deploy": set(FOLDERS) - {"deploy", "deploy/run"},
-    "deploy/run": set(FOLDERS) - {"deploy/run"},
+    # What a run decided and when it ends (summary, digest, watchdog), and the tables of runs.
+    "deploy/analysis": {"wire", "robot_agent/core"},
+    # The in-process engine: the world's, the robots' and the beacon's cores on one bus.
+    "deploy/inprocess": {
+        "wire",
+        "robot_agent/core",
+        "world_server/core",
+        "nest_beacon/core",
+        "deploy/analysis",
+    },
+    "deploy/security": {"wire", "plumbing"},
+    "deploy/reports": set(FOLDERS) - {"deploy", "deploy/reports", "deploy/launcher"},
+    "deploy/launcher": set(FOLDERS) - {"deploy", "deploy/launcher"},
+    "deploy": set(FOLDERS) - {"deploy"},
 }
 # Imports a link to a robot's hardware may not make: it runs where there is no Zenoh.
 LINK_FORBIDDEN = {"zenoh", "plumbing"}

@@ -73,9 +73,17 @@ def test_routers_per_host_carry_a_swarm_to_the_right_consensus(hosts: Lan, tmp_p
 
     common = ["--run-id", RUN, "--seed", str(SEED), "--mode", "client"]
     try:
-        on(0, "-m", "deploy.router", "--listen", endpoint(0))
+        on(0, "-m", "deploy.launcher.router", "--listen", endpoint(0))
         for host in (1, 2):
-            on(host, "-m", "deploy.router", "--listen", endpoint(host), "--connect", endpoint(0))
+            on(
+                host,
+                "-m",
+                "deploy.launcher.router",
+                "--listen",
+                endpoint(host),
+                "--connect",
+                endpoint(0),
+            )
         on(
             0,
             "-m",

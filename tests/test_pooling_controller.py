@@ -46,7 +46,7 @@ def test_robot_agent_takes_pooling_from_its_command_line() -> None:
 
 def test_swarm_run_forwards_pooling_to_every_robot_and_records_it() -> None:
     from deploy.cli import build_parser
-    from deploy.run_plan import plan_from_args
+    from deploy.launcher.plan import plan_from_args
     from robot_agent.node.options import RobotAgentConfig
     from wire import settings
 

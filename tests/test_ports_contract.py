@@ -1,8 +1,8 @@
 """One port contract, and every transport runs it.
 
 ``ports.control_step`` is the loop docs/porting.md tells a port to implement. The Zenoh
-robot (robot_agent/node/robot_node.py), the in-process engine (deploy/inmemory.py) and the UDP
-example (examples/udp_robot.py) are adapters of it. These tests replay the tick vectors
+robot (robot_agent/node/robot_node.py), the in-process engine (deploy/inprocess/engine.py)
+and the UDP example (examples/udp_robot.py) are adapters of it. These tests replay the tick vectors
 (tests/vectors/tick.json) through the adapter the node and the engine share, and through
 the node itself, and check in each transport that its controller is stepped by
 ``control_step`` and by nothing else (the calling frame is the contract's code, however
@@ -21,7 +21,7 @@ from typing import Any
 
 import pytest
 
-from deploy.inmemory import run_in_memory
+from deploy.inprocess.engine import run_in_process
 from plumbing.inbox import BoundedInbox
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
@@ -184,7 +184,7 @@ def witness(stepped_by: list[CodeType]) -> type[Controller]:
 def test_the_in_process_engine_steps_every_robot_through_the_contract() -> None:
     stepped_by: list[CodeType] = []
     ticks: list[int] = []
-    run_in_memory(
+    run_in_process(
         WorldConfig(num_sites=3, num_robots=2),
         ControllerConfig(),
         timeout=1.0,

@@ -28,7 +28,8 @@ from swarm_helpers import (
     unique_run_id,
 )
 
-from deploy import credentials, report
+from deploy.reports import report
+from deploy.security import credentials
 from wire.endings import Ending
 
 pytestmark = pytest.mark.timeout(180)
@@ -185,7 +186,7 @@ def _janitor_of(directory: Path) -> int | None:
                 cmdline = (entry / "cmdline").read_bytes().split(b"\0")
             except OSError:
                 continue
-            if b"deploy.janitor" in cmdline and str(directory).encode() in cmdline:
+            if b"deploy.security.janitor" in cmdline and str(directory).encode() in cmdline:
                 return int(entry.name)
     return None
 

@@ -25,7 +25,7 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
 from swarm_helpers import REPO, kill_leftovers, loopback_router, run_swarm, unique_run_id
 
-from deploy import report
+from deploy.reports import report
 from wire import protocol
 from wire.names import Role
 from world_server.core.layout import make_layout
@@ -429,7 +429,7 @@ def test_a_query_is_waited_for_while_worth_it_and_given_up_when_not() -> None:
 
 
 def test_the_launcher_waits_for_the_recorder_while_its_file_grows(tmp_path: Path) -> None:
-    from deploy.run.recording import RECORDER_REPORT_EVERY, RecorderProgress
+    from deploy.launcher.recording import RECORDER_REPORT_EVERY, RecorderProgress
 
     path = tmp_path / "run.mcap"
     path.write_bytes(b"x" * 100)
@@ -470,7 +470,7 @@ def test_the_launcher_waits_for_the_recorder_while_its_file_grows(tmp_path: Path
 
 
 def test_the_recorder_yields_the_cpu_only_to_a_swarm_that_leaves_it_idle_time() -> None:
-    from deploy.run_plan import ROBOTS_PER_PROCESS, recorder_niceness
+    from deploy.launcher.plan import ROBOTS_PER_PROCESS, recorder_niceness
 
     assert recorder_niceness(10) == recorder_options.DEFAULT_NICENESS == 10
     assert recorder_niceness(ROBOTS_PER_PROCESS) == 10  # one robot process

@@ -19,9 +19,9 @@ from typing import Any
 import pytest
 from swarm_helpers import REPO, swarm_command
 
-from deploy import report
+from deploy.analysis.summary import run_digest
 from deploy.cli import main
-from deploy.summary import run_digest
+from deploy.reports import report
 from wire import protocol
 from world_server.core.layout import make_layout
 from world_server.recording.description import RunDescription

@@ -9,7 +9,7 @@ import time
 import pytest
 from swarm_helpers import REPO, swarm_command
 
-from deploy.processes import free_port, wait_for_port
+from plumbing.tcp import free_port, wait_for_port
 from plumbing.zenoh_session import open_session
 
 pytestmark = pytest.mark.timeout(60)

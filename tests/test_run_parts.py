@@ -14,13 +14,13 @@ import pytest
 import zenoh
 
 from deploy.cli import build_parser
-from deploy.processes import ProcessGroup
-from deploy.run.faults import FaultSchedule
-from deploy.run.follower import Heard, Kind
-from deploy.run.launcher import Swarm
-from deploy.run.log_relay import LogRelay
-from deploy.run.signals import StopSignals
-from deploy.run_plan import Fault, FaultAction, RunPlan, plan_from_args
+from deploy.launcher.faults import FaultSchedule
+from deploy.launcher.follower import Heard, Kind
+from deploy.launcher.launcher import Swarm
+from deploy.launcher.log_relay import LogRelay
+from deploy.launcher.plan import Fault, FaultAction, RunPlan, plan_from_args
+from deploy.launcher.processes import ProcessGroup
+from deploy.launcher.signals import StopSignals
 from plumbing import stop_signals
 from wire import protocol
 from wire.endings import Halt, Stop, TimeLimit

@@ -14,9 +14,9 @@ from typing import Any
 import pytest
 from swarm_helpers import REPO
 
-from deploy import section5
-from deploy import section5_tables as tables
+from deploy.analysis import section5_tables as tables
 from deploy.cli import main
+from deploy.reports import section5
 
 
 def _published() -> tuple[dict[str, Any], list[dict[str, Any]]]:

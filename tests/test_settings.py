@@ -12,9 +12,9 @@ from typing import Any
 
 import pytest
 
-from deploy import run_switches
 from deploy.cli import build_parser
-from deploy.run_plan import plan_from_args
+from deploy.launcher import switches as run_switches
+from deploy.launcher.plan import plan_from_args
 from nest_beacon.core.beacon import BeaconConfig
 from nest_beacon.node import cli as beacon_main
 from nest_beacon.node.options import NEST_BEACON_OPTIONS, NestBeaconConfig

@@ -269,7 +269,7 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run(tmp_path: Path
     """Same seed: the distributed run and the single-process run agree robot by robot. Over
     Zenoh, robots 0-4 share a process that exchanges batches with the world, and robot 5
     has one of its own, on its own keys (the world's timeline says which went how)."""
-    from deploy.inmemory import run_in_memory
+    from deploy.inprocess.engine import run_in_process
     from robot_agent.node import cli as node
     from robot_agent.node import options
     from world_server.server import cli as server
@@ -280,7 +280,7 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run(tmp_path: Path
         server.build_parser().parse_args([*common, "--run-id", "memory"])
     )
     controller_config = options.controller_config(node.build_parser().parse_args(["--id", "0"]))
-    in_memory = run_in_memory(world_config, controller_config, timeout=900)
+    in_memory = run_in_process(world_config, controller_config, timeout=900)
     trace = tmp_path / "trace"
     hosts = ["--robots-per-process", "5", "--trace", str(trace)]
     code, over_zenoh, stderr = run_swarm(

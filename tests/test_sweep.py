@@ -1,4 +1,4 @@
-"""The sweep executor (deploy/sweep.py): the same results per task in this process, on
+"""The sweep executor (deploy/reports/sweep.py): the same results per task in this process, on
 local processes and on a local Dask cluster on loopback; a worker that dies costs only
 its tasks, which are retried or reported."""
 
@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import sweep_tasks
 
-from deploy import sweep
+from deploy.reports import sweep
 
 RUNS = [("paper", 0), ("dc", 1), ("paper", 2)]
 

@@ -31,7 +31,7 @@ FORBIDDEN = (
     "swarm_helpers",
     "netns",
     "browser",
-    "deploy.processes",
+    "deploy.launcher.processes",
     "plumbing.zenoh_session",
 )
 # This module imports some of them to show that the guard refuses them.

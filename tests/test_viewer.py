@@ -35,7 +35,7 @@ from swarm_helpers import (
 from websockets.sync.client import connect
 from websockets.typing import Subprotocol
 
-from deploy.processes import free_port
+from plumbing.tcp import free_port
 from plumbing.world_info import ask
 from viewer import replay
 from viewer.core import model

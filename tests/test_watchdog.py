@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from deploy.inmemory import run_in_memory
-from deploy.watchdog import Watchdog, default_stall_window
+from deploy.analysis.watchdog import Watchdog, default_stall_window
+from deploy.inprocess.engine import run_in_process
 from nest_beacon.core.beacon import BeaconConfig
 from robot_agent.core.controller import ControllerConfig
 from wire import protocol
@@ -223,7 +223,7 @@ def _world(seed: int, robots: int, sites: int = 3) -> WorldConfig:
 def test_an_in_process_run_that_stalls_ends_stalled_with_its_stuck_robot() -> None:
     """The beacon is silent all run: the lone robot comes home and waits at the nest."""
     silent = BeaconConfig(outages=((0.0, 1e6),))
-    summary = run_in_memory(
+    summary = run_in_process(
         _world(0, robots=1), ControllerConfig(), silent, timeout=1800, stall_window=20.0
     )
     assert summary["ended"] == "stalled" and not summary["timed_out"]
@@ -236,13 +236,13 @@ def test_an_in_process_run_that_stalls_ends_stalled_with_its_stuck_robot() -> No
 
 @pytest.mark.timeout(120)
 def test_in_process_endings_consensus_split_and_timeout() -> None:
-    agreed = run_in_memory(_world(1, robots=4), ControllerConfig(threshold=0.5), timeout=600)
+    agreed = run_in_process(_world(1, robots=4), ControllerConfig(threshold=0.5), timeout=600)
     assert agreed["ended"] == "consensus" and "stuck" not in agreed
     # Deciding at 0.5 with three sites: one comparison each, and the robots disagree.
-    split = run_in_memory(_world(2, robots=4), ControllerConfig(threshold=0.5), timeout=600)
+    split = run_in_process(_world(2, robots=4), ControllerConfig(threshold=0.5), timeout=600)
     assert split["ended"] == "split" and split["stuck"] == []
     assert not split["consensus"] and not split["timed_out"]
     assert len({robot["decided_site"] for robot in split["per_robot"]}) == 2
-    short = run_in_memory(_world(0, robots=4), ControllerConfig(), timeout=5.0)
+    short = run_in_process(_world(0, robots=4), ControllerConfig(), timeout=5.0)
     assert short["ended"] == "timeout" and short["timeout_kind"] == "sim"
     assert short["timed_out"] and [entry["id"] for entry in short["stuck"]] == [0, 1, 2, 3]

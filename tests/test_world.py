@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from deploy.inmemory import run_in_memory
+from deploy.inprocess.engine import run_in_process
 from robot_agent.core.controller import ControllerConfig
 from world_server.core.radio import RadioConfig
 from world_server.core.world import World, WorldConfig
@@ -26,7 +26,7 @@ def _config(seed: int, robots: int = 6, sites: int = 8, **radio: Any) -> WorldCo
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_every_robot_decides_on_the_best_site(seed: int) -> None:
-    summary = run_in_memory(_config(seed), ControllerConfig(), timeout=1200)
+    summary = run_in_process(_config(seed), ControllerConfig(), timeout=1200)
     assert not summary["timed_out"]
     assert summary["correct"], summary["per_robot"]
     for robot in summary["per_robot"]:
@@ -35,15 +35,15 @@ def test_every_robot_decides_on_the_best_site(seed: int) -> None:
 
 
 def test_the_same_seed_gives_the_same_run_and_another_seed_another() -> None:
-    first = run_in_memory(_config(4), ControllerConfig(), timeout=1200)
-    again = run_in_memory(_config(4), ControllerConfig(), timeout=1200)
-    other = run_in_memory(_config(5), ControllerConfig(), timeout=1200)
+    first = run_in_process(_config(4), ControllerConfig(), timeout=1200)
+    again = run_in_process(_config(4), ControllerConfig(), timeout=1200)
+    other = run_in_process(_config(5), ControllerConfig(), timeout=1200)
     assert first == again
     assert first["per_robot"] != other["per_robot"]
 
 
 def test_a_lossy_radio_slows_nothing_down_into_a_wrong_decision() -> None:
-    summary = run_in_memory(_config(3, drop=0.3), ControllerConfig(), timeout=1800)
+    summary = run_in_process(_config(3, drop=0.3), ControllerConfig(), timeout=1800)
     assert summary["correct"]
     assert summary["radio"]["dropped"] > 0
 

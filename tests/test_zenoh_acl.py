@@ -22,8 +22,8 @@ from pathlib import Path, PurePath
 import pytest
 import zenoh
 
-from deploy import certificates, zenoh_acl
-from deploy.processes import python_module
+from deploy.launcher.processes import python_module
+from deploy.security import certificates, zenoh_acl
 from plumbing import run_keys, zenoh_session
 from wire import protocol
 from wire.names import Role

@@ -2,7 +2,7 @@
 stops following a run, and the one rule that decides it.
 
 An engine of ``swarm run`` (the launcher following processes over Zenoh,
-``deploy/run/launcher.py``, or the in-process loop, ``deploy/inmemory.py``) asks
+``deploy/launcher/launcher.py``, or the in-process loop, ``deploy/inprocess/engine.py``) asks
 ``stop_reason`` at every look at its run; the answer (``Halt``) says why it stops
 (``Stop``). The summary then names how the run ended (``Ending``, ``ending_of``): a run
 stopped because every running robot decided ended in consensus or split. The exit code,
@@ -22,7 +22,7 @@ SIGNAL_EXIT_BASE = 128  # a run ended by a signal exits 128 + the signal's numbe
 
 class StopSignal(IntEnum):
     """The signals that end a run in order, by their POSIX numbers (the same on every
-    Unix; deploy/run/signals.py installs them)."""
+    Unix; deploy/launcher/signals.py installs them)."""
 
     SIGINT = 2
     SIGTERM = 15

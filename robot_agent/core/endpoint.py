@@ -153,15 +153,19 @@ class RobotEndpoint:
     def receive_sense(self, sense: protocol.Sense, arrived: float = 0.0) -> Step | None:
         """Take a sense from a batch of senses that passed its process's checks (its tag,
         its decoding: ``hosting.HostedRobots``); the step it completes, if any."""
+        assembly = self.assembly
         try:
             refused = guard.time_refused(sense.tick, sense.t, self.dt)
             if refused:
                 raise protocol.ProtocolError(refused)
-            held = self.assembly.add_sense(sense, arrived)
+            alone = assembly.step_alone(sense, arrived)
+            if alone is not None:
+                return self._step(alone)
+            held = assembly.add_sense(sense, arrived)
         except protocol.ProtocolError as error:
             self.reject(InputKind.SENSE, error)
             return None
-        ready = self.assembly.take_ready(sense.tick) if held else None
+        ready = assembly.take_ready(sense.tick) if held else None
         return None if ready is None else self._step(ready)
 
     def _hold(

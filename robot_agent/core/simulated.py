@@ -1,6 +1,6 @@
 """The ``Body`` and ``Radio`` of a robot whose body the world simulates: one adapter of the
 port contract (``ports.control_step``), used by the robot's endpoint (``endpoint.py``, and
-so by the robot process over Zenoh) and by ``deploy/inmemory.py`` in one process, so both
+so by the robot process over Zenoh) and by ``deploy/inprocess/engine.py`` in one process, so both
 run exactly the loop a port runs.
 
 Each tick the world sends a ``Sense`` (time, pose, proximity), the radio medium's

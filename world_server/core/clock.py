@@ -12,7 +12,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 
-@dataclass
+@dataclass(slots=True)
 class _Answer:
     radio_tx: int | None = None  # announced count; None until the answer arrives
     received_tx: int = 0

@@ -1,0 +1,19 @@
+#ifndef TESTS_H
+#define TESTS_H
+#include "jdom.h"
+extern int passed, failed;
+void check(int ok, const char *what, const char *name);
+JNode *load(const char *file);
+void test_numeric(void);
+void test_rng(void);
+void test_fsum(void);
+void test_format(void);
+void test_auth(void);
+void test_link(void);
+void test_messages(void);
+void test_png(void);
+void test_vision(void);
+void test_decision(void);
+void test_endpoint(void);
+void test_client(void);
+#endif

@@ -1,0 +1,407 @@
+/* auth.json, link_frame.json and the message files a robot decodes or encodes. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "auth.h"
+#include "link.h"
+#include "messages.h"
+#include "sha256.h"
+#include "tests.h"
+
+static unsigned char buf[70000], buf2[140000];
+
+void test_auth(void) {
+    JNode *root = load("auth.json");
+    if (!root) return;
+    unsigned char secret[32], key[32], want[64];
+    jdom_hex(jdom_str(root, "secret_hex"), secret, 32);
+    JNode *keys = jdom_get(root, "keys");
+    for (size_t i = 0; i < keys->count; i++) {
+        const char *identity = jdom_str(keys->items[i], "identity");
+        auth_derive_key(secret, identity, key);
+        jdom_hex(jdom_str(keys->items[i], "key_hex"), want, 32);
+        check(!memcmp(key, want, 32), "auth.json key", identity);
+        check(is_identity(identity, strlen(identity)), "auth.json identity", identity);
+    }
+    JNode *tags = jdom_get(root, "tags");
+    for (size_t i = 0; i < tags->count; i++) {
+        JNode *t = tags->items[i];
+        auth_derive_key(secret, jdom_str(t, "identity"), key);
+        const char *meta = jdom_str(t, "metadata_utf8"), *payload = jdom_str(t, "payload_utf8");
+        unsigned char tag[16], attachment[512];
+        auth_tag(key, jdom_str(t, "key_expr"), (const unsigned char *)meta, strlen(meta),
+                 (const unsigned char *)payload, strlen(payload), tag);
+        jdom_hex(jdom_str(t, "tag_hex"), want, 16);
+        check(!memcmp(tag, want, 16), "auth.json tag", jdom_str(t, "name"));
+        size_t n = jdom_hex(jdom_str(t, "attachment_hex"), attachment, sizeof attachment);
+        const unsigned char *m;
+        size_t mn;
+        int ok = auth_open(key, jdom_str(t, "key_expr"), (const unsigned char *)payload,
+                           strlen(payload), attachment, n, &m, &mn) == 0 &&
+                 mn == strlen(meta) && !memcmp(m, meta, mn);
+        check(ok, "auth.json open", jdom_str(t, "name"));
+        attachment[3] ^= 1;
+        check(auth_open(key, jdom_str(t, "key_expr"), (const unsigned char *)payload,
+                        strlen(payload), attachment, n, &m, &mn) != 0,
+              "auth.json forged", jdom_str(t, "name"));
+    }
+    const char *bad[] = {"robot/01", "robot/100000", "host/5-3", "beacon/", "nobody", "robot/-1"};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++)
+        check(!is_identity(bad[i], strlen(bad[i])), "identity refused", bad[i]);
+    const char *good[] = {"robot/0", "robot/99999", "host/3-4", "beacon/nest", "bridge"};
+    for (size_t i = 0; i < sizeof good / sizeof good[0]; i++)
+        check(is_identity(good[i], strlen(good[i])), "identity", good[i]);
+}
+
+static int frame_count;
+static unsigned char deframed[70000];
+static size_t deframed_size;
+static int deframed_refusal;
+static void collect(void *ctx, const unsigned char *frame, size_t size, int refusal) {
+    (void)ctx;
+    frame_count++;
+    deframed_refusal = refusal;
+    if (frame) {
+        memcpy(deframed, frame, size);
+        deframed_size = size;
+    }
+}
+
+static const char *type_names[] = {"", "HELLO", "WELCOME", "DATA", "PING", "PONG", "BYE"};
+static Deframer deframer;
+
+void test_link(void) {
+    JNode *root = load("link_frame.json");
+    if (!root) return;
+    unsigned char robot_key[32], lk[32], sk[32], want[32];
+    jdom_hex(jdom_str(root, "robot_key_hex"), robot_key, 32);
+    link_key(robot_key, lk);
+    jdom_hex(jdom_str(root, "link_key_hex"), want, 32);
+    check(!memcmp(lk, want, 32), "link_frame.json", "link key");
+    unsigned char rn[8] = {1, 2, 3, 4, 5, 6, 7, 8}, bn[8] = {0x11, 0x12, 0x13, 0x14, 0x15, 0x16, 0x17, 0x18};
+    session_key(lk, rn, bn, sk);
+    jdom_hex(jdom_str(root, "session_key_hex"), want, 32);
+    check(!memcmp(sk, want, 32), "link_frame.json", "session key");
+    JNode *valid = jdom_get(root, "valid");
+    for (size_t i = 0; i < valid->count; i++) {
+        JNode *v = valid->items[i];
+        const char *name = jdom_str(v, "name");
+        size_t n = jdom_hex(jdom_str(v, "hex"), buf, sizeof buf);
+        int encrypted = jdom_get(v, "encrypted")->boolean;
+        Frame f;
+        static unsigned char plain[70000];
+        int refusal = link_open(buf, n, lk, encrypted ? sk : NULL, plain, &f);
+        if (!refusal) refusal = link_check_body(&f);
+        check(refusal == R_NONE, "link_frame.json valid opens", name);
+        if (refusal) continue;
+        unsigned char body[70000], rnonce[8], bnonce[8];
+        size_t bs = jdom_hex(jdom_str(v, "body_hex"), body, sizeof body);
+        jdom_hex(jdom_str(v, "robot_nonce_hex"), rnonce, 8);
+        jdom_hex(jdom_str(v, "bridge_nonce_hex"), bnonce, 8);
+        int ok = !strcmp(type_names[f.type], jdom_str(v, "type")) &&
+                 f.from_bridge == jdom_get(v, "from_bridge")->boolean &&
+                 f.robot == (unsigned)jdom_get(v, "robot")->integer &&
+                 !memcmp(f.robot_nonce, rnonce, 8) && !memcmp(f.bridge_nonce, bnonce, 8) &&
+                 f.seq == (unsigned long long)jdom_get(v, "seq")->integer &&
+                 f.body_size == bs && !memcmp(f.body, body, bs) && f.encrypted == encrypted;
+        check(ok, "link_frame.json valid reads as", name);
+        Frame g = f;
+        g.body = body;
+        long sealed = link_seal(&g, lk, encrypted ? sk : NULL, buf2, sizeof buf2);
+        check(sealed == (long)n && !memcmp(buf2, buf, n), "link_frame.json seals to its bytes", name);
+        unsigned char serial[80000], want_serial[80000];
+        long sn = serial_encode(buf, n, serial, sizeof serial);
+        size_t wn = jdom_hex(jdom_str(v, "serial_hex"), want_serial, sizeof want_serial);
+        check(sn == (long)wn && !memcmp(serial, want_serial, wn), "link_frame.json serial", name);
+        frame_count = 0;
+        deframer.used = 0;
+        deframer.overflowed = 0;
+        /* fed in two pieces: a frame may arrive in any chunks */
+        deframer_feed(&deframer, serial, (size_t)sn / 2, collect, NULL);
+        deframer_feed(&deframer, serial + sn / 2, (size_t)sn - (size_t)sn / 2, collect, NULL);
+        check(frame_count == 1 && deframed_refusal == R_NONE && deframed_size == n &&
+                  !memcmp(deframed, buf, n),
+              "link_frame.json deframes", name);
+        JNode *data = jdom_get(v, "data");
+        if (data && data->type == J_OBJ) {
+            int kind;
+            const unsigned char *payload, *attachment;
+            size_t ps, as;
+            int r = link_decode_data(f.body, f.body_size, &kind, &payload, &ps, &attachment, &as);
+            unsigned char att[2000];
+            size_t an = jdom_hex(jdom_str(data, "attachment_hex"), att, sizeof att);
+            const char *pu = jdom_str(data, "payload_utf8");
+            ok = r == R_NONE && kind == jdom_get(data, "kind_byte")->integer && ps == strlen(pu) &&
+                 !memcmp(payload, pu, ps) && as == an && (an == 0 || !memcmp(attachment, att, an));
+            check(ok, "link_frame.json data", name);
+            unsigned char again[70000];
+            long en = link_encode_data(kind, payload, ps, attachment, as, again, sizeof again);
+            check(en == (long)f.body_size && !memcmp(again, f.body, f.body_size),
+                  "link_frame.json data encodes", name);
+        }
+        if (f.type == F_WELCOME) {
+            LinkWelcome w;
+            check(decode_welcome(f.body, f.body_size, &w) && !strcmp(w.run, "demo") &&
+                      w.ping_every == 0.5 && w.silence == 3.0 && !w.encrypted &&
+                      w.controller_size == strlen("{\"dwell\":3.0}"),
+                  "link_frame.json welcome", name);
+            ControllerConfig c;
+            char error[200];
+            check(decode_controller_config(w.controller, w.controller_size, &c, error, sizeof error) == 0 &&
+                      c.dwell == 3.0 && c.broadcast_period == 0.5,
+                  "welcome's controller settings", name);
+        }
+    }
+    JNode *invalid = jdom_get(root, "invalid");
+    for (size_t i = 0; i < invalid->count; i++) {
+        JNode *v = invalid->items[i];
+        size_t n = jdom_hex(jdom_str(v, "hex"), buf, sizeof buf);
+        Frame f;
+        static unsigned char plain[70000];
+        const unsigned char *cipher = n > 4 && (buf[4] & 2) ? sk : NULL;
+        int refusal = link_open(buf, n, lk, cipher, plain, &f);
+        if (!refusal) refusal = link_check_body(&f);
+        if (!refusal && f.type == F_DATA) {
+            int kind;
+            const unsigned char *p, *a;
+            size_t ps, as;
+            refusal = link_decode_data(f.body, f.body_size, &kind, &p, &ps, &a, &as);
+        }
+        check(refusal != R_NONE && !strcmp(refusal_names[refusal], jdom_str(v, "category")),
+              "link_frame.json invalid refused for its reason", jdom_str(v, "name"));
+    }
+    JNode *serial_invalid = jdom_get(root, "serial_invalid");
+    for (size_t i = 0; i < serial_invalid->count; i++) {
+        JNode *v = serial_invalid->items[i];
+        size_t n = jdom_hex(jdom_str(v, "hex"), buf, sizeof buf);
+        frame_count = 0;
+        deframer.used = 0;
+        deframer.overflowed = 0;
+        deframer_feed(&deframer, buf, n, collect, NULL);
+        check(frame_count == 1 && deframed_refusal != R_NONE &&
+                  !strcmp(refusal_names[deframed_refusal], jdom_str(v, "category")),
+              "link_frame.json serial_invalid", jdom_str(v, "name"));
+    }
+    /* the replay window: 63 behind is taken, 64 behind refused (docs say "more than 64") */
+    ReplayWindow w = {0, 0};
+    replay_take(&w, 100);
+    check(!replay_refuses(&w, 37) && replay_refuses(&w, 36) && replay_refuses(&w, 100) &&
+              !replay_refuses(&w, 99) && !replay_refuses(&w, 101),
+          "replay window", "63 behind taken, 64 behind refused");
+    /* the deframer: idle zeros, an overlong chunk */
+    frame_count = 0;
+    deframer.used = 0;
+    deframer.overflowed = 0;
+    unsigned char zeros[3] = {0, 0, 0};
+    deframer_feed(&deframer, zeros, 3, collect, NULL);
+    check(frame_count == 0, "deframer", "consecutive zeros are idle fill");
+    static unsigned char big[LINK_MAX_ENCODED_BYTES + 10];
+    memset(big, 1, sizeof big);
+    big[sizeof big - 1] = 0;
+    deframer_feed(&deframer, big, sizeof big, collect, NULL);
+    check(frame_count == 1 && deframed_refusal == R_OVERSIZE, "deframer", "overlong chunk");
+}
+
+/* --- messages ----------------------------------------------------------------------- */
+
+static double num(JNode *m, const char *key) { return jdom_get(m, key)->num; }
+static long long integer(JNode *m, const char *key) { return jdom_get(m, key)->integer; }
+
+static int same_sense(const Sense *s, JNode *m) {
+    JNode *prox = jdom_get(m, "prox");
+    int ok = s->tick == integer(m, "tick") && s->t == num(m, "t") && s->x == num(m, "x") &&
+             s->y == num(m, "y") && s->theta == num(m, "theta") && s->rx == integer(m, "rx") &&
+             s->camera == jdom_get(m, "camera")->boolean && prox->count == 8;
+    for (int i = 0; i < 8 && ok; i++) ok &= s->prox[i] == prox->items[i]->num;
+    return ok;
+}
+
+static int same_world(const WorldInfo *w, JNode *m) {
+    JNode *nest = jdom_get(m, "nest"), *sites = jdom_get(m, "sites"), *cam = jdom_get(m, "camera");
+    int ok = !strcmp(w->run, jdom_str(m, "run")) && w->seed == integer(m, "seed") &&
+             w->dt == num(m, "dt") && w->arena_radius == num(m, "arena_radius") &&
+             w->nest_x == num(nest, "x") && w->nest_y == num(nest, "y") &&
+             w->nest_radius == num(nest, "radius") && w->n_sites == (int)sites->count &&
+             w->robot_radius == num(m, "robot_radius") && w->wheel_base == num(m, "wheel_base") &&
+             w->max_wheel_speed == num(m, "max_wheel_speed") &&
+             w->cam_width == integer(cam, "width") && w->cam_height == integer(cam, "height") &&
+             w->cam_fov == num(cam, "fov") &&
+             w->lockstep == !strcmp(jdom_str(m, "clock"), "lockstep");
+    for (int i = 0; ok && i < w->n_sites; i++)
+        ok &= w->sites[i].id == integer(sites->items[i], "id") &&
+              w->sites[i].x == num(sites->items[i], "x") && w->sites[i].y == num(sites->items[i], "y");
+    return ok;
+}
+
+/* Decode data as the file's type; compare with message (if given); re-encode where the
+   robot encodes that type and compare with want (if given). */
+static int decode_check(const char *type, const unsigned char *data, size_t size, JNode *m,
+                        const unsigned char *want, size_t want_size) {
+    static RadioPayload radio;
+    static WorldInfo world;
+    static char out[70000];
+    int n = -2;
+    if (!strcmp(type, "Sense")) {
+        Sense s;
+        if (!decode_sense(data, size, &s)) return 0;
+        if (m && !same_sense(&s, m)) return 0;
+    } else if (!strcmp(type, "CameraMeta")) {
+        CameraMeta c;
+        if (!decode_camera_meta(data, size, &c)) return 0;
+        if (m && !(c.tick == integer(m, "tick") && c.width == integer(m, "width") &&
+                   c.height == integer(m, "height") &&
+                   c.jpeg == !strcmp(jdom_str(m, "encoding"), "jpeg")))
+            return 0;
+    } else if (!strcmp(type, "RadioRxMeta")) {
+        RadioRxMeta r;
+        if (!decode_radio_rx_meta(data, size, &r)) return 0;
+        if (m && !(r.tick == integer(m, "tick") && !strcmp(r.sender, jdom_str(m, "sender")) &&
+                   r.seq == integer(m, "seq") && r.sent_tick == integer(m, "sent_tick")))
+            return 0;
+    } else if (!strcmp(type, "RadioTxMeta")) {
+        RadioTxMeta r;
+        if (!decode_radio_tx_meta(data, size, &r)) return 0;
+        if (m && !(r.tick == integer(m, "tick") && r.seq == integer(m, "seq"))) return 0;
+        n = encode_radio_tx_meta(r.tick, r.seq, out, sizeof out);
+    } else if (!strcmp(type, "Act")) {
+        Act a;
+        if (!decode_act(data, size, &a)) return 0;
+        if (m && !(a.tick == integer(m, "tick") && a.left == num(m, "left") &&
+                   a.right == num(m, "right") && a.capture == jdom_get(m, "capture")->boolean &&
+                   a.radio_tx == integer(m, "radio_tx")))
+            return 0;
+        n = encode_act(&a, out, sizeof out);
+    } else if (!strcmp(type, "WorldInfo")) {
+        if (!decode_world_info(data, size, &world)) return 0;
+        if (m && !same_world(&world, m)) return 0;
+    } else if (!strcmp(type, "OpinionPayload") || !strcmp(type, "BeaconPayload") ||
+               !strcmp(type, "VotePayload")) {
+        if (!decode_radio(data, size, &radio)) return 0;
+        int kind = !strcmp(type, "OpinionPayload") ? RADIO_OPINION
+                   : !strcmp(type, "BeaconPayload") ? RADIO_BEACON : RADIO_VOTE;
+        if (radio.kind != kind) return 0;
+        if (m) {
+            if (kind == RADIO_BEACON) {
+                if (strcmp(radio.name, jdom_str(m, "id")) || radio.seq != integer(m, "seq")) return 0;
+            } else {
+                if (radio.id != integer(m, "id") || radio.trip != integer(m, "trip") ||
+                    radio.decided != jdom_get(m, "decided")->boolean)
+                    return 0;
+                if (kind == RADIO_OPINION) {
+                    JNode *o = jdom_get(m, "opinion");
+                    if (radio.n != (int)o->count) return 0;
+                    for (int i = 0; i < radio.n; i++)
+                        if (radio.opinion[i] != o->items[i]->num) return 0;
+                } else if (radio.site != integer(m, "site") || radio.quality != num(m, "quality")) {
+                    return 0;
+                }
+            }
+        }
+        if (kind == RADIO_OPINION)
+            n = encode_opinion(radio.id, radio.trip, radio.decided, radio.opinion, radio.n, out, sizeof out);
+    } else if (!strcmp(type, "Status")) {
+        if (check_message(type, data, size) != 1) return 0;
+        if (m) {
+            static double opinion[1000];
+            StatusOut s;
+            memset(&s, 0, sizeof s);
+            s.id = integer(m, "id");
+            s.tick = integer(m, "tick");
+            s.t = num(m, "t");
+            s.phase = jdom_str(m, "phase");
+            s.trips = integer(m, "trips");
+            JNode *o = jdom_get(m, "opinion");
+            for (size_t i = 0; i < o->count; i++) opinion[i] = o->items[i]->num;
+            s.opinion = opinion;
+            s.n = (int)o->count;
+            s.pool_size = integer(m, "pool_size");
+            s.poolings = integer(m, "poolings");
+            JNode *d = jdom_get(m, "decided_site");
+            s.has_decided = d->type != J_NULL;
+            s.decided_site = d->integer;
+            d = jdom_get(m, "decision_time");
+            s.has_decision_time = d->type != J_NULL;
+            s.decision_time = d->num;
+            d = jdom_get(m, "decision_trips");
+            s.has_decision_trips = d->type != J_NULL;
+            s.decision_trips = d->integer;
+            d = jdom_get(m, "comparison");
+            s.has_comparison = d->type != J_NULL;
+            if (s.has_comparison) {
+                s.comparison.site_a = integer(d, "site_a");
+                s.comparison.quality_a = num(d, "quality_a");
+                s.comparison.site_b = integer(d, "site_b");
+                s.comparison.quality_b = num(d, "quality_b");
+                s.comparison.eliminated = integer(d, "eliminated");
+            }
+            s.rejected = integer(m, "rejected");
+            n = encode_status(&s, out, sizeof out);
+        }
+    } else {
+        if (check_message(type, data, size) != 1) return 0;
+    }
+    if (want && n != -2) {
+        if (n < 0 || (size_t)n != want_size || memcmp(out, want, want_size)) {
+            printf("  encoded %.*s\n  wanted  %.*s\n", n, out, (int)want_size, want);
+            return 0;
+        }
+    }
+    return 1;
+}
+
+void test_messages(void) {
+    const char *files[] = {"sense.json", "act.json", "status.json", "opinion_payload.json",
+                           "beacon_payload.json", "vote_payload.json", "world_info.json",
+                           "join_reply.json", "camera_meta.json", "radio_tx_meta.json",
+                           "radio_rx_meta.json", "clock.json", "ack.json", "link_stats.json",
+                           "log_line.json", "world_state.json"};
+    static unsigned char data[70000], canonical[70000];
+    for (size_t f = 0; f < sizeof files / sizeof files[0]; f++) {
+        JNode *root = load(files[f]);
+        if (!root) continue;
+        const char *type = jdom_str(root, "type");
+        JNode *valid = jdom_get(root, "valid");
+        for (size_t i = 0; i < valid->count; i++) {
+            JNode *v = valid->items[i];
+            size_t n = jdom_hex(jdom_str(v, "hex"), data, sizeof data);
+            char name[200];
+            snprintf(name, sizeof name, "%s %s", files[f], jdom_str(v, "name"));
+            check(decode_check(type, data, n, jdom_get(v, "message"), data, n), "valid", name);
+        }
+        JNode *accepted = jdom_get(root, "accepted");
+        for (size_t i = 0; accepted && i < accepted->count; i++) {
+            JNode *v = accepted->items[i];
+            size_t n = jdom_hex(jdom_str(v, "hex"), data, sizeof data);
+            size_t cn = jdom_hex(jdom_str(v, "canonical_hex"), canonical, sizeof canonical);
+            char name[200];
+            snprintf(name, sizeof name, "%s %s", files[f], jdom_str(v, "name"));
+            int ok = decode_check(type, data, n, NULL, canonical, cn);
+            /* and the canonical bytes decode to the same as the accepted ones */
+            ok &= decode_check(type, canonical, cn, NULL, canonical, cn);
+            check(ok, "accepted", name);
+        }
+        JNode *invalid = jdom_get(root, "invalid");
+        for (size_t i = 0; i < invalid->count; i++) {
+            JNode *v = invalid->items[i];
+            size_t n = jdom_hex(jdom_str(v, "hex"), data, sizeof data);
+            char name[200];
+            snprintf(name, sizeof name, "%s %s (%s)", files[f], jdom_str(v, "name"),
+                     jdom_str(v, "category"));
+            check(!decode_check(type, data, n, NULL, NULL, 0), "invalid refused", name);
+        }
+        /* a worst case, where the file has one */
+        JNode *worst = jdom_get(root, "worst_case_n100");
+        if (worst && jdom_str(worst, "hex")) {
+            size_t n = jdom_hex(jdom_str(worst, "hex"), data, sizeof data);
+            check(decode_check(type, data, n, NULL, data, n), "worst case", files[f]);
+        }
+    }
+    /* payloads over 64 KiB are refused before they are read */
+    static unsigned char huge[MAX_PAYLOAD_BYTES + 2];
+    memset(huge, ' ', sizeof huge);
+    memcpy(huge, "{\"v\":1,\"tick\":1,\"t\":0.1}", 24);
+    check(!check_message("Clock", huge, sizeof huge), "messages", "over 64 KiB refused");
+    check(check_message("Clock", huge, 24 + 100), "messages", "whitespace after the object");
+}

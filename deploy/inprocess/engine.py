@@ -1,0 +1,363 @@
+"""A whole lockstep run in one process: the processes of ``swarm run`` on an in-memory bus.
+
+The world's ``Coordinator``, one process's ``HostedRobots`` over every robot's
+``RobotEndpoint``, and the beacon's ``BeaconEndpoint`` exchange the same messages as over
+Zenoh (the same keys, payloads and attachments; the robots' senses and acts in batches,
+as a process hosting them does), handed from one to the other in memory. Nothing of the
+tick is coded here: opening and closing ticks, the barrier, the radio and the checks of
+every input are the coordinator's and the endpoints', so a seed gives the same per-robot
+results as ``swarm run`` by construction. Like the launcher, this engine learns the run
+from what is published (every status, the world's state, the beacon's acks) and decides
+when the run ends with the same watchdog and stop rule; ``EngineHooks.tap`` sees every
+message, which is how ``swarm run --engine inprocess --record`` records one.
+
+Time: lockstep only. The coordinator is never told a time that passes, so no tick closes
+early; a tick closes once every robot and the beacon answered it, which in memory is at
+once.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from deploy.analysis.summary import RobotRecord, RunOutcome, build_summary
+from deploy.analysis.watchdog import Watchdog, default_stall_window
+from nest_beacon.core.beacon import Beacon, BeaconConfig
+from nest_beacon.core.endpoint import BeaconEndpoint
+from robot_agent.core import byzantine
+from robot_agent.core.controller import Controller, ControllerConfig
+from robot_agent.core.endpoint import InputKind, Outgoing, RobotEndpoint, Step
+from robot_agent.core.hosting import HostedRobots
+from robot_agent.core.parking import ParkingSlots
+from wire import protocol, shape
+from wire.endings import Look, Stop, stop_reason
+from wire.names import Role
+from wire.rng import Stream
+from world_server.core.coordinator import Coordinator
+from world_server.core.events import Event, EventKind, Output, Publish
+from world_server.core.world import World, WorldConfig
+
+# The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
+# world/state (the world server's default --state-every): both see the same samples.
+POSES_EVERY = 10
+
+# What a tap is handed: every message of the run as a subscriber would see it.
+Tap = Callable[[str, bytes, bytes | None], None]
+
+
+@dataclass(frozen=True)
+class Progress:
+    sim_time: float
+    decided: int
+    trips: int
+
+
+@dataclass
+class EngineHooks:
+    """What ``swarm run --engine inprocess`` adds to a bare run (every part optional)."""
+
+    stop_signal: Callable[[], bool] | None = None  # asked every tick: has a stop signal come?
+    since_launch: Callable[[], float] | None = None  # wall seconds, for wall_timeout
+    wall_timeout: float | None = None  # --wall-timeout (with since_launch)
+    progress: Callable[[Progress], None] | None = None  # told every ``poses_every`` ticks
+    tap: Tap | None = None  # every message of the run, as published (a recorder)
+    wall_clock: Callable[[], float] | None = None  # measures wall_time_s when given
+    config: dict[str, Any] = field(default_factory=dict)  # the summary's "config"
+    poses_every: int = POSES_EVERY  # swarm run's --state-every: how often the watchdog looks
+
+
+class _Bus:
+    """The run's processes and what passes between them, in one thread.
+
+    Whatever the coordinator gives out waits in a queue until the tick's work reaches it,
+    so the coordinator is never re-entered: an answer it takes is handed to it with
+    ``take``, which never closes a tick; the engine closes ticks with ``wake``.
+    """
+
+    def __init__(
+        self,
+        world: World,
+        robots: list[RobotEndpoint],
+        beacon: BeaconEndpoint,
+        *,
+        records: dict[int, RobotRecord],
+        watchdog: Watchdog,
+        hooks: EngineHooks,
+    ) -> None:
+        keys = robots[0].keys
+        self.keys = keys
+        self.world = world
+        self.records = records
+        self.watchdog = watchdog
+        self.tap = hooks.tap
+        self.queue: deque[Output] = deque()
+        self.coordinator = Coordinator(
+            world,
+            keys,
+            self.queue.append,
+            stall_timeout=math.inf,
+            start_timeout=math.inf,
+            state_every=hooks.poses_every,
+            expect_robots=len(robots),
+            expect_beacons=1,
+        )
+        self.host = HostedRobots(robots, keyring=None)
+        self.beacon = beacon
+        self.beacon_name = beacon.name
+        # Where each robot's inputs come in: its own keys (its senses, until the world has
+        # learnt the batched path; camera frames; radio deliveries).
+        self.inputs: dict[str, tuple[RobotEndpoint, InputKind]] = {}
+        for endpoint in robots:
+            for kind, key in endpoint.input_keys.items():
+                self.inputs[key] = (endpoint, kind)
+        self.last_state: protocol.WorldState | None = None
+
+    def start(self) -> None:
+        """The processes' liveliness, as the coordinator would see their tokens; tick 0."""
+        keys = self.keys
+        instance = "in-process"
+        for endpoint in self.host.by_id.values():
+            endpoint.world_appeared(instance)
+            self._event(Event(EventKind.ALIVE, keys.alive(Role.ROBOT, endpoint.robot_id)))
+        self.beacon.world_appeared(instance)
+        self._event(Event(EventKind.ALIVE, keys.alive(Role.BEACON, self.beacon_name)))
+        self.coordinator.begin(0.0)
+
+    def run_tick(self) -> None:
+        """Deliver everything the tick under way put out, until every answer is in."""
+        queue = self.queue
+        while queue:
+            output = queue.popleft()
+            if isinstance(output, Publish):
+                self._deliver(output.key, output.payload, output.attachment)
+
+    def close_tick(self) -> None:
+        """Close the tick under way (every answer is in) and open the next."""
+        self.coordinator.wake(0.0)
+
+    def stop(self) -> None:
+        """Stop the world, which publishes its state a last time."""
+        self.coordinator.stop()
+        self.run_tick()
+
+    # --- the wire --------------------------------------------------------------------
+
+    def _deliver(self, key: str, payload: bytes, attachment: bytes | None) -> None:
+        """One message the world published, to whoever subscribes to its key."""
+        if self.tap is not None:
+            self.tap(key, payload, attachment)
+        keys = self.keys
+        if key == self.host.sense_key:
+            for endpoint, sense in self.host.senses(payload, attachment):
+                self._stepped(endpoint.receive_sense(sense))
+            self._send_acts()  # as the hosting process does after each batch
+        elif key in self.inputs:
+            endpoint, kind = self.inputs[key]
+            self._stepped(endpoint.receive(kind, payload, attachment))
+            self._send_acts()
+        elif key == self.beacon.clock_key:
+            for message in self.beacon.receive_clock(payload, attachment):
+                self._beacon_sent(message.key, message.payload, message.attachment)
+        elif key == keys.world_state:
+            self.last_state = protocol.decode(payload, protocol.WorldState)
+
+    def _stepped(self, step: Step | None) -> None:
+        if step is None:
+            return
+        for message in step.transmissions:
+            self._sent(EventKind.TX, message)
+        if step.act is not None:
+            self._sent(EventKind.ACT, step.act)
+        else:
+            self.host.hold(step)
+        if step.status is not None:
+            self._status(step.status)
+
+    def _send_acts(self) -> None:
+        acts = self.host.take_acts()
+        if acts is not None:
+            self._sent(EventKind.ACTS, acts)
+
+    def _status(self, message: Outgoing, published: bool = True) -> None:
+        """A robot's status: to the tap (if it was published), and to what follows the run."""
+        if published and self.tap is not None:
+            self.tap(message.key, message.payload, message.attachment)
+        status = protocol.decode(message.payload, protocol.Status)
+        self.records[status.id].update(status)
+        self.watchdog.status(status)
+
+    def _sent(self, kind: EventKind, message: Outgoing) -> None:
+        self._publish(kind, message.key, message.payload, message.attachment)
+
+    def _beacon_sent(self, key: str, payload: bytes, attachment: bytes | None) -> None:
+        kind = EventKind.ACK if key == self.keys.beacon_ack(self.beacon_name) else EventKind.TX
+        self._publish(kind, key, payload, attachment)
+
+    def _publish(self, kind: EventKind, key: str, payload: bytes, attachment: bytes | None) -> None:
+        """A robot's or the beacon's message: to the tap, and to the world."""
+        if self.tap is not None:
+            self.tap(key, payload, attachment)
+        self._event(Event(kind, key, payload, attachment))
+
+    def _event(self, event: Event) -> None:
+        self.coordinator.take(event, 0.0)
+
+
+def run_in_process(
+    world_config: WorldConfig,
+    controller_config: ControllerConfig,
+    beacon_config: BeaconConfig | None = None,
+    *,
+    timeout: float = shape.DEFAULT_TIMEOUT,
+    stall_window: float | None = None,
+    on_tick: Callable[[World], None] | None = None,
+    controller_factory: type[Controller] = Controller,
+    byzantine_robots: Mapping[int, byzantine.Behaviour] | None = None,
+    hooks: EngineHooks | None = None,
+) -> dict[str, Any]:
+    """Run until every robot decided, the watchdog finds the run stalled (no undecided
+    robot made progress for ``stall_window`` sim seconds; default: ``default_stall_window``
+    for this arena and beacon) or ``timeout`` sim seconds; the summary is the
+    ``swarm run --json`` object.
+
+    ``controller_factory`` lets a study observe the controllers (a subclass of
+    Controller); ``on_tick`` sees the world once every answer of a tick is in, before it
+    closes. ``byzantine_robots`` makes those robots misbehave as ``swarm run --byzantine``
+    does (a liar without a site claims ``byzantine.default_liar_site``); the run ends when
+    every honest robot has decided. ``hooks``: progress, an outside stop, a tap of every
+    message (a recording), wall time.
+    """
+    hooks = hooks or EngineHooks()
+    started = hooks.wall_clock() if hooks.wall_clock is not None else 0.0
+    world = World(world_config)
+    keys = protocol.Keys(world_config.run)
+    beacon_config = beacon_config or BeaconConfig()
+    beacon = Beacon(beacon_config, Stream.named(world_config.seed, "beacon", beacon_config.name))
+    behaviours = byzantine.resolve_liar_sites(
+        byzantine_robots or {}, world_config.num_sites, world.layout.best_site, world_config.seed
+    )
+    endpoints: list[RobotEndpoint] = []
+    records: dict[int, RobotRecord] = {}
+    for robot_id in range(world_config.num_robots):
+        rng = Stream.named(world_config.seed, "robot", robot_id)
+        behaviour = behaviours.get(robot_id)
+        controller = (
+            controller_factory(robot_id, world.info, controller_config, rng)
+            if behaviour is None
+            else byzantine.build_controller(robot_id, world.info, controller_config, rng, behaviour)
+        )
+        endpoints.append(
+            RobotEndpoint(robot_id, keys=keys, controller=controller, world=world.info)
+        )
+        records[robot_id] = RobotRecord(robot_id)
+    if stall_window is None:
+        stall_window = default_stall_window(
+            world.layout.arena_radius,
+            world_config.spec.max_wheel_speed,
+            # The longest leg a robot may take before it gives up: across the arena.
+            controller_config.leg_allowance(2 * world.layout.arena_radius),
+            beacon_config.outages,
+            time_limit=timeout,
+        )
+    watchdog = Watchdog(
+        records,
+        stall_window,
+        body_length=2 * world_config.spec.radius,
+        slot_of=ParkingSlots.of_world(world.info, controller_config).slot,
+    )
+    honest = [record for robot_id, record in records.items() if robot_id not in behaviours]
+    bus = _Bus(
+        world,
+        endpoints,
+        BeaconEndpoint(beacon, keys, world_config.dt, keyring=None),
+        records=records,
+        watchdog=watchdog,
+        hooks=hooks,
+    )
+    bus.start()
+    while True:
+        bus.run_tick()
+        if on_tick is not None:
+            on_tick(world)
+        if world.tick % hooks.poses_every == 0:
+            state = bus.last_state
+            if state is not None and state.tick == world.tick:
+                watchdog.poses(state.t, [(pose.id, pose.x, pose.y) for pose in state.robots])
+            if hooks.progress is not None:
+                hooks.progress(_progress(world.t, records))
+        halt = stop_reason(_look(world.t, timeout, honest, watchdog, hooks))
+        if halt is not None:
+            break
+        bus.close_tick()
+    # Every robot's state at the end (not published: its status changes are).
+    for endpoint in endpoints:
+        bus._status(endpoint.status(world.tick), published=False)
+    bus.stop()
+    state = bus.last_state
+    if state is not None:
+        watchdog.poses(state.t, [(pose.id, pose.x, pose.y) for pose in state.robots])
+    wall = hooks.wall_clock() - started if hooks.wall_clock is not None else 0.0
+    return build_summary(
+        RunOutcome(
+            run_id=world_config.run,
+            num_robots=world_config.num_robots,
+            num_sites=world_config.num_sites,
+            seed=world_config.seed,
+            best_site=world.layout.best_site,
+            sim_time_s=world.t,
+            wall_time_s=wall,
+            timed_out=halt.stop is Stop.TIMEOUT,
+            radio=world.state().radio,
+            world_rejected=bus.coordinator.counters.rejected,
+            stalls=bus.coordinator.counters.stalls,
+            observer_rejected=0,
+            config=hooks.config,
+            stop=halt.stop,
+            timeout_kind=halt.limit,
+            stuck=watchdog.stuck(),
+            byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
+        ),
+        records.values(),
+    )
+
+
+def _look(
+    sim_time: float,
+    timeout: float,
+    honest: list[RobotRecord],
+    watchdog: Watchdog,
+    hooks: EngineHooks,
+) -> Look:
+    """What this engine sees at the end of a tick (``wire.endings.stop_reason`` decides)."""
+    decided = all(record.decided_site is not None for record in honest)
+    return Look(
+        sim_time=sim_time,
+        sim_limit=timeout,
+        all_decided=decided,
+        last_decision=_last_decision(honest) if decided else 0.0,
+        stalled=watchdog.stalled(sim_time),
+        wall_time=hooks.since_launch() if hooks.since_launch is not None else 0.0,
+        wall_limit=hooks.wall_timeout,
+        signalled=hooks.stop_signal() if hooks.stop_signal is not None else False,
+    )
+
+
+def _last_decision(records: list[RobotRecord]) -> float:
+    """The sim time at which the last of ``records`` decided (0 if none did)."""
+    return max(
+        (record.status.decision_time or 0.0 for record in records if record.status is not None),
+        default=0.0,
+    )
+
+
+def _progress(sim_time: float, records: Mapping[int, RobotRecord]) -> Progress:
+    decided = sum(1 for record in records.values() if record.decided_site is not None)
+    trips = sum(record.status.trips for record in records.values() if record.status)
+    return Progress(sim_time, decided, trips)
+
+
+__all__ = ["POSES_EVERY", "EngineHooks", "Progress", "Tap", "run_in_process"]

@@ -1,0 +1,323 @@
+"""``swarm run``: a whole swarm on this machine, to a stated ending.
+
+Starts the world server (the Zenoh router of the run, on a Unix socket in a private
+directory; TLS on loopback with ``--secure``; a client of the router ``--connect`` names),
+the recorder, the nest beacon and the robot processes (``supervisor.py``); follows what
+they publish (``follower.py``) and shows progress (``console.py``); kills and restarts
+robots when their ``--kill`` and ``--restart`` sim time comes (``faults.py``); stops when
+``wire.endings.stop_reason`` says so; stops every process it started, by pid, however
+the run ends; prints a summary that says how it ended, hands it to the recorder
+(``recording.py``) and exits with that ending's code (``swarm run --help``).
+``--engine inprocess`` runs the same computation in this process instead
+(``inprocess.py``).
+
+The main thread owns the run. It waits on one inbox, into which Zenoh's callbacks queue
+what the processes publish and the stop signals' relay queues the signals
+(``signals.py``), until the next look is due; it takes what came, applies the faults
+that fell due, and every ``LOOK_EVERY`` (at once on a signal) it looks: marks the
+robots whose process died, updates the display, and asks the ending rule.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import queue
+import signal
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+from rich.console import Console
+
+from deploy.analysis.summary import RunOutcome, build_summary
+from deploy.launcher.console import decided_progress, describe_ending, print_summary, say
+from deploy.launcher.faults import FaultSchedule
+from deploy.launcher.follower import Follower, Heard
+from deploy.launcher.inprocess import run_inprocess
+from deploy.launcher.options import add_arguments
+from deploy.launcher.plan import FaultAction, RunPlan, plan_from_args
+from deploy.launcher.processes import Child
+from deploy.launcher.recording import RecorderProgress, finish_recording
+from deploy.launcher.signals import Signalled, StopSignals
+from deploy.launcher.supervisor import StartError, Supervisor
+from plumbing.cliargs import UsageError
+from plumbing.inbox import BoundedInbox
+from plumbing.lifecycle import die_with_launcher
+from wire import protocol
+from wire.endings import Ending, Halt, Look, Stop, stop_reason
+from world_server.core.layout import make_layout
+
+__all__ = ["add_arguments", "run"]
+
+log = logging.getLogger("swarm.run")
+
+# Wall seconds between two looks at the run. Looks are paced rather than made on every
+# message: what they check costs a system call per robot process, and a process's death
+# comes as no message at all.
+LOOK_EVERY = 0.1
+# What the launcher takes in (status, clock, state, acks), at most: junk cannot grow it.
+EVENTS_BYTES, MAX_EVENT_BYTES = 64 * 2**20, protocol.MAX_PAYLOAD_BYTES + 1024
+
+
+class Swarm:
+    """One local run as the main loop holds it: its processes (``supervisor``), what is
+    known of it (``follower``), the faults to come, and the inbox between them."""
+
+    def __init__(
+        self,
+        plan: RunPlan,
+        echo: Callable[[str, str], None] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.plan = plan
+        self.clock = clock
+        self.launched_at = clock()
+        self.inbox: BoundedInbox[Heard | Signalled] = BoundedInbox(EVENTS_BYTES, MAX_EVENT_BYTES)
+        self.supervisor = Supervisor(plan, self.inbox, echo)
+        self.follower = Follower(plan, clock)
+        self.faults = FaultSchedule(plan.faults)
+        self.crash: Child | None = None  # the process whose death ended the run
+        self.ended_at: float | None = None
+        self.departures = 0  # the world's count before the swarm was stopped (stopping adds)
+
+    def signalled(self, signum: int) -> None:
+        """A stop signal, from the signals' relay: an event like any other."""
+        self.inbox.put(Signalled(signum), control=True)
+
+    @property
+    def wall_deadline(self) -> float:
+        if self.plan.wall_timeout is None:
+            return math.inf
+        return self.launched_at + self.plan.wall_timeout
+
+    def take_events(self, until: float) -> bool:
+        """Take in what came, waiting for it until the wall time ``until``; whether a stop
+        signal came."""
+        try:
+            item = self.inbox.get(timeout=max(0.0, until - self.clock()))
+        except queue.Empty:
+            return False
+        signalled = False
+        while True:
+            if isinstance(item, Signalled):
+                signalled = True
+            else:
+                self.follower.take(item, self.supervisor.keyring)
+            try:
+                item = self.inbox.get(timeout=0)
+            except queue.Empty:
+                break
+        self.follower.rejected += self.inbox.take_dropped(None)
+        return signalled
+
+    def inject_due_faults(self) -> None:
+        """Kill and restart the robots whose fault's sim time has come."""
+        sim_time = self.follower.sim_time
+        for fault in self.faults.due(sim_time):
+            was_running = self.supervisor.kill_robot(fault.robot)
+            restarting = fault.action is FaultAction.RESTART
+            self.follower.killed(fault.robot, restarting=restarting)
+            if restarting:
+                self.supervisor.restart_robot(fault.robot)
+            self.faults.note(fault, sim_time, was_running)
+            log.info("%s robot %d at sim time %.1f", fault.action, fault.robot, sim_time)
+
+    def look(self, signalled: bool) -> Halt | None:
+        """Whether the run stops now, and why (``wire.endings.stop_reason``)."""
+        supervisor, follower = self.supervisor, self.follower
+        for robot in supervisor.crashed_robots():
+            follower.crashed(robot)
+        self.crash = supervisor.infrastructure_crash()
+        live = supervisor.live_robots() + follower.outside_present()
+        # Robots join once the world ticks; a restart to come will make progress.
+        waiting = not follower.started or self.faults.restart_pending()
+        all_decided = not waiting and follower.all_decided(live)
+        return stop_reason(
+            Look(
+                sim_time=follower.sim_time,
+                sim_limit=self.plan.timeout,
+                all_decided=all_decided,
+                last_decision=follower.last_decision_time(live) if all_decided else 0.0,
+                stalled=not waiting and follower.watchdog.stalled(follower.sim_time),
+                wall_time=self.clock() - self.launched_at,
+                wall_limit=self.plan.wall_timeout,
+                crashed=self.crash is not None,
+                signalled=signalled,
+                world_stopped=follower.world_stopped(self.plan.world_stop_window),
+            )
+        )
+
+    def stop(self) -> protocol.WorldState | None:
+        """Stop the robots and the beacon, and read the world's final counters (its last
+        state if it does not answer)."""
+        supervisor, follower = self.supervisor, self.follower
+        self.ended_at = self.clock()
+        if supervisor.world is not None and supervisor.world.alive():
+            before = supervisor.query_world_stats() or follower.last_state
+            self.departures = before.departures if before else 0
+        supervisor.stop_swarm()
+        self.take_events(until=self.clock())  # what they said last
+        stats = supervisor.world_stats() if supervisor.world_running() else None
+        return stats or follower.last_state
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.engine == "inprocess":
+        return run_inprocess(args)
+    try:
+        plan = plan_from_args(args)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    console = Console(stderr=True)
+    echo = (
+        (lambda name, line: console.print(f"[dim]{name}:[/] {line}", highlight=False))
+        if args.verbose
+        else None
+    )
+    # Started by `swarm experiment`: end in order if it dies (a SIGTERM then: signals.py).
+    die_with_launcher()
+    swarm = Swarm(plan, echo)
+    with StopSignals(notify=swarm.signalled) as signals:
+        try:
+            return _run_swarm(swarm, args, console, signals)
+        finally:
+            swarm.supervisor.close()
+
+
+def _run_swarm(
+    swarm: Swarm, args: argparse.Namespace, console: Console, signals: StopSignals
+) -> int:
+    try:
+        started = swarm.supervisor.start(stopping=lambda: signals.received is not None)
+        halt = _watch(swarm, signals, console, args.quiet) if started else None
+    except StartError as error:
+        print(f"swarm run: could not start: {error}", file=sys.stderr)
+        if error.child is not None and error.child.tail():
+            print(error.child.tail(), file=sys.stderr)
+        return Ending.CRASHED.code
+    if halt is None:  # a stop signal came while the processes were starting
+        halt = Halt(Stop.INTERRUPTED)
+    signum = signals.received if halt.stop is Stop.INTERRUPTED else None
+    return _finish(swarm, args, halt, signum)
+
+
+def _watch(swarm: Swarm, signals: StopSignals, console: Console, quiet: bool) -> Halt:
+    """Follow the run until the ending rule stops it."""
+    plan, follower = swarm.plan, swarm.follower
+    progress = decided_progress(console, quiet)
+    with progress:
+        task = progress.add_task("decided", total=plan.robots, info="starting")
+        next_look = swarm.clock() + LOOK_EVERY
+        while True:
+            # Until the next look or the wall limit; a fault falls due with a clock message.
+            signalled = swarm.take_events(until=min(next_look, swarm.wall_deadline))
+            swarm.inject_due_faults()
+            now = swarm.clock()
+            if not signalled and now < min(next_look, swarm.wall_deadline):
+                continue
+            next_look = now + LOOK_EVERY
+            started_at = follower.started_at
+            elapsed = now - started_at if started_at is not None else 0.0
+            factor = follower.sim_time / elapsed if elapsed > 0 else 0.0
+            progress.update(
+                task,
+                completed=follower.decided(),
+                info=f"{follower.decided()}/{plan.robots} decided, {follower.trips()} trips, "
+                f"sim {follower.sim_time:.0f}s, {factor:.0f}x real time"
+                if started_at is not None
+                else "waiting for the robots to join",
+            )
+            halt = swarm.look(signals.received is not None)
+            if halt is not None:
+                return halt
+
+
+def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | None) -> int:
+    """Stop the swarm, build and print the summary, finish the recording; the exit code."""
+    plan, supervisor, follower = swarm.plan, swarm.supervisor, swarm.follower
+    if signum is not None:
+        print(
+            f"swarm run: {signal.Signals(signum).name}: stopping every process",
+            file=sys.stderr,
+        )
+    if swarm.crash is not None:
+        print(
+            f"swarm run: the {swarm.crash.name} process crashed (exit code "
+            f"{swarm.crash.process.returncode}):\n{swarm.crash.tail()}",
+            file=sys.stderr,
+        )
+    follower.departed()  # before the bridge stops and every link goes
+    stats = swarm.stop()
+    robot_crashes = [record.id for record in follower.records.values() if record.crashed]
+    stop = halt.stop
+    if robot_crashes and stop is not Stop.INTERRUPTED:
+        stop = Stop.CRASHED
+    started_at = follower.started_at
+    wall = (swarm.ended_at or 0.0) - started_at if started_at is not None else 0.0
+    summary = build_summary(
+        RunOutcome(
+            run_id=plan.run_id,
+            num_robots=plan.robots,
+            num_sites=plan.sites,
+            seed=plan.seed,
+            best_site=make_layout(plan.sites, plan.robots, plan.seed).best_site,
+            sim_time_s=follower.sim_time,
+            wall_time_s=wall,
+            timed_out=stop is Stop.TIMEOUT,
+            radio=stats.radio if stats else protocol.RadioCounters(),
+            world_rejected=stats.rejected if stats else 0,
+            stalls=stats.stalls if stats else 0,
+            departures=swarm.departures,
+            links=follower.links,
+            observer_rejected=follower.rejected,
+            beacon_rejected=sum(follower.beacon_rejected.values()),
+            config=plan.config,
+            stop=stop,
+            timeout_kind=halt.limit if stop is Stop.TIMEOUT else None,
+            stuck=follower.watchdog.stuck(),
+            byzantine={robot: str(how) for robot, how in plan.byzantine_robots.items()},
+            robot_processes=plan.robot_processes,
+        ),
+        follower.records.values(),
+    )
+    if signum is not None:
+        summary["signal"] = signal.Signals(signum).name
+    summary["faults"] = swarm.faults.applied
+    summary["recording"] = str(plan.record) if plan.record else None
+    supervisor.finish_observers(summary)
+    if not args.quiet:
+        print(f"swarm run: {describe_ending(summary)}", file=sys.stderr)
+    problem = _finish_recording(swarm, summary, args.quiet)
+    if problem is not None:
+        print(f"swarm run: the recorder did not confirm {plan.record}: {problem}", file=sys.stderr)
+        summary["recording"] = None
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print_summary(summary, Console())
+    if robot_crashes:
+        print(f"swarm run: robot process(es) {robot_crashes} crashed", file=sys.stderr)
+    return Ending(summary["ended"]).exit_code(signum)
+
+
+def _finish_recording(swarm: Swarm, summary: dict[str, Any], quiet: bool) -> str | None:
+    """Hand the summary to the recorder; None once it confirmed the file, else why not
+    (also when the run records nothing)."""
+    plan, supervisor = swarm.plan, swarm.supervisor
+    if plan.record is None:
+        return None
+    recorder = supervisor.recorder
+    if supervisor.session is None or recorder is None or not recorder.alive():
+        return "it was not running"
+    if plan.connect is None and not supervisor.world_running():
+        # The world server was the run's router: nothing reaches the recorder any more.
+        # Stopped, it closes the file without the summary.
+        return "the world server, the run's router, is gone, so it cannot be reached"
+    waiting = RecorderProgress(plan.record, recorder.alive, say(quiet))
+    return finish_recording(
+        supervisor.session, supervisor.keys, supervisor.keyring, waiting, summary
+    )
