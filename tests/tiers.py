@@ -35,6 +35,7 @@ FAST = frozenset(
         "test_fuzz",
         "test_guard",
         "test_inbox",
+        "test_keyspace",
         "test_layering",
         "test_link",
         "test_names",
@@ -78,6 +79,7 @@ SLOW = {
 
 FULL_ONLY = {
     "test_attacks": "attacks live runs over Zenoh",
+    "test_c_robot": "builds the C robot and runs swarms with it over UDP and serial links",
     "test_attacks_presence": "attacks live runs over Zenoh (presence and freshness)",
     "test_byzantine": "a real run with Byzantine robots",
     "test_endings": "starts swarms",

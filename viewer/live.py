@@ -45,6 +45,7 @@ from wire import auth, names, protocol
 from wire.names import Role
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
+from world_server.core.pooling import Pooling, PoolingTracker
 
 log = logging.getLogger("viewer")
 
@@ -67,8 +68,8 @@ class LiveSource:
         self.keys = keys
         self.keyring = keyring  # None: an unauthenticated run (no tags to check)
         self.robots: dict[int, model.RobotView] = {}
-        self.poolings: collections.deque[model.Pooling] = collections.deque(maxlen=1000)
-        self.tracker = model.PoolingTracker()
+        self.poolings: collections.deque[Pooling] = collections.deque(maxlen=1000)
+        self.tracker = PoolingTracker()
         self.clock: protocol.Clock | None = None
         self.counters: protocol.WorldState | None = None
         self.rejected = 0

@@ -32,6 +32,7 @@ from viewer.options import VIEW_PORT
 from viewer.server import ViewServer
 from wire import protocol
 from world_server.core.layout import make_layout
+from world_server.core.pooling import LINK_SECONDS, Pooling, PoolingTracker
 from world_server.recording.reader import RecordedMessage, RecordingReader
 from world_server.recording.records import RUN_METADATA
 
@@ -67,7 +68,7 @@ class Timeline:
     clock_times: list[float] = field(default_factory=list)
     clock_walls: list[int] = field(default_factory=list)
     deliveries: list[tuple[float, str, int]] = field(default_factory=list)
-    poolings: list[model.Pooling] = field(default_factory=list)
+    poolings: list[Pooling] = field(default_factory=list)
     decisions: list[tuple[float, int]] = field(default_factory=list)
     # Robots outside the emulator: their links' figures as the bridge reported them.
     link_times: dict[int, list[float]] = field(default_factory=dict)
@@ -99,7 +100,7 @@ class _Loader:
     def __init__(self, timeline: Timeline, with_sense: bool) -> None:
         self.timeline = timeline
         self.with_sense = with_sense
-        self.tracker = model.PoolingTracker()
+        self.tracker = PoolingTracker()
         self.decoders: dict[str, msgspec.json.Decoder[Any]] = {
             "bestofn.WorldState": msgspec.json.Decoder(protocol.WorldState),
             "bestofn.Status": msgspec.json.Decoder(protocol.Status),
@@ -334,7 +335,7 @@ class ReplaySource:
                 max(low, high - MAX_DELIVERIES_PER_FRAME) : high
             ]
         ]
-        recent = bisect.bisect_left([p.t for p in timeline.poolings], t - model.LINK_SECONDS)
+        recent = bisect.bisect_left([p.t for p in timeline.poolings], t - LINK_SECONDS)
         at_end = t >= timeline.end
         return model.frame(
             self.scene,

@@ -27,7 +27,7 @@ from deploy.analysis.watchdog import Watchdog
 from deploy.launcher.plan import RunPlan
 from plumbing.inbox import BoundedInbox, message_bytes
 from robot_agent.core.parking import ParkingSlots
-from wire import auth, names, protocol
+from wire import auth, keyspace, protocol
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
 
@@ -137,11 +137,15 @@ class Follower:
 
     def _believe(self, heard: Heard, keyring: auth.Keyring | None) -> None:
         key, payload, attachment = heard.key, heard.payload, heard.attachment
+        # Whose tag the key carries, and the robot or beacon it names: the key table says.
+        found = keyspace.classify(self.keys, key)
+        if found is None or found.kind.name != heard.kind.value or found.speaker is None:
+            raise protocol.ProtocolError(f"{key} is not a key of this run's {heard.kind}")
+        identity, robot = found.speaker, found.robot
         if heard.kind is Kind.STATUS:
-            robot = self.keys.robot_of(key)
             if robot not in self.records:
                 raise protocol.ProtocolError(f"no robot {robot} in this run")
-            auth.unseal(keyring, names.robot_identity(robot), key, payload, attachment)
+            auth.unseal(keyring, identity, key, payload, attachment)
             status = protocol.decode(payload, protocol.Status)
             if status.id != robot:
                 raise protocol.ProtocolError(f"status of robot {status.id} on {key}")
@@ -152,29 +156,23 @@ class Follower:
             record.update(status)
             self.watchdog.status(status)
         elif heard.kind is Kind.ACK:
-            identity = names.beacon_identity(key.rsplit("/", 2)[-2])
-            try:
-                names.check_identity(identity)
-            except ValueError as error:
-                raise protocol.ProtocolError(str(error)) from None
             auth.unseal(keyring, identity, key, payload, attachment)
             name = identity.partition("/")[2]
             ack = protocol.decode(payload, protocol.Ack)
             self.beacon_rejected[name] = max(self.beacon_rejected.get(name, 0), ack.rejected)
         elif heard.kind is Kind.LINK:
-            robot = self.keys.robot_of(key, "link")
             if robot not in self.outside:
                 raise protocol.ProtocolError(f"robot {robot} is not outside the emulator")
-            auth.unseal(keyring, names.BRIDGE, key, payload, attachment)
+            auth.unseal(keyring, identity, key, payload, attachment)
             stats = protocol.decode(payload, protocol.LinkStats)
             if stats.robot != robot:
                 raise protocol.ProtocolError(f"the link of robot {stats.robot} on {key}")
             self.links[robot] = stats
         elif heard.kind is Kind.CLOCK:
-            auth.unseal(keyring, names.WORLD, key, payload, attachment)
+            auth.unseal(keyring, identity, key, payload, attachment)
             self._ticked(protocol.decode(payload, protocol.Clock).t)
         else:
-            auth.unseal(keyring, names.WORLD, key, payload, attachment)
+            auth.unseal(keyring, identity, key, payload, attachment)
             state = protocol.decode(payload, protocol.WorldState)
             last = self.last_state
             if last is not None and state.tick < last.tick:

@@ -32,7 +32,8 @@ from deploy.security.certificates import create_ca, is_ip, issue_all
 from plumbing import cliargs
 from plumbing.bounded_read import CERTIFICATE_BYTES, read_bounded
 from plumbing.private_files import make_private_folder, write_private
-from wire import names, protocol
+from wire import keyspace, names, protocol
+from wire.keyspace import Party
 from wire.names import Role
 
 DEFAULT_PORT = cliargs.ZENOH_PORT
@@ -108,6 +109,17 @@ class SwarmPlan:
 # --- access control ------------------------------------------------------------------
 
 
+# Who may say what, from the key table (wire/keyspace.py): the kinds each party publishes,
+# and the kinds the world sends each robot or beacon alone.
+WORLD_SPEAKS = keyspace.published_by(Party.WORLD)
+ROBOT_SPEAKS = keyspace.published_by(Party.ROBOT, Party.HOST, Party.SENDER)
+ROBOT_HEARS = keyspace.inputs_of(Party.ROBOT, Party.HOST, Party.RECEIVER)
+BEACON_SPEAKS = keyspace.published_by(Party.BEACON, Party.SENDER)
+BEACON_HEARS = keyspace.inputs_of(Party.BEACON)
+LAUNCHER_SPEAKS = keyspace.published_by(Party.LAUNCHER)
+BRIDGE_SPEAKS = keyspace.published_by(Party.BRIDGE)
+
+
 def _rule(
     rule_id: str, flow: str, messages: Sequence[str], key_exprs: Sequence[str]
 ) -> dict[str, Any]:
@@ -158,25 +170,12 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         ),
         _rule("follow-world-token", "egress", ["liveliness_token"], [keys.alive(Role.WORLD, "*")]),
         # The world server: the robots' bodies, the radio medium, the clock.
-        _rule(
-            "world-speak",
-            "ingress",
-            ["put"],
-            [
-                keys.sense("*"),
-                keys.host_sense("*"),
-                keys.camera("*"),
-                keys.radio_rx("*"),
-                keys.world_clock,
-                keys.beacon_clock("*"),
-                keys.world_state,
-            ],
-        ),
+        _rule("world-speak", "ingress", ["put"], keyspace.keys_for(keys, WORLD_SPEAKS)),
         _rule("world-alive", "ingress", ["liveliness_token"], [keys.alive(Role.WORLD, "*")]),
         _rule("world-serve", "ingress", ["declare_queryable", "reply"], world_services),
         _rule("world-asked", "egress", ["query"], world_services),
         # The launcher relays process logs and asks the recorder and the page to finish.
-        _rule("launcher-log", "ingress", ["put"], [keys.log("*")]),
+        _rule("launcher-log", "ingress", ["put"], keyspace.keys_for(keys, LAUNCHER_SPEAKS)),
         _rule("launcher-finish", "ingress", ["query"], finishes),
         _rule("launcher-finished", "egress", ["reply"], finishes),
         # The recorder answers the finish query once its file is complete.
@@ -190,7 +189,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         # Foxglove live only listens, and says it serves.
         _rule("foxglove-alive", "ingress", ["liveliness_token"], [keys.alive(Role.FOXGLOVE, 0)]),
         # The bridge publishes its links' figures and says it serves.
-        _rule("bridge-speak", "ingress", ["put"], [keys.link_stats("*")]),
+        _rule("bridge-speak", "ingress", ["put"], keyspace.keys_for(keys, BRIDGE_SPEAKS)),
         _rule("bridge-alive", "ingress", ["liveliness_token"], [keys.alive(Role.BRIDGE, 0)]),
         # Routers of the other hosts relay everyone's traffic; each checks its own clients.
         _rule("router-relay-in", "ingress", ALL_MESSAGES, everything),
@@ -218,18 +217,10 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         identity, name = names.robot_certificate(robot), names.robot_name(robot)
         # A robot may lead a process hosting several: its session then carries their
         # senses and acts as batches (each entry sealed with its own robot's key).
-        own_inputs = [
-            keys.sense(robot),
-            keys.host_sense(robot),
-            keys.camera(robot),
-            keys.radio_rx(name),
-        ]
+        own_inputs = keyspace.keys_for(keys, ROBOT_HEARS, name)
         rules += [
             _rule(
-                f"{identity}-speak",
-                "ingress",
-                ["put"],
-                [keys.act(robot), keys.host_act(robot), keys.status(robot), keys.radio_tx(name)],
+                f"{identity}-speak", "ingress", ["put"], keyspace.keys_for(keys, ROBOT_SPEAKS, name)
             ),
             _rule(
                 f"{identity}-alive",
@@ -260,7 +251,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 f"{identity}-speak",
                 "ingress",
                 ["put"],
-                [keys.radio_tx(beacon), keys.beacon_ack(beacon)],
+                keyspace.keys_for(keys, BEACON_SPEAKS, beacon),
             ),
             _rule(
                 f"{identity}-alive",
@@ -273,9 +264,14 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 f"{identity}-subscribe-clock",
                 "ingress",
                 ["declare_subscriber"],
-                [keys.beacon_clock(beacon)],
+                keyspace.keys_for(keys, BEACON_HEARS, beacon),
             ),
-            _rule(f"{identity}-receive-clock", "egress", ["put"], [keys.beacon_clock(beacon)]),
+            _rule(
+                f"{identity}-receive-clock",
+                "egress",
+                ["put"],
+                keyspace.keys_for(keys, BEACON_HEARS, beacon),
+            ),
         ]
         grant_client(
             identity,

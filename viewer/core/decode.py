@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from wire import auth, names, protocol
+from wire import auth, keyspace, protocol
 
 
 @dataclass(frozen=True)
@@ -35,29 +35,20 @@ class InvalidSampleError(Exception):
     not carry its speaker's tag."""
 
 
+# The kinds of the key table (wire/keyspace.py) the view draws.
+VIEWED = frozenset({"state", "clock", "link", "status", "radio_rx"})
+
+
+def _viewed(keys: protocol.Keys, key: str) -> keyspace.Classified | None:
+    """The key, read by the key table, if the view uses it."""
+    found = keyspace.classify(keys, key)
+    return found if found is not None and found.kind.name in VIEWED else None
+
+
 def speaker(keys: protocol.Keys, key: str) -> str | None:
     """The identity whose tag a sample on ``key`` must carry, if the view uses the key."""
-    if key in (keys.world_state, keys.world_clock):
-        return names.WORLD
-    outside = keys.robot_of(key, "link")
-    if outside is not None and key == keys.link_stats(outside):
-        return names.BRIDGE
-    robot = keys.robot_of(key)
-    if robot is not None and key == keys.status(robot):
-        return names.robot_identity(robot)
-    receiver = _receiver(keys, key)
-    if receiver is not None:
-        return names.robot_identity(receiver)
-    return None
-
-
-def _receiver(keys: protocol.Keys, key: str) -> int | None:
-    """The robot in ``radio/rx/<id>``; None for any other key, or a receiver that is not a
-    robot (none today: nothing to draw). One spelling per robot: "07" names none."""
-    name = keys.last_chunk(key)
-    if key != keys.radio_rx(name):
-        return None
-    return names.robot_of_name(name)
+    found = _viewed(keys, key)
+    return None if found is None else found.speaker
 
 
 def decode_sample(
@@ -74,31 +65,33 @@ def decode_sample(
     Raises InvalidSampleError for a sample on a used key that fails its tag, or does not
     decode or validate.
     """
-    identity = speaker(keys, key)
-    if identity is None:
+    found = _viewed(keys, key)
+    if found is None:
         return None
+    identity = found.speaker
+    assert identity is not None  # every viewed kind has a speaker of its own
     try:
         metadata = auth.unseal(keyring, identity, key, payload, attachment)
     except auth.AuthError as error:
         raise InvalidSampleError(f"{key}: {identity}: {error}") from None
+    kind, robot = found.kind.name, found.robot
     try:
-        if key == keys.world_state:
+        if kind == "state":
             return protocol.decode(payload, protocol.WorldState)
-        if key == keys.world_clock:
+        if kind == "clock":
             return protocol.decode(payload, protocol.Clock)
-        outside = keys.robot_of(key, "link")
-        if outside is not None:
+        if kind == "link":
             stats = protocol.decode(payload, protocol.LinkStats)
-            if stats.robot != outside:
+            if stats.robot != robot:
                 raise InvalidSampleError(f"the link of robot {stats.robot} on {key}")
             return stats
-        receiver = _receiver(keys, key)
-        if receiver is not None:
+        if kind == "radio_rx":
             if not metadata:
                 raise InvalidSampleError(f"radio delivery without metadata on {key}")
-            return Delivery(receiver, protocol.decode(metadata, protocol.RadioRxMeta))
+            assert robot is not None
+            return Delivery(robot, protocol.decode(metadata, protocol.RadioRxMeta))
         status = protocol.decode(payload, protocol.Status)
-        if status.id != keys.robot_of(key):
+        if status.id != robot:
             raise InvalidSampleError(f"status of robot {status.id} on {key}")
         return status
     except protocol.ProtocolError as error:

@@ -2,9 +2,9 @@
 
 The live bridge (``viewer.live``) and the replay (``viewer.replay``) feed the same types:
 ``Scene`` says what never changes in a run (arena, sites in their rendered colours and
-qualities, nest, palette), ``RobotView`` one robot's latest pose and status,
-``PoolingTracker`` tells which robots' opinions each pooling joined, and ``frame`` turns
-one moment of the run into the JSON object the page draws.
+qualities, nest, palette), ``RobotView`` one robot's latest pose and status, and ``frame``
+turns one moment of the run into the JSON object the page draws; which robots' opinions
+each pooling joined is ``world_server.core.pooling``'s, as in the recording's scene.
 
 Qualities are not on the wire: like the recorder, the scene computes the run's layout
 from its seed and sizes (``world_server.core.layout.make_layout``).
@@ -14,15 +14,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
-from wire import names, protocol
+from wire import protocol
 from wire.endings import Ending
 from world_server.core.body import EPUCK
 from world_server.core.camera import site_colour_bgr
 from world_server.core.layout import Layout
 from world_server.core.palette import PHASE_COLOURS, UNKNOWN_PHASE_COLOUR, Rgba
+from world_server.core.pooling import LINK_SECONDS, Pooling
 
 # The page's legend, in the order of a trip. Each phase keeps the colour it has in the
 # recording's Foxglove scene (world_server.core.palette.PHASE_COLOURS).
@@ -38,8 +39,6 @@ PHASES: tuple[tuple[str, str], ...] = (
 )
 PHASE_INDEX = {name: index for index, (name, _) in enumerate(PHASES)}
 UNKNOWN_PHASE = -1
-LINK_SECONDS = 3.0  # sim seconds a pooling stays drawn
-ARRIVAL_SLACK = 1e-6  # sim seconds: an opinion delivered in the tick of arrival counts
 
 # Target kinds in a frame: none, a site the status names, a site inferred from the
 # robot's heading (the status does not say which site of its pair it is going to), nest.
@@ -124,56 +123,6 @@ class RobotView:
 
     pose: tuple[float, float, float] | None = None
     status: protocol.Status | None = None
-
-
-@dataclass(frozen=True)
-class Pooling:
-    """One pooling: ``robot`` pooled at sim time ``t`` the opinions of ``members``."""
-
-    t: float
-    robot: int
-    size: int
-    members: tuple[int, ...]
-
-
-@dataclass
-class PoolingTracker:
-    """Finds poolings in status messages, and whom they joined from radio deliveries.
-
-    A robot pools its own opinion with the latest opinion of every robot it heard since it
-    arrived at the nest (``Controller._pool_and_decide``): here, the robot senders whose
-    messages the medium delivered to it since its first ``at_nest`` status of the visit.
-    """
-
-    heard: dict[int, dict[int, float]] = field(default_factory=dict)  # robot -> sender -> t
-    arrived: dict[int, float] = field(default_factory=dict)  # robot -> sim time at the nest
-    poolings_seen: dict[int, int] = field(default_factory=dict)
-    decided: set[int] = field(default_factory=set)
-
-    def on_delivery(self, receiver: int, sender: str, t: float) -> None:
-        robot = names.robot_of_name(sender)
-        if robot is not None:  # a robot's opinion; the beacon has a name, not a number
-            self.heard.setdefault(receiver, {})[robot] = t
-
-    def on_status(self, status: protocol.Status) -> tuple[Pooling | None, bool]:
-        """Take in one status: the pooling it reports (if any) and whether the robot just
-        decided."""
-        robot = status.id
-        pooling = None
-        if status.poolings > self.poolings_seen.get(robot, 0):
-            since = self.arrived.pop(robot, -math.inf) - ARRIVAL_SLACK
-            heard = self.heard.pop(robot, {})
-            members = tuple(
-                sorted(s for s, t in heard.items() if since <= t <= status.t and s != robot)
-            )
-            pooling = Pooling(status.t, robot, status.pool_size, members)
-        elif status.phase == "at_nest":
-            self.arrived.setdefault(robot, status.t)
-        self.poolings_seen[robot] = status.poolings
-        just_decided = status.decided_site is not None and robot not in self.decided
-        if just_decided:
-            self.decided.add(robot)
-        return pooling, just_decided
 
 
 def leading(opinion: Sequence[float]) -> tuple[int, float]:

@@ -16,7 +16,7 @@ from typing import Any
 
 import msgspec
 
-from wire import names, protocol
+from wire import keyspace, protocol
 from world_server.recording import foxglove
 
 START_METADATA = "bestofn.start"  # written when recording begins
@@ -104,27 +104,10 @@ def message_schema(kind: str) -> dict[str, Any]:
 
 
 def classify(keys: protocol.Keys, key: str) -> str | None:
-    """The kind of sample a key carries, or None for a key outside the protocol."""
-    if not key.startswith(keys.prefix + "/"):
+    """The kind of sample a key carries (its name in the key table, ``wire/keyspace.py``),
+    or None for a key outside the protocol, or whose name no robot, beacon or process of a
+    run can have. A host's batch is recorded as its robots' own messages (``writer.py``)."""
+    found = keyspace.classify(keys, key)
+    if found is None or found.kind.name in ("host_sense", "host_act"):
         return None
-    parts = key[len(keys.prefix) + 1 :].split("/")
-    match parts:
-        case ["world", "clock"]:
-            return "clock"
-        case ["world", "state"]:
-            return "state"
-        case ["robot", robot, ("sense" | "act" | "status" | "camera") as leaf] if (
-            names.robot_of_name(robot) is not None
-        ):
-            return leaf
-        case ["beacon", _, "ack"]:
-            return "ack"
-        case ["beacon", _, "clock"]:
-            return BEACON_CLOCK
-        case ["radio", ("tx" | "rx") as direction, _]:
-            return f"radio_{direction}"
-        case ["log", _]:
-            return "log"
-        case ["link", robot, "stats"] if names.robot_of_name(robot) is not None:
-            return "link"
-    return None
+    return found.kind.name

@@ -39,9 +39,10 @@ from typing import IO, Any, NamedTuple
 import msgspec
 from mcap.writer import CompressionType, Writer
 
-from wire import auth, batch, names, protocol
+from wire import auth, batch, keyspace, names, protocol
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
+from world_server.core.pooling import LINK_SECONDS, Pooling, PoolingTracker
 from world_server.recording import foxglove
 from world_server.recording.description import RunDescription, layout_description, versions
 from world_server.recording.records import (
@@ -56,7 +57,6 @@ from world_server.recording.records import (
 
 log = logging.getLogger("recorder")
 
-LINK_SECONDS = 5.0  # sim seconds a pooling's radio links stay in the scene
 CHUNK_BYTES = 256 * 1024  # a crash loses at most the chunk being filled
 # Rejected samples: every one counted, the first REJECTED_KEPT kept, each cut to this size.
 REJECTED_KEPT, REJECTED_SAMPLE_BYTES = 100, 1024
@@ -149,7 +149,7 @@ class McapRecorder:
         self.views: dict[int, foxglove.RobotView] = {}
         self._pose_batch: list[tuple[int, float, float, float]] = []
         self._pose_batch_ns = 0
-        self._heard: dict[int, set[int]] = {}
+        self.poolings = PoolingTracker()  # who each pooling joined, as the live page sees it
         self._links: dict[int, tuple[int, list[foxglove.Segment]]] = {}  # robot -> (when, links)
         self._writer.add_metadata(START_METADATA, self._description())
 
@@ -284,35 +284,19 @@ class McapRecorder:
             entry = Sample(per_robot(robot), protocol.encode(message), None, sample.wall_ns)
             self._record_one(entry, checked=True)
 
-    def _speaker(self, key: str) -> str | None:
-        """The identity whose key tags a sample on ``key`` (a key of the protocol), or None
-        if no robot or beacon of a run can have the name it gives."""
-        parts = key[len(self.keys.prefix) + 1 :].split("/")
-        match parts:
-            case ["world", _] | ["beacon", _, "clock"]:
-                return names.WORLD
-            case ["robot", robot, _]:
-                return names.robot_identity(int(robot))  # classify() checked it is a number
-            case ["beacon", name, _]:
-                return names.beacon_identity(name) if names.is_beacon_name(name) else None
-            case ["radio", _, name]:
-                return names.sender_identity(name)
-            case ["link", _, _]:
-                return names.BRIDGE
-        return names.LAUNCHER  # log/<process>
-
     def _route(self, key: str) -> tuple[Callable[[Sample], None], str | None]:
         """How to record a sample on ``key``, and whose tag it must carry (None: the key
         is none of the protocol's, and every sample on it is rejected)."""
         kind = classify(self.keys, key)
-        if kind is None:
+        found = keyspace.classify(self.keys, key)
+        if kind is None or found is None:
             return functools.partial(self.reject, reason="not a key of the protocol"), None
-        speaker = self._speaker(key)
+        speaker = found.speaker  # whose key tags the key: the key table says
         if speaker is None or not names.is_identity(speaker):
             return functools.partial(self.reject, reason="no identity of the run"), None
         if kind == BEACON_CLOCK:
             return self._check_beacon_clock, speaker
-        channel = _Channel(None, kind, self.keys.robot_of(key), topic=key)
+        channel = _Channel(None, kind, found.robot, topic=key)  # the robot the key names
         handler = getattr(self, f"_on_{kind}")
         return functools.partial(handler, channel), speaker
 
@@ -415,26 +399,24 @@ class McapRecorder:
         previous = self.views.get(robot, foxglove.RobotView())
         view = foxglove.RobotView(status.phase, status.decided_site, status.trips, status.poolings)
         self.views[robot] = view
-        if status.phase == "at_nest" and previous.phase != "at_nest":
-            self._heard[robot] = set()
-        if status.poolings > previous.poolings:
-            self._note_links(robot, ns)
+        pooling, _ = self.poolings.on_status(status)
+        if pooling is not None:
+            self._note_links(pooling, ns)
         if (view.phase, view.decided_site) != (previous.phase, previous.decided_site):
             update = self.scene.robot_update(ns, robot, view)
             self._write_derived("scene", foxglove.SCENE_UPDATE, ns, update, sample.wall_ns)
 
-    def _note_links(self, robot: int, ns: int) -> None:
-        """The radio links of a pooling: to every robot heard at the nest this visit."""
-        here = self.poses.get(robot)
-        heard = self._heard.pop(robot, set())
+    def _note_links(self, pooling: Pooling, ns: int) -> None:
+        """The radio links of a pooling: to every robot whose opinion it joined."""
+        here = self.poses.get(pooling.robot)
         if here is None:
             return
         segments = [
             ((here[0], here[1]), (self.poses[other][0], self.poses[other][1]))
-            for other in sorted(heard)
+            for other in pooling.members
             if other in self.poses
         ]
-        self._links[robot] = (ns, segments)
+        self._links[pooling.robot] = (ns, segments)
 
     def _on_state(self, channel: _Channel, sample: Sample) -> None:
         state = self._decoded("state", sample.payload, sample)
@@ -444,7 +426,7 @@ class McapRecorder:
         self._write(channel, ns, sample.payload, sample.wall_ns)
         for pose in state.robots:
             self.poses[pose.id] = (pose.x, pose.y, pose.theta)
-        recent = ns - round(LINK_SECONDS * 1e9)
+        recent = ns - round(LINK_SECONDS * 1e9)  # as long as the live page draws one
         segments = [
             segment
             for pooled_ns, robot_segments in self._links.values()
@@ -471,16 +453,14 @@ class McapRecorder:
         self._radio("radio_tx meta", channel, sample)
 
     def _on_radio_rx(self, channel: _Channel, sample: Sample) -> None:
-        message = self._radio("radio_rx meta", channel, sample)
-        receiver = self.keys.last_chunk(sample.key)
-        robot = names.robot_of_name(receiver)
-        if isinstance(message, protocol.OpinionPayload) and robot is not None:
-            heard = self._heard.get(robot)
-            if heard is not None:
-                heard.add(message.id)
+        meta = self._radio("radio_rx meta", channel, sample)
+        robot = channel.robot
+        if isinstance(meta, protocol.RadioRxMeta) and robot is not None:
+            self.poolings.on_delivery(robot, meta.sender, self._tick_ns(meta.tick) / 1e9)
 
     def _radio(self, meta_kind: str, channel: _Channel, sample: Sample) -> Any:
-        """Record a radio sample as ``{"meta": <attachment>, "payload": <payload>}``."""
+        """Record a radio sample as ``{"meta": <attachment>, "payload": <payload>}``; its
+        metadata, or None if it was rejected."""
         meta = self._decoded(meta_kind, sample.attachment, sample)
         if meta is None:
             return None
@@ -490,7 +470,7 @@ class McapRecorder:
         assert sample.attachment is not None  # _decoded refused a missing one
         data = b'{"meta":' + sample.attachment + b',"payload":' + sample.payload + b"}"
         self._write(channel, self._tick_ns(meta.tick), data, sample.wall_ns)
-        return message
+        return meta
 
     def _on_log(self, channel: _Channel, sample: Sample) -> None:
         line = self._decoded("log", sample.payload, sample)
