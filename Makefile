@@ -31,7 +31,7 @@ TEST_LOCK := requirements/test.lock
 UV_VERSION := 0.13.9
 LOCK_OPTIONS := --generate-hashes --universal --fork-strategy fewest --python-version 3.11
 
-.PHONY: run test test-fast check-published explore lint bench lock clean
+.PHONY: run test test-fast check-published explore lint bench lock c-robot clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -54,7 +54,12 @@ test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
+	$(MAKE) -C c_robot test
 	$(BIN)/python -m pytest
+
+# The robot in C (c_robot/build/c-robot): gcc or cc, and make.
+c-robot:
+	$(MAKE) -C c_robot
 
 test-fast: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -m fast
@@ -83,3 +88,4 @@ lock: | $(BIN)/python
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache .mypy_cache
+	$(MAKE) -C c_robot clean

@@ -2,6 +2,7 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "json.h"
@@ -207,8 +208,8 @@ static void parking_slot(Controller *c, int site, double *sx, double *sy) {
     double pitch = 2 * c->robot_radius + k->park_lane;
     double home = c->site_angle[site];
     /* the rings, from the wall inwards: their radii, steps and slot counts */
-    double radii[4096], steps[4096], clear[4096];
-    long counts[4096];
+    static double radii[4096], steps[4096], clear[4096];
+    static long counts[4096];
     int rings = 0;
     long total = 0;
     double radius = c->arena_radius - k->park_clearance;
@@ -629,15 +630,16 @@ static void broadcasts(Controller *c, Command *out) {
     wire_opinion(c->opinion, c->n, out->opinion);
 }
 
-static void listen(Controller *c, const Heard *received, int count) {
-    for (int i = 0; i < count; i++) {
-        const RadioPayload *p = received[i].payload;
+static void listen(Controller *c, NextHeard next, void *ctx) {
+    Heard heard;
+    while (next(ctx, &heard)) {
+        const RadioPayload *p = heard.payload;
         if (p->kind == RADIO_BEACON) {
             c->has_last_beacon = 1;
             c->last_beacon = c->t;
             continue;
         }
-        const char *sender = received[i].sender;
+        const char *sender = heard.sender;
         if (!strcmp(sender, c->name) && p->id == c->robot_id) continue; /* our own echo */
         char claimed[24];
         snprintf(claimed, sizeof claimed, "%lld", (long long)p->id);
@@ -767,11 +769,10 @@ static void park(Controller *c, const Reading *r, Command *out) {
     }
 }
 
-void controller_step(Controller *c, const Reading *r, const Heard *received, int count,
-                     Command *out) {
+void controller_step(Controller *c, const Reading *r, NextHeard next, void *ctx, Command *out) {
     stop(out);
     c->t = r->t;
-    listen(c, received, count);
+    listen(c, next, ctx);
     if (!c->started) {
         c->started = 1;
         choose_next_pair(c, r);
@@ -787,4 +788,8 @@ void controller_step(Controller *c, const Reading *r, const Heard *received, int
     case P_TO_DECISION: park(c, r, out); break;
     default: stop(out); break;
     }
+}
+
+void controller_parking_slot(Controller *c, int site, double *x, double *y) {
+    parking_slot(c, site, x, y);
 }

@@ -54,12 +54,16 @@ typedef struct Controller Controller;
 /* 0, or -1 and why (the Python constructor's ValueError) */
 int controller_init(Controller *c, int robot_id, const WorldInfo *world,
                     const ControllerConfig *config, uint64_t seed, const char **why);
-void controller_step(Controller *c, const Reading *reading, const Heard *received, int count,
+/* the step's radio messages, one valid one at a time (1), until there are none (0) */
+typedef int (*NextHeard)(void *ctx, Heard *out);
+void controller_step(Controller *c, const Reading *reading, NextHeard next, void *ctx,
                      Command *out);
 int controller_take_status_change(Controller *c);
 /* the status (without the endpoint's rejections); opinion_buffer holds n doubles */
 void controller_status(const Controller *c, int64_t tick, StatusOut *s, double *opinion_buffer);
 int controller_phase(const Controller *c);
+/* robot c->robot_id's parking slot for site (parking.parking_slot) */
+void controller_parking_slot(Controller *c, int site, double *x, double *y);
 Controller *controller_instance(void); /* the one static controller of this program */
 
 struct Controller {

@@ -167,7 +167,29 @@ static void drop_where(Endpoint *e, int64_t below, int64_t also) {
 
 static uint8_t tx_payload[32 * 1024], tx_attachment[256], act_payload[256], act_attachment[32];
 static uint8_t status_payload[32 * 1024], status_attachment[32];
-static RadioPayload received_payloads[64];
+
+typedef struct {
+    Endpoint *e;
+    const PendingItem **rx;
+    int count, at;
+} RxCursor;
+
+/* decode_received, one message at a time: invalid payloads dropped and counted */
+static int next_heard(void *ctx, Heard *out) {
+    static RadioPayload payload;
+    RxCursor *cursor = ctx;
+    while (cursor->at < cursor->count) {
+        const PendingItem *it = cursor->rx[cursor->at++];
+        if (!decode_radio(arena + it->offset, it->size, &payload)) {
+            endpoint_reject(cursor->e, it->sender, "not a valid radio payload");
+            continue;
+        }
+        out->sender = it->sender;
+        out->payload = &payload;
+        return 1;
+    }
+    return 0;
+}
 
 Outgoing endpoint_status(Endpoint *e, int64_t tick) {
     static double opinion[MAX_OPTIONS];
@@ -202,26 +224,10 @@ static int step(Endpoint *e, const Sense *sense_in, const PendingItem **rx, int 
         else
             endpoint_reject(e, "camera", why);
     }
-    /* Radio.poll, then decode_received: invalid payloads dropped and counted */
-    static Heard heard[64];
-    int heard_count = 0;
-    for (int i = 0; i < rx_count; i++) {
-        const PendingItem *it = rx[i];
-        if (heard_count >= 64) {
-            endpoint_reject(e, it->sender, "more radio messages in one step than kept");
-            continue;
-        }
-        RadioPayload *p = &received_payloads[heard_count];
-        if (!decode_radio(arena + it->offset, it->size, p)) {
-            endpoint_reject(e, it->sender, "not a valid radio payload");
-            continue;
-        }
-        heard[heard_count].sender = it->sender;
-        heard[heard_count].payload = p;
-        heard_count++;
-    }
+    /* Radio.poll, then decode_received as the controller listens */
+    RxCursor cursor = {e, rx, rx_count, 0};
     static Command command;
-    controller_step(e->controller, &reading, heard, heard_count, &command);
+    controller_step(e->controller, &reading, next_heard, &cursor, &command);
     int count = 0;
     int64_t radio_tx = 0;
     if (command.broadcast) {
@@ -336,9 +342,6 @@ int endpoint_receive(Endpoint *e, int kind, const uint8_t *payload, size_t paylo
         }
     } else if (kind == IN_RADIO_RX) {
         RadioRxMeta meta;
-        if (metadata_size == 0 && attachment_size == 16) {
-            /* the tag alone: no metadata */
-        }
         if (!decode_radio_rx_meta(metadata, metadata_size, &meta)) {
             endpoint_reject(e, sources[kind], why);
             return 0;

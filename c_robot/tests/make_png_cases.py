@@ -47,7 +47,7 @@ def chunk(kind, body):
     return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
 
 
-def png(image_rgb, colour_type, filters, level=6, strategy=zlib.Z_DEFAULT_STRATEGY, split=0):
+def png(image_rgb, colour_type, filters, level=6, strategy=zlib.Z_DEFAULT_STRATEGY, *, split=0):
     height, width = image_rgb.shape[:2]
     channels = {0: 1, 2: 3, 6: 4}[colour_type]
     rows = image_rgb.reshape(height, width * channels).astype(np.int32)
@@ -109,24 +109,34 @@ for sites in (5, 10, 100):
         image = renderer.render(0.0, 0.0, 0.3, [], rng=Stream(1))
         cases.append(case(f"world n={sites} from the nest", renderer.encode(image)))
 
-random_rgb = np.array([[[rng.randrange(256) for _ in range(3)] for _ in range(17)] for _ in range(11)], dtype=np.uint8)
+random_rgb = np.array(
+    [[[rng.randrange(256) for _ in range(3)] for _ in range(17)] for _ in range(11)], dtype=np.uint8
+)
 panel = np.zeros((48, 64, 3), dtype=np.uint8)
 panel[:] = (95, 95, 95)
 panel[6:42, 10:54] = (200, 0, 55)  # RGB: a panel of quality 200/255
 for filters in ([0], [1], [2], [3], [4], [0, 1, 2, 3, 4]):
     cases.append(case(f"rgb filters {filters}", png(random_rgb, 2, filters)))
     cases.append(case(f"panel filters {filters}", png(panel, 2, filters)))
-for level, strategy, label in ((0, zlib.Z_DEFAULT_STRATEGY, "stored"), (9, zlib.Z_FIXED, "fixed"),
-                               (9, zlib.Z_DEFAULT_STRATEGY, "dynamic"), (1, zlib.Z_RLE, "rle")):
+for level, strategy, label in (
+    (0, zlib.Z_DEFAULT_STRATEGY, "stored"),
+    (9, zlib.Z_FIXED, "fixed"),
+    (9, zlib.Z_DEFAULT_STRATEGY, "dynamic"),
+    (1, zlib.Z_RLE, "rle"),
+):
     cases.append(case(f"rgb {label} blocks", png(random_rgb, 2, [4], level, strategy)))
     cases.append(case(f"panel {label} blocks", png(panel, 2, [1], level, strategy)))
 cases.append(case("rgb split over IDAT chunks", png(random_rgb, 2, [0, 4], split=7)))
 grey = np.array([[rng.randrange(256) for _ in range(9)] for _ in range(5)], dtype=np.uint8)
 cases.append(case("greyscale", png(grey[..., None].reshape(5, 9, 1), 0, [0, 2, 4])))
-rgba = np.array([[[rng.randrange(256) for _ in range(4)] for _ in range(6)] for _ in range(7)], dtype=np.uint8)
+rgba = np.array(
+    [[[rng.randrange(256) for _ in range(4)] for _ in range(6)] for _ in range(7)], dtype=np.uint8
+)
 cases.append(case("rgba: alpha dropped", png(rgba, 6, [1, 3])))
 for level in range(10):  # OpenCV's own encoder at every level
-    ok, buf = cv2.imencode(".png", cv2.cvtColor(panel, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_PNG_COMPRESSION, level])
+    ok, buf = cv2.imencode(
+        ".png", cv2.cvtColor(panel, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_PNG_COMPRESSION, level]
+    )
     cases.append(case(f"opencv level {level}", buf.tobytes()))
 tiny = np.zeros((2, 2, 3), dtype=np.uint8)
 cases.append(case("2x2: too small to estimate", png(tiny, 2, [0])))
@@ -139,7 +149,15 @@ cases.append(case("a changed byte", bytes(bad_crc), expect_ok=False))
 cases.append(case("not a png", b"GIF89a" + bytes(40), expect_ok=False))
 cases.append(case("empty", b"", expect_ok=False))
 bad_filter = bytearray(png(random_rgb, 2, [0], level=0))
-cases.append(case("zero-size header", b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 0, 5, 8, 2, 0, 0, 0)) + chunk(b"IEND", b""), expect_ok=False))
+cases.append(
+    case(
+        "zero-size header",
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", 0, 5, 8, 2, 0, 0, 0))
+        + chunk(b"IEND", b""),
+        expect_ok=False,
+    )
+)
 
 Path(__file__).with_name("png_cases.json").write_text(json.dumps(cases, indent=0) + "\n")
 print(len(cases), "cases;", sum(1 for c in cases if c.get("quality")), "with a quality")

@@ -5,6 +5,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "controller.h"
+#include "decision.h"
 #include "png.h"
 #include "sha256.h"
 #include "tests.h"
@@ -52,7 +54,238 @@ void test_png(void) {
     }
 }
 
-void test_vision(void) {}
-void test_decision(void) {}
-void test_endpoint(void) {}
-void test_client(void) {}
+
+static double hexd(const char *hex) {
+    unsigned long long v = strtoull(hex, NULL, 16);
+    double d;
+    memcpy(&d, &v, 8);
+    return d;
+}
+
+static int same_list(const double *got, JNode *want, int n) {
+    if ((int)want->count != n) return 0;
+    for (int i = 0; i < n; i++) {
+        double w = hexd(want->items[i]->str);
+        if (memcmp(&got[i], &w, 8) != 0) return 0;
+    }
+    return 1;
+}
+
+static void list_of(JNode *list, double *out) {
+    for (size_t i = 0; i < list->count; i++) out[i] = hexd(list->items[i]->str);
+}
+
+void test_decision(void) {
+    JNode *root = jdom_parse_file("tests/cases.json");
+    if (!root) return;
+    JNode *cases = jdom_get(root, "decision");
+    static double opinion[MAX_OPTIONS], out[MAX_OPTIONS], pool_values[64][MAX_OPTIONS];
+    for (size_t k = 0; k < cases->count; k++) {
+        JNode *c = cases->items[k];
+        const char *op = jdom_str(c, "op");
+        char name[64];
+        snprintf(name, sizeof name, "%s case %zu", op, k);
+        if (!strcmp(op, "negative_update")) {
+            JNode *o = jdom_get(c, "opinion");
+            list_of(o, opinion);
+            negative_update(opinion, (int)o->count, (int)jdom_get(c, "eliminated")->integer,
+                            hexd(jdom_str(c, "alpha")), out);
+            check(same_list(out, jdom_get(c, "out"), (int)o->count), "decision", name);
+        } else if (!strcmp(op, "mprodop") || !strcmp(op, "loglinear")) {
+            JNode *pool = jdom_get(c, "pool");
+            const double *ptrs[64];
+            int n = (int)pool->items[0]->count;
+            for (size_t i = 0; i < pool->count; i++) {
+                list_of(pool->items[i], pool_values[i]);
+                ptrs[i] = pool_values[i];
+            }
+            int ok = !strcmp(op, "mprodop") ? mprodop(ptrs, (int)pool->count, n, out)
+                                            : loglinear_pool(ptrs, (int)pool->count, n, 0.5, out);
+            JNode *want = jdom_get(c, "out");
+            check(want->type == J_NULL ? !ok : ok && same_list(out, want, n), "decision", name);
+        } else if (!strcmp(op, "choose_pair")) {
+            JNode *o = jdom_get(c, "opinion");
+            list_of(o, opinion);
+            Stream s;
+            stream_seed(&s, strtoull(jdom_str(c, "seed"), NULL, 16));
+            int first, second;
+            choose_pair(opinion, (int)o->count, &s, &first, &second);
+            JNode *want = jdom_get(c, "out");
+            check(first == want->items[0]->integer && second == want->items[1]->integer &&
+                      s.state == strtoull(jdom_str(c, "state_after"), NULL, 16),
+                  "decision", name);
+        } else {
+            JNode *o = jdom_get(c, "opinion");
+            list_of(o, opinion);
+            check(decided_option(opinion, (int)o->count, hexd(jdom_str(c, "threshold"))) ==
+                      jdom_get(c, "out")->integer,
+                  "decision", name);
+        }
+    }
+    JNode *parking = jdom_get(root, "parking");
+    static WorldInfo world;
+    ControllerConfig config;
+    controller_config_defaults(&config);
+    for (size_t k = 0; k < parking->count; k++) {
+        JNode *p = parking->items[k];
+        JNode *w = jdom_get(p, "world"), *sites = jdom_get(w, "sites");
+        memset(&world, 0, sizeof world);
+        world.dt = 0.1;
+        world.arena_radius = hexd(jdom_str(w, "arena_radius"));
+        world.nest_radius = hexd(jdom_str(w, "nest_radius"));
+        world.robot_radius = 0.037;
+        world.wheel_base = 0.053;
+        world.max_wheel_speed = 0.13;
+        world.lockstep = 1;
+        world.n_sites = (int)sites->count;
+        for (int i = 0; i < world.n_sites; i++) {
+            world.sites[i].id = i;
+            world.sites[i].x = hexd(sites->items[i]->items[0]->str);
+            world.sites[i].y = hexd(sites->items[i]->items[1]->str);
+        }
+        JNode *slots = jdom_get(p, "slots");
+        for (size_t i = 0; i < slots->count; i++) {
+            JNode *s = slots->items[i];
+            int robot = (int)s->items[0]->integer, site = (int)s->items[1]->integer;
+            const char *why;
+            Controller *c = controller_instance();
+            int ok = controller_init(c, robot, &world, &config, 1, &why) == 0;
+            double x = 0, y = 0;
+            if (ok) controller_parking_slot(c, site, &x, &y);
+            double wx = hexd(s->items[2]->str), wy = hexd(s->items[3]->str);
+            char name[96];
+            snprintf(name, sizeof name, "%lld robots: robot %d, site %d",
+                     jdom_get(p, "robots")->integer, robot, site);
+            check(ok && !memcmp(&x, &wx, 8) && !memcmp(&y, &wy, 8), "parking slot", name);
+        }
+    }
+}
+/* --- the link session and the start-up sequence, against a bridge made here ----------- */
+
+#include "auth.h"
+#include "client.h"
+#include "link.h"
+
+static LinkRobot robot;
+static uint8_t lk[32], robot_key[32];
+static const uint8_t bridge_nonce[8] = {0x11, 0x12, 0x13, 0x14, 0x15, 0x16, 0x17, 0x18};
+
+static void from_bridge(int type, const uint8_t *body, size_t size, uint64_t seq, double now) {
+    static uint8_t frame[LINK_MAX_FRAME_BYTES];
+    Frame f;
+    memset(&f, 0, sizeof f);
+    f.type = type;
+    f.from_bridge = 1;
+    f.robot = 8;
+    memcpy(f.robot_nonce, robot.client.robot_nonce, 8);
+    memcpy(f.bridge_nonce, bridge_nonce, 8);
+    f.seq = seq;
+    f.body = body;
+    f.body_size = size;
+    long n = link_seal(&f, lk, NULL, frame, sizeof frame);
+    link_robot_receive(&robot, frame, (size_t)n, now);
+}
+
+/* the robot's queued frames, opened; their types in order */
+static int sent_types(int *types, Frame *frames, int cap) {
+    static uint8_t copies[16][70000];
+    int n = 0;
+    size_t size;
+    const uint8_t *frame;
+    for (int i = 0; n < cap && (frame = client_frame(&robot.client, i, &size)) != NULL; i++) {
+        memcpy(copies[n], frame, size);
+        static uint8_t plain[70000];
+        check(link_open(copies[n], size, lk, NULL, plain, &frames[n]) == R_NONE, "client", "its frames are tagged under the link key");
+        types[n] = frames[n].type;
+        n++;
+    }
+    client_clear(&robot.client);
+    return n;
+}
+
+
+void test_client(void) {
+    memset(robot_key, 7, sizeof robot_key);
+    link_key(robot_key, lk);
+    link_robot_init(&robot, 8, "demo", robot_key);
+    int types[16];
+    Frame frames[16];
+    link_robot_wake(&robot, 0.0);
+    int n = sent_types(types, frames, 16);
+    check(n == 1 && types[0] == F_HELLO && frames[0].seq == 0, "client", "a hello at once");
+    link_robot_wake(&robot, 0.3);
+    check(sent_types(types, frames, 16) == 0, "client", "no second hello before 0.5 s");
+    link_robot_wake(&robot, 0.5);
+    check(sent_types(types, frames, 16) == 1 && types[0] == F_HELLO, "client", "hello every 0.5 s");
+    const char *welcome = "{\"v\":1,\"run\":\"demo\",\"root\":\"bestofn\",\"cipher\":\"none\","
+                          "\"ping_every\":0.5,\"silence\":3.0,\"controller\":{\"dwell\":3.0}}";
+    from_bridge(F_WELCOME, (const uint8_t *)welcome, strlen(welcome), 0, 0.6);
+    n = sent_types(types, frames, 16);
+    check(n == 2 && types[0] == F_PING && frames[0].seq == 1 && types[1] == F_DATA &&
+              frames[1].seq == 2,
+          "client", "welcome: a ping at once, then the question for the map");
+    if (n == 2) {
+        int kind;
+        const uint8_t *payload, *attachment, *metadata;
+        size_t ps, as, ms;
+        link_decode_data(frames[1].body, frames[1].body_size, &kind, &payload, &ps, &attachment, &as);
+        int ok = kind == K_INFO_QUERY && ps == 0 && as == 16 + 16 + 7 &&
+                 !memcmp(attachment + 32, "robot/8", 7) &&
+                 auth_open(robot_key, "bestofn/demo/world/info", payload, 0, attachment, as,
+                           &metadata, &ms) == 0 &&
+                 !memcmp(metadata, robot.nonce, 16);
+        check(ok, "client", "kind 19: tag, nonce, identity, tagged with the robot's key");
+    }
+    link_robot_wake(&robot, 1.6);
+    n = sent_types(types, frames, 16);
+    check(n == 1 && types[0] == F_DATA, "client", "the question again after 1 s");
+    from_bridge(F_WELCOME, (const uint8_t *)welcome, strlen(welcome), 0, 1.6);
+    check(sent_types(types, frames, 16) == 0 && robot.client.refused[R_UNEXPECTED] == 0,
+          "client", "the same welcome again is ignored");
+    uint8_t ping[8] = {0, 0, 0, 0, 0, 0, 0, 9};
+    from_bridge(F_PING, ping, 8, 1, 1.7);
+    n = sent_types(types, frames, 16);
+    check(n == 1 && types[0] == F_PONG && !memcmp(frames[0].body, ping, 8), "client", "a pong repeats the ping");
+    from_bridge(F_PING, ping, 8, 1, 1.8);
+    check(robot.client.refused[R_REPLAYED] == 1 && sent_types(types, frames, 16) == 0, "client",
+          "a sequence number taken twice is refused (replayed)");
+    /* a world/info answer for another nonce is not taken */
+    uint8_t body[4096], att[64];
+    const char *info = "{\"v\":1,\"run\":\"demo\",\"seed\":0,\"dt\":0.1,\"arena_radius\":0.75,\"nest\":"
+                       "{\"x\":0.0,\"y\":0.0,\"radius\":0.2},\"sites\":[{\"id\":0,\"x\":0.75,\"y\":0.0},"
+                       "{\"id\":1,\"x\":-0.375,\"y\":0.649519053},{\"id\":2,\"x\":-0.375,\"y\":-0.649519053}],"
+                       "\"robot_radius\":0.037,\"wheel_base\":0.053,\"max_wheel_speed\":0.13,\"camera\":"
+                       "{\"width\":64,\"height\":48,\"fov\":0.84},\"clock\":\"lockstep\"}";
+    uint8_t wrong[16];
+    memset(wrong, 1, 16);
+    long an = auth_seal(robot_key, "bestofn/demo/world/info", (const uint8_t *)info, strlen(info), wrong, 16, att, sizeof att);
+    long bn = link_encode_data(K_INFO_REPLY, (const uint8_t *)info, strlen(info), att, (size_t)an, body, sizeof body);
+    from_bridge(F_DATA, body, (size_t)bn, 2, 1.9);
+    check(!robot.has_endpoint && sent_types(types, frames, 16) == 0, "client", "an answer to another question is not taken");
+    an = auth_seal(robot_key, "bestofn/demo/world/info", (const uint8_t *)info, strlen(info), robot.nonce, 16, att, sizeof att);
+    bn = link_encode_data(K_INFO_REPLY, (const uint8_t *)info, strlen(info), att, (size_t)an, body, sizeof body);
+    from_bridge(F_DATA, body, (size_t)bn, 3, 2.0);
+    n = sent_types(types, frames, 16);
+    int status_ok = 0;
+    if (n == 1 && types[0] == F_DATA) {
+        int kind;
+        const uint8_t *payload, *attachment;
+        size_t ps, as;
+        link_decode_data(frames[0].body, frames[0].body_size, &kind, &payload, &ps, &attachment, &as);
+        const char *head = "{\"v\":1,\"id\":8,\"tick\":0,\"t\":0.0,\"phase\":\"to_site\",\"trips\":0,";
+        status_ok = kind == K_STATUS && ps > strlen(head) && !memcmp(payload, head, strlen(head));
+    }
+    check(robot.has_endpoint && status_ok, "client", "the map answered: the first status, at tick 0");
+    link_robot_wake(&robot, 3.9);
+    check(sent_types(types, frames, 16) == 0, "client", "no repeat before 2 s");
+    link_robot_wake(&robot, 4.0);
+    n = sent_types(types, frames, 16);
+    check(n == 1 && types[0] == F_DATA, "client", "the status again every 2 s");
+    uint8_t bye = BYE_RUN_ENDED;
+    from_bridge(F_BYE, &bye, 1, 4, 4.1);
+    check(robot.ended && !robot.client.open, "client", "a bye (run ended) ends the program");
+    char summary[1024];
+    link_robot_summary(&robot, summary, sizeof summary);
+    check(strstr(summary, "\"sessions\": 1") && strstr(summary, "\"refused\": {\"replayed\": 1}"),
+          "client", summary);
+}

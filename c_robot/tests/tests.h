@@ -12,8 +12,6 @@ void test_auth(void);
 void test_link(void);
 void test_messages(void);
 void test_png(void);
-void test_vision(void);
 void test_decision(void);
-void test_endpoint(void);
 void test_client(void);
 #endif

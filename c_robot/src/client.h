@@ -1,0 +1,78 @@
+/* The robot's end of a link session (robot_agent/link/client.py) and the program around
+   the endpoint (robot_agent/link/program.py's LinkRobot), without I/O. */
+#ifndef CR_CLIENT_H
+#define CR_CLIENT_H
+#include <stddef.h>
+#include <stdint.h>
+
+#include "endpoint.h"
+#include "link.h"
+
+#define HELLO_EVERY 0.5
+#define SILENCE_BEFORE_WELCOME 3.0
+#define ASK_EVERY 1.0
+#define STATUS_EVERY 2.0
+#define OUT_QUEUE_BYTES (512 * 1024)
+#define OUT_QUEUE_FRAMES 256
+
+typedef struct {
+    uint32_t robot;
+    uint8_t key[32]; /* the link key */
+    long refused[R_COUNT];
+    long sessions;
+    int has_welcome;
+    char run[MAX_NAME + 1], root[MAX_NAME + 1];
+    int encrypted;
+    double ping_every;
+    uint8_t controller[8192];
+    size_t controller_size;
+    uint8_t robot_nonce[8], bridge_nonce[8];
+    int open;
+    int has_cipher;
+    uint8_t cipher_key[32];
+    uint64_t sent_seq;
+    ReplayWindow window;
+    double next_hello, last_heard, silence;
+    /* frames to send, in order */
+    uint8_t queue[OUT_QUEUE_BYTES];
+    size_t queue_used;
+    size_t frame_size[OUT_QUEUE_FRAMES];
+    int frame_count;
+    long queue_dropped;
+} LinkClient;
+
+typedef struct {
+    int robot;
+    char run[MAX_NAME + 1];
+    uint8_t robot_key[32];
+    char identity[32];
+    LinkClient client;
+    int has_endpoint;
+    Endpoint *endpoint;
+    char worlds[MAX_WORLDS][MAX_NAME + 1];
+    int world_count;
+    int asking;
+    uint8_t nonce[16];
+    double ask_again_at;
+    int ended;
+    int has_last_status;
+    uint8_t last_status[32 * 1024];
+    size_t last_status_size;
+    uint8_t last_status_attachment[32];
+    double status_again_at;
+    long dropped[3]; /* sense, camera, radio_rx inputs before the map */
+    int fatal; /* the map or the settings could not be used: exit 1 */
+} LinkRobot;
+
+void random_bytes(uint8_t *out, size_t size);
+void link_robot_init(LinkRobot *p, int robot, const char *run, const uint8_t robot_key[32]);
+double link_robot_deadline(const LinkRobot *p);
+void link_robot_wake(LinkRobot *p, double now);
+void link_robot_receive(LinkRobot *p, const uint8_t *data, size_t size, double now);
+void link_robot_stop(LinkRobot *p);
+/* the frames to send: call with index 0.. until it returns NULL, then clear */
+const uint8_t *client_frame(LinkClient *c, int index, size_t *size);
+void client_clear(LinkClient *c);
+/* the program's last line (program.py summary) */
+void link_robot_summary(const LinkRobot *p, char *out, size_t cap);
+#endif
