@@ -308,7 +308,7 @@ def run_case(case: str, args: argparse.Namespace, workdir: Path) -> dict[str, An
             elif case == "junk-largest":
                 largest: list[tuple[str, bytes, bytes | None]] = [
                     (keys.host_act(0), os.urandom(batch.MAX_BATCH_BYTES), None),
-                    (keys.camera(0), os.urandom(protocol.MAX_FRAME_BYTES), None),
+                    (keys.camera(0), os.urandom(protocol.MAX_CAMERA_FRAME_BYTES), None),
                     *((keys.status(robot), os.urandom(60 * 1024), None) for robot in range(10)),
                 ]
 

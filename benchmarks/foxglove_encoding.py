@@ -48,7 +48,7 @@ def per_call(function: Callable[[], Any], seconds: float = 0.5) -> float:
     return (time.perf_counter() - start) / calls
 
 
-def typed_robot(ns: int, robot: int, view: foxglove.RobotView, scene: foxglove.ArenaScene) -> Any:
+def typed_robot(ns: int, robot: int, view: foxglove.SceneRobot, scene: foxglove.ArenaScene) -> Any:
     r, g, b, a = scene.robot_colour(view)
     return SceneEntity(
         timestamp=Timestamp.from_epoch_secs(ns / 1e9),
@@ -92,7 +92,7 @@ def main() -> None:
     args = parser.parse_args()
     layout = make_layout(10, args.robots, 0)
     scene = foxglove.ArenaScene(layout)
-    views = {robot: foxglove.RobotView("to_site", None, 3, 2) for robot in range(args.robots)}
+    views = {robot: foxglove.SceneRobot("to_site", None, 3, 2) for robot in range(args.robots)}
     encoder = msgspec.json.Encoder()
     zstd = zstandard.ZstdCompressor()
 

@@ -99,7 +99,7 @@ def outside_run(
             deadline = time.monotonic() + 120
             while not key_file.exists() and time.monotonic() < deadline:
                 time.sleep(0.05)
-            program = [sys.executable, "-m", "robot_agent.link", "--link", reach]
+            program = [sys.executable, "-m", "link", "--link", reach]
             program += ["--id", str(robot), "--key-file", str(key_file), "--give-up", "120"]
             programs.append(
                 subprocess.Popen(

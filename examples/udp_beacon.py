@@ -16,11 +16,15 @@ import threading
 import time
 from collections.abc import Sequence
 from dataclasses import asdict
+from pathlib import Path
 
+# Run as a script (python examples/udp_beacon.py), the repository root is not on the path.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from examples.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from plumbing import cliargs
 from plumbing.stop_signals import on_stop_signals
-from robot_agent.link.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 from wire import protocol
 from wire.rng import Stream
 

@@ -24,14 +24,18 @@ import threading
 import time
 from collections.abc import Sequence
 from dataclasses import asdict
+from pathlib import Path
 
 import numpy as np
 
+# Run as a script (python examples/udp_robot.py), the repository root is not on the path.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from examples.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 from plumbing import cliargs
 from plumbing.stop_signals import on_stop_signals
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
-from robot_agent.link.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 from wire import names, protocol
 from wire.rng import Stream
 

@@ -59,14 +59,7 @@ def load(run: str, key_file: str | None, program: str) -> auth.Keyring | None:
     text = os.environ.pop(KEYS_ENV, None)
     source = f"${KEYS_ENV}"
     if text is None and key_file is not None:
-        path = Path(key_file)
-        try:
-            text = read_bounded_text(path, KEY_FILE_BYTES, "key file")
-            mode = path.stat().st_mode
-        except OSError as error:
-            raise ValueError(f"cannot read key file {key_file}: {error.strerror}") from None
-        if stat.S_ISREG(mode) and mode & (stat.S_IRWXG | stat.S_IRWXO):
-            log.warning("key file %s can be read by other users (chmod 600 it)", key_file)
+        text = read_key_text(Path(key_file))
         source = key_file
     if text is None:
         log.warning(
@@ -78,6 +71,32 @@ def load(run: str, key_file: str | None, program: str) -> auth.Keyring | None:
         return from_text(text, run)
     except ValueError as error:
         raise ValueError(f"{source}: {error}") from None
+
+
+def read_key_text(path: Path) -> str:
+    """The text of a key file, read no further than ``KEY_FILE_BYTES``; ValueError if it
+    cannot be read, and a warning if other users may read it."""
+    text = read_bounded_text(path, KEY_FILE_BYTES, "key file")
+    try:
+        mode = path.stat().st_mode
+    except OSError as error:
+        raise ValueError(f"cannot read key file {path}: {error.strerror}") from None
+    if stat.S_ISREG(mode) and mode & (stat.S_IRWXG | stat.S_IRWXO):
+        log.warning("key file %s can be read by other users (chmod 600 it)", path)
+    return text
+
+
+def read_key_file(path: Path, identity: str) -> tuple[str, auth.Keyring]:
+    """The run a key file is for, and the keyring of ``identity`` alone in it (a robot
+    outside the emulator: ``robot-agent --link``); ValueError says what is wrong."""
+    text = read_key_text(path)
+    try:
+        run, keyring = auth.keyring_from_text(text)
+    except ValueError as error:
+        raise ValueError(f"{path}: {error}") from None
+    if not keyring.holds(identity):
+        raise ValueError(f"{path} holds no key for {identity}")
+    return run, keyring.only([identity])
 
 
 def from_args(

@@ -4,7 +4,7 @@
     python tests/make_vectors.py --check   # exit 1 if a file differs from what it would write
 
 One file per message type of ``wire/protocol.py``, plus ``udp_frame.json`` for the
-UDP radio's framing (``robot_agent/link/udp_radio.py``), ``auth.json`` for run keys and
+UDP radio's framing (``examples/udp_radio.py``), ``auth.json`` for run keys and
 message tags (``wire/auth.py``), ``batch.json`` for the binary batches of a process
 hosting several robots and their host's tag (``wire/batch.py``) and ``tick.json`` for one
 lockstep tick of a robot on Zenoh: what arrives, what the port contract hands the
@@ -44,8 +44,9 @@ from typing import Any
 
 import msgspec
 
-from robot_agent.link.udp_radio import MAX_PAYLOAD_BYTES, encode_frame
-from wire import auth, batch, link, names, numeric, protocol
+from examples.udp_radio import MAX_RADIO_PAYLOAD_BYTES, encode_frame
+from link.core import codec
+from wire import auth, batch, names, numeric, protocol
 from wire.rng import Stream, seed_of
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
@@ -802,7 +803,7 @@ def opinion_vectors() -> TypeVectors:
         ),
         note="the longest opinion over 100 sites",
     )
-    assert len(worst_data) <= MAX_PAYLOAD_BYTES
+    assert len(worst_data) <= MAX_RADIO_PAYLOAD_BYTES
     vectors.add_accepted(
         "kind_last",
         (
@@ -996,8 +997,8 @@ def udp_frame_vectors() -> dict[str, Any]:
         ("empty_payload", "a frame carries a payload", b"BN\x01\x013"),
         (
             "payload_too_long",
-            f"payloads are at most {MAX_PAYLOAD_BYTES} bytes",
-            b"BN\x01\x013" + b" " * (MAX_PAYLOAD_BYTES + 1),
+            f"payloads are at most {MAX_RADIO_PAYLOAD_BYTES} bytes",
+            b"BN\x01\x013" + b" " * (MAX_RADIO_PAYLOAD_BYTES + 1),
         ),
     ]
     return {
@@ -1192,14 +1193,14 @@ LINK_BRIDGE_NONCE = bytes.fromhex("1112131415161718")
 
 
 def link_frame_vectors() -> dict[str, Any]:
-    """Frames of the link to a robot outside the emulator (wire/link.py, docs/protocol.md):
+    """Frames of the link to a robot outside the emulator (link/core/codec.py, docs/protocol.md):
     the keys, a session's frames both ways (plain and encrypted), their serial encoding,
     and frames a receiver refuses, each with the reason it is counted under."""
     keyring = auth.Keyring(secret=AUTH_SECRET)
     robot_key = keyring.key(names.robot_identity(LINK_ROBOT))
     assert robot_key is not None
-    key = link.link_key(robot_key)
-    cipher_key = link.session_key(key, LINK_ROBOT_NONCE, LINK_BRIDGE_NONCE)
+    key = codec.link_key(robot_key)
+    cipher_key = codec.session_key(key, LINK_ROBOT_NONCE, LINK_BRIDGE_NONCE)
     keys = protocol.Keys("demo")
     act = protocol.encode(
         protocol.Act(v=1, tick=42, left=0.13, right=0.1, capture=False, radio_tx=0)
@@ -1211,7 +1212,7 @@ def link_frame_vectors() -> dict[str, Any]:
         )
     )
     sense_tag = keyring.seal("robot/8", keys.sense(LINK_ROBOT), sense)
-    welcome = link.LinkWelcome(
+    welcome = codec.LinkWelcome(
         v=1,
         run="demo",
         root="bestofn",
@@ -1222,41 +1223,41 @@ def link_frame_vectors() -> dict[str, Any]:
     )
 
     def frame(
-        kind: link.FrameType,
+        kind: codec.FrameType,
         from_bridge: bool,
         seq: int,
         body: bytes = b"",
         *,
         bridge_nonce: bytes = LINK_BRIDGE_NONCE,
         encrypted: bool = False,
-    ) -> link.Frame:
-        return link.Frame(
+    ) -> codec.Frame:
+        return codec.Frame(
             kind, from_bridge, LINK_ROBOT, LINK_ROBOT_NONCE, bridge_nonce, seq, body, encrypted
         )
 
-    act_body = link.encode_data(link.DataKind.ACT, act, act_tag)
+    act_body = codec.encode_data(codec.DataKind.ACT, act, act_tag)
     cases = [
-        ("hello", frame(link.FrameType.HELLO, False, 0, bridge_nonce=link.NO_NONCE)),
-        ("welcome", frame(link.FrameType.WELCOME, True, 0, link.encode_welcome(welcome))),
-        ("ping_from_the_robot", frame(link.FrameType.PING, False, 1, bytes(8))),
-        ("act", frame(link.FrameType.DATA, False, 2, act_body)),
+        ("hello", frame(codec.FrameType.HELLO, False, 0, bridge_nonce=codec.NO_NONCE)),
+        ("welcome", frame(codec.FrameType.WELCOME, True, 0, codec.encode_welcome(welcome))),
+        ("ping_from_the_robot", frame(codec.FrameType.PING, False, 1, bytes(8))),
+        ("act", frame(codec.FrameType.DATA, False, 2, act_body)),
         (
             "sense",
             frame(
-                link.FrameType.DATA,
+                codec.FrameType.DATA,
                 True,
                 1,
-                link.encode_data(link.DataKind.SENSE, sense, sense_tag),
+                codec.encode_data(codec.DataKind.SENSE, sense, sense_tag),
             ),
         ),
-        ("ping_from_the_bridge", frame(link.FrameType.PING, True, 2, (1).to_bytes(8, "big"))),
-        ("pong", frame(link.FrameType.PONG, False, 3, (1).to_bytes(8, "big"))),
-        ("bye_run_ended", frame(link.FrameType.BYE, True, 3, bytes((link.ByeReason.RUN_ENDED,)))),
-        ("act_encrypted", frame(link.FrameType.DATA, False, 2, act_body, encrypted=True)),
+        ("ping_from_the_bridge", frame(codec.FrameType.PING, True, 2, (1).to_bytes(8, "big"))),
+        ("pong", frame(codec.FrameType.PONG, False, 3, (1).to_bytes(8, "big"))),
+        ("bye_run_ended", frame(codec.FrameType.BYE, True, 3, bytes((codec.ByeReason.RUN_ENDED,)))),
+        ("act_encrypted", frame(codec.FrameType.DATA, False, 2, act_body, encrypted=True)),
     ]
     valid = []
     for name, item in cases:
-        data = link.seal(item, key, cipher_key if item.encrypted else None)
+        data = codec.seal(item, key, cipher_key if item.encrypted else None)
         vector: dict[str, Any] = {
             "name": name,
             "type": item.type.name,
@@ -1268,90 +1269,90 @@ def link_frame_vectors() -> dict[str, Any]:
             "encrypted": item.encrypted,
             "body_hex": item.body.hex(),
             "hex": data.hex(),
-            "serial_hex": link.serial_encode(data).hex(),
+            "serial_hex": codec.serial_encode(data).hex(),
         }
-        if item.type is link.FrameType.DATA:
-            kind, payload, attachment = link.decode_data(item.body)
+        if item.type is codec.FrameType.DATA:
+            kind, payload, attachment = codec.decode_data(item.body)
             vector["data"] = {
                 "kind": kind.name,
                 "kind_byte": int(kind),
                 "attachment_hex": (attachment or b"").hex(),
                 "payload_utf8": payload.decode(),
             }
-        if item.type is link.FrameType.WELCOME:
+        if item.type is codec.FrameType.WELCOME:
             vector["body_utf8"] = item.body.decode()
         valid.append(vector)
-    act_frame = link.seal(cases[3][1], key)
-    resealed: list[tuple[str, str, link.Refusal, link.Frame]] = [
+    act_frame = codec.seal(cases[3][1], key)
+    resealed: list[tuple[str, str, codec.Refusal, codec.Frame]] = [
         (
             "hello_with_a_body",
             "a hello has no body",
-            link.Refusal.MALFORMED,
-            frame(link.FrameType.HELLO, False, 0, b"x", bridge_nonce=link.NO_NONCE),
+            codec.Refusal.MALFORMED,
+            frame(codec.FrameType.HELLO, False, 0, b"x", bridge_nonce=codec.NO_NONCE),
         ),
         (
             "ping_of_seven_bytes",
             "a ping carries 8 bytes",
-            link.Refusal.MALFORMED,
-            frame(link.FrameType.PING, False, 4, bytes(7)),
+            codec.Refusal.MALFORMED,
+            frame(codec.FrameType.PING, False, 4, bytes(7)),
         ),
         (
             "bye_of_an_unknown_reason",
             "a bye's reason is 1, 2 or 3",
-            link.Refusal.MALFORMED,
-            frame(link.FrameType.BYE, True, 4, b"\x09"),
+            codec.Refusal.MALFORMED,
+            frame(codec.FrameType.BYE, True, 4, b"\x09"),
         ),
         (
             "data_of_an_unknown_kind",
             "data kinds are 1-7 (to the robot) and 16-19 (from it)",
-            link.Refusal.MALFORMED,
-            frame(link.FrameType.DATA, False, 4, b"\x63\x00\x00{}"),
+            codec.Refusal.MALFORMED,
+            frame(codec.FrameType.DATA, False, 4, b"\x63\x00\x00{}"),
         ),
         (
             "attachment_past_the_body",
             "the attachment length runs past the body",
-            link.Refusal.MALFORMED,
-            frame(link.FrameType.DATA, False, 4, b"\x10\x00\x20short"),
+            codec.Refusal.MALFORMED,
+            frame(codec.FrameType.DATA, False, 4, b"\x10\x00\x20short"),
         ),
         (
             "data_with_sequence_number_zero",
             "frames of a session count from 1",
-            link.Refusal.MALFORMED,
-            frame(link.FrameType.DATA, False, 0, act_body),
+            codec.Refusal.MALFORMED,
+            frame(codec.FrameType.DATA, False, 0, act_body),
         ),
         (
             "welcome_from_the_robot",
             "only the bridge welcomes",
-            link.Refusal.UNEXPECTED,
-            frame(link.FrameType.WELCOME, False, 0, link.encode_welcome(welcome)),
+            codec.Refusal.UNEXPECTED,
+            frame(codec.FrameType.WELCOME, False, 0, codec.encode_welcome(welcome)),
         ),
     ]
     flipped = bytearray(act_frame)
     flipped[-1] ^= 0x01
     changed_body = bytearray(act_frame)
-    changed_body[link.HEADER_BYTES + 10] ^= 0x20
+    changed_body[codec.HEADER_BYTES + 10] ^= 0x20
     encrypted = bytearray.fromhex(valid[-1]["hex"])
-    encrypted[link.HEADER_BYTES] ^= 0x01
-    raw: list[tuple[str, str, link.Refusal, bytes]] = [
-        ("shorter_than_a_frame", "a frame has at least 49 bytes", link.Refusal.MALFORMED,
+    encrypted[codec.HEADER_BYTES] ^= 0x01
+    raw: list[tuple[str, str, codec.Refusal, bytes]] = [
+        ("shorter_than_a_frame", "a frame has at least 49 bytes", codec.Refusal.MALFORMED,
          act_frame[:48]),
-        ("bad_magic", "a frame starts with 'BL'", link.Refusal.MALFORMED, b"BX" + act_frame[2:]),
-        ("version_2", "the frame version is 1", link.Refusal.MALFORMED,
+        ("bad_magic", "a frame starts with 'BL'", codec.Refusal.MALFORMED, b"BX" + act_frame[2:]),
+        ("version_2", "the frame version is 1", codec.Refusal.MALFORMED,
          act_frame[:2] + b"\x02" + act_frame[3:]),
-        ("unknown_type", "frame types are 1 to 6", link.Refusal.MALFORMED,
+        ("unknown_type", "frame types are 1 to 6", codec.Refusal.MALFORMED,
          act_frame[:3] + b"\x07" + act_frame[4:]),
-        ("unknown_flag", "flags other than 0x01 and 0x02 are 0", link.Refusal.MALFORMED,
+        ("unknown_flag", "flags other than 0x01 and 0x02 are 0", codec.Refusal.MALFORMED,
          act_frame[:4] + b"\x04" + act_frame[5:]),
-        ("robot_id_out_of_range", "robot ids are below 100000", link.Refusal.MALFORMED,
+        ("robot_id_out_of_range", "robot ids are below 100000", codec.Refusal.MALFORMED,
          act_frame[:5] + (100_000).to_bytes(4, "big") + act_frame[9:]),
-        ("tag_changed", "the tag does not check out", link.Refusal.FORGED, bytes(flipped)),
-        ("body_changed", "the tag covers the body", link.Refusal.FORGED, bytes(changed_body)),
+        ("tag_changed", "the tag does not check out", codec.Refusal.FORGED, bytes(flipped)),
+        ("body_changed", "the tag covers the body", codec.Refusal.FORGED, bytes(changed_body)),
         ("direction_changed", "the tag covers the flags: a robot's frame cannot be reflected",
-         link.Refusal.FORGED, act_frame[:4] + b"\x01" + act_frame[5:]),
-        ("ciphertext_changed", "Poly1305 covers the ciphertext", link.Refusal.FORGED,
+         codec.Refusal.FORGED, act_frame[:4] + b"\x01" + act_frame[5:]),
+        ("ciphertext_changed", "Poly1305 covers the ciphertext", codec.Refusal.FORGED,
          bytes(encrypted)),
-        ("oversize", f"a frame has at most {link.MAX_FRAME_BYTES} bytes", link.Refusal.OVERSIZE,
-         act_frame + bytes(link.MAX_FRAME_BYTES)),
+        ("oversize", f"a frame has at most {codec.MAX_FRAME_BYTES} bytes", codec.Refusal.OVERSIZE,
+         act_frame + bytes(codec.MAX_FRAME_BYTES)),
     ]  # fmt: skip
     invalid = [
         {"name": name, "category": refusal.value, "reason": reason, "hex": data.hex()}
@@ -1362,11 +1363,11 @@ def link_frame_vectors() -> dict[str, Any]:
             "name": name,
             "category": refusal.value,
             "reason": reason,
-            "hex": link.seal(item, key).hex(),
+            "hex": codec.seal(item, key).hex(),
         }
         for name, reason, refusal, item in resealed
     ]
-    good = link.serial_encode(act_frame)
+    good = codec.serial_encode(act_frame)
     bad_crc = bytearray(good)
     bad_crc[-3] ^= 0x01
     serial_invalid = [
@@ -1377,12 +1378,12 @@ def link_frame_vectors() -> dict[str, Any]:
     return {
         "type": "LinkFrame",
         "decoder": "link_frame",
-        "frame_version": link.VERSION,
+        "frame_version": codec.VERSION,
         "robot": LINK_ROBOT,
         "robot_key_hex": robot_key.hex(),
-        "link_key_label_utf8": link.LINK_KEY_LABEL.decode(),
+        "link_key_label_utf8": codec.LINK_KEY_LABEL.decode(),
         "link_key_hex": key.hex(),
-        "session_key_label_utf8": link.SESSION_KEY_LABEL.decode(),
+        "session_key_label_utf8": codec.SESSION_KEY_LABEL.decode(),
         "session_key_hex": cipher_key.hex(),
         "valid": valid,
         "invalid": invalid,

@@ -1,5 +1,5 @@
 """Helpers for tests of robots outside the emulator: ``swarm run --external`` with the
-outside programs (``python -m robot_agent.link``) started by the test, on loopback UDP or
+outside programs (``python -m link``) started by the test, on loopback UDP or
 a pseudo-terminal pair made by ``socat``. Every process is killed by pid at the end."""
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def in_process(options: Sequence[str]) -> dict[str, Any]:
 
 def program(link: str, robot: int, key_file: Path, *extra: str) -> subprocess.Popen[bytes]:
     """The outside robot's program, as a porter starts it."""
-    command = [sys.executable, "-m", "robot_agent.link", "--link", link, "--id", str(robot)]
+    command = [sys.executable, "-m", "link", "--link", link, "--id", str(robot)]
     return subprocess.Popen(
         [*command, "--key-file", str(key_file), "--give-up", "60", *extra],
         cwd=REPO,

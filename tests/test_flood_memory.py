@@ -145,7 +145,7 @@ def test_a_flood_of_replays_and_junk_leaves_every_process_under_its_cap(tmp_path
                 assert ticks and heard, "the run never got going"
                 junk = [
                     (keys.host_act(0), os.urandom(batch.MAX_BATCH_BYTES), None),
-                    (keys.camera(0), os.urandom(protocol.MAX_FRAME_BYTES), None),
+                    (keys.camera(0), os.urandom(protocol.MAX_CAMERA_FRAME_BYTES), None),
                     (keys.status(0), os.urandom(60 * 1024), None),
                 ]
                 replays = [(key, *message) for key, message in heard.items()]

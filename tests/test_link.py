@@ -1,5 +1,5 @@
 """The link between a robot outside the emulator and the bridge, without sockets: frames
-(wire/link.py), the robot's end of a session (``LinkClient``) against the bridge's
+(link/core/codec.py), the robot's end of a session (``LinkClient``) against the bridge's
 (``LinkPeer``) in memory, refusals of what is forged, replayed, oversized or out of place,
 and the impairment that makes a link worse on purpose."""
 
@@ -13,28 +13,29 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from robot_agent.link.client import LinkClient, Lost, Received, Welcomed
-from wire import link, protocol
-from wire.rng import Stream
-from world_server.bridge.impairment import ImpairedDirection, LinkImpairment
-from world_server.bridge.peer import (
+from link.core import codec, pacing
+from link.core.impairment import ImpairedDirection, LinkImpairment
+from link.core.peer import (
     FRAME_BURST,
     MAX_FROM_ROBOT_BYTES,
     PING_TIMEOUT,
-    Closed,
     LinkPeer,
     Message,
-    Opened,
+    SessionClosed,
+    SessionOpened,
 )
+from link.core.session import LinkClient, LinkData, Lost, Welcomed
+from wire import protocol
+from wire.rng import Stream
 
 ROBOT_KEY = bytes(range(32))
-KEY = link.link_key(ROBOT_KEY)
+KEY = codec.link_key(ROBOT_KEY)
 ROBOT = 8
 SOURCE = ("127.0.0.1", 40000)
 
 
-def welcome(cipher: link.Cipher = "none") -> link.LinkWelcome:
-    return link.LinkWelcome(
+def welcome(cipher: codec.Cipher = "none") -> codec.LinkWelcome:
+    return codec.LinkWelcome(
         v=1,
         run="demo",
         root="bestofn",
@@ -47,13 +48,13 @@ def welcome(cipher: link.Cipher = "none") -> link.LinkWelcome:
 
 def counting_nonces(start: int) -> Callable[[], bytes]:
     counter = itertools.count(start)
-    return lambda: next(counter).to_bytes(link.NONCE_BYTES, "big")
+    return lambda: next(counter).to_bytes(codec.NONCE_BYTES, "big")
 
 
 class Pair:
     """A program's client and the bridge's peer, wired back to back in memory."""
 
-    def __init__(self, cipher: link.Cipher = "none") -> None:
+    def __init__(self, cipher: codec.Cipher = "none") -> None:
         self.client = LinkClient(ROBOT, KEY, nonce=counting_nonces(1))
         self.peer = LinkPeer(
             ROBOT,
@@ -91,7 +92,7 @@ class Pair:
 # --- frames --------------------------------------------------------------------------------
 
 
-def frame(kind: link.FrameType = link.FrameType.DATA, **changes: object) -> link.Frame:
+def frame(kind: codec.FrameType = codec.FrameType.DATA, **changes: object) -> codec.Frame:
     fields: dict[str, object] = {
         "type": kind,
         "from_bridge": False,
@@ -99,108 +100,108 @@ def frame(kind: link.FrameType = link.FrameType.DATA, **changes: object) -> link
         "robot_nonce": b"\x01" * 8,
         "bridge_nonce": b"\x02" * 8,
         "seq": 1,
-        "body": link.encode_data(link.DataKind.ACT, b'{"v":1}', b"t" * 16),
+        "body": codec.encode_data(codec.DataKind.ACT, b'{"v":1}', b"t" * 16),
     }
     fields.update(changes)
-    return link.Frame(**fields)  # type: ignore[arg-type]
+    return codec.Frame(**fields)  # type: ignore[arg-type]
 
 
 def test_a_frame_is_its_header_body_and_tag_and_reads_back() -> None:
     sent = frame()
-    data = link.seal(sent, KEY)
-    assert data[:2] == b"BL" and data[2] == 1 and data[3] == link.FrameType.DATA
+    data = codec.seal(sent, KEY)
+    assert data[:2] == b"BL" and data[2] == 1 and data[3] == codec.FrameType.DATA
     assert data[4] == 0  # from the robot, not encrypted
     assert int.from_bytes(data[5:9], "big") == ROBOT
-    assert len(data) == link.HEADER_BYTES + len(sent.body) + link.TAG_BYTES
-    assert link.open_frame(data, KEY) == sent
-    assert link.decode_data(sent.body) == (link.DataKind.ACT, b'{"v":1}', b"t" * 16)
+    assert len(data) == codec.HEADER_BYTES + len(sent.body) + codec.TAG_BYTES
+    assert codec.open_frame(data, KEY) == sent
+    assert codec.decode_data(sent.body) == (codec.DataKind.ACT, b'{"v":1}', b"t" * 16)
 
 
 def test_an_encrypted_frame_hides_its_body_and_checks_out_only_under_its_session_key() -> None:
-    session = link.session_key(KEY, b"\x01" * 8, b"\x02" * 8)
+    session = codec.session_key(KEY, b"\x01" * 8, b"\x02" * 8)
     sent = frame(encrypted=True)
-    data = link.seal(sent, KEY, session)
-    assert sent.body not in data and data[4] == link.ENCRYPTED
-    assert link.open_frame(data, KEY, session) == sent
-    other = link.session_key(KEY, b"\x01" * 8, b"\x03" * 8)
-    with pytest.raises(link.LinkError) as refused:
-        link.open_frame(data, KEY, other)
-    assert refused.value.refusal is link.Refusal.FORGED
+    data = codec.seal(sent, KEY, session)
+    assert sent.body not in data and data[4] == codec.ENCRYPTED
+    assert codec.open_frame(data, KEY, session) == sent
+    other = codec.session_key(KEY, b"\x01" * 8, b"\x03" * 8)
+    with pytest.raises(codec.LinkError) as refused:
+        codec.open_frame(data, KEY, other)
+    assert refused.value.refusal is codec.Refusal.FORGED
 
 
 @pytest.mark.parametrize(
     ("change", "refusal"),
     [
-        (lambda data: data[:20], link.Refusal.MALFORMED),
-        (lambda data: b"XX" + data[2:], link.Refusal.MALFORMED),
-        (lambda data: data[:2] + b"\x02" + data[3:], link.Refusal.MALFORMED),
-        (lambda data: data[:3] + b"\x09" + data[4:], link.Refusal.MALFORMED),
-        (lambda data: data[:4] + b"\x80" + data[5:], link.Refusal.MALFORMED),
-        (lambda data: data[:-1] + bytes([data[-1] ^ 1]), link.Refusal.FORGED),
-        (lambda data: data[:40] + b"!" + data[41:], link.Refusal.FORGED),
-        (lambda data: data + b"\0" * link.MAX_FRAME_BYTES, link.Refusal.OVERSIZE),
+        (lambda data: data[:20], codec.Refusal.MALFORMED),
+        (lambda data: b"XX" + data[2:], codec.Refusal.MALFORMED),
+        (lambda data: data[:2] + b"\x02" + data[3:], codec.Refusal.MALFORMED),
+        (lambda data: data[:3] + b"\x09" + data[4:], codec.Refusal.MALFORMED),
+        (lambda data: data[:4] + b"\x80" + data[5:], codec.Refusal.MALFORMED),
+        (lambda data: data[:-1] + bytes([data[-1] ^ 1]), codec.Refusal.FORGED),
+        (lambda data: data[:40] + b"!" + data[41:], codec.Refusal.FORGED),
+        (lambda data: data + b"\0" * codec.MAX_FRAME_BYTES, codec.Refusal.OVERSIZE),
     ],
 )
 def test_a_frame_changed_in_any_way_is_refused_for_its_reason(
-    change: object, refusal: link.Refusal
+    change: object, refusal: codec.Refusal
 ) -> None:
-    data = change(link.seal(frame(), KEY))  # type: ignore[operator]
-    with pytest.raises(link.LinkError) as refused:
-        link.open_frame(data, KEY)
+    data = change(codec.seal(frame(), KEY))  # type: ignore[operator]
+    with pytest.raises(codec.LinkError) as refused:
+        codec.open_frame(data, KEY)
     assert refused.value.refusal is refusal
 
 
 def test_the_link_key_is_not_the_robot_key_and_cannot_tag_as_the_robot() -> None:
-    assert link.link_key(ROBOT_KEY) != ROBOT_KEY and len(KEY) == 32
-    data = link.seal(frame(), ROBOT_KEY)
-    with pytest.raises(link.LinkError):
-        link.open_frame(data, KEY)
+    assert codec.link_key(ROBOT_KEY) != ROBOT_KEY and len(KEY) == 32
+    data = codec.seal(frame(), ROBOT_KEY)
+    with pytest.raises(codec.LinkError):
+        codec.open_frame(data, KEY)
 
 
 @given(st.binary(max_size=3000))
 def test_any_bytes_are_a_frame_or_a_link_error(data: bytes) -> None:
     try:
-        opened = link.open_frame(data, KEY)
-    except link.LinkError as error:
-        assert error.refusal in link.Refusal
+        opened = codec.open_frame(data, KEY)
+    except codec.LinkError as error:
+        assert error.refusal in codec.Refusal
     else:
-        assert isinstance(opened, link.Frame)
+        assert isinstance(opened, codec.Frame)
 
 
 @given(st.lists(st.binary(min_size=1, max_size=600), min_size=1, max_size=8), st.data())
 def test_serial_framing_cuts_any_split_stream_back_into_its_frames(
     frames: list[bytes], data: st.DataObject
 ) -> None:
-    stream = b"".join(link.serial_encode(item) for item in frames)
+    stream = b"".join(codec.serial_encode(item) for item in frames)
     assert stream.count(0) == len(frames)  # COBS: the only zeros end frames
     cuts = sorted(data.draw(st.lists(st.integers(0, len(stream)), max_size=6)))
-    deframer = link.Deframer()
-    found: list[bytes | link.LinkError] = []
+    deframer = codec.Deframer()
+    found: list[bytes | codec.LinkError] = []
     for start, end in itertools.pairwise([0, *cuts, len(stream)]):
         found += deframer.feed(stream[start:end])
     assert found == frames
 
 
 def test_serial_framing_refuses_a_bad_crc_and_finds_the_next_frame() -> None:
-    good = link.serial_encode(b"hello")
-    bad = bytearray(link.serial_encode(b"world"))
+    good = codec.serial_encode(b"hello")
+    bad = bytearray(codec.serial_encode(b"world"))
     bad[2] ^= 0x40
-    found = link.Deframer().feed(bytes(bad) + good)
-    assert isinstance(found[0], link.LinkError) and found[0].refusal is link.Refusal.CORRUPT
+    found = codec.Deframer().feed(bytes(bad) + good)
+    assert isinstance(found[0], codec.LinkError) and found[0].refusal is codec.Refusal.CORRUPT
     assert found[1:] == [b"hello"]
 
 
 def test_serial_framing_drops_a_run_longer_than_any_frame_until_the_next_zero() -> None:
-    deframer = link.Deframer()
-    found = deframer.feed(b"\x01" * (link.MAX_ENCODED_BYTES + 10))
-    assert found == [] and len(deframer.buffer) < link.MAX_ENCODED_BYTES
-    found = deframer.feed(b"\x01\x00" + link.serial_encode(b"next"))
-    assert isinstance(found[0], link.LinkError) and found[0].refusal is link.Refusal.OVERSIZE
+    deframer = codec.Deframer()
+    found = deframer.feed(b"\x01" * (codec.MAX_ENCODED_BYTES + 10))
+    assert found == [] and len(deframer.buffer) < codec.MAX_ENCODED_BYTES
+    found = deframer.feed(b"\x01\x00" + codec.serial_encode(b"next"))
+    assert isinstance(found[0], codec.LinkError) and found[0].refusal is codec.Refusal.OVERSIZE
     assert found[1:] == [b"next"]
 
 
 def test_the_replay_window_takes_each_number_once_and_allows_reordering() -> None:
-    window = link.ReplayWindow()
+    window = codec.ReplayWindow()
     for seq in (1, 3, 2, 10, 5):
         assert window.refuses(seq) is None
         window.take(seq)
@@ -212,7 +213,7 @@ def test_the_replay_window_takes_each_number_once_and_allows_reordering() -> Non
 
 
 def test_a_paced_line_hands_a_frame_on_when_its_last_byte_would_arrive() -> None:
-    pacer = link.LinePacer(115200)
+    pacer = pacing.LinePacer(115200)
     assert pacer.done_at(1152, 0.0) == pytest.approx(0.1)  # 11520 bits
     assert pacer.done_at(1152, 0.05) == pytest.approx(0.2)  # waits for the line
     assert pacer.done_at(10, 1.0) == pytest.approx(1.0 + 100 / 115200)
@@ -221,16 +222,16 @@ def test_a_paced_line_hands_a_frame_on_when_its_last_byte_would_arrive() -> None
 @pytest.mark.parametrize(
     ("text", "expected"),
     [
-        ("udp://127.0.0.1:47800", link.LinkAddress("udp", host="127.0.0.1", port=47800)),
-        ("udp://[::1]:9", link.LinkAddress("udp", host="::1", port=9)),
-        ("serial:/dev/ttyUSB0", link.LinkAddress("serial", path="/dev/ttyUSB0")),
-        ("serial:/dev/pts/4@921600", link.LinkAddress("serial", path="/dev/pts/4", baud=921600)),
+        ("udp://127.0.0.1:47800", codec.LinkAddress("udp", host="127.0.0.1", port=47800)),
+        ("udp://[::1]:9", codec.LinkAddress("udp", host="::1", port=9)),
+        ("serial:/dev/ttyUSB0", codec.LinkAddress("serial", path="/dev/ttyUSB0")),
+        ("serial:/dev/pts/4@921600", codec.LinkAddress("serial", path="/dev/pts/4", baud=921600)),
     ],
 )
-def test_link_addresses_read_and_print_back(text: str, expected: link.LinkAddress) -> None:
-    address = link.parse_address(text)
+def test_link_addresses_read_and_print_back(text: str, expected: codec.LinkAddress) -> None:
+    address = codec.parse_address(text)
     assert address == expected
-    assert link.parse_address(str(address)) == address
+    assert codec.parse_address(str(address)) == address
 
 
 @pytest.mark.parametrize(
@@ -238,7 +239,7 @@ def test_link_addresses_read_and_print_back(text: str, expected: link.LinkAddres
 )
 def test_a_bad_link_address_is_a_value_error(text: str) -> None:
     with pytest.raises(ValueError, match=r"link|UDP|serial"):
-        link.parse_address(text)
+        codec.parse_address(text)
 
 
 # --- sessions ------------------------------------------------------------------------------
@@ -246,27 +247,27 @@ def test_a_bad_link_address_is_a_value_error(text: str) -> None:
 
 @pytest.mark.parametrize("cipher", ["none", "chacha20-poly1305"])
 def test_hello_welcome_and_the_first_frame_open_a_session_both_ends_agree_on(
-    cipher: link.Cipher,
+    cipher: codec.Cipher,
 ) -> None:
     pair = Pair(cipher)
     pair.connect()
     assert [type(event) for event in pair.client_events] == [Welcomed]
-    assert pair.peer_events == [Opened(ROBOT)]
+    assert pair.peer_events == [SessionOpened(ROBOT)]
     assert pair.client.open and pair.peer.connected
     assert pair.client.cipher_key == pair.peer.session.cipher_key  # type: ignore[union-attr]
     assert (pair.client.cipher_key is None) == (cipher == "none")
     # Messages both ways, in order, as they were sent.
-    assert pair.client.send(link.DataKind.STATUS, b"status", b"t" * 16)
-    pair.peer.send(link.DataKind.SENSE, b"sense", b"s" * 16)
+    assert pair.client.send(codec.DataKind.STATUS, b"status", b"t" * 16)
+    pair.peer.send(codec.DataKind.SENSE, b"sense", b"s" * 16)
     pair.exchange()
-    assert pair.peer_events[-1] == Message(ROBOT, link.DataKind.STATUS, b"status", b"t" * 16)
-    assert pair.client_events[-1] == Received(link.DataKind.SENSE, b"sense", b"s" * 16)
+    assert pair.peer_events[-1] == Message(ROBOT, codec.DataKind.STATUS, b"status", b"t" * 16)
+    assert pair.client_events[-1] == LinkData(codec.DataKind.SENSE, b"sense", b"s" * 16)
 
 
 def test_a_replayed_or_forged_frame_is_refused_and_counted_and_changes_nothing() -> None:
     pair = Pair()
     pair.connect()
-    pair.client.send(link.DataKind.ACT, b"act", b"t" * 16)
+    pair.client.send(codec.DataKind.ACT, b"act", b"t" * 16)
     pair.exchange()
     events = len(pair.peer_events)
     act = pair.to_peer[-1]
@@ -285,8 +286,8 @@ def test_a_replayed_or_forged_frame_is_refused_and_counted_and_changes_nothing()
 def test_a_frame_of_another_robot_direction_or_kind_is_refused() -> None:
     pair = Pair()
     pair.connect()
-    other_key = link.link_key(bytes(32))
-    stranger = link.seal(frame(robot=9), other_key)
+    other_key = codec.link_key(bytes(32))
+    stranger = codec.seal(frame(robot=9), other_key)
     assert pair.peer.receive(stranger, SOURCE, 0.0) == []
     session = pair.peer.session
     assert session is not None
@@ -295,9 +296,9 @@ def test_a_frame_of_another_robot_direction_or_kind_is_refused() -> None:
         robot_nonce=session.robot_nonce,
         bridge_nonce=session.bridge_nonce,
         seq=99,
-        body=link.encode_data(link.DataKind.SENSE, b"x", None),
+        body=codec.encode_data(codec.DataKind.SENSE, b"x", None),
     )
-    assert pair.peer.receive(link.seal(wrong_kind, KEY), SOURCE, 0.0) == []
+    assert pair.peer.receive(codec.seal(wrong_kind, KEY), SOURCE, 0.0) == []
     assert pair.peer.refused == {"unexpected": 2}
 
 
@@ -327,8 +328,8 @@ def test_a_newer_session_replaces_the_old_one_which_the_run_sees_leave_and_join(
     restarted = LinkClient(ROBOT, KEY, nonce=counting_nonces(77))
     pair.client = restarted
     pair.connect()
-    replaced = Closed(ROBOT, "a newer session replaced it")
-    assert pair.peer_events == [Opened(ROBOT), replaced, Opened(ROBOT)]
+    replaced = SessionClosed(ROBOT, "a newer session replaced it")
+    assert pair.peer_events == [SessionOpened(ROBOT), replaced, SessionOpened(ROBOT)]
     assert pair.peer.sessions == 2
 
 
@@ -356,19 +357,19 @@ def test_silence_ends_the_session_at_both_ends_and_the_program_says_hello_again(
     pair = Pair()
     pair.connect()
     pair.now = 3.5
-    assert pair.peer.wake(pair.now) == [Closed(ROBOT, "silent for 3 s")]
+    assert pair.peer.wake(pair.now) == [SessionClosed(ROBOT, "silent for 3 s")]
     lost = pair.client.wake(pair.now)
     assert [type(event) for event in lost] == [Lost] and not pair.client.open
     pair.client_events.clear()
     pair.peer_events.clear()
     pair.connect()
-    assert pair.peer_events == [Opened(ROBOT)] and pair.client.sessions == 2
+    assert pair.peer_events == [SessionOpened(ROBOT)] and pair.client.sessions == 2
 
 
 def test_a_bye_that_the_run_ended_tells_the_program_to_stop() -> None:
     pair = Pair()
     pair.connect()
-    pair.peer.close(link.ByeReason.RUN_ENDED)
+    pair.peer.close(codec.ByeReason.RUN_ENDED)
     pair.exchange()
     assert pair.client_events[-1] == Lost("the bridge said bye (run_ended)", ended=True)
 
@@ -377,7 +378,7 @@ def test_a_robot_that_floods_its_link_is_held_to_the_rate_bound() -> None:
     pair = Pair()
     pair.connect()
     for _ in range(int(FRAME_BURST) + 50):
-        pair.client.send(link.DataKind.ACT, b"a", None)
+        pair.client.send(codec.DataKind.ACT, b"a", None)
     pair.exchange()
     assert pair.peer.refused["rate"] >= 40
 
@@ -408,67 +409,96 @@ def test_a_frame_is_held_for_the_delay_and_no_less() -> None:
 # --- the program, end to end in memory -----------------------------------------------------
 
 
-def test_the_program_asks_for_the_map_says_it_is_there_and_steps_a_sealed_sense() -> None:
+INFO = protocol.WorldInfo(
+    v=1,
+    run="demo",
+    seed=3,
+    dt=0.1,
+    arena_radius=0.75,
+    nest=protocol.Nest(0.0, 0.0, 0.2),
+    sites=[protocol.Site(0, 0.75, 0.0), protocol.Site(1, -0.75, 0.0)],
+    robot_radius=0.037,
+    wheel_base=0.053,
+    max_wheel_speed=0.13,
+    camera=protocol.CameraSpec(width=64, height=48, fov=0.84),
+    clock="lockstep",
+)
+
+
+class ProgramOnABridge:
     """The robot program (``robot-agent --link`` without its loop) against the bridge's end
-    and a world that answers: the map is asked and checked, the first status comes before
-    anything else, and a sense sealed for the robot is answered by an act sealed by it."""
-    from robot_agent.link.program import LinkRobot
-    from wire import auth, names
+    and a world that answers world/info for any world or for its own instance only, as the
+    world server does."""
 
-    secret = auth.Keyring(secret=bytes(32))  # the world's
-    keys = protocol.Keys("demo")
-    identity = names.robot_identity(ROBOT)
-    robot = LinkRobot.create(ROBOT, "demo", secret.only([identity]))
-    key = robot.client.key
-    peer = LinkPeer(
-        ROBOT,
-        key,
-        msgspec.structs.replace(welcome(), controller=msgspec.Raw(b"{}")),
-        transport="udp",
-        address="x",
-    )
-    info = protocol.WorldInfo(
-        v=1,
-        run="demo",
-        seed=3,
-        dt=0.1,
-        arena_radius=0.75,
-        nest=protocol.Nest(0.0, 0.0, 0.2),
-        sites=[protocol.Site(0, 0.75, 0.0), protocol.Site(1, -0.75, 0.0)],
-        robot_radius=0.037,
-        wheel_base=0.053,
-        max_wheel_speed=0.13,
-        camera=protocol.CameraSpec(width=64, height=48, fov=0.84),
-        clock="lockstep",
-    )
-    relayed: list[Message] = []
+    def __init__(self, instance: str = "w-1") -> None:
+        from link.core.robot import LinkRobot
+        from wire import auth, names
 
-    def exchange() -> None:
+        self.auth = auth
+        self.secret = auth.Keyring(secret=bytes(32))  # the world's
+        self.keys = protocol.Keys("demo")
+        self.identity = names.robot_identity(ROBOT)
+        self.instance = instance
+        self.robot = LinkRobot.create(ROBOT, "demo", self.secret.only([self.identity]))
+        self.peer = LinkPeer(
+            ROBOT,
+            self.robot.client.key,
+            msgspec.structs.replace(welcome(), controller=msgspec.Raw(b"{}")),
+            transport="udp",
+            address="x",
+        )
+        self.relayed: list[Message] = []
+
+    def exchange(self, now: float = 0.0) -> None:
+        self.robot.wake(now)
+        self.peer.wake(now)
         while True:
-            up, down = robot.client.take_outgoing(), peer.take_outgoing()
+            up, down = self.robot.client.take_outgoing(), self.peer.take_outgoing()
             if not up and not down:
                 return
-            for frame in up:
-                for event in peer.receive(frame, SOURCE, 0.0):
+            for sent in up:
+                for event in self.peer.receive(sent, SOURCE, now):
                     if isinstance(event, Message):
-                        relayed.append(event)
-                        world(event)
-            for frame, _ in down:
-                robot.receive(frame, 0.0)
+                        self.relayed.append(event)
+                        self.world(event)
+            for sent, _ in down:
+                self.robot.receive(sent, now)
 
-    def world(message: Message) -> None:
-        if message.kind is link.DataKind.INFO_QUERY:
-            asker, nonce = auth.query_open(
-                secret, keys.world_info, message.payload, message.attachment
-            )
-            payload = protocol.encode(info)
-            sealed = auth.reply_seal(secret, asker, keys.world_info, payload, nonce)
-            peer.send(link.DataKind.INFO_REPLY, payload, sealed)
+    def world(self, message: Message) -> None:
+        if message.kind is not codec.DataKind.INFO_QUERY:
+            return
+        if message.payload not in (b"", self.instance.encode()):
+            return  # a question for another world instance: this world does not answer
+        info_key = self.keys.world_info
+        asker, nonce = self.auth.query_open(
+            self.secret, info_key, message.payload, message.attachment
+        )
+        payload = protocol.encode(INFO)
+        sealed = self.auth.reply_seal(self.secret, asker, info_key, payload, nonce)
+        self.peer.send(codec.DataKind.INFO_REPLY, payload, sealed)
 
-    robot.wake(0.0)
-    exchange()
-    assert [m.kind for m in relayed] == [link.DataKind.INFO_QUERY, link.DataKind.STATUS]
-    status = relayed[-1]
+    def questions(self, instance: str) -> int:
+        return sum(
+            1
+            for m in self.relayed
+            if m.kind is codec.DataKind.INFO_QUERY and m.payload == instance.encode()
+        )
+
+
+def test_the_program_asks_for_the_map_says_it_is_there_and_steps_a_sealed_sense() -> None:
+    """The map is asked and checked, the first status comes before anything else, and a
+    sense sealed for the robot is answered by an act sealed by it."""
+    bench = ProgramOnABridge()
+    robot, peer, secret, keys, identity = (
+        bench.robot,
+        bench.peer,
+        bench.secret,
+        bench.keys,
+        bench.identity,
+    )
+    bench.exchange()
+    assert [m.kind for m in bench.relayed] == [codec.DataKind.INFO_QUERY, codec.DataKind.STATUS]
+    status = bench.relayed[-1]
     secret.open(identity, keys.status(ROBOT), status.payload, status.attachment)
     assert protocol.decode(status.payload, protocol.Status).tick == 0
     sense = protocol.encode(
@@ -476,13 +506,40 @@ def test_the_program_asks_for_the_map_says_it_is_there_and_steps_a_sealed_sense(
             v=1, tick=0, t=0.0, x=0.3, y=0.0, theta=0.0, prox=[0.0] * 8, rx=0, camera=False
         )
     )
-    peer.send(link.DataKind.SENSE, sense, secret.seal(identity, keys.sense(ROBOT), sense))
-    exchange()
-    act = next(m for m in relayed if m.kind is link.DataKind.ACT)
+    peer.send(codec.DataKind.SENSE, sense, secret.seal(identity, keys.sense(ROBOT), sense))
+    bench.exchange()
+    act = next(m for m in bench.relayed if m.kind is codec.DataKind.ACT)
     secret.open(identity, keys.act(ROBOT), act.payload, act.attachment)  # sealed by the robot
     assert protocol.decode(act.payload, protocol.Act).tick == 0
     # A sense forged by anyone without the robot's key is refused by the program itself.
     forged = sense.replace(b'"x":0.3', b'"x":0.4')
-    peer.send(link.DataKind.SENSE, forged, secret.seal(identity, keys.sense(ROBOT), sense))
-    exchange()
+    peer.send(codec.DataKind.SENSE, forged, secret.seal(identity, keys.sense(ROBOT), sense))
+    bench.exchange()
     assert robot.endpoint is not None and robot.endpoint.rejects.count == 1
+
+
+def test_the_program_follows_a_world_token_only_once_that_world_answers_for_it() -> None:
+    """The bridge is trusted with nothing the robot believes: a world token it reports is
+    asked to answer for itself (world/info with its instance), followed once it does, and
+    one that no world answers for is asked PROVE_TRIES times, PROVE_EVERY apart, then
+    counted as a rejection, the robot still on its world."""
+    from link.core.robot import PROVE_EVERY, PROVE_TRIES
+
+    bench = ProgramOnABridge(instance="w-1")
+    bench.exchange()
+    endpoint = bench.robot.endpoint
+    assert endpoint is not None and endpoint.worlds.followed is None
+    bench.peer.send(codec.DataKind.WORLD_UP, b"w-1", None)
+    bench.exchange()
+    assert bench.questions("w-1") == 1
+    assert endpoint.worlds.followed == "w-1"  # answered at once by its world
+    rejected = endpoint.rejects.count
+    bench.peer.send(codec.DataKind.WORLD_UP, b"w-2", None)
+    now = 0.0
+    while now <= PROVE_EVERY * (PROVE_TRIES + 1):
+        bench.exchange(now)
+        now += 0.25
+    assert bench.robot.client.open  # the bridge's pings kept the session all along
+    assert bench.questions("w-2") == PROVE_TRIES
+    assert endpoint.rejects.count == rejected + 1
+    assert endpoint.worlds.followed == "w-1" and bench.robot.proving == {}

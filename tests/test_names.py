@@ -9,7 +9,7 @@ from collections.abc import Callable
 import msgspec
 import pytest
 
-from robot_agent.link import udp_radio
+from examples import udp_radio
 from wire import names, protocol
 
 NOT_NAMES = ["ünïcode", "run\n", "a b", "a/b", "x" * 65, "", "*", "é"]

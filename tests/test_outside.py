@@ -15,7 +15,7 @@ import pytest
 from outside_helpers import Relay, decisions, in_process, outside_run, pty_pair, udp_link
 from swarm_helpers import processes_of
 
-from wire import link
+from link.core import codec
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -157,8 +157,8 @@ def test_a_secure_run_encrypts_the_link_and_decides_as_all_emulated(tmp_path: Pa
     assert code == 0, stderr
     assert summary is not None and decisions(summary) == decisions(reference)
     assert summary["links"]["2"]["sessions"] == 1  # the bridge's figures pass the access rules
-    sessions = [frame for frame in relay.captured if frame[3] != link.FrameType.HELLO]
-    assert sessions and all(frame[4] & link.ENCRYPTED for frame in sessions)
+    sessions = [frame for frame in relay.captured if frame[3] != codec.FrameType.HELLO]
+    assert sessions and all(frame[4] & codec.ENCRYPTED for frame in sessions)
 
 
 def test_forged_replayed_and_oversized_frames_are_refused_counted_and_change_nothing(
@@ -180,7 +180,7 @@ def test_forged_replayed_and_oversized_frames_are_refused_counted_and_change_not
             forged[position] ^= 0x01
             relay.inject(bytes(forged))
         for _ in range(5):  # a robot's frame is never this big
-            relay.inject(bytes(last[: link.HEADER_BYTES]) + bytes(40_000))
+            relay.inject(bytes(last[: codec.HEADER_BYTES]) + bytes(40_000))
         code, summary, stderr = run.finish()
     assert code == 0, stderr
     assert summary is not None

@@ -22,12 +22,12 @@ from typing import Any
 import pytest
 
 from deploy.inprocess.engine import run_in_process
+from examples.udp_radio import UdpRadioStats
 from plumbing.inbox import BoundedInbox
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import RobotEndpoint
 from robot_agent.core.simulated import SimulatedPorts
-from robot_agent.link.udp_radio import UdpRadioStats
 from robot_agent.node.robot_node import Event, EventKind, RobotNode
 from wire import protocol
 from world_server.core.world import World, WorldConfig

@@ -19,16 +19,16 @@ from typing import Any
 import pytest
 from netns import UDP_SUBNET, Lan, lan_address, namespaces
 
-from robot_agent.core import ports
-from robot_agent.link.udp_radio import (
+from examples.udp_radio import (
     MAX_DATAGRAM_BYTES,
-    MAX_PAYLOAD_BYTES,
+    MAX_RADIO_PAYLOAD_BYTES,
     FrameError,
     FrameTooLargeError,
     UdpRadio,
     decode_frame,
     encode_frame,
 )
+from robot_agent.core import ports
 from wire import protocol
 
 TESTS = Path(__file__).resolve().parent
@@ -61,9 +61,9 @@ def poll_until(radio: UdpRadio, count: int, timeout: float = 5.0) -> list[tuple[
 def test_frame_layout_is_magic_version_sender_length_sender_payload() -> None:
     assert encode_frame("12", b"{}") == b"BN\x01\x0212{}"
     assert decode_frame(b'BN\x01\x04nest{"a":1}') == ("nest", b'{"a":1}')
-    longest = encode_frame("n" * 64, b"x" * MAX_PAYLOAD_BYTES)
+    longest = encode_frame("n" * 64, b"x" * MAX_RADIO_PAYLOAD_BYTES)
     assert len(longest) == MAX_DATAGRAM_BYTES == 2116
-    assert decode_frame(longest) == ("n" * 64, b"x" * MAX_PAYLOAD_BYTES)
+    assert decode_frame(longest) == ("n" * 64, b"x" * MAX_RADIO_PAYLOAD_BYTES)
 
 
 @pytest.mark.parametrize(
@@ -74,7 +74,7 @@ def test_frame_layout_is_magic_version_sender_length_sender_payload() -> None:
         ("é", b"{}", FrameError),
         ("n" * 65, b"{}", FrameError),
         ("1", b"", FrameError),
-        ("1", b"x" * (MAX_PAYLOAD_BYTES + 1), FrameTooLargeError),
+        ("1", b"x" * (MAX_RADIO_PAYLOAD_BYTES + 1), FrameTooLargeError),
     ],
 )
 def test_encode_frame_refuses_what_receivers_would_drop(
@@ -130,7 +130,7 @@ def test_bad_datagrams_are_counted_and_dropped_never_raised() -> None:
         b"BN\x01\x011",  # no payload
     ]
     oversize = [
-        b"BN\x01\x011" + b"x" * (MAX_PAYLOAD_BYTES + 1),  # payload over the limit
+        b"BN\x01\x011" + b"x" * (MAX_RADIO_PAYLOAD_BYTES + 1),  # payload over the limit
         b"x" * 4000,  # datagram over MAX_DATAGRAM_BYTES
     ]
     good = encode_frame("4", protocol.encode(OPINION))
@@ -155,7 +155,7 @@ def test_bad_datagrams_are_counted_and_dropped_never_raised() -> None:
 @pytest.mark.timeout(20)
 def test_send_takes_payloads_up_to_2048_bytes_and_refuses_larger() -> None:
     port = free_udp_port()
-    largest = b"y" * MAX_PAYLOAD_BYTES
+    largest = b"y" * MAX_RADIO_PAYLOAD_BYTES
     with (
         UdpRadio("1", port=port, interface=LOOPBACK) as sender,
         UdpRadio("2", port=port, interface=LOOPBACK) as receiver,
@@ -421,7 +421,7 @@ def test_controllers_in_separate_namespaces_pool_opinions_and_decide(lan: Lan) -
 # One send per line on stdin, the counts after it on stdout.
 SEND_PER_LINE = """
 import dataclasses, json, sys
-from robot_agent.link.udp_radio import UdpRadio
+from examples.udp_radio import UdpRadio
 with UdpRadio("1", interface=sys.argv[1]) as radio:
     for _ in sys.stdin:
         radio.send(b'{"kind":"beacon","v":1,"id":"x","seq":0}')

@@ -15,14 +15,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from robot_agent.link.udp_radio import (
+from examples.udp_radio import (
     MAX_DATAGRAM_BYTES,
-    MAX_PAYLOAD_BYTES,
+    MAX_RADIO_PAYLOAD_BYTES,
     FrameError,
     decode_frame,
     encode_frame,
 )
-from wire import auth, batch, link, names, protocol
+from link.core import codec
+from wire import auth, batch, names, protocol
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
 ZENOH_PICO_BATCH = 2048  # bytes: one opinion and its attachment must fit one batch
@@ -206,19 +207,19 @@ SESSION_KEY = bytes.fromhex(LINK["session_key_hex"])
 
 def test_the_link_keys_derive_from_the_robot_key() -> None:
     robot_key = bytes.fromhex(LINK["robot_key_hex"])
-    assert link.link_key(robot_key) == LINK_KEY
+    assert codec.link_key(robot_key) == LINK_KEY
     nonces = bytes.fromhex("0102030405060708"), bytes.fromhex("1112131415161718")
-    assert link.session_key(LINK_KEY, *nonces) == SESSION_KEY
+    assert codec.session_key(LINK_KEY, *nonces) == SESSION_KEY
 
 
 @pytest.mark.parametrize("vector", LINK["valid"], ids=[v["name"] for v in LINK["valid"]])
 def test_link_frame_vectors_read_and_seal_to_their_bytes(vector: dict[str, Any]) -> None:
     data = bytes.fromhex(vector["hex"])
     cipher = SESSION_KEY if vector["encrypted"] else None
-    frame = link.open_frame(data, LINK_KEY, cipher)
-    link.check_body(frame)
-    assert frame == link.Frame(
-        link.FrameType[vector["type"]],
+    frame = codec.open_frame(data, LINK_KEY, cipher)
+    codec.check_body(frame)
+    assert frame == codec.Frame(
+        codec.FrameType[vector["type"]],
         vector["from_bridge"],
         vector["robot"],
         bytes.fromhex(vector["robot_nonce_hex"]),
@@ -227,17 +228,17 @@ def test_link_frame_vectors_read_and_seal_to_their_bytes(vector: dict[str, Any])
         bytes.fromhex(vector["body_hex"]),
         vector["encrypted"],
     )
-    assert link.seal(frame, LINK_KEY, cipher) == data
+    assert codec.seal(frame, LINK_KEY, cipher) == data
     serial = bytes.fromhex(vector["serial_hex"])
-    assert link.serial_encode(data) == serial
-    assert link.Deframer().feed(serial) == [data]
+    assert codec.serial_encode(data) == serial
+    assert codec.Deframer().feed(serial) == [data]
     if "data" in vector:
-        kind, payload, attachment = link.decode_data(frame.body)
+        kind, payload, attachment = codec.decode_data(frame.body)
         assert (kind.name, int(kind)) == (vector["data"]["kind"], vector["data"]["kind_byte"])
         assert payload.decode() == vector["data"]["payload_utf8"]
         assert (attachment or b"").hex() == vector["data"]["attachment_hex"]
-    if frame.type is link.FrameType.WELCOME:
-        assert link.decode_welcome(frame.body).run == "demo"
+    if frame.type is codec.FrameType.WELCOME:
+        assert codec.decode_welcome(frame.body).run == "demo"
 
 
 @pytest.mark.parametrize("vector", LINK["invalid"], ids=[v["name"] for v in LINK["invalid"]])
@@ -245,12 +246,12 @@ def test_link_frame_vectors_that_a_receiver_refuses_for_their_reason(
     vector: dict[str, Any],
 ) -> None:
     data = bytes.fromhex(vector["hex"])
-    with pytest.raises(link.LinkError) as refused:
-        cipher = SESSION_KEY if len(data) > 4 and data[4] & link.ENCRYPTED else None
-        frame = link.open_frame(data, LINK_KEY, cipher)
-        link.check_body(frame)
-        if frame.type is link.FrameType.DATA:
-            link.decode_data(frame.body)
+    with pytest.raises(codec.LinkError) as refused:
+        cipher = SESSION_KEY if len(data) > 4 and data[4] & codec.ENCRYPTED else None
+        frame = codec.open_frame(data, LINK_KEY, cipher)
+        codec.check_body(frame)
+        if frame.type is codec.FrameType.DATA:
+            codec.decode_data(frame.body)
     assert refused.value.refusal.value == vector["category"]
 
 
@@ -258,8 +259,8 @@ def test_link_frame_vectors_that_a_receiver_refuses_for_their_reason(
     "vector", LINK["serial_invalid"], ids=[v["name"] for v in LINK["serial_invalid"]]
 )
 def test_serial_vectors_that_a_receiver_refuses_as_corrupt(vector: dict[str, Any]) -> None:
-    (found,) = link.Deframer().feed(bytes.fromhex(vector["hex"]))
-    assert isinstance(found, link.LinkError) and found.refusal.value == vector["category"]
+    (found,) = codec.Deframer().feed(bytes.fromhex(vector["hex"]))
+    assert isinstance(found, codec.LinkError) and found.refusal.value == vector["category"]
 
 
 def test_the_files_are_exactly_what_the_generator_writes() -> None:
@@ -288,7 +289,7 @@ def test_the_longest_opinion_over_100_sites_fits_one_2kb_batch() -> None:
     assert isinstance(message, protocol.OpinionPayload) and message.opinion == worst
     attachment = protocol.encode(protocol.RadioTxMeta(v=1, tick=2**53, seq=2**53))
     assert len(payload) + len(attachment) <= ZENOH_PICO_BATCH
-    assert len(payload) <= MAX_PAYLOAD_BYTES
+    assert len(payload) <= MAX_RADIO_PAYLOAD_BYTES
     assert len(encode_frame(str(names.MAX_ROBOTS - 1), payload)) <= MAX_DATAGRAM_BYTES
 
 

@@ -33,14 +33,18 @@ import time
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import asdict
+from pathlib import Path
 
 from fakes import ROBOT_RADIUS, FakeBody, FakeWorld, make_world_info, shuffled_qualities
 
+# Run as a script (python tests/udp_swarm_node.py), the repository root is not on the path.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from examples.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from plumbing import cliargs
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
-from robot_agent.link.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 from wire import names, protocol
 from wire.rng import Stream
 

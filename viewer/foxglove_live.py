@@ -44,7 +44,7 @@ from world_server.recording.writer import McapRecorder, Sample
 log = logging.getLogger("foxglove-live")
 
 INBOX_BYTES = 64 * 2**20  # samples waiting for the writer thread, at most
-MAX_SAMPLE_BYTES = protocol.MAX_FRAME_BYTES + 1024  # a frame and its attachment
+MAX_SAMPLE_BYTES = protocol.MAX_CAMERA_FRAME_BYTES + 1024  # a frame and its attachment
 BACKLOG = 4096  # messages the SDK buffers per connected app
 DEFAULT_NICENESS = 10
 DRAIN_SECONDS, SEND_SECONDS = 1.5, 0.3  # at a stop: to pass on what is queued, to send it

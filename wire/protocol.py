@@ -27,7 +27,7 @@ DEFAULT_ROOT = "bestofn"
 # digits (float32 round-trip precision; zeros stay exact, so alpha = 0 logic is exact).
 MAX_OPTIONS = 1000
 MAX_PAYLOAD_BYTES = 64 * 1024
-MAX_FRAME_BYTES = 1024 * 1024
+MAX_CAMERA_FRAME_BYTES = 1024 * 1024
 OPINION_DIGITS = 9
 
 # The bounds, by name where the binary batches (wire/batch.py) check them too.
@@ -321,7 +321,7 @@ class LogLine(Message, frozen=True):
 
 
 class LinkRefusals(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
-    """Link frames a bridge refused, by reason (wire/link.py ``Refusal``)."""
+    """Link frames a bridge refused, by reason (link/core/codec.py ``Refusal``)."""
 
     malformed: _Count = 0
     oversize: _Count = 0

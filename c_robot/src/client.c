@@ -148,6 +148,8 @@ void link_robot_init(LinkRobot *p, int robot, const char *run, const uint8_t rob
 double link_robot_deadline(const LinkRobot *p) {
     double deadline = client_deadline(&p->client);
     if (p->asking && p->ask_again_at < deadline) deadline = p->ask_again_at;
+    for (int i = 0; i < p->proving_count; i++)
+        if (p->proving[i].again_at < deadline) deadline = p->proving[i].again_at;
     if (p->has_last_status && p->status_again_at < deadline) deadline = p->status_again_at;
     return deadline;
 }
@@ -173,24 +175,74 @@ static void world_key(const LinkRobot *p, char *out, size_t cap) {
     snprintf(out, cap, "%s/%s/world/info", p->client.root, p->client.run);
 }
 
-/* ask world/info in the robot's name, with a fresh nonce (auth.query_seal) */
-static void ask(LinkRobot *p, double now) {
+/* a question on world/info in the robot's name with a fresh nonce (auth.query_seal),
+   sent: its payload names the world instance that must answer ("": any) */
+static void question(LinkRobot *p, const char *instance, uint8_t nonce[16]) {
     char key[200];
     uint8_t metadata[16 + 32], attachment[16 + 16 + 32];
-    random_bytes(p->nonce, 16);
+    random_bytes(nonce, 16);
     world_key(p, key, sizeof key);
-    size_t id = strlen(p->identity);
-    memcpy(metadata, p->nonce, 16);
+    size_t id = strlen(p->identity), size = strlen(instance);
+    memcpy(metadata, nonce, 16);
     memcpy(metadata + 16, p->identity, id);
-    long n = auth_seal(p->robot_key, key, (const uint8_t *)"", 0, metadata, 16 + id, attachment,
-                       sizeof attachment);
-    client_send(&p->client, K_INFO_QUERY, (const uint8_t *)"", 0, attachment, (size_t)n);
+    long n = auth_seal(p->robot_key, key, (const uint8_t *)instance, size, metadata, 16 + id,
+                       attachment, sizeof attachment);
+    client_send(&p->client, K_INFO_QUERY, (const uint8_t *)instance, size, attachment, (size_t)n);
+}
+
+/* ask any world for the map */
+static void ask(LinkRobot *p, double now) {
+    question(p, "", p->nonce);
     p->asking = 1;
     p->ask_again_at = now + ASK_EVERY;
 }
 
+static int proving_index(const LinkRobot *p, const char *instance) {
+    for (int i = 0; i < p->proving_count; i++)
+        if (!strcmp(p->proving[i].instance, instance)) return i;
+    return -1;
+}
+
+static void forget_proving(LinkRobot *p, int at) {
+    memmove(&p->proving[at], &p->proving[at + 1],
+            sizeof p->proving[0] * (size_t)(p->proving_count - at - 1));
+    p->proving_count--;
+}
+
+/* ask world instance to answer for its token; after PROVE_TRIES questions without an
+   answer that holds, the token is someone else's (counted) */
+static void prove(LinkRobot *p, const char *instance, double now, int tries) {
+    int at = proving_index(p, instance);
+    if (tries > PROVE_TRIES) {
+        if (at >= 0) forget_proving(p, at);
+        endpoint_world_unproven(p->endpoint, instance);
+        return;
+    }
+    if (at < 0) {
+        if (p->proving_count >= MAX_WORLDS) return;
+        at = p->proving_count++;
+        snprintf(p->proving[at].instance, sizeof p->proving[at].instance, "%s", instance);
+    }
+    question(p, instance, p->proving[at].nonce);
+    p->proving[at].again_at = now + PROVE_EVERY;
+    p->proving[at].tries = tries;
+}
+
+/* whether an answer on world/info is the world's answer to the question with nonce */
+static int holds(const LinkRobot *p, const uint8_t nonce[16], const uint8_t *payload, size_t size,
+                 const uint8_t *attachment, size_t attachment_size) {
+    char key[200];
+    world_key(p, key, sizeof key);
+    const uint8_t *metadata;
+    size_t metadata_size;
+    return auth_open(p->robot_key, key, payload, size, attachment, attachment_size, &metadata,
+                     &metadata_size) == 0 &&
+           metadata_size == 16 && memcmp(metadata, nonce, 16) == 0;
+}
+
 static void lost(LinkRobot *p, int ended) {
     p->asking = 0;
+    p->proving_count = 0;
     if (p->has_endpoint) {
         /* sorted(self.worlds): the world is out of reach with the link */
         for (int pass = 0; pass < p->world_count; pass++) {
@@ -226,21 +278,40 @@ static void welcomed(LinkRobot *p, double now) {
     }
 }
 
-static void sorted_worlds_appeared(LinkRobot *p) {
+/* the worlds reported before the map came, proved in sorted order */
+static void prove_sorted_worlds(LinkRobot *p, double now) {
     int done[MAX_WORLDS] = {0};
     for (int pass = 0; pass < p->world_count; pass++) {
         int least = -1;
         for (int i = 0; i < p->world_count; i++)
             if (!done[i] && (least < 0 || strcmp(p->worlds[i], p->worlds[least]) < 0)) least = i;
         done[least] = 1;
-        endpoint_world_appeared(p->endpoint, p->worlds[least]);
+        prove(p, p->worlds[least], now, 1);
     }
+}
+
+static int reported(const LinkRobot *p, const char *instance) {
+    for (int i = 0; i < p->world_count; i++)
+        if (!strcmp(p->worlds[i], instance)) return 1;
+    return 0;
 }
 
 static void answered(LinkRobot *p, const uint8_t *payload, size_t size,
                      const uint8_t *attachment, size_t attachment_size, double now) {
     static WorldInfo info;
-    if (!p->asking || p->has_endpoint) return; /* an answer to a question no longer asked */
+    if (p->has_endpoint) { /* a world answering for its token, or an answer no longer awaited */
+        for (int i = 0; i < p->proving_count; i++) {
+            if (!holds(p, p->proving[i].nonce, payload, size, attachment, attachment_size))
+                continue;
+            char instance[MAX_NAME + 1];
+            snprintf(instance, sizeof instance, "%s", p->proving[i].instance);
+            forget_proving(p, i);
+            if (reported(p, instance)) endpoint_world_appeared(p->endpoint, instance);
+            return;
+        }
+        return;
+    }
+    if (!p->asking) return; /* an answer to a question no longer asked */
     char key[200];
     world_key(p, key, sizeof key);
     const uint8_t *metadata;
@@ -282,11 +353,14 @@ static void answered(LinkRobot *p, const uint8_t *payload, size_t size,
     p->has_endpoint = 1;
     log_info("robot %d: %d sites, clock %s, seed %lld: running", p->robot, info.n_sites,
              info.lockstep ? "lockstep" : "realtime", (long long)info.seed);
-    sorted_worlds_appeared(p);
     send_status(p, endpoint_status(p->endpoint, 0), now);
+    prove_sorted_worlds(p, now);
 }
 
-static void world_token(LinkRobot *p, int up, const uint8_t *payload, size_t size) {
+/* A world token the bridge reports, appeared or gone. The bridge is trusted with nothing
+   the robot believes: an appeared token is followed only once that world answers for
+   itself (prove). */
+static void world_token(LinkRobot *p, int up, const uint8_t *payload, size_t size, double now) {
     char instance[MAX_NAME + 1];
     size_t n = size < MAX_NAME ? size : MAX_NAME;
     memcpy(instance, payload, n);
@@ -297,12 +371,14 @@ static void world_token(LinkRobot *p, int up, const uint8_t *payload, size_t siz
     if (up) {
         if (at < 0 && p->world_count < MAX_WORLDS)
             snprintf(p->worlds[p->world_count++], sizeof p->worlds[0], "%s", instance);
-        if (p->has_endpoint) endpoint_world_appeared(p->endpoint, instance);
+        if (p->has_endpoint && proving_index(p, instance) < 0) prove(p, instance, now, 1);
     } else {
         if (at >= 0) {
             memmove(p->worlds[at], p->worlds[at + 1], sizeof p->worlds[0] * (size_t)(p->world_count - at - 1));
             p->world_count--;
         }
+        int proving = proving_index(p, instance);
+        if (proving >= 0) forget_proving(p, proving);
         if (p->has_endpoint) endpoint_world_vanished(p->endpoint, instance);
     }
 }
@@ -315,7 +391,7 @@ static void received(LinkRobot *p, int kind, const uint8_t *payload, size_t size
         log_warning("the world refused the question for the map: %.*s", (int)(size < 200 ? size : 200),
                     (const char *)payload);
     } else if (kind == K_WORLD_UP || kind == K_WORLD_DOWN) {
-        world_token(p, kind == K_WORLD_UP, payload, size);
+        world_token(p, kind == K_WORLD_UP, payload, size, now);
     } else if (kind == K_SENSE || kind == K_RADIO_RX || kind == K_CAMERA) {
         int input = kind == K_SENSE ? IN_SENSE : kind == K_RADIO_RX ? IN_RADIO_RX : IN_CAMERA;
         if (!p->has_endpoint) {
@@ -437,6 +513,14 @@ void link_robot_wake(LinkRobot *p, double now) {
         send_hello(c, now);
     }
     if (p->asking && now >= p->ask_again_at && c->open) ask(p, now);
+    for (int i = 0; i < p->proving_count; i++) {
+        if (now < p->proving[i].again_at || !c->open) continue;
+        int before = p->proving_count;
+        char instance[MAX_NAME + 1];
+        snprintf(instance, sizeof instance, "%s", p->proving[i].instance);
+        prove(p, instance, now, p->proving[i].tries + 1);
+        if (p->proving_count < before) i--; /* given up: the next moved into its place */
+    }
     if (p->has_last_status && now >= p->status_again_at && c->open) resend_status(p, now);
 }
 

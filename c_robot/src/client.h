@@ -1,5 +1,5 @@
-/* The robot's end of a link session (robot_agent/link/client.py) and the program around
-   the endpoint (robot_agent/link/program.py's LinkRobot), without I/O. */
+/* The robot's end of a link session (link/core/session.py) and the program around
+   the endpoint (link/core/robot.py), without I/O. */
 #ifndef CR_CLIENT_H
 #define CR_CLIENT_H
 #include <stddef.h>
@@ -12,6 +12,11 @@
 #define SILENCE_BEFORE_WELCOME 3.0
 #define ASK_EVERY 1.0
 #define STATUS_EVERY 2.0
+/* A world token the bridge reports is followed once that world answers world/info asked
+   with the token's instance: asked up to PROVE_TRIES times, PROVE_EVERY seconds apart; a
+   token no world answers for is counted as a rejection (link/core/robot.py). */
+#define PROVE_TRIES 5
+#define PROVE_EVERY 2.0
 #define OUT_QUEUE_BYTES (512 * 1024)
 #define OUT_QUEUE_FRAMES 256
 
@@ -54,6 +59,14 @@ typedef struct {
     int asking;
     uint8_t nonce[16];
     double ask_again_at;
+    /* world tokens being proved, in the order their questions were asked */
+    struct {
+        char instance[MAX_NAME + 1];
+        uint8_t nonce[16];
+        double again_at;
+        int tries;
+    } proving[MAX_WORLDS];
+    int proving_count;
     int ended;
     int has_last_status;
     uint8_t last_status[32 * 1024];

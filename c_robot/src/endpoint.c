@@ -114,6 +114,13 @@ void endpoint_world_vanished(Endpoint *e, const char *instance) {
         log_warning("robot %d lost the world server; waiting", e->robot_id);
 }
 
+/* a world token no world answered for: someone else's, ignored and counted */
+void endpoint_world_unproven(Endpoint *e, const char *instance) {
+    char why[MAX_NAME + 40];
+    snprintf(why, sizeof why, "no world answers for '%s'", instance);
+    endpoint_reject(e, "world token", why);
+}
+
 /* --- the tick assembly --------------------------------------------------------------- */
 
 /* Room for one input of tick: 1 held (then *item), 0 stale, -1 refused (counted). */

@@ -74,5 +74,6 @@ int endpoint_receive(Endpoint *e, int kind, const uint8_t *payload, size_t paylo
 Outgoing endpoint_status(Endpoint *e, int64_t tick);
 void endpoint_world_appeared(Endpoint *e, const char *instance);
 void endpoint_world_vanished(Endpoint *e, const char *instance);
+void endpoint_world_unproven(Endpoint *e, const char *instance);
 void endpoint_reject(Endpoint *e, const char *source, const char *why);
 #endif

@@ -57,7 +57,7 @@ static double now_monotonic(void) {
     return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
-/* --- the link's address (wire/link.py parse_address) --------------------------------- */
+/* --- the link's address (link/core/codec.py parse_address) --------------------------------- */
 
 typedef struct {
     int udp;
@@ -241,7 +241,7 @@ static void read_key_file(const char *path, int robot, char *run, uint8_t key[32
     }
 }
 
-/* --- transports (robot_agent/link/transport.py) -------------------------------------- */
+/* --- transports (link/io/transport.py) -------------------------------------- */
 
 typedef struct {
     int fd;

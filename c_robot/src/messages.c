@@ -343,7 +343,7 @@ int decode_act(const void *data, size_t size, Act *a) {
     return DONE(r, seen, 63u) && jr_end(r);
 }
 
-/* --- LinkWelcome (wire/link.py) ------------------------------------------------------ */
+/* --- LinkWelcome (link/core/codec.py) ------------------------------------------------------ */
 
 int decode_welcome(const void *data, size_t size, LinkWelcome *w) {
     static const char *const ciphers[] = {"none", "chacha20-poly1305", NULL};

@@ -281,8 +281,54 @@ void test_client(void) {
     link_robot_wake(&robot, 4.0);
     n = sent_types(types, frames, 16);
     check(n == 1 && types[0] == F_DATA, "client", "the status again every 2 s");
+    /* a world token is followed once that world answers world/info asked with its instance */
+    uint8_t token[64];
+    long tn = link_encode_data(K_WORLD_UP, (const uint8_t *)"w-1", 3, NULL, 0, token, sizeof token);
+    from_bridge(F_DATA, token, (size_t)tn, 4, 4.1);
+    n = sent_types(types, frames, 16);
+    int asked = 0;
+    if (n == 1 && types[0] == F_DATA) {
+        int kind;
+        const uint8_t *payload, *attachment;
+        size_t ps, as;
+        link_decode_data(frames[0].body, frames[0].body_size, &kind, &payload, &ps, &attachment, &as);
+        asked = kind == K_INFO_QUERY && ps == 3 && !memcmp(payload, "w-1", 3);
+    }
+    check(asked && !robot.endpoint->has_followed, "client",
+          "a world token: its world asked to answer for it, not followed yet");
+    an = auth_seal(robot_key, "bestofn/demo/world/info", (const uint8_t *)info, strlen(info),
+                   robot.proving[0].nonce, 16, att, sizeof att);
+    bn = link_encode_data(K_INFO_REPLY, (const uint8_t *)info, strlen(info), att, (size_t)an, body, sizeof body);
+    from_bridge(F_DATA, body, (size_t)bn, 5, 4.2);
+    check(robot.endpoint->has_followed && !strcmp(robot.endpoint->followed, "w-1") &&
+              robot.proving_count == 0,
+          "client", "the world answered for its token: followed");
+    /* a token no world answers for: asked PROVE_TRIES times, PROVE_EVERY apart, then counted */
+    long rejects = robot.endpoint->rejects;
+    tn = link_encode_data(K_WORLD_UP, (const uint8_t *)"w-2", 3, NULL, 0, token, sizeof token);
+    from_bridge(F_DATA, token, (size_t)tn, 6, 4.3);
+    int questions = 0;
+    uint64_t seq = 7;
+    for (double t = 4.3; t < 14.5; t += 1.0) {
+        if (t > 4.3) {
+            from_bridge(F_PING, ping, 8, seq++, t); /* the bridge keeps the session alive */
+            link_robot_wake(&robot, t);
+        }
+        n = sent_types(types, frames, 16);
+        for (int i = 0; i < n; i++) {
+            int kind;
+            const uint8_t *payload, *attachment;
+            size_t ps, as;
+            if (types[i] != F_DATA) continue;
+            link_decode_data(frames[i].body, frames[i].body_size, &kind, &payload, &ps, &attachment, &as);
+            questions += kind == K_INFO_QUERY && ps == 3 && !memcmp(payload, "w-2", 3);
+        }
+    }
+    check(questions == PROVE_TRIES && robot.endpoint->rejects == rejects + 1 &&
+              !strcmp(robot.endpoint->followed, "w-1") && robot.proving_count == 0,
+          "client", "an unanswered token: asked 5 times, then one rejection, still on its world");
     uint8_t bye = BYE_RUN_ENDED;
-    from_bridge(F_BYE, &bye, 1, 4, 4.1);
+    from_bridge(F_BYE, &bye, 1, seq, 14.6);
     check(robot.ended && !robot.client.open, "client", "a bye (run ended) ends the program");
     char summary[1024];
     link_robot_summary(&robot, summary, sizeof summary);

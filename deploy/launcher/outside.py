@@ -21,11 +21,12 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from wire import auth, link, names
+from link.core import codec
+from link.core.impairment import LinkImpairment
+from wire import auth, names
 from world_server.bridge import keys as link_keys
 from world_server.bridge.bridge import LinkedRobot
 from world_server.bridge.cli import add_impairment_options, impairment_of
-from world_server.bridge.impairment import LinkImpairment
 
 DEFAULT_LINK_HOST = "127.0.0.1"  # the bridge listens on loopback unless told otherwise
 DEFAULT_WAIT = 60.0  # wall seconds for every outside robot to connect
@@ -45,7 +46,7 @@ class OutsidePlan:
     def ids(self) -> list[int]:
         return [linked.robot for linked in self.robots]
 
-    def address_of(self, robot: int) -> link.LinkAddress:
+    def address_of(self, robot: int) -> codec.LinkAddress:
         return next(linked.address for linked in self.robots if linked.robot == robot)
 
     def bridge_argv(self, run_id: str, seed: int, controller: str, encrypted: bool) -> list[str]:
@@ -154,25 +155,25 @@ def outside_plan(args: argparse.Namespace, robots: int) -> OutsidePlan | None:
         raise ValueError("--external with --connect: say where the keys go (--link-keys DIR)")
     shared, own = links_of(args.links or [], external)
     if shared is None:
-        shared = link.LinkAddress("udp", host=DEFAULT_LINK_HOST, port=0)
+        shared = codec.LinkAddress("udp", host=DEFAULT_LINK_HOST, port=0)
     if shared.transport != "udp":
         raise ValueError("--link without ID= is the UDP address of every outside robot")
     if shared.port == 0 and any(robot not in own for robot in external):
-        shared = link.LinkAddress("udp", host=shared.host, port=free_udp_port(shared.host))
+        shared = codec.LinkAddress("udp", host=shared.host, port=free_udp_port(shared.host))
     linked = tuple(LinkedRobot(robot, own.get(robot, shared)) for robot in sorted(external))
     return OutsidePlan(linked, args.link_wait, args.link_keys, impairment_of(args))
 
 
 def links_of(
     texts: Sequence[str], external: Sequence[int]
-) -> tuple[link.LinkAddress | None, dict[int, link.LinkAddress]]:
+) -> tuple[codec.LinkAddress | None, dict[int, codec.LinkAddress]]:
     """The shared UDP address and the links given robot by robot."""
-    shared: link.LinkAddress | None = None
-    own: dict[int, link.LinkAddress] = {}
+    shared: codec.LinkAddress | None = None
+    own: dict[int, codec.LinkAddress] = {}
     for text in texts:
         robot_text, equals, address_text = text.partition("=")
         if not equals or "://" in robot_text or ":" in robot_text:
-            address = link.parse_address(text)
+            address = codec.parse_address(text)
             if shared is not None:
                 raise ValueError("--link: one address for every outside robot on UDP")
             shared = address
@@ -182,7 +183,7 @@ def links_of(
             raise ValueError(f"--link {text}: robot {robot_text} is not one of --external")
         if robot in own:
             raise ValueError(f"--link names robot {robot} twice")
-        own[robot] = link.parse_address(address_text)
+        own[robot] = codec.parse_address(address_text)
     udp = {address for address in own.values() if address.transport == "udp"}
     if shared is not None:
         udp.add(shared)
@@ -227,5 +228,5 @@ def link_keys_env(keyring: auth.Keyring, run_id: str, robots: Iterable[int]) -> 
     for robot in robots:
         key = keyring.key(names.robot_identity(robot))
         assert key is not None  # the launcher holds the run secret
-        keys[robot] = link.link_key(key)
+        keys[robot] = codec.link_key(key)
     return {link_keys.LINK_KEYS_ENV: link_keys.to_text(run_id, keys)}

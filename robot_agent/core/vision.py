@@ -46,7 +46,7 @@ def decode_frame(
     max_pixels: int = 1_000_000,
     *,
     expected_size: tuple[int, int] | None = None,
-    max_bytes: int = protocol.MAX_FRAME_BYTES,
+    max_bytes: int = protocol.MAX_CAMERA_FRAME_BYTES,
 ) -> np.ndarray:
     """Decode a PNG or JPEG camera frame into an H x W x 3 uint8 BGR array.
 

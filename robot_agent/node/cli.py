@@ -123,6 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="robot-agent",
         description="A robot of the swarm: the decision controller on Zenoh. Several --id "
         "options host several robots in this process, each with its own Zenoh session.",
+        epilog="With --link ADDRESS the robot runs outside the emulator instead, over UDP or "
+        "a serial line to the run's bridge, without Zenoh (robot-agent --link ADDRESS --help).",
     )
     parser.add_argument(
         "--id",

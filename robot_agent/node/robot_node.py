@@ -54,7 +54,7 @@ log = logging.getLogger("robot_agent")
 # process hosts; a tick's inputs are a few kilobytes per robot, so this leaves room for a
 # long stall, not for a flood.
 INBOX_BYTES, INBOX_BYTES_PER_ROBOT = 16 * 2**20, 2**20
-MAX_MESSAGE_BYTES = protocol.MAX_FRAME_BYTES + 1024  # a frame and its attachment
+MAX_MESSAGE_BYTES = protocol.MAX_CAMERA_FRAME_BYTES + 1024  # a frame and its attachment
 
 
 class EventKind(enum.StrEnum):

@@ -17,23 +17,24 @@ may say) and a link (``LinkPeer`` over UDP or a serial line):
   the robot process does; the robot's own token is presence (``presence.py``).
 
 On top, every link frame carries its own tag under the robot's link key with a session
-nonce and a sequence number (wire/link.py), checked by the peer before anything is
+nonce and a sequence number (link/core/codec.py), checked by the peer before anything is
 forwarded. The bridge pings each program, and publishes each link's figures (round trip,
 loss, frames, refusals: ``LinkStats`` on ``link/<id>/stats``, sealed as the bridge) every
 second and whenever a link opens or closes. A link can be made worse on purpose
 (``impairment.py``).
 
 Threads: Zenoh's callbacks only queue what they bring (a bounded inbox) and wake the loop;
-one thread owns the peers, the sockets and serial lines, and publishes.
+one thread owns the peers and the link transports (a ``link.io.hub.Hub``, the loop
+``robot-agent --link`` runs on too), and publishes.
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import math
 import queue
-import selectors
 import socket
 import time
 from collections import Counter
@@ -44,36 +45,34 @@ from typing import Any
 import msgspec
 import zenoh
 
+from link.core import codec
+from link.core.impairment import ImpairedDirection, LinkImpairment
+from link.core.peer import LinkPeer, Message, PeerEvent, SessionClosed, SessionOpened
+from link.io.hub import Hub
+from link.io.transport import SerialLine, UdpServer
 from plumbing.inbox import BoundedInbox
 from plumbing.zenoh_session import reliable_publisher
-from robot_agent.link.transport import LinkClosedError, SerialLine
-from wire import auth, link, names, protocol
+from wire import auth, names, protocol
 from wire.names import Role
-from world_server.bridge.impairment import ImpairedDirection, LinkImpairment
-from world_server.bridge.peer import Closed, LinkPeer, Message, Opened, PeerEvent
 from world_server.bridge.presence import Presence
-from world_server.bridge.udp import UdpServer
 
 log = logging.getLogger("bridge")
 
 INBOX_BYTES = 64 * 2**20
-MAX_INBOX_ITEM = protocol.MAX_FRAME_BYTES + 2048
+MAX_INBOX_ITEM = protocol.MAX_CAMERA_FRAME_BYTES + 2048
 STATS_EVERY = 1.0  # seconds between two LinkStats of a link
-MAX_WAIT = 0.2  # seconds the loop waits at most
 QUERY_TIMEOUT = 5.0  # seconds a relayed world/info question waits for answers
-REOPEN_EVERY = 1.0  # seconds between attempts to reopen a serial line that closed
-DRAIN_WAIT = 2.0  # seconds to let paced serial lines send their goodbyes
-PING_EVERY = 0.5
-SILENCE = 3.0
+UDP = "udp"  # the hub's name for the one UDP server; serial lines go by their robot
+WAKE = "wake"
 
 # What the world sends a robot, by its key, and what the robot sends, to its key.
-FROM_WORLD = (link.DataKind.SENSE, link.DataKind.CAMERA, link.DataKind.RADIO_RX)
+FROM_WORLD = (codec.DataKind.SENSE, codec.DataKind.CAMERA, codec.DataKind.RADIO_RX)
 
 
 @dataclass(frozen=True)
 class LinkedRobot:
     robot: int
-    address: link.LinkAddress
+    address: codec.LinkAddress
 
 
 @dataclass(frozen=True)
@@ -84,12 +83,12 @@ class BridgeConfig:
     root: str = protocol.DEFAULT_ROOT
     seed: int = 0  # for the impairment's draws
     encrypted: bool = False  # --secure: every session ChaCha20-Poly1305
-    ping_every: float = PING_EVERY
-    silence: float = SILENCE
+    ping_every: float = codec.PING_EVERY
+    silence: float = codec.SILENCE
     impairment: LinkImpairment = field(default_factory=LinkImpairment)
 
-    def welcome(self) -> link.LinkWelcome:
-        return link.LinkWelcome(
+    def welcome(self) -> codec.LinkWelcome:
+        return codec.LinkWelcome(
             v=1,
             run=self.run_id,
             root=self.root,
@@ -103,7 +102,7 @@ class BridgeConfig:
 @dataclass(frozen=True)
 class FromWorld:
     robot: int
-    kind: link.DataKind
+    kind: codec.DataKind
     payload: bytes
     attachment: bytes | None
 
@@ -116,7 +115,7 @@ class WorldToken:
 
 @dataclass(frozen=True)
 class StopBridge:
-    reason: link.ByeReason
+    reason: codec.ByeReason
 
 
 Event = FromWorld | WorldToken | StopBridge
@@ -145,9 +144,7 @@ class Bridge:
         self._wake_write.setblocking(False)
         welcome = config.welcome()
         self.peers: dict[int, LinkPeer] = {}
-        self.udp: UdpServer | None = None
-        self.serial: dict[int, SerialLine | None] = {}
-        self.reopen_at: dict[int, float] = {}
+        self.hub = Hub()
         self.up: dict[int, ImpairedDirection] = {}
         self.down: dict[int, ImpairedDirection] = {}
         for linked in config.robots:
@@ -166,40 +163,29 @@ class Bridge:
         self.presence = Presence(robot_sessions, self.keys)
         self.worlds: set[str] = set()
         self.unattributed: Counter[str] = Counter()  # UDP frames of no robot served here
-        self._publishers: dict[tuple[int, link.DataKind], zenoh.Publisher] = {}
+        self._publishers: dict[tuple[int, codec.DataKind], zenoh.Publisher] = {}
         self._stats_publishers: dict[int, zenoh.Publisher] = {}
         self._declared: list[Any] = []
         self._token: Any = None
-        self._selector = selectors.DefaultSelector()
         self._next_stats = 0.0
 
     # --- setting up --------------------------------------------------------------------
 
     def open_links(self) -> None:
-        """Bind the UDP address and open the serial lines (OSError if one cannot be)."""
+        """Bind the UDP address (OSError if it cannot be) and open the serial lines (one
+        that cannot be opened yet is tried again every second: a cable not yet in)."""
         udp = {linked.address for linked in self.config.robots if linked.address.transport == "udp"}
         if len(udp) > 1:
             raise ValueError(f"one UDP address serves every robot on UDP, not {len(udp)}")
         if udp:
-            (address,) = udp
-            self.udp = UdpServer(address.host, address.port)
-            self._selector.register(self.udp, selectors.EVENT_READ, "udp")
+            (server,) = udp
+            bind = functools.partial(UdpServer, server.host, server.port)
+            self.hub.add(UDP, bind, must_open=True)
         for linked in self.config.robots:
             if linked.address.transport == "serial":
-                self._open_serial(linked)
-        self._selector.register(self._wake_read, selectors.EVENT_READ, "wake")
-
-    def _open_serial(self, linked: LinkedRobot) -> None:
-        address = linked.address
-        try:
-            line = SerialLine(address.path, address.baud)
-        except OSError as error:
-            log.warning("robot %d: %s", linked.robot, error)
-            self.serial[linked.robot] = None
-            self.reopen_at[linked.robot] = time.monotonic() + REOPEN_EVERY
-            return
-        self.serial[linked.robot] = line
-        self._selector.register(line, selectors.EVENT_READ, linked.robot)
+                line = functools.partial(SerialLine, linked.address.path, linked.address.baud)
+                self.hub.add(linked.robot, line)
+        self.hub.watch(self._wake_read, WAKE)
 
     def declare(self) -> None:
         """Subscribe to each robot's inputs and the world's liveliness; say the bridge is up."""
@@ -207,16 +193,16 @@ class Bridge:
         for robot, session in self.robot_sessions.items():
             name = names.robot_name(robot)
             inputs = {
-                link.DataKind.SENSE: keys.sense(robot),
-                link.DataKind.CAMERA: keys.camera(robot),
-                link.DataKind.RADIO_RX: keys.radio_rx(name),
+                codec.DataKind.SENSE: keys.sense(robot),
+                codec.DataKind.CAMERA: keys.camera(robot),
+                codec.DataKind.RADIO_RX: keys.radio_rx(name),
             }
             for kind, key in inputs.items():
                 self._declared.append(session.declare_subscriber(key, self._on_input(robot, kind)))
             outputs = {
-                link.DataKind.ACT: keys.act(robot),
-                link.DataKind.RADIO_TX: keys.radio_tx(name),
-                link.DataKind.STATUS: keys.status(robot),
+                codec.DataKind.ACT: keys.act(robot),
+                codec.DataKind.RADIO_TX: keys.radio_tx(name),
+                codec.DataKind.STATUS: keys.status(robot),
             }
             for kind, key in outputs.items():
                 self._publishers[robot, kind] = reliable_publisher(session, key)
@@ -235,12 +221,7 @@ class Bridge:
             self._token.undeclare()
         for entity in self._declared:
             entity.undeclare()
-        for line in self.serial.values():
-            if line is not None:
-                line.close()
-        if self.udp is not None:
-            self.udp.close()
-        self._selector.close()
+        self.hub.close()
         self._wake_read.close()
         self._wake_write.close()
 
@@ -251,10 +232,10 @@ class Bridge:
         with contextlib.suppress(OSError):  # a full wake-up pipe: the loop is awake anyway
             self._wake_write.send(b"\0")
 
-    def stop(self, reason: link.ByeReason = link.ByeReason.RUN_ENDED) -> None:
+    def stop(self, reason: codec.ByeReason = codec.ByeReason.RUN_ENDED) -> None:
         self.put(StopBridge(reason))
 
-    def _on_input(self, robot: int, kind: link.DataKind) -> Callable[[zenoh.Sample], None]:
+    def _on_input(self, robot: int, kind: codec.DataKind) -> Callable[[zenoh.Sample], None]:
         def callback(sample: zenoh.Sample) -> None:
             payload = sample.payload.to_bytes()
             extra = sample.attachment.to_bytes() if sample.attachment is not None else None
@@ -275,13 +256,13 @@ class Bridge:
                 extra = reply.ok.attachment
                 answer = FromWorld(
                     robot,
-                    link.DataKind.INFO_REPLY,
+                    codec.DataKind.INFO_REPLY,
                     data,
                     extra.to_bytes() if extra is not None else None,
                 )
             else:
                 said = reply.err.payload.to_bytes() if reply.err is not None else b"no answer"
-                answer = FromWorld(robot, link.DataKind.INFO_ERROR, said[:1024], None)
+                answer = FromWorld(robot, codec.DataKind.INFO_ERROR, said[:1024], None)
             self.put(answer, len(answer.payload))
 
         self.robot_sessions[robot].get(
@@ -302,23 +283,23 @@ class Bridge:
             self._take_events(peer.close(reason), now)
             for frame, target in peer.take_outgoing():  # the goodbye is not impaired
                 self._transmit(peer, frame, target, now)
-        self._drain_serial()
+        self.hub.drain()
         self._publish_stats(time.monotonic(), force=True)
         if sum(self.unattributed.values()):
             log.warning("refused UDP frames of no robot served here: %s", dict(self.unattributed))
 
-    def _serve(self) -> link.ByeReason:
+    def _serve(self) -> codec.ByeReason:
         while True:
-            now = time.monotonic()
-            for key, _ in self._selector.select(self._wait(now)):
+            for name in self.hub.poll(self._deadline()):
                 now = time.monotonic()
-                if key.data == "wake":
+                if name == WAKE:
                     self._drain_wake()
-                elif key.data == "udp":
+                elif name == UDP:
                     self._take_udp(now)
                 else:
-                    self._take_serial(int(key.data), now)
+                    self._take_serial(int(name), now)  # type: ignore[call-overload]
             now = time.monotonic()
+            self._take_closed(now)
             stop = self._take_inbox(now)
             if stop is not None:
                 return stop.reason
@@ -327,18 +308,17 @@ class Bridge:
             self._release(now)
             for peer in self.peers.values():
                 self._flush_peer(peer, now)
-            self._flush_serial(now)
+            self.hub.flush(now)
+            self._take_closed(now)
             self._publish_stats(now)
 
-    def _wait(self, now: float) -> float:
-        deadlines = [self._next_stats, *self.reopen_at.values()]
+    def _deadline(self) -> float:
+        """The loop's next own deadline (the hub adds its transports')."""
+        deadlines = [self._next_stats]
         deadlines += [peer.deadline for peer in self.peers.values() if peer.deadline is not None]
         for directions in (self.up, self.down):
             deadlines += [d.deadline for d in directions.values() if d.deadline is not None]
-        for line in self.serial.values():
-            if line is not None and line.deadline is not None:
-                deadlines.append(line.deadline)
-        return min(max(0.0, min(deadlines, default=math.inf) - now), MAX_WAIT)
+        return min(deadlines, default=math.inf)
 
     def _drain_wake(self) -> None:
         with contextlib.suppress(BlockingIOError):
@@ -366,54 +346,44 @@ class Bridge:
             self.worlds.add(token.instance)
         else:
             self.worlds.discard(token.instance)
-        kind = link.DataKind.WORLD_UP if token.up else link.DataKind.WORLD_DOWN
+        kind = codec.DataKind.WORLD_UP if token.up else codec.DataKind.WORLD_DOWN
         for peer in self.peers.values():
             peer.send(kind, token.instance.encode(), None)
 
     # --- links in ----------------------------------------------------------------------
 
     def _take_udp(self, now: float) -> None:
-        assert self.udp is not None
-        for data, source in self.udp.receive():
+        for data, source in self.hub.receive(UDP, now):
             try:
-                header = link.read_header(data)
-            except link.LinkError as error:
+                header = codec.read_header(data)
+            except codec.LinkError as error:
                 self.unattributed[error.refusal] += 1
                 continue
             peer = self.peers.get(header.robot)
             if peer is None or peer.transport != "udp":
-                self.unattributed[link.Refusal.UNEXPECTED] += 1
+                self.unattributed[codec.Refusal.UNEXPECTED] += 1
                 continue
             self._arrive(peer, data, source, now)
 
     def _take_serial(self, robot: int, now: float) -> None:
-        line, peer = self.serial.get(robot), self.peers[robot]
-        if line is None:
-            return
-        try:
-            frames = line.receive(now)
-        except LinkClosedError as error:
-            self._serial_closed(robot, str(error), now)
-            return
-        for refusal, count in line.refused.items():
-            for _ in range(count):
-                peer.refuse(link.LinkError(link.Refusal(refusal), "serial framing"))
-        line.refused.clear()
-        for frame in frames:
+        peer = self.peers[robot]
+        frames = self.hub.receive(robot, now)
+        line = self.hub.transports.get(robot)
+        if line is not None:
+            for refusal, count in line.refused.items():
+                for _ in range(count):
+                    peer.refuse(codec.LinkError(codec.Refusal(refusal), "serial framing"))
+            line.refused.clear()
+        for frame, _ in frames:
             self._arrive(peer, frame, robot, now)
 
-    def _serial_closed(self, robot: int, why: str, now: float) -> None:
-        line = self.serial.get(robot)
-        if line is not None:
-            self._selector.unregister(line)
-            line.close()
-        self.serial[robot] = None
-        self.reopen_at[robot] = now + REOPEN_EVERY
-        log.warning("robot %d: %s", robot, why)
-        peer = self.peers[robot]
-        if peer.connected:
-            self._take_events(peer.close(link.ByeReason.GOING_AWAY), now)
-            peer.take_outgoing()  # nowhere to send the goodbye
+    def _take_closed(self, now: float) -> None:
+        """End the session of each serial line that closed (the hub opens it again)."""
+        for name, _ in self.hub.take_closed():
+            peer = self.peers.get(name) if isinstance(name, int) else None
+            if peer is not None and peer.connected:
+                self._take_events(peer.close(codec.ByeReason.GOING_AWAY), now)
+                peer.take_outgoing()  # nowhere to send the goodbye
 
     def _arrive(self, peer: LinkPeer, data: bytes, source: Hashable, now: float) -> None:
         up = self.up.get(peer.robot)
@@ -434,11 +404,6 @@ class Bridge:
         for robot, down in self.down.items():
             for frame, target in down.due(now):
                 self._transmit(self.peers[robot], frame, target, now)
-        for robot, at in list(self.reopen_at.items()):
-            if now >= at:
-                del self.reopen_at[robot]
-                linked = next(item for item in self.config.robots if item.robot == robot)
-                self._open_serial(linked)
 
     # --- what the peers say ------------------------------------------------------------
 
@@ -446,18 +411,18 @@ class Bridge:
         for event in events:
             if isinstance(event, Message):
                 self._relay(event)
-            elif isinstance(event, Opened):
+            elif isinstance(event, SessionOpened):
                 peer = self.peers[event.robot]
                 for instance in sorted(self.worlds):
-                    peer.send(link.DataKind.WORLD_UP, instance.encode(), None)
+                    peer.send(codec.DataKind.WORLD_UP, instance.encode(), None)
                 self._publish_stats(now, force=True)
-            elif isinstance(event, Closed):
+            elif isinstance(event, SessionClosed):
                 self.presence.gone(event.robot)
                 self._publish_stats(now, force=True)
 
     def _relay(self, message: Message) -> None:
         """Publish what the program sent, as it sent it, on its robot's key."""
-        if message.kind is link.DataKind.INFO_QUERY:
+        if message.kind is codec.DataKind.INFO_QUERY:
             self._ask_world(message.robot, message.payload, message.attachment)
             return
         publisher = self._publishers[message.robot, message.kind]
@@ -475,36 +440,7 @@ class Bridge:
                 peer.impaired += 1
 
     def _transmit(self, peer: LinkPeer, frame: bytes, target: Hashable, now: float) -> None:
-        if peer.transport == "udp":
-            assert self.udp is not None
-            self.udp.send(frame, target)
-            return
-        line = self.serial.get(peer.robot)
-        if line is not None:
-            line.send(frame, now)
-
-    def _flush_serial(self, now: float) -> None:
-        for robot, line in list(self.serial.items()):
-            if line is None:
-                continue
-            try:
-                line.flush(now)
-            except LinkClosedError as error:
-                self._serial_closed(robot, str(error), now)
-
-    def _drain_serial(self) -> None:
-        deadline = time.monotonic() + DRAIN_WAIT
-        while time.monotonic() < deadline:
-            waiting = [
-                line.deadline
-                for line in self.serial.values()
-                if line is not None and line.deadline is not None
-            ]
-            if not waiting:
-                break
-            time.sleep(max(0.0, min(min(waiting) - time.monotonic(), 0.05)))
-            self._flush_serial(time.monotonic())
-        self._flush_serial(time.monotonic())
+        self.hub.send(UDP if peer.transport == "udp" else peer.robot, frame, target, now)
 
     # --- figures -----------------------------------------------------------------------
 

@@ -21,14 +21,15 @@ from pathlib import Path
 
 import zenoh
 
+from link.core import codec
+from link.core.impairment import LinkImpairment
 from plumbing import cliargs, run_keys
 from plumbing.lifecycle import die_with_launcher
 from plumbing.stop_signals import on_stop_signals
 from plumbing.zenoh_session import open_from_args, open_session, session_mode
-from wire import link, names
+from wire import names
 from world_server.bridge import keys as link_keys
-from world_server.bridge.bridge import PING_EVERY, SILENCE, Bridge, BridgeConfig, LinkedRobot
-from world_server.bridge.impairment import LinkImpairment
+from world_server.bridge.bridge import Bridge, BridgeConfig, LinkedRobot
 
 log = logging.getLogger("bridge")
 
@@ -40,7 +41,7 @@ def linked_robot(text: str) -> LinkedRobot:
     if not equals or robot is None:
         raise argparse.ArgumentTypeError(f"{text!r}: give ID=ADDRESS, e.g. 8=udp://127.0.0.1:47800")
     try:
-        return LinkedRobot(robot, link.parse_address(address))
+        return LinkedRobot(robot, codec.parse_address(address))
     except ValueError as error:
         raise argparse.ArgumentTypeError(str(error)) from None
 
@@ -76,16 +77,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--ping-every",
         type=cliargs.float_range(0.01, 60.0),
-        default=PING_EVERY,
+        default=codec.PING_EVERY,
         metavar="SECONDS",
-        help=f"seconds between pings of each program (default: {PING_EVERY:g})",
+        help=f"seconds between pings of each program (default: {codec.PING_EVERY:g})",
     )
     parser.add_argument(
         "--silence",
         type=cliargs.float_range(0.1, 600.0),
-        default=SILENCE,
+        default=codec.SILENCE,
         metavar="SECONDS",
-        help=f"a link silent this long is gone (default: {SILENCE:g})",
+        help=f"a link silent this long is gone (default: {codec.SILENCE:g})",
     )
     add_impairment_options(parser)
     parser.add_argument(
@@ -193,7 +194,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 1
         on_stop_signals(
             lambda signum: bridge.stop(
-                link.ByeReason.GOING_AWAY if signum == signal.SIGHUP else link.ByeReason.RUN_ENDED
+                codec.ByeReason.GOING_AWAY if signum == signal.SIGHUP else codec.ByeReason.RUN_ENDED
             ),
             (signal.SIGINT, signal.SIGTERM, signal.SIGHUP),
         )

@@ -21,14 +21,15 @@ from typing import Any
 
 import zenoh
 
-from wire import link, protocol
+from link.core import codec
+from wire import protocol
 from wire.names import Role
 
 log = logging.getLogger("bridge")
 
 # The first message of a session that makes the robot present: the node publishes its
 # first status just before it declares its token (robot_agent/node/robot_node.py).
-ANNOUNCES = link.DataKind.STATUS
+ANNOUNCES = codec.DataKind.STATUS
 
 
 class Presence:
@@ -40,7 +41,7 @@ class Presence:
     def present(self, robot: int) -> bool:
         return robot in self.tokens
 
-    def spoke(self, robot: int, kind: link.DataKind) -> None:
+    def spoke(self, robot: int, kind: codec.DataKind) -> None:
         """The robot sent ``kind`` (relayed already): present from its first status."""
         if kind is ANNOUNCES and robot not in self.tokens:
             token = (

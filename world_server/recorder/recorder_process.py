@@ -35,7 +35,7 @@ from world_server.recording.writer import McapRecorder, Sample
 log = logging.getLogger("recorder")
 
 INBOX_BYTES = 256 * 2**20  # what may wait for the writer thread, at most
-MAX_SAMPLE_BYTES = protocol.MAX_FRAME_BYTES + 1024  # a frame and its attachment
+MAX_SAMPLE_BYTES = protocol.MAX_CAMERA_FRAME_BYTES + 1024  # a frame and its attachment
 
 
 def _lower_priority(niceness: int) -> None:

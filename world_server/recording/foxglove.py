@@ -168,7 +168,7 @@ def log_message(ns: int, process: str, line: str) -> dict[str, Any]:
 
 
 @dataclass(frozen=True)
-class RobotView:
+class SceneRobot:
     """What the scene shows of one robot."""
 
     phase: str | None = None
@@ -298,14 +298,14 @@ class ArenaScene:
             texts=labels,
         )
 
-    def robot_colour(self, view: RobotView) -> Rgba:
+    def robot_colour(self, view: SceneRobot) -> Rgba:
         if view.decided_site is not None and 0 <= view.decided_site < len(self.layout.sites):
             return site_colour(self.layout.site(view.decided_site).quality)
         if view.phase is None:
             return UNKNOWN_PHASE_COLOUR
         return PHASE_COLOURS.get(view.phase, UNKNOWN_PHASE_COLOUR)
 
-    def robot(self, ns: int, robot: int, view: RobotView) -> dict[str, Any]:
+    def robot(self, ns: int, robot: int, view: SceneRobot) -> dict[str, Any]:
         """A robot's body, heading and label in its own frame (it follows its transform)."""
         height = 0.05
         decided = "-" if view.decided_site is None else str(view.decided_site)
@@ -349,7 +349,7 @@ class ArenaScene:
     def update(
         self,
         ns: int,
-        robots: Mapping[int, RobotView],
+        robots: Mapping[int, SceneRobot],
         segments: Iterable[Segment] = (),
     ) -> dict[str, Any]:
         """A whole ``foxglove.SceneUpdate``: arena, every robot, and the pooling links."""
@@ -357,6 +357,6 @@ class ArenaScene:
         entities += [self.robot(ns, robot, view) for robot, view in sorted(robots.items())]
         return {"deletions": [], "entities": entities}
 
-    def robot_update(self, ns: int, robot: int, view: RobotView) -> dict[str, Any]:
+    def robot_update(self, ns: int, robot: int, view: SceneRobot) -> dict[str, Any]:
         """A ``foxglove.SceneUpdate`` that replaces one robot's entity (its state changed)."""
         return {"deletions": [], "entities": [self.robot(ns, robot, view)]}

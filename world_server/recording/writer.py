@@ -146,7 +146,7 @@ class McapRecorder:
         self._encoder = msgspec.json.Encoder()
         # Scene state: the latest pose and status of each robot, and pooling links.
         self.poses: dict[int, tuple[float, float, float]] = {}
-        self.views: dict[int, foxglove.RobotView] = {}
+        self.views: dict[int, foxglove.SceneRobot] = {}
         self._pose_batch: list[tuple[int, float, float, float]] = []
         self._pose_batch_ns = 0
         self.poolings = PoolingTracker()  # who each pooling joined, as the live page sees it
@@ -396,8 +396,8 @@ class McapRecorder:
         self._write(channel, ns, sample.payload, sample.wall_ns)
         robot = channel.robot
         assert robot is not None
-        previous = self.views.get(robot, foxglove.RobotView())
-        view = foxglove.RobotView(status.phase, status.decided_site, status.trips, status.poolings)
+        previous = self.views.get(robot, foxglove.SceneRobot())
+        view = foxglove.SceneRobot(status.phase, status.decided_site, status.trips, status.poolings)
         self.views[robot] = view
         pooling, _ = self.poolings.on_status(status)
         if pooling is not None:
@@ -433,7 +433,7 @@ class McapRecorder:
             if pooled_ns >= recent
             for segment in robot_segments
         ]
-        views = {robot: self.views.get(robot, foxglove.RobotView()) for robot in self.poses}
+        views = {robot: self.views.get(robot, foxglove.SceneRobot()) for robot in self.poses}
         update = self.scene.update(ns, views, segments)
         self._write_derived("scene", foxglove.SCENE_UPDATE, ns, update, sample.wall_ns)
 
@@ -441,7 +441,7 @@ class McapRecorder:
         meta = self._decoded("camera meta", sample.attachment, sample)
         if meta is None:
             return
-        if len(sample.payload) > protocol.MAX_FRAME_BYTES:
+        if len(sample.payload) > protocol.MAX_CAMERA_FRAME_BYTES:
             self.reject(sample, f"camera frame of {len(sample.payload)} bytes")
             return
         ns = self._tick_ns(meta.tick)

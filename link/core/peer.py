@@ -9,7 +9,8 @@ the robot's link key, the session, the sequence number (each taken once), the di
 and a rate bound; a refusal is counted by reason and never raised.
 
 A newer session of the same robot (the program restarted, or its link came back) replaces
-the old one: ``Closed`` then ``Opened``, so that the run sees the robot leave and join.
+the old one: ``SessionClosed`` then ``SessionOpened``, so that the run sees the robot leave
+and join.
 """
 
 from __future__ import annotations
@@ -20,7 +21,9 @@ from collections import Counter, deque
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 
-from wire import link, protocol
+from link.core import codec
+from link.core.pacing import TokenBucket, percentile
+from wire import protocol
 
 log = logging.getLogger("bridge")
 
@@ -34,12 +37,12 @@ LOGGED_REFUSALS = 10  # per robot; every one is counted
 
 
 @dataclass(frozen=True)
-class Opened:
+class SessionOpened:
     robot: int
 
 
 @dataclass(frozen=True)
-class Closed:
+class SessionClosed:
     robot: int
     reason: str
 
@@ -47,12 +50,12 @@ class Closed:
 @dataclass(frozen=True)
 class Message:
     robot: int
-    kind: link.DataKind
+    kind: codec.DataKind
     payload: bytes
     attachment: bytes | None
 
 
-PeerEvent = Opened | Closed | Message
+PeerEvent = SessionOpened | SessionClosed | Message
 
 
 @dataclass
@@ -76,24 +79,24 @@ class LinkPeer:
         self,
         robot: int,
         key: bytes,
-        welcome: link.LinkWelcome,
+        welcome: codec.LinkWelcome,
         *,
-        transport: link.Transport,
+        transport: codec.Transport,
         address: str,
-        nonce: Callable[[], bytes] = lambda: secrets.token_bytes(link.NONCE_BYTES),
+        nonce: Callable[[], bytes] = lambda: secrets.token_bytes(codec.NONCE_BYTES),
     ) -> None:
         self.robot = robot
         self.key = key  # the robot's link key, never its run key
         self.welcome = welcome
-        self.welcome_body = link.encode_welcome(welcome)
-        self.transport: link.Transport = transport
+        self.welcome_body = codec.encode_welcome(welcome)
+        self.transport: codec.Transport = transport
         self.address = address
         self.new_nonce = nonce
         self.session: Session | None = None
         self.pending: Session | None = None  # welcomed, not yet proven by the robot
-        self.window = link.ReplayWindow()
-        self.hellos = link.RecentNonces()
-        self.bucket = link.TokenBucket(FRAME_RATE, FRAME_BURST)
+        self.window = codec.ReplayWindow()
+        self.hellos = codec.RecentNonces()
+        self.bucket = TokenBucket(FRAME_RATE, FRAME_BURST)
         self.last_heard = 0.0
         self.next_ping = 0.0
         self.ping_id = 0
@@ -143,36 +146,36 @@ class LinkPeer:
         if now >= self.next_ping:
             self.ping_id += 1
             self.outstanding[self.ping_id] = now
-            self._send(link.FrameType.PING, self.ping_id.to_bytes(link.PING_BODY_BYTES, "big"))
+            self._send(codec.FrameType.PING, self.ping_id.to_bytes(codec.PING_BODY_BYTES, "big"))
             self.next_ping = now + self.welcome.ping_every
         return []
 
     # --- sending -----------------------------------------------------------------------
 
-    def send(self, kind: link.DataKind, payload: bytes, attachment: bytes | None) -> bool:
+    def send(self, kind: codec.DataKind, payload: bytes, attachment: bytes | None) -> bool:
         """Relay one message of the run to the robot; False if no session carries it (or it
         cannot go in a frame: a camera frame too big for the link, counted)."""
         if self.session is None:
             return False
         try:
-            self._send(link.FrameType.DATA, link.encode_data(kind, payload, attachment))
-        except link.LinkError as error:
+            self._send(codec.FrameType.DATA, codec.encode_data(kind, payload, attachment))
+        except codec.LinkError as error:
             self._refuse(error)
             return False
         return True
 
-    def close(self, reason: link.ByeReason) -> list[PeerEvent]:
+    def close(self, reason: codec.ByeReason) -> list[PeerEvent]:
         """End the session (the bridge stops): say bye to the program."""
         if self.session is None:
             return []
-        self._send(link.FrameType.BYE, bytes((reason,)))
+        self._send(codec.FrameType.BYE, bytes((reason,)))
         return self._close(f"the bridge said bye ({reason.name.lower()})")
 
-    def _send(self, kind: link.FrameType, body: bytes) -> None:
+    def _send(self, kind: codec.FrameType, body: bytes) -> None:
         session = self.session
         assert session is not None
         session.sent_seq += 1
-        frame = link.Frame(
+        frame = codec.Frame(
             kind,
             True,
             self.robot,
@@ -182,7 +185,7 @@ class LinkPeer:
             body,
             encrypted=session.cipher_key is not None,
         )
-        self._outgoing.append((link.seal(frame, self.key, session.cipher_key), session.target))
+        self._outgoing.append((codec.seal(frame, self.key, session.cipher_key), session.target))
 
     # --- receiving ---------------------------------------------------------------------
 
@@ -190,81 +193,76 @@ class LinkPeer:
         """Take one frame that came from ``source``; the events it makes."""
         try:
             return self._receive(data, source, now)
-        except link.LinkError as error:
+        except codec.LinkError as error:
             self._refuse(error)
             return []
 
-    def refuse(self, error: link.LinkError) -> None:
+    def refuse(self, error: codec.LinkError) -> None:
         """Count a frame refused before it reached this peer (by its transport)."""
         self._refuse(error)
 
-    def _refuse(self, error: link.LinkError) -> None:
+    def _refuse(self, error: codec.LinkError) -> None:
         self.refused[error.refusal] += 1
         if sum(self.refused.values()) <= LOGGED_REFUSALS:
             log.warning("robot %d: refused a link frame: %s", self.robot, error)
 
     def _receive(self, data: bytes, source: Hashable, now: float) -> list[PeerEvent]:
         if len(data) > MAX_FROM_ROBOT_BYTES:
-            raise link.LinkError(link.Refusal.OVERSIZE, f"{len(data)} bytes from a robot")
-        header = link.read_header(data)
+            raise codec.LinkError(codec.Refusal.OVERSIZE, f"{len(data)} bytes from a robot")
+        header = codec.read_header(data)
         if header.robot != self.robot or header.from_bridge:
-            raise link.LinkError(link.Refusal.UNEXPECTED, "not a frame of this robot")
-        if header.type is link.FrameType.HELLO:
-            frame = link.open_frame(data, self.key)
-            link.check_body(frame)
+            raise codec.LinkError(codec.Refusal.UNEXPECTED, "not a frame of this robot")
+        if header.type is codec.FrameType.HELLO:
+            frame = codec.open_frame(data, self.key)
+            codec.check_body(frame)
             self._hello(frame, source, now)
             return []
         nonces = (header.robot_nonce, header.bridge_nonce)
         events: list[PeerEvent] = []
         session = self.session
         if self.pending is not None and nonces == self.pending.nonces:
-            frame = link.open_frame(data, self.key, self.pending.cipher_key)
-            link.check_body(frame)
+            frame = codec.open_frame(data, self.key, self.pending.cipher_key)
+            codec.check_body(frame)
             if session is not None:
                 events += self._close("a newer session replaced it")
             session = self.session = self.pending
             self.pending = None
-            self.window = link.ReplayWindow()
+            self.window = codec.ReplayWindow()
             self.sessions += 1
             self.next_ping = now
-            events.append(Opened(self.robot))
+            events.append(SessionOpened(self.robot))
             log.info("robot %d: link session %d open (%s)", self.robot, self.sessions, source)
         elif session is not None and nonces == session.nonces:
-            frame = link.open_frame(data, self.key, session.cipher_key)
-            link.check_body(frame)
+            frame = codec.open_frame(data, self.key, session.cipher_key)
+            codec.check_body(frame)
         else:
-            raise link.LinkError(link.Refusal.UNEXPECTED, "a frame of no open session")
-        if frame.encrypted != (session.cipher_key is not None):
-            raise link.LinkError(link.Refusal.UNEXPECTED, "not protected as the session is")
-        refused = self.window.refuses(frame.seq)
-        if refused is not None:
-            raise link.LinkError(link.Refusal.REPLAYED, refused)
-        self.window.take(frame.seq)
+            raise codec.LinkError(codec.Refusal.UNEXPECTED, "a frame of no open session")
+        self.window.admit(frame, encrypted=session.cipher_key is not None)
         if not self.bucket.take(now):
-            raise link.LinkError(link.Refusal.RATE, f"more than {FRAME_RATE:g} frames a second")
+            raise codec.LinkError(codec.Refusal.RATE, f"more than {FRAME_RATE:g} frames a second")
         self.last_heard = now
         session.target = source  # a robot that roams (a new address) is followed once proven
         self.frames_in += 1
         self.bytes_in += len(data)
         return events + self._handle(frame, now)
 
-    def _hello(self, frame: link.Frame, source: Hashable, now: float) -> None:
+    def _hello(self, frame: codec.Frame, source: Hashable, now: float) -> None:
         pending = self.pending
         if pending is not None and frame.robot_nonce == pending.robot_nonce:
             pending.target = source
             self._outgoing.append((pending.welcome, source))  # the hello again: same answer
             return
         if frame.robot_nonce in self.hellos:
-            raise link.LinkError(link.Refusal.REPLAYED, "a hello already answered")
+            raise codec.LinkError(codec.Refusal.REPLAYED, "a hello already answered")
         self.hellos.add(frame.robot_nonce)
         bridge_nonce = self.new_nonce()
         cipher_key = (
-            link.session_key(self.key, frame.robot_nonce, bridge_nonce)
+            codec.session_key(self.key, frame.robot_nonce, bridge_nonce)
             if self.welcome.cipher != "none"
             else None
         )
-        welcome = link.Frame(
-            link.FrameType.WELCOME,
+        welcome = codec.Frame(
+            codec.FrameType.WELCOME,
             True,
             self.robot,
             frame.robot_nonce,
@@ -272,42 +270,42 @@ class LinkPeer:
             0,
             self.welcome_body,
         )
-        sealed = link.seal(welcome, self.key)
+        sealed = codec.seal(welcome, self.key)
         self.pending = Session(frame.robot_nonce, bridge_nonce, cipher_key, source, sealed)
         self._outgoing.append((sealed, source))
 
-    def _handle(self, frame: link.Frame, now: float) -> list[PeerEvent]:
-        if frame.type is link.FrameType.PING:
-            self._send(link.FrameType.PONG, frame.body)
-        elif frame.type is link.FrameType.PONG:
+    def _handle(self, frame: codec.Frame, now: float) -> list[PeerEvent]:
+        if frame.type is codec.FrameType.PING:
+            self._send(codec.FrameType.PONG, frame.body)
+        elif frame.type is codec.FrameType.PONG:
             sent = self.outstanding.pop(int.from_bytes(frame.body, "big"), None)
             if sent is not None:
                 self.rtts.append(now - sent)
                 self.answered += 1
-        elif frame.type is link.FrameType.BYE:
-            reason = link.ByeReason(frame.body[0])
+        elif frame.type is codec.FrameType.BYE:
+            reason = codec.ByeReason(frame.body[0])
             return self._close(f"the program said bye ({reason.name.lower()})")
-        elif frame.type is link.FrameType.DATA:
-            kind, payload, attachment = link.decode_data(frame.body)
-            if kind not in link.FROM_ROBOT:
-                raise link.LinkError(link.Refusal.UNEXPECTED, f"{kind.name} is not a robot's")
+        elif frame.type is codec.FrameType.DATA:
+            kind, payload, attachment = codec.decode_data(frame.body)
+            if kind not in codec.FROM_ROBOT:
+                raise codec.LinkError(codec.Refusal.UNEXPECTED, f"{kind.name} is not a robot's")
             return [Message(self.robot, kind, payload, attachment)]
         else:
-            raise link.LinkError(link.Refusal.UNEXPECTED, f"a {frame.type.name} in a session")
+            raise codec.LinkError(codec.Refusal.UNEXPECTED, f"a {frame.type.name} in a session")
         return []
 
     def _close(self, reason: str) -> list[PeerEvent]:
         log.warning("robot %d: link session %d closed: %s", self.robot, self.sessions, reason)
         self.session = None
         self.outstanding.clear()
-        return [Closed(self.robot, reason)]
+        return [SessionClosed(self.robot, reason)]
 
     # --- figures -----------------------------------------------------------------------
 
     def stats(self) -> protocol.LinkStats:
         settled = self.answered + self.lost
-        median = link.percentile(self.rtts, 0.5)
-        p95 = link.percentile(self.rtts, 0.95)
+        median = percentile(self.rtts, 0.5)
+        p95 = percentile(self.rtts, 0.95)
         return protocol.LinkStats(
             v=protocol.VERSION,
             robot=self.robot,
@@ -325,6 +323,6 @@ class LinkPeer:
             bytes_out=self.bytes_out,
             impaired=self.impaired,
             refused=protocol.LinkRefusals(
-                **{reason.value: self.refused[reason] for reason in link.Refusal}
+                **{reason.value: self.refused[reason] for reason in codec.Refusal}
             ),
         )

@@ -42,8 +42,8 @@ MAGIC = b"BN"
 FRAME_VERSION = 1
 HEADER_BYTES = 4
 MAX_SENDER_BYTES = 64
-MAX_PAYLOAD_BYTES = 2048  # an opinion over n = 100 sites fits, with room to spare
-MAX_DATAGRAM_BYTES = HEADER_BYTES + MAX_SENDER_BYTES + MAX_PAYLOAD_BYTES
+MAX_RADIO_PAYLOAD_BYTES = 2048  # an opinion over n = 100 sites fits, with room to spare
+MAX_DATAGRAM_BYTES = HEADER_BYTES + MAX_SENDER_BYTES + MAX_RADIO_PAYLOAD_BYTES
 DEFAULT_MAX_PER_POLL = 1024  # bounds one poll under a flood; the rest waits for the next
 RECEIVE_BUFFER_BYTES = 256 * 1024  # a burst of ~100 full datagrams at one poll
 _MAX_LOGGED_SOURCES = 1000  # memory bound for "log the first bad datagram per source"
@@ -74,8 +74,10 @@ def encode_frame(sender: str, payload: bytes) -> bytes:
     name = sender_bytes(sender)
     if not payload:
         raise FrameError("empty payload")
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise FrameTooLargeError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}")
+    if len(payload) > MAX_RADIO_PAYLOAD_BYTES:
+        raise FrameTooLargeError(
+            f"payload of {len(payload)} bytes exceeds {MAX_RADIO_PAYLOAD_BYTES}"
+        )
     return MAGIC + bytes((FRAME_VERSION, len(name))) + name + bytes(payload)
 
 
@@ -96,8 +98,10 @@ def decode_frame(datagram: bytes) -> tuple[str, bytes]:
     payload = bytes(datagram[HEADER_BYTES + length :])
     if not payload:
         raise FrameError("empty payload")
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise FrameTooLargeError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}")
+    if len(payload) > MAX_RADIO_PAYLOAD_BYTES:
+        raise FrameTooLargeError(
+            f"payload of {len(payload)} bytes exceeds {MAX_RADIO_PAYLOAD_BYTES}"
+        )
     return name.decode("ascii"), payload
 
 
@@ -110,7 +114,7 @@ class UdpRadioStats:
     received: int = 0  # valid frames handed to the controller
     own_echoes: int = 0  # our own datagrams, looped back by the host, skipped
     malformed: int = 0  # not a frame: bad magic, version, sender or empty payload
-    oversize: int = 0  # longer than MAX_DATAGRAM_BYTES, or a payload over MAX_PAYLOAD_BYTES
+    oversize: int = 0  # longer than MAX_DATAGRAM_BYTES, or a payload over MAX_RADIO_PAYLOAD_BYTES
 
     @property
     def dropped(self) -> int:
@@ -362,7 +366,7 @@ __all__ = [
     "DEFAULT_GROUP",
     "DEFAULT_PORT",
     "MAX_DATAGRAM_BYTES",
-    "MAX_PAYLOAD_BYTES",
+    "MAX_RADIO_PAYLOAD_BYTES",
     "FrameError",
     "FrameTooLargeError",
     "UdpRadio",

@@ -27,8 +27,8 @@ A UDP datagram is one frame. On a serial line a frame travels as
 ``COBS(frame + CRC-32(frame)) 0x00`` (CRC-32 of zlib, big-endian): the zero byte ends
 each frame, so a receiver finds the next frame after any corruption.
 
-Nothing here does I/O or reads a clock: the two ends (``robot_agent/link``,
-``world_server/bridge``) give the time where it matters.
+Nothing here does I/O or reads a clock: the two ends (``link/io/program.py`` for the
+robot, ``world_server/bridge`` for the world's side) give the time where it matters.
 """
 
 from __future__ import annotations
@@ -38,7 +38,6 @@ import hashlib
 import hmac
 import struct
 import zlib
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
@@ -68,6 +67,8 @@ PING_BODY_BYTES = 8
 LINK_KEY_LABEL = b"bestofn-link"
 SESSION_KEY_LABEL = b"bestofn-link-session"
 NO_NONCE = bytes(NONCE_BYTES)
+PING_EVERY = 0.5  # seconds between the bridge's pings, unless its welcome says otherwise
+SILENCE = 3.0  # seconds of silence that end a session (before the welcome: always this)
 REPLAY_WINDOW = 64  # sequence numbers behind the highest that may still arrive (reordering)
 
 FROM_BRIDGE = 0x01
@@ -383,6 +384,17 @@ class ReplayWindow:
             return f"sequence number {seq} was already taken"
         return None
 
+    def admit(self, frame: Frame, encrypted: bool) -> None:
+        """The checks every frame of an open session passes at either end, in this order:
+        protected as the session is, and its sequence number not taken before (it is then
+        taken). LinkError otherwise."""
+        if frame.encrypted != encrypted:
+            raise LinkError(Refusal.UNEXPECTED, "not protected as the session is")
+        refused = self.refuses(frame.seq)
+        if refused is not None:
+            raise LinkError(Refusal.REPLAYED, refused)
+        self.take(frame.seq)
+
     def take(self, seq: int) -> None:
         if seq > self.highest:
             shift = seq - self.highest
@@ -470,59 +482,6 @@ class Deframer:
             self.buffer.clear()
             self.overflowed = False
             start = end + 1
-
-
-# --- pacing a serial line ------------------------------------------------------------------
-
-
-BITS_PER_BYTE = 10  # 8N1: a start bit, eight data bits, a stop bit
-
-
-@dataclass
-class LinePacer:
-    """When bytes written to a serial line at ``baud`` have all left: a frame is handed on
-    once its last byte would have arrived, so a pseudo-terminal (which moves bytes at memory
-    speed) behaves like the line it stands for."""
-
-    baud: int
-    free_at: float = 0.0
-
-    def done_at(self, size: int, now: float) -> float:
-        """Queue ``size`` bytes at ``now``: the time their last byte arrives."""
-        self.free_at = max(now, self.free_at) + size * BITS_PER_BYTE / self.baud
-        return self.free_at
-
-
-# --- rates ---------------------------------------------------------------------------------
-
-
-@dataclass
-class TokenBucket:
-    """At most ``rate`` a second on average, ``burst`` at once."""
-
-    rate: float
-    burst: float
-    tokens: float = -1.0
-    at: float = 0.0
-
-    def take(self, now: float, amount: float = 1.0) -> bool:
-        if self.tokens < 0:
-            self.tokens, self.at = self.burst, now
-        self.tokens = min(self.burst, self.tokens + (now - self.at) * self.rate)
-        self.at = now
-        if self.tokens < amount:
-            return False
-        self.tokens -= amount
-        return True
-
-
-def percentile(values: Iterable[float], fraction: float) -> float | None:
-    """The ``fraction`` quantile of ``values`` (nearest rank), or None if there are none."""
-    ordered = sorted(values)
-    if not ordered:
-        return None
-    rank = min(len(ordered) - 1, max(0, round(fraction * (len(ordered) - 1))))
-    return ordered[rank]
 
 
 # --- addresses -----------------------------------------------------------------------------

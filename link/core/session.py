@@ -4,7 +4,7 @@
 in DATA frames, answers the bridge's pings and notices when the bridge goes quiet. A
 session is the pair of nonces of one hello and its welcome; every frame after the welcome
 carries them and a sequence number, each direction counting from 1, and its tag under the
-robot's link key (wire/link.py). A frame that is not authentic, not of this session, or
+robot's link key (link/core/codec.py). A frame that is not authentic, not of this session, or
 a sequence number already taken is refused and counted (``refused``), never raised.
 
 When the bridge is silent for the welcome's ``silence`` seconds, or says bye, the session
@@ -20,26 +20,25 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from wire import link
+from link.core import codec
 
-log = logging.getLogger("robot_agent.link")
+log = logging.getLogger("link.session")
 
 HELLO_EVERY = 0.5  # seconds between hellos until one is answered
-SILENCE_BEFORE_WELCOME = 3.0  # seconds of silence that end a session, until the welcome says
 
 
 @dataclass(frozen=True)
 class Welcomed:
     """A session opened: the run's settings for it."""
 
-    welcome: link.LinkWelcome
+    welcome: codec.LinkWelcome
 
 
 @dataclass(frozen=True)
-class Received:
+class LinkData:
     """A message of the run for the robot."""
 
-    kind: link.DataKind
+    kind: codec.DataKind
     payload: bytes
     attachment: bytes | None
 
@@ -52,7 +51,7 @@ class Lost:
     ended: bool = False
 
 
-Event = Welcomed | Received | Lost
+Event = Welcomed | LinkData | Lost
 
 
 class LinkClient:
@@ -63,24 +62,24 @@ class LinkClient:
         robot: int,
         key: bytes,
         *,
-        nonce: Callable[[], bytes] = lambda: secrets.token_bytes(link.NONCE_BYTES),
+        nonce: Callable[[], bytes] = lambda: secrets.token_bytes(codec.NONCE_BYTES),
         hello_every: float = HELLO_EVERY,
     ) -> None:
         self.robot = robot
-        self.key = key  # the link key (link.link_key of the robot's run key)
+        self.key = key  # the link key (codec.link_key of the robot's run key)
         self.new_nonce = nonce
         self.hello_every = hello_every
         self.refused: Counter[str] = Counter()
         self.sessions = 0
-        self.welcome: link.LinkWelcome | None = None
+        self.welcome: codec.LinkWelcome | None = None
         self.robot_nonce = nonce()
         self.bridge_nonce: bytes | None = None  # None: saying hello
         self.cipher_key: bytes | None = None
         self.sent_seq = 0
-        self.window = link.ReplayWindow()
+        self.window = codec.ReplayWindow()
         self.next_hello = 0.0
         self.last_heard = 0.0
-        self.silence = SILENCE_BEFORE_WELCOME
+        self.silence = codec.SILENCE  # until the welcome says
         self._outgoing: list[bytes] = []
 
     @property
@@ -110,10 +109,10 @@ class LinkClient:
         return []
 
     def _send_hello(self, now: float) -> None:
-        frame = link.Frame(
-            link.FrameType.HELLO, False, self.robot, self.robot_nonce, link.NO_NONCE, 0
+        frame = codec.Frame(
+            codec.FrameType.HELLO, False, self.robot, self.robot_nonce, codec.NO_NONCE, 0
         )
-        self._outgoing.append(link.seal(frame, self.key))
+        self._outgoing.append(codec.seal(frame, self.key))
         self.next_hello = now + self.hello_every
 
     def _lose(self, reason: str, now: float, ended: bool = False) -> Lost:
@@ -126,26 +125,26 @@ class LinkClient:
 
     # --- sending -------------------------------------------------------------------------
 
-    def send(self, kind: link.DataKind, payload: bytes, attachment: bytes | None) -> bool:
+    def send(self, kind: codec.DataKind, payload: bytes, attachment: bytes | None) -> bool:
         """Queue one message of the robot; False if there is no session to carry it (or it
         is too big for a frame: counted as refused)."""
         if not self.open:
             return False
         try:
-            self._send(link.FrameType.DATA, link.encode_data(kind, payload, attachment))
-        except link.LinkError as error:
+            self._send(codec.FrameType.DATA, codec.encode_data(kind, payload, attachment))
+        except codec.LinkError as error:
             self.refused[error.refusal] += 1
             return False
         return True
 
-    def bye(self, reason: link.ByeReason) -> None:
+    def bye(self, reason: codec.ByeReason) -> None:
         if self.open:
-            self._send(link.FrameType.BYE, bytes((reason,)))
+            self._send(codec.FrameType.BYE, bytes((reason,)))
 
-    def _send(self, kind: link.FrameType, body: bytes) -> None:
+    def _send(self, kind: codec.FrameType, body: bytes) -> None:
         assert self.bridge_nonce is not None
         self.sent_seq += 1
-        frame = link.Frame(
+        frame = codec.Frame(
             kind,
             False,
             self.robot,
@@ -155,7 +154,7 @@ class LinkClient:
             body,
             encrypted=self.cipher_key is not None,
         )
-        self._outgoing.append(link.seal(frame, self.key, self.cipher_key))
+        self._outgoing.append(codec.seal(frame, self.key, self.cipher_key))
 
     # --- receiving -----------------------------------------------------------------------
 
@@ -163,64 +162,59 @@ class LinkClient:
         """Take one frame from the link; the events it makes (refusals are counted)."""
         try:
             return self._receive(data, now)
-        except link.LinkError as error:
+        except codec.LinkError as error:
             self.refused[error.refusal] += 1
             if sum(self.refused.values()) <= 10:
                 log.warning("robot %d: refused a link frame: %s", self.robot, error)
             return []
 
     def _receive(self, data: bytes, now: float) -> list[Event]:
-        header = link.read_header(data)
+        header = codec.read_header(data)
         if header.robot != self.robot or not header.from_bridge:
-            raise link.LinkError(link.Refusal.UNEXPECTED, "not a frame for this robot")
-        frame = link.open_frame(data, self.key, self.cipher_key)
-        link.check_body(frame)
+            raise codec.LinkError(codec.Refusal.UNEXPECTED, "not a frame for this robot")
+        frame = codec.open_frame(data, self.key, self.cipher_key)
+        codec.check_body(frame)
         if frame.robot_nonce != self.robot_nonce:
-            raise link.LinkError(link.Refusal.UNEXPECTED, "a frame of another session")
-        if frame.type is link.FrameType.WELCOME:
+            raise codec.LinkError(codec.Refusal.UNEXPECTED, "a frame of another session")
+        if frame.type is codec.FrameType.WELCOME:
             return self._welcomed(frame, now)
         if frame.bridge_nonce != self.bridge_nonce:
-            raise link.LinkError(link.Refusal.UNEXPECTED, "a frame of another session")
-        if frame.encrypted != (self.cipher_key is not None):
-            raise link.LinkError(link.Refusal.UNEXPECTED, "not protected as the session is")
-        refused = self.window.refuses(frame.seq)
-        if refused is not None:
-            raise link.LinkError(link.Refusal.REPLAYED, refused)
-        self.window.take(frame.seq)
+            raise codec.LinkError(codec.Refusal.UNEXPECTED, "a frame of another session")
+        self.window.admit(frame, encrypted=self.cipher_key is not None)
         self.last_heard = now
-        if frame.type is link.FrameType.PING:
-            self._send(link.FrameType.PONG, frame.body)
+        if frame.type is codec.FrameType.PING:
+            self._send(codec.FrameType.PONG, frame.body)
             return []
-        if frame.type is link.FrameType.BYE:
-            reason = link.ByeReason(frame.body[0])
-            ended = reason is link.ByeReason.RUN_ENDED
+        if frame.type is codec.FrameType.BYE:
+            reason = codec.ByeReason(frame.body[0])
+            ended = reason is codec.ByeReason.RUN_ENDED
             return [self._lose(f"the bridge said bye ({reason.name.lower()})", now, ended)]
-        if frame.type is link.FrameType.DATA:
-            kind, payload, attachment = link.decode_data(frame.body)
-            if kind not in link.TO_ROBOT:
-                raise link.LinkError(link.Refusal.UNEXPECTED, f"{kind.name} is not for a robot")
-            return [Received(kind, payload, attachment)]
+        if frame.type is codec.FrameType.DATA:
+            kind, payload, attachment = codec.decode_data(frame.body)
+            if kind not in codec.TO_ROBOT:
+                raise codec.LinkError(codec.Refusal.UNEXPECTED, f"{kind.name} is not for a robot")
+            return [LinkData(kind, payload, attachment)]
         return []  # a pong: the bridge measures round trips, not this end
 
-    def _welcomed(self, frame: link.Frame, now: float) -> list[Event]:
+    def _welcomed(self, frame: codec.Frame, now: float) -> list[Event]:
         if self.open:
             if frame.bridge_nonce == self.bridge_nonce:
                 return []  # the same welcome again: our hello was repeated
-            raise link.LinkError(link.Refusal.UNEXPECTED, "a second welcome for one hello")
-        welcome = link.decode_welcome(frame.body)
+            raise codec.LinkError(codec.Refusal.UNEXPECTED, "a second welcome for one hello")
+        welcome = codec.decode_welcome(frame.body)
         self.welcome = welcome
         self.bridge_nonce = frame.bridge_nonce
         self.cipher_key = (
-            link.session_key(self.key, self.robot_nonce, frame.bridge_nonce)
+            codec.session_key(self.key, self.robot_nonce, frame.bridge_nonce)
             if welcome.cipher != "none"
             else None
         )
         self.sent_seq = 0
-        self.window = link.ReplayWindow()
+        self.window = codec.ReplayWindow()
         self.silence = welcome.silence
         self.last_heard = now
         self.sessions += 1
         # An authenticated frame of the new session at once: the bridge takes the session
         # (and says the robot is present) only on the robot's first frame in it.
-        self._send(link.FrameType.PING, bytes(link.PING_BODY_BYTES))
+        self._send(codec.FrameType.PING, bytes(codec.PING_BODY_BYTES))
         return [Welcomed(welcome)]
