@@ -1,23 +1,18 @@
 # `make run`: a default swarm to consensus.
-# `make test`: lint, then the whole test suite (every tier; CI's budget for it: 15 minutes
-#   on 2 cores). tests/test_section5.py reruns only seeds 0-9 of Section 5.
+# `make test`: lint, the C robot's unit tests, then the whole test suite (every tier) on
+#   TEST_WORKERS workers (pytest-xdist; its live runs mostly wait on each other), printing
+#   the 20 slowest tests. CI's budget for it: 10 minutes on 2 cores.
 # `make test-fast`: the fast tier only: the tests of the pure layers, which start no process
-#   and open no Zenoh session or network connection (about 950 tests, 100 s wall on a quiet
-#   2-core machine; more when it is shared). The tier is FAST in tests/tiers.py, less the
-#   whole-swarm tests in SLOW; tests/test_tiers.py fails if a test module is in no tier,
-#   and tests/conftest.py fails a fast test that starts a process, connects, listens or
-#   sends on a socket, or opens a Zenoh session.
+#   and open no Zenoh session or network connection. The tier is set per test in
+#   tests/tiers.py; tests/test_tiers.py fails if a test module is in no tier, and
+#   tests/conftest.py fails a fast test that starts a process, connects, listens or sends
+#   on a socket, or opens a Zenoh session.
 # `make check-published`: every published Section 5 run again (all 600 of
-#   docs/section5-runs.json, `swarm section5 --check`; about 7 minutes of both cores), and
-#   the tables of docs/section5.md and the data of Figures 4 and 5 made from them. CI
-#   runs it after `make test`. Published from runs but NOT rerun by any check: the PNGs
-#   (drawn from the checked data); docs/section5.md's lag and settings-study blocks and
-#   docs/section5-lag.json (benchmarks/section5_study.py, section5_lag.py);
-#   docs/scale-runs.json but 3 of its 48 runs (tests/test_scale_doc.py reruns in process
-#   10 robots seeds 0 and 7, 50 robots seed 3, and renders docs/scale.md from the file);
-#   docs/byzantine.md, docs/robustness.md (each says the commit it was made at),
-#   docs/wellstirred.md's Figure 1 table, and docs/performance.md (timings).
-#   docs/testing.md says the same.
+#   docs/section5-runs.json, `swarm section5 --check`; about 7 minutes of both cores), the
+#   tables of docs/section5.md and the data of Figures 4 and 5 made from them; then the
+#   tests that run published runs again (tests/tiers.py PUBLISHED: `pytest --published`).
+#   CI runs it after `make test`. docs/testing.md says what is published from runs but
+#   not run again by any check.
 # All of them create .venv and install the project on first use (and again when the
 # lock changes): the exact versions and hashes of requirements/run.lock (make run) or
 # requirements/test.lock (the rest), then the project itself without dependencies.
@@ -30,6 +25,7 @@ RUN_LOCK := requirements/run.lock
 TEST_LOCK := requirements/test.lock
 UV_VERSION := 0.13.9
 LOCK_OPTIONS := --generate-hashes --universal --fork-strategy fewest --python-version 3.11
+TEST_WORKERS ?= 2
 
 .PHONY: run test test-fast check-published explore lint bench lock c-robot clean
 
@@ -56,7 +52,7 @@ test: $(VENV)/.installed-test
 	$(BIN)/mypy
 	@if command -v $${CC:-gcc} >/dev/null 2>&1; then $(MAKE) -C c_robot test; \
 	else echo "make test: no C compiler ($${CC:-gcc}): the C robot's unit tests are skipped"; fi
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=20
 
 # The robot in C (c_robot/build/c-robot): gcc or cc, and make.
 c-robot:
@@ -65,8 +61,9 @@ c-robot:
 test-fast: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -m fast
 
-check-published: $(VENV)/.installed
+check-published: $(VENV)/.installed-test
 	$(BIN)/swarm section5 --check
+	$(BIN)/python -m pytest --published --durations=20
 
 # The property tests with fresh random examples (make test repeats the same ones).
 explore: $(VENV)/.installed-test

@@ -1,4 +1,4 @@
-"""Byzantine robots against the swarm's defences (issue 9): correct runs vs their number.
+"""Byzantine robots against the swarm's defences: correct runs vs their number.
 
 Whole lockstep runs in one process each (``deploy.inprocess.engine.run_in_process``: the same
 world, controllers and beacon as ``swarm run``, and the same per-robot results), 10
@@ -342,7 +342,7 @@ def write_page(path: Path, section: str) -> None:
     path.write_text(head + section + tail)
 
 
-# --- the defence study (issue 25): --defence trimmed against liars ---------------------
+# --- the defence study: --defence trimmed against liars ------------------------------
 
 DEFENCE_RESULTS = REPO / "docs" / "byzantine-defence-runs.jsonl"
 DEFENCE_FIGURE = "byzantine-defence.png"

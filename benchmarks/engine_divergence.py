@@ -1,4 +1,4 @@
-"""Where do a Zenoh run and an in-process run of the same seed part? (issue 10)
+"""Where do a Zenoh run and an in-process run of the same seed part?
 
 A lockstep run is meant to be deterministic: the same seed gives the same run in one
 process (``--engine inprocess``) and over Zenoh (``swarm run``), tick for tick. This runs

@@ -5,7 +5,7 @@ A live ``swarm run`` (10 robots hosted in one robot process, 10 sites, seed 3, r
 on a Zenoh router this benchmark starts (``swarm router``, loopback TCP), with an
 attacker's session on that router that holds no keys: the place of any client of the
 run's router. The robots stay in one process (``--robots-per-process 10``; the default
-since issue 26 is a process per robot up to 25 robots), as when the figures of
+is a process per robot up to 25 robots), as when the figures of
 docs/security.md were first measured, so that they compare and the batch path (sealed
 by the host identity) is the one flooded. The attacker
 hears the run's authentic messages and, from ``--flood-at`` sim seconds on, sends copies
@@ -14,10 +14,10 @@ seconds, then lets the run end. Each process's peak resident set (VmHWM) is read
 /proc until it exits. Cases:
 
 * ``clean``: no flood (what each process takes anyway);
-* ``replayed-acts-realtime`` (issue 23, case 4): ``--clock realtime``, old acts and radio
-  transmissions replayed (the freshness checks of world_server/core/intake.py and
-  wire/guard.py refuse them);
-* ``replayed-acts-statuses`` (case 5): lockstep, old acts and statuses replayed;
+* ``replayed-acts-realtime`` (case 4 of docs/security.md): ``--clock realtime``, old
+  acts and radio transmissions replayed (the freshness checks of
+  world_server/core/intake.py and wire/guard.py refuse them);
+* ``replayed-acts-statuses``: lockstep, old acts and statuses replayed;
 * ``empty``: empty messages on the acts' and statuses' keys;
 * ``junk-1mb``: 1 MiB of random bytes on the status keys;
 * ``junk-largest``: the largest junk each process still takes in before it drops it: a
@@ -27,11 +27,11 @@ seconds, then lets the run end. Each process's peak resident set (VmHWM) is read
 It also prints what one queued message holds beyond its bytes in each inbox there is
 (tracemalloc), the overhead ``plumbing.inbox`` charges for, and (``--fill``) what an inbox
 filled to its cap with small messages adds to a process's resident set, charged as now
-and as before issue 23 (payload and attachment only): a flood only fills an inbox when
-its process falls behind, which on a given machine it may not, so this is the bound a
-flood reaches at worst. The world server has no inbox since issue 26 (each Zenoh
-callback hands its input to the coordinator at once, under one lock): there is none of
-its to fill or measure, and the benchmark says so.
+and as without the per-message overhead (payload and attachment only): a flood only fills
+an inbox when its process falls behind, which on a given machine it may not, so this is
+the bound a flood reaches at worst. The world server has no inbox (each Zenoh callback
+hands its input to the coordinator at once, under one lock): there is none of its to
+fill or measure, and the benchmark says so.
 
     .venv/bin/python benchmarks/flood_memory.py                    # every case
     .venv/bin/python benchmarks/flood_memory.py --cases clean empty --flood-for 10
@@ -392,9 +392,9 @@ def queued_overheads() -> dict[str, float]:
     return found
 
 
-# Why the world is not among the inboxes measured or filled: it has none (issue 26).
+# Why the world is not among the inboxes measured or filled: it has none.
 NO_INBOX = (
-    "the world server has no inbox (issue 26): each Zenoh callback hands its input to the "
+    "the world server has no inbox: each Zenoh callback hands its input to the "
     "coordinator at once, under one lock, so there is none to measure or fill"
 )
 FILLED = {  # the inboxes a flood can fill: their caps, and a small message of each
@@ -476,7 +476,7 @@ def main() -> int:
     if args.fill_one:
         fill_one(*args.fill_one)
         return 0
-    charged = getattr(inbox_module, "ITEM_OVERHEAD_BYTES", 0)  # 0 before issue 23
+    charged = getattr(inbox_module, "ITEM_OVERHEAD_BYTES", 0)  # 0 in older checkouts
     print(f"charged per queued message: {charged} bytes + its bytes")
     for name, bytes_ in queued_overheads().items():
         print(f"  measured in the {name}'s inbox: {bytes_:.0f} bytes beyond its bytes")

@@ -1,4 +1,4 @@
-"""How much memory does ``swarm report`` take on a large recording? (issue 24)
+"""How much memory does ``swarm report`` take on a large recording?
 
 Runs ``swarm report RECORDING --out DIR`` in a child process, of this checkout or of
 another one (``--checkout``: e.g. a ``git worktree`` of the commit before a change), and
@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
-LIMIT_MB = 500.0  # issue 24: a 200-robot recording's report stays under this
+LIMIT_MB = 500.0  # a 200-robot recording's report stays under this
 
 
 def make_recording(path: Path, robots: int, seed: int) -> None:

@@ -1,4 +1,4 @@
-"""Robustness of the swarm's decision to radio loss and camera noise (issue 5).
+"""Robustness of the swarm's decision to radio loss and camera noise.
 
 Sweeps whole lockstep runs in one process each (``deploy.inprocess.engine.run_in_process``: the
 same world, controllers and beacon as ``swarm run``, and the same per-robot results), 10

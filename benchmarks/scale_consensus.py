@@ -1,4 +1,4 @@
-"""Do large swarms reach consensus? Sim time to consensus against swarm size (issue 10).
+"""Do large swarms reach consensus? Sim time to consensus against swarm size.
 
 Runs whole lockstep swarms (10 sites, default settings) to consensus or ``--timeout`` sim
 seconds, one run per (size, seed), and prints per run: consensus, correct, the sim time
@@ -13,9 +13,10 @@ through real processes instead: ``swarm run --json --no-record --quiet`` (hostin
 ``--save FILE`` keeps the results (JSON), ``--load FILE...`` adds earlier ones (a later
 run of the same size and seed replaces an earlier one), and ``--doc`` writes docs/scale.md
 with the tables and a box plot of sim time to consensus against swarm size
-(docs/scale.png), and README's per-size table; ``--before FILE`` adds a before/after table from the
-results of another checkout (main's code before the fix of issue 10, run with this
-script). The commands that made docs/scale.md are listed there (``COMMANDS``).
+(docs/scale.png), and README's per-size table; ``--before FILE`` adds a before/after table
+from the results of another checkout (the code before the large-swarm fixes, parking lanes
+and long legs, run with this script). The commands that made docs/scale.md are listed there
+(``COMMANDS``).
 
     .venv/bin/python benchmarks/scale_consensus.py --parallel 2          # the whole plan
     .venv/bin/python benchmarks/scale_consensus.py --sizes 200 --seeds 8 --zenoh
@@ -44,7 +45,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 SITES = 10
-# The plan of issue 24: ten seeds of every size up to 500 robots, three of 1000.
+# The whole plan: ten seeds of every size up to 500 robots, three of 1000.
 DEFAULT_PLAN = {
     10: range(10),
     50: range(10),
@@ -53,8 +54,8 @@ DEFAULT_PLAN = {
     500: range(10),
     1000: range(3),
 }
-# What docs/scale.md publishes at least: issue 10's plan (ten seeds up to 200 robots, three
-# of 500); issue 24's further 500- and 1000-robot seeds join it as their runs finish.
+# What docs/scale.md publishes at least: ten seeds up to 200 robots and three of 500; the
+# whole plan's further 500- and 1000-robot seeds join them as their runs finish.
 PUBLISHED_PLAN = {10: range(10), 50: range(10), 100: range(10), 200: range(10), 500: range(3)}
 DEFAULT_TIMEOUT = 6000.0  # sim seconds: well beyond the slowest run of the plan
 ROBOTS_PER_PROCESS = 50  # --zenoh: hosted robots per process above this swarm size
@@ -322,7 +323,7 @@ COMMANDS = f"""\
 .venv/bin/python benchmarks/scale_consensus.py --no-run \\
     --load small.json 500-01.json 500-2.json zenoh.json zenoh200.json zenoh500.json \\
     --save {RUNS_FILE} --before {BEFORE_FILE} --doc
-# issue 24: the other seeds of 500 robots and 1000 robots, one run per command, two
+# the other seeds of 500 robots and 1000 robots, one run per command, two
 # commands at a time (niced), each given up at 12000 s of sim time
 .venv/bin/python benchmarks/scale_consensus.py --sizes 500 --seeds 3 --timeout 12000 \\
     --save r500-s3.json                   # and so on, for seeds 4 to 9
@@ -374,11 +375,11 @@ def render_doc(runs: Sequence[Run], before: Sequence[Run], figure: str) -> str:
         ]
     if before:
         parts += [
-            "## Before and after the fix of issue 10\n",
-            "Before: main's code before the fix (parking rings a body length apart, and a "
+            "## Before and after the large-swarm fixes\n",
+            "Before: the code before the fixes (parking rings a body length apart, and a "
             "fixed 120 s for any leg), the same script and seeds, runs given up at 3000 s of "
-            "sim time. The causes and the fixes are in [history.md](history.md) (issue 10: "
-            "parking lanes, long legs).\n",
+            "sim time. The causes and the fixes (parking lanes, long legs) are in "
+            "[history.md](history.md#large-swarms-that-did-not-finish).\n",
             before_after(before, in_process) + "\n",
             HEADER + "\n" + "\n".join(row(run) for run in before) + "\n",
         ]
@@ -396,7 +397,8 @@ def unfinished_note(runs: Sequence[Run]) -> list[str]:
     )
     return [
         f"**Not every run ended in consensus**: {which}. What held the last robots of "
-        "earlier runs, and how it was found, is in [history.md](history.md) (issue 10).\n"
+        "earlier runs, and how it was found, is in "
+        "[history.md](history.md#large-swarms-that-did-not-finish).\n"
     ]
 
 

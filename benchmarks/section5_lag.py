@@ -1,4 +1,4 @@
-"""Why the last robot lags: the paper's diagnosis measured on our swarm (issue 14).
+"""Why the last robot lags: the paper's diagnosis measured on our swarm.
 
 Reads the observed runs of ``benchmarks/section5_study.py`` (one JSON line per run:
 every pooling with its members and the sites each still held possible, and at every

@@ -1,4 +1,4 @@
-"""Section 5 study: how the settings the paper leaves open move time to consensus (issue 14).
+"""Section 5 study: how the settings the paper leaves open move time to consensus.
 
 Runs whole lockstep runs in one process each (``deploy.inprocess.engine.run_in_process``: the same
 world, controllers and beacon as ``swarm run``, the same per-robot results), ten robots,

@@ -1,4 +1,4 @@
-"""Where are the robots that never decide, and what holds them? (issue 10)
+"""Where are the robots that never decide, and what holds them? (large swarms)
 
 Runs one lockstep swarm in one process (``deploy.inprocess.engine.run_in_process``: the same
 world, controllers and beacon as ``swarm run``) and watches it: once a second of sim time

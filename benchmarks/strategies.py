@@ -1,4 +1,4 @@
-"""The paper's strategy against its rivals (issue 25): consensus time and accuracy against n.
+"""The paper's strategy against its rivals: consensus time and accuracy against n.
 
 Two parts, each resumable (every result is appended to ``docs/strategies-runs.jsonl`` as
 it comes, and a task already there is not run again):

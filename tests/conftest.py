@@ -5,6 +5,9 @@ source, so the same commit passes or fails the same way every time. ``make explo
 (``HYPOTHESIS_PROFILE=explore``) draws fresh random examples (500 per test that sets no
 count of its own) to hunt for new edge cases; pin any it finds as a regression test.
 
+The tests in ``tiers.PUBLISHED`` run published runs again: they run with ``--published``
+(``make check-published``), and only they; ``make test`` leaves them out.
+
 Every test of a module in ``tiers.FAST`` but those in ``tiers.SLOW`` is marked ``fast``
 (``make test-fast`` runs ``pytest -m fast``), and while it runs, starting a process, using
 the network or opening a Zenoh session fails it: a module that does belongs in
@@ -23,7 +26,7 @@ from typing import Any
 import pytest
 import zenoh
 from hypothesis import settings
-from tiers import is_fast
+from tiers import is_fast, is_published
 
 # No per-example deadline in either: timing varies on a loaded CI machine.
 settings.register_profile("repeatable", derandomize=True, deadline=None, print_blob=True)
@@ -35,10 +38,26 @@ class FastTierError(AssertionError):
     """A test of the fast tier started a process, used the network or opened Zenoh."""
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--published",
+        action="store_true",
+        help="run only the checks of published runs (tests/tiers.py PUBLISHED)",
+    )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    published_only = bool(config.getoption("--published"))
+    kept: list[pytest.Item] = []
+    left_out: list[pytest.Item] = []
     for item in items:
-        if is_fast(item.path.stem, getattr(item, "originalname", item.name)):
+        module, test = item.path.stem, getattr(item, "originalname", item.name)
+        if is_fast(module, test):
             item.add_marker(pytest.mark.fast)
+        (kept if is_published(module, test) == published_only else left_out).append(item)
+    if left_out:
+        config.hook.pytest_deselected(items=left_out)
+        items[:] = kept
 
 
 @pytest.fixture(autouse=True)

@@ -6,9 +6,12 @@
 One file per message type of ``wire/protocol.py``, plus ``udp_frame.json`` for the
 UDP radio's framing (``examples/udp_radio.py``), ``auth.json`` for run keys and
 message tags (``wire/auth.py``), ``batch.json`` for the binary batches of a process
-hosting several robots and their host's tag (``wire/batch.py``) and ``tick.json`` for one
+hosting several robots and their host's tag (``wire/batch.py``), ``tick.json`` for one
 lockstep tick of a robot on Zenoh: what arrives, what the port contract hands the
-controller, what goes out (``robot_agent/core/simulated.py``). Each message file holds:
+controller, what goes out (``robot_agent/core/simulated.py``), ``link_frame.json`` for the
+link to a robot outside the emulator (``link/core/codec.py``: frames, and what each end of
+a session counts for a frame it refuses) and ``key_file.json`` for the key files such a
+robot reads (``plumbing/run_keys.py``). Each message file holds:
 
 * ``valid``: messages with the exact bytes ``protocol.encode`` produces for them (as a
   UTF-8 string and as hex). A decoder must accept them; an encoder that wants to be
@@ -1190,37 +1193,91 @@ def batch_vectors() -> dict[str, Any]:
 LINK_ROBOT = 8
 LINK_ROBOT_NONCE = bytes.fromhex("0102030405060708")
 LINK_BRIDGE_NONCE = bytes.fromhex("1112131415161718")
+LINK_OTHER_NONCE = bytes.fromhex("2122232425262728")  # another session's (robot or bridge)
+LINK_MAP_NONCE = bytes(range(0x30, 0x40))  # the query nonce of the question for the map
+LINK_PROOF_NONCE = bytes(range(0x40, 0x50))  # the query nonce of a world token's proof
+LINK_WORLD = "8d2f5e4a1b3c6d7e"  # a world server's instance (its Zenoh id), as WORLD_UP says
+# What a receiver of an invalid frame or of a sequence is, before the frame arrives. Each
+# frame of ``invalid`` goes to a fresh receiver in its ``session``; the counter it adds one
+# to is the vector's ``refusal`` for that end.
+LINK_RECEIVERS = {
+    "robot": (
+        "robot 8's program (link/core/session.py LinkClient): it said hello with "
+        "robot_nonce_hex and took the vector 'welcome' (session 'plain') or "
+        "'welcome_encrypted' (session 'encrypted'), and no frame of the bridge since; in "
+        "session 'hello' it said hello and took nothing yet"
+    ),
+    "bridge": (
+        "the bridge's end of robot 8 (link/core/peer.py LinkPeer), serving the welcome of "
+        "the vector 'welcome' (session 'plain') or 'welcome_encrypted' (session "
+        "'encrypted') with the bridge nonce bridge_nonce_hex: it answered the vector "
+        "'hello' and took 'ping_from_the_robot' (or 'ping_from_the_robot_encrypted'), so "
+        "the session is open and the robot's sequence number 1 is taken"
+    ),
+}
+
+
+def _link_world_info() -> bytes:
+    """The WorldInfo the world answers with (docs/protocol.md's example)."""
+    sites = [
+        protocol.Site(0, 0.75, 0.0),
+        protocol.Site(1, -0.375, 0.649519053),
+        protocol.Site(2, -0.375, -0.649519053),
+    ]
+    return protocol.encode(
+        protocol.WorldInfo(
+            v=1,
+            run="demo",
+            seed=0,
+            dt=0.1,
+            arena_radius=0.75,
+            nest=protocol.Nest(0.0, 0.0, 0.2),
+            sites=sites,
+            robot_radius=0.037,
+            wheel_base=0.053,
+            max_wheel_speed=0.13,
+            camera=protocol.CameraSpec(width=64, height=48, fov=0.84),
+            clock="lockstep",
+        )
+    )
 
 
 def link_frame_vectors() -> dict[str, Any]:
     """Frames of the link to a robot outside the emulator (link/core/codec.py, docs/protocol.md):
-    the keys, a session's frames both ways (plain and encrypted), their serial encoding,
-    and frames a receiver refuses, each with the reason it is counted under."""
+    the keys, a session's frames both ways (plain and encrypted, the questions on world/info
+    and their answers), their serial encoding, frames a receiver refuses with the counter
+    each end adds it to, and sequences of frames with what a receiver does with each."""
     keyring = auth.Keyring(secret=AUTH_SECRET)
-    robot_key = keyring.key(names.robot_identity(LINK_ROBOT))
+    identity = names.robot_identity(LINK_ROBOT)
+    robot_key = keyring.key(identity)
     assert robot_key is not None
     key = codec.link_key(robot_key)
     cipher_key = codec.session_key(key, LINK_ROBOT_NONCE, LINK_BRIDGE_NONCE)
+    other_key = codec.link_key(keyring.key(names.robot_identity(9)) or b"")
     keys = protocol.Keys("demo")
     act = protocol.encode(
         protocol.Act(v=1, tick=42, left=0.13, right=0.1, capture=False, radio_tx=0)
     )
-    act_tag = keyring.seal("robot/8", keys.act(LINK_ROBOT), act)
+    act_tag = keyring.seal(identity, keys.act(LINK_ROBOT), act)
     sense = protocol.encode(
         protocol.Sense(
             v=1, tick=42, t=4.2, x=0.31, y=-0.12, theta=1.5708, prox=[0.0] * 8, rx=0, camera=False
         )
     )
-    sense_tag = keyring.seal("robot/8", keys.sense(LINK_ROBOT), sense)
-    welcome = codec.LinkWelcome(
-        v=1,
-        run="demo",
-        root="bestofn",
-        cipher="none",
-        ping_every=0.5,
-        silence=3.0,
-        controller=msgspec.Raw(b'{"dwell":3.0}'),
-    )
+    sense_tag = keyring.seal(identity, keys.sense(LINK_ROBOT), sense)
+
+    def welcome_body(cipher: codec.Cipher) -> bytes:
+        return codec.encode_welcome(
+            codec.LinkWelcome(
+                v=1,
+                run="demo",
+                root="bestofn",
+                cipher=cipher,
+                ping_every=0.5,
+                silence=3.0,
+                controller=msgspec.Raw(b'{"dwell":3.0}'),
+            )
+        )
 
     def frame(
         kind: codec.FrameType,
@@ -1228,36 +1285,126 @@ def link_frame_vectors() -> dict[str, Any]:
         seq: int,
         body: bytes = b"",
         *,
+        robot_nonce: bytes = LINK_ROBOT_NONCE,
         bridge_nonce: bytes = LINK_BRIDGE_NONCE,
         encrypted: bool = False,
+        robot: int = LINK_ROBOT,
     ) -> codec.Frame:
         return codec.Frame(
-            kind, from_bridge, LINK_ROBOT, LINK_ROBOT_NONCE, bridge_nonce, seq, body, encrypted
+            kind, from_bridge, robot, robot_nonce, bridge_nonce, seq, body, encrypted
         )
 
-    act_body = codec.encode_data(codec.DataKind.ACT, act, act_tag)
-    cases = [
-        ("hello", frame(codec.FrameType.HELLO, False, 0, bridge_nonce=codec.NO_NONCE)),
-        ("welcome", frame(codec.FrameType.WELCOME, True, 0, codec.encode_welcome(welcome))),
-        ("ping_from_the_robot", frame(codec.FrameType.PING, False, 1, bytes(8))),
-        ("act", frame(codec.FrameType.DATA, False, 2, act_body)),
+    def data(kind: codec.DataKind, payload: bytes, attachment: bytes | None = None) -> bytes:
+        return codec.encode_data(kind, payload, attachment)
+
+    def sealed(item: codec.Frame, with_key: bytes = key) -> bytes:
+        cipher = codec.session_key(with_key, item.robot_nonce, item.bridge_nonce)
+        return codec.seal(item, with_key, cipher if item.encrypted else None)
+
+    # The questions on world/info (kind 19) and the world's answers (kind 4): a query's
+    # attachment is tag || nonce || identity, its answer's tag || nonce, both tags under
+    # the robot's run key (wire/auth.py query_seal, reply_seal).
+    world_info = _link_world_info()
+    instance = LINK_WORLD.encode()
+    questions = {
+        "map": (b"", LINK_MAP_NONCE),
+        "proof": (instance, LINK_PROOF_NONCE),
+    }
+    query: dict[str, dict[str, Any]] = {}
+    for purpose, (payload, nonce) in questions.items():
+        asked = auth.query_seal(keyring, identity, keys.world_info, payload, nonce)
+        answer = auth.reply_seal(keyring, identity, keys.world_info, world_info, nonce)
+        assert asked is not None and answer is not None
+        query[purpose] = {
+            "question": (payload, asked, nonce),
+            "answer": (world_info, answer, nonce),
+        }
+
+    def query_vector(purpose: str, part: str) -> dict[str, Any]:
+        _, attachment, nonce = query[purpose][part]
+        return {
+            "key_expr": keys.world_info,
+            "identity": identity,
+            "nonce_hex": nonce.hex(),
+            "metadata_hex": attachment[auth.TAG_BYTES :].hex(),
+            "tag_hex": attachment[: auth.TAG_BYTES].hex(),
+        }
+
+    act_body = data(codec.DataKind.ACT, act, act_tag)
+    sense_body = data(codec.DataKind.SENSE, sense, sense_tag)
+    map_question = data(codec.DataKind.INFO_QUERY, *query["map"]["question"][:2])
+    map_answer = data(codec.DataKind.INFO_REPLY, *query["map"]["answer"][:2])
+    proof_question = data(codec.DataKind.INFO_QUERY, *query["proof"]["question"][:2])
+    proof_answer = data(codec.DataKind.INFO_REPLY, *query["proof"]["answer"][:2])
+    ping_one = (1).to_bytes(8, "big")
+    run_ended = bytes((codec.ByeReason.RUN_ENDED,))
+    cases: list[tuple[str, codec.Frame, dict[str, Any] | None]] = [
+        ("hello", frame(codec.FrameType.HELLO, False, 0, bridge_nonce=codec.NO_NONCE), None),
+        ("welcome", frame(codec.FrameType.WELCOME, True, 0, welcome_body("none")), None),
         (
-            "sense",
+            "welcome_encrypted",
+            frame(codec.FrameType.WELCOME, True, 0, welcome_body("chacha20-poly1305")),
+            None,
+        ),
+        ("ping_from_the_robot", frame(codec.FrameType.PING, False, 1, bytes(8)), None),
+        (
+            "ping_from_the_robot_encrypted",
+            frame(codec.FrameType.PING, False, 1, bytes(8), encrypted=True),
+            None,
+        ),
+        (
+            "world_info_question",
+            frame(codec.FrameType.DATA, False, 2, map_question),
+            query_vector("map", "question"),
+        ),
+        (
+            "world_info_answer",
+            frame(codec.FrameType.DATA, True, 1, map_answer),
+            query_vector("map", "answer"),
+        ),
+        ("act", frame(codec.FrameType.DATA, False, 2, act_body), None),
+        ("sense", frame(codec.FrameType.DATA, True, 1, sense_body), None),
+        ("sense_encrypted", frame(codec.FrameType.DATA, True, 1, sense_body, encrypted=True), None),
+        ("ping_from_the_bridge", frame(codec.FrameType.PING, True, 2, ping_one), None),
+        ("pong", frame(codec.FrameType.PONG, False, 3, ping_one), None),
+        (
+            "world_up",
+            frame(codec.FrameType.DATA, True, 2, data(codec.DataKind.WORLD_UP, instance)),
+            None,
+        ),
+        (
+            "world_proof_question",
+            frame(codec.FrameType.DATA, False, 4, proof_question),
+            query_vector("proof", "question"),
+        ),
+        (
+            "world_proof_answer",
+            frame(codec.FrameType.DATA, True, 3, proof_answer),
+            query_vector("proof", "answer"),
+        ),
+        (
+            "world_info_error",
             frame(
                 codec.FrameType.DATA,
                 True,
-                1,
-                codec.encode_data(codec.DataKind.SENSE, sense, sense_tag),
+                3,
+                data(codec.DataKind.INFO_ERROR, b"not this world instance"),
             ),
+            None,
         ),
-        ("ping_from_the_bridge", frame(codec.FrameType.PING, True, 2, (1).to_bytes(8, "big"))),
-        ("pong", frame(codec.FrameType.PONG, False, 3, (1).to_bytes(8, "big"))),
-        ("bye_run_ended", frame(codec.FrameType.BYE, True, 3, bytes((codec.ByeReason.RUN_ENDED,)))),
-        ("act_encrypted", frame(codec.FrameType.DATA, False, 2, act_body, encrypted=True)),
-    ]
+        (
+            "world_down",
+            frame(codec.FrameType.DATA, True, 4, data(codec.DataKind.WORLD_DOWN, instance)),
+            None,
+        ),
+        ("bye_run_ended", frame(codec.FrameType.BYE, True, 3, run_ended), None),
+        ("act_encrypted", frame(codec.FrameType.DATA, False, 2, act_body, encrypted=True), None),
+    ]  # fmt: skip
     valid = []
-    for name, item in cases:
-        data = codec.seal(item, key, cipher_key if item.encrypted else None)
+    frames: dict[str, bytes] = {}
+    for name, item, query_info in cases:
+        sealed_frame = sealed(item)
+        frames[name] = sealed_frame
         vector: dict[str, Any] = {
             "name": name,
             "type": item.type.name,
@@ -1268,8 +1415,8 @@ def link_frame_vectors() -> dict[str, Any]:
             "seq": item.seq,
             "encrypted": item.encrypted,
             "body_hex": item.body.hex(),
-            "hex": data.hex(),
-            "serial_hex": codec.serial_encode(data).hex(),
+            "hex": sealed_frame.hex(),
+            "serial_hex": codec.serial_encode(sealed_frame).hex(),
         }
         if item.type is codec.FrameType.DATA:
             kind, payload, attachment = codec.decode_data(item.body)
@@ -1279,94 +1426,195 @@ def link_frame_vectors() -> dict[str, Any]:
                 "attachment_hex": (attachment or b"").hex(),
                 "payload_utf8": payload.decode(),
             }
+            if query_info is not None:
+                vector["data"]["query"] = query_info
         if item.type is codec.FrameType.WELCOME:
             vector["body_utf8"] = item.body.decode()
         valid.append(vector)
-    act_frame = codec.seal(cases[3][1], key)
-    resealed: list[tuple[str, str, codec.Refusal, codec.Frame]] = [
-        (
-            "hello_with_a_body",
-            "a hello has no body",
-            codec.Refusal.MALFORMED,
-            frame(codec.FrameType.HELLO, False, 0, b"x", bridge_nonce=codec.NO_NONCE),
-        ),
-        (
-            "ping_of_seven_bytes",
-            "a ping carries 8 bytes",
-            codec.Refusal.MALFORMED,
-            frame(codec.FrameType.PING, False, 4, bytes(7)),
-        ),
-        (
-            "bye_of_an_unknown_reason",
-            "a bye's reason is 1, 2 or 3",
-            codec.Refusal.MALFORMED,
-            frame(codec.FrameType.BYE, True, 4, b"\x09"),
-        ),
-        (
-            "data_of_an_unknown_kind",
-            "data kinds are 1-7 (to the robot) and 16-19 (from it)",
-            codec.Refusal.MALFORMED,
-            frame(codec.FrameType.DATA, False, 4, b"\x63\x00\x00{}"),
-        ),
-        (
-            "attachment_past_the_body",
-            "the attachment length runs past the body",
-            codec.Refusal.MALFORMED,
-            frame(codec.FrameType.DATA, False, 4, b"\x10\x00\x20short"),
-        ),
-        (
-            "data_with_sequence_number_zero",
-            "frames of a session count from 1",
-            codec.Refusal.MALFORMED,
-            frame(codec.FrameType.DATA, False, 0, act_body),
-        ),
-        (
-            "welcome_from_the_robot",
-            "only the bridge welcomes",
-            codec.Refusal.UNEXPECTED,
-            frame(codec.FrameType.WELCOME, False, 0, codec.encode_welcome(welcome)),
-        ),
-    ]
-    flipped = bytearray(act_frame)
-    flipped[-1] ^= 0x01
-    changed_body = bytearray(act_frame)
-    changed_body[codec.HEADER_BYTES + 10] ^= 0x20
-    encrypted = bytearray.fromhex(valid[-1]["hex"])
-    encrypted[codec.HEADER_BYTES] ^= 0x01
-    raw: list[tuple[str, str, codec.Refusal, bytes]] = [
-        ("shorter_than_a_frame", "a frame has at least 49 bytes", codec.Refusal.MALFORMED,
+
+    def flipped(data: bytes, at: int, bit: int = 0x01) -> bytes:
+        changed_data = bytearray(data)
+        changed_data[at] ^= bit
+        return bytes(changed_data)
+
+    act_frame, sense_frame = frames["act"], frames["sense"]
+    plain, encrypted = "plain", "encrypted"
+    malformed, unexpected = codec.Refusal.MALFORMED, codec.Refusal.UNEXPECTED
+    forged, oversize = codec.Refusal.FORGED, codec.Refusal.OVERSIZE
+    # (name, reason, session, robot's refusal, bridge's refusal, bytes): the robot checks
+    # the robot id and the direction before the tag, so a robot's frame is unexpected at
+    # the robot whatever else is wrong with it, as a bridge's frame is at the bridge.
+    raw: list[tuple[str, str, str, codec.Refusal, codec.Refusal, bytes]] = [
+        ("shorter_than_a_frame", "a frame has at least 49 bytes", plain, malformed, malformed,
          act_frame[:48]),
-        ("bad_magic", "a frame starts with 'BL'", codec.Refusal.MALFORMED, b"BX" + act_frame[2:]),
-        ("version_2", "the frame version is 1", codec.Refusal.MALFORMED,
+        ("bad_magic", "a frame starts with 'BL'", plain, malformed, malformed,
+         b"BX" + act_frame[2:]),
+        ("version_2", "the frame version is 1", plain, malformed, malformed,
          act_frame[:2] + b"\x02" + act_frame[3:]),
-        ("unknown_type", "frame types are 1 to 6", codec.Refusal.MALFORMED,
+        ("unknown_type", "frame types are 1 to 6", plain, malformed, malformed,
          act_frame[:3] + b"\x07" + act_frame[4:]),
-        ("unknown_flag", "flags other than 0x01 and 0x02 are 0", codec.Refusal.MALFORMED,
+        ("unknown_flag", "flags other than 0x01 and 0x02 are 0", plain, malformed, malformed,
          act_frame[:4] + b"\x04" + act_frame[5:]),
-        ("robot_id_out_of_range", "robot ids are below 100000", codec.Refusal.MALFORMED,
+        ("robot_id_out_of_range", "robot ids are below 100000", plain, malformed, malformed,
          act_frame[:5] + (100_000).to_bytes(4, "big") + act_frame[9:]),
-        ("tag_changed", "the tag does not check out", codec.Refusal.FORGED, bytes(flipped)),
-        ("body_changed", "the tag covers the body", codec.Refusal.FORGED, bytes(changed_body)),
+        ("oversize", f"a frame has at most {codec.MAX_FRAME_BYTES} bytes", plain, oversize,
+         oversize, act_frame + bytes(codec.MAX_FRAME_BYTES)),
+        ("robot_frame_over_32_kib", "the bridge refuses a robot's frame over 32 KiB before "
+         "reading it; the robot reads the header first", plain, unexpected, oversize,
+         sealed(frame(codec.FrameType.DATA, False, 4, data(codec.DataKind.STATUS,
+                                                              bytes(32 * 1024))))),
+        ("tag_changed", "the tag does not check out", plain, unexpected, forged,
+         flipped(act_frame, -1)),
+        ("body_changed", "the tag covers the body", plain, unexpected, forged,
+         flipped(act_frame, codec.HEADER_BYTES + 10, 0x20)),
+        ("tag_changed_from_the_bridge", "the tag does not check out", plain, forged, unexpected,
+         flipped(sense_frame, -1)),
+        ("body_changed_from_the_bridge", "the tag covers the body", plain, forged, unexpected,
+         flipped(sense_frame, codec.HEADER_BYTES + 10, 0x20)),
         ("direction_changed", "the tag covers the flags: a robot's frame cannot be reflected",
-         codec.Refusal.FORGED, act_frame[:4] + b"\x01" + act_frame[5:]),
-        ("ciphertext_changed", "Poly1305 covers the ciphertext", codec.Refusal.FORGED,
-         bytes(encrypted)),
-        ("oversize", f"a frame has at most {codec.MAX_FRAME_BYTES} bytes", codec.Refusal.OVERSIZE,
-         act_frame + bytes(codec.MAX_FRAME_BYTES)),
+         plain, forged, unexpected, act_frame[:4] + b"\x01" + act_frame[5:]),
+        ("ciphertext_changed", "Poly1305 covers the ciphertext", encrypted, unexpected, forged,
+         flipped(frames["act_encrypted"], codec.HEADER_BYTES)),
+        ("ciphertext_changed_from_the_bridge", "Poly1305 covers the ciphertext", encrypted,
+         forged, unexpected, flipped(frames["sense_encrypted"], codec.HEADER_BYTES)),
+        ("encrypted_in_a_plain_session", "every frame is protected as its session is", plain,
+         unexpected, unexpected, frames["sense_encrypted"]),
+        ("plain_in_an_encrypted_session", "every frame is protected as its session is",
+         encrypted, unexpected, unexpected, sense_frame),
+        ("robot_plain_in_an_encrypted_session", "every frame is protected as its session is",
+         encrypted, unexpected, unexpected, act_frame),
+        ("another_robot", "a frame of robot 9 (under robot 9's link key)", plain, unexpected,
+         unexpected, codec.seal(frame(codec.FrameType.DATA, True, 1, sense_body, robot=9),
+                                other_key)),
+        ("another_bridge_session", "a frame of another session of the bridge", plain,
+         unexpected, unexpected, sealed(frame(codec.FrameType.DATA, True, 1, sense_body,
+                                              bridge_nonce=LINK_OTHER_NONCE))),
+        ("another_robot_session", "a frame of another session of the robot", plain, unexpected,
+         unexpected, sealed(frame(codec.FrameType.DATA, False, 2, act_body,
+                                  robot_nonce=LINK_OTHER_NONCE))),
+        ("welcome_of_another_session", "a second welcome for one hello", plain, unexpected,
+         unexpected, sealed(frame(codec.FrameType.WELCOME, True, 0, welcome_body("none"),
+                                  bridge_nonce=LINK_OTHER_NONCE))),
+        ("hello_with_a_body", "a hello has no body", plain, unexpected, malformed,
+         sealed(frame(codec.FrameType.HELLO, False, 0, b"x", bridge_nonce=codec.NO_NONCE))),
+        ("hello_from_the_bridge", "only the robot says hello", plain, unexpected, unexpected,
+         sealed(frame(codec.FrameType.HELLO, True, 0, bridge_nonce=codec.NO_NONCE))),
+        ("welcome_from_the_robot", "only the bridge welcomes", plain, unexpected, unexpected,
+         sealed(frame(codec.FrameType.WELCOME, False, 0, welcome_body("none")))),
+        ("welcome_with_sequence_number_1", "a welcome has sequence number 0", plain, malformed,
+         unexpected, sealed(frame(codec.FrameType.WELCOME, True, 1, welcome_body("none")))),
+        ("ping_of_seven_bytes", "a ping carries 8 bytes", plain, unexpected, malformed,
+         sealed(frame(codec.FrameType.PING, False, 4, bytes(7)))),
+        ("ping_of_seven_bytes_from_the_bridge", "a ping carries 8 bytes", plain, malformed,
+         unexpected, sealed(frame(codec.FrameType.PING, True, 4, bytes(7)))),
+        ("bye_of_an_unknown_reason", "a bye's reason is 1, 2 or 3", plain, malformed,
+         unexpected, sealed(frame(codec.FrameType.BYE, True, 4, b"\x09"))),
+        ("bye_of_an_unknown_reason_from_the_robot", "a bye's reason is 1, 2 or 3", plain,
+         unexpected, malformed, sealed(frame(codec.FrameType.BYE, False, 4, b"\x09"))),
+        ("data_with_sequence_number_zero", "frames of a session count from 1", plain,
+         unexpected, malformed, sealed(frame(codec.FrameType.DATA, False, 0, act_body))),
+        ("data_with_sequence_number_zero_from_the_bridge", "frames of a session count from 1",
+         plain, malformed, unexpected, sealed(frame(codec.FrameType.DATA, True, 0, sense_body))),
+        ("data_of_an_unknown_kind", "data kinds are 1-7 (to the robot) and 16-19 (from it)",
+         plain, unexpected, malformed, sealed(frame(codec.FrameType.DATA, False, 4,
+                                                    b"\x63\x00\x00{}"))),
+        ("data_of_an_unknown_kind_from_the_bridge", "data kinds are 1-7 (to the robot) and "
+         "16-19 (from it)", plain, malformed, unexpected,
+         sealed(frame(codec.FrameType.DATA, True, 4, b"\x63\x00\x00{}"))),
+        ("attachment_past_the_body", "the attachment length runs past the body", plain,
+         unexpected, malformed, sealed(frame(codec.FrameType.DATA, False, 4,
+                                             b"\x10\x00\x20short"))),
+        ("attachment_past_the_body_from_the_bridge", "the attachment length runs past the "
+         "body", plain, malformed, unexpected, sealed(frame(codec.FrameType.DATA, True, 4,
+                                                            b"\x01\x00\x20short"))),
+        ("attachment_over_1024_bytes", "an attachment has at most 1024 bytes", plain,
+         unexpected, malformed, sealed(frame(codec.FrameType.DATA, False, 4,
+                                             b"\x10\x04\x01" + bytes(1025) + b"{}"))),
+        ("attachment_over_1024_bytes_from_the_bridge", "an attachment has at most 1024 bytes",
+         plain, malformed, unexpected, sealed(frame(codec.FrameType.DATA, True, 4,
+                                                    b"\x01\x04\x01" + bytes(1025) + b"{}"))),
+        ("robot_kind_from_the_bridge", "kind 16 (act) is the robot's to send", plain,
+         unexpected, unexpected, sealed(frame(codec.FrameType.DATA, True, 4, act_body))),
+        ("bridge_kind_from_the_robot", "kind 1 (sense) is the bridge's to send", plain,
+         unexpected, unexpected, sealed(frame(codec.FrameType.DATA, False, 4, sense_body))),
     ]  # fmt: skip
     invalid = [
-        {"name": name, "category": refusal.value, "reason": reason, "hex": data.hex()}
-        for name, reason, refusal, data in raw
-    ]
-    invalid += [
         {
             "name": name,
-            "category": refusal.value,
             "reason": reason,
-            "hex": codec.seal(item, key).hex(),
+            "session": session,
+            "refusal": {"robot": by_robot.value, "bridge": by_bridge.value},
+            "hex": data_.hex(),
         }
-        for name, reason, refusal, item in resealed
+        for name, reason, session, by_robot, by_bridge, data_ in raw
     ]
+
+    def pings(from_bridge: bool, seqs: list[tuple[int, str | None]]) -> list[dict[str, Any]]:
+        return [
+            {
+                "note": f"ping {seq}",
+                "refused": refused,
+                "hex": sealed(frame(codec.FrameType.PING, from_bridge, seq, bytes(8))).hex(),
+            }
+            for seq, refused in seqs
+        ]
+
+    replayed = codec.Refusal.REPLAYED.value
+    edge = [(100, None), (37, None), (36, replayed), (37, replayed), (101, None), (38, None),
+            (37, replayed), (100, replayed)]  # fmt: skip
+    bad_welcome = sealed(frame(codec.FrameType.WELCOME, True, 0, b'{"v":1}'))
+    sequences = [
+        {
+            "name": "replay_window_edge_at_the_robot",
+            "receiver": "robot",
+            "session": plain,
+            "note": "63 behind the highest taken is taken once; 64 behind is refused",
+            "frames": pings(True, edge),
+        },
+        {
+            "name": "replay_window_edge_at_the_bridge",
+            "receiver": "bridge",
+            "session": plain,
+            "note": "63 behind the highest taken is taken once; 64 behind is refused",
+            "frames": pings(False, edge),
+        },
+        {
+            "name": "welcomes",
+            "receiver": "robot",
+            "session": "hello",
+            "note": "before its welcome a robot takes nothing of a session; a welcome that "
+            "does not decode is malformed; the same welcome again is ignored, another refused",
+            "frames": [
+                {"note": "data before a welcome", "refused": unexpected.value,
+                 "hex": sense_frame.hex()},
+                {"note": "a welcome whose body is no LinkWelcome", "refused": malformed.value,
+                 "hex": bad_welcome.hex()},
+                {"note": "the welcome", "refused": None, "hex": frames["welcome"].hex()},
+                {"note": "the same welcome again", "refused": None,
+                 "hex": frames["welcome"].hex()},
+                {"note": "a welcome of another bridge nonce", "refused": unexpected.value,
+                 "hex": sealed(frame(codec.FrameType.WELCOME, True, 0, welcome_body("none"),
+                                     bridge_nonce=LINK_OTHER_NONCE)).hex()},
+                {"note": "data of the session", "refused": None, "hex": sense_frame.hex()},
+                {"note": "the same data again", "refused": replayed,
+                 "hex": sense_frame.hex()},
+            ],
+        },
+        {
+            "name": "hellos",
+            "receiver": "bridge",
+            "session": plain,
+            "note": "a hello whose nonce the bridge answered before is a replay",
+            "frames": [
+                {"note": "the session's hello again", "refused": replayed,
+                 "hex": frames["hello"].hex()},
+                {"note": "a hello with a new nonce", "refused": None,
+                 "hex": sealed(frame(codec.FrameType.HELLO, False, 0,
+                                     robot_nonce=LINK_OTHER_NONCE,
+                                     bridge_nonce=codec.NO_NONCE)).hex()},
+            ],
+        },
+    ]  # fmt: skip
     good = codec.serial_encode(act_frame)
     bad_crc = bytearray(good)
     bad_crc[-3] ^= 0x01
@@ -1383,11 +1631,81 @@ def link_frame_vectors() -> dict[str, Any]:
         "robot_key_hex": robot_key.hex(),
         "link_key_label_utf8": codec.LINK_KEY_LABEL.decode(),
         "link_key_hex": key.hex(),
+        "robot_nonce_hex": LINK_ROBOT_NONCE.hex(),
+        "bridge_nonce_hex": LINK_BRIDGE_NONCE.hex(),
         "session_key_label_utf8": codec.SESSION_KEY_LABEL.decode(),
         "session_key_hex": cipher_key.hex(),
+        "max_frame_bytes": codec.MAX_FRAME_BYTES,
+        "max_encoded_bytes": codec.MAX_ENCODED_BYTES,
+        "max_attachment_bytes": codec.MAX_ATTACHMENT_BYTES,
+        "replay_window": codec.REPLAY_WINDOW,
         "valid": valid,
+        "receivers": LINK_RECEIVERS,
         "invalid": invalid,
+        "sequences": sequences,
         "serial_invalid": serial_invalid,
+    }
+
+
+# --- key files ---------------------------------------------------------------------------
+
+
+def key_file_vectors() -> dict[str, Any]:
+    """Key files as ``robot-agent --link`` reads them (plumbing/run_keys.py read_key_file,
+    wire/auth.py keyring_from_text): the run, and the key of the robot it is for; and files
+    it refuses (the program exits 2)."""
+    keyring = auth.Keyring(secret=AUTH_SECRET)
+    identity = names.robot_identity(LINK_ROBOT)
+    robot_key = keyring.key(identity) or b""
+    other_key = keyring.key(names.robot_identity(9)) or b""
+    host_key = keyring.key(names.host_identity(8, 9)) or b""
+    own = robot_key.hex()
+
+    def text(content: dict[str, Any], separators: tuple[str, str] = (",", ":")) -> str:
+        return json.dumps(content, separators=separators)
+
+    valid = [
+        ("one_robot", "what swarm run writes (robot-8.key)",
+         text({"v": 1, "run": "demo", "keys": {identity: own}})),
+        ("the_secret", "the run secret: the robot derives its key (wire/auth.py derive_key)",
+         text({"v": 1, "run": "demo", "secret": AUTH_SECRET.hex()})),
+        ("a_host", "a process's keys: its robots' and its host identity's",
+         text({"v": 1, "run": "demo",
+               "keys": {"host/8-9": host_key.hex(), identity: own, "robot/9": other_key.hex()}})),
+        ("spaced_and_reordered", "any JSON spelling; hex in either case",
+         text({"keys": {identity: own.upper()}, "run": "demo", "v": 1}, (", ", ": "))
+         + "\n"),
+    ]  # fmt: skip
+    invalid = [
+        ("not_json", "not JSON", '{"v": 1, "run": "demo",'),
+        ("not_an_object", "one JSON object", "[1]"),
+        ("version_2", '"v" is 1', text({"v": 2, "run": "demo", "keys": {identity: own}})),
+        ("no_run", "the run is named", text({"v": 1, "keys": {identity: own}})),
+        ("run_not_a_string", "the run is a string",
+         text({"v": 1, "run": 7, "keys": {identity: own}})),
+        ("neither_secret_nor_keys", '"secret" or "keys"', text({"v": 1, "run": "demo"})),
+        ("no_keys", '"keys" holds at least one', text({"v": 1, "run": "demo", "keys": {}})),
+        ("no_key_for_the_robot", "the file holds the robot's key",
+         text({"v": 1, "run": "demo", "keys": {"robot/9": other_key.hex()}})),
+        ("key_not_hex", "a key is 64 hex digits",
+         text({"v": 1, "run": "demo", "keys": {identity: "zz" * 32}})),
+        ("key_of_31_bytes", "a key is 32 bytes",
+         text({"v": 1, "run": "demo", "keys": {identity: own[:62]}})),
+        ("not_an_identity", "keys are by identity (robot/08 is none)",
+         text({"v": 1, "run": "demo", "keys": {identity: own, "robot/08": own}})),
+        ("secret_of_31_bytes", "a secret is 32 bytes",
+         text({"v": 1, "run": "demo", "secret": AUTH_SECRET.hex()[:62]})),
+    ]  # fmt: skip
+    return {
+        "type": "KeyFile",
+        "decoder": "key_file",
+        "identity": identity,
+        "run": "demo",
+        "key_hex": own,
+        "valid": [{"name": name, "note": note, "utf8": body} for name, note, body in valid],
+        "invalid": [
+            {"name": name, "reason": reason, "utf8": body} for name, reason, body in invalid
+        ],
     }
 
 
@@ -1798,6 +2116,7 @@ def build() -> dict[str, str]:
     files["udp_frame.json"] = udp_frame_vectors()
     files["auth.json"] = auth_vectors()
     files["link_frame.json"] = link_frame_vectors()
+    files["key_file.json"] = key_file_vectors()
     files["tick.json"] = tick_vectors()
     files["batch.json"] = batch_vectors()
     files["numeric.json"] = numeric_vectors()

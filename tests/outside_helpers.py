@@ -1,10 +1,12 @@
 """Helpers for tests of robots outside the emulator: ``swarm run --external`` with the
-outside programs (``python -m link``) started by the test, on loopback UDP or
-a pseudo-terminal pair made by ``socat``. Every process is killed by pid at the end."""
+outside programs started by the test (``python -m link``, or the C robot,
+``c_robot/build/c-robot``), on loopback UDP or a pseudo-terminal pair made by ``socat``.
+Every process is killed by pid at the end."""
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import json
 import select
 import shutil
@@ -13,13 +15,21 @@ import subprocess
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import pytest
-from swarm_helpers import REPO, kill_leftovers, stop_processes, swarm_command, unique_run_id
+from swarm_helpers import (
+    REPO,
+    kill_leftovers,
+    reference_run,
+    stop_processes,
+    swarm_command,
+    unique_run_id,
+)
 
 from deploy.launcher.outside import free_udp_port
 
@@ -34,11 +44,9 @@ def decisions(summary: dict[str, Any]) -> list[tuple[object, ...]]:
 
 def in_process(options: Sequence[str]) -> dict[str, Any]:
     """The all-emulated run of the same options (the in-process engine gives the same
-    per-robot results as swarm run: tests/test_swarm.py)."""
-    command = swarm_command("run", "--engine", "inprocess", "--json", "--quiet", "--no-record")
-    done = subprocess.run([*command, *options], capture_output=True, timeout=300, cwd=REPO)
-    result: dict[str, Any] = json.loads(done.stdout)
-    return result
+    per-robot results as swarm run: tests/test_swarm.py), run in this process once per
+    set of options and kept (``reference_run``)."""
+    return reference_run(options)
 
 
 def program(link: str, robot: int, key_file: Path, *extra: str) -> subprocess.Popen[bytes]:
@@ -50,6 +58,30 @@ def program(link: str, robot: int, key_file: Path, *extra: str) -> subprocess.Po
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
+
+
+C_ROBOT = REPO / "c_robot"
+C_BINARY = C_ROBOT / "build" / "c-robot"
+
+
+def make_c_robot(*targets: str) -> subprocess.CompletedProcess[str]:
+    """``make -C c_robot TARGETS``, one at a time across test workers (they share the
+    build folder)."""
+    C_BINARY.parent.mkdir(exist_ok=True)
+    with (C_BINARY.parent / ".make-lock").open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return subprocess.run(
+            ["make", "-C", str(C_ROBOT), *targets], capture_output=True, timeout=600, text=True
+        )
+
+
+def c_robot_binary() -> Path | None:
+    """The C robot, built when it is missing; None without gcc or make."""
+    if shutil.which("make") is None or shutil.which("gcc") is None:
+        return None
+    built = make_c_robot()
+    assert built.returncode == 0, built.stdout[-2000:] + built.stderr[-2000:]
+    return C_BINARY
 
 
 def wait_for(path: Path, timeout: float = 60.0) -> None:
@@ -75,6 +107,22 @@ class OutsideRun:
 
     def start(self, link: str, robot: int, *extra: str) -> subprocess.Popen[bytes]:
         started = program(link, robot, self.key_file(robot), *extra)
+        self.programs.append(started)
+        return started
+
+    def start_c(self, binary: Path | None, link: str, robot: int) -> subprocess.Popen[bytes]:
+        """The C robot for ``robot``, as a porter starts it; the Python program in its place
+        (with a warning) when there is no C compiler to build it."""
+        if binary is None:
+            warnings.warn(f"no C compiler: robot {robot} runs as the Python program", stacklevel=2)
+            return self.start(link, robot)
+        command = [str(binary), "--link", link, "--id", str(robot)]
+        started = subprocess.Popen(
+            [*command, "--key-file", str(self.key_file(robot)), "--give-up", "60"],
+            cwd=REPO,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
         self.programs.append(started)
         return started
 

@@ -7,6 +7,7 @@ test can check that nothing is left behind and kill stragglers by pid.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
 import signal
@@ -14,10 +15,11 @@ import subprocess
 import sys
 import time
 import uuid
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+import pytest
 import zenoh
 
 from deploy.launcher.supervisor import RUN_ID_ENV
@@ -97,6 +99,45 @@ def stop_processes(processes: Sequence[subprocess.Popen[bytes]], grace: float = 
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait()
+
+
+@functools.cache
+def _reference_json(options: tuple[str, ...]) -> str:
+    from deploy.cli import build_parser
+    from deploy.launcher.inprocess import run_plan
+    from deploy.launcher.plan import plan_from_args
+
+    argv = ["run", "--engine", "inprocess", "--no-record", *options]
+    return json.dumps(run_plan(plan_from_args(build_parser(["run"]).parse_args(argv))))
+
+
+def reference_run(options: Sequence[str]) -> dict[str, Any]:
+    """The summary ``swarm run --engine inprocess --no-record OPTIONS`` gives (but for what
+    the command adds to it: ``faults``, ``recording``), run in this process once per set of
+    options and kept for the tests that compare a live run with it."""
+    summary: dict[str, Any] = json.loads(_reference_json(tuple(options)))
+    return summary
+
+
+def call_main(
+    main: Callable[[list[str]], int], argv: Sequence[str], capsys: pytest.CaptureFixture[str]
+) -> tuple[int, str, str]:
+    """A command's ``main(argv)`` called in this process, as its command line would be:
+    (exit code, standard output, standard error). For what ends before anything starts
+    (help, usage errors); what starts processes or sessions runs in a process of its own."""
+    try:
+        code = main(list(argv))
+    except SystemExit as leaving:
+        code = leaving.code if isinstance(leaving.code, int) else (0 if leaving.code is None else 1)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def swarm_cli(argv: Sequence[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    """``swarm ARGV`` in this process (``call_main``)."""
+    from deploy.cli import main
+
+    return call_main(main, argv, capsys)
 
 
 def run_swarm(args: Sequence[str], run_id: str, timeout: float = 120.0) -> tuple[int, Any, str]:

@@ -24,6 +24,7 @@ from swarm_helpers import (
     kill_leftovers,
     processes_of,
     run_swarm,
+    swarm_cli,
     swarm_command,
     unique_run_id,
 )
@@ -319,16 +320,13 @@ def test_robots_that_decide_on_different_sites_end_split() -> None:
     assert [robot["decided_site"] for robot in summary["per_robot"]] == [1, 1, 0, 1]
 
 
-def test_an_unwritable_recording_path_is_refused_before_anything_starts() -> None:
+def test_an_unwritable_recording_path_is_refused_before_anything_starts(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     run_id = unique_run_id("badrecord")
-    done = subprocess.run(
-        swarm_command("run", "--run-id", run_id, "--record", "/etc/passwd/x.mcap"),
-        capture_output=True,
-        timeout=60,
-        cwd=REPO,
-    )
-    errors = done.stderr.decode().strip().splitlines()
-    assert done.returncode == 2
+    code, _, err = swarm_cli(["run", "--run-id", run_id, "--record", "/etc/passwd/x.mcap"], capsys)
+    errors = err.strip().splitlines()
+    assert code == 2
     assert errors == [
         "swarm run: error: --record /etc/passwd/x.mcap: /etc/passwd is not a directory"
     ]
@@ -355,9 +353,8 @@ def test_a_router_that_is_not_there_is_one_line_saying_how_long_it_tried() -> No
     assert processes_of(run_id) == []
 
 
-def test_the_help_documents_each_endings_exit_code() -> None:
-    done = subprocess.run(swarm_command("run", "--help"), capture_output=True, timeout=60, cwd=REPO)
-    text = done.stdout.decode()
+def test_the_help_documents_each_endings_exit_code(capsys: pytest.CaptureFixture[str]) -> None:
+    _, text, _ = swarm_cli(["run", "--help"], capsys)
     for line in ("0    consensus", "1    crashed", "3    split", "4    stalled", "5    timeout"):
         assert line in text
     assert "6    world_stopped" in text and "--world-stop-window" in text

@@ -269,6 +269,14 @@ SWITCHES: dict[str, tuple[list[str], str, Callable[[Run], None], bool]] = {
 }
 
 
+# The switches run over Zenoh, one for each process a switch is for: a world switch and a
+# beacon switch travel in the world's and the beacon's settings (one JSON object each, the
+# same for every switch of that process), and the robots' switches act on their processes.
+# The others run on the in-process engine, which runs the same world and beacon: what
+# each does is checked there, in its recording, as over Zenoh.
+LIVE = {"latency-jitter", "beacon-outage", "kill", "restart"}
+
+
 @pytest.mark.parametrize("switch", list(SWITCHES))
 def test_the_swarm_still_decides_right_with(switch: str, tmp_path: Path) -> None:
     """Each switch reaches the process it is for (the world, the beacon, the robots) and
@@ -277,7 +285,9 @@ def test_the_swarm_still_decides_right_with(switch: str, tmp_path: Path) -> None
     options, process, check, recorded = SWITCHES[switch]
     path = tmp_path / "run.mcap"
     output = ["--record", str(path)] if recorded else ["--no-record"]
-    code, summary, stderr = run_swarm([*BASE, *output, *options], unique_run_id(switch))
+    engine = [] if switch in LIVE else ["--engine", "inprocess"]
+    run_id = unique_run_id(switch)
+    code, summary, stderr = run_swarm([*BASE, *engine, *output, *options], run_id)
     assert code == 0, stderr
     assert summary["correct"], summary["per_robot"]
     try:

@@ -448,6 +448,8 @@ class ProgramOnABridge:
             address="x",
         )
         self.relayed: list[Message] = []
+        self.slow = False  # the world holds its answers until ``answer_held``
+        self.held: list[Message] = []
 
     def exchange(self, now: float = 0.0) -> None:
         self.robot.wake(now)
@@ -469,6 +471,12 @@ class ProgramOnABridge:
             return
         if message.payload not in (b"", self.instance.encode()):
             return  # a question for another world instance: this world does not answer
+        if self.slow:
+            self.held.append(message)
+            return
+        self.answer(message)
+
+    def answer(self, message: Message) -> None:
         info_key = self.keys.world_info
         asker, nonce = self.auth.query_open(
             self.secret, info_key, message.payload, message.attachment
@@ -543,3 +551,50 @@ def test_the_program_follows_a_world_token_only_once_that_world_answers_for_it()
     assert bench.questions("w-2") == PROVE_TRIES
     assert endpoint.rejects.count == rejected + 1
     assert endpoint.worlds.followed == "w-1" and bench.robot.proving == {}
+
+
+def test_an_answer_slower_than_the_repeats_still_brings_the_map_and_the_proof() -> None:
+    """A question asked again does not void the ones before it: over a relay slower than
+    ASK_EVERY and PROVE_EVERY (a link with a long delay) the first answers still count."""
+    from link.core.robot import ASK_EVERY, PROVE_EVERY
+
+    bench = ProgramOnABridge(instance="w-1")
+    bench.slow = True
+    bench.exchange(0.0)
+    bench.exchange(ASK_EVERY)
+    bench.exchange(2 * ASK_EVERY)
+    assert bench.questions("") == 3 and bench.robot.endpoint is None
+    bench.answer(bench.held[0])  # the answer to the first question, two askings late
+    bench.exchange(2 * ASK_EVERY)
+    endpoint = bench.robot.endpoint
+    assert endpoint is not None
+    bench.held.clear()
+    bench.peer.send(codec.DataKind.WORLD_UP, b"w-1", None)
+    now = 2 * ASK_EVERY
+    for _ in range(3):
+        bench.exchange(now)
+        now += PROVE_EVERY
+    assert bench.questions("w-1") == 3 and endpoint.worlds.followed is None
+    bench.answer(bench.held[0])
+    bench.exchange(now)
+    assert endpoint.worlds.followed == "w-1" and bench.robot.proving == {}
+
+
+def test_a_welcome_of_another_run_gets_one_bye_and_ends_the_program_as_failed() -> None:
+    """The key file is of another run: the program says BYE (going away) once, ends, and
+    counts as failed (exit code 1); stopping it afterwards sends nothing more."""
+    bench = ProgramOnABridge()
+    robot = bench.robot
+    robot.run = "another-run"
+    robot.wake(0.0)
+    for hello in robot.client.take_outgoing():
+        for event in bench.peer.receive(hello, SOURCE, 0.0):
+            assert not isinstance(event, Message)
+    for sent, _ in bench.peer.take_outgoing():
+        robot.receive(sent, 0.0)
+    said = robot.client.take_outgoing()
+    types = [codec.read_header(frame).type for frame in said]
+    assert types == [codec.FrameType.PING, codec.FrameType.BYE]
+    assert robot.ended and robot.failed and not robot.client.open
+    robot.stop()
+    assert robot.client.take_outgoing() == []

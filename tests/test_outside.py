@@ -1,5 +1,6 @@
-"""Robots outside the emulator against live runs (``swarm run --external``): the same run
-bit for bit over UDP and over a serial line, a robot that never connects, one whose program
+"""Robots outside the emulator against live runs (``swarm run --external``), as the Python
+program (``robot-agent --link``) and as the C robot (c_robot/): the same run bit for bit
+over UDP and over serial lines, a robot that never connects, one whose program
 is killed and restarted, a bridge that dies and is found again, a link made worse on
 purpose in real time, an encrypted link (``--secure``), and forged, replayed and oversized
 frames sent at a live link."""
@@ -12,35 +13,54 @@ import signal
 from pathlib import Path
 
 import pytest
-from outside_helpers import Relay, decisions, in_process, outside_run, pty_pair, udp_link
+from outside_helpers import (
+    Relay,
+    c_robot_binary,
+    decisions,
+    in_process,
+    outside_run,
+    pty_pair,
+    udp_link,
+)
 from swarm_helpers import processes_of
 
 from link.core import codec
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = pytest.mark.timeout(900)
 
 SMALL = ["--robots", "4", "--sites", "3", "--timeout", "600", "--no-record"]
 # The runs compared bit for bit with the all-emulated run: a world that waits long for a
 # robot a busy machine starved stays in lockstep (a stall closes a tick without a robot,
 # and the run is no longer the seed's, whatever the link).
-PATIENT = ["--stall-timeout", "120"]
+PATIENT = ["--stall-timeout", "300"]
+TEN = ["--robots", "10", "--timeout", "900", "--no-record", *PATIENT]
 
 
-def test_two_robots_outside_over_udp_decide_exactly_as_all_emulated(tmp_path: Path) -> None:
-    """Lockstep: robots 8 and 9 run as programs outside, on their own clocks and sockets,
-    and every robot's results equal those of the all-emulated run of the same seed."""
-    options = ["--robots", "10", "--sites", "5", "--seed", "0", "--timeout", "900", "--no-record"]
-    options += PATIENT
+@pytest.fixture(scope="module")
+def c_binary() -> Path | None:
+    """The C robot (c_robot/), built for these tests; None without a C compiler."""
+    return c_robot_binary()
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_a_python_and_a_c_robot_over_udp_decide_exactly_as_all_emulated(
+    tmp_path: Path, c_binary: Path | None, seed: int
+) -> None:
+    """Lockstep: robot 8 runs as the Python program and robot 9 as the C program, outside,
+    on their own clocks and sockets, and every robot's results (and the run's digest) equal
+    those of the all-emulated run of the same seed."""
+    options = [*TEN, "--seed", str(seed)]
     reference = in_process(options)
     address = udp_link()
     with outside_run(tmp_path, *options, "--external", "8,9", "--link", address) as run:
         run.start(address, 8)
-        run.start(address, 9)
-        code, summary, stderr = run.finish()
+        run.start_c(c_binary, address, 9)
+        code, summary, stderr = run.finish(timeout=800)
         programs = run.program_summaries()
     assert code == 0, stderr
     assert summary is not None
     assert decisions(summary) == decisions(reference)
+    assert summary["digest"] == reference["digest"]
     assert summary["sim_time_s"] == reference["sim_time_s"]
     assert [r["outside"] for r in summary["per_robot"]] == [None] * 8 + ["udp", "udp"]
     assert summary["world"]["departures"] == 0
@@ -51,25 +71,35 @@ def test_two_robots_outside_over_udp_decide_exactly_as_all_emulated(tmp_path: Pa
     # Each program says how it ended: the bridge told it the run was over.
     decided = [robot["decided_site"] for robot in summary["per_robot"][8:]]
     assert [each["decided_site"] for each in programs] == decided
+    assert all(each["sessions"] == 1 and each["refused"] == {} for each in programs)
     assert "robot-agent --link" in stderr and "--key-file" in stderr
     assert oct((tmp_path / "keys" / "robot-8.key").stat().st_mode & 0o777) == "0o600"
 
 
-def test_one_robot_outside_over_a_serial_line_decides_exactly_as_all_emulated(
-    tmp_path: Path,
+def test_a_python_and_a_c_robot_over_serial_lines_decide_exactly_as_all_emulated(
+    tmp_path: Path, c_binary: Path | None
 ) -> None:
+    """Robot 2 runs as the C program and robot 3 as the Python program, each on its own
+    serial line (a pseudo-terminal pair), and the run is the all-emulated run's."""
     options = [*SMALL, *PATIENT, "--seed", "1"]
     reference = in_process(options)
-    with pty_pair(tmp_path) as (bridge_end, robot_end):
-        served = f"3=serial:{bridge_end}@921600"
-        with outside_run(tmp_path, *options, "--external", "3", "--link", served) as run:
-            run.start(f"serial:{robot_end}@921600", 3)
-            code, summary, stderr = run.finish()
+    lines = [tmp_path / "c", tmp_path / "python"]
+    for folder in lines:
+        folder.mkdir()
+    with pty_pair(lines[0]) as (c_bridge, c_robot), pty_pair(lines[1]) as (py_bridge, py_robot):
+        served = ["--link", f"2=serial:{c_bridge}@921600", "--link", f"3=serial:{py_bridge}@921600"]
+        with outside_run(tmp_path, *options, "--external", "2,3", *served) as run:
+            run.start_c(c_binary, f"serial:{c_robot}@921600", 2)
+            run.start(f"serial:{py_robot}@921600", 3)
+            code, summary, stderr = run.finish(timeout=800)
     assert code == 0, stderr
     assert summary is not None
     assert decisions(summary) == decisions(reference)
-    assert summary["links"]["3"]["transport"] == "serial"
-    assert summary["links"]["3"]["refused"] == 0
+    assert summary["digest"] == reference["digest"]
+    assert summary["world"]["departures"] == 0
+    for robot in ("2", "3"):
+        assert summary["links"][robot]["transport"] == "serial"
+        assert summary["links"][robot]["refused"] == 0
 
 
 def test_an_outside_robot_that_never_connects_ends_the_run_naming_it(tmp_path: Path) -> None:
@@ -105,7 +135,7 @@ def test_a_killed_program_is_a_departure_and_its_restart_rejoins_and_decides(
 def test_a_bridge_that_dies_is_started_again_and_its_robot_finds_it(tmp_path: Path) -> None:
     """In real time (a lockstep run this small would be over before the robot noticed)."""
     address = udp_link()
-    options = [*SMALL, "--seed", "2", "--clock", "realtime", "--speed", "2"]
+    options = [*SMALL, "--seed", "2", "--clock", "realtime", "--speed", "4"]
     options += ["--external", "3", "--link", address]
     with outside_run(tmp_path, *options) as run, Relay.to(address) as relay:
         started = run.start(relay.address, 3)
@@ -146,19 +176,34 @@ def test_a_real_time_swarm_with_a_bad_link_reaches_the_right_consensus(tmp_path:
     assert summary["config"]["link_delay"] == 50.0 and summary["config"]["link_loss"] == 0.2
 
 
-def test_a_secure_run_encrypts_the_link_and_decides_as_all_emulated(tmp_path: Path) -> None:
+def test_a_secure_run_encrypts_the_links_and_decides_as_all_emulated(
+    tmp_path: Path, c_binary: Path | None
+) -> None:
+    """``--secure``: every frame of each session (robot 2 the C program, robot 3 the Python
+    one) is ChaCha20-Poly1305 under its session key, and the run is the all-emulated run's."""
     options = [*SMALL, *PATIENT, "--seed", "1"]
     reference = in_process(options)
     address = udp_link()
-    secure = ["--secure", "--external", "2", "--link", address]
-    with outside_run(tmp_path, *options, *secure) as run, Relay.to(address) as relay:
-        run.start(relay.address, 2)
+    secure = ["--secure", "--external", "2,3", "--link", address]
+    with (
+        outside_run(tmp_path, *options, *secure) as run,
+        Relay.to(address) as c_relay,
+        Relay.to(address) as py_relay,
+    ):
+        run.start_c(c_binary, c_relay.address, 2)
+        run.start(py_relay.address, 3)
         code, summary, stderr = run.finish()
+        programs = run.program_summaries()
     assert code == 0, stderr
     assert summary is not None and decisions(summary) == decisions(reference)
-    assert summary["links"]["2"]["sessions"] == 1  # the bridge's figures pass the access rules
-    sessions = [frame for frame in relay.captured if frame[3] != codec.FrameType.HELLO]
-    assert sessions and all(frame[4] & codec.ENCRYPTED for frame in sessions)
+    assert summary["digest"] == reference["digest"]
+    for robot in ("2", "3"):  # the bridge's figures pass the access rules
+        assert summary["links"][robot]["sessions"] == 1
+        assert summary["links"][robot]["refused"] == 0
+    assert all(each["refused"] == {} and each["sessions"] == 1 for each in programs)
+    for relay in (c_relay, py_relay):
+        sessions = [frame for frame in relay.captured if frame[3] != codec.FrameType.HELLO]
+        assert sessions and all(frame[4] & codec.ENCRYPTED for frame in sessions)
 
 
 def test_forged_replayed_and_oversized_frames_are_refused_counted_and_change_nothing(

@@ -132,9 +132,10 @@ def _plan(*options: str) -> RunPlan:
     return plan_from_args(args)
 
 
-def _clock_message(t: float) -> Heard:
+def _clock_message(t: float, plan: RunPlan) -> Heard:
+    """The world's clock at ``t`` on the run's clock key (a key of another run is refused)."""
     clock = protocol.Clock(v=protocol.VERSION, tick=round(t * 10), t=t)
-    return Heard(Kind.CLOCK, protocol.Keys("x").world_clock, protocol.encode(clock))
+    return Heard(Kind.CLOCK, protocol.Keys(plan.run_id).world_clock, protocol.encode(clock))
 
 
 def test_the_launcher_looks_with_its_clock_given_and_takes_a_signal_as_an_event() -> None:
@@ -144,7 +145,7 @@ def test_the_launcher_looks_with_its_clock_given_and_takes_a_signal_as_an_event(
     swarm = Swarm(plan, clock=lambda: now[0])
     assert swarm.wall_deadline == 1030.0
     assert swarm.look(signalled=False) is None
-    swarm.inbox.put(_clock_message(12.5))
+    swarm.inbox.put(_clock_message(12.5, plan))
     assert not swarm.take_events(until=now[0])
     assert swarm.follower.sim_time == 12.5 and swarm.follower.started_at == 1000.0
     swarm.signalled(signal.SIGINT)
@@ -152,15 +153,16 @@ def test_the_launcher_looks_with_its_clock_given_and_takes_a_signal_as_an_event(
     assert swarm.look(signalled=True) == Halt(Stop.INTERRUPTED)
     now[0] = 1030.0
     assert swarm.look(signalled=False) == Halt(Stop.TIMEOUT, TimeLimit.WALL)
-    swarm.inbox.put(_clock_message(50.0))
+    swarm.inbox.put(_clock_message(50.0, plan))
     swarm.take_events(until=now[0])
     assert swarm.look(signalled=True) == Halt(Stop.TIMEOUT, TimeLimit.SIM)
 
 
 def test_the_inbox_takes_a_signal_whatever_else_filled_it() -> None:
-    swarm = Swarm(_plan())
+    plan = _plan()
+    swarm = Swarm(plan)
     swarm.inbox.max_bytes = 0  # full: every sample is dropped and counted
-    swarm.inbox.put(_clock_message(1.0), 100)
+    swarm.inbox.put(_clock_message(1.0, plan), 100)
     swarm.signalled(signal.SIGTERM)
     assert swarm.take_events(until=swarm.clock())
     assert swarm.follower.rejected == 1 and swarm.follower.sim_time == 0.0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import signal
@@ -14,10 +15,13 @@ from typing import Any
 import pytest
 from swarm_helpers import (
     REPO,
+    call_main,
     kill_leftovers,
     loopback_router,
     processes_of,
+    reference_run,
     run_swarm,
+    swarm_cli,
     swarm_command,
     unique_run_id,
     wait_for_processes,
@@ -52,19 +56,23 @@ def test_a_small_swarm_reaches_the_right_consensus_and_leaves_nothing_behind() -
 
 
 def test_the_same_seed_gives_the_same_per_robot_results() -> None:
-    def outcome(run_id: str) -> list[tuple[object, ...]]:
-        # Ten robots crowd the nest: contacts make any order-dependence in the world show.
-        code, summary, stderr = run_swarm(
-            ["--robots", "10", "--sites", "8", "--seed", "2", "--no-record"], run_id
-        )
-        assert code == 0, stderr
-        return [
-            (r["id"], r["decided_site"], r["steps"], r["decision_time_s"], r["pool_sizes"])
-            for r in summary["per_robot"]
-        ]
+    """Ten robots, one process each (the default), crowd the nest: contacts make any
+    order-dependence in the world show. The run is robot for robot the in-process run of
+    the same seed, which is deterministic (tests/test_inprocess.py): so is this one."""
+    options = ["--robots", "10", "--sites", "8", "--seed", "2", "--no-record"]
+    code, summary, stderr = run_swarm(options, unique_run_id("same"))
+    assert code == 0, stderr
+    assert summary["robot_processes"] == 10
+    reference = reference_run(options)
+    assert _decisions(summary) == _decisions(reference)
+    assert summary["digest"] == reference["digest"]
 
-    first = outcome(unique_run_id("same-a"))
-    assert first == outcome(unique_run_id("same-b"))
+
+def _decisions(summary: dict[str, Any]) -> list[tuple[object, ...]]:
+    return [
+        (r["id"], r["decided_site"], r["steps"], r["decision_time_s"], r["pool_sizes"])
+        for r in summary["per_robot"]
+    ]
 
 
 def test_killing_a_robot_mid_run_does_not_hang_the_world() -> None:
@@ -225,7 +233,7 @@ def test_malformed_payloads_on_every_key_are_rejected_and_counted() -> None:
     assert left == []
 
 
-def test_bad_arguments_exit_with_code_2_and_one_line() -> None:
+def test_bad_arguments_exit_with_code_2_and_one_line(capsys: pytest.CaptureFixture[str]) -> None:
     for bad in (
         ["--robots", "0"],
         ["--alpha", "0.7"],
@@ -236,33 +244,29 @@ def test_bad_arguments_exit_with_code_2_and_one_line() -> None:
         ["--timeout", "nan"],
         ["--record", "x.mcap", "--no-record"],
     ):
-        done = subprocess.run(swarm_command("run", *bad), capture_output=True, timeout=60, cwd=REPO)
-        assert done.returncode == 2, bad
-        lines = done.stderr.decode().strip().splitlines()
+        code, _, err = swarm_cli(["run", *bad], capsys)
+        assert code == 2, bad
+        lines = err.strip().splitlines()
         assert lines[-1].startswith("swarm run: error:"), lines
-        assert "Traceback" not in done.stderr.decode()
+        assert "Traceback" not in err
 
 
-@pytest.mark.parametrize("module", ["world_server.server", "nest_beacon", "robot_agent.node"])
-def test_every_component_prints_its_help(module: str) -> None:
-    done = subprocess.run(
-        [*swarm_command()[:1], "-m", module, "--help"], capture_output=True, timeout=60, cwd=REPO
-    )
-    assert done.returncode == 0
-    assert "usage:" in done.stdout.decode()
-    assert "--connect" in done.stdout.decode()
+@pytest.mark.parametrize("module", ["world_server.server", "nest_beacon.node", "robot_agent.node"])
+def test_every_component_prints_its_help(module: str, capsys: pytest.CaptureFixture[str]) -> None:
+    main = importlib.import_module(f"{module}.cli").main
+    code, out, _ = call_main(main, ["--help"], capsys)
+    assert code == 0
+    assert "usage:" in out
+    assert "--connect" in out
 
 
-def test_alpha_without_threshold_is_a_usage_error_not_a_traceback() -> None:
-    done = subprocess.run(
-        swarm_command("run", "--alpha", "0.2", "--threshold", "1"),
-        capture_output=True,
-        timeout=60,
-        cwd=REPO,
-    )
-    assert done.returncode == 2
-    assert "Traceback" not in done.stderr.decode()
-    assert "threshold" in done.stderr.decode()
+def test_alpha_without_threshold_is_a_usage_error_not_a_traceback(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    code, _, err = swarm_cli(["run", "--alpha", "0.2", "--threshold", "1"], capsys)
+    assert code == 2
+    assert "Traceback" not in err
+    assert "threshold" in err
 
 
 def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run(tmp_path: Path) -> None:
@@ -318,24 +322,22 @@ def test_lockstep_over_zenoh_decides_exactly_as_the_in_memory_run(tmp_path: Path
 
 
 def test_the_process_layout_changes_no_robot_s_results() -> None:
-    """One process per robot (the default for a small swarm, each robot on its own keys)
-    and robots hosted three to a process (batches sealed by their host): the same seed,
-    the same results, robot for robot."""
+    """Robots hosted three to a process (batches sealed by their host) give the same seed's
+    results robot for robot, as one process per robot does
+    (test_the_same_seed_gives_the_same_per_robot_results): both are the in-process run."""
     common = ["--robots", "6", "--sites", "6", "--seed", "3", "--timeout", "900", "--no-record"]
-    results = {}
-    digests = {}
-    for per_process, processes in (("1", 6), ("3", 2)):
-        code, summary, stderr = run_swarm(
-            [*common, "--robots-per-process", per_process], unique_run_id(f"layout-{per_process}")
-        )
-        assert code == 0, stderr
-        assert summary["robot_processes"] == processes
-        # Everything of each robot but where it is when the run stops (the launcher notices
-        # the last decision a tick or two late, and the robots move on).
-        results[per_process] = [{**robot, "phase": None} for robot in summary["per_robot"]]
-        digests[per_process] = summary["digest"]
-    assert results["1"] == results["3"]
-    assert digests["1"] == digests["3"]
+    code, summary, stderr = run_swarm(
+        [*common, "--robots-per-process", "3"], unique_run_id("layout-3")
+    )
+    assert code == 0, stderr
+    assert summary["robot_processes"] == 2
+    reference = reference_run(common)
+    # Everything of each robot but where it is when the run stops (the launcher notices
+    # the last decision a tick or two late, and the robots move on).
+    assert [{**r, "phase": None} for r in summary["per_robot"]] == [
+        {**r, "phase": None} for r in reference["per_robot"]
+    ]
+    assert summary["digest"] == reference["digest"]
 
 
 HOSTED_FOUR = ["--robots-per-process", "4"]

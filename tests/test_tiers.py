@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 import zenoh
 from conftest import FastTierError
-from tiers import FAST, FULL_ONLY, SLOW, is_fast
+from tiers import FAST, FAST_TESTS, FULL_ONLY, PUBLISHED, SLOW, is_fast, is_published
 
 TESTS = Path(__file__).resolve().parent
 # What a fast module (or a local helper it imports) may not import: these start processes,
@@ -114,7 +114,41 @@ def test_a_slow_test_is_not_fast_and_its_neighbours_are() -> None:
         module, _, function = test.partition("::")
         assert not is_fast(module, function)
     assert is_fast("test_controller", "test_same_seed_same_decisions_other_seed_other_decisions")
-    assert not is_fast("test_section5", "test_published_section5_is_what_the_code_gives")
+    assert not is_fast(
+        "test_swarm", "test_a_small_swarm_reaches_the_right_consensus_and_leaves_nothing_behind"
+    )
+
+
+def test_every_fast_test_of_a_full_module_is_there() -> None:
+    """FAST_TESTS names tests of FULL_ONLY modules only (a FAST module's are fast anyway),
+    and each is a test function of its module."""
+    for test in FAST_TESTS:
+        module, _, function = test.partition("::")
+        assert module in FULL_ONLY, test
+        tree = ast.parse((TESTS / f"{module}.py").read_text())
+        functions = {node.name for node in tree.body if isinstance(node, ast.FunctionDef)}
+        assert function in functions, f"{test}: no such test"
+        assert is_fast(module, function)
+
+
+def test_every_published_check_is_a_test_that_is_there() -> None:
+    for test, reason in PUBLISHED.items():
+        module, _, function = test.partition("::")
+        tree = ast.parse((TESTS / f"{module}.py").read_text())
+        functions = {node.name for node in tree.body if isinstance(node, ast.FunctionDef)}
+        assert function in functions, f"{test}: no such test"
+        assert reason.strip() and is_published(module, function)
+        assert not is_fast(module, function), f"{test}: a published check is not fast"
+
+
+def test_make_test_leaves_the_published_checks_out(request: pytest.FixtureRequest) -> None:
+    """Without --published the session holds no published check; with it, only they."""
+    held = {
+        f"{item.path.stem}::{getattr(item, 'originalname', item.name)}"
+        for item in request.session.items
+    }
+    assert request.config.getoption("--published") is False
+    assert held.isdisjoint(PUBLISHED)
 
 
 def test_this_module_is_fast_and_so_guarded(request: pytest.FixtureRequest) -> None:

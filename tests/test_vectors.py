@@ -6,6 +6,7 @@ A port in another language runs the same checks against the same files (docs/por
 from __future__ import annotations
 
 import json
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +24,9 @@ from examples.udp_radio import (
     encode_frame,
 )
 from link.core import codec
+from link.core.peer import LinkPeer, SessionOpened
+from link.core.session import LinkClient, Welcomed
+from plumbing.run_keys import read_key_file
 from wire import auth, batch, names, protocol
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
@@ -43,6 +47,7 @@ MESSAGE_FILES = {
         "tick.json",
         "batch.json",
         "link_frame.json",
+        "key_file.json",
         "numeric.json",
         "rng.json",
     )
@@ -201,6 +206,7 @@ def test_batch_vectors_that_are_refused_whole(vector: dict[str, Any]) -> None:
 
 
 LINK = load(VECTORS / "link_frame.json")
+AUTH = load(VECTORS / "auth.json")
 LINK_KEY = bytes.fromhex(LINK["link_key_hex"])
 SESSION_KEY = bytes.fromhex(LINK["session_key_hex"])
 
@@ -241,18 +247,155 @@ def test_link_frame_vectors_read_and_seal_to_their_bytes(vector: dict[str, Any])
         assert codec.decode_welcome(frame.body).run == "demo"
 
 
+LINK_FRAMES = {vector["name"]: bytes.fromhex(vector["hex"]) for vector in LINK["valid"]}
+ROBOT_NONCE = bytes.fromhex(LINK["robot_nonce_hex"])
+BRIDGE_NONCE = bytes.fromhex(LINK["bridge_nonce_hex"])
+
+
+def test_the_bounds_are_the_codec_s() -> None:
+    assert LINK["max_frame_bytes"] == codec.MAX_FRAME_BYTES == 65507
+    assert LINK["max_encoded_bytes"] == codec.MAX_ENCODED_BYTES == 65769
+    assert LINK["max_attachment_bytes"] == codec.MAX_ATTACHMENT_BYTES == 1024
+    assert LINK["replay_window"] == codec.REPLAY_WINDOW == 64
+
+
+def robot_receiver(session: str) -> LinkClient:
+    """Robot 8's end in ``session`` (LINK["receivers"]["robot"])."""
+    client = LinkClient(LINK["robot"], LINK_KEY, nonce=lambda: ROBOT_NONCE)
+    client.wake(0.0)  # its hello
+    if session != "hello":
+        welcome = LINK_FRAMES["welcome" if session == "plain" else "welcome_encrypted"]
+        (event,) = client.receive(welcome, 0.0)
+        assert isinstance(event, Welcomed)
+    client.take_outgoing()
+    assert not client.refused
+    return client
+
+
+def bridge_receiver(session: str) -> LinkPeer:
+    """The bridge's end of robot 8 in ``session`` (LINK["receivers"]["bridge"])."""
+    name = "welcome" if session == "plain" else "welcome_encrypted"
+    body = bytes.fromhex(next(v for v in LINK["valid"] if v["name"] == name)["body_hex"])
+    peer = LinkPeer(
+        LINK["robot"],
+        LINK_KEY,
+        codec.decode_welcome(body),
+        transport="udp",
+        address="udp://127.0.0.1:47800",
+        nonce=lambda: BRIDGE_NONCE,
+    )
+    assert peer.receive(LINK_FRAMES["hello"], "robot", 0.0) == []
+    ping = "ping_from_the_robot" + ("" if session == "plain" else "_encrypted")
+    assert peer.receive(LINK_FRAMES[ping], "robot", 0.0) == [SessionOpened(LINK["robot"])]
+    peer.take_outgoing()
+    assert not peer.refused
+    return peer
+
+
+def refused_by(receiver: str, session: str, frames: list[bytes]) -> list[str | None]:
+    """What a receiver in ``session`` refuses of ``frames`` in turn: each one's refusal, or
+    None if it took it."""
+    end = robot_receiver(session) if receiver == "robot" else bridge_receiver(session)
+    found: list[str | None] = []
+    for data in frames:
+        before = Counter(end.refused)
+        if isinstance(end, LinkClient):
+            end.receive(data, 0.0)
+        else:
+            end.receive(data, "robot", 0.0)
+        added = Counter(end.refused) - before
+        assert sum(added.values()) <= 1
+        found.append(next(iter(added), None))
+    return found
+
+
 @pytest.mark.parametrize("vector", LINK["invalid"], ids=[v["name"] for v in LINK["invalid"]])
-def test_link_frame_vectors_that_a_receiver_refuses_for_their_reason(
-    vector: dict[str, Any],
+@pytest.mark.parametrize("receiver", ["robot", "bridge"])
+def test_link_frame_vectors_that_each_end_refuses_for_its_reason(
+    vector: dict[str, Any], receiver: str
 ) -> None:
     data = bytes.fromhex(vector["hex"])
-    with pytest.raises(codec.LinkError) as refused:
-        cipher = SESSION_KEY if len(data) > 4 and data[4] & codec.ENCRYPTED else None
-        frame = codec.open_frame(data, LINK_KEY, cipher)
-        codec.check_body(frame)
-        if frame.type is codec.FrameType.DATA:
-            codec.decode_data(frame.body)
-    assert refused.value.refusal.value == vector["category"]
+    assert refused_by(receiver, vector["session"], [data]) == [vector["refusal"][receiver]]
+
+
+@pytest.mark.parametrize("vector", LINK["valid"], ids=[v["name"] for v in LINK["valid"]])
+def test_a_valid_frame_is_taken_by_the_end_it_goes_to(vector: dict[str, Any]) -> None:
+    """Each end in its state (LINK["receivers"]) takes the other end's frames: a welcome from
+    a robot saying hello, the robot's frames after the one that opened the session."""
+    data = bytes.fromhex(vector["hex"])
+    session = "encrypted" if vector["encrypted"] else "plain"
+    if vector["type"] == "WELCOME":
+        assert refused_by("robot", "hello", [data]) == [None]
+    elif vector["from_bridge"]:
+        assert refused_by("robot", session, [data]) == [None]
+    elif vector["type"] != "HELLO" and vector["seq"] > 1:
+        assert refused_by("bridge", session, [data]) == [None]
+
+
+@pytest.mark.parametrize("sequence", LINK["sequences"], ids=[s["name"] for s in LINK["sequences"]])
+def test_link_frame_sequences(sequence: dict[str, Any]) -> None:
+    frames = [bytes.fromhex(item["hex"]) for item in sequence["frames"]]
+    expected = [item["refused"] for item in sequence["frames"]]
+    assert refused_by(sequence["receiver"], sequence["session"], frames) == expected
+
+
+def test_the_replay_window_takes_63_behind_and_refuses_64() -> None:
+    window = codec.ReplayWindow()
+    window.take(100)
+    assert window.refuses(37) is None  # 63 behind
+    assert window.refuses(36) is not None  # 64 behind
+    assert window.refuses(100) is not None and window.refuses(101) is None
+
+
+@pytest.mark.parametrize(
+    "vector",
+    [v for v in LINK["valid"] if "query" in v.get("data", {})],
+    ids=lambda v: v["name"],
+)
+def test_the_questions_on_world_info_and_their_answers(vector: dict[str, Any]) -> None:
+    """Kind 19: the attachment is tag || nonce || identity under the robot's run key; kind
+    4: tag || nonce, under the robot's run key too (wire/auth.py)."""
+    keyring = auth.Keyring(keys={"robot/8": bytes.fromhex(LINK["robot_key_hex"])})
+    data, query = vector["data"], vector["data"]["query"]
+    payload = data["payload_utf8"].encode()
+    attachment = bytes.fromhex(data["attachment_hex"])
+    nonce = bytes.fromhex(query["nonce_hex"])
+    assert attachment == bytes.fromhex(query["tag_hex"] + query["metadata_hex"])
+    if data["kind"] == "INFO_QUERY":
+        assert attachment[16:] == nonce + query["identity"].encode()
+        secret = auth.Keyring(secret=bytes.fromhex(AUTH["secret_hex"]))
+        assert auth.query_open(secret, query["key_expr"], payload, attachment) == (
+            query["identity"],
+            nonce,
+        )
+    else:
+        assert attachment[16:] == nonce
+        auth.reply_open(
+            keyring, query["identity"], query["key_expr"], payload, attachment, nonce=nonce
+        )
+        protocol.decode(payload, protocol.WorldInfo)
+
+
+KEY_FILES = load(VECTORS / "key_file.json")
+
+
+@pytest.mark.parametrize("vector", KEY_FILES["valid"], ids=lambda v: v["name"])
+def test_key_files_that_a_robot_reads(vector: dict[str, Any], tmp_path: Path) -> None:
+    path = tmp_path / "robot-8.key"
+    path.write_text(vector["utf8"], encoding="utf-8")
+    path.chmod(0o600)
+    run, keyring = read_key_file(path, KEY_FILES["identity"])
+    assert run == KEY_FILES["run"]
+    assert keyring.key(KEY_FILES["identity"]) == bytes.fromhex(KEY_FILES["key_hex"])
+
+
+@pytest.mark.parametrize("vector", KEY_FILES["invalid"], ids=lambda v: v["name"])
+def test_key_files_that_a_robot_refuses(vector: dict[str, Any], tmp_path: Path) -> None:
+    path = tmp_path / "robot-8.key"
+    path.write_text(vector["utf8"], encoding="utf-8")
+    path.chmod(0o600)
+    with pytest.raises(ValueError):
+        read_key_file(path, KEY_FILES["identity"])
 
 
 @pytest.mark.parametrize(

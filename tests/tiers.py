@@ -10,7 +10,13 @@ their tests fail that starts a process or opens a socket or a Zenoh session.
 ``SLOW``: tests of fast modules left out of the fast tier for their time alone (whole
 swarms on real physics), with why; ``make test`` runs them.
 
+``FAST_TESTS``: tests of the other modules that start nothing: fast, and guarded as such.
+
 ``FULL_ONLY``: the rest, with why, run by ``make test`` only (which also runs ``FAST``).
+
+``PUBLISHED``: tests that run published runs again to check them against today's code,
+with why; ``make check-published`` runs them (``pytest --published``), ``make test`` does
+not.
 
 tests/test_tiers.py fails if a test module is in neither or both, if a fast module imports
 what starts processes or talks to a network, or if ``SLOW`` names a test that is not there.
@@ -110,6 +116,109 @@ FULL_ONLY = {
 }
 
 
+# Tests of FULL_ONLY modules that start nothing (their modules' other tests do): in the
+# fast tier like the FAST modules, and guarded the same way.
+FAST_TESTS = frozenset(
+    {
+        "test_byzantine::test_a_liar_broadcasts_certainty_of_its_site_every_trip_and_never_settles",
+        "test_byzantine::test_a_liar_needs_its_site_and_a_site_of_the_world",
+        "test_byzantine::test_a_one_hot_opinion_is_final_under_both_pooling_operators",
+        "test_byzantine::test_a_report_rebuilding_a_summary_reads_the_byzantine_robots_from_the_config",
+        "test_byzantine::test_a_silent_robot_pools_and_decides_but_never_broadcasts",
+        "test_byzantine::test_an_inverted_robot_eliminates_the_better_site_of_the_same_pair",
+        "test_byzantine::test_bad_switches_exit_with_code_2_and_one_line",
+        "test_byzantine::test_consensus_and_its_time_are_the_honest_robots",
+        "test_byzantine::test_robot_agent_refuses_bad_switches_with_code_2",
+        "test_byzantine::test_swarm_experiment_passes_byzantine_and_kill_switches_on_to_each_run",
+        "test_byzantine::test_switches_parse_and_print_back",
+        "test_byzantine::test_the_default_liar_site_is_seeded_never_the_best_and_shared",
+        "test_ending_rule::test_a_run_goes_on_until_a_condition_holds_and_each_limit_counts_when_reached",
+        "test_ending_rule::test_each_ending_has_its_exit_code_and_an_interrupted_run_tells_the_signal",
+        "test_ending_rule::test_the_ending_from_why_the_run_stopped_and_what_the_robots_decided",
+        "test_ending_rule::test_the_help_has_one_row_per_exit_code_in_order",
+        "test_ending_rule::test_the_in_process_engine_stops_on_a_signal_or_the_wall_limit_at_once",
+        "test_ending_rule::test_the_stop_signals_have_their_posix_numbers",
+        "test_ending_rule::test_when_conditions_coincide_the_first_in_the_rules_order_decides",
+        "test_endings::test_an_unwritable_recording_path_is_refused_before_anything_starts",
+        "test_endings::test_the_help_documents_each_endings_exit_code",
+        "test_experiment::test_bad_arguments_exit_with_code_2_and_one_line",
+        "test_flood_memory::test_the_caps_table_states_a_cap_for_every_process",
+        "test_inprocess::test_a_wall_time_limit_ends_the_run_as_a_wall_timeout",
+        "test_inprocess::test_each_ending_has_swarm_runs_exit_code",
+        "test_inprocess::test_what_it_cannot_honour_is_a_one_line_usage_error",
+        "test_recording::test_a_bad_niceness_is_a_usage_error",
+        "test_recording::test_foxglove_channels_use_the_official_schemas",
+        "test_recording::test_foxglove_messages_carry_the_required_fields_and_the_run",
+        "test_recording::test_log_time_is_sim_time_and_publish_time_is_wall_time",
+        "test_recording::test_metadata_holds_config_versions_seed_and_summary",
+        "test_recording::test_nothing_published_is_missing_from_the_recording",
+        "test_recording::test_one_channel_per_key_with_its_protocol_schema",
+        "test_recording::test_the_launcher_waits_for_the_recorder_while_its_file_grows",
+        "test_recording::test_the_recorder_yields_the_cpu_only_to_a_swarm_that_leaves_it_idle_time",
+        "test_report::test_a_runs_digest_is_its_per_robot_results_and_nothing_else",
+        "test_report::test_a_trail_keeps_at_most_its_limit_of_evenly_spaced_points_and_the_last",
+        "test_report::test_acks_are_expected_at_the_ticks_the_beacon_named",
+        "test_run_parts::test_a_stop_signal_becomes_one_event_and_later_ones_change_nothing",
+        "test_run_parts::test_faults_fall_due_in_sim_time_order_and_are_noted_as_the_summary_lists_them",
+        "test_run_parts::test_stop_signals_that_come_while_the_lock_notify_takes_is_held_stop_the_process",
+        "test_run_parts::test_the_inbox_takes_a_signal_whatever_else_filled_it",
+        "test_run_parts::test_the_launcher_looks_with_its_clock_given_and_takes_a_signal_as_an_event",
+        "test_run_parts::test_the_log_relay_holds_lines_for_the_recorder_and_publishes_none_once_detached",
+        "test_scale_doc::test_a_later_run_of_the_same_size_and_seed_replaces_an_earlier_one",
+        "test_scale_doc::test_every_size_and_seed_of_the_plan_is_in_the_results",
+        "test_scale_doc::test_readme_has_the_per_size_table_the_results_give",
+        "test_scale_doc::test_the_page_is_what_the_results_give",
+        "test_section5::test_a_runs_file_that_lacks_runs_or_has_other_settings_is_reported",
+        "test_section5::test_blocks_are_replaced_between_their_markers",
+        "test_section5::test_check_finds_a_run_that_changed",
+        "test_section5::test_check_finds_an_edited_table_and_missing_data",
+        "test_section5::test_check_runs_every_published_run_and_names_each_that_differs",
+        "test_section5::test_cli_needs_the_repository",
+        "test_section5::test_figure_data_is_what_the_tables_count",
+        "test_section5::test_render_rewrites_the_blocks_from_the_published_runs",
+        "test_section5::test_sample_goes_with_check",
+        "test_section5::test_swarm_steps_is_the_last_robot_and_only_for_consensus",
+        "test_section5::test_the_published_runs_file_holds_every_run_it_promises",
+        "test_section5::test_the_sample_checks_seeds_0_to_9_and_says_what_it_did_not_check",
+        "test_swarm::test_alpha_without_threshold_is_a_usage_error_not_a_traceback",
+        "test_swarm::test_bad_arguments_exit_with_code_2_and_one_line",
+        "test_swarm::test_every_component_prints_its_help",
+        "test_sweep::test_dask_options_are_checked",
+        "test_udp_radio::test_bad_options_are_refused_with_a_reason",
+        "test_udp_radio::test_encode_frame_refuses_what_receivers_would_drop",
+        "test_udp_radio::test_frame_layout_is_magic_version_sender_length_sender_payload",
+        "test_viewer::test_a_forged_status_is_counted_and_never_reaches_the_page",
+        "test_viewer::test_every_sample_passes_one_gate_that_rejects_what_is_not_a_valid_message",
+        "test_viewer::test_foxglove_live_serves_the_recording_channels",
+        "test_viewer::test_in_a_keyed_run_the_gate_checks_each_tag_with_its_speakers_key",
+        "test_viewer::test_the_bridge_keeps_the_newest_state_and_a_bounded_list_of_deliveries",
+        "test_wellstirred_cli::test_bad_arguments_exit_2_with_one_line",
+        "test_wellstirred_cli::test_exact_mean_is_added_on_request",
+        "test_wellstirred_cli::test_exact_mean_is_null_where_population_exceeds_the_pool",
+        "test_wellstirred_cli::test_figures_are_written",
+        "test_wellstirred_cli::test_json_is_one_array_with_the_documented_keys",
+        "test_wellstirred_cli::test_same_seed_same_output",
+        "test_wellstirred_cli::test_table_shows_baseline_and_k_star",
+        "test_zenoh_acl::test_a_plan_refuses_names_that_would_clash_or_break_keys",
+        "test_zenoh_acl::test_every_policy_names_existing_rules_and_one_subject_per_identity",
+        "test_zenoh_acl::test_routers_connect_to_each_other_by_name",
+        "test_zenoh_acl::test_the_templates_are_what_the_generator_writes",
+    }
+)
+
+PUBLISHED = {
+    "test_scale_doc::test_a_published_run_is_what_the_code_gives": (
+        "runs of docs/scale-runs.json again, in process"
+    ),
+}
+
+
+def is_published(module: str, test: str) -> bool:
+    """Whether test function ``test`` of ``tests/<module>.py`` checks published runs."""
+    return f"{module}::{test}" in PUBLISHED
+
+
 def is_fast(module: str, test: str) -> bool:
     """Whether test function ``test`` of ``tests/<module>.py`` is in the fast tier."""
-    return module in FAST and f"{module}::{test}" not in SLOW
+    name = f"{module}::{test}"
+    return (module in FAST and name not in SLOW) or name in FAST_TESTS

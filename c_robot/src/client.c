@@ -116,10 +116,12 @@ static int client_send(LinkClient *c, int kind, const uint8_t *payload, size_t p
     return 0;
 }
 
+/* say goodbye: the session ends at this end (a second bye would be refused) */
 static void client_bye(LinkClient *c, int reason) {
     if (!c->open) return;
     uint8_t b = (uint8_t)reason;
     session_send(c, F_BYE, &b, 1);
+    c->open = 0;
 }
 
 static void lose(LinkClient *c, const char *why, double now) {
@@ -175,11 +177,28 @@ static void world_key(const LinkRobot *p, char *out, size_t cap) {
     snprintf(out, cap, "%s/%s/world/info", p->client.root, p->client.run);
 }
 
+const uint8_t *questions_latest(const Questions *q) { return q->nonces[q->count - 1]; }
+
+static uint8_t *questions_add(Questions *q) {
+    if (q->count == RECENT_QUESTIONS) {
+        memmove(q->nonces[0], q->nonces[1], sizeof q->nonces[0] * (RECENT_QUESTIONS - 1));
+        q->count--;
+    }
+    return q->nonces[q->count++];
+}
+
+static int questions_hold(const Questions *q, const uint8_t *nonce) {
+    for (int i = 0; i < q->count; i++)
+        if (!memcmp(q->nonces[i], nonce, 16)) return 1;
+    return 0;
+}
+
 /* a question on world/info in the robot's name with a fresh nonce (auth.query_seal),
    sent: its payload names the world instance that must answer ("": any) */
-static void question(LinkRobot *p, const char *instance, uint8_t nonce[16]) {
+static void question(LinkRobot *p, const char *instance, Questions *asked) {
     char key[200];
     uint8_t metadata[16 + 32], attachment[16 + 16 + 32];
+    uint8_t *nonce = questions_add(asked);
     random_bytes(nonce, 16);
     world_key(p, key, sizeof key);
     size_t id = strlen(p->identity), size = strlen(instance);
@@ -192,7 +211,8 @@ static void question(LinkRobot *p, const char *instance, uint8_t nonce[16]) {
 
 /* ask any world for the map */
 static void ask(LinkRobot *p, double now) {
-    question(p, "", p->nonce);
+    if (!p->asking) p->asked.count = 0;
+    question(p, "", &p->asked);
     p->asking = 1;
     p->ask_again_at = now + ASK_EVERY;
 }
@@ -222,14 +242,15 @@ static void prove(LinkRobot *p, const char *instance, double now, int tries) {
         if (p->proving_count >= MAX_WORLDS) return;
         at = p->proving_count++;
         snprintf(p->proving[at].instance, sizeof p->proving[at].instance, "%s", instance);
+        p->proving[at].asked.count = 0;
     }
-    question(p, instance, p->proving[at].nonce);
+    question(p, instance, &p->proving[at].asked);
     p->proving[at].again_at = now + PROVE_EVERY;
     p->proving[at].tries = tries;
 }
 
-/* whether an answer on world/info is the world's answer to the question with nonce */
-static int holds(const LinkRobot *p, const uint8_t nonce[16], const uint8_t *payload, size_t size,
+/* whether an answer on world/info is the world's answer to one of a question's askings */
+static int holds(const LinkRobot *p, const Questions *asked, const uint8_t *payload, size_t size,
                  const uint8_t *attachment, size_t attachment_size) {
     char key[200];
     world_key(p, key, sizeof key);
@@ -237,7 +258,7 @@ static int holds(const LinkRobot *p, const uint8_t nonce[16], const uint8_t *pay
     size_t metadata_size;
     return auth_open(p->robot_key, key, payload, size, attachment, attachment_size, &metadata,
                      &metadata_size) == 0 &&
-           metadata_size == 16 && memcmp(metadata, nonce, 16) == 0;
+           metadata_size == 16 && questions_hold(asked, metadata);
 }
 
 static void lost(LinkRobot *p, int ended) {
@@ -266,6 +287,7 @@ static void welcomed(LinkRobot *p, double now) {
     if (strcmp(p->client.run, p->run) != 0) {
         log_error("the bridge serves run %s, the key file is of run %s", p->client.run, p->run);
         client_bye(&p->client, BYE_GOING_AWAY);
+        p->fatal = 1;
         p->ended = 1;
         return;
     }
@@ -301,7 +323,7 @@ static void answered(LinkRobot *p, const uint8_t *payload, size_t size,
     static WorldInfo info;
     if (p->has_endpoint) { /* a world answering for its token, or an answer no longer awaited */
         for (int i = 0; i < p->proving_count; i++) {
-            if (!holds(p, p->proving[i].nonce, payload, size, attachment, attachment_size))
+            if (!holds(p, &p->proving[i].asked, payload, size, attachment, attachment_size))
                 continue;
             char instance[MAX_NAME + 1];
             snprintf(instance, sizeof instance, "%s", p->proving[i].instance);
@@ -322,7 +344,7 @@ static void answered(LinkRobot *p, const uint8_t *payload, size_t size,
                     p->robot, p->identity);
         return;
     }
-    if (metadata_size != 16 || memcmp(metadata, p->nonce, 16) != 0) {
+    if (metadata_size != 16 || !questions_hold(&p->asked, metadata)) {
         log_warning("robot %d: an answer on world/info that does not hold: it answers another query",
                     p->robot);
         return;

@@ -17,6 +17,19 @@
    token no world answers for is counted as a rejection (link/core/robot.py). */
 #define PROVE_TRIES 5
 #define PROVE_EVERY 2.0
+/* A question asked again does not void the ones before it: an answer to any of the last
+   RECENT_QUESTIONS counts, so a relay slower than ASK_EVERY or PROVE_EVERY still brings
+   the map and the proofs. */
+#define RECENT_QUESTIONS 8
+
+/* the nonces of a question's last askings, oldest first */
+typedef struct {
+    uint8_t nonces[RECENT_QUESTIONS][16];
+    int count;
+} Questions;
+
+/* the nonce of the latest asking */
+const uint8_t *questions_latest(const Questions *q);
 #define OUT_QUEUE_BYTES (512 * 1024)
 #define OUT_QUEUE_FRAMES 256
 
@@ -57,12 +70,12 @@ typedef struct {
     char worlds[MAX_WORLDS][MAX_NAME + 1];
     int world_count;
     int asking;
-    uint8_t nonce[16];
+    Questions asked; /* the question for the map */
     double ask_again_at;
     /* world tokens being proved, in the order their questions were asked */
     struct {
         char instance[MAX_NAME + 1];
-        uint8_t nonce[16];
+        Questions asked;
         double again_at;
         int tries;
     } proving[MAX_WORLDS];

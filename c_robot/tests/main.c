@@ -39,6 +39,7 @@ int main(int argc, char **argv) {
     } groups[] = {
         {"numeric", test_numeric},   {"rng", test_rng},           {"fsum", test_fsum},
         {"format", test_format},     {"auth", test_auth},         {"link", test_link},
+        {"key files", test_key_files},
         {"messages", test_messages}, {"png+vision", test_png},
         {"decision", test_decision}, {"client", test_client},
     };

@@ -233,7 +233,7 @@ void test_client(void) {
                  !memcmp(attachment + 32, "robot/8", 7) &&
                  auth_open(robot_key, "bestofn/demo/world/info", payload, 0, attachment, as,
                            &metadata, &ms) == 0 &&
-                 !memcmp(metadata, robot.nonce, 16);
+                 !memcmp(metadata, questions_latest(&robot.asked), 16);
         check(ok, "client", "kind 19: tag, nonce, identity, tagged with the robot's key");
     }
     link_robot_wake(&robot, 1.6);
@@ -262,7 +262,12 @@ void test_client(void) {
     long bn = link_encode_data(K_INFO_REPLY, (const uint8_t *)info, strlen(info), att, (size_t)an, body, sizeof body);
     from_bridge(F_DATA, body, (size_t)bn, 2, 1.9);
     check(!robot.has_endpoint && sent_types(types, frames, 16) == 0, "client", "an answer to another question is not taken");
-    an = auth_seal(robot_key, "bestofn/demo/world/info", (const uint8_t *)info, strlen(info), robot.nonce, 16, att, sizeof att);
+    /* answered an asking late (asked at 0.6 s and again at 1.6 s): the first still counts */
+    uint8_t first[16];
+    memcpy(first, robot.asked.nonces[0], 16);
+    check(robot.asked.count == 2 && memcmp(questions_latest(&robot.asked), first, 16) != 0,
+          "client", "each asking has its own nonce, the earlier ones kept");
+    an = auth_seal(robot_key, "bestofn/demo/world/info", (const uint8_t *)info, strlen(info), first, 16, att, sizeof att);
     bn = link_encode_data(K_INFO_REPLY, (const uint8_t *)info, strlen(info), att, (size_t)an, body, sizeof body);
     from_bridge(F_DATA, body, (size_t)bn, 3, 2.0);
     n = sent_types(types, frames, 16);
@@ -297,7 +302,7 @@ void test_client(void) {
     check(asked && !robot.endpoint->has_followed, "client",
           "a world token: its world asked to answer for it, not followed yet");
     an = auth_seal(robot_key, "bestofn/demo/world/info", (const uint8_t *)info, strlen(info),
-                   robot.proving[0].nonce, 16, att, sizeof att);
+                   questions_latest(&robot.proving[0].asked), 16, att, sizeof att);
     bn = link_encode_data(K_INFO_REPLY, (const uint8_t *)info, strlen(info), att, (size_t)an, body, sizeof body);
     from_bridge(F_DATA, body, (size_t)bn, 5, 4.2);
     check(robot.endpoint->has_followed && !strcmp(robot.endpoint->followed, "w-1") &&

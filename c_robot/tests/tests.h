@@ -10,6 +10,7 @@ void test_fsum(void);
 void test_format(void);
 void test_auth(void);
 void test_link(void);
+void test_key_files(void);
 void test_messages(void);
 void test_png(void);
 void test_decision(void);

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "auth.h"
+#include "client.h"
 #include "link.h"
 #include "messages.h"
 #include "sha256.h"
@@ -71,6 +72,47 @@ static void collect(void *ctx, const unsigned char *frame, size_t size, int refu
 
 static const char *type_names[] = {"", "HELLO", "WELCOME", "DATA", "PING", "PONG", "BYE"};
 static Deframer deframer;
+
+/* A robot in the state receivers.robot of link_frame.json gives: robot 8, its hello said
+   with the file's robot nonce, and the welcome of its session taken (none: "hello"). */
+static LinkRobot receiver;
+
+static size_t valid_frame(JNode *root, const char *name, unsigned char *out, size_t cap) {
+    JNode *valid = jdom_get(root, "valid");
+    for (size_t i = 0; i < valid->count; i++)
+        if (!strcmp(jdom_str(valid->items[i], "name"), name))
+            return jdom_hex(jdom_str(valid->items[i], "hex"), out, cap);
+    return 0;
+}
+
+static void robot_in(JNode *root, const char *session, const unsigned char robot_key[32]) {
+    static unsigned char welcome[4096];
+    link_robot_init(&receiver, 8, "demo", robot_key);
+    jdom_hex(jdom_str(root, "robot_nonce_hex"), receiver.client.robot_nonce, 8);
+    link_robot_wake(&receiver, 0.0); /* its hello */
+    if (strcmp(session, "hello") != 0) {
+        const char *name = !strcmp(session, "plain") ? "welcome" : "welcome_encrypted";
+        size_t n = valid_frame(root, name, welcome, sizeof welcome);
+        link_robot_receive(&receiver, welcome, n, 0.0);
+        check(receiver.client.open, "link_frame.json receiver", name);
+    }
+    client_clear(&receiver.client);
+}
+
+/* the counter one frame adds one to (R_NONE: taken; -1: more than one) */
+static int refusal_of(const unsigned char *data, size_t size) {
+    long before[R_COUNT];
+    memcpy(before, receiver.client.refused, sizeof before);
+    link_robot_receive(&receiver, data, size, 0.0);
+    client_clear(&receiver.client);
+    int found = R_NONE;
+    long added = 0;
+    for (int i = 0; i < R_COUNT; i++) {
+        if (receiver.client.refused[i] != before[i]) found = i;
+        added += receiver.client.refused[i] - before[i];
+    }
+    return added > 1 ? -1 : found;
+}
 
 void test_link(void) {
     JNode *root = load("link_frame.json");
@@ -144,7 +186,8 @@ void test_link(void) {
         if (f.type == F_WELCOME) {
             LinkWelcome w;
             check(decode_welcome(f.body, f.body_size, &w) && !strcmp(w.run, "demo") &&
-                      w.ping_every == 0.5 && w.silence == 3.0 && !w.encrypted &&
+                      w.ping_every == 0.5 && w.silence == 3.0 &&
+                      w.encrypted == (strstr(jdom_str(v, "body_utf8"), "chacha20") != NULL) &&
                       w.controller_size == strlen("{\"dwell\":3.0}"),
                   "link_frame.json welcome", name);
             ControllerConfig c;
@@ -154,23 +197,71 @@ void test_link(void) {
                   "welcome's controller settings", name);
         }
     }
+    /* each end's counters: what the robot (this program) adds a frame to, in the state the
+       file gives (receivers.robot) */
     JNode *invalid = jdom_get(root, "invalid");
     for (size_t i = 0; i < invalid->count; i++) {
         JNode *v = invalid->items[i];
         size_t n = jdom_hex(jdom_str(v, "hex"), buf, sizeof buf);
-        Frame f;
-        static unsigned char plain[70000];
-        const unsigned char *cipher = n > 4 && (buf[4] & 2) ? sk : NULL;
-        int refusal = link_open(buf, n, lk, cipher, plain, &f);
-        if (!refusal) refusal = link_check_body(&f);
-        if (!refusal && f.type == F_DATA) {
-            int kind;
-            const unsigned char *p, *a;
-            size_t ps, as;
-            refusal = link_decode_data(f.body, f.body_size, &kind, &p, &ps, &a, &as);
+        robot_in(root, jdom_str(v, "session"), robot_key);
+        int refusal = refusal_of(buf, n);
+        const char *want = jdom_str(jdom_get(v, "refusal"), "robot");
+        check(refusal > R_NONE && !strcmp(refusal_names[refusal], want),
+              "link_frame.json invalid: the robot's counter", jdom_str(v, "name"));
+    }
+    JNode *sequences = jdom_get(root, "sequences");
+    for (size_t i = 0; i < sequences->count; i++) {
+        JNode *s = sequences->items[i];
+        if (strcmp(jdom_str(s, "receiver"), "robot") != 0) continue;
+        robot_in(root, jdom_str(s, "session"), robot_key);
+        JNode *frames = jdom_get(s, "frames");
+        int ok = 1;
+        for (size_t k = 0; k < frames->count; k++) {
+            JNode *item = frames->items[k];
+            size_t n = jdom_hex(jdom_str(item, "hex"), buf, sizeof buf);
+            int refusal = refusal_of(buf, n);
+            JNode *want = jdom_get(item, "refused");
+            ok &= want->type == J_NULL ? refusal == R_NONE
+                                       : refusal > R_NONE && !strcmp(refusal_names[refusal], want->str);
         }
-        check(refusal != R_NONE && !strcmp(refusal_names[refusal], jdom_str(v, "category")),
-              "link_frame.json invalid refused for its reason", jdom_str(v, "name"));
+        check(ok, "link_frame.json sequence", jdom_str(s, "name"));
+    }
+    /* the bridge's frames are taken by a robot in their session */
+    for (size_t i = 0; i < valid->count; i++) {
+        JNode *v = valid->items[i];
+        if (!jdom_get(v, "from_bridge")->boolean) continue;
+        size_t n = jdom_hex(jdom_str(v, "hex"), buf, sizeof buf);
+        const char *type = jdom_str(v, "type");
+        robot_in(root,
+                 !strcmp(type, "WELCOME") ? "hello"
+                 : jdom_get(v, "encrypted")->boolean ? "encrypted"
+                                                     : "plain",
+                 robot_key);
+        check(refusal_of(buf, n) == R_NONE, "link_frame.json valid: taken by the robot",
+              jdom_str(v, "name"));
+    }
+    /* kind 19 and kind 4: tag || nonce || identity, and tag || nonce, under the run key */
+    for (size_t i = 0; i < valid->count; i++) {
+        JNode *v = valid->items[i];
+        JNode *data = jdom_get(v, "data");
+        JNode *query = data && data->type == J_OBJ ? jdom_get(data, "query") : NULL;
+        if (!query || query->type != J_OBJ) continue;
+        unsigned char attachment[256], nonce[16], want_meta[128];
+        size_t an = jdom_hex(jdom_str(data, "attachment_hex"), attachment, sizeof attachment);
+        jdom_hex(jdom_str(query, "nonce_hex"), nonce, 16);
+        size_t mn = jdom_hex(jdom_str(query, "metadata_hex"), want_meta, sizeof want_meta);
+        const char *payload = jdom_str(data, "payload_utf8");
+        const char *identity = jdom_str(query, "identity");
+        const unsigned char *meta;
+        size_t meta_size;
+        int ok = auth_open(robot_key, jdom_str(query, "key_expr"), (const unsigned char *)payload,
+                           strlen(payload), attachment, an, &meta, &meta_size) == 0 &&
+                 meta_size == mn && !memcmp(meta, want_meta, mn) && !memcmp(meta, nonce, 16);
+        if (!strcmp(jdom_str(data, "kind"), "INFO_QUERY"))
+            ok &= meta_size == 16 + strlen(identity) && !memcmp(meta + 16, identity, strlen(identity));
+        else
+            ok &= meta_size == 16;
+        check(ok, "link_frame.json world/info under the run key", jdom_str(v, "name"));
     }
     JNode *serial_invalid = jdom_get(root, "serial_invalid");
     for (size_t i = 0; i < serial_invalid->count; i++) {
@@ -184,7 +275,7 @@ void test_link(void) {
                   !strcmp(refusal_names[deframed_refusal], jdom_str(v, "category")),
               "link_frame.json serial_invalid", jdom_str(v, "name"));
     }
-    /* the replay window: 63 behind is taken, 64 behind refused (docs say "more than 64") */
+    /* the replay window: 63 behind the highest is taken, 64 behind refused */
     ReplayWindow w = {0, 0};
     replay_take(&w, 100);
     check(!replay_refuses(&w, 37) && replay_refuses(&w, 36) && replay_refuses(&w, 100) &&
@@ -404,4 +495,81 @@ void test_messages(void) {
     memcpy(huge, "{\"v\":1,\"tick\":1,\"t\":0.1}", 24);
     check(!check_message("Clock", huge, sizeof huge), "messages", "over 64 KiB refused");
     check(check_message("Clock", huge, 24 + 100), "messages", "whitespace after the object");
+}
+
+/* --- key files (key_file.json), read by the program itself --------------------------- */
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#define KEY_FILE "build/key-file-vector.key"
+
+/* Run build/c-robot on a key file against a UDP socket of this test: its exit code (it
+   gives up after 0.01 s without a bridge: 1; a key file it refuses: 2). */
+static int run_program(int port) {
+    char command[512];
+    snprintf(command, sizeof command,
+             "./build/c-robot --link udp://127.0.0.1:%d --id 8 --key-file " KEY_FILE
+             " --give-up 0.01 --log-level error >/dev/null 2>&1",
+             port);
+    int status = system(command);
+    return status != -1 && WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+static int write_key_file(const char *text) {
+    FILE *file = fopen(KEY_FILE, "w");
+    if (!file) return -1;
+    fputs(text, file);
+    fclose(file);
+    return chmod(KEY_FILE, 0600);
+}
+
+void test_key_files(void) {
+    JNode *root = load("key_file.json");
+    if (!root) return;
+    if (access("./build/c-robot", X_OK) != 0) {
+        check(0, "key_file.json", "build/c-robot is not built (make -C c_robot)");
+        return;
+    }
+    int fd = socket(AF_INET, SOCK_DGRAM, 0);
+    struct sockaddr_in address;
+    memset(&address, 0, sizeof address);
+    address.sin_family = AF_INET;
+    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t length = sizeof address;
+    if (fd < 0 || bind(fd, (struct sockaddr *)&address, sizeof address) != 0 ||
+        getsockname(fd, (struct sockaddr *)&address, &length) != 0) {
+        check(0, "key_file.json", "no UDP socket on 127.0.0.1");
+        return;
+    }
+    int port = ntohs(address.sin_port);
+    unsigned char key[32], lk[32];
+    jdom_hex(jdom_str(root, "key_hex"), key, 32);
+    link_key(key, lk);
+    JNode *valid = jdom_get(root, "valid");
+    for (size_t i = 0; i < valid->count; i++) {
+        JNode *v = valid->items[i];
+        while (recv(fd, buf, sizeof buf, MSG_DONTWAIT) > 0) {
+        }
+        int code = write_key_file(jdom_str(v, "utf8")) == 0 ? run_program(port) : -1;
+        /* its hello is tagged under the link key of the key the file holds */
+        ssize_t n = recv(fd, buf, sizeof buf, MSG_DONTWAIT);
+        Frame f;
+        static unsigned char plain[70000];
+        int ok = code == 1 && n > 0 && link_open(buf, (size_t)n, lk, NULL, plain, &f) == R_NONE &&
+                 f.type == F_HELLO && f.robot == 8;
+        check(ok, "key_file.json valid: read, and its key tags the hello", jdom_str(v, "name"));
+    }
+    JNode *invalid = jdom_get(root, "invalid");
+    for (size_t i = 0; i < invalid->count; i++) {
+        JNode *v = invalid->items[i];
+        int code = write_key_file(jdom_str(v, "utf8")) == 0 ? run_program(port) : -1;
+        check(code == 2, "key_file.json invalid: exit code 2", jdom_str(v, "name"));
+    }
+    unlink(KEY_FILE);
+    close(fd);
 }

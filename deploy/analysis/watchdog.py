@@ -1,6 +1,6 @@
 """The stall watchdog: tells when no robot at work has made progress for a while (pure).
 
-Progress is task progress, not motion (issue 24): a robot jostling in a crowd at a silent
+Progress is task progress, not motion: a robot jostling in a crowd at a silent
 nest moves all the time and gets nowhere. An undecided robot progresses when it completes
 a step of its task: it reaches a site's viewpoint, finishes looking at the site, reaches
 the nest and hears the beacon, pools, decides (``TASK_STEPS``, read from the phase changes

@@ -136,7 +136,7 @@ def print_stuck(stuck: list[dict[str, Any]], console: Console) -> None:
         table.add_column(column, justify="right")
     for robot in stuck[:STUCK_ROWS_SHOWN]:
         position = "-" if robot["x"] is None else f"({robot['x']:.2f}, {robot['y']:.2f})"
-        since = robot.get("phase_since_s")  # absent from summaries before issue 24
+        since = robot.get("phase_since_s")  # absent from older summaries
         table.add_row(
             str(robot["id"]),
             robot["phase"] or "-",

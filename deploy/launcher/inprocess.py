@@ -76,15 +76,7 @@ def run_inprocess(args: argparse.Namespace) -> int:
     )
     try:
         with signals, progress:
-            summary = engine.run_in_process(
-                config,
-                switches.controller,
-                switches.beacon,
-                timeout=plan.timeout,
-                stall_window=plan.stall_window,
-                byzantine_robots=plan.byzantine_robots,
-                hooks=hooks,
-            )
+            summary = run_plan(plan, hooks)
     except BaseException:
         if recording is not None:
             recording.close(None)
@@ -104,6 +96,23 @@ def run_inprocess(args: argparse.Namespace) -> int:
     else:
         print_summary(summary, Console())
     return ended.exit_code(signum)
+
+
+def run_plan(plan: RunPlan, hooks: engine.EngineHooks | None = None) -> dict[str, Any]:
+    """The run a plan of ``swarm run --engine inprocess`` describes, in this process and
+    thread; its summary (the ``--json`` object but for what the command adds: ``faults``,
+    ``recording``, ``signal``). ``hooks``: progress, a stop, a recording, wall time."""
+    switches = plan.switches
+    bare = engine.EngineHooks(config=plan.config, poses_every=switches.world.state_every)
+    return engine.run_in_process(
+        switches.world.world,
+        switches.controller,
+        switches.beacon,
+        timeout=plan.timeout,
+        stall_window=plan.stall_window,
+        byzantine_robots=plan.byzantine_robots,
+        hooks=hooks or bare,
+    )
 
 
 class _Recording:

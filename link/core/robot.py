@@ -40,6 +40,10 @@ STATUS_EVERY = 2.0
 # no world answers for is counted as a rejection.
 PROVE_TRIES = 5
 PROVE_EVERY = 2.0
+# A question asked again does not void the ones before it: an answer to any of the last
+# RECENT_QUESTIONS counts, so a relay slower than ASK_EVERY or PROVE_EVERY (a link with a
+# long delay) still brings the map and the proofs.
+RECENT_QUESTIONS = 8
 # The link's kind of each input the robot's endpoint takes, and of each message it sends.
 # Inputs that come before the robot can step (none, normally: the bridge makes it present
 # only once it has sent its first status) are dropped and counted.
@@ -56,14 +60,19 @@ OUTPUT_OF = {
 
 @dataclass
 class Asking:
-    """A question on world/info under way: its nonce, and when to ask again. For the map
-    ``instance`` is empty (any world answers); to prove a world token it is the token's
-    instance, and ``tries`` counts the questions asked."""
+    """A question on world/info under way: the nonces of its last RECENT_QUESTIONS askings
+    (newest last), and when to ask again. For the map ``instance`` is empty (any world
+    answers); to prove a world token it is the token's instance, and ``tries`` counts the
+    questions asked."""
 
-    nonce: bytes
+    nonces: tuple[bytes, ...]
     again_at: float
     instance: str = ""
     tries: int = 1
+
+    def again(self, nonce: bytes, again_at: float, tries: int) -> Asking:
+        nonces = (*self.nonces, nonce)[-RECENT_QUESTIONS:]
+        return Asking(nonces, again_at, self.instance, tries)
 
 
 @dataclass
@@ -136,7 +145,7 @@ class LinkRobot:
         if welcome.run != self.run:
             log.error("the bridge serves run %s, the key file is of run %s", welcome.run, self.run)
             self.client.bye(codec.ByeReason.GOING_AWAY)
-            self.ended = True
+            self.ended = self.failed = True
             return
         log.info("robot %d: link session %d open", self.robot, self.client.sessions)
         if self.endpoint is None:
@@ -212,7 +221,8 @@ class LinkRobot:
     def _ask(self, now: float) -> None:
         """Ask any world for the map."""
         nonce, _ = self._question("")
-        self.asking = Asking(nonce, now + ASK_EVERY)
+        before = self.asking or Asking((), 0.0)
+        self.asking = before.again(nonce, now + ASK_EVERY, 1)
 
     def _prove(self, instance: str, now: float, tries: int) -> None:
         """Ask world ``instance`` to answer for its token; after PROVE_TRIES questions
@@ -223,22 +233,17 @@ class LinkRobot:
             self.endpoint.world_unproven(instance)
             return
         nonce, _ = self._question(instance)
-        self.proving[instance] = Asking(nonce, now + PROVE_EVERY, instance, tries)
+        before = self.proving.get(instance) or Asking((), 0.0, instance)
+        self.proving[instance] = before.again(nonce, now + PROVE_EVERY, tries)
 
     def _holds(self, ask: Asking, payload: bytes, attachment: bytes | None) -> bool:
-        """Whether an answer on world/info is the world's answer to ``ask``."""
+        """Whether an answer on world/info is the world's answer to ``ask`` (to any of its
+        last RECENT_QUESTIONS askings)."""
         try:
-            auth.reply_open(
-                self.keyring,
-                self.identity,
-                self._keys().world_info,
-                payload,
-                attachment,
-                nonce=ask.nonce,
-            )
+            nonce = self.keyring.open(self.identity, self._keys().world_info, payload, attachment)
         except auth.AuthError:
             return False
-        return True
+        return nonce in ask.nonces
 
     def _answered(self, payload: bytes, attachment: bytes | None, now: float) -> None:
         if self.asking is not None and self.endpoint is None:

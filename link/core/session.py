@@ -138,8 +138,10 @@ class LinkClient:
         return True
 
     def bye(self, reason: codec.ByeReason) -> None:
+        """Say goodbye: the session ends at this end (a second bye would be refused)."""
         if self.open:
             self._send(codec.FrameType.BYE, bytes((reason,)))
+            self.bridge_nonce = None
 
     def _send(self, kind: codec.FrameType, body: bytes) -> None:
         assert self.bridge_nonce is not None

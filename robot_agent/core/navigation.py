@@ -17,10 +17,11 @@ Three things break the deadlocks and dithering that crowds produce:
   then draws a new side and tries again. Two robots blocking each other thus separate
   after a few seconds instead of pushing forever;
 * a robot whose last ``push_after`` escapes all began within a body radius of each other
-  is wedged among bodies with no gap its avoidance will take (the crowd pressed it
-  between robots parked against the wall, issue 10): its next escapes push, straight for
-  the goal and blind to the sensors, until it has moved a body radius. Bodies give way
-  to a push, and a crowd never keeps a robot this still for this long otherwise.
+  is wedged among bodies with no gap its avoidance will take (in a large swarm, the
+  crowd pressed it between robots parked against the wall): its next escapes push,
+  straight for the goal and blind to the sensors, until it has moved a body radius.
+  Bodies give way to a push, and a crowd never keeps a robot this still for this long
+  otherwise.
 """
 
 from __future__ import annotations
