@@ -33,8 +33,8 @@ import concurrent.futures
 import dataclasses
 import json
 import math
+import os
 import statistics
-import subprocess
 import sys
 import time
 from collections.abc import Sequence
@@ -45,7 +45,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from deploy.reports import sweep  # noqa: E402
+from deploy.reports import pages, sweep  # noqa: E402
 from robot_agent.core import byzantine  # noqa: E402
 from wire.rng import Stream  # noqa: E402
 
@@ -300,16 +300,6 @@ def plot(rows: Sequence[Cell], modes: Sequence[str], path: Path, seeds: int) -> 
     plt.close(fig)
 
 
-def commit() -> str:
-    def git(*args: str) -> str:
-        done = subprocess.run(["git", *args], capture_output=True, text=True, cwd=REPO)
-        return done.stdout.strip()
-
-    head = git("rev-parse", "--short", "HEAD") or "unknown"
-    changed = sorted(line[3:] for line in git("status", "--porcelain").splitlines())
-    return head + (f" with uncommitted changes to {', '.join(changed)}" if changed else "")
-
-
 def results_section(
     rows: Sequence[Cell], outcomes: Sequence[Outcome], args: argparse.Namespace, wall: float
 ) -> str:
@@ -317,29 +307,24 @@ def results_section(
     hit = sum(outcome.verdict == "undecided" for outcome in outcomes)
     return "\n".join(
         [
-            BEGIN,
             "",
-            f"Made by `.venv/bin/python {command}` at commit {commit()}: "
+            f"Made by `.venv/bin/python {command}` at {pages.made_at(REPO)}: "
             f"{len(outcomes)} runs, {args.robots} robots, seeds 0..{args.seeds - 1}, "
             f"timeout {args.timeout:g} sim s ({hit} run{'' if hit == 1 else 's'} hit it), "
-            f"{wall / 60:.0f} min wall with {args.parallel} processes on a shared 2-core "
-            "machine. The rows with 0 Byzantine robots are the same runs in every mode.",
+            f"{wall / 60:.0f} min wall with {args.parallel} processes on {os.cpu_count()} "
+            "cores. The rows with 0 Byzantine robots are the same runs in every mode.",
             "",
             table(rows),
             "",
-            END,
         ]
     )
 
 
 def write_page(path: Path, section: str) -> None:
     """Replace the results between the markers; a new page gets only the results."""
-    text = path.read_text() if path.exists() else f"# Byzantine robots\n\n{BEGIN}\n{END}\n"
-    if BEGIN not in text or END not in text:
-        raise SystemExit(f"{path} lacks the markers {BEGIN} and {END}")
-    head, rest = text.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    path.write_text(head + section + tail)
+    if not path.exists():
+        path.write_text(f"# Byzantine robots\n\n{BEGIN}\n{END}\n")
+    pages.write_between(path, BEGIN, END, section)
 
 
 # --- the defence study: --defence trimmed against liars ------------------------------
@@ -563,23 +548,15 @@ def write_defence(args: argparse.Namespace) -> None:
     rows = defence_rows(load_defence(args.defence_results))
     section = "\n".join(
         [
-            DEFENCE_BEGIN,
             "",
             f"Made by `.venv/bin/python benchmarks/byzantine.py --study defence --write` at "
-            f"commit {commit()} from `docs/{args.defence_results.name}` (one run per line).",
+            f"{pages.made_at(REPO)} from `docs/{args.defence_results.name}` (one run per line).",
             "",
             defence_table(rows),
             "",
-            DEFENCE_END,
         ]
     )
-    page = args.out / "byzantine.md"
-    text = page.read_text()
-    if DEFENCE_BEGIN not in text or DEFENCE_END not in text:
-        raise SystemExit(f"{page} lacks the markers {DEFENCE_BEGIN} and {DEFENCE_END}")
-    head, rest = text.split(DEFENCE_BEGIN, 1)
-    _, tail = rest.split(DEFENCE_END, 1)
-    page.write_text(head + section + tail)
+    pages.write_between(args.out / "byzantine.md", DEFENCE_BEGIN, DEFENCE_END, section)
     plot_defence(rows, args.out / DEFENCE_FIGURE)
     print(defence_table(rows))
 

@@ -60,6 +60,7 @@ sys.path.insert(0, str(REPO))
 import zenoh  # noqa: E402
 
 from benchmarks.process_cpu import in_process_options  # noqa: E402
+from deploy.reports import pages  # noqa: E402
 from plumbing.tcp import free_port  # noqa: E402
 from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
 from wire.endings import RESULT_CODES  # noqa: E402
@@ -370,11 +371,6 @@ def engines(args: argparse.Namespace, extra: list[str]) -> list[str]:
 
 def write_table(path: Path, rows: list[str], command: str, args: argparse.Namespace) -> None:
     """Replace the table between the page's markers with this run's."""
-    text = path.read_text()
-    if TABLE_BEGIN not in text or TABLE_END not in text:
-        raise SystemExit(f"{path}: no {TABLE_BEGIN} ... {TABLE_END} markers")
-    head, rest = text.split(TABLE_BEGIN, 1)
-    _, tail = rest.split(TABLE_END, 1)
     table = [
         f"| swarm (lockstep, {args.sites} sites) | in one process | over Zenoh | ratio "
         "| CPU over Zenoh / in one process | messaging floor | over Zenoh / floor "
@@ -383,10 +379,11 @@ def write_table(path: Path, rows: list[str], command: str, args: argparse.Namesp
         *rows,
     ]
     low, high = args.loads
+    busy = " (above the core count: not a quiet machine)" if high > (os.cpu_count() or 1) else ""
     note = (
         f"Written by `{command}` on {platform.machine()} Linux with {os.cpu_count()} cores, "
         f"{time.strftime('%Y-%m-%d')}, its 1-minute load average between {low:.0f} and "
-        f"{high:.0f} while the table was measured (other jobs shared the machine). "
+        f"{high:.0f} while the table was measured{busy}. "
         "Absolute real-time factors depend on the machine and its load; each ratio is of "
         "two runs measured back to back (with --pairs, the median of the pairs and their "
         "range). The CPU column divides the CPU time that all of a run's processes used per "
@@ -400,7 +397,7 @@ def write_table(path: Path, rows: list[str], command: str, args: argparse.Namesp
             " A run cut at a sim time is compared on its robots' decisions up to the earlier"
             " of the two stops (over Zenoh the launcher notices the limit a tick or two late)."
         )
-    path.write_text(f"{head}{TABLE_BEGIN}\n{chr(10).join(table)}\n\n{note}\n{TABLE_END}{tail}")
+    pages.write_between(path, TABLE_BEGIN, TABLE_END, f"{chr(10).join(table)}\n\n{note}")
     print(f"wrote the engines table into {path}")
 
 

@@ -18,9 +18,12 @@ from __future__ import annotations
 
 import multiprocessing.process
 import os
+import shutil
 import socket
 import subprocess
+import tempfile
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -91,3 +94,15 @@ def refuse_processes_and_networks(monkeypatch: pytest.MonkeyPatch, test: str) ->
     # binding one); talking over it is not.
     for name in ("connect", "connect_ex", "listen", "sendto", "sendmsg"):
         monkeypatch.setattr(socket.socket, name, refuse("used the network"))
+
+
+@pytest.fixture
+def short_tmp() -> Iterator[Path]:
+    """A folder of this test's under /tmp, with a short path, for a run's temporary files
+    (TMPDIR): a run's Unix socket lives there, and a socket's path holds at most 108 bytes,
+    which pytest's own tmp_path (deeper still under a worker) can exceed. Removed after."""
+    folder = Path(tempfile.mkdtemp(prefix="bt-", dir="/tmp"))
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)

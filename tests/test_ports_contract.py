@@ -26,7 +26,7 @@ from examples.udp_radio import UdpRadioStats
 from plumbing.inbox import BoundedInbox
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
-from robot_agent.core.endpoint import RobotEndpoint
+from robot_agent.core.endpoint import InputKind, OutputKind, RobotEndpoint
 from robot_agent.core.simulated import SimulatedPorts
 from robot_agent.node.robot_node import Event, EventKind, RobotNode
 from wire import protocol
@@ -166,6 +166,109 @@ def test_tick_vectors_through_the_zenoh_robot(vector: dict[str, Any]) -> None:
         (payload, meta) for _, payload, meta in expected_transmissions(vector)
     ]
     assert act.sent == [(bytes.fromhex(vector["out"]["act"]["hex"]), None)]
+
+
+class _Bytes:
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+
+    def to_bytes(self) -> bytes:
+        return self.data
+
+
+class _Sample:
+    def __init__(self, payload: bytes, attachment: bytes | None) -> None:
+        self.payload = _Bytes(payload)
+        self.attachment = _Bytes(attachment) if attachment is not None else None
+
+
+class _Declared:
+    def undeclare(self) -> None:
+        pass
+
+
+class _EagerSession:
+    """A session on which what is waiting for a key arrives the moment a subscriber for
+    it is declared (as a tick the world already sent does on a busy machine), and which
+    notes the order of the declarations."""
+
+    def __init__(self, waiting: dict[str, list[_Sample]]) -> None:
+        self.waiting = waiting
+        self.order: list[str] = []
+        self.publishers: dict[str, _Publisher] = {}
+
+    def declare_publisher(self, key: str, **_: object) -> _Publisher:
+        self.order.append(f"publisher {key}")
+        return self.publishers.setdefault(key, _Publisher())
+
+    def declare_subscriber(self, key: str, callback: Any, **_: object) -> _Declared:
+        self.order.append(f"subscriber {key}")
+        for sample in self.waiting.pop(key, []):
+            callback(sample)
+        return _Declared()
+
+    def declare_token(self, key: str) -> _Declared:
+        self.order.append(f"token {key}")
+        return _Declared()
+
+    def liveliness(self) -> _EagerSession:
+        return self
+
+
+class _Announcing(Scripted):
+    """The scripted controller, with the status a robot publishes as it starts."""
+
+    def status(self, tick: int) -> protocol.Status:
+        return protocol.Status(
+            id=ROBOT,
+            tick=tick,
+            t=0.0,
+            v=protocol.VERSION,
+            phase="waiting",
+            trips=0,
+            opinion=[0.2] * 5,
+            pool_size=0,
+            poolings=0,
+            decided_site=None,
+            decision_time=None,
+            decision_trips=None,
+            comparison=None,
+        )
+
+
+def test_a_tick_that_arrives_as_the_robot_subscribes_is_answered() -> None:
+    """A robot declares what it publishes on before it subscribes: a tick's inputs that
+    arrive while it is still subscribing complete a step whose act goes out (not an
+    error in a callback and a tick the world waits for), and its token comes last."""
+    vector = TICKS[0]
+    endpoint = RobotEndpoint(
+        ROBOT,
+        keys=protocol.Keys("ticks"),
+        controller=_Announcing(vector["command"]),
+        world=World(WorldConfig(num_sites=5, num_robots=8)).info,
+    )
+    endpoint.ports.radio.seq = vector["sent_before"]
+    inputs, keys = vector["in"], endpoint.input_keys
+    waiting = {
+        keys[InputKind.SENSE]: [_Sample(bytes.fromhex(inputs["sense"]["hex"]), None)],
+        keys[InputKind.RADIO_RX]: [
+            _Sample(bytes.fromhex(item["hex"]), bytes.fromhex(item["meta_hex"]))
+            for item in inputs["radio_rx"]
+        ],
+    }
+    if inputs["camera"]:
+        camera = inputs["camera"]
+        waiting[keys[InputKind.CAMERA]] = [
+            _Sample(bytes.fromhex(camera["hex"]), bytes.fromhex(camera["meta_hex"]))
+        ]
+    session = _EagerSession(waiting)
+    node = RobotNode(endpoint, session=session, inbox=BoundedInbox())  # type: ignore[arg-type]
+    node.start()
+    act = session.publishers[endpoint.output_keys[OutputKind.ACT]]
+    assert act.sent == [(bytes.fromhex(vector["out"]["act"]["hex"]), None)]
+    kinds = [entry.split()[0] for entry in session.order]
+    assert kinds.index("subscriber") > max(i for i, k in enumerate(kinds) if k == "publisher")
+    assert kinds[-1] == "token"
 
 
 def witness(stepped_by: list[CodeType]) -> type[Controller]:

@@ -191,9 +191,8 @@ def _janitor_of(directory: Path) -> int | None:
     return None
 
 
-def test_a_sigkilled_secure_launcher_leaves_no_private_key_behind(tmp_path: Path) -> None:
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+def test_a_sigkilled_secure_launcher_leaves_no_private_key_behind(short_tmp: Path) -> None:
+    tmp = short_tmp
     run_id = unique_run_id("secure-kill")
     process = _secure_run(tmp, run_id)
     try:
@@ -211,10 +210,9 @@ def test_a_sigkilled_secure_launcher_leaves_no_private_key_behind(tmp_path: Path
 
 
 def test_the_next_run_sweeps_what_a_killed_launcher_and_janitor_left(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    short_tmp: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+    tmp = short_tmp
     run_id = unique_run_id("secure-kill")
     process = _secure_run(tmp, run_id)
     try:

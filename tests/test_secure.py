@@ -58,9 +58,9 @@ def _interruptible() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-def test_a_secure_swarm_reaches_consensus_and_records_it(tmp_path: Path) -> None:
+def test_a_secure_swarm_reaches_consensus_and_records_it(short_tmp: Path, tmp_path: Path) -> None:
     recording = tmp_path / "run.mcap"
-    code, summary, stderr = run_in(tmp_path / "tmp", *SMALL, "--secure", "--record", str(recording))
+    code, summary, stderr = run_in(short_tmp, *SMALL, "--secure", "--record", str(recording))
     assert code == 0, stderr
     assert summary["correct"] and not summary["timed_out"], summary["per_robot"]
     assert summary["config"]["secure"] is True
@@ -76,12 +76,12 @@ def test_a_secure_swarm_reaches_consensus_and_records_it(tmp_path: Path) -> None
     assert any("listening on tls/127.0.0.1:" in line for line in lines), lines
     assert json.loads(final["bestofn.run"]["summary"])["correct"] is True
     assert json.loads(final["bestofn.run"]["recorder"])["rejected"] == 0
-    assert private_directories(tmp_path / "tmp") == []  # certificates and keys are gone
+    assert private_directories(short_tmp) == []  # certificates and keys are gone
 
 
-def test_a_secure_swarm_survives_a_kill_and_a_restart(tmp_path: Path) -> None:
+def test_a_secure_swarm_survives_a_kill_and_a_restart(short_tmp: Path) -> None:
     code, summary, stderr = run_in(
-        tmp_path / "tmp",
+        short_tmp,
         *["--robots", "4", "--sites", "5", "--seed", "11", "--timeout", "1500"],
         *["--secure", "--no-record", "--restart", "2@15", "--kill", "1@20"],
     )
@@ -92,7 +92,7 @@ def test_a_secure_swarm_survives_a_kill_and_a_restart(tmp_path: Path) -> None:
     assert [robot["decided_site"] for robot in robots if not robot["killed"]] == [
         summary["best_site"]
     ] * 3
-    assert private_directories(tmp_path / "tmp") == []
+    assert private_directories(short_tmp) == []
 
 
 def _wait_for(condition: Any, timeout: float) -> Any:
@@ -135,9 +135,8 @@ def _tcp_listeners(pid: int) -> list[str]:
     return found
 
 
-def test_ctrl_c_on_a_secure_run_removes_its_certificates(tmp_path: Path) -> None:
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+def test_ctrl_c_on_a_secure_run_removes_its_certificates(short_tmp: Path, tmp_path: Path) -> None:
+    tmp = short_tmp
     run_id = unique_run_id("secure-int")
     command = swarm_command("run", "--run-id", run_id, "--quiet", *SMALL, "--secure", "--no-record")
     command += ["--clock", "realtime", "--speed", "1"]  # long enough to interrupt
@@ -170,14 +169,14 @@ def test_ctrl_c_on_a_secure_run_removes_its_certificates(tmp_path: Path) -> None
 
 
 def test_keys_never_show_on_a_command_line_and_the_default_listens_on_no_port(
+    short_tmp: Path,
     tmp_path: Path,
 ) -> None:
     """While a default run goes: no process of it has a key in its command line, the
     launcher and the fork server have none in their environment either (a forked robot
     gets its own through the fork call), and the world listens on a socket in a private
     directory, on no TCP port at all."""
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+    tmp = short_tmp
     run_id = unique_run_id("no-leak")
     command = swarm_command("run", "--run-id", run_id, "--quiet", *SMALL, "--no-record")
     command += ["--clock", "realtime", "--speed", "2", "--robots-per-process", "1"]

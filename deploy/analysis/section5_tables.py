@@ -211,7 +211,7 @@ def provenance(meta: dict[str, Any]) -> str:
         f"in-process lockstep runs, {meta.get('robots', ROBOTS)} robots, default settings "
         "unless named). `swarm section5 --check` (`make check-published`, run by CI) runs "
         "every one of these runs again and fails if anything here differs; "
-        "`tests/test_section5.py` (`make test`) does the same for seeds 0-9."
+        "`swarm section5 --check --sample` does the same for seeds 0-9."
     )
 
 

@@ -17,7 +17,7 @@ on every executor). Seeds 0-9 stand for the paper's ten runs per n.
   differs: each run, the Markdown blocks, the figures' data, and runs missing from the file
   or settings that differ from the code's. The PNGs are not compared (they are drawn from
   the checked data). ``--check --sample`` runs seeds 0-9 only (60 runs) and says which
-  published runs it did not check; ``tests/test_section5.py`` does this.
+  published runs it did not check.
 
     swarm section5 --seeds 100 --write
     swarm section5 --check
@@ -28,15 +28,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from deploy.analysis import section5_tables as tables
-from deploy.reports import sweep
+from deploy.reports import pages, sweep
 from plumbing import cliargs
 
 RUNS_FILE = "docs/section5-runs.json"
@@ -146,11 +145,10 @@ def replace_block(
 ) -> str:
     """``text`` with block ``name`` replaced by ``content``; ValueError without markers."""
     begin, end = begin_marker(name, command, edit), end_marker(name, command)
-    start = text.find(begin)
-    stop = text.find(end)
-    if start < 0 or stop < start:
-        raise ValueError(f"no block {name!r}: add the lines\n{begin}\n{end}")
-    return text[: start + len(begin)] + "\n" + content + "\n" + text[stop:]
+    try:
+        return pages.replace_between(text, begin, end, content)
+    except ValueError:
+        raise ValueError(f"no block {name!r}: add the lines\n{begin}\n{end}") from None
 
 
 def read_block(text: str, name: str, command: str = COMMAND, edit: str = EDIT) -> str | None:
@@ -416,36 +414,6 @@ def _render(root: Path) -> int:
 # --- provenance ----------------------------------------------------------------------------
 
 
-# Changes here cannot change a run, so they do not make the code that ran "uncommitted".
-NOT_RUN = ("docs/", "benchmarks/", "tests/", "README.md")
-
-
-def git_state(root: Path, ignore: Iterable[str]) -> tuple[str | None, bool]:
-    """HEAD's short hash and whether tracked files other than ``ignore`` (and ``NOT_RUN``)
-    have changes."""
-    try:
-        head = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True
-        )
-        status = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=root,
-            capture_output=True,
-            text=True,
-        )
-    except OSError:
-        return None, False
-    if head.returncode != 0:
-        return None, False
-    skipped = set(ignore)
-    changed = [
-        path
-        for line in status.stdout.splitlines()
-        if (path := line[3:]) not in skipped and not path.startswith(NOT_RUN)
-    ]
-    return head.stdout.strip(), bool(changed)
-
-
 def published_paths() -> list[str]:
     paths = [RUNS_FILE, *FIGURE_DATA.values(), *MARKDOWN, DISTRIBUTION_FIGURE]
     paths += [path.replace(".json", ".png") for path in FIGURE_DATA.values()]
@@ -516,7 +484,7 @@ def run(args: argparse.Namespace) -> int:
         return _check(root, args.sample, executor, progress)
     # The code that runs is this package's, wherever --root points: its state, before the
     # runs (edits made while they run do not count).
-    commit, dirty = git_state(CODE_ROOT, published_paths())
+    commit, dirty = pages.git_state(CODE_ROOT, published_paths())
     records = simulate(tasks_for(args.seeds), executor, progress)
     meta = {
         "command": f"swarm section5 --seeds {args.seeds} --write",

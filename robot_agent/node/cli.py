@@ -226,12 +226,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             node = RobotNode(
                 endpoint, session=session, inbox=inbox, lock=lock, trace=trace, latest=latest
             )
-            node.start()
             nodes.append(node)
+        # The batch path is ready before any robot announces itself: once every robot's
+        # token is up the world may tick, and a robot's act goes out in the batch.
         if len(nodes) > 1 and not args.no_batch:
             host = host_batch(nodes, inbox, keyring)
             if host is not None:
                 host.start()
+        for node in nodes:
+            node.start()
         log.info("robot(s) %s running", ", ".join(str(node.robot_id) for node in nodes))
         serve(nodes, inbox)
     except (zenoh.ZError, TimeoutError, NoKeyError) as error:

@@ -165,9 +165,14 @@ class RobotNode:
         self.latest = latest
 
     def start(self) -> None:
-        """Subscribe first, then announce liveliness, so no tick is missed."""
+        """Declare what it publishes on, then subscribe, then announce liveliness: no
+        input finds the robot unable to answer, and no tick is missed."""
         keys, robot, session = self.keys, self.robot_id, self.session
         input_keys = self.endpoint.input_keys
+        output_keys = self.endpoint.output_keys
+        self._act = reliable_publisher(session, output_keys[OutputKind.ACT])
+        self._status = reliable_publisher(session, output_keys[OutputKind.STATUS])
+        self._tx = reliable_publisher(session, output_keys[OutputKind.RADIO_TX])
 
         def forward(kind: EventKind) -> Callable[[zenoh.Sample], None]:
             input_kind = INPUT_OF_EVENT[kind]
@@ -205,10 +210,6 @@ class RobotNode:
                 keys.alive(Role.WORLD, "*"), self._on_world, history=True
             ),
         ]
-        output_keys = self.endpoint.output_keys
-        self._act = reliable_publisher(session, output_keys[OutputKind.ACT])
-        self._status = reliable_publisher(session, output_keys[OutputKind.STATUS])
-        self._tx = reliable_publisher(session, output_keys[OutputKind.RADIO_TX])
         self._fold_dropped()
         self._publish(self.endpoint.status(0))
         self._token = session.liveliness().declare_token(keys.alive(Role.ROBOT, robot))
@@ -358,8 +359,9 @@ class HostBatch:
             else:
                 deliver()
 
-        self._subscriber = lead.session.declare_subscriber(self.robots.sense_key, callback)
+        # The publisher first: a batch of senses may come as soon as the subscriber is up.
         self._publisher = reliable_publisher(lead.session, self.robots.act_key)
+        self._subscriber = lead.session.declare_subscriber(self.robots.sense_key, callback)
 
     def close(self) -> None:
         self._subscriber.undeclare()
