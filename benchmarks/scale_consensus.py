@@ -337,7 +337,8 @@ def render_doc(runs: Sequence[Run], before: Sequence[Run], figure: str) -> str:
         "indicative only: the machine (2 cores) ran other work beside these runs. "
         "`tests/test_scale_doc.py` checks that this page is what the results file gives; "
         "`make check-published` (`pytest --published`, which CI runs) runs 10 robots seeds "
-        "0 and 7 and 50 robots seed 3 again and fails if they differ from the file.\n",
+        "0 and 7, 50 robots seed 3 and 100 robots seed 3 again and fails if they differ "
+        "from the file.\n",
         f"![sim time to consensus against swarm size]({figure})\n",
         "## Per swarm size (in one process)\n",
         per_size(in_process) + "\n",

@@ -69,9 +69,6 @@ FAST = frozenset(
 )
 
 SLOW = {
-    "test_controller::test_a_hundred_robots_all_park_and_decide_in_one_process": (
-        "100 robots to consensus: about 50 s"
-    ),
     "test_navigation::test_ten_robots_keep_cycling_through_a_crowded_nest": (
         "two 10-robot swarms cycling through the nest: about 12 s"
     ),
