@@ -156,12 +156,17 @@ class Swarm:
         state if it does not answer)."""
         supervisor, follower = self.supervisor, self.follower
         self.ended_at = self.clock()
-        if supervisor.world is not None and supervisor.world.alive():
+        # A world whose clock stopped (frozen, or stuck) cannot answer: its last state is
+        # all there is, without waiting out a question it will not hear.
+        answering = not follower.world_stopped(self.plan.world_stop_window)
+        if answering and supervisor.world is not None and supervisor.world.alive():
             before = supervisor.query_world_stats() or follower.last_state
             self.departures = before.departures if before else 0
+        elif not answering and follower.last_state is not None:
+            self.departures = follower.last_state.departures
         supervisor.stop_swarm()
         self.take_events(until=self.clock())  # what they said last
-        stats = supervisor.world_stats() if supervisor.world_running() else None
+        stats = supervisor.world_stats() if answering and supervisor.world_running() else None
         return stats or follower.last_state
 
 
