@@ -379,11 +379,10 @@ def write_table(path: Path, rows: list[str], command: str, args: argparse.Namesp
         *rows,
     ]
     low, high = args.loads
-    busy = " (above the core count: not a quiet machine)" if high > (os.cpu_count() or 1) else ""
     note = (
         f"Written by `{command}` on {platform.machine()} Linux with {os.cpu_count()} cores, "
         f"{time.strftime('%Y-%m-%d')}, its 1-minute load average between {low:.0f} and "
-        f"{high:.0f} while the table was measured{busy}. "
+        f"{high:.0f} while the table was measured (the runs' own processes count in it). "
         "Absolute real-time factors depend on the machine and its load; each ratio is of "
         "two runs measured back to back (with --pairs, the median of the pairs and their "
         "range). The CPU column divides the CPU time that all of a run's processes used per "
