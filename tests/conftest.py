@@ -49,7 +49,34 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     )
 
 
+# The modules with the longest runs, longest first. pytest-xdist hands modules to its
+# workers in the order they are collected (``--dist loadfile``), so the long ones go first
+# and the short ones fill in at the end: the workers finish together.
+LONGEST_FIRST = (
+    "test_outside",
+    "test_attacks",
+    "test_faults",
+    "test_endings",
+    "test_attacks_presence",
+    "test_viewer",
+    "test_swarm",
+    "test_experiment",
+    "test_portable_runs",
+    "test_private_runs",
+    "test_flood_memory",
+    "test_recording",
+    "test_secure",
+    "test_report",
+)
+
+
+def _collection_rank(item: pytest.Item) -> int:
+    module = item.path.stem
+    return LONGEST_FIRST.index(module) if module in LONGEST_FIRST else len(LONGEST_FIRST)
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    items.sort(key=_collection_rank)  # stable: a module's tests keep their order
     published_only = bool(config.getoption("--published"))
     kept: list[pytest.Item] = []
     left_out: list[pytest.Item] = []
