@@ -390,7 +390,10 @@ def unfinished_note(runs: Sequence[Run]) -> list[str]:
     return [
         f"**Not every run ended in consensus**: {which}. What held the last robots of "
         "earlier runs, and how it was found, is in "
-        "[history.md](history.md#large-swarms-that-did-not-finish).\n"
+        "[history.md](history.md#large-swarms-that-did-not-finish); a run listed here "
+        "that history.md does not explain is not explained yet, and "
+        "`benchmarks/stall_diagnosis.py --robots N --seed S --until T --plot FILE` shows "
+        "where its undecided robots are and what holds them.\n"
     ]
 
 
