@@ -24,12 +24,8 @@ import argparse
 import concurrent.futures
 import json
 import shlex
-import shutil
-import signal
 import subprocess
 import sys
-import tempfile
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -37,115 +33,18 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from benchmarks.link_runs import (  # noqa: E402
+    IMPAIRED,
+    LOCKSTEP_STALL_TIMEOUT,
+    PtyPair,
+    decisions,
+    in_process,
+    outside_run,
+    seeds,
+)
 from deploy.launcher.outside import free_udp_port  # noqa: E402
 
 BINARY = REPO / "c_robot" / "build" / "c-robot"
-IMPAIRED = ["--link-delay", "50", "--link-loss", "0.2"]
-LOCKSTEP_STALL_TIMEOUT = 300.0  # wall seconds: a busy machine must not close ticks early
-
-
-def decisions(summary: dict[str, Any]) -> list[tuple[object, ...]]:
-    return [
-        (r["id"], r["decided_site"], r["steps"], r["decision_time_s"], r["pool_sizes"])
-        for r in summary["per_robot"]
-    ]
-
-
-def in_process(options: Sequence[str]) -> dict[str, Any]:
-    command = [sys.executable, "-m", "deploy.cli", "run", "--engine", "inprocess"]
-    done = subprocess.run(
-        [*command, "--json", "--quiet", "--no-record", *options],
-        capture_output=True,
-        cwd=REPO,
-        timeout=3600,
-    )
-    result: dict[str, Any] = json.loads(done.stdout)
-    return result
-
-
-def stop(processes: Sequence[subprocess.Popen[bytes]]) -> None:
-    for process in processes:
-        if process.poll() is None:
-            process.send_signal(signal.SIGTERM)
-    for process in processes:
-        try:
-            process.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-
-
-def outside_run(
-    options: Sequence[str], outside: dict[int, tuple[str, str]], timeout: float = 7200
-) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """``swarm run`` with the robots of ``outside`` (robot -> (the run's --link, the
-    program's --link)) run by the C program; the summary and each program's last line."""
-    keys = Path(tempfile.mkdtemp(prefix="c-robot-keys-"))
-    links = []
-    shared = {served for served, _ in outside.values() if "=" not in served}
-    for served in shared:
-        links += ["--link", served]
-    links += [arg for served, _ in outside.values() if "=" in served for arg in ("--link", served)]
-    command = [
-        *(sys.executable, "-m", "deploy.cli", "run", "--json", "--quiet", "--no-record"),
-        *options,
-        *("--external", ",".join(map(str, sorted(outside))), *links),
-        *("--link-keys", str(keys)),
-    ]
-    run = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    programs: list[subprocess.Popen[bytes]] = []
-    lines: list[dict[str, Any]] = []
-    try:
-        for robot, (_, reach) in sorted(outside.items()):
-            key_file = keys / f"robot-{robot}.key"
-            deadline = time.monotonic() + 120
-            while not key_file.exists() and time.monotonic() < deadline:
-                time.sleep(0.05)
-            program = [str(BINARY), "--link", reach, "--id", str(robot)]
-            program += ["--key-file", str(key_file), "--give-up", "120"]
-            programs.append(
-                subprocess.Popen(
-                    program, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL
-                )
-            )
-        stdout, stderr = run.communicate(timeout=timeout)
-        for started in programs:
-            try:
-                out, _ = started.communicate(timeout=30)
-                text = out.decode().strip().splitlines()
-                lines.append(json.loads(text[-1]) if text else {})
-            except (subprocess.TimeoutExpired, json.JSONDecodeError):
-                lines.append({})
-    finally:
-        stop([run, *programs])
-        shutil.rmtree(keys, ignore_errors=True)
-    if not stdout.strip():
-        raise RuntimeError(f"swarm run {options} failed: {stderr.decode()[-2000:]}")
-    summary: dict[str, Any] = json.loads(stdout)
-    return summary, lines
-
-
-class PtyPair:
-    """Two pseudo-terminals joined by socat: the bridge's end and the robot's."""
-
-    def __init__(self) -> None:
-        socat = shutil.which("socat")
-        if socat is None:
-            raise SystemExit("socat is not installed (apt-get install socat)")
-        self.directory = Path(tempfile.mkdtemp(prefix="c-robot-pty-"))
-        self.bridge, self.robot = self.directory / "bridge", self.directory / "robot"
-        self.process = subprocess.Popen(
-            [socat, f"pty,raw,echo=0,link={self.bridge}", f"pty,raw,echo=0,link={self.robot}"],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
-        deadline = time.monotonic() + 10
-        while not (self.bridge.exists() and self.robot.exists()) and time.monotonic() < deadline:
-            time.sleep(0.05)
-
-    def close(self) -> None:
-        stop([self.process])
-        shutil.rmtree(self.directory, ignore_errors=True)
 
 
 def lockstep(seed: int, serial: bool) -> dict[str, Any]:
@@ -159,7 +58,7 @@ def lockstep(seed: int, serial: bool) -> dict[str, Any]:
         else:
             address = f"udp://127.0.0.1:{free_udp_port('127.0.0.1')}"
             outside = {8: (address, address), 9: (address, address)}
-        summary, programs = outside_run(options, outside)
+        summary, programs = outside_run(options, outside, program=[str(BINARY)])
     finally:
         if pty is not None:
             pty.close()
@@ -186,7 +85,8 @@ def realtime(seed: int, speed: float) -> dict[str, Any]:
     options = ["--robots", "10", "--seed", str(seed), "--clock", "realtime"]
     options += ["--speed", str(speed), "--timeout", "1200", *IMPAIRED]
     address = f"udp://127.0.0.1:{free_udp_port('127.0.0.1')}"
-    summary, programs = outside_run(options, {8: (address, address), 9: (address, address)})
+    served = {8: (address, address), 9: (address, address)}
+    summary, programs = outside_run(options, served, program=[str(BINARY)])
     links = summary.get("links", {})
     outside = [r for r in summary["per_robot"] if r["outside"]]
     return {
@@ -205,17 +105,6 @@ def realtime(seed: int, speed: float) -> dict[str, Any]:
         "departures": summary["world"]["departures"],
         "programs": programs,
     }
-
-
-def seeds(text: str) -> list[int]:
-    """``0-9``, ``1,3`` or ``0-4,7``; ``none`` for no seed."""
-    if text == "none":
-        return []
-    chosen: list[int] = []
-    for part in text.split(","):
-        first, _, last = part.partition("-")
-        chosen += range(int(first), int(last or first) + 1)
-    return chosen
 
 
 def loadavg() -> str:

@@ -54,12 +54,12 @@ def measure(
             summary = emulated(options)
         elif transport == "udp":
             address = f"udp://127.0.0.1:{free_udp_port('127.0.0.1')}"
-            summary = outside_run(options, {outside: (address, address)})
+            summary, _ = outside_run(options, {outside: (address, address)})
         else:
             baud = int(transport.partition("@")[2])
             pty = PtyPair()
             served = f"{outside}=serial:{pty.bridge}@{baud}"
-            summary = outside_run(options, {outside: (served, f"serial:{pty.robot}@{baud}")})
+            summary, _ = outside_run(options, {outside: (served, f"serial:{pty.robot}@{baud}")})
     finally:
         if pty is not None:
             pty.close()

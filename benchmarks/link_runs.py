@@ -74,11 +74,20 @@ def stop(processes: Sequence[subprocess.Popen[bytes]]) -> None:
             process.wait()
 
 
+# The link robot program: ``robot-agent --link``'s, or another that takes its options (the
+# robot in C, benchmarks/c_robot_runs.py).
+PYTHON_PROGRAM = (sys.executable, "-m", "link")
+
+
 def outside_run(
-    options: Sequence[str], outside: dict[int, tuple[str, str]], timeout: float = 7200
-) -> dict[str, Any]:
+    options: Sequence[str],
+    outside: dict[int, tuple[str, str]],
+    timeout: float = 7200,
+    program: Sequence[str] = PYTHON_PROGRAM,
+) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """``swarm run`` with the robots of ``outside`` (robot -> (the run's --link, the
-    program's --link)) started as programs once their key files are written."""
+    program's --link)) run by ``program``, each started once its key file is written; the
+    summary and each program's last line (``{}`` if it wrote none)."""
     keys = Path(tempfile.mkdtemp(prefix="link-keys-"))
     links = []
     shared = {served for served, _ in outside.values() if "=" not in served}
@@ -93,30 +102,35 @@ def outside_run(
     ]
     run = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     programs: list[subprocess.Popen[bytes]] = []
+    lines: list[dict[str, Any]] = []
     try:
         for robot, (_, reach) in sorted(outside.items()):
             key_file = keys / f"robot-{robot}.key"
             deadline = time.monotonic() + 120
             while not key_file.exists() and time.monotonic() < deadline:
                 time.sleep(0.05)
-            program = [sys.executable, "-m", "link", "--link", reach]
-            program += ["--id", str(robot), "--key-file", str(key_file), "--give-up", "120"]
+            started = [*program, "--link", reach, "--id", str(robot)]
+            started += ["--key-file", str(key_file), "--give-up", "120"]
             programs.append(
                 subprocess.Popen(
-                    program,
-                    cwd=REPO,
-                    stdout=subprocess.DEVNULL,
-                    stderr=subprocess.DEVNULL,
+                    started, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL
                 )
             )
         stdout, stderr = run.communicate(timeout=timeout)
+        for finished in programs:
+            try:
+                out, _ = finished.communicate(timeout=30)
+                text = out.decode().strip().splitlines()
+                lines.append(json.loads(text[-1]) if text else {})
+            except (subprocess.TimeoutExpired, json.JSONDecodeError):
+                lines.append({})
     finally:
         stop([run, *programs])
         shutil.rmtree(keys, ignore_errors=True)
     if not stdout.strip():
         raise RuntimeError(f"swarm run {options} failed: {stderr.decode()[-2000:]}")
     summary: dict[str, Any] = json.loads(stdout)
-    return summary
+    return summary, lines
 
 
 class PtyPair:
@@ -156,7 +170,7 @@ def lockstep(seed: int, robots: int, sites: int, serial: bool) -> dict[str, Any]
         else:
             address = f"udp://127.0.0.1:{free_udp_port('127.0.0.1')}"
             outside = {robots - 2: (address, address), robots - 1: (address, address)}
-        summary = outside_run(options, outside)
+        summary, _ = outside_run(options, outside)
     finally:
         if pty is not None:
             pty.close()
@@ -181,7 +195,7 @@ def realtime(seed: int, robots: int, sites: int, speed: float, impaired: bool) -
         options += IMPAIRED
     address = f"udp://127.0.0.1:{free_udp_port('127.0.0.1')}"
     outside = {robots - 2: (address, address), robots - 1: (address, address)}
-    summary = outside_run(options, outside)
+    summary, _ = outside_run(options, outside)
     links = summary.get("links", {})
     return {
         "seed": seed,
@@ -201,7 +215,9 @@ def realtime(seed: int, robots: int, sites: int, speed: float, impaired: bool) -
 
 
 def seeds(text: str) -> list[int]:
-    """``0-9``, ``1,3`` or ``0-4,7``."""
+    """``0-9``, ``1,3`` or ``0-4,7``; ``none`` for no seed."""
+    if text == "none":
+        return []
     chosen: list[int] = []
     for part in text.split(","):
         first, _, last = part.partition("-")

@@ -21,6 +21,7 @@ each with where it came from; refusals of the transport's own checks are counted
 
 from __future__ import annotations
 
+import abc
 import errno
 import logging
 import socket
@@ -47,11 +48,12 @@ class LinkClosedError(OSError):
     """The transport is gone for good (a serial device removed, a closed descriptor)."""
 
 
-class Closing:
+class Closing(abc.ABC):
     """``with transport:`` closes it at the end."""
 
+    @abc.abstractmethod
     def close(self) -> None:
-        raise NotImplementedError
+        """Release the transport."""
 
     def __enter__(self) -> Self:
         return self
