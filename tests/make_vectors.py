@@ -47,6 +47,10 @@ from typing import Any
 
 import msgspec
 
+# Run as a script, tests/ is on the path and the repository is not (examples/ is not an
+# installed package).
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
 from examples.udp_radio import MAX_RADIO_PAYLOAD_BYTES, encode_frame
 from link.core import codec
 from wire import auth, batch, names, numeric, protocol
@@ -440,6 +444,24 @@ def clock_vectors() -> TypeVectors:
     return vectors
 
 
+def demo_world_info(sites: list[protocol.Site], seed: int) -> protocol.WorldInfo:
+    """Run "demo"'s world: the arena, nest, robot and camera of the defaults."""
+    return protocol.WorldInfo(
+        v=1,
+        run="demo",
+        seed=seed,
+        dt=0.1,
+        arena_radius=0.75,
+        nest=protocol.Nest(0.0, 0.0, 0.2),
+        sites=sites,
+        robot_radius=0.037,
+        wheel_base=0.053,
+        max_wheel_speed=0.13,
+        camera=protocol.CameraSpec(width=64, height=48, fov=0.84),
+        clock="lockstep",
+    )
+
+
 def world_info_vectors() -> TypeVectors:
     vectors = TypeVectors("world_info.json", protocol.WorldInfo)
     sites = [
@@ -452,20 +474,7 @@ def world_info_vectors() -> TypeVectors:
     ]
     data = vectors.add_valid(
         "three_sites",
-        protocol.WorldInfo(
-            v=1,
-            run="demo",
-            seed=12345678901234567,
-            dt=0.1,
-            arena_radius=0.75,
-            nest=protocol.Nest(0.0, 0.0, 0.2),
-            sites=sites,
-            robot_radius=0.037,
-            wheel_base=0.053,
-            max_wheel_speed=0.13,
-            camera=protocol.CameraSpec(width=64, height=48, fov=0.84),
-            clock="lockstep",
-        ),
+        demo_world_info(sites, seed=12345678901234567),
         note="site coordinates are full doubles: only opinions are rounded",
     )
     common_faults(vectors, data, b'"dt":0.1,', "dt")
@@ -1224,22 +1233,7 @@ def _link_world_info() -> bytes:
         protocol.Site(1, -0.375, 0.649519053),
         protocol.Site(2, -0.375, -0.649519053),
     ]
-    return protocol.encode(
-        protocol.WorldInfo(
-            v=1,
-            run="demo",
-            seed=0,
-            dt=0.1,
-            arena_radius=0.75,
-            nest=protocol.Nest(0.0, 0.0, 0.2),
-            sites=sites,
-            robot_radius=0.037,
-            wheel_base=0.053,
-            max_wheel_speed=0.13,
-            camera=protocol.CameraSpec(width=64, height=48, fov=0.84),
-            clock="lockstep",
-        )
-    )
+    return protocol.encode(demo_world_info(sites, seed=0))
 
 
 def link_frame_vectors() -> dict[str, Any]:
