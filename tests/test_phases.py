@@ -32,7 +32,7 @@ def test_the_table_has_every_phase_of_the_protocol_and_only_those() -> None:
     assert {event for _, event in EDGES} == set(get_args(Event))  # no event left unused
 
 
-def test_every_phase_is_reachable_and_only_stopped_is_final() -> None:
+def test_every_phase_is_reachable_and_a_decided_robot_only_parks() -> None:
     reached, frontier = {INITIAL_PHASE}, [INITIAL_PHASE]
     while frontier:
         for target in TRANSITIONS[frontier.pop()].values():
@@ -40,7 +40,12 @@ def test_every_phase_is_reachable_and_only_stopped_is_final() -> None:
                 reached.add(target)
                 frontier.append(target)
     assert reached == set(TRANSITIONS)
-    assert [phase for phase, leaving in TRANSITIONS.items() if not leaving] == ["stopped"]
+    # Once decided, a robot never goes back to the trip: it parks, and parks again when
+    # pushed out of its slot.
+    decided: set[protocol.Phase] = {"lingering", "to_decision", "stopped"}
+    for phase in decided:
+        assert set(TRANSITIONS[phase].values()) <= decided
+    assert TRANSITIONS["stopped"] == {"displaced": "to_decision"}
 
 
 @pytest.mark.parametrize(
@@ -120,13 +125,15 @@ def test_every_phase_change_of_a_ten_robot_run_is_a_transition_of_the_table(
         ("waiting", "heard_beacon"),
         ("at_nest", "decided_to_linger"),
         ("lingering", "lingered"),
+        ("stopped", "displaced"),
     }
 
 
 def test_a_hard_trip_takes_the_rest_of_the_table(monkeypatch: pytest.MonkeyPatch) -> None:
     """One robot that is stuck at first (its leg times out), finds the nest silent (it
     waits at the centre), sees nothing for a while (gives sites up) and lingers once
-    decided: together with the run above, every transition of the table is taken."""
+    decided, and once parked is pushed out of its slot: together with the run above,
+    every transition of the table is taken."""
     swarm = make_swarm(1, 4, 2, ControllerConfig(linger=2.0))
     world, body = swarm.world, swarm.bodies[0]
     stuck_until, deaf_until, blind_until = 125.0, 160.0, 190.0
@@ -143,6 +150,11 @@ def test_a_hard_trip_takes_the_rest_of_the_table(monkeypatch: pytest.MonkeyPatch
     seen = observe_transitions(swarm, monkeypatch)
     for _ in _ticks(swarm, 900):
         world.beacon_on = world.t >= deaf_until
+    assert swarm.controllers[0].phase == "stopped"
+    x, y, theta = body.pose
+    body.pose = (0.8 * x, 0.8 * y, theta)  # pushed towards the nest, out of its slot
+    for _ in _ticks(swarm, 300):
+        pass
     assert swarm.controllers[0].phase == "stopped"
     assert seen == EDGES - {("at_nest", "decided")}  # it lingered instead
 

@@ -20,7 +20,7 @@ Controller *controller_instance(void) { return &the_controller; }
 enum Event {
     E_START, E_REACHED_VIEWPOINT, E_LEG_TIMED_OUT, E_SENSED_FIRST_SITE, E_COMPARED,
     E_SITE_UNSEEN, E_HEARD_BEACON, E_REACHED_NEST_CENTRE, E_POOLED_UNDECIDED, E_DECIDED,
-    E_DECIDED_TO_LINGER, E_LINGERED, E_PARKED
+    E_DECIDED_TO_LINGER, E_LINGERED, E_PARKED, E_DISPLACED
 };
 
 /* phases.TRANSITIONS: -1 where the table has no transition */
@@ -52,6 +52,9 @@ static int transition(int phase, int event) {
         break;
     case P_TO_DECISION:
         if (event == E_PARKED) return P_STOPPED;
+        break;
+    case P_STOPPED:
+        if (event == E_DISPLACED) return P_TO_DECISION;
         break;
     default:
         break;
@@ -769,6 +772,14 @@ static void park(Controller *c, const Reading *r, Command *out) {
     }
 }
 
+/* parking.Parking.displaced: pushed more than a body width out of its slot, drive back */
+static void stay(Controller *c, const Reading *r, Command *out) {
+    if (distance_to(r, c->slot_x, c->slot_y) > 2 * c->robot_radius) {
+        fire(c, E_DISPLACED, r);
+        park(c, r, out);
+    }
+}
+
 void controller_step(Controller *c, const Reading *r, NextHeard next, void *ctx, Command *out) {
     stop(out);
     c->t = r->t;
@@ -786,6 +797,7 @@ void controller_step(Controller *c, const Reading *r, NextHeard next, void *ctx,
     case P_AT_NEST: dwell(c, r, out); break;
     case P_LINGERING: linger(c, r, out); break;
     case P_TO_DECISION: park(c, r, out); break;
+    case P_STOPPED: stay(c, r, out); break;
     default: stop(out); break;
     }
 }

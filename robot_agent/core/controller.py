@@ -14,7 +14,8 @@ One cycle ("trip"):
     to_nest [-> waiting]                         until the nest beacon is heard
     at_nest                                      stop, broadcast the opinion, listen `dwell` s
     pool (MProdOp, or config.pooling) with every neighbour heard; trips += 1; decision test
-    -> next pair (to_site), or lingering -> to_decision -> stopped once decided.
+    -> next pair (to_site), or lingering -> to_decision -> stopped once decided
+    (and to_decision again whenever a crowd pushes it out of its slot).
 
 That overview is defined in one place, the table ``phases.TRANSITIONS``: every phase,
 the events that leave it and the phase each leads to. The controller changes phase only
@@ -371,6 +372,9 @@ class Controller:
         return command
 
     def _stay(self, reading: ports.BodyReading) -> ports.Command:
+        if self._parking.displaced(reading):
+            self._fire("displaced", reading)
+            return self._park(reading)
         return STOP
 
     # --- on entering a phase -------------------------------------------------------

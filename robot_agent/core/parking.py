@@ -11,10 +11,13 @@ slots lie on rings further in, each a free lane of ``park_lane`` in from the rob
 on the previous one and with that lane between its own robots: whichever slots are taken,
 every slot and every free spot among them stays joined to the interior by paths wide
 enough for the navigator, so no robot, parking or passing, can be walled in
-(``parking_rings``). That holds only while every decided robot ends in its slot, so a
+(``parking_rings``). That holds only while every decided robot is in its slot, so a
 robot never parks short of it: when its parking leg runs out of time, or it stalls more
 than a body radius away, it backs off towards the nest for ``stall_timeout`` seconds and
-tries again (``Parking``).
+tries again (``Parking``). Nor does it stay where a crowd pushed it: a parked robot more
+than a body width from its slot drives back (``Parking.displaced``), since a robot pushed
+along the wall into a site's corridor stands between the viewpoint and the panel, and the
+robots that still need that site could never see it.
 """
 
 from __future__ import annotations
@@ -101,6 +104,13 @@ class Parking:
                 return self._back_off(reading)
             return None
         return ports.Command(left, right)
+
+    def displaced(self, reading: ports.BodyReading) -> bool:
+        """Whether a parked robot has been pushed out of its slot: more than a body width
+        from it (it parks within a body radius, so a robot that settles there stays)."""
+        if self.slot is None:
+            raise RuntimeError("Parking.displaced before begin: no slot chosen yet")
+        return distance(reading, self.slot) > 2 * self._world.robot_radius
 
     def _back_off(self, reading: ports.BodyReading) -> ports.Command:
         """Give up this parking attempt: head towards the nest, clear of the parking rows,

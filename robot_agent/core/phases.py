@@ -30,6 +30,7 @@ Event = Literal[
     "decided_to_linger",
     "lingered",
     "parked",
+    "displaced",
 ]
 
 INITIAL_PHASE: Final[Phase] = "to_site"
@@ -63,7 +64,10 @@ TRANSITIONS: Final[Mapping[Phase, Mapping[Event, Phase]]] = {
     "lingering": {"lingered": "to_decision"},
     # Park in the robot's own slot; kept from it, back off and try again (no phase change).
     "to_decision": {"parked": "stopped"},
-    "stopped": {},
+    # Parked. Pushed more than a body width out of its slot (a crowd passing by), it drives
+    # back: left there it could stand in a site's corridor, between the viewpoint and the
+    # panel, and robots that still need that site could never see it.
+    "stopped": {"displaced": "to_decision"},
 }
 
 
