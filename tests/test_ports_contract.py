@@ -117,7 +117,8 @@ def test_tick_vectors_through_the_adapter_of_the_node_and_the_engine(
     check_what_the_controller_got(controller, vector)
     assert rejects.count == vector["rejected"]
     assert [
-        (sent.seq, sent.payload.hex(), sent.meta.hex()) for sent in answer.transmissions
+        (sent.seq, sent.payload.hex(), protocol.encode(sent.meta).hex())
+        for sent in answer.transmissions
     ] == expected_transmissions(vector)
     assert protocol.encode(answer.act).hex() == vector["out"]["act"]["hex"]
 

@@ -60,6 +60,28 @@ class SenseBatch(NamedTuple):
     senses: list[protocol.Sense]
 
 
+class SenseRows(NamedTuple):
+    """The senses of one tick for robots of one host as the world makes them: a row of
+    ``values`` per robot (x, y, theta, 8 proximity readings), in the order of ``robots``."""
+
+    last: int
+    tick: int
+    t: float
+    robots: list[int]
+    values: np.ndarray
+    rx: list[int]
+    camera: list[bool]
+
+    def batch(self) -> SenseBatch:
+        """The same senses as ``decode_senses`` of their encoding gives them."""
+        tick, t = self.tick, self.t
+        senses = [
+            sense_of_row(tick, t, row, rx, camera)
+            for row, rx, camera in zip(self.values.tolist(), self.rx, self.camera, strict=True)
+        ]
+        return SenseBatch(self.last, self.robots, senses)
+
+
 class ActBatch(NamedTuple):
     """Acts of robots of one host, in the batch's order."""
 
@@ -95,6 +117,19 @@ def encode_senses(
             np.asarray(rx, dtype="<u2").tobytes(),
             np.asarray(camera, dtype="u1").tobytes(),
         )
+    )
+
+
+def encode_sense_rows(rows: SenseRows) -> bytes:
+    """``encode_senses`` of a batch held as ``SenseRows``."""
+    return encode_senses(
+        rows.last,
+        tick=rows.tick,
+        t=rows.t,
+        robots=rows.robots,
+        values=rows.values,
+        rx=rows.rx,
+        camera=rows.camera,
     )
 
 
@@ -160,6 +195,11 @@ def encode_acts(last: int, acts: Sequence[tuple[int, protocol.Act]]) -> bytes:
         pack(robot, act.tick, act.left, act.right, act.capture, act.radio_tx) for robot, act in acts
     ]
     return _ACT_HEADER.pack(ACT_MAGIC, last, len(acts)) + b"".join(rows)
+
+
+def encode_act_batch(acts: ActBatch) -> bytes:
+    """``encode_acts`` of a batch held as an ``ActBatch``."""
+    return encode_acts(acts.last, acts.acts)
 
 
 def decode_acts(data: bytes) -> ActBatch:

@@ -2,8 +2,10 @@
 
 The world's ``Coordinator``, one process's ``HostedRobots`` over every robot's
 ``RobotEndpoint``, and the beacon's ``BeaconEndpoint`` exchange the same messages as over
-Zenoh (the same keys, payloads and attachments; the robots' senses and acts in batches,
-as a process hosting them does), handed from one to the other in memory. Nothing of the
+Zenoh (the same keys and messages; the robots' senses and acts in batches, as a process
+hosting them does), handed from one to the other in memory as they are made, typed: the
+bytes, tags and decoding a transport needs are never made (``wire.parcel``), except for
+a tap, which sees every message as it would be sent. Nothing of the
 tick is coded here: opening and closing ticks, the barrier, the radio and the checks of
 every input are the coordinator's and the endpoints', so a seed gives the same per-robot
 results as ``swarm run`` by construction. Like the launcher, this engine learns the run
@@ -33,7 +35,7 @@ from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import InputKind, Outgoing, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
 from robot_agent.core.parking import ParkingSlots
-from wire import protocol, shape
+from wire import batch, protocol, shape
 from wire.endings import Look, Stop, stop_reason
 from wire.names import Role
 from wire.rng import Stream
@@ -133,7 +135,7 @@ class _Bus:
         while queue:
             output = queue.popleft()
             if isinstance(output, Publish):
-                self._deliver(output.key, output.payload, output.attachment)
+                self._deliver(output)
 
     def close_tick(self) -> None:
         """Close the tick under way (every answer is in) and open the next."""
@@ -146,32 +148,33 @@ class _Bus:
 
     # --- the wire --------------------------------------------------------------------
 
-    def _deliver(self, key: str, payload: bytes, attachment: bytes | None) -> None:
+    def _deliver(self, output: Publish) -> None:
         """One message the world published, to whoever subscribes to its key."""
         if self.tap is not None:
-            self.tap(key, payload, attachment)
-        keys = self.keys
+            self.tap(output.key, output.payload, output.attachment)
+        key = output.key
         if key == self.host.sense_key:
-            for endpoint, sense in self.host.senses(payload, attachment):
+            rows: batch.SenseRows = output.message
+            for endpoint, sense in self.host.senses_of(rows.batch()):
                 self._stepped(endpoint.receive_sense(sense))
             self._send_acts()  # as the hosting process does after each batch
         elif key in self.inputs:
             endpoint, kind = self.inputs[key]
-            self._stepped(endpoint.receive(kind, payload, attachment))
+            self._stepped(endpoint.receive_message(kind, output.message, output.meta))
             self._send_acts()
         elif key == self.beacon.clock_key:
-            for message in self.beacon.receive_clock(payload, attachment):
+            for message in self.beacon.receive_clock(output.payload, output.attachment):
                 self._beacon_sent(message.key, message.payload, message.attachment)
-        elif key == keys.world_state:
-            self.last_state = protocol.decode(payload, protocol.WorldState)
+        elif key == self.keys.world_state:
+            self.last_state = output.message
 
     def _stepped(self, step: Step | None) -> None:
         if step is None:
             return
         for message in step.transmissions:
-            self._sent(EventKind.TX, message)
+            self._sent(EventKind.TX, message, message.meta)
         if step.act is not None:
-            self._sent(EventKind.ACT, step.act)
+            self._sent(EventKind.ACT, step.act, step.act.message)
         else:
             self.host.hold(step)
         if step.status is not None:
@@ -180,25 +183,27 @@ class _Bus:
     def _send_acts(self) -> None:
         acts = self.host.take_acts()
         if acts is not None:
-            self._sent(EventKind.ACTS, acts)
+            self._sent(EventKind.ACTS, acts, acts.message)
 
     def _status(self, message: Outgoing, published: bool = True) -> None:
         """A robot's status: to the tap (if it was published), and to what follows the run."""
         if published and self.tap is not None:
             self.tap(message.key, message.payload, message.attachment)
-        status = protocol.decode(message.payload, protocol.Status)
+        status: protocol.Status = message.message
         self.records[status.id].update(status)
         self.watchdog.status(status)
 
-    def _sent(self, kind: EventKind, message: Outgoing) -> None:
-        self._publish(kind, message.key, message.payload, message.attachment)
+    def _sent(self, kind: EventKind, message: Outgoing, typed: object) -> None:
+        """A robot's message (or its host's batch): to the tap, and to the world, typed
+        (a radio message as its payload and its ``RadioTxMeta``)."""
+        if self.tap is not None:
+            self.tap(message.key, message.payload, message.attachment)
+        payload = message.message if kind is EventKind.TX else b""
+        self._event(Event(kind, message.key, payload, message=typed))
 
     def _beacon_sent(self, key: str, payload: bytes, attachment: bytes | None) -> None:
+        """The beacon's message, as bytes: to the tap, and to the world."""
         kind = EventKind.ACK if key == self.keys.beacon_ack(self.beacon_name) else EventKind.TX
-        self._publish(kind, key, payload, attachment)
-
-    def _publish(self, kind: EventKind, key: str, payload: bytes, attachment: bytes | None) -> None:
-        """A robot's or the beacon's message: to the tap, and to the world."""
         if self.tap is not None:
             self.tap(key, payload, attachment)
         self._event(Event(kind, key, payload, attachment))

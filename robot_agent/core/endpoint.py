@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import enum
 import logging
-from typing import NamedTuple, TypeVar
+from typing import Any, NamedTuple, TypeVar
 
 import msgspec
 
@@ -36,6 +36,7 @@ from robot_agent.core.ports import RejectCounter, RobotController
 from robot_agent.core.simulated import SimulatedPorts
 from robot_agent.core.tick_assembly import ReadyTick, TickAssembly
 from wire import auth, guard, names, protocol
+from wire.parcel import Encoder, Parcel
 
 log = logging.getLogger(__name__)
 Meta = TypeVar("Meta", protocol.RadioRxMeta, protocol.CameraMeta)
@@ -58,13 +59,34 @@ class OutputKind(enum.StrEnum):
     HOST_ACT = "host/act"  # a batch of the acts of the robots one process hosts
 
 
-class Outgoing(NamedTuple):
-    """One message to send: on ``key``, ``payload`` with ``attachment`` (sealed)."""
+class Outgoing(Parcel):
+    """One message to send, of ``kind``: ``message`` for a core in the same process,
+    ``payload`` with ``attachment`` (sealed) for a transport (``wire.parcel``)."""
 
-    kind: OutputKind
-    key: str
-    payload: bytes
-    attachment: bytes | None
+    __slots__ = ("kind",)
+
+    def __init__(
+        self,
+        kind: OutputKind,
+        key: str,
+        message: Any,
+        encode: Encoder,
+        *,
+        identity: str,
+        keyring: auth.Keyring | None,
+        meta: Any = None,
+        meta_encode: Encoder = None,
+    ) -> None:
+        super().__init__(
+            key,
+            message,
+            encode,
+            identity=identity,
+            keyring=keyring,
+            meta=meta,
+            meta_encode=meta_encode,
+        )
+        self.kind = kind
 
 
 class Step(NamedTuple):
@@ -168,6 +190,24 @@ class RobotEndpoint:
         ready = assembly.take_ready(sense.tick) if held else None
         return None if ready is None else self._step(ready)
 
+    def receive_message(
+        self, kind: InputKind, message: Any, meta: Any = None, arrived: float = 0.0
+    ) -> Step | None:
+        """Take one message the world sent this robot, handed over typed by a core in the
+        same process (the in-process engine): a ``Sense``, or a radio payload or camera
+        frame with its ``RadioRxMeta`` or ``CameraMeta``. It is taken without decoding or
+        a tag, as the process's own; every other check applies. The step it completes,
+        if any."""
+        try:
+            tick, held = self._hold_message(kind, message, meta, arrived)
+        except protocol.ProtocolError as error:
+            self.reject(kind, error)
+            return None
+        if not held:
+            return None
+        ready = self.assembly.take_ready(tick)
+        return None if ready is None else self._step(ready)
+
     def _hold(
         self, kind: InputKind, payload: bytes, attachment: bytes | None, arrived: float
     ) -> int | None:
@@ -178,22 +218,34 @@ class RobotEndpoint:
                 self.keyring, self.identity, self.input_keys[kind], payload, attachment
             )
             if kind is InputKind.SENSE:
-                sense = protocol.decode(payload, protocol.Sense)
-                refused = guard.time_refused(sense.tick, sense.t, self.dt)
-                if refused:
-                    raise protocol.ProtocolError(refused)
-                tick, held = sense.tick, self.assembly.add_sense(sense, arrived)
+                message: Any = protocol.decode(payload, protocol.Sense)
+                meta: Any = None
             elif kind is InputKind.RADIO_RX:
-                radio = _metadata(metadata, protocol.RadioRxMeta)
-                tick = radio.tick
-                held = self.assembly.add_rx(tick, radio.sender, payload, arrived)
+                message, meta = payload, _metadata(metadata, protocol.RadioRxMeta)
             else:
-                camera = _metadata(metadata, protocol.CameraMeta)
-                tick, held = camera.tick, self.assembly.add_frame(camera.tick, payload, arrived)
+                message, meta = payload, _metadata(metadata, protocol.CameraMeta)
+            tick, held = self._hold_message(kind, message, meta, arrived)
         except (auth.AuthError, protocol.ProtocolError) as error:
             self.reject(kind, error)
             return None
         return tick if held else None
+
+    def _hold_message(
+        self, kind: InputKind, message: Any, meta: Any, arrived: float
+    ) -> tuple[int, bool]:
+        """Hold a decoded input for its tick: its tick, and whether it was held (False:
+        stale). ProtocolError if it is refused."""
+        if kind is InputKind.SENSE:
+            sense: protocol.Sense = message
+            refused = guard.time_refused(sense.tick, sense.t, self.dt)
+            if refused:
+                raise protocol.ProtocolError(refused)
+            return sense.tick, self.assembly.add_sense(sense, arrived)
+        if kind is InputKind.RADIO_RX:
+            radio: protocol.RadioRxMeta = meta
+            return radio.tick, self.assembly.add_rx(radio.tick, radio.sender, message, arrived)
+        camera: protocol.CameraMeta = meta
+        return camera.tick, self.assembly.add_frame(camera.tick, message, arrived)
 
     def reject(self, source: str, error: Exception) -> None:
         """Count a refused input (``source``: what it came as), logged once per source."""
@@ -245,21 +297,28 @@ class RobotEndpoint:
             sense = msgspec.structs.replace(sense, t=sense.t + self.time_offset)
         self.last_t = sense.t
         answer = self.ports.answer(self.controller, sense, ready.rx, ready.frame)
-        tx_key = self._tx_key
         transmissions = tuple(
             Outgoing(
                 OutputKind.RADIO_TX,
-                tx_key,
+                self._tx_key,
                 sent.payload,
-                self._seal(tx_key, sent.payload, sent.meta),
+                None,
+                identity=self.identity,
+                keyring=self.keyring,
+                meta=sent.meta,
+                meta_encode=protocol.encode,
             )
             for sent in answer.transmissions
         )
         act_message = None
         if not self.batched:
-            act = protocol.encode(answer.act)
             act_message = Outgoing(
-                OutputKind.ACT, self._act_key, act, self._seal(self._act_key, act)
+                OutputKind.ACT,
+                self._act_key,
+                answer.act,
+                protocol.encode,
+                identity=self.identity,
+                keyring=self.keyring,
             )
         status = self.status(sense.tick) if self.controller.take_status_change() else None
         return Step(
@@ -269,14 +328,16 @@ class RobotEndpoint:
     def status(self, tick: int) -> Outgoing:
         """The robot's status at ``tick``, its rejections included, sealed."""
         status = self.controller.status(tick)
-        status = msgspec.structs.replace(status, rejected=status.rejected + self.rejects.count)
-        payload = protocol.encode(status)
+        if self.rejects.count:
+            status = msgspec.structs.replace(status, rejected=status.rejected + self.rejects.count)
         return Outgoing(
-            OutputKind.STATUS, self._status_key, payload, self._seal(self._status_key, payload)
+            OutputKind.STATUS,
+            self._status_key,
+            status,
+            protocol.encode,
+            identity=self.identity,
+            keyring=self.keyring,
         )
-
-    def _seal(self, key: str, payload: bytes, metadata: bytes = b"") -> bytes | None:
-        return auth.seal(self.keyring, self.identity, key, payload, metadata)
 
 
 def _metadata(metadata: bytes | None, kind: type[Meta]) -> Meta:

@@ -51,9 +51,16 @@ class HostedRobots:
         try:
             auth.unseal(self.keyring, self.identity, self.sense_key, payload, attachment)
             senses = batch.decode_senses(payload)
-            if senses.last != self.last:
-                raise batch.BatchError(f"a batch of host/{self.first}-{senses.last}'s")
         except (auth.AuthError, protocol.ProtocolError) as error:
+            self.lead.reject("host sense", error)
+            return
+        yield from self.senses_of(senses)
+
+    def senses_of(self, senses: batch.SenseBatch) -> Iterator[tuple[RobotEndpoint, protocol.Sense]]:
+        """``senses`` as a batch of senses that passed its checks (``senses``, or handed
+        over typed in the same process) is taken: refused whole unless it is this host's."""
+        if senses.last != self.last:
+            error = batch.BatchError(f"a batch of host/{self.first}-{senses.last}'s")
             self.lead.reject("host sense", error)
             return
         for robot, sense in zip(senses.robots, senses.senses, strict=True):
@@ -69,10 +76,17 @@ class HostedRobots:
         self._acts.append((step.robot, step.answer))
 
     def take_acts(self) -> Outgoing | None:
-        """The acts held since the last call, as one sealed batch; None if there are none."""
+        """The acts held since the last call, as one batch (sealed when sent); None if
+        there are none."""
         if not self._acts:
             return None
-        payload = batch.encode_acts(self.last, self._acts)
-        self._acts.clear()
-        attachment = auth.seal(self.keyring, self.identity, self.act_key, payload)
-        return Outgoing(OutputKind.HOST_ACT, self.act_key, payload, attachment)
+        acts = batch.ActBatch(self.last, self._acts)
+        self._acts = []
+        return Outgoing(
+            OutputKind.HOST_ACT,
+            self.act_key,
+            acts,
+            batch.encode_act_batch,
+            identity=self.identity,
+            keyring=self.keyring,
+        )

@@ -26,7 +26,7 @@ class Broadcast:
 
     seq: int  # from 1 over the robot's life
     payload: bytes
-    meta: bytes  # the encoded RadioTxMeta{tick, seq}: the sample's attachment
+    meta: protocol.RadioTxMeta  # {tick, seq}: what the sample's attachment carries
 
 
 @dataclass(frozen=True)
@@ -135,11 +135,7 @@ class SimulatedPorts:
         transmissions = (
             tuple(
                 Broadcast(
-                    seq,
-                    payload,
-                    protocol.encode(
-                        protocol.RadioTxMeta(v=protocol.VERSION, tick=sense.tick, seq=seq)
-                    ),
+                    seq, payload, protocol.RadioTxMeta(v=protocol.VERSION, tick=sense.tick, seq=seq)
                 )
                 for seq, payload in sent
             )

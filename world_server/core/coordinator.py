@@ -24,6 +24,8 @@ import logging
 from collections.abc import Callable
 from enum import StrEnum
 
+import msgspec
+
 from wire import auth, batch, names, protocol
 from wire.names import Role
 from world_server.core.clock import Pacer
@@ -342,8 +344,17 @@ class Coordinator:
                     seq=delivery.seq,
                     sent_tick=delivery.sent_tick,
                 )
-                attachment = self._seal(receiver, key, delivery.payload, protocol.encode(meta))
-                self.outbox(Publish(key, delivery.payload, attachment))
+                self.outbox(
+                    Publish(
+                        key,
+                        delivery.payload,
+                        None,
+                        identity=receiver,
+                        keyring=self.keyring,
+                        meta=meta,
+                        meta_encode=protocol.encode,
+                    )
+                )
         if self.traced:
             self.outbox(Mark(Moment.DELIVERED))
         self._open_tick(result.tick, rx_counts, result.frames)
@@ -353,13 +364,11 @@ class Coordinator:
             self.outbox(Mark(Moment.OPEN_START))
         # The clock first: a beacon that answers this tick does so while the senses go out.
         # Each beacon is sent it only for the ticks it answers; world/clock is for observers.
-        clock = protocol.encode(protocol.Clock(v=protocol.VERSION, tick=tick, t=self.world.t))
+        clock = protocol.Clock(v=protocol.VERSION, tick=tick, t=self.world.t)
         for beacon in self.roster.beacons_answering(tick):
             key = self.keys.beacon_clock(beacon)
-            self.outbox(Publish(key, clock, self._seal(names.WORLD, key, clock), steady=True))
-        key = self.keys.world_clock
-        sealed = self._seal(names.WORLD, key, clock)
-        self.outbox(Publish(key, clock, sealed, steady=True, if_heard=True))
+            self.outbox(self._world_message(key, clock))
+        self.outbox(self._world_message(self.keys.world_clock, clock, if_heard=True))
         spec = self.world.config.camera
         for robot, frame in frames.items():
             meta = protocol.CameraMeta(
@@ -369,9 +378,17 @@ class Coordinator:
                 height=spec.height,
                 encoding="png",
             )
-            key = self.keys.camera(robot)
-            attachment = self._seal(names.robot_identity(robot), key, frame, protocol.encode(meta))
-            self.outbox(Publish(key, frame, attachment))
+            self.outbox(
+                Publish(
+                    self.keys.camera(robot),
+                    frame,
+                    None,
+                    identity=names.robot_identity(robot),
+                    keyring=self.keyring,
+                    meta=meta,
+                    meta_encode=protocol.encode,
+                )
+            )
         batched = self._send_senses(rx_counts, frames)
         self.intake.open(tick, self.roster.participants(tick))
         if tick % self.state_every == 0:
@@ -400,36 +417,59 @@ class Coordinator:
             else:
                 batches.setdefault(host, []).append(index)
         for host, rows in batches.items():
-            payload = batch.encode_senses(
+            message = batch.SenseRows(
                 host.last,
-                tick=senses.tick,
-                t=senses.t,
-                robots=[robots[row] for row in rows],
-                values=senses.values[rows],
-                rx=[senses.rx[row] for row in rows],
-                camera=[senses.camera[row] for row in rows],
+                senses.tick,
+                senses.t,
+                [robots[row] for row in rows],
+                senses.values[rows],
+                [senses.rx[row] for row in rows],
+                [senses.camera[row] for row in rows],
             )
-            key = self.keys.host_sense(host.first)
-            self.outbox(Publish(key, payload, self._seal(host.identity, key, payload), steady=True))
+            self.outbox(
+                Publish(
+                    self.keys.host_sense(host.first),
+                    message,
+                    batch.encode_sense_rows,
+                    identity=host.identity,
+                    keyring=self.keyring,
+                    steady=True,
+                )
+            )
         if alone:
             messages = senses.messages()
             for index in alone:
                 robot = robots[index]
-                payload = protocol.encode(messages[index])
-                key = self.keys.sense(robot)
-                attachment = self._seal(names.robot_identity(robot), key, payload)
-                self.outbox(Publish(key, payload, attachment, steady=True))
+                self.outbox(
+                    Publish(
+                        self.keys.sense(robot),
+                        messages[index],
+                        protocol.encode,
+                        identity=names.robot_identity(robot),
+                        keyring=self.keyring,
+                        steady=True,
+                    )
+                )
         return len(robots) - len(alone)
 
     def _publish_state(self) -> None:
-        state = protocol.encode(self.state())
-        key = self.keys.world_state
-        self.outbox(Publish(key, state, self._seal(names.WORLD, key, state), steady=True))
+        self.outbox(self._world_message(self.keys.world_state, self.state()))
+
+    def _world_message(
+        self, key: str, message: msgspec.Struct, *, if_heard: bool = False
+    ) -> Publish:
+        """A message of the world's own, sent tick after tick, tagged with its key."""
+        return Publish(
+            key,
+            message,
+            protocol.encode,
+            identity=names.WORLD,
+            keyring=self.keyring,
+            steady=True,
+            if_heard=if_heard,
+        )
 
     def state(self) -> protocol.WorldState:
         """The world's poses and counters (world/state, world/stats)."""
         counters = self.counters
         return self.world.state(counters.rejected, counters.stalls, counters.departures)
-
-    def _seal(self, identity: str, key: str, payload: bytes, metadata: bytes = b"") -> bytes | None:
-        return auth.seal(self.keyring, identity, key, payload, metadata)

@@ -11,6 +11,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Any
+
+from wire import auth
+from wire.parcel import Encoder, Parcel
 
 
 class EventKind(StrEnum):
@@ -37,23 +41,51 @@ class Event:
     attachment: bytes | None = None
     query: object = None  # the transport's handle of a query, handed back with its reply
     arrived: float = 0.0  # when the transport took it (only when tracing)
+    # The message itself, handed over by a core in the same process (the in-process
+    # engine): an Act, an ActBatch, an Ack, or a radio message's RadioTxMeta (its payload
+    # stays in ``payload``). It is taken without decoding or a tag, as the process's own;
+    # every other check still applies. A transport never sets it: what arrives as bytes
+    # is decoded and its tag checked.
+    message: object = None
 
 
 # --- outputs ----------------------------------------------------------------------------
 
 
-@dataclass(frozen=True, slots=True)
-class Publish:
-    """A message to publish, reliably (blocking rather than dropping under congestion)."""
+class Publish(Parcel):
+    """A message to publish, reliably (blocking rather than dropping under congestion):
+    ``message`` for a core in the same process, ``payload`` and ``attachment`` (encoded
+    and sealed on demand) for a transport (``wire.parcel``)."""
 
-    key: str
-    payload: bytes
-    attachment: bytes | None
-    # Sent tick after tick on this key (senses, batches, the clock, the state): worth a
-    # publisher kept for the key; else one put (camera frames, radio deliveries).
-    steady: bool = False
-    # Only for observers (world/clock): need not go out while nobody subscribes to it.
-    if_heard: bool = False
+    __slots__ = ("if_heard", "steady")
+
+    def __init__(
+        self,
+        key: str,
+        message: Any,
+        encode: Encoder,
+        *,
+        identity: str,
+        keyring: auth.Keyring | None,
+        meta: Any = None,
+        meta_encode: Encoder = None,
+        steady: bool = False,
+        if_heard: bool = False,
+    ) -> None:
+        super().__init__(
+            key,
+            message,
+            encode,
+            identity=identity,
+            keyring=keyring,
+            meta=meta,
+            meta_encode=meta_encode,
+        )
+        # Sent tick after tick on this key (senses, batches, the clock, the state): worth a
+        # publisher kept for the key; else one put (camera frames, radio deliveries).
+        self.steady = steady
+        # Only for observers (world/clock): need not go out while nobody subscribes to it.
+        self.if_heard = if_heard
 
 
 @dataclass(frozen=True, slots=True)
