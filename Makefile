@@ -27,7 +27,7 @@ UV_VERSION := 0.13.9
 LOCK_OPTIONS := --generate-hashes --universal --fork-strategy fewest --python-version 3.11
 TEST_WORKERS ?= 2
 
-.PHONY: run test test-fast check-published explore lint bench lock c-robot clean
+.PHONY: run test test-fast check-published explore lint bench lock c-robot clean cores clean-cores
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -44,9 +44,11 @@ $(VENV)/.installed-test: $(TEST_LOCK) pyproject.toml | $(BIN)/python
 	touch $@ $(VENV)/.installed
 
 run: $(VENV)/.installed
+	$(BIN)/python -m plumbing.cores build
 	$(BIN)/swarm run
 
 test: $(VENV)/.installed-test
+	$(BIN)/python -m plumbing.cores build
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
@@ -54,14 +56,25 @@ test: $(VENV)/.installed-test
 	else echo "make test: no C compiler ($${CC:-gcc}): the C robot's unit tests are skipped"; fi
 	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=20
 
+# The compiled cores (plumbing/cores.py): mypyc builds the pure modules of the tick in
+# place, again whenever one of them changes; without a C compiler or mypyc, make says so
+# and the source runs. `make clean-cores` removes them.
+cores: $(VENV)/.installed
+	$(BIN)/python -m plumbing.cores build
+
+clean-cores:
+	@if [ -x $(BIN)/python ]; then $(BIN)/python -m plumbing.cores clean; fi
+
 # The robot in C (c_robot/build/c-robot): gcc or cc, and make.
 c-robot:
 	$(MAKE) -C c_robot
 
 test-fast: $(VENV)/.installed-test
+	$(BIN)/python -m plumbing.cores build
 	$(BIN)/python -m pytest -m fast
 
 check-published: $(VENV)/.installed-test
+	$(BIN)/python -m plumbing.cores build
 	$(BIN)/swarm section5 --check
 	$(BIN)/python -m pytest --published --durations=20
 
@@ -81,9 +94,9 @@ bench: $(VENV)/.installed-test
 
 lock: | $(BIN)/python
 	$(BIN)/python -m pip install --quiet uv==$(UV_VERSION)
-	$(BIN)/uv pip compile pyproject.toml $(LOCK_OPTIONS) -o $(RUN_LOCK)
-	$(BIN)/uv pip compile pyproject.toml --extra test $(LOCK_OPTIONS) -o $(TEST_LOCK)
+	$(BIN)/uv pip compile pyproject.toml --extra cores $(LOCK_OPTIONS) -o $(RUN_LOCK)
+	$(BIN)/uv pip compile pyproject.toml --extra test --extra cores $(LOCK_OPTIONS) -o $(TEST_LOCK)
 
-clean:
+clean: clean-cores
 	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache .mypy_cache
 	$(MAKE) -C c_robot clean

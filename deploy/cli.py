@@ -11,6 +11,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
+from plumbing import cores
 from plumbing.cliargs import UsageError
 
 __all__ = ["SUBCOMMANDS", "UsageError", "main"]
@@ -37,6 +38,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    cores.check()  # stale compiled cores would run old code
     arguments = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser(arguments)
     args = parser.parse_args(arguments)

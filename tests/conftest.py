@@ -31,6 +31,8 @@ import zenoh
 from hypothesis import settings
 from tiers import is_fast, is_published
 
+from plumbing import cores
+
 # No per-example deadline in either: timing varies on a loaded CI machine.
 settings.register_profile("repeatable", derandomize=True, deadline=None, print_blob=True)
 settings.register_profile("explore", max_examples=500, deadline=None, print_blob=True)
@@ -39,6 +41,13 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
 
 class FastTierError(AssertionError):
     """A test of the fast tier started a process, used the network or opened Zenoh."""
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Stale compiled cores would test old code in place of the source: stop at once."""
+    found = cores.status()
+    if found.state == "stale":
+        pytest.exit(f"{found.line}: `make cores` builds them again", returncode=2)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -37,6 +37,8 @@ RUNS: list[list[str]] = [
     ["--seed", "2", "--robots", "8", "--sites", "6", "--alpha", "0.1", "--pooling",
      "loglinear", "--timeout", "400"],
     ["--seed", "3", "--robots", "8", "--sites", "6", "--strategy", "dmvd", "--timeout", "400"],
+    ["--seed", "4", "--robots", "6", "--sites", "5", "--linger", "10", "--timeout", "400"],
+    ["--seed", "5", "--robots", "40", "--timeout", "60"],
 ]  # fmt: skip
 
 # What a run's result is, robot by robot (the fields the run digest covers, and more).
@@ -98,8 +100,11 @@ def kernel_digest() -> str:
 
 
 def main() -> int:
+    from robot_agent.core import controller
+
     json.dump(
         {
+            "compiled": not controller.__file__.endswith(".py"),
             "kernel": kernel_digest(),
             "section4": section4_results(),
             "runs": [run_results(options) for options in RUNS],

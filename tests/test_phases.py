@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Iterator, Sequence
-from typing import get_args
+from typing import Any, get_args
 
 import numpy as np
 import pytest
@@ -89,15 +89,22 @@ def observe_transitions(
 
     monkeypatch.setattr(PhaseMachine, "fire", recording_fire)
 
-    def check(controller: Controller) -> None:
-        step = controller.step
+    class Checked:
+        """A controller whose every step is checked (the swarm steps this instead)."""
 
-        def checked_step(
-            reading: ports.BodyReading, received: Sequence[ports.Received]
+        def __init__(self, controller: Controller) -> None:
+            self.controller = controller
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(self.controller, name)
+
+        def step(
+            self, reading: ports.BodyReading, received: Sequence[ports.Received]
         ) -> ports.Command:
+            controller = self.controller
             phase = controller.phase
             fired.clear()
-            command = step(reading, received)
+            command = controller.step(reading, received)
             for leaving, event, entering in fired:
                 assert leaving == phase, f"{phase} changed to {leaving} outside the table"
                 phase = entering
@@ -105,10 +112,7 @@ def observe_transitions(
             assert controller.phase == phase, "the phase changed outside the table"
             return command
 
-        controller.step = checked_step  # type: ignore[method-assign]
-
-    for controller in swarm.controllers:
-        check(controller)
+    swarm.controllers[:] = [Checked(controller) for controller in swarm.controllers]  # type: ignore[misc]
     return seen
 
 

@@ -92,6 +92,7 @@ FULL_ONLY = {
     "test_multihost": "network namespaces and processes",
     "test_outside": "starts swarms with robots outside the emulator over UDP and serial links",
     "test_portable_runs": "swarms in fresh interpreters, with SIMD dispatch and without",
+    "test_compiled_cores": "swarms in fresh interpreters, compiled and from the source",
     "test_recording": "starts swarms and the recorder",
     "test_report": "runs `swarm report` in a process; plots",
     "test_flood_memory": "floods a live swarm and reads its processes' memory",

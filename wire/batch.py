@@ -68,7 +68,7 @@ class SenseRows(NamedTuple):
     tick: int
     t: float
     robots: list[int]
-    values: np.ndarray
+    values: list[list[float]]
     rx: list[int]
     camera: list[bool]
 
@@ -77,7 +77,7 @@ class SenseRows(NamedTuple):
         tick, t = self.tick, self.t
         senses = [
             sense_of_row(tick, t, row, rx, camera)
-            for row, rx, camera in zip(self.values.tolist(), self.rx, self.camera, strict=True)
+            for row, rx, camera in zip(self.values, self.rx, self.camera, strict=True)
         ]
         return SenseBatch(self.last, self.robots, senses)
 

@@ -29,6 +29,7 @@ SIMD path runs them; only its transcendental ufuncs and reductions are not.
 from __future__ import annotations
 
 import math
+from typing import Final
 
 import numpy as np
 import numpy.typing as npt
@@ -37,91 +38,87 @@ FloatArray = npt.NDArray[np.float64]
 
 # --- constants (hex floats: the exact bits a port copies) ---------------------------------
 
-PI = float.fromhex("0x1.921fb54442d18p+1")
-HALF_PI = float.fromhex("0x1.921fb54442d18p+0")
-PI_LO = float.fromhex("0x1.1a62633145c07p-53")  # pi - PI
-TWO_PI = float.fromhex("0x1.921fb54442d18p+2")
+PI: Final = float.fromhex("0x1.921fb54442d18p+1")
+HALF_PI: Final = float.fromhex("0x1.921fb54442d18p+0")
+PI_LO: Final = float.fromhex("0x1.1a62633145c07p-53")  # pi - PI
+TWO_PI: Final = float.fromhex("0x1.921fb54442d18p+2")
 
 # Reduction by pi/2 (Cody and Waite, fdlibm's __rem_pio2 in two rounds): PIO2_1 and
 # PIO2_2 hold 33 significant bits, so n * PIO2_1 and n * PIO2_2 are exact for |n| < 2^20.
-INV_PIO2 = float.fromhex("0x1.45f306dc9c883p-1")  # 2 / pi
-PIO2_1 = float.fromhex("0x1.921fb544p+0")
-PIO2_2 = float.fromhex("0x1.0b4611a6p-34")
-PIO2_2T = float.fromhex("0x1.3198a2e037073p-69")
+INV_PIO2: Final = float.fromhex("0x1.45f306dc9c883p-1")  # 2 / pi
+PIO2_1: Final = float.fromhex("0x1.921fb544p+0")
+PIO2_2: Final = float.fromhex("0x1.0b4611a6p-34")
+PIO2_2T: Final = float.fromhex("0x1.3198a2e037073p-69")
 # The largest |x| sin and cos take: n stays below 2^19, well inside the exact range.
-MAX_ANGLE = 8.0e5
+MAX_ANGLE: Final = 8.0e5
 
 # Kernels on [-pi/4, pi/4] (fdlibm's __kernel_sin and __kernel_cos, musl's arrangement).
 # A port evaluates each expression exactly as parenthesised here.
-S1 = float.fromhex("-0x1.5555555555549p-3")
-S2 = float.fromhex("0x1.111111110f8a6p-7")
-S3 = float.fromhex("-0x1.a01a019c161d5p-13")
-S4 = float.fromhex("0x1.71de357b1fe7dp-19")
-S5 = float.fromhex("-0x1.ae5e68a2b9cebp-26")
-S6 = float.fromhex("0x1.5d93a5acfd57cp-33")
-C1 = float.fromhex("0x1.555555555554cp-5")
-C2 = float.fromhex("-0x1.6c16c16c15177p-10")
-C3 = float.fromhex("0x1.a01a019cb159p-16")
-C4 = float.fromhex("-0x1.27e4f809c52adp-22")
-C5 = float.fromhex("0x1.1ee9ebdb4b1c4p-29")
-C6 = float.fromhex("-0x1.8fae9be8838d4p-37")
+S1: Final = float.fromhex("-0x1.5555555555549p-3")
+S2: Final = float.fromhex("0x1.111111110f8a6p-7")
+S3: Final = float.fromhex("-0x1.a01a019c161d5p-13")
+S4: Final = float.fromhex("0x1.71de357b1fe7dp-19")
+S5: Final = float.fromhex("-0x1.ae5e68a2b9cebp-26")
+S6: Final = float.fromhex("0x1.5d93a5acfd57cp-33")
+C1: Final = float.fromhex("0x1.555555555554cp-5")
+C2: Final = float.fromhex("-0x1.6c16c16c15177p-10")
+C3: Final = float.fromhex("0x1.a01a019cb159p-16")
+C4: Final = float.fromhex("-0x1.27e4f809c52adp-22")
+C5: Final = float.fromhex("0x1.1ee9ebdb4b1c4p-29")
+C6: Final = float.fromhex("-0x1.8fae9be8838d4p-37")
 
 # atan (fdlibm's s_atan.c): atan(0.5), atan(1), atan(1.5), atan(inf) in two parts each.
-ATAN_HI = (
-    float.fromhex("0x1.dac670561bb4fp-2"),
-    float.fromhex("0x1.921fb54442d18p-1"),
-    float.fromhex("0x1.f730bd281f69bp-1"),
-    float.fromhex("0x1.921fb54442d18p+0"),
-)
-ATAN_LO = (
-    float.fromhex("0x1.a2b7f222f65e2p-56"),
-    float.fromhex("0x1.1a62633145c07p-55"),
-    float.fromhex("0x1.007887af0cbbdp-56"),
-    float.fromhex("0x1.1a62633145c07p-54"),
-)
-AT = (
-    float.fromhex("0x1.555555555550dp-2"),
-    float.fromhex("-0x1.999999998ebc4p-3"),
-    float.fromhex("0x1.24924920083ffp-3"),
-    float.fromhex("-0x1.c71c6fe231671p-4"),
-    float.fromhex("0x1.745cdc54c206ep-4"),
-    float.fromhex("-0x1.3b0f2af749a6dp-4"),
-    float.fromhex("0x1.10d66a0d03d51p-4"),
-    float.fromhex("-0x1.dde2d52defd9ap-5"),
-    float.fromhex("0x1.97b4b24760debp-5"),
-    float.fromhex("-0x1.2b4442c6a6c2fp-5"),
-    float.fromhex("0x1.0ad3ae322da11p-6"),
-)
-ATAN_BIG = float.fromhex("0x1p66")  # from here on atan(x) rounds to +-pi/2
-# The same constants by name: the functions read these (a name is faster than an index).
-ATAN_HI_0, ATAN_HI_1, ATAN_HI_2, ATAN_HI_3 = ATAN_HI
-ATAN_LO_0, ATAN_LO_1, ATAN_LO_2, ATAN_LO_3 = ATAN_LO
-AT0, AT1, AT2, AT3, AT4, AT5, AT6, AT7, AT8, AT9, AT10 = AT
+ATAN_HI_0: Final = float.fromhex("0x1.dac670561bb4fp-2")
+ATAN_HI_1: Final = float.fromhex("0x1.921fb54442d18p-1")
+ATAN_HI_2: Final = float.fromhex("0x1.f730bd281f69bp-1")
+ATAN_HI_3: Final = float.fromhex("0x1.921fb54442d18p+0")
+ATAN_LO_0: Final = float.fromhex("0x1.a2b7f222f65e2p-56")
+ATAN_LO_1: Final = float.fromhex("0x1.1a62633145c07p-55")
+ATAN_LO_2: Final = float.fromhex("0x1.007887af0cbbdp-56")
+ATAN_LO_3: Final = float.fromhex("0x1.1a62633145c07p-54")
+AT0: Final = float.fromhex("0x1.555555555550dp-2")
+AT1: Final = float.fromhex("-0x1.999999998ebc4p-3")
+AT2: Final = float.fromhex("0x1.24924920083ffp-3")
+AT3: Final = float.fromhex("-0x1.c71c6fe231671p-4")
+AT4: Final = float.fromhex("0x1.745cdc54c206ep-4")
+AT5: Final = float.fromhex("-0x1.3b0f2af749a6dp-4")
+AT6: Final = float.fromhex("0x1.10d66a0d03d51p-4")
+AT7: Final = float.fromhex("-0x1.dde2d52defd9ap-5")
+AT8: Final = float.fromhex("0x1.97b4b24760debp-5")
+AT9: Final = float.fromhex("-0x1.2b4442c6a6c2fp-5")
+AT10: Final = float.fromhex("0x1.0ad3ae322da11p-6")
+ATAN_BIG: Final = float.fromhex("0x1p66")  # from here on atan(x) rounds to +-pi/2
+# The same constants as tuples (the functions read the names: a name is faster).
+ATAN_HI: Final = (ATAN_HI_0, ATAN_HI_1, ATAN_HI_2, ATAN_HI_3)
+ATAN_LO: Final = (ATAN_LO_0, ATAN_LO_1, ATAN_LO_2, ATAN_LO_3)
+AT: Final = (AT0, AT1, AT2, AT3, AT4, AT5, AT6, AT7, AT8, AT9, AT10)
 
 # exp and log (fdlibm's e_exp.c and e_log.c).
-LN2_HI = float.fromhex("0x1.62e42feep-1")  # 32 significant bits: k * LN2_HI exact
-LN2_LO = float.fromhex("0x1.a39ef35793c76p-33")
-INV_LN2 = float.fromhex("0x1.71547652b82fep+0")
-EXP_OVERFLOW = float.fromhex("0x1.62e42fefa39efp+9")  # above: inf
-EXP_UNDERFLOW = float.fromhex("-0x1.74910d52d3051p+9")  # below: 0
-P1 = float.fromhex("0x1.555555555553ep-3")
-P2 = float.fromhex("-0x1.6c16c16bebd93p-9")
-P3 = float.fromhex("0x1.1566aaf25de2cp-14")
-P4 = float.fromhex("-0x1.bbd41c5d26bf1p-20")
-P5 = float.fromhex("0x1.6376972bea4d0p-25")
-SQRT_HALF = float.fromhex("0x1.6a09ep-1")  # log reduces x to m 2^k, m in [SQRT_HALF, 2 SQRT_HALF)
-LG1 = float.fromhex("0x1.5555555555593p-1")
-LG2 = float.fromhex("0x1.999999997fa04p-2")
-LG3 = float.fromhex("0x1.2492494229359p-2")
-LG4 = float.fromhex("0x1.c71c51d8e78afp-3")
-LG5 = float.fromhex("0x1.7466496cb03dep-3")
-LG6 = float.fromhex("0x1.39a09d078c69fp-3")
-LG7 = float.fromhex("0x1.2f112df3e5244p-3")
+LN2_HI: Final = float.fromhex("0x1.62e42feep-1")  # 32 significant bits: k * LN2_HI exact
+LN2_LO: Final = float.fromhex("0x1.a39ef35793c76p-33")
+INV_LN2: Final = float.fromhex("0x1.71547652b82fep+0")
+EXP_OVERFLOW: Final = float.fromhex("0x1.62e42fefa39efp+9")  # above: inf
+EXP_UNDERFLOW: Final = float.fromhex("-0x1.74910d52d3051p+9")  # below: 0
+P1: Final = float.fromhex("0x1.555555555553ep-3")
+P2: Final = float.fromhex("-0x1.6c16c16bebd93p-9")
+P3: Final = float.fromhex("0x1.1566aaf25de2cp-14")
+P4: Final = float.fromhex("-0x1.bbd41c5d26bf1p-20")
+P5: Final = float.fromhex("0x1.6376972bea4d0p-25")
+SQRT_HALF: Final = float.fromhex(
+    "0x1.6a09ep-1"
+)  # log reduces x to m 2^k, m in [SQRT_HALF, 2 SQRT_HALF)
+LG1: Final = float.fromhex("0x1.5555555555593p-1")
+LG2: Final = float.fromhex("0x1.999999997fa04p-2")
+LG3: Final = float.fromhex("0x1.2492494229359p-2")
+LG4: Final = float.fromhex("0x1.c71c51d8e78afp-3")
+LG5: Final = float.fromhex("0x1.7466496cb03dep-3")
+LG6: Final = float.fromhex("0x1.39a09d078c69fp-3")
+LG7: Final = float.fromhex("0x1.2f112df3e5244p-3")
 
 # wrap_angle: 2 pi in two parts, the first with 35 significant bits (4 PIO2_1).
-INV_TWO_PI = float.fromhex("0x1.45f306dc9c883p-3")
-TWO_PI_HI = 4.0 * PIO2_1
-TWO_PI_LO = float.fromhex("0x1.0b4611a626331p-32")  # 2 pi - TWO_PI_HI
+INV_TWO_PI: Final = float.fromhex("0x1.45f306dc9c883p-3")
+TWO_PI_HI: Final = 4.0 * PIO2_1
+TWO_PI_LO: Final = float.fromhex("0x1.0b4611a626331p-32")  # 2 pi - TWO_PI_HI
 
 
 # --- sin and cos ---------------------------------------------------------------------------
@@ -203,9 +200,9 @@ def cos(x: float) -> float:
 
 
 # Below this many elements a loop of ``sincos`` is faster than numpy's per-call overhead.
-_SCALAR_BELOW = 24
-_SINE_SIGN = np.array([1.0, 1.0, -1.0, -1.0])  # by quadrant: sin(x) = +-(kernel sin or cos)
-_COSINE_SIGN = np.array([1.0, -1.0, -1.0, 1.0])
+_SCALAR_BELOW: Final = 24
+_SINE_SIGN: Final = np.array([1.0, 1.0, -1.0, -1.0])  # by quadrant: sin(x) = +-(kernel sin or cos)
+_COSINE_SIGN: Final = np.array([1.0, -1.0, -1.0, 1.0])
 
 
 def sincos_array(x: FloatArray) -> tuple[FloatArray, FloatArray]:

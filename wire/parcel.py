@@ -30,19 +30,6 @@ class Parcel:
     when ``keyring`` is set (an unkeyed run sends the bare metadata, or no attachment).
     """
 
-    __slots__ = (
-        "_attachment",
-        "_payload",
-        "_sealed",
-        "encode",
-        "identity",
-        "key",
-        "keyring",
-        "message",
-        "meta",
-        "meta_encode",
-    )
-
     def __init__(
         self,
         key: str,

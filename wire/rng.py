@@ -70,7 +70,9 @@ class Stream:
 
     __slots__ = ("_state",)
 
-    def __init__(self, seed: int) -> None:
+    def __init__(self, seed: object) -> None:
+        # ``object``: a seed of another type gets this error, compiled (plumbing/cores.py)
+        # or not, rather than the compiled code's TypeError.
         if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MASK:
             raise ValueError(f"a stream's seed is an integer in [0, 2^64), got {seed!r}")
         self._state = seed

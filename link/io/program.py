@@ -29,7 +29,7 @@ from link.core import codec
 from link.core.robot import LinkRobot
 from link.io.hub import Hub
 from link.io.transport import open_transport
-from plumbing import cliargs
+from plumbing import cliargs, cores
 from plumbing.run_keys import read_key_file
 from wire import names
 
@@ -138,6 +138,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    cores.check()  # stale compiled cores would run old code
     parser = build_parser()
     args = parser.parse_args(argv)
     try:  # checked after parsing, so that --help works wherever it stands

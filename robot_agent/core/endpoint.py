@@ -63,8 +63,6 @@ class Outgoing(Parcel):
     """One message to send, of ``kind``: ``message`` for a core in the same process,
     ``payload`` with ``attachment`` (sealed) for a transport (``wire.parcel``)."""
 
-    __slots__ = ("kind",)
-
     def __init__(
         self,
         kind: OutputKind,

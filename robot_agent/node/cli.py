@@ -20,7 +20,7 @@ from collections.abc import Sequence
 
 import zenoh
 
-from plumbing import cliargs, run_keys, settings_cli
+from plumbing import cliargs, cores, run_keys, settings_cli
 from plumbing.inbox import BoundedInbox
 from plumbing.lifecycle import die_with_launcher
 from plumbing.stop_signals import on_stop_signals
@@ -163,6 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    cores.check()  # stale compiled cores would run old code
     die_with_launcher()
     parser = build_parser()
     args = parser.parse_args(argv)

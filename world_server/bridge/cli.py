@@ -23,7 +23,7 @@ import zenoh
 
 from link.core import codec
 from link.core.impairment import LinkImpairment
-from plumbing import cliargs, run_keys
+from plumbing import cliargs, cores, run_keys
 from plumbing.lifecycle import die_with_launcher
 from plumbing.stop_signals import on_stop_signals
 from plumbing.zenoh_session import open_from_args, open_session, session_mode
@@ -139,6 +139,7 @@ def impairment_of(args: argparse.Namespace) -> LinkImpairment:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    cores.check()  # stale compiled cores would run old code
     die_with_launcher()
     parser = build_parser()
     args = parser.parse_args(argv)

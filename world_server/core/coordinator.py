@@ -422,7 +422,7 @@ class Coordinator:
                 senses.tick,
                 senses.t,
                 [robots[row] for row in rows],
-                senses.values[rows],
+                [senses.values[row] for row in rows],
                 [senses.rx[row] for row in rows],
                 [senses.camera[row] for row in rows],
             )

@@ -57,8 +57,6 @@ class Publish(Parcel):
     ``message`` for a core in the same process, ``payload`` and ``attachment`` (encoded
     and sealed on demand) for a transport (``wire.parcel``)."""
 
-    __slots__ = ("if_heard", "steady")
-
     def __init__(
         self,
         key: str,

@@ -4,8 +4,8 @@ pymunk (Chipmunk 2) resolves robot-robot and robot-wall contacts; the robots' wh
 speeds are reached through forces: at every substep each body gets the force that brings
 its velocity to its wheels' velocity, so the contact solver can still push a robot aside
 (``Physics.step`` says why not a velocity written straight onto the body). The 8 infrared
-proximity rays are computed analytically with numpy (robots are discs and the wall is a
-circle), which costs far less than 8 pymunk ray queries per robot; ``proximity_raycast``
+proximity rays are computed analytically (robots are discs and the wall is a circle),
+which costs far less than 8 pymunk ray queries per robot; ``proximity_raycast``
 does the same with pymunk's segment queries and serves as the reference the tests
 compare against.
 
@@ -21,9 +21,10 @@ sin, which Chipmunk calls, cannot move a robot). No clock and no randomness here
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Sequence
+from typing import Final
 
-import numpy as np
 import pymunk
 from pymunk import batch
 
@@ -42,7 +43,6 @@ MAX_SUBSTEP = 0.02  # seconds
 # A body's angle accumulates its turns; past this many radians it is wrapped back into
 # [-pi, pi], which keeps it inside the portable kernel's range and its precision high.
 ANGLE_BOUND = 64 * math.pi
-ALL_PAIRS_UP_TO = 48  # robots: up to here proximity compares every pair, past it a grid
 
 # Row layouts of pymunk's batch buffers: x, y, angle, vx, vy, omega / fx, fy, torque.
 _STATE_FIELDS = (
@@ -52,6 +52,8 @@ _STATE_FIELDS = (
     | batch.BodyFields.ANGULAR_VELOCITY
 )
 _FORCE_FIELDS = batch.BodyFields.FORCE | batch.BodyFields.TORQUE
+STATE_ROW: Final = 6  # numbers per body in a state buffer
+FORCE_ROW: Final = 3  # and in a force buffer
 
 
 def wall_segment_count(arena_radius: float, sag: float = WALL_SAG) -> int:
@@ -106,31 +108,30 @@ class Physics:
         self._add_wall(wall_segments or wall_segment_count(arena_radius))
 
         directions = [numeric.sincos(angle) for angle in spec.prox_angles]
-        self._prox_sin = np.array([sin for sin, _ in directions])
-        self._prox_cos = np.array([cos for _, cos in directions])
-        # Mass, mass, moment of inertia: turns a velocity change per second into a force.
-        self._inertia = np.array(
-            [ROBOT_MASS, ROBOT_MASS, pymunk.moment_for_circle(ROBOT_MASS, 0.0, spec.radius)]
-        )
+        self._sensor_sin = [sin for sin, _ in directions]
+        self._sensor_cos = [cos for _, cos in directions]
+        self._mass = ROBOT_MASS
+        self._moment = float(pymunk.moment_for_circle(ROBOT_MASS, 0.0, spec.radius))
         self._ids: list[int] = []  # robot ids in insertion order == pymunk's body order
         self._index: dict[int, int] = {}
         self._bodies: list[pymunk.Body] = []
-        self._left = np.zeros(0)
-        self._right = np.zeros(0)
+        self._left: list[float] = []
+        self._right: list[float] = []
         self._sorted_ids: list[int] = []
-        self._state = np.zeros((0, 3))  # x, y, angle (unwrapped) per robot, insertion order
-        self._velocity = np.zeros((0, 3))  # vx, vy, omega per robot, as the solver left them
-        self._body_rows = 0  # bodies pymunk's batch API lists: the robots, then static ones
-        self._prox: np.ndarray | None = None  # cache of proximity_all, cleared by step()
-        self._poses: list[tuple[float, float, float]] | None = None  # likewise, of pose()
-        self._readings: np.ndarray | None = None  # likewise, of readings()
-        self._directions: tuple[np.ndarray, np.ndarray] | None = None  # sin, cos of angles
-        # Per robot, the last angle whose sine and cosine were taken, and them: a robot
-        # standing still (waiting, sensing, parked) keeps its angle, and the kernel's sine
-        # is the physics' largest cost in a small swarm.
-        self._direction_angle = np.zeros(0)
-        self._direction_sin = np.zeros(0)
-        self._direction_cos = np.zeros(0)
+        # What pymunk's batch API lists, STATE_ROW numbers a body: x, y, angle (unwrapped),
+        # vx, vy, omega; the robots first, in insertion order, then the static wall body.
+        self._rows: list[float] = []
+        self._body_rows = 0
+        # Made at most once per step, and cleared by it: every robot's proximity readings,
+        # poses, senses and the sine and cosine of its heading.
+        self._prox: list[list[float]] | None = None
+        self._poses: list[tuple[float, float, float]] | None = None
+        self._readings: list[list[float]] | None = None
+        self._directions: tuple[list[float], list[float]] | None = None
+        # Per robot, the last angle whose sine and cosine were taken, and them.
+        self._direction_angle: list[float] = []
+        self._direction_sin: list[float] = []
+        self._direction_cos: list[float] = []
         self._read_buffer = batch.Buffer()
         self._write_buffer = batch.Buffer()
 
@@ -165,7 +166,7 @@ class Physics:
         if numeric.hypot(x, y) > self.arena_radius - self.spec.radius:
             raise ValueError(f"robot {robot_id} at ({x}, {y}) does not fit inside the arena")
         radius = self.spec.radius
-        body = pymunk.Body(ROBOT_MASS, float(self._inertia[2]))
+        body = pymunk.Body(ROBOT_MASS, self._moment)
         body.position = (x, y)
         body.angle = theta
         shape = pymunk.Circle(body, radius)
@@ -178,10 +179,14 @@ class Physics:
         self._ids.append(robot_id)
         self._bodies.append(body)
         self._sorted_ids = sorted(self._ids)
-        self._left = np.append(self._left, 0.0)
-        self._right = np.append(self._right, 0.0)
+        self._left.append(0.0)
+        self._right.append(0.0)
+        self._direction_angle.append(math.nan)  # no angle's sine taken yet
+        self._direction_sin.append(0.0)
+        self._direction_cos.append(0.0)
         self._read_state()
-        if not np.array_equal(self._state[len(self._ids) - 1], (x, y, theta)):
+        row = STATE_ROW * (len(self._ids) - 1)
+        if self._rows[row : row + 3] != [x, y, theta]:
             # pymunk's batch API must list robots first, in insertion order; refuse if not.
             raise RuntimeError("pymunk body order differs from insertion order")
 
@@ -203,86 +208,72 @@ class Physics:
 
     def _pose_list(self) -> list[tuple[float, float, float]]:
         # Wrapped once per step for all robots, so pose(), poses() and readings() agree.
-        if self._poses is None:
-            state = self._state
-            self._poses = list(
-                zip(
-                    state[:, 0].tolist(),
-                    state[:, 1].tolist(),
-                    self._headings().tolist(),
-                    strict=True,
-                )
-            )
-        return self._poses
+        poses = self._poses
+        if poses is None:
+            rows = self._rows
+            wrap = numeric.wrap_angle
+            poses = [
+                (rows[row], rows[row + 1], wrap(rows[row + 2]))
+                for row in range(0, STATE_ROW * len(self._ids), STATE_ROW)
+            ]
+            self._poses = poses
+        return poses
 
-    def _headings(self) -> np.ndarray:
-        """Every robot's heading in [-pi, pi], in insertion order."""
-        return numeric.wrap_angle_array(self._state[:, 2])
+    def _heading_directions(self) -> tuple[list[float], list[float]]:
+        """Sine and cosine of every robot's angle, in insertion order (once per state).
+        A robot standing still (waiting, sensing, parked) keeps its angle, and with it
+        the sine and cosine it had: the kernel's sine is a large part of a small swarm's
+        physics."""
+        directions = self._directions
+        if directions is None:
+            rows = self._rows
+            angles, sines, cosines = self._direction_angle, self._direction_sin, self._direction_cos
+            for index in range(len(self._ids)):
+                angle = rows[STATE_ROW * index + 2]
+                if angle != angles[index]:
+                    sines[index], cosines[index] = numeric.sincos(angle)
+                    angles[index] = angle
+            directions = (sines, cosines)
+            self._directions = directions
+        return directions
 
-    def _heading_directions(self) -> tuple[np.ndarray, np.ndarray]:
-        """Sine and cosine of every robot's angle, in insertion order (once per state; use
-        them before the next step, which updates them in place)."""
-        if self._directions is None:
-            angle = self._state[:, 2]
-            if len(self._direction_angle) != len(angle):
-                self._direction_angle = np.full(len(angle), np.nan)
-                self._direction_sin = np.zeros(len(angle))
-                self._direction_cos = np.zeros(len(angle))
-            changed = np.flatnonzero(angle != self._direction_angle)
-            if changed.size:
-                sin, cos = numeric.sincos_array(angle[changed])
-                self._direction_sin[changed] = sin
-                self._direction_cos[changed] = cos
-                self._direction_angle[changed] = angle[changed]
-            self._directions = (self._direction_sin, self._direction_cos)
-        return self._directions
-
-    def readings(self, robot_ids: list[int]) -> np.ndarray:
+    def readings(self, robot_ids: list[int]) -> list[list[float]]:
         """One row per robot of ``robot_ids``: its x, y, heading (as ``pose``) and its 8
         proximity readings (as ``proximity``), made for every robot at once."""
-        if self._readings is None:
-            state = self._state
-            self._readings = np.column_stack(
-                (state[:, 0], state[:, 1], self._headings(), self._proximity_array())
-            )
+        readings = self._readings
+        if readings is None:
+            proximity = self._proximity_rows()
+            readings = [[*pose, *proximity[index]] for index, pose in enumerate(self._pose_list())]
+            self._readings = readings
         index = self._index
-        return self._readings[[index[robot] for robot in robot_ids]]
+        return [readings[index[robot]] for robot in robot_ids]
 
     def wheels(self, robot_id: int) -> tuple[float, float]:
         """The wheel speeds in force (after clamping)."""
         index = self._index[robot_id]
-        return float(self._left[index]), float(self._right[index])
+        return self._left[index], self._right[index]
 
     # --- driving --------------------------------------------------------------------
 
     def set_wheels(self, robot_id: int, left: float, right: float) -> None:
         """Wheel speeds in m/s, clamped to the e-puck's maximum; they hold until changed."""
-        if not (math.isfinite(left) and math.isfinite(right)):
-            raise ValueError(f"robot {robot_id}: wheel speeds must be finite")
-        index = self._index[robot_id]
-        limit = self.spec.max_wheel_speed
-        self._left[index] = min(max(left, -limit), limit)
-        self._right[index] = min(max(right, -limit), limit)
+        self.set_all_wheels([robot_id], [left], [right])
 
     def set_all_wheels(
         self, robot_ids: Sequence[int], left: Sequence[float], right: Sequence[float]
     ) -> None:
-        """``set_wheels`` for many robots at once (the same clamping, done with numpy)."""
-        if not robot_ids:
-            return
-        lefts = np.asarray(left, dtype=np.float64)
-        rights = np.asarray(right, dtype=np.float64)
-        if not (np.isfinite(lefts).all() and np.isfinite(rights).all()):
-            bad = next(
-                robot
-                for robot, pair in zip(robot_ids, zip(left, right, strict=True), strict=True)
-                if not (math.isfinite(pair[0]) and math.isfinite(pair[1]))
-            )
-            raise ValueError(f"robot {bad}: wheel speeds must be finite")
-        index = [self._index[robot] for robot in robot_ids]
+        """Wheel speeds in m/s for many robots at once, each clamped to the e-puck's
+        maximum; they hold until changed. ValueError (nothing set) if any is not finite."""
+        if len(left) != len(robot_ids) or len(right) != len(robot_ids):
+            raise ValueError("one left and one right wheel speed per robot")
+        for robot, wheel_left, wheel_right in zip(robot_ids, left, right, strict=True):
+            if not (math.isfinite(wheel_left) and math.isfinite(wheel_right)):
+                raise ValueError(f"robot {robot}: wheel speeds must be finite")
         limit = self.spec.max_wheel_speed
-        self._left[index] = np.minimum(np.maximum(lefts, -limit), limit)
-        self._right[index] = np.minimum(np.maximum(rights, -limit), limit)
+        for robot, wheel_left, wheel_right in zip(robot_ids, left, right, strict=True):
+            index = self._index[robot]
+            self._left[index] = _clamp(float(wheel_left), limit)
+            self._right[index] = _clamp(float(wheel_right), limit)
 
     def substeps_for(self, dt: float) -> int:
         """How many pymunk steps ``step(dt)`` takes."""
@@ -302,54 +293,68 @@ class Physics:
         """
         if not dt > 0:
             raise ValueError(f"dt must be positive, got {dt!r}")
-        if not self._ids:
+        robots = len(self._ids)
+        if not robots:
             return
         substeps = self.substeps_for(dt)
         substep = dt / substeps
-        robots = len(self._ids)
-        speed = 0.5 * (self._left + self._right)
-        turn_rate = (self._right - self._left) / self.spec.wheel_base
+        wheel_base = self.spec.wheel_base
+        speeds = [0.5 * (left + right) for left, right in zip(self._left, self._right, strict=True)]
+        turn_rates = [
+            (right - left) / wheel_base for left, right in zip(self._left, self._right, strict=True)
+        ]
+        # A velocity change per second times mass (or moment of inertia) is a force.
+        push = self._mass / substep
+        twist = self._moment / substep
         # One row per body pymunk lists; rows past the robots (the static wall body) stay 0.
-        forces = np.zeros((self._body_rows, 3))
+        padding = [0.0] * (FORCE_ROW * (self._body_rows - robots))
         for _ in range(substeps):
             # The heading changes every substep, so the target velocity follows it.
-            sin, cos = self._heading_directions()
-            forces[:robots, 0] = speed * cos - self._velocity[:, 0]
-            forces[:robots, 1] = speed * sin - self._velocity[:, 1]
-            forces[:robots, 2] = turn_rate - self._velocity[:, 2]
-            forces[:robots] *= self._inertia / substep
-            self._write_buffer.set_float_buf(forces.reshape(-1))
+            sines, cosines = self._heading_directions()
+            rows = self._rows
+            forces: list[float] = []
+            for index in range(robots):
+                row = STATE_ROW * index
+                speed = speeds[index]
+                forces.append((speed * cosines[index] - rows[row + 3]) * push)
+                forces.append((speed * sines[index] - rows[row + 4]) * push)
+                forces.append((turn_rates[index] - rows[row + 5]) * twist)
+            forces.extend(padding)
+            self._write_buffer.set_float_buf(array("d", forces))
             batch.set_space_bodies(self.space, _FORCE_FIELDS, self._write_buffer)
             self.space.step(substep)
             self._read_state()
-        if not np.abs(self._state[:, 2]).max() <= ANGLE_BOUND:
-            self._wrap_angles()
+        self._wrap_angles()
 
     def _read_state(self) -> None:
         self._read_buffer.clear()
         batch.get_space_bodies(self.space, _STATE_FIELDS, self._read_buffer)
-        rows = np.frombuffer(self._read_buffer.float_buf(), dtype=np.float64).reshape(-1, 6)
+        state = array("d")
+        state.frombytes(self._read_buffer.float_buf())
+        rows = state.tolist()
         # pymunk lists the dynamic bodies (the robots, in insertion order) before the
         # static body that holds the wall.
-        self._body_rows = len(rows)
-        self._state = rows[: len(self._ids), :3].copy()
+        self._body_rows = len(rows) // STATE_ROW
+        self._rows = rows
         self._prox = None
         self._poses = None
         self._readings = None
         self._directions = None
-        self._velocity = rows[: len(self._ids), 3:].copy()
 
     def _wrap_angles(self) -> None:
         """Wraps every angle past ``ANGLE_BOUND`` into [-pi, pi], in pymunk and here (a
         step turns a robot by well under a radian, so checking after each is enough)."""
-        for index in np.flatnonzero(~(np.abs(self._state[:, 2]) <= ANGLE_BOUND)).tolist():
-            angle = numeric.wrap_angle(float(self._state[index, 2]))
-            self._bodies[index].angle = angle
-            self._state[index, 2] = angle
-        self._poses = None
-        self._readings = None
-        self._prox = None
-        self._directions = None
+        rows = self._rows
+        for index in range(len(self._ids)):
+            row = STATE_ROW * index + 2
+            angle = rows[row]
+            if not -ANGLE_BOUND <= angle <= ANGLE_BOUND:
+                wrapped = numeric.wrap_angle(angle)
+                self._bodies[index].angle = wrapped
+                rows[row] = wrapped
+                self._poses = None
+                self._readings = None
+                self._directions = None
 
     # --- proximity ------------------------------------------------------------------
 
@@ -359,94 +364,109 @@ class Physics:
         A reading falls linearly with the gap between the body's surface and the nearest
         wall or robot along the ray: 1 - gap / prox_range.
         """
-        readings = self._proximity_array()[self._index[robot_id]]
-        return tuple(float(value) for value in readings)
+        return tuple(self._proximity_rows()[self._index[robot_id]])
 
     def proximity_all(self) -> dict[int, tuple[float, ...]]:
-        readings = self._proximity_array().tolist()
-        return {robot_id: tuple(readings[self._index[robot_id]]) for robot_id in self._sorted_ids}
+        rows = self._proximity_rows()
+        return {robot_id: tuple(rows[self._index[robot_id]]) for robot_id in self._sorted_ids}
 
-    def _proximity_array(self) -> np.ndarray:
-        if self._prox is None:
-            self._prox = self._compute_proximity()
-        return self._prox
+    def _proximity_rows(self) -> list[list[float]]:
+        """Every robot's 8 readings, in insertion order (once per state)."""
+        proximity = self._prox
+        if proximity is None:
+            proximity = self._compute_proximity()
+            self._prox = proximity
+        return proximity
 
-    def _compute_proximity(self) -> np.ndarray:
+    def _compute_proximity(self) -> list[list[float]]:
+        """The analytic ray casts, robot by robot: the wall first, then every robot within
+        reach of a sensor (found on a grid of cells as wide as that reach)."""
         radius = self.spec.radius
         reach = self.spec.prox_range
-        centres = self._state[:, :2]
-        # Each sensor's direction: the robot's heading turned by the sensor's angle.
-        sin, cos = self._heading_directions()
-        sin, cos = sin[:, None], cos[:, None]
-        ray_x = cos * self._prox_cos - sin * self._prox_sin  # (robots, 8)
-        ray_y = sin * self._prox_cos + cos * self._prox_sin
-
-        # Wall: the ray from a centre p inside the circle |q| = R leaves it at distance
-        # s = -b + sqrt(b^2 - (|p|^2 - R^2)), with b = p . u.
-        along = centres[:, :1] * ray_x + centres[:, 1:2] * ray_y
-        squared = centres[:, 0] * centres[:, 0] + centres[:, 1] * centres[:, 1]
-        inside = (self.arena_radius * self.arena_radius - squared)[:, None]
-        to_wall = -along + np.sqrt(np.maximum(along * along + inside, 0.0))
-        readings: np.ndarray = np.clip(1.0 - (to_wall - radius) / reach, 0.0, 1.0)
-
-        owners, others = self._neighbour_pairs(2.0 * radius + reach)
-        if owners.size:
-            offset = centres[others] - centres[owners]  # (pairs, 2)
-            along = offset[:, :1] * ray_x[owners] + offset[:, 1:2] * ray_y[owners]
-            # Ray meets the other disc where s^2 - 2 b s + |c|^2 - r^2 = 0.
-            squared = offset[:, 0] * offset[:, 0] + offset[:, 1] * offset[:, 1]
-            discriminant = along * along - (squared - radius * radius)[:, None]
-            root = np.sqrt(np.maximum(discriminant, 0.0))
-            near = along - root
-            far = along + root
-            # A hit needs a real root, the disc not behind the sensor, and the disc within
-            # reach; a disc already over the sensor (near < radius < far) reads as touching.
-            hit = (discriminant >= 0.0) & (far >= radius) & (near <= radius + reach)
-            gap = np.maximum(near, radius) - radius
-            pair_readings = np.where(hit, 1.0 - gap / reach, 0.0)
-            # owners is sorted, so each robot's pairs form one run: reduce each run by max.
-            starts = np.flatnonzero(np.r_[True, owners[1:] != owners[:-1]])
-            best = np.maximum.reduceat(pair_readings, starts, axis=0)
-            rows = owners[starts]
-            readings[rows] = np.maximum(readings[rows], best)
+        inside_reach = radius + reach
+        radius_squared = radius * radius
+        wall_squared = self.arena_radius * self.arena_radius
+        robots = len(self._ids)
+        rows = self._rows
+        sines, cosines = self._heading_directions()
+        sensor_sines, sensor_cosines = self._sensor_sin, self._sensor_cos
+        sensors = len(sensor_sines)
+        near = self._neighbours(2.0 * radius + reach)
+        readings: list[list[float]] = []
+        for index in range(robots):
+            x, y = rows[STATE_ROW * index], rows[STATE_ROW * index + 1]
+            sin, cos = sines[index], cosines[index]
+            # Each sensor's direction: the robot's heading turned by the sensor's angle.
+            rays_x = [cos * sensor_cosines[k] - sin * sensor_sines[k] for k in range(sensors)]
+            rays_y = [sin * sensor_cosines[k] + cos * sensor_sines[k] for k in range(sensors)]
+            # Wall: the ray from a centre p inside the circle |q| = R leaves it at distance
+            # s = -b + sqrt(b^2 - (|p|^2 - R^2)), with b = p . u.
+            inside = wall_squared - (x * x + y * y)
+            row: list[float] = []
+            for k in range(sensors):
+                along = x * rays_x[k] + y * rays_y[k]
+                to_wall = -along + math.sqrt(_at_least_zero(along * along + inside))
+                reading = 1.0 - (to_wall - radius) / reach
+                # Clamped to [0, 1], the larger (then the smaller) bound on a tie.
+                reading = reading if reading > 0.0 else 0.0
+                row.append(reading if reading < 1.0 else 1.0)
+            for other in near[index]:
+                offset_x = rows[STATE_ROW * other] - x
+                offset_y = rows[STATE_ROW * other + 1] - y
+                # The ray meets the other disc where s^2 - 2 b s + |c|^2 - r^2 = 0.
+                clearance = (offset_x * offset_x + offset_y * offset_y) - radius_squared
+                for k in range(sensors):
+                    along = offset_x * rays_x[k] + offset_y * rays_y[k]
+                    discriminant = along * along - clearance
+                    root = math.sqrt(_at_least_zero(discriminant))
+                    # A hit needs a real root, the disc not behind the sensor, and the disc
+                    # within reach; a disc already over the sensor reads as touching.
+                    if discriminant >= 0.0 and along + root >= radius:
+                        first = along - root
+                        if first <= inside_reach:
+                            gap = (first if first >= radius else radius) - radius
+                            row[k] = max(row[k], 1.0 - gap / reach)
+            readings.append(row)
         return readings
 
-    def _neighbour_pairs(self, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
-        """Ordered pairs (i, j), i != j, of bodies closer than ``cutoff``; i ascending.
+    def _neighbours(self, cutoff: float) -> list[list[int]]:
+        """For each robot (insertion order), the robots closer than ``cutoff``.
 
         A uniform grid with cells of side ``cutoff``: each body looks only in its own and
-        the 8 neighbouring cells, so the cost grows with the bodies, not their square. A
-        small swarm compares every pair instead, in fewer numpy calls.
+        the 8 neighbouring cells, so the cost grows with the bodies, not their square.
         """
-        count = len(self._ids)
-        if count < 2:
-            empty = np.zeros(0, dtype=np.intp)
-            return empty, empty
-        centres = self._state[:, :2]
-        if count <= ALL_PAIRS_UP_TO:
-            dx = centres[:, 0][:, None] - centres[:, 0]
-            dy = centres[:, 1][:, None] - centres[:, 1]
-            close = dx * dx + dy * dy < cutoff * cutoff
-            np.fill_diagonal(close, False)
-            owners, others = np.nonzero(close)
-            return owners, others
-        cells = np.floor((centres + self.arena_radius) / cutoff).astype(np.int64) + 1
-        width = math.ceil(2 * self.arena_radius / cutoff) + 3  # padded: no wrap-around
-        keys = cells[:, 0] * width + cells[:, 1]
-        order = np.argsort(keys, kind="stable")
-        sorted_keys = keys[order]
-        offsets = np.array([dx * width + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1)])
-        wanted = (keys[:, None] + offsets).reshape(-1)
-        first = np.searchsorted(sorted_keys, wanted, side="left")
-        counts = np.searchsorted(sorted_keys, wanted, side="right") - first
-        total = int(counts.sum())
-        owners = np.repeat(np.repeat(np.arange(count), len(offsets)), counts)
-        run_starts = np.repeat(np.cumsum(counts) - counts, counts)
-        others = order[np.repeat(first, counts) + np.arange(total) - run_starts]
-        offset = centres[others] - centres[owners]
-        squared = offset[:, 0] * offset[:, 0] + offset[:, 1] * offset[:, 1]
-        close = (owners != others) & (squared < cutoff * cutoff)
-        return owners[close], others[close]
+        robots = len(self._ids)
+        rows = self._rows
+        reach = cutoff * cutoff
+        # Cells numbered row by row, with a border of empty ones: no neighbour wraps round.
+        width = math.ceil(2.0 * self.arena_radius / cutoff) + 3
+        cells: dict[int, list[int]] = {}
+        keys: list[int] = []
+        for index in range(robots):
+            column = math.floor((rows[STATE_ROW * index] + self.arena_radius) / cutoff) + 1
+            line = math.floor((rows[STATE_ROW * index + 1] + self.arena_radius) / cutoff) + 1
+            key = column * width + line
+            keys.append(key)
+            members = cells.get(key)
+            if members is None:
+                cells[key] = [index]
+            else:
+                members.append(index)
+        near: list[list[int]] = []
+        empty: list[int] = []
+        for index in range(robots):
+            x, y = rows[STATE_ROW * index], rows[STATE_ROW * index + 1]
+            key = keys[index]
+            found: list[int] = []
+            for offset in (-width - 1, -width, -width + 1, -1, 0, 1, width - 1, width, width + 1):
+                for other in cells.get(key + offset, empty):
+                    if other != index:
+                        dx = rows[STATE_ROW * other] - x
+                        dy = rows[STATE_ROW * other + 1] - y
+                        if dx * dx + dy * dy < reach:
+                            found.append(other)
+            near.append(found)
+        return near
 
     def proximity_raycast(self, robot_id: int) -> tuple[float, ...]:
         """The same 8 readings from pymunk segment queries (slow; a reference for tests).
@@ -454,7 +474,8 @@ class Physics:
         Differs from ``proximity`` only by the polygonal wall's sag (under ``WALL_SAG``).
         """
         body = self._bodies[self._index[robot_id]]
-        x, y, angle = self._state[self._index[robot_id]]
+        row = STATE_ROW * self._index[robot_id]
+        x, y, angle = self._rows[row], self._rows[row + 1], self._rows[row + 2]
         radius = self.spec.radius
         reach = self.spec.prox_range
         own = pymunk.ShapeFilter(group=robot_id + 1)
@@ -469,3 +490,15 @@ class Physics:
             else:
                 readings.append(1.0 - hit.alpha)
         return tuple(readings)
+
+
+def _at_least_zero(value: float) -> float:
+    """``value``, or 0.0 if it is below (a square root's argument that rounding pushed
+    just under zero)."""
+    return value if value >= 0.0 else 0.0
+
+
+def _clamp(speed: float, limit: float) -> float:
+    """``speed`` within [-limit, limit]."""
+    speed = speed if speed >= -limit else -limit
+    return speed if speed <= limit else limit

@@ -93,7 +93,7 @@ class Senses:
     tick: int
     t: float
     robots: list[int]  # ascending ids
-    values: np.ndarray  # one row per robot: x, y, theta, then its 8 proximity readings
+    values: list[list[float]]  # one row per robot: x, y, theta, then its 8 proximity readings
     rx: list[int]  # radio deliveries of the tick, per robot
     camera: list[bool]  # a frame comes this tick, per robot
 
@@ -102,7 +102,7 @@ class Senses:
         tick, t = self.tick, self.t
         return [
             batch.sense_of_row(tick, t, row, rx, camera)
-            for row, rx, camera in zip(self.values.tolist(), self.rx, self.camera, strict=True)
+            for row, rx, camera in zip(self.values, self.rx, self.camera, strict=True)
         ]
 
 

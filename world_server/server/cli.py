@@ -16,7 +16,7 @@ from collections.abc import Sequence
 
 import zenoh
 
-from plumbing import cliargs, run_keys, settings_cli
+from plumbing import cliargs, cores, run_keys, settings_cli
 from plumbing.lifecycle import die_with_launcher
 from plumbing.stop_signals import on_stop_signals
 from plumbing.trace import open_trace
@@ -55,6 +55,7 @@ def config_from_args(args: argparse.Namespace) -> WorldConfig:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    cores.check()  # stale compiled cores would run old code
     die_with_launcher()
     parser = build_parser()
     args = parser.parse_args(argv)
