@@ -62,7 +62,7 @@ def made_block(study: Study, records: Records) -> str:
             "Made at "
             + ", ".join(_commit(name, count) for name, count in commits.items())
             + ", with the run lock "
-            + ", ".join(f"{name} ({count})" for name, count in locks.items())
+            + ", ".join(f"{name} ({_runs(count)})" for name, count in locks.items())
             + " (the first 12 hex digits of the SHA-256 of `requirements/run.lock`)."
         )
     lines.append(
@@ -72,10 +72,14 @@ def made_block(study: Study, records: Records) -> str:
     return "\n".join(lines)
 
 
+def _runs(count: int) -> str:
+    return f"{count} run" if count == 1 else f"{count} runs"
+
+
 def _commit(name: str, count: int) -> str:
     if name.endswith("+"):
-        return f"commit {name[:-1]} with uncommitted changes ({count} runs)"
-    return f"commit {name} ({count} runs)"
+        return f"commit {name[:-1]} with uncommitted changes ({_runs(count)})"
+    return f"commit {name} ({_runs(count)})"
 
 
 def rendered(study: Study, records: Records) -> dict[str, dict[str, str]]:

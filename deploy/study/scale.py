@@ -24,7 +24,6 @@ from typing import Any
 from deploy.study import tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
-from deploy.study.make import ZENOH_ROBOTS_PER_PROCESS, ZENOH_STALL_TIMEOUT
 
 SITES = 10
 IN_PROCESS = {
@@ -296,5 +295,3 @@ STUDY = Study(
     ),
     outputs=(Output("docs/scale.png", plot),),
 )
-
-__all__ = ["STUDY", "ZENOH_ROBOTS_PER_PROCESS", "ZENOH_STALL_TIMEOUT"]
