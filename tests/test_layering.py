@@ -115,7 +115,8 @@ ALLOWED: dict[str, set[str]] = {
         "deploy/analysis",
     },
     "deploy/security": {"wire", "plumbing"},
-    "deploy/reports": set(FOLDERS) - {"deploy", "deploy/reports", "deploy/launcher", "deploy/study"},
+    "deploy/reports": set(FOLDERS)
+    - {"deploy", "deploy/reports", "deploy/launcher", "deploy/study"},
     "deploy/launcher": set(FOLDERS) - {"deploy", "deploy/launcher", "deploy/study"},
     "deploy/study": set(FOLDERS) - {"deploy", "deploy/study"},
     "deploy": set(FOLDERS) - {"deploy"},

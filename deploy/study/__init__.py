@@ -12,8 +12,8 @@ from typing import Any
 
 
 def frame(name: str, root: Any = None) -> Any:
-    """The runs of study ``name`` as a pandas DataFrame (``deploy/study/frame.py``)."""
-    from deploy.study.frame import frame as load
+    """The runs of study ``name`` as a pandas DataFrame (``deploy/study/dataframe.py``)."""
+    from deploy.study.dataframe import frame as load
 
     return load(name, root)
 

@@ -2,20 +2,19 @@
 and compared, field by field, with what its results file says they gave.
 
 The sample is chosen from the file alone, so it is the same on every machine: the runs
-that took least wall time first (a check must stay cheap), one run per point before a
-second of any point, ties broken by a hash of the key.
+that took least wall time first (by powers of two of their recorded wall seconds: a
+check must stay cheap), one run per point before a second of any point, ties broken by a
+hash of the key.
 """
 
 from __future__ import annotations
 
 import hashlib
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 from deploy.study import grid
-
-# Runs that took at most this many wall seconds are preferred for a check.
-CHEAP_WALL_S = 30.0
 
 
 def sample(
@@ -23,10 +22,10 @@ def sample(
 ) -> list[grid.Run]:
     """``k`` of the runs made: cheap ones first, spread over the points, deterministic."""
 
-    def rank(run: grid.Run) -> tuple[bool, float, str]:
+    def rank(run: grid.Run) -> tuple[float, str]:
         wall = records[run.key].get("wall_s")
-        seconds = float(wall) if isinstance(wall, int | float) else float("inf")
-        return (seconds > CHEAP_WALL_S, seconds if seconds > CHEAP_WALL_S else 0.0, _hash(run.key))
+        seconds = float(wall) if isinstance(wall, int | float) else math.inf
+        return (math.ceil(math.log2(max(seconds, 1.0))), _hash(run.key))
 
     chosen: list[grid.Run] = []
     points: set[str] = set()
@@ -46,15 +45,15 @@ def _hash(text: str) -> str:
 
 
 def differences(published: Any, fresh: Any, path: str = "") -> list[str]:
-    """Every field that differs, as ``field: published -> now`` (nested fields dotted)."""
+    """Every field of the published result that differs in the fresh one, as ``field:
+    published -> now`` (nested fields dotted). A field only the fresh result has is not
+    compared: a run converted from an older results file kept fewer fields."""
     if isinstance(published, dict) and isinstance(fresh, dict):
         found = []
-        for name in sorted(published.keys() | fresh.keys()):
+        for name in sorted(published):
             where = f"{path}.{name}" if path else str(name)
             if name not in fresh:
                 found.append(f"{where}: {_short(published[name])} -> (none)")
-            elif name not in published:
-                found.append(f"{where}: (none) -> {_short(fresh[name])}")
             else:
                 found += differences(published[name], fresh[name], where)
         return found

@@ -7,6 +7,7 @@ data (``deploy/study/catalogue.py``), each with a results file (``docs/studies/N
     swarm study NAME --only robots=500      # part of the grid (with any of the above)
     swarm study NAME --render               # the pages, tables and figures, from the results file
     swarm study NAME --check [--sample K]   # K runs made again and compared with the file
+    swarm study --check [--sample K]        # the same for every study (make check-published)
 
 Rendering never runs a swarm; with runs missing it renders what is there and says how many
 are missing, on the page and here. docs/studies.md says more.
@@ -101,6 +102,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.list:
             return list_studies(args)
+        if args.name is None and args.check:
+            return check_every_study(args, console)
         if args.name is None:
             raise UsageError("give a study's name (swarm study --list names them)")
         study = study_named(args.name, args.declared)
@@ -198,6 +201,23 @@ def render(state: State, root: Path, console: Console) -> int:
             f"the pages show the {len(records.runs)} made (swarm study {study.name} makes the rest)"
         )
     return 0
+
+
+def check_every_study(args: argparse.Namespace, console: Console) -> int:
+    """``swarm study --check``: a sample of every study's runs; 1 if any differs."""
+    try:
+        found = studies(args.declared)
+        only = grid.parse_only(args.only)
+        if only:
+            raise UsageError("--only goes with a study's name")
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    executor = sweep.executor_from_args(args)
+    worst = 0
+    for study in found.values():
+        state = state_of(study, args.root)
+        worst = max(worst, check_runs(state, executor, args.sample or DEFAULT_SAMPLE, console))
+    return worst
 
 
 def check_runs(state: State, executor: sweep.ExecutorSpec, k: int, console: Console) -> int:

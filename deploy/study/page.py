@@ -30,7 +30,7 @@ def replace_block(text: str, study: Study, block: str, content: str) -> str:
     try:
         return pages.replace_between(text, begin, end, content)
     except ValueError:
-        raise ValueError(f"no block {block!r}: add the lines\n{begin}\n{end}") from None
+        raise ValueError(f"no block {block!r}: add the lines {begin} and {end}") from None
 
 
 def read_block(text: str, study: Study, block: str) -> str | None:
@@ -51,8 +51,9 @@ def made_block(study: Study, records: Records) -> str:
         f"{made} of the {records.declared} runs the study declares."
     ]
     if records.missing:
+        missing = "1 run is" if records.missing == 1 else f"{records.missing} runs are"
         lines.append(
-            f"**{records.missing} runs are missing** (`swarm study {study.name}` makes them): "
+            f"**{missing} missing** (`swarm study {study.name}` makes them): "
             "the tables and figures show the runs that are there."
         )
     if made:
@@ -124,6 +125,6 @@ def stale_blocks(study: Study, records: Records, root: Path) -> list[str]:
             shown = read_block(text, study, name)
             if shown is None:
                 problems.append(f"{relative}: no block {name!r} of `{command(study)}`")
-            elif shown != content:
+            elif shown != content.strip("\n"):
                 problems.append(f"{relative}: block {name!r} is not what the runs give")
     return problems

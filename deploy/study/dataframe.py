@@ -3,7 +3,7 @@
 One row per run of the results file that the study declares, in the declaration's
 order: its key and seed, one column per parameter (``robots``, ``sites``, ...), one per
 field of what it gave (``verdict``, ``sim_time_s``, ...; nested fields dotted:
-``radio.sent``, ``robots.steps``, whose values are lists, one item per robot), its wall
+``robots.steps``, whose values are lists, one item per robot), its wall
 time (``wall_s``) and what it was made with (``commit``, ``dirty``, ``lock``). A result
 field with the name of a parameter is called ``result.NAME``.
 
