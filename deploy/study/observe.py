@@ -1,6 +1,6 @@
 """Controllers that watch a run without changing it, for the studies that need more than
 a run's summary: every site comparison (robustness), and every pooling and decision
-(why the last robot lags, section5_lag.py).
+(why the last robot lags, ``lag.py``).
 
 Each is a subclass of the robot's ``Controller`` that reads what it needs after or around
 the controller's own work and changes nothing it decides; ``run_in_process`` builds the
