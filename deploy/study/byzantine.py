@@ -149,7 +149,7 @@ def results_block(records: Records) -> str:
     return "\n".join(
         [
             "",
-            f"{len(records.runs)} runs: {ROBOTS} robots, n = {SITES}, seeds "
+            f"{tables.runs(len(records.runs))}: {ROBOTS} robots, n = {SITES}, seeds "
             f"{SEEDS.start}-{SEEDS.stop - 1} per row, timeout {TIMEOUT:g} sim s ({hit} "
             f"run{'' if hit == 1 else 's'} hit it). The rows with 0 Byzantine robots are the "
             "same runs in every mode.",

@@ -165,7 +165,7 @@ def claim(records: Records) -> str:
     ratios = [b / a for a, b in zip(before, after, strict=True)]
     mean_before, mean_after = statistics.fmean(before), statistics.fmean(after)
     lines = [
-        f"**The 30 % claim** ({ROBOTS} robots, {SITES} sites, seeds {seeds[0]}-{seeds[-1]}, drop "
+        f"**The 30 % claim** ({ROBOTS} robots, {SITES} sites, {tables.seeds(seeds)}, drop "
         f"0.3 against drop 0): right consensus in "
         f"{share(sum(clean[s]['correct'] for s in seeds), len(seeds))} "
         f"runs without loss and {share(sum(lossy[s]['correct'] for s in seeds), len(seeds))} "

@@ -99,11 +99,10 @@ def row(runs: Sequence[dict[str, Any]], n: int) -> dict[str, Any]:
         if (sizes := [size for robot in result["robots"]["pools"] for size in robot])
     ]
     times = [result["sim_time_s"] for result in results if swarm_steps(result) is not None]
-    q1, median, q3 = (
-        statistics.quantiles(finished, n=4, method="inclusive")
-        if len(finished) >= 2
-        else (math.nan,) * 3
-    )
+    if len(finished) >= 2:
+        q1, median, q3 = statistics.quantiles(finished, n=4, method="inclusive")
+    else:  # one run: its value; none: nothing
+        q1 = median = q3 = float(finished[0]) if finished else math.nan
     return {
         "runs": len(results),
         "consensus": len(finished),
@@ -119,6 +118,13 @@ def row(runs: Sequence[dict[str, Any]], n: int) -> dict[str, Any]:
         "alone": sum(size == 1 for size in pools) / max(len(pools), 1),
         "time": tables.mean(times),
     }
+
+
+def _steps(r: dict[str, Any]) -> str:
+    """The swarm steps' median and IQR, ``-`` without a run in consensus."""
+    if math.isnan(r["median"]):
+        return "-"
+    return f"{r['median']:g} ({r['q1']:g}-{r['q3']:g})"
 
 
 def describe(setting: str) -> str:
@@ -143,7 +149,7 @@ def settings_table(records: Records) -> str:
             right = f"{r['correct']}" + (f" ({missing} without consensus)" if missing else "")
             lines.append(
                 f"| {describe(setting)} | {n} | {r['runs']} | {right} "
-                f"| {r['median']:g} ({r['q1']:g}-{r['q3']:g}) | "
+                f"| {_steps(r)} | "
                 f"{tables.number(r['mean_swarm'], 2)} "
                 f"| {share(r['within'], r['runs'])} | {share(r['below'], r['runs'])} "
                 f"| {tables.number(r['pool_mean'], 2)} | {r['run_pool_over3']} | {r['alone']:.0%} "
@@ -192,7 +198,7 @@ def lag_tables(records: Records) -> str:
             f"{trip}: {size:.2f} ({_f(s['other_pool_by_trip'].get(trip))})"
             for trip, size in s["last_pool_by_trip"].items()
         )
-        lines.append(f"* n = {s['n']}, trip {cells}")
+        lines.append(f"* n = {s['n']}, trip {cells or '-: no trip with 20 poolings yet'}")
     lines += [
         "",
         "Non-best sites that no undecided robot has ruled out (the undecided robots all "

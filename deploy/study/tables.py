@@ -20,6 +20,20 @@ def number(value: float | None, digits: int = 0) -> str:
     return f"{value:.{digits}f}"
 
 
+def runs(count: int) -> str:
+    """``1 run``, ``5 runs``."""
+    return f"{count} run" if count == 1 else f"{count} runs"
+
+
+def seeds(numbers: list[int]) -> str:
+    """``seed 3``, ``seeds 0-9``, ``seeds 0, 2``."""
+    if len(numbers) == 1:
+        return f"seed {numbers[0]}"
+    if numbers == list(range(numbers[0], numbers[-1] + 1)):
+        return f"seeds {numbers[0]}-{numbers[-1]}"
+    return "seeds " + ", ".join(map(str, numbers))
+
+
 def median(values: Iterable[float]) -> float | None:
     found = list(values)
     return statistics.median(found) if found else None
