@@ -4,6 +4,7 @@ missing``), ``--render`` from a results file, and bad arguments (exit code 2, on
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -47,6 +48,16 @@ def test_status_ends_with_done_and_missing(
     assert "  made at: abc1234 (2)" in lines
     assert _study(root, "tiny", "--status", "--only", "drop=0.2") == 0
     assert capsys.readouterr().out.strip().splitlines()[-1] == "0 done, 3 missing"
+
+
+def test_status_counts_parameters_that_only_some_points_have(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["study", "strategies", "--status"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    # only the swarm runs have a message loss: 4 strategies x 4 n x 30 seeds each
+    assert any(re.fullmatch(r"  drop: 0 \d+/480, 0.2 \d+/480", line) for line in lines)
+    assert re.fullmatch(r"\d+ done, \d+ missing", lines[-1])
 
 
 def test_status_warns_of_a_torn_last_line(

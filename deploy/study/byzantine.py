@@ -83,7 +83,7 @@ def points() -> list[Point]:
                     SEEDS,
                     options=["--robots", str(ROBOTS), "--sites", str(SITES), *defence.options],
                     timeout=TIMEOUT,
-                    cost=6.0,
+                    cost=5.0,
                     per_seed=switches(mode, count),
                 )
             )

@@ -155,7 +155,11 @@ def status(state: State) -> int:
     for name, values in grid.summarise_params(state.runs).items():
         cells = []
         for value in values:
-            mine = [run for run in state.runs if grid.text(run.param(name)) == value]
+            mine = [
+                run
+                for run in state.runs
+                if name in dict(run.params) and grid.text(run.param(name)) == value
+            ]
             made = sum(run.key in done for run in mine)
             cells.append(f"{value} {made}/{len(mine)}")
         print(f"  {name}: " + ", ".join(cells))
