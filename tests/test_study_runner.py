@@ -117,6 +117,9 @@ def test_a_killed_runner_loses_only_its_runs_in_flight_and_resumes(
     study = study_named("tiny", [TINY])
     run = next(run for run in study.runs() if run.key == "drop=0.2 engine=inprocess seed=1")
     assert make.make(run)["result"] == after.runs[run.key]["result"]
+    # Made with this checkout's code and run lock, wherever its results file is.
+    assert after.runs[run.key]["lock"] == results.lock_hash(REPO)
+    assert after.runs[run.key]["commit"] == results.provenance()["commit"] is not None
     assert after.runs[run.key]["command"] == (
         "swarm run --robots 10 --sites 5 --drop 0.2 --seed 1 --timeout 120"
     )

@@ -22,14 +22,14 @@ from pathlib import Path
 from rich.console import Console
 
 from deploy.reports import sweep
-from deploy.study import check, grid, page, runner
+from deploy.study import check, grid, page, results, runner
 from deploy.study.catalogue import studies, study_named
 from deploy.study.state import State, state_of
 from plumbing import cliargs
 from plumbing.cliargs import UsageError
 
 DEFAULT_SAMPLE = 3
-REPOSITORY = Path(__file__).resolve().parent.parent.parent
+REPOSITORY = results.CODE_ROOT
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -165,8 +165,6 @@ def status(state: State) -> int:
         print(f"  {name}: " + ", ".join(cells))
     if state.done:
         records = state.records()
-        from deploy.study import results
-
         print(
             "  made at: "
             + ", ".join(f"{c} ({n})" for c, n in results.made_with(list(records.runs)).items())

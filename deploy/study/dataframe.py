@@ -16,7 +16,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-CODE_ROOT = Path(__file__).resolve().parent.parent.parent
+from deploy.study.results import CODE_ROOT
+
 INSTALL = "pip install -e '.[analysis]'"
 
 

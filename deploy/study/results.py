@@ -26,6 +26,8 @@ from typing import IO, Any
 from deploy.reports import pages
 
 RUN_LOCK = "requirements/run.lock"
+# The checkout of the code that makes the runs, wherever its results files are written.
+CODE_ROOT = Path(__file__).resolve().parent.parent.parent
 
 
 @dataclass
@@ -119,8 +121,9 @@ def lock_hash(root: Path) -> str | None:
         return None
 
 
-def provenance(root: Path, ignore: tuple[str, ...] = ()) -> dict[str, Any]:
-    """The commit, whether the code that runs had uncommitted changes, and the lock."""
+def provenance(root: Path = CODE_ROOT, ignore: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The commit of the checkout ``root`` (by default the one whose code runs), whether
+    the code that runs had uncommitted changes, and the run lock's hash."""
     commit, dirty = pages.git_state(root, ignore)
     return {"commit": commit, "dirty": dirty, "lock": lock_hash(root)}
 

@@ -89,7 +89,7 @@ def run_missing(
         return []
     expected = [grid.estimate(run, walls) for run in todo]
     eta = Eta(sum(expected), executor.parallel)
-    provenance = results.provenance(root)
+    provenance = results.provenance()  # the code's, wherever the results go
     failures: list[tuple[grid.Run, sweep.Failure]] = []
     started = time.monotonic()
     progress = Progress(
