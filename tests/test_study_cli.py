@@ -127,6 +127,19 @@ def test_bad_arguments_exit_with_code_2_and_one_line(
     assert message in lines[-1] and sum("error" in line for line in lines) == 1
 
 
+def test_a_results_file_that_cannot_be_read_is_a_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    root = _tiny_root(tmp_path, made=0)
+    (root / "docs" / "studies" / "tiny.jsonl").unlink()
+    (root / "docs" / "studies" / "tiny.jsonl").mkdir()  # a folder where the file goes
+    with pytest.raises(SystemExit) as exit_info:
+        _study(root, "tiny", "--parallel", "1")
+    assert exit_info.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("swarm study: error: ") and "tiny.jsonl: Is a directory" in line
+
+
 def test_render_without_the_pages_markers_is_a_usage_error(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

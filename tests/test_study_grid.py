@@ -119,6 +119,8 @@ def test_the_time_left_scales_the_estimates_by_how_the_runs_went() -> None:
     assert eta.seconds_left() == 200.0
     eta.finished(expected=100.0, actual=200.0)  # twice as slow as expected
     assert eta.seconds_left() == 300.0
+    eta.dropped(expected=100.0)  # a run that failed
+    assert eta.seconds_left() == 200.0
 
 
 def test_a_checks_sample_is_cheap_spread_over_points_and_the_same_every_time() -> None:

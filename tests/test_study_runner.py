@@ -172,7 +172,7 @@ def test_a_point_over_zenoh_is_made_by_real_processes_and_recorded(
     assert made.returncode == 0, made.stderr[-3000:]
     (record,) = results.load(root / "docs" / "studies" / "tiny.jsonl").runs.values()
     assert record["kind"] == "zenoh"
-    recording = Path(record["recording"]["path"])
+    recording = root / record["recording"]["path"]  # kept relative to the root
     assert recording.parent == recordings / "tiny"
     assert recording.stat().st_size == record["recording"]["bytes"] > 0
     assert recording.read_bytes()[:8] == b"\x89MCAP0\r\n"

@@ -113,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
         state = state_of(study, args.root, only)
     except ValueError as error:
         raise UsageError(str(error)) from None
+    except OSError as error:  # the results file cannot be read
+        raise UsageError(f"{error.filename}: {error.strerror}") from None
     for warning in state.loaded.skipped:
         console.print(f"[yellow]warning[/]: {warning}")
     if args.status:
@@ -123,7 +125,12 @@ def run(args: argparse.Namespace) -> int:
     if args.check:
         return check_runs(state, executor, args.sample or DEFAULT_SAMPLE, console)
     recordings = args.recordings or args.root / "runs" / "studies"
-    failures = runner.run_missing(state, args.root, executor, recordings, console, quiet=args.quiet)
+    try:
+        failures = runner.run_missing(
+            state, args.root, executor, recordings, console, quiet=args.quiet
+        )
+    except OSError as error:  # the results file cannot be written
+        raise UsageError(f"{error.filename or study.results}: {error.strerror}") from None
     for line in runner.failures_text(failures):
         print(f"failed: {line}", file=sys.stderr)
     after = state_of(study, args.root, only)

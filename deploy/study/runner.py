@@ -35,6 +35,10 @@ class Eta:
         self.expected_done += expected
         self.actual_done += actual
 
+    def dropped(self, expected: float) -> None:
+        """A run that failed: no longer to do, and no measure of how fast runs go."""
+        self.remaining = max(0.0, self.remaining - expected)
+
     def seconds_left(self) -> float:
         scale = self.actual_done / self.expected_done if self.expected_done > 0 else 1.0
         return self.remaining * scale / max(1, self.workers)
@@ -89,7 +93,6 @@ def run_missing(
         return []
     expected = [grid.estimate(run, walls) for run in todo]
     eta = Eta(sum(expected), executor.parallel)
-    provenance = results.provenance()  # the code's, wherever the results go
     failures: list[tuple[grid.Run, sweep.Failure]] = []
     started = time.monotonic()
     progress = Progress(
@@ -103,7 +106,9 @@ def run_missing(
         disable=quiet,
     )
     path = root / state.study.results
-    with results.Appender(path) as appender, progress, _runner_environment():
+    appender = results.Appender(path)  # first: a file that cannot be written stops it all
+    provenance = results.provenance()  # the code's, wherever the results go
+    with appender, progress, _runner_environment():
         bar = progress.add_task(
             "runs",
             total=len(todo),
@@ -112,6 +117,12 @@ def run_missing(
         )
 
         def keep(index: int, made: dict[str, object]) -> None:
+            recording = made.get("recording")
+            if isinstance(recording, dict):  # kept relative to the root where it can be
+                made = {
+                    **made,
+                    "recording": {**recording, "path": _relative(recording["path"], root)},
+                }
             appender.add(record_of(todo[index], made, provenance))
             wall = made.get("wall_s")
             eta.finished(expected[index], float(wall) if isinstance(wall, int | float) else 0.0)
@@ -119,7 +130,7 @@ def run_missing(
         def advance(done: int, total: int, index: int, failure: sweep.Failure | None) -> None:
             if failure is not None:
                 failures.append((todo[index], failure))
-                eta.finished(expected[index], 0.0)
+                eta.dropped(expected[index])
                 console.print(f"{todo[index].key}: failed: {failure.error}")
             progress.update(
                 bar,
@@ -136,6 +147,13 @@ def run_missing(
             f" on {executor.describe()}, into {path}"
         )
     return failures
+
+
+def _relative(path: str, root: Path) -> str:
+    try:
+        return str(Path(path).resolve().relative_to(root.resolve()))
+    except ValueError:
+        return path
 
 
 def failures_text(failures: Sequence[tuple[grid.Run, sweep.Failure]]) -> list[str]:
