@@ -154,4 +154,5 @@ def test_the_declared_studies_have_the_sizes_asked_for() -> None:
     scale = {run.key: run for run in found["scale"].runs()}
     assert scale["engine=zenoh robots=1000 seed=0"].record
     assert scale["engine=zenoh robots=1000 seed=0"].kind == "zenoh"
+    assert scale["engine=zenoh robots=1000 seed=0"].wall_limit == 12 * 3600
     assert scale["engine=inprocess robots=1000 seed=2"].options[-1] == "12000"
