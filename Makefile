@@ -10,7 +10,8 @@
 # `make check-published`: every published Section 5 run again (all 600 of
 #   docs/section5-runs.json, `swarm section5 --check`; about 7 minutes of both cores), the
 #   tables of docs/section5.md and the data of Figures 4 and 5 made from them; then the
-#   tests that run published runs again (tests/tiers.py PUBLISHED: `pytest --published`).
+#   tests that run published runs again (tests/tiers.py PUBLISHED: `pytest --published`):
+#   a sample of every study's runs (`swarm study NAME --check`, docs/studies.md).
 #   CI runs it after `make test`. docs/testing.md says what is published from runs but
 #   not run again by any check.
 # All of them create .venv and install the project on first use (and again when the

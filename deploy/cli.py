@@ -32,6 +32,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "deploy.reports.section5",
         "the paper's Section 5 numbers and figures, from in-process runs (docs/section5.md)",
     ),
+    "study": (
+        "deploy.study.cli",
+        "the studies behind the published pages: run what is missing, render, check",
+    ),
     "router": ("deploy.launcher.router", "a Zenoh router (a Python session; no zenohd needed)"),
     "view": ("viewer.replay", "replay a recording in the browser, on the live view's page"),
 }

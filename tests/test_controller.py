@@ -483,8 +483,8 @@ def test_parking_slots_are_distinct_clear_of_every_site_and_inside_the_arena(
     assert max(distances) < 0.6
 
 
-# A hundred robots parking and deciding in one process: `make check-published` runs a
-# published 100-robot run again (tests/test_scale_doc.py), result for result.
+# A hundred robots parking and deciding in one process: `swarm study scale --check` makes
+# published runs of the large-swarm study again (docs/studies.md), result for result.
 
 
 # --- long legs -------------------------------------------------------------------------

@@ -47,8 +47,9 @@ ADAPTERS = [
     "plumbing",
 ]
 # The rooms of the ``swarm`` command: the launcher (``swarm run`` and what starts runs),
-# security (keys, certificates, access control), reports (what is made of runs).
-OUTER = ["deploy", "deploy/launcher", "deploy/security", "deploy/reports", "viewer"]
+# security (keys, certificates, access control), reports (what is made of runs), studies
+# (the runs behind the published pages, ``swarm study``).
+OUTER = ["deploy", "deploy/launcher", "deploy/security", "deploy/reports", "deploy/study", "viewer"]
 # The package roots that hold only layers and a ``__main__`` that starts one.
 ROOTS = ["robot_agent", "world_server", "nest_beacon", "link"]
 FOLDERS = PURE + ADAPTERS + OUTER + ROOTS
@@ -114,8 +115,10 @@ ALLOWED: dict[str, set[str]] = {
         "deploy/analysis",
     },
     "deploy/security": {"wire", "plumbing"},
-    "deploy/reports": set(FOLDERS) - {"deploy", "deploy/reports", "deploy/launcher"},
-    "deploy/launcher": set(FOLDERS) - {"deploy", "deploy/launcher"},
+    "deploy/reports": set(FOLDERS)
+    - {"deploy", "deploy/reports", "deploy/launcher", "deploy/study"},
+    "deploy/launcher": set(FOLDERS) - {"deploy", "deploy/launcher", "deploy/study"},
+    "deploy/study": set(FOLDERS) - {"deploy", "deploy/study"},
     "deploy": set(FOLDERS) - {"deploy"},
 }
 # What ``robot-agent --link`` may not import, directly or through any module of this

@@ -57,6 +57,11 @@ FAST = frozenset(
         "test_radio",
         "test_robot_endpoint",
         "test_settings",
+        "test_study_cli",
+        "test_study_frame",
+        "test_study_grid",
+        "test_study_pages",
+        "test_study_results",
         "test_tiers",
         "test_user_files",
         "test_vectors",
@@ -64,6 +69,7 @@ FAST = frozenset(
         "test_watchdog",
         "test_wellstirred",
         "test_wellstirred_voting",
+        "test_wilson",
         "test_world",
     }
 )
@@ -101,9 +107,10 @@ FULL_ONLY = {
     "test_recording_reader": "writes recordings, whose metadata asks git and uname",
     "test_router": "starts Zenoh routers",
     "test_run_parts": "the launcher's parts, with a Zenoh session",
-    "test_scale_doc": "in-process runs of up to 50 robots",
     "test_section5": "60 in-process runs",
     "test_secure": "starts secure swarms",
+    "test_study_published": "makes published runs again, on worker processes",
+    "test_study_runner": "makes, kills and resumes a tiny study on processes; a run over Zenoh",
     "test_swarm": "starts swarms",
     "test_sweep": "worker processes and a Dask cluster on loopback, some of them killed",
     "test_trace": "starts a traced swarm",
@@ -162,10 +169,6 @@ FAST_TESTS = frozenset(
         "test_run_parts::test_the_inbox_takes_a_signal_whatever_else_filled_it",
         "test_run_parts::test_the_launcher_looks_with_its_clock_given_and_takes_a_signal_as_an_event",
         "test_run_parts::test_the_log_relay_holds_lines_for_the_recorder_and_publishes_none_once_detached",
-        "test_scale_doc::test_a_later_run_of_the_same_size_and_seed_replaces_an_earlier_one",
-        "test_scale_doc::test_every_size_and_seed_of_the_plan_is_in_the_results",
-        "test_scale_doc::test_readme_has_the_per_size_table_the_results_give",
-        "test_scale_doc::test_the_page_is_what_the_results_give",
         "test_section5::test_a_runs_file_that_lacks_runs_or_has_other_settings_is_reported",
         "test_section5::test_blocks_are_replaced_between_their_markers",
         "test_section5::test_check_finds_a_run_that_changed",
@@ -205,8 +208,8 @@ FAST_TESTS = frozenset(
 )
 
 PUBLISHED = {
-    "test_scale_doc::test_a_published_run_is_what_the_code_gives": (
-        "runs of docs/scale-runs.json again, in process"
+    "test_study_published::test_a_sample_of_the_published_runs_is_what_the_code_gives": (
+        "makes a sample of every study's published runs again (swarm study NAME --check)"
     ),
 }
 

@@ -1,18 +1,16 @@
 """Sweeps on an executor: many independent in-process runs, here, on local processes or
 on Dask.
 
-``swarm experiment --engine inprocess``, ``swarm section5`` and the sweep benchmarks
-(benchmarks/strategies.py, benchmarks/byzantine.py) hand their runs to ``run_sweep``
-as tasks: a module-level function and one picklable argument per run. Where they run is
-the executor's choice (``add_executor_options``):
+``swarm experiment --engine inprocess``, ``swarm section5`` and ``swarm study`` hand their
+runs to ``run_sweep`` as tasks: a module-level function and one picklable argument per
+run. Where they run is the executor's choice (``add_executor_options``):
 
 * ``--parallel 1``: one after the other in this process;
 * ``--parallel J`` (J > 1, the default 2): J local worker processes (spawned, so they
   share nothing with a caller that holds threads); no dependency beyond the project's;
 * ``--dask``: a local Dask cluster of J single-threaded worker processes on loopback;
 * ``--dask tcp://HOST:PORT``: an existing Dask scheduler, whose workers must have this
-  project installed (``pip install -e '.[dask]'``), the benchmarks importable from the
-  repository root.
+  project installed (``pip install -e '.[dask]'``).
 
 Every run's result depends only on its task (a lockstep run is a function of its seed
 and settings), so a sweep gives the same result per task whichever executor runs it,

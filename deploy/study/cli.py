@@ -1,0 +1,267 @@
+"""``swarm study``: the studies whose runs make the published pages, each declared as
+data (``deploy/study/catalogue.py``), each with a results file (``docs/studies/NAME.jsonl``).
+
+    swarm study --list                      # the studies, their size, how many runs are done
+    swarm study NAME --status               # what is done and missing; last line: N done, M missing
+    swarm study NAME [--parallel J|--dask]  # make the missing runs (resumable, longest first)
+    swarm study NAME --only robots=500      # part of the grid (with any of the above)
+    swarm study NAME --render               # the pages, tables and figures, from the results file
+    swarm study NAME --check [--sample K]   # K runs made again and compared with the file
+    swarm study --check [--sample K]        # the same for every study (make check-published)
+
+Rendering never runs a swarm; with runs missing it renders what is there and says how many
+are missing, on the page and here. docs/studies.md says more.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from rich.console import Console
+
+from deploy.reports import sweep
+from deploy.study import check, grid, page, results, runner
+from deploy.study.catalogue import studies, study_named
+from deploy.study.state import State, state_of
+from plumbing import cliargs
+from plumbing.cliargs import UsageError
+
+DEFAULT_SAMPLE = 3
+REPOSITORY = results.CODE_ROOT
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("name", nargs="?", metavar="NAME", help="the study (--list names them)")
+    mode = parser.add_mutually_exclusive_group()
+    mode.add_argument(
+        "--list", action="store_true", help="name the studies, their size and runs done"
+    )
+    mode.add_argument(
+        "--status",
+        action="store_true",
+        help="what is done and missing; its last line: N done, M missing",
+    )
+    mode.add_argument(
+        "--render",
+        action="store_true",
+        help="write the study's page blocks, figures and data files from its results file (runs "
+        "nothing)",
+    )
+    mode.add_argument(
+        "--check",
+        action="store_true",
+        help="make a sample of the runs again and compare them with the results file (exit 1 if "
+        "any differs)",
+    )
+    parser.add_argument(
+        "--sample",
+        type=cliargs.int_range(1, 100_000),
+        default=None,
+        metavar="K",
+        help=f"with --check: how many runs (default: {DEFAULT_SAMPLE}; cheap ones first, spread "
+        "over the points)",
+    )
+    parser.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="only the runs whose parameter NAME (or seed) has this value; VALUE may be A,B; "
+        "repeatable",
+    )
+    parser.add_argument(
+        "--root",
+        type=Path,
+        default=REPOSITORY,
+        help="the repository whose results files and pages are read and written (default: this "
+        "one)",
+    )
+    parser.add_argument(
+        "--declared",
+        type=Path,
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="a Python file that declares more studies (STUDY or STUDIES); repeatable",
+    )
+    parser.add_argument(
+        "--recordings",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="where recorded runs over Zenoh write their MCAP files (default: ROOT/runs/studies)",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress display")
+    sweep.add_executor_options(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    console = Console(stderr=True)
+    try:
+        if args.list:
+            return list_studies(args)
+        if args.name is None and args.check:
+            return check_every_study(args, console)
+        if args.name is None:
+            raise UsageError("give a study's name (swarm study --list names them)")
+        study = study_named(args.name, args.declared)
+        only = grid.parse_only(args.only)
+        if args.sample is not None and not args.check:
+            raise UsageError("--sample goes with --check")
+        state = state_of(study, args.root, only)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    except OSError as error:  # the results file cannot be read
+        raise UsageError(f"{error.filename}: {error.strerror}") from None
+    for warning in state.loaded.skipped:
+        console.print(f"[yellow]warning[/]: {warning}")
+    if args.status:
+        return status(state)
+    if args.render:
+        return render(state, args.root, console)
+    executor = sweep.executor_from_args(args)
+    if args.check:
+        return check_runs(state, executor, args.sample or DEFAULT_SAMPLE, console)
+    recordings = args.recordings or args.root / "runs" / "studies"
+    try:
+        failures = runner.run_missing(
+            state, args.root, executor, recordings, console, quiet=args.quiet
+        )
+    except OSError as error:  # the results file cannot be written
+        raise UsageError(f"{error.filename or study.results}: {error.strerror}") from None
+    for line in runner.failures_text(failures):
+        print(f"failed: {line}", file=sys.stderr)
+    after = state_of(study, args.root, only)
+    print(f"{len(after.done)} done, {len(after.missing)} missing")
+    return 1 if failures else 0
+
+
+def list_studies(args: argparse.Namespace) -> int:
+    try:
+        found = studies(args.declared)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    width = max(len(name) for name in found)
+    for name, study in found.items():
+        state = state_of(study, args.root)
+        print(
+            f"{name:<{width}}  {len(state.runs):>5} runs, {len(state.done):>5} done, "
+            f"{len(state.missing):>5} missing  {study.title}: {study.about}"
+        )
+    return 0
+
+
+def status(state: State) -> int:
+    """Per parameter value, runs done of declared; the commits and locks of the runs; what
+    the file holds that is not declared; and, last, ``N done, M missing``."""
+    study = state.study
+    print(f"{study.name}: {study.title}; results in {study.results}")
+    done = {run.key for run in state.done}
+    for name, values in grid.summarise_params(state.runs).items():
+        cells = []
+        for value in values:
+            mine = [
+                run
+                for run in state.runs
+                if name in dict(run.params) and grid.text(run.param(name)) == value
+            ]
+            made = sum(run.key in done for run in mine)
+            cells.append(f"{value} {made}/{len(mine)}")
+        print(f"  {name}: " + ", ".join(cells))
+    if state.done:
+        records = state.records()
+        print(
+            "  made at: "
+            + ", ".join(f"{c} ({n})" for c, n in results.made_with(list(records.runs)).items())
+        )
+        print(
+            "  run lock: "
+            + ", ".join(f"{c} ({n})" for c, n in results.locks(list(records.runs)).items())
+        )
+    if state.undeclared:
+        print(
+            f"  {len(state.undeclared)} runs in the file are not declared (ignored), e.g. "
+            f"{state.undeclared[0]}"
+        )
+    if state.missing:
+        walls = state.walls()
+        left = sum(grid.estimate(run, walls) for run in state.missing)
+        print(f"  the missing runs take {runner.describe_seconds(left)[6:]} of one core, about")
+    print(f"{len(state.done)} done, {len(state.missing)} missing")
+    return 0
+
+
+def render(state: State, root: Path, console: Console) -> int:
+    """Write what the study publishes from its results file; say what is missing."""
+    study = state.study
+    records = state.records()
+    try:
+        written = page.write(study, records, root)
+    except (OSError, ValueError) as error:
+        raise UsageError(str(error)) from None
+    for path in written:
+        console.print(f"wrote {path}")
+    if records.missing:
+        console.print(
+            f"[yellow]{records.missing} of the {records.declared} runs of {study.name} are "
+            "missing[/]: "
+            f"the pages show the {len(records.runs)} made (swarm study {study.name} makes the rest)"
+        )
+    return 0
+
+
+def check_every_study(args: argparse.Namespace, console: Console) -> int:
+    """``swarm study --check``: a sample of every study's runs; 1 if any differs."""
+    try:
+        found = studies(args.declared)
+        only = grid.parse_only(args.only)
+        if only:
+            raise UsageError("--only goes with a study's name")
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    executor = sweep.executor_from_args(args)
+    worst = 0
+    for study in found.values():
+        state = state_of(study, args.root)
+        worst = max(worst, check_runs(state, executor, args.sample or DEFAULT_SAMPLE, console))
+    return worst
+
+
+def check_runs(state: State, executor: sweep.ExecutorSpec, k: int, console: Console) -> int:
+    """Make ``k`` of the study's runs again; print each difference by key and field."""
+    from deploy.study import make
+
+    study = state.study
+    if not state.done:
+        console.print(f"{study.name}: no runs made yet: nothing to check")
+        return 0
+    chosen = check.sample(state.done, state.loaded.runs, k)
+    console.print(
+        f"{study.name}: making {len(chosen)} of its {len(state.done)} runs again on "
+        f"{executor.describe()}"
+    )
+    outcome = sweep.run_sweep(make.make, chosen, executor)
+    problems = []
+    for run, fresh in zip(chosen, outcome.results, strict=True):
+        if fresh is None:
+            continue
+        found = check.differences(state.loaded.runs[run.key]["result"], fresh["result"])
+        if found:
+            problems.append(f"{study.name} run {run.key}: " + "; ".join(found))
+    for failure in outcome.failures:
+        problems.append(
+            f"{study.name} run {chosen[failure.index].key}: gave no result: {failure.error}"
+        )
+    for problem in problems:
+        print(problem)
+    checked = ", ".join(run.key for run in chosen)
+    console.print(
+        f"{study.name}: {len(chosen) - len(problems)} of {len(chosen)} runs as published "
+        f"({checked})"
+    )
+    return 1 if problems else 0
+
+
+__all__ = ["add_arguments", "run"]

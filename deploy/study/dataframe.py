@@ -1,0 +1,53 @@
+"""A study's runs as a pandas DataFrame: ``deploy.study.frame("strategies")``.
+
+One row per run of the results file that the study declares, in the declaration's
+order: its key and seed, one column per parameter (``robots``, ``sites``, ...), one per
+field of what it gave (``verdict``, ``sim_time_s``, ...; nested fields dotted:
+``robots.steps``, whose values are lists, one item per robot), its wall
+time (``wall_s``) and what it was made with (``commit``, ``dirty``, ``lock``). A result
+field with the name of a parameter is called ``result.NAME``.
+
+pandas is an optional extra: ``pip install -e '.[analysis]'``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from deploy.study.results import CODE_ROOT
+
+INSTALL = "pip install -e '.[analysis]'"
+
+
+def flatten(record: Mapping[str, Any]) -> dict[str, Any]:
+    """One results line as one row: parameters and result fields as columns."""
+    params = dict(record.get("params", {}))
+    row: dict[str, Any] = {"key": record["key"], **params, "seed": record.get("seed")}
+
+    def add(prefix: str, value: Any) -> None:
+        if isinstance(value, Mapping):
+            for name, inner in value.items():
+                add(f"{prefix}.{name}" if prefix else str(name), inner)
+        else:
+            row[prefix if prefix not in row else f"result.{prefix}"] = value
+
+    add("", record.get("result") or {})
+    for name in ("kind", "command", "wall_s", "commit", "dirty", "lock"):
+        row[name] = record.get(name)
+    return row
+
+
+def frame(name: str, root: Path | None = None) -> Any:
+    """The runs of study ``name`` (``swarm study --list`` names them) in its results file
+    under ``root`` (default: this checkout) as a pandas DataFrame, one row per run."""
+    try:
+        import pandas
+    except ImportError:
+        raise ImportError(f"deploy.study.frame needs pandas: {INSTALL}") from None
+    from deploy.study.catalogue import study_named
+    from deploy.study.state import state_of
+
+    state = state_of(study_named(name), root or CODE_ROOT)
+    return pandas.DataFrame([flatten(record) for record in state.records().runs])

@@ -1,0 +1,412 @@
+"""The study ``robustness``: the swarm's decision against radio loss and camera noise
+(docs/robustness.md, its tables and docs/robustness_drop.png, docs/robustness_noise.png).
+
+10 robots, 10 sites, timeout 1800 sim s, every run observed (``make.make_comparisons``:
+each site comparison judged against the true qualities):
+
+* ``sweep=drop``: iid radio loss 0, 0.1, ..., 0.8, the paper's controller (alpha = 0,
+  MProdOp), seeds 0-9; drop 0 against 0.3 is the 30% loss claim;
+* ``sweep=noise``: Gaussian pixel noise (``--camera-noise SIGMA``) 0, 100, 120 and 140
+  (seeds 0-9) and 150 to 180 (seeds 0-39), and per-site lighting (``--lighting 0.3``) at
+  SIGMA 0 and 100 (seeds 0-9), for three controllers: the paper's, distrust (alpha = 0.1,
+  threshold 0.99) and distrust with the diluting pool (``--pooling loglinear``);
+* ``sweep=sensing``: no swarm: the best and second-best site of seed 0's layout, 300
+  frames each, at each pixel noise level (``make.make_sensing``);
+* ``sweep=processes``: the 30% loss claim with real processes (``swarm run`` over
+  Zenoh), drop 0 and 0.3, seeds 0-9, compared run by run with the runs in one process.
+"""
+
+from __future__ import annotations
+
+import itertools
+import statistics
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from deploy.study import tables
+from deploy.study.declare import Output, Page, Records, Study
+from deploy.study.grid import Point, text
+from deploy.study.wilson import share
+
+ROBOTS, SITES = 10, 10
+TIMEOUT = 1800.0  # sim seconds
+DROPS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)
+CLAIM_DROP = 0.3
+SIGMAS = (0.0, 100.0, 120.0, 140.0, 150.0, 160.0, 170.0, 180.0)
+FAILING = (150.0, 160.0, 170.0, 180.0)  # the levels run with 40 seeds
+SENSING_SIGMAS = (0.0, 60.0, 100.0, 120.0, 140.0, 150.0, 160.0, 170.0, 180.0)
+LIGHTING = 0.3
+LIGHTING_SIGMAS = (0.0, 100.0)
+SEEDS = range(10)
+MORE_SEEDS = range(40)
+
+
+@dataclass(frozen=True)
+class Setup:
+    """A controller set-up of the noise sweep, as ``swarm run`` options."""
+
+    key: str
+    label: str
+    options: tuple[str, ...]
+
+
+SETUPS = (
+    Setup("alpha0", "α = 0, MProdOp (paper)", ()),
+    Setup("alpha01", "α = 0.1, MProdOp", ("--alpha", "0.1", "--threshold", "0.99")),
+    Setup(
+        "loglinear",
+        "α = 0.1, log-linear pool",
+        ("--alpha", "0.1", "--threshold", "0.99", "--pooling", "loglinear"),
+    ),
+)
+LABELS = {setup.key: setup.label for setup in SETUPS}
+BASE = ("--robots", str(ROBOTS), "--sites", str(SITES))
+
+
+def points() -> list[Point]:
+    found = [
+        Point(
+            {"sweep": "drop", "drop": level, "controller": "alpha0"},
+            SEEDS,
+            "comparisons",
+            options=[*BASE, "--drop", text(level)],
+            timeout=TIMEOUT,
+            cost=6.0,
+        )
+        for level in DROPS
+    ]
+    noise = [(sigma, 0.0) for sigma in SIGMAS] + [(sigma, LIGHTING) for sigma in LIGHTING_SIGMAS]
+    for (sigma, lighting), setup in itertools.product(noise, SETUPS):
+        lit = ["--lighting", text(lighting)] if lighting else []
+        found.append(
+            Point(
+                {"sweep": "noise", "sigma": sigma, "lighting": lighting, "controller": setup.key},
+                MORE_SEEDS if sigma in FAILING and not lighting else SEEDS,
+                "comparisons",
+                options=[*BASE, "--camera-noise", text(sigma), *lit, *setup.options],
+                timeout=TIMEOUT,
+                cost=10.0,
+            )
+        )
+    found += [
+        Point({"sweep": "sensing", "sigma": sigma, "lighting": 0.0}, (0,), "sensing", cost=10.0)
+        for sigma in SENSING_SIGMAS
+    ]
+    found += [
+        Point(
+            {"sweep": "processes", "drop": level},
+            SEEDS,
+            "zenoh",
+            options=[*BASE, "--drop", text(level)],
+            timeout=TIMEOUT,
+            cost=20.0,
+        )
+        for level in (0.0, CLAIM_DROP)
+    ]
+    return found
+
+
+# --- the page ------------------------------------------------------------------------------
+
+
+def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """A point's runs: accuracy, failures, consensus times and comparisons."""
+    results = [tables.result(run) for run in runs]
+    times = [result["sim_time_s"] for result in results if result["consensus"]]
+    comparisons = sum(result["comparisons"] for result in results)
+    return {
+        "runs": len(results),
+        "correct": sum(result["correct"] for result in results),
+        "wrong": sum(result["consensus"] and not result["correct"] for result in results),
+        "split": sum(not result["consensus"] for result in results),
+        "time_mean": tables.mean(times),
+        "time_median": tables.median(times),
+        "time_max": max(times) if times else None,
+        "comparisons": comparisons / len(results),
+        "wrong_share": sum(result["wrong_comparisons"] for result in results) / max(comparisons, 1),
+        "best_eliminated": sum(result["best_eliminated"] for result in results) / len(results),
+    }
+
+
+def _times(row: dict[str, Any]) -> str:
+    return " / ".join(tables.number(row[name]) for name in ("time_mean", "time_median", "time_max"))
+
+
+def drop_table(records: Records) -> str:
+    lines = [
+        "| drop | correct (95% interval) | consensus time s: mean / median / max | "
+        "comparisons/run |",
+        "|---|---|---|---|",
+    ]
+    for level in DROPS:
+        runs = records.where(sweep="drop", drop=level)
+        if runs:
+            row = summarise(runs)
+            lines.append(
+                f"| {text(level)} | {share(row['correct'], row['runs'])} | {_times(row)} "
+                f"| {row['comparisons']:.1f} |"
+            )
+    return "\n".join(lines)
+
+
+def claim(records: Records) -> str:
+    """The 30% claim: drop 0.3 against drop 0, seed by seed, in one process and with real
+    processes."""
+    clean = {run["seed"]: tables.result(run) for run in records.where(sweep="drop", drop=0.0)}
+    lossy = {
+        run["seed"]: tables.result(run) for run in records.where(sweep="drop", drop=CLAIM_DROP)
+    }
+    seeds = sorted(set(clean) & set(lossy))
+    if not seeds:
+        return "The runs of drop 0 and 0.3 are not made yet."
+    before = [clean[seed]["sim_time_s"] for seed in seeds]
+    after = [lossy[seed]["sim_time_s"] for seed in seeds]
+    ratios = [b / a for a, b in zip(before, after, strict=True)]
+    mean_before, mean_after = statistics.fmean(before), statistics.fmean(after)
+    lines = [
+        f"**The 30 % claim** ({ROBOTS} robots, {SITES} sites, {tables.seeds(seeds)}, drop "
+        f"0.3 against drop 0): right consensus in "
+        f"{share(sum(clean[s]['correct'] for s in seeds), len(seeds))} "
+        f"runs without loss and {share(sum(lossy[s]['correct'] for s in seeds), len(seeds))} "
+        "with 30 % "
+        f"loss. Mean consensus time {mean_before:.1f} s without loss, {mean_after:.1f} s with: "
+        f"ratio {mean_after / mean_before:.2f}, per seed from {min(ratios):.2f} to "
+        f"{max(ratios):.2f}."
+    ]
+    processes = records.where(sweep="processes")
+    if processes:
+        memory = {
+            (run["params"]["drop"], run["seed"]): tables.result(run)
+            for run in records.where(sweep="drop")
+        }
+        fields = ("correct", "sim_time_s", "slowest_steps", "digest")
+        same = sum(
+            (twin := memory.get((run["params"]["drop"], run["seed"]))) is not None
+            and all(twin[name] == tables.result(run)[name] for name in fields)
+            for run in processes
+        )
+        walls = [float(run.get("wall_s") or 0.0) for run in processes]
+        lines.append(
+            f"The same runs with real processes (`swarm run --robots {ROBOTS} --sites {SITES} "
+            "--seed S "
+            f"--drop D --json`, D = 0 and 0.3, over Zenoh) gave the same outcome, consensus time "
+            f"and per-robot results as in one process in {same} of {len(processes)} runs "
+            f"({min(walls):.1f} to {max(walls):.1f} s of wall time each)."
+        )
+    return "\n".join(lines)
+
+
+def sensing_table(records: Records) -> str:
+    runs = {run["params"]["sigma"]: tables.result(run) for run in records.where(sweep="sensing")}
+    first = next(iter(runs.values()), None)
+    if first is None:
+        return "The sensing runs are not made yet."
+    lines = [
+        f"| σ | best (ρ = {first['best_quality']:.3g}): mean (sd) | second (ρ = "
+        f"{first['second_quality']:.3g}): mean (sd) | frames with no site found "
+        "| P(best reads below second) |",
+        "|---|---|---|---|---|",
+    ]
+
+    def cell(reading: dict[str, Any]) -> str:
+        if reading["mean"] is None:
+            return "-"
+        return f"{reading['mean']:.3f} ({reading['sd']:.3f})"
+
+    for sigma in SENSING_SIGMAS:
+        if (found := runs.get(sigma)) is None:
+            continue
+        swapped = "-" if not found["pairs"] else f"{100 * found['swapped'] / found['pairs']:.1f} %"
+        lines.append(
+            f"| {text(sigma)} | {cell(found['best'])} | {cell(found['second'])} "
+            f"| {100 * found['missed'] / (2 * found['frames']):.0f} % | {swapped} |"
+        )
+    return "\n".join(lines)
+
+
+def noise_rows(
+    records: Records, sigmas: tuple[float, ...], lighting: float, seeds: range
+) -> list[dict[str, Any]]:
+    rows = []
+    for sigma in sigmas:
+        for setup in SETUPS:
+            runs = [
+                run
+                for run in records.where(
+                    sweep="noise", sigma=sigma, lighting=lighting, controller=setup.key
+                )
+                if run["seed"] in seeds
+            ]
+            if runs:
+                rows.append({"sigma": sigma, "controller": setup.key, **summarise(runs)})
+    return rows
+
+
+def noise_table(rows: list[dict[str, Any]]) -> str:
+    lines = [
+        "| σ | controller | correct (95% interval) | wrong consensus | split/timeout "
+        "| consensus time s: mean / median / max | comparisons/run | wrong comparisons "
+        "| best eliminated/run |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        lines.append(
+            f"| {text(row['sigma'])} | {LABELS[row['controller']]} | "
+            f"{share(row['correct'], row['runs'])} "
+            f"| {row['wrong']} | {row['split']} | {_times(row)} | {row['comparisons']:.1f} "
+            f"| {100 * row['wrong_share']:.1f} % | {row['best_eliminated']:.2f} |"
+        )
+    return "\n".join(lines)
+
+
+def failing_table(records: Records) -> str:
+    """The failing levels with every seed they have: correct runs per controller."""
+    lines = [
+        "| σ | " + " | ".join(setup.label for setup in SETUPS) + " |",
+        "|---|" + "---|" * len(SETUPS),
+    ]
+    totals = {setup.key: [0, 0] for setup in SETUPS}
+    for sigma in FAILING:
+        cells = []
+        for setup in SETUPS:
+            runs = records.where(sweep="noise", sigma=sigma, lighting=0.0, controller=setup.key)
+            right = sum(tables.result(run)["correct"] for run in runs)
+            totals[setup.key][0] += right
+            totals[setup.key][1] += len(runs)
+            cells.append(share(right, len(runs)))
+        lines.append(f"| {text(sigma)} | " + " | ".join(cells) + " |")
+    lines.append("| all | " + " | ".join(share(*totals[setup.key]) for setup in SETUPS) + " |")
+    return "\n".join(lines)
+
+
+def page_blocks(records: Records) -> dict[str, str]:
+    return {
+        "drop": drop_table(records),
+        "claim": claim(records),
+        "sensing": sensing_table(records),
+        "noise": noise_table(noise_rows(records, SIGMAS, 0.0, SEEDS)),
+        "failing": failing_table(records),
+        "lighting": noise_table(noise_rows(records, LIGHTING_SIGMAS, LIGHTING, SEEDS)),
+    }
+
+
+# --- figures -------------------------------------------------------------------------------
+
+
+def plot_drop(records: Records, path: Path) -> None:
+    plt = tables.pyplot()
+    figure, (accuracy, timing) = plt.subplots(1, 2, figsize=(10, 4))
+    rows = [
+        (level, summarise(runs))
+        for level in DROPS
+        if (runs := records.where(sweep="drop", drop=level))
+    ]
+    if rows:
+        bars = [tables.error_bar(row["correct"], row["runs"]) for _, row in rows]
+        levels = [level for level, _ in rows]
+        accuracy.errorbar(
+            levels, [bar[0] for bar in bars], yerr=[[b[1] for b in bars], [b[2] for b in bars]],
+            fmt="o-", color="tab:blue", capsize=2,
+        )  # fmt: skip
+        for run in records.where(sweep="drop"):
+            result = tables.result(run)
+            if result["consensus"]:
+                timing.plot(
+                    run["params"]["drop"], result["sim_time_s"], ".", color="tab:grey", alpha=0.5
+                )
+        timing.plot(
+            levels, [row["time_mean"] for _, row in rows], "o-", color="tab:blue", label="mean"
+        )
+        timing.plot(
+            levels,
+            [row["time_median"] for _, row in rows],
+            "s--",
+            color="tab:orange",
+            label="median",
+        )
+        timing.legend()
+    else:
+        tables.no_runs_yet(accuracy)
+    accuracy.set_xlabel("iid radio loss (drop probability)")
+    accuracy.set_ylabel("accuracy (share of runs: all robots chose the best)")
+    accuracy.set_ylim(-0.05, 1.05)
+    accuracy.grid(alpha=0.3)
+    timing.set_xlabel("iid radio loss (drop probability)")
+    timing.set_ylabel("consensus time (sim s, last robot decided)")
+    timing.grid(alpha=0.3)
+    figure.suptitle(
+        f"Radio loss: α = 0, MProdOp; {len(SEEDS)} seeds per point, dots are runs, bars 95% "
+        "interval"
+    )
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+
+
+COLOURS = {"alpha0": "tab:red", "alpha01": "tab:blue", "loglinear": "tab:green"}
+MARKERS = {"alpha0": "o", "alpha01": "s", "loglinear": "^"}
+
+
+def plot_noise(records: Records, path: Path) -> None:
+    plt = tables.pyplot()
+    figure, (accuracy, timing, errors) = plt.subplots(1, 3, figsize=(15, 4.3))
+    rows = noise_rows(records, SIGMAS, 0.0, SEEDS)
+    spacing = min((b - a for a, b in itertools.pairwise(SIGMAS)), default=1.0)
+    for number, setup in enumerate(SETUPS):
+        # Each set-up's dots a little to the side, so that runs at one level stay apart.
+        nudge = (number - (len(SETUPS) - 1) / 2) * 0.12 * spacing
+        mine = [row for row in rows if row["controller"] == setup.key]
+        if not mine:
+            continue
+        levels = [row["sigma"] for row in mine]
+        style = {"color": COLOURS[setup.key], "marker": MARKERS[setup.key]}
+        bars = [tables.error_bar(row["correct"], row["runs"]) for row in mine]
+        accuracy.errorbar(
+            [level + nudge for level in levels], [bar[0] for bar in bars],
+            yerr=[[b[1] for b in bars], [b[2] for b in bars]], fmt="-", capsize=2,
+            label=setup.label, **style,
+        )  # fmt: skip
+        timing.plot(levels, [row["time_mean"] for row in mine], "-", label=setup.label, **style)
+        errors.plot(
+            levels, [100 * row["wrong_share"] for row in mine], "-", label=setup.label, **style
+        )
+        for run in records.where(sweep="noise", lighting=0.0, controller=setup.key):
+            result = tables.result(run)
+            if run["seed"] in SEEDS and result["consensus"]:
+                timing.plot(
+                    run["params"]["sigma"] + nudge, result["sim_time_s"], ".",
+                    color=COLOURS[setup.key], alpha=0.35,
+                )  # fmt: skip
+    if not rows:
+        tables.no_runs_yet(accuracy)
+    else:
+        accuracy.legend(loc="lower left")
+    accuracy.set_ylabel("accuracy (share of runs: all robots chose the best)")
+    accuracy.set_ylim(-0.05, 1.05)
+    timing.set_ylabel("consensus time (sim s; mean line, dots are runs)")
+    errors.set_ylabel("wrong comparisons (% of all comparisons)")
+    for axis in (accuracy, timing, errors):
+        axis.set_xlabel("camera pixel noise sigma (0..255 scale)")
+        axis.grid(alpha=0.3)
+    figure.suptitle(
+        f"Camera noise: {len(SEEDS)} seeds per point, {ROBOTS} robots, {SITES} sites; bars 95% "
+        "interval"
+    )
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+
+
+STUDY = Study(
+    name="robustness",
+    title="radio loss and camera noise",
+    about="radio loss, camera noise and lighting against alpha > 0 and the log-linear pool",
+    points=points,
+    source="deploy/study/robustness.py",
+    pages=(Page("docs/robustness.md", page_blocks),),
+    outputs=(
+        Output("docs/robustness_drop.png", plot_drop),
+        Output("docs/robustness_noise.png", plot_noise),
+    ),
+)

@@ -1,0 +1,231 @@
+"""The study ``strategies``: the paper's strategy against its rivals (docs/strategies.md).
+
+Two parts, one results file:
+
+* ``part=wellstirred``: the Section 4 model for the paper's strategy (N = 100 agents
+  shuffled into pools of k = 3) and for DMVD, DMMD and DC (the same 100 agents, dmmd's
+  group of 3: itself and 2 neighbours), n = 5, 10, 20, 50 and 100, one cell of 100 runs
+  per point (``make.make_wellstirred``);
+* ``part=swarm``: whole lockstep runs, every ``--strategy``, n = 5, 8, 10 and 20 sites,
+  without and with 20% message loss (``--drop 0.2``), 10 robots (seeds 0-19) and 50
+  robots (seeds 0-9), timeout 2400 sim s: ``swarm run --robots R --sites n --strategy S
+  --drop D --seed S --timeout 2400``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from deploy.study import tables
+from deploy.study.declare import Output, Page, Records, Study
+from deploy.study.grid import Point, product
+from deploy.study.make import WELLSTIRRED_AGENTS
+from deploy.study.wilson import share
+
+STRATEGIES = ("paper", "dmvd", "dmmd", "dc")
+WELLSTIRRED_OPTIONS = (5, 10, 20, 50, 100)
+SITES = (5, 8, 10, 20)
+DROPS = (0.0, 0.2)
+SEEDS = {10: range(20), 50: range(10)}
+TIMEOUT = 2400.0  # sim seconds
+COST = {10: 6.0, 50: 42.0}  # wall seconds a run takes, about (the mean of earlier runs)
+
+
+def points() -> list[Point]:
+    found = [
+        Point(
+            {"part": "wellstirred", "strategy": strategy, "options": n},
+            (0,),
+            "wellstirred",
+            cost=5.0,
+        )
+        for strategy in STRATEGIES
+        for n in WELLSTIRRED_OPTIONS
+    ]
+    for robots, seeds in SEEDS.items():
+        for axes in product(sites=SITES, drop=DROPS, strategy=STRATEGIES):
+            params = {"part": "swarm", "robots": robots, **axes}
+            options = [
+                "--robots", str(robots), "--sites", str(axes["sites"]),
+                "--strategy", str(axes["strategy"]), "--drop", f"{axes['drop']:g}",
+            ]  # fmt: skip
+            found.append(Point(params, seeds, options=options, timeout=TIMEOUT, cost=COST[robots]))
+    return found
+
+
+# --- the page ------------------------------------------------------------------------------
+
+
+def wellstirred_rows(records: Records) -> list[dict[str, Any]]:
+    rows = []
+    for strategy in STRATEGIES:
+        for n in WELLSTIRRED_OPTIONS:
+            for record in records.where(part="wellstirred", strategy=strategy, options=n):
+                result = tables.result(record)
+                times, success = result["times"], result["success"]
+                good = sorted(t for t, ok in zip(times, success, strict=True) if ok)
+                rows.append(
+                    {
+                        "strategy": strategy,
+                        "n": n,
+                        "runs": len(times),
+                        "correct": sum(success),
+                        "median": tables.median(good),
+                        "q1": _quartile(good, 0),
+                        "q3": _quartile(good, 2),
+                    }
+                )
+    return rows
+
+
+def _quartile(values: list[int], which: int) -> float | None:
+    import statistics
+
+    return float(statistics.quantiles(values, n=4)[which]) if len(values) > 1 else None
+
+
+def swarm_rows(records: Records) -> list[dict[str, Any]]:
+    runs = [record for record in records.runs if record["params"]["part"] == "swarm"]
+    grouped = tables.groups(runs, "robots", "sites", "drop", "strategy")
+    rows = []
+    for (robots, sites, drop, strategy), group in sorted(
+        grouped.items(), key=lambda item: (*item[0][:3], STRATEGIES.index(item[0][3]))
+    ):
+        right = [tables.result(run) for run in group if tables.result(run)["verdict"] == "correct"]
+        rows.append(
+            {
+                "robots": robots,
+                "n": sites,
+                "drop": drop,
+                "strategy": strategy,
+                "runs": len(group),
+                **{verdict: tables.count(group, verdict) for verdict in tables.VERDICTS},
+                "median": tables.median(result["sim_time_s"] for result in right),
+                "steps": tables.median(
+                    result["slowest_steps"]
+                    for result in right
+                    if result["slowest_steps"] is not None
+                ),
+            }
+        )
+    return rows
+
+
+def wellstirred_table(records: Records) -> str:
+    lines = [
+        "| strategy | n | right consensus (95% interval) | steps to consensus, median (IQR), "
+        "right runs |",
+        "|---|---:|---:|---|",
+    ]
+    for row in wellstirred_rows(records):
+        lines.append(
+            f"| {row['strategy']} | {row['n']} | {share(row['correct'], row['runs'])} "
+            f"| {tables.number(row['median'], 1)} ({tables.number(row['q1'], 1)}-"
+            f"{tables.number(row['q3'], 1)}) |"
+        )
+    return "\n".join(lines)
+
+
+def swarm_table(records: Records) -> str:
+    lines = [
+        "| robots | n | message loss | strategy | runs | right (95% interval) | wrong | split "
+        "| undecided | sim s to consensus, median (right runs) | trips of the last robot, median |",
+        "|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for row in swarm_rows(records):
+        lines.append(
+            f"| {row['robots']} | {row['n']} | {row['drop']:.0%} | {row['strategy']} "
+            f"| {row['runs']} | {share(row['correct'], row['runs'])} | {row['wrong']} "
+            f"| {row['split']} | {row['undecided']} | {tables.number(row['median'])} "
+            f"| {tables.number(row['steps'], 1)} |"
+        )
+    return "\n".join(lines)
+
+
+def blocks(records: Records) -> dict[str, str]:
+    return {"wellstirred": wellstirred_table(records), "swarm": swarm_table(records)}
+
+
+COLOURS = {"paper": "tab:red", "dmvd": "tab:blue", "dmmd": "tab:orange", "dc": "tab:green"}
+
+
+def plot(records: Records, path: Path) -> None:
+    """Accuracy (with its 95% interval) and time against n: well-stirred, then the swarm
+    at each size."""
+    plt = tables.pyplot()
+    well = wellstirred_rows(records)
+    swarm = swarm_rows(records)
+    robots = sorted(SEEDS)
+    figure, axes = plt.subplots(2, 1 + len(robots), figsize=(5 * (1 + len(robots)), 7.5))
+    for strategy in STRATEGIES:
+        mine = [row for row in well if row["strategy"] == strategy]
+        _accuracy(axes[0][0], mine, "o-", COLOURS[strategy])
+        axes[1][0].plot(
+            [row["n"] for row in mine], [row["median"] for row in mine], "o-",
+            color=COLOURS[strategy], label=strategy,
+        )  # fmt: skip
+    if not well:
+        tables.no_runs_yet(axes[0][0])
+    axes[0][0].set_title(f"well-stirred, N = {WELLSTIRRED_AGENTS}, group 3")
+    axes[1][0].set_ylabel("steps to consensus, median of right runs")
+    axes[0][0].set_ylabel("share of runs: consensus on the best")
+    axes[1][0].set_yscale("log")
+    for column, count in enumerate(robots, start=1):
+        drawn = False
+        for strategy in STRATEGIES:
+            for drop, style in ((0.0, "o-"), (0.2, "s--")):
+                mine = [
+                    row
+                    for row in swarm
+                    if row["robots"] == count
+                    and row["strategy"] == strategy
+                    and row["drop"] == drop
+                ]
+                if not mine:
+                    continue
+                drawn = True
+                _accuracy(axes[0][column], mine, style, COLOURS[strategy])
+                axes[1][column].plot(
+                    [row["n"] for row in mine], [row["median"] for row in mine], style,
+                    color=COLOURS[strategy], label=f"{strategy}, {drop:.0%} loss",
+                )  # fmt: skip
+        if not drawn:
+            tables.no_runs_yet(axes[0][column])
+        axes[0][column].set_title(f"swarm, {count} robots")
+        axes[1][column].set_ylabel("sim s to consensus, median of right runs")
+    for axis in axes[1]:
+        if axis.get_legend_handles_labels()[0]:
+            axis.legend(fontsize="x-small", ncols=2)
+    for axis in axes[0]:
+        axis.set_ylim(-0.05, 1.05)
+    for axis in [*axes[0], *axes[1]]:
+        axis.set_xlabel("n (options / sites)")
+        axis.grid(alpha=0.3)
+    figure.suptitle("bars: 95% Wilson interval of the share of runs", fontsize="small")
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def _accuracy(axis: Any, rows: list[dict[str, Any]], style: str, colour: str) -> None:
+    bars = [tables.error_bar(row["correct"], row["runs"]) for row in rows]
+    axis.errorbar(
+        [row["n"] for row in rows],
+        [bar[0] for bar in bars],
+        yerr=[[bar[1] for bar in bars], [bar[2] for bar in bars]],
+        fmt=style,
+        color=colour,
+        capsize=2,
+    )
+
+
+STUDY = Study(
+    name="strategies",
+    title="rivals in the swarm",
+    about="the paper's strategy against DMVD, DMMD and DC: well-stirred and in the swarm",
+    points=points,
+    source="deploy/study/strategies.py",
+    pages=(Page("docs/strategies.md", blocks),),
+    outputs=(Output("docs/strategies.png", plot),),
+)

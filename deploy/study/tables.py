@@ -1,0 +1,91 @@
+"""What the studies' tables share: numbers, medians, shares with their interval, and
+the runs of a group."""
+
+from __future__ import annotations
+
+import math
+import statistics
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+from deploy.study.wilson import share, wilson
+
+VERDICTS = ("correct", "wrong", "split", "undecided")
+
+
+def number(value: float | None, digits: int = 0) -> str:
+    """A number to ``digits`` places; ``-`` for none."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    return f"{value:.{digits}f}"
+
+
+def runs(count: int) -> str:
+    """``1 run``, ``5 runs``."""
+    return f"{count} run" if count == 1 else f"{count} runs"
+
+
+def seeds(numbers: list[int]) -> str:
+    """``seed 3``, ``seeds 0-9``, ``seeds 0, 2``."""
+    if len(numbers) == 1:
+        return f"seed {numbers[0]}"
+    if numbers == list(range(numbers[0], numbers[-1] + 1)):
+        return f"seeds {numbers[0]}-{numbers[-1]}"
+    return "seeds " + ", ".join(map(str, numbers))
+
+
+def median(values: Iterable[float]) -> float | None:
+    found = list(values)
+    return statistics.median(found) if found else None
+
+
+def mean(values: Iterable[float]) -> float | None:
+    found = list(values)
+    return statistics.fmean(found) if found else None
+
+
+def result(record: dict[str, Any]) -> dict[str, Any]:
+    found: dict[str, Any] = record["result"]
+    return found
+
+
+def count(records: Sequence[dict[str, Any]], verdict: str) -> int:
+    return sum(result(record)["verdict"] == verdict for record in records)
+
+
+def correct_share(records: Sequence[dict[str, Any]]) -> str:
+    """``7/10 (39-90%)``: the runs whose (honest) robots all chose the best site."""
+    return share(count(records, "correct"), len(records))
+
+
+def error_bar(successes: int, trials: int) -> tuple[float, float, float]:
+    """The share and the distances below and above it to its 95% interval, for a plot."""
+    if trials == 0:
+        return math.nan, 0.0, 0.0
+    low, high = wilson(successes, trials)
+    value = successes / trials
+    return value, value - low, high - value
+
+
+def groups(
+    records: Sequence[dict[str, Any]], *names: str
+) -> dict[tuple[Any, ...], list[dict[str, Any]]]:
+    """The records by the values of these parameters, in the order first met."""
+    found: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
+    for record in records:
+        found.setdefault(tuple(record["params"][name] for name in names), []).append(record)
+    return found
+
+
+def pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def no_runs_yet(axis: Any) -> None:
+    """Mark an empty panel of a figure: its runs are not made yet."""
+    axis.text(0.5, 0.5, "no runs yet", ha="center", va="center", transform=axis.transAxes)
