@@ -69,6 +69,7 @@ MODULES = (
     "world_server/core/roster.py",
     "world_server/core/intake.py",
     "world_server/core/coordinator.py",
+    "deploy/inprocess/engine.py",
 )
 # The library every compiled module shares (``wire/cores__mypyc``): inside a package, so
 # it is found wherever the packages are.

@@ -68,8 +68,6 @@ def mix(z: int) -> int:
 class Stream:
     """One seeded stream of random numbers (see the module docstring for the algorithm)."""
 
-    __slots__ = ("_state",)
-
     def __init__(self, seed: object) -> None:
         # ``object``: a seed of another type gets this error, compiled (plumbing/cores.py)
         # or not, rather than the compiled code's TypeError.

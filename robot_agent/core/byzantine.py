@@ -152,9 +152,7 @@ class Liar:
         command = self._controller.step(reading, beacon_only)
         if not command.broadcasts:
             return command
-        return dataclasses.replace(
-            command, broadcasts=tuple(self._lie(payload) for payload in command.broadcasts)
-        )
+        return command.with_broadcasts(tuple(self._lie(payload) for payload in command.broadcasts))
 
     def _lie(self, payload: protocol.RobotBroadcast) -> protocol.RobotBroadcast:
         if isinstance(payload, protocol.VotePayload):
@@ -179,7 +177,7 @@ class Silent:
         self._controller = controller
 
     def step(self, reading: ports.BodyReading, received: Sequence[ports.Received]) -> ports.Command:
-        return dataclasses.replace(self._controller.step(reading, received), broadcasts=())
+        return self._controller.step(reading, received).with_broadcasts(())
 
     def status(self, tick: int) -> protocol.Status:
         return self._controller.status(tick)

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import enum
 import logging
-from typing import Any, NamedTuple, TypeVar
+from typing import Any, Final, TypeVar
 
 import msgspec
 
@@ -87,17 +87,37 @@ class Outgoing(Parcel):
         self.kind = kind
 
 
-class Step(NamedTuple):
+class Step:
     """What one control step of a robot sends, in sending order: its transmissions, its
-    act, and its status if it changed."""
+    act, and its status if it changed (a plain class: one per robot per tick, and a
+    NamedTuple's constructor runs interpreted in the compiled cores)."""
 
-    robot: int
-    tick: int
-    arrived: float  # the latest mark of the tick's inputs (0.0 unless the transport marks)
-    transmissions: tuple[Outgoing, ...]
-    answer: protocol.Act  # the act itself
-    act: Outgoing | None  # the act as sent on the robot's key; None: in its host's batch
-    status: Outgoing | None
+    robot: Final[int]
+    tick: Final[int]
+    arrived: Final[float]  # the latest mark of the tick's inputs (0.0 unless the transport marks)
+    transmissions: Final[tuple[Outgoing, ...]]
+    answer: Final[protocol.Act]  # the act itself
+    act: Final[Outgoing | None]  # the act as sent on the robot's key; None: in its host's batch
+    status: Final[Outgoing | None]
+
+    def __init__(
+        self,
+        *,
+        robot: int,
+        tick: int,
+        arrived: float,
+        transmissions: tuple[Outgoing, ...],
+        answer: protocol.Act,
+        act: Outgoing | None,
+        status: Outgoing | None,
+    ) -> None:
+        self.robot = robot
+        self.tick = tick
+        self.arrived = arrived
+        self.transmissions = transmissions
+        self.answer = answer
+        self.act = act
+        self.status = status
 
     @property
     def outgoing(self) -> list[Outgoing]:
@@ -320,7 +340,13 @@ class RobotEndpoint:
             )
         status = self.status(sense.tick) if self.controller.take_status_change() else None
         return Step(
-            self.robot_id, sense.tick, ready.arrived, transmissions, answer.act, act_message, status
+            robot=self.robot_id,
+            tick=sense.tick,
+            arrived=ready.arrived,
+            transmissions=transmissions,
+            answer=answer.act,
+            act=act_message,
+            status=status,
         )
 
     def status(self, tick: int) -> Outgoing:

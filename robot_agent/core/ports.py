@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Final, Protocol
 
 from wire import protocol
 
@@ -23,34 +23,114 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
+# The values a control step is made of are plain classes with read-only attributes, not
+# frozen dataclasses: the compiled cores (plumbing/cores.py) make several per robot per
+# tick, and a dataclass's generated __init__ runs interpreted, an order slower.
+
+
 class BodyReading:
     """What the body senses at one control step."""
 
-    t: float  # seconds since the run started, from the port's clock
-    x: float  # metres, world frame (odometry or a positioning system on hardware)
-    y: float
-    theta: float  # radians, counter-clockwise from +x
-    proximity: tuple[float, ...]  # 8 infrared readings in [0, 1]; 1 = touching
-    frame: np.ndarray | None = None  # BGR camera frame, present once after a request
+    t: Final[float]  # seconds since the run started, from the port's clock
+    x: Final[float]  # metres, world frame (odometry or a positioning system on hardware)
+    y: Final[float]
+    theta: Final[float]  # radians, counter-clockwise from +x
+    proximity: Final[tuple[float, ...]]  # 8 infrared readings in [0, 1]; 1 = touching
+    frame: Final[np.ndarray | None]  # BGR camera frame, present once after a request
+
+    def __init__(
+        self,
+        *,
+        t: float,
+        x: float,
+        y: float,
+        theta: float,
+        proximity: tuple[float, ...],
+        frame: np.ndarray | None = None,
+    ) -> None:
+        self.t = t
+        self.x = x
+        self.y = y
+        self.theta = theta
+        self.proximity = proximity
+        self.frame = frame
+
+    def __repr__(self) -> str:
+        frame = "None" if self.frame is None else f"<{'x'.join(map(str, self.frame.shape))}>"
+        return (
+            f"BodyReading(t={self.t!r}, x={self.x!r}, y={self.y!r}, theta={self.theta!r}, "
+            f"proximity={self.proximity!r}, frame={frame})"
+        )
 
 
-@dataclass(frozen=True)
 class Received:
     """A radio message that passed validation."""
 
-    sender: str
-    payload: protocol.OpinionPayload | protocol.BeaconPayload | protocol.VotePayload
+    sender: Final[str]
+    payload: Final[protocol.OpinionPayload | protocol.BeaconPayload | protocol.VotePayload]
+
+    def __init__(
+        self,
+        sender: str,
+        payload: protocol.OpinionPayload | protocol.BeaconPayload | protocol.VotePayload,
+    ) -> None:
+        self.sender = sender
+        self.payload = payload
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Received):
+            return NotImplemented
+        return (self.sender, self.payload) == (other.sender, other.payload)
+
+    def __hash__(self) -> int:
+        return hash((self.sender, self.payload))
+
+    def __repr__(self) -> str:
+        return f"Received(sender={self.sender!r}, payload={self.payload!r})"
 
 
-@dataclass(frozen=True)
 class Command:
     """What the controller wants done until its next step."""
 
-    left: float  # wheel speeds, m/s
-    right: float
-    capture: bool = False  # request a camera frame (arrives with a later reading)
-    broadcasts: tuple[protocol.RobotBroadcast, ...] = ()
+    left: Final[float]  # wheel speeds, m/s
+    right: Final[float]
+    capture: Final[bool]  # request a camera frame (arrives with a later reading)
+    broadcasts: Final[tuple[protocol.RobotBroadcast, ...]]
+
+    def __init__(
+        self,
+        left: float,
+        right: float,
+        capture: bool = False,
+        broadcasts: tuple[protocol.RobotBroadcast, ...] = (),
+    ) -> None:
+        self.left = left
+        self.right = right
+        self.capture = capture
+        self.broadcasts = broadcasts
+
+    def with_broadcasts(self, broadcasts: tuple[protocol.RobotBroadcast, ...]) -> Command:
+        """The same command with other broadcasts."""
+        return Command(self.left, self.right, self.capture, broadcasts)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Command):
+            return NotImplemented
+        return (self.left, self.right, self.capture, self.broadcasts) == (
+            other.left,
+            other.right,
+            other.capture,
+            other.broadcasts,
+        )
+
+    def __hash__(self) -> int:
+        return hash((self.left, self.right, self.capture, self.broadcasts))
+
+    def __repr__(self) -> str:
+        return (
+            f"Command(left={self.left!r}, right={self.right!r}, capture={self.capture!r}, "
+            f"broadcasts={self.broadcasts!r})"
+        )
 
 
 class RobotController(Protocol):

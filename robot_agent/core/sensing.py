@@ -12,8 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
@@ -28,13 +27,20 @@ if TYPE_CHECKING:
 QualityEstimator = Callable[[np.ndarray], "float | None"]
 
 
-@dataclass(frozen=True)
 class Look:
-    """One control period of sensing: what to do, and what came of it."""
+    """One control period of sensing: what to do, and what came of it (a plain class: a
+    compiled dataclass's __init__ runs interpreted)."""
 
-    command: ports.Command
-    quality: float | None = None  # the site's quality in [0, 1], once a frame showed it
-    gave_up: bool = False  # capture_attempts frames failed: the site cannot be seen
+    command: Final[ports.Command]
+    quality: Final[float | None]  # the site's quality in [0, 1], once a frame showed it
+    gave_up: Final[bool]  # capture_attempts frames failed: the site cannot be seen
+
+    def __init__(
+        self, command: ports.Command, quality: float | None = None, gave_up: bool = False
+    ) -> None:
+        self.command = command
+        self.quality = quality
+        self.gave_up = gave_up
 
 
 class Sensing:

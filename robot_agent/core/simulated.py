@@ -13,34 +13,48 @@ bytes, in and out (docs/porting.md).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import Final
 
 from robot_agent.core import ports, vision
 from robot_agent.core.ports import BodyReading, RejectCounter, RobotController
 from wire import protocol
 
+# Plain classes with read-only attributes, not frozen dataclasses: a tick makes one per
+# robot, and a dataclass's generated __init__ runs interpreted in the compiled cores.
 
-@dataclass(frozen=True)
+
 class Broadcast:
     """One broadcast as the robot publishes it on ``radio/tx/<id>``."""
 
-    seq: int  # from 1 over the robot's life
-    payload: bytes
-    meta: protocol.RadioTxMeta  # {tick, seq}: what the sample's attachment carries
+    seq: Final[int]  # from 1 over the robot's life
+    payload: Final[bytes]
+    meta: Final[protocol.RadioTxMeta]  # {tick, seq}: what the sample's attachment carries
+
+    def __init__(self, seq: int, payload: bytes, meta: protocol.RadioTxMeta) -> None:
+        self.seq = seq
+        self.payload = payload
+        self.meta = meta
+
+    def __repr__(self) -> str:
+        return f"Broadcast(seq={self.seq!r}, payload={self.payload!r}, meta={self.meta!r})"
 
 
-@dataclass(frozen=True)
 class TickAnswer:
     """What a robot publishes for one tick: its broadcasts, then its act."""
 
-    act: protocol.Act
-    transmissions: tuple[Broadcast, ...]  # in sending order
+    act: Final[protocol.Act]
+    transmissions: Final[tuple[Broadcast, ...]]  # in sending order
+
+    def __init__(self, act: protocol.Act, transmissions: tuple[Broadcast, ...]) -> None:
+        self.act = act
+        self.transmissions = transmissions
+
+    def __repr__(self) -> str:
+        return f"TickAnswer(act={self.act!r}, transmissions={self.transmissions!r})"
 
 
 class SimulatedBody:
     """``ports.Body`` over the world's messages of one tick."""
-
-    __slots__ = ("_frame", "_rejects", "_sense", "capture", "left", "right")  # stepped per tick
 
     def __init__(self, rejects: RejectCounter) -> None:
         self._rejects = rejects
@@ -84,8 +98,6 @@ class SimulatedBody:
 
 class SimulatedRadio:
     """``ports.Radio`` over the medium's deliveries of one tick."""
-
-    __slots__ = ("_delivered", "_sent", "seq")
 
     def __init__(self) -> None:
         self.seq = 0  # the last broadcast's number

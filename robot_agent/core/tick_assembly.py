@@ -20,7 +20,7 @@ stepped is stale and dropped quietly (late, not wrong).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Final
 
 from wire import guard, protocol
 
@@ -48,13 +48,27 @@ class TickInputs:
     arrived: float = 0.0
 
 
-class ReadyTick(NamedTuple):
-    """A tick's inputs, complete enough to step."""
+class ReadyTick:
+    """A tick's inputs, complete enough to step (a plain class: one per robot per tick,
+    and a NamedTuple's or a dataclass's constructor runs interpreted in the compiled
+    cores)."""
 
-    sense: protocol.Sense
-    rx: list[tuple[str, bytes]]  # (sender, payload) in delivery order
-    frame: bytes | None
-    arrived: float  # the latest mark of its inputs (see TickInputs)
+    sense: Final[protocol.Sense]
+    rx: Final[list[tuple[str, bytes]]]  # (sender, payload) in delivery order
+    frame: Final[bytes | None]
+    arrived: Final[float]  # the latest mark of its inputs (see TickInputs)
+
+    def __init__(
+        self,
+        sense: protocol.Sense,
+        rx: list[tuple[str, bytes]],
+        frame: bytes | None,
+        arrived: float,
+    ) -> None:
+        self.sense = sense
+        self.rx = rx
+        self.frame = frame
+        self.arrived = arrived
 
 
 class TickAssembly:

@@ -12,10 +12,13 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 
-@dataclass(slots=True)
 class _Answer:
-    radio_tx: int | None = None  # announced count; None until the answer arrives
-    received_tx: int = 0
+    """One participant's answer to the tick (a plain class: a tick makes one per robot,
+    and a dataclass's generated __init__ runs interpreted in the compiled cores)."""
+
+    def __init__(self) -> None:
+        self.radio_tx: int | None = None  # announced count; None until the answer arrives
+        self.received_tx = 0
 
     @property
     def done(self) -> bool:

@@ -219,6 +219,28 @@ class World:
         self, acts: Mapping[int, protocol.Act], transmissions: Sequence[Transmission]
     ) -> TickResult:
         """Close the current tick: transmit, move, render, and deliver what is due next."""
+        if transmissions:
+            self._transmit(transmissions)
+        live = self._live_robots
+        moving = [(robot, act) for robot, act in sorted(acts.items()) if robot in live]
+        self.physics.set_all_wheels(
+            [robot for robot, _ in moving],
+            [act.left for _, act in moving],
+            [act.right for _, act in moving],
+        )
+        self.physics.step(self.config.dt)
+        self.tick += 1
+        frames = {
+            robot: self.camera.encode(self._render(robot)) for robot, act in moving if act.capture
+        }
+        deliveries: dict[str, list[Delivery]] = {}
+        for delivery in self.radio.deliveries(self.tick):
+            deliveries.setdefault(delivery.receiver, []).append(delivery)
+        return TickResult(self.tick, deliveries, frames)
+
+    def _transmit(self, transmissions: Sequence[Transmission]) -> None:
+        """Hand the tick's radio messages to the medium, in the medium's order, each from
+        where its sender is now."""
         receivers = {
             names.robot_name(robot): self.physics.pose(robot)[:2]
             for robot in sorted(self._live_robots)
@@ -235,23 +257,6 @@ class World:
             self.radio.transmit(
                 self.tick, message.sender, message.seq, message.payload, position, kind, receivers
             )
-        moving = [(robot, act) for robot, act in sorted(acts.items()) if robot in self._live_robots]
-        self.physics.set_all_wheels(
-            [robot for robot, _ in moving],
-            [act.left for _, act in moving],
-            [act.right for _, act in moving],
-        )
-        self.physics.step(self.config.dt)
-        self.tick += 1
-        frames = {
-            robot: self.camera.encode(self._render(robot))
-            for robot, act in sorted(acts.items())
-            if act.capture and robot in self._live_robots
-        }
-        deliveries: dict[str, list[Delivery]] = {}
-        for delivery in self.radio.deliveries(self.tick):
-            deliveries.setdefault(delivery.receiver, []).append(delivery)
-        return TickResult(self.tick, deliveries, frames)
 
     def is_sender(self, name: str) -> bool:
         """Whether ``name`` may transmit now (a live robot or a known beacon)."""
