@@ -48,6 +48,9 @@ from world_server.core.world import World, WorldConfig
 # world/state (the world server's default --state-every): both see the same samples.
 POSES_EVERY = 10
 
+# Allocations between two collections of the youngest generation during a run.
+RUN_COLLECT_THRESHOLD = 50_000
+
 # What a tap is handed: every message of the run as a subscriber would see it.
 Tap = Callable[[str, bytes, bytes | None], None]
 
@@ -286,11 +289,16 @@ def run_in_process(
     )
     bus.start()
     # Everything made so far lives for the whole run: the collector need not look at it
-    # again until the run ends (a large swarm spent a tenth of its time there).
+    # again until the run ends, and what a tick makes is freed by reference counting, so
+    # the collector may wait for more of it than its default 700 (a large swarm spent a
+    # tenth of its time collecting).
+    thresholds = gc.get_threshold()
     gc.freeze()
+    gc.set_threshold(RUN_COLLECT_THRESHOLD, *thresholds[1:])
     try:
         halt = _run_ticks(bus, timeout=timeout, honest=honest, hooks=hooks, on_tick=on_tick)
     finally:
+        gc.set_threshold(*thresholds)
         gc.unfreeze()
     # Every robot's state at the end (not published: its status changes are).
     for endpoint in endpoints:

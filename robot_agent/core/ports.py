@@ -55,12 +55,37 @@ class BodyReading:
         self.proximity = proximity
         self.frame = frame
 
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, BodyReading):
+            return NotImplemented
+        return _same_frame(self.frame, other.frame) and (
+            self.t,
+            self.x,
+            self.y,
+            self.theta,
+            self.proximity,
+        ) == (
+            other.t,
+            other.x,
+            other.y,
+            other.theta,
+            other.proximity,
+        )
+
+    __hash__ = None  # type: ignore[assignment]  # equal readings may hold unhashable frames
+
     def __repr__(self) -> str:
         frame = "None" if self.frame is None else f"<{'x'.join(map(str, self.frame.shape))}>"
         return (
             f"BodyReading(t={self.t!r}, x={self.x!r}, y={self.y!r}, theta={self.theta!r}, "
             f"proximity={self.proximity!r}, frame={frame})"
         )
+
+
+def _same_frame(first: np.ndarray | None, second: np.ndarray | None) -> bool:
+    if first is None or second is None:
+        return first is second
+    return first.shape == second.shape and bool((first == second).all())
 
 
 class Received:

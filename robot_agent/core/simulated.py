@@ -4,19 +4,22 @@ so by the robot process over Zenoh) and by ``deploy/inprocess/engine.py`` in one
 run exactly the loop a port runs.
 
 Each tick the world sends a ``Sense`` (time, pose, proximity), the radio medium's
-deliveries and, after a capture request, a camera frame (PNG). ``SimulatedBody`` reads
-them as a ``BodyReading`` and turns ``drive`` and ``request_frame`` into the tick's
-``Act``; ``SimulatedRadio`` hands the deliveries to ``poll`` and numbers what ``send``
-broadcasts, from 1 over the robot's life. ``tests/vectors/tick.json`` gives ticks in
-bytes, in and out (docs/porting.md).
+deliveries and, after a capture request, a camera frame (PNG over a transport, the image
+itself in one process). ``SimulatedBody`` reads them as a ``BodyReading`` and turns
+``drive`` and ``request_frame`` into the tick's ``Act``; ``SimulatedRadio`` hands the
+deliveries to ``poll`` and numbers what ``send`` broadcasts, from 1 over the robot's life.
+``tests/vectors/tick.json`` gives ticks in bytes, in and out (docs/porting.md).
 """
 
 from __future__ import annotations
 
 from typing import Final
 
+import numpy as np
+
 from robot_agent.core import ports, vision
 from robot_agent.core.ports import BodyReading, RejectCounter, RobotController
+from robot_agent.core.tick_assembly import Frame
 from wire import protocol
 
 # Plain classes with read-only attributes, not frozen dataclasses: a tick makes one per
@@ -59,12 +62,12 @@ class SimulatedBody:
     def __init__(self, rejects: RejectCounter) -> None:
         self._rejects = rejects
         self._sense: protocol.Sense | None = None
-        self._frame: bytes | None = None
+        self._frame: Frame | None = None
         self.left = 0.0
         self.right = 0.0
         self.capture = False
 
-    def arrive(self, sense: protocol.Sense, frame: bytes | None) -> None:
+    def arrive(self, sense: protocol.Sense, frame: Frame | None) -> None:
         """The tick's sense and camera frame; the command starts afresh."""
         self._sense, self._frame = sense, frame
         self.left = self.right = 0.0
@@ -75,9 +78,12 @@ class SimulatedBody:
         if sense is None:
             raise RuntimeError("read before the world's first sense arrived")
         image = None
-        if self._frame is not None:
+        frame = self._frame
+        if isinstance(frame, np.ndarray):
+            image = frame  # the world's own image, in the same process
+        elif frame is not None:
             try:
-                image = vision.decode_frame(self._frame)
+                image = vision.decode_frame(frame)
             except ValueError as error:  # a frame that is no image: counted, not raised
                 self._rejects.reject("camera", error)
         return BodyReading(
@@ -137,7 +143,7 @@ class SimulatedPorts:
         controller: RobotController,
         sense: protocol.Sense,
         delivered: list[tuple[str, bytes]],
-        frame: bytes | None,
+        frame: Frame | None,
     ) -> TickAnswer:
         """Run the contract's control step on tick ``sense.tick``'s inputs."""
         self.body.arrive(sense, frame)

@@ -22,7 +22,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Final
 
+import numpy as np
+
 from wire import guard, protocol
+
+# A camera frame: its encoding (PNG, as a transport carries it), or the image itself when
+# the world runs in the same process.
+Frame = bytes | np.ndarray
 
 # What may wait for one robot: the inputs of ticks it has not reached (a lockstep robot
 # needs one tick's; a camera frame and the radio of a crowded nest are well under this).
@@ -40,7 +46,7 @@ class TickInputs:
 
     sense: protocol.Sense | None = None
     rx: list[tuple[str, bytes]] = field(default_factory=list)  # (sender, payload)
-    frame: bytes | None = None
+    frame: Frame | None = None
     size: int = 0  # bytes held for this tick
     messages: int = 0
     # The latest mark its inputs came with: the transport's arrival time when it traces
@@ -55,14 +61,14 @@ class ReadyTick:
 
     sense: Final[protocol.Sense]
     rx: Final[list[tuple[str, bytes]]]  # (sender, payload) in delivery order
-    frame: Final[bytes | None]
+    frame: Final[Frame | None]
     arrived: Final[float]  # the latest mark of its inputs (see TickInputs)
 
     def __init__(
         self,
         sense: protocol.Sense,
         rx: list[tuple[str, bytes]],
-        frame: bytes | None,
+        frame: Frame | None,
         arrived: float,
     ) -> None:
         self.sense = sense
@@ -127,9 +133,11 @@ class TickAssembly:
         inputs.rx.append((sender, payload))
         return True
 
-    def add_frame(self, tick: int, frame: bytes, arrived: float = 0.0) -> bool:
-        """Hold the camera frame of ``tick``; as ``add_sense``."""
-        inputs = self._admit(tick, len(frame), arrived)
+    def add_frame(self, tick: int, frame: Frame, arrived: float = 0.0) -> bool:
+        """Hold the camera frame of ``tick`` (encoded, or the image itself when the world
+        is in the same process); as ``add_sense``."""
+        size = frame.nbytes if isinstance(frame, np.ndarray) else len(frame)
+        inputs = self._admit(tick, size, arrived)
         if inputs is None:
             return False
         inputs.frame = frame

@@ -25,6 +25,7 @@ from collections.abc import Callable
 from enum import StrEnum
 
 import msgspec
+import numpy as np
 
 from wire import auth, batch, names, protocol
 from wire.names import Role
@@ -359,7 +360,9 @@ class Coordinator:
             self.outbox(Mark(Moment.DELIVERED))
         self._open_tick(result.tick, rx_counts, result.frames)
 
-    def _open_tick(self, tick: int, rx_counts: dict[str, int], frames: dict[int, bytes]) -> None:
+    def _open_tick(
+        self, tick: int, rx_counts: dict[str, int], frames: dict[int, np.ndarray]
+    ) -> None:
         if self.traced:
             self.outbox(Mark(Moment.OPEN_START))
         # The clock first: a beacon that answers this tick does so while the senses go out.
@@ -382,7 +385,7 @@ class Coordinator:
                 Publish(
                     self.keys.camera(robot),
                     frame,
-                    None,
+                    self.world.camera.encode,  # PNG, lossless: the robot sees what was rendered
                     identity=names.robot_identity(robot),
                     keyring=self.keyring,
                     meta=meta,
@@ -399,7 +402,7 @@ class Coordinator:
             self.outbox(Opened(tick, robots, len(frames), rx, batched))
             self.outbox(Mark(Moment.OPENED))
 
-    def _send_senses(self, rx_counts: dict[str, int], frames: dict[int, bytes]) -> int:
+    def _send_senses(self, rx_counts: dict[str, int], frames: dict[int, np.ndarray]) -> int:
         """Send every live robot its senses, made for all of them at once: on its own key,
         or in its process's batch, sealed with that process's key; how many went in
         batches. Batches go first, each as soon as it is made, so their processes step

@@ -110,7 +110,7 @@ class Senses:
 class TickResult:
     tick: int  # the tick that now begins
     deliveries: dict[str, list[Delivery]]  # by receiver name, in delivery order
-    frames: dict[int, bytes]  # encoded camera frames by robot id
+    frames: dict[int, np.ndarray]  # camera frames (BGR images) by robot id
 
 
 class World:
@@ -230,9 +230,7 @@ class World:
         )
         self.physics.step(self.config.dt)
         self.tick += 1
-        frames = {
-            robot: self.camera.encode(self._render(robot)) for robot, act in moving if act.capture
-        }
+        frames = {robot: self._render(robot) for robot, act in moving if act.capture}
         deliveries: dict[str, list[Delivery]] = {}
         for delivery in self.radio.deliveries(self.tick):
             deliveries.setdefault(delivery.receiver, []).append(delivery)
