@@ -93,7 +93,7 @@ ALLOWED: dict[str, set[str]] = {
     # The bridge is the other end of the robots' links: their protocol and transports.
     "world_server/bridge": {"wire", "plumbing", "link/core", "link/io"},
     "nest_beacon/node": {"wire", "nest_beacon/core", "plumbing"},
-    "robot_agent": {"robot_agent/node", "link/io"},
+    "robot_agent": {"robot_agent/node"},
     "link": {"link/io"},
     "world_server": {"world_server/server", "world_server/recorder", "world_server/bridge"},
     "nest_beacon": {"nest_beacon/node"},
@@ -309,6 +309,59 @@ def test_find_cycle_finds_one() -> None:
 
 def test_no_import_cycle_between_folders() -> None:
     assert find_cycle(import_graph()) is None
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(REPO).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def module_graph() -> dict[str, set[str]]:
+    """Every module of the repository and the modules of the repository it imports,
+    wherever in the file (``TYPE_CHECKING`` blocks and functions too); ``from package
+    import module`` is an import of the module, not of its package."""
+    paths = {
+        module_name(path): path
+        for root in [*ROOTS, "wire", "plumbing", "deploy", "viewer", "wellstirred"]
+        for path in (REPO / root).rglob("*.py")
+        if ".venv" not in path.parts
+    }
+    graph: dict[str, set[str]] = {}
+    for module, path in paths.items():
+        imported = imported_modules(path)
+        graph[module] = {
+            target
+            for target in imported
+            if target in paths
+            and target != module
+            # ``from a import b`` gives both a and a.b: a.b alone when b is a module
+            and not any(other.startswith(target + ".") and other in paths for other in imported)
+        }
+    return graph
+
+
+def test_no_import_cycle_between_modules() -> None:
+    """Two modules that import each other, even only for their types, are one module in
+    two files: their order of import, their layering and their tests are tangled."""
+    assert find_cycle(module_graph()) is None
+
+
+def test_no_import_cycle_between_packages() -> None:
+    """No arrow runs back up: a package never imports one that imports it, through any of
+    their folders (the robot's link imports the robot's core, so the robot's package does
+    not import the link: ``robot-agent`` chooses between them from ``deploy/``)."""
+    graph: dict[str, set[str]] = {}
+    for module, targets in module_graph().items():
+        package = module.split(".")[0]
+        graph.setdefault(package, set()).update(
+            target.split(".")[0] for target in targets if target.split(".")[0] != package
+        )
+    assert find_cycle(graph) is None
+
+
+def test_the_cycle_checks_find_cycles() -> None:
+    assert find_cycle({"a.x": {"b.y"}, "b.y": {"a.x"}}) == ["a.x", "b.y", "a.x"]
+    assert find_cycle({"a": {"b"}, "b": set()}) is None
 
 
 def test_mypy_checks_exactly_the_pure_folders_strictly() -> None:

@@ -18,7 +18,7 @@ from wire import protocol
 from wire.rng import Stream
 
 if TYPE_CHECKING:
-    from robot_agent.core.controller import ControllerConfig
+    from robot_agent.core.controller_config import ControllerConfig
 
 
 class Beliefs:

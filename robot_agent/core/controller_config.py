@@ -7,13 +7,20 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Annotated, Any, ClassVar
+from typing import Annotated, Any, ClassVar, Literal
 
 from msgspec import Meta
 
-from robot_agent.core import decision, defence, voting
+from robot_agent.core import decision, defence
 from wire import settings
 from wire.settings import Flag
+
+# The decision strategies: the paper's, and the ones it is compared with, which vote.
+StrategyName = Literal["paper", "dmvd", "dmmd", "dc"]
+STRATEGIES: tuple[StrategyName, ...] = ("paper", "dmvd", "dmmd", "dc")
+VOTING: tuple[StrategyName, ...] = ("dmvd", "dmmd", "dc")
+# A liar's settle count: it never decides, so it keeps coming back to lie.
+NEVER_SETTLE = 1_000_000
 
 Seconds = Annotated[float, Meta(gt=0.0)]
 Metres = Annotated[float, Meta(gt=0.0)]
@@ -74,7 +81,7 @@ class ControllerConfig:
         Flag(),
     ] = 0.0
     strategy: Annotated[
-        voting.StrategyName,
+        StrategyName,
         Meta(
             description="the decision strategy: paper (negative updating and pooling), or "
             "one the paper is compared with (docs/strategies.md): dmvd (voter), dmmd "
@@ -109,7 +116,7 @@ class ControllerConfig:
         int,
         Meta(
             ge=1,
-            le=voting.NEVER_SETTLE,
+            le=NEVER_SETTLE,
             description="dmvd, dmmd, dc: decide after this many updates in a row that kept "
             "the site with no vote heard for another",
         ),

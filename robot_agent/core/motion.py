@@ -18,7 +18,7 @@ from robot_agent.core.navigation import Navigator
 from wire import numeric
 
 if TYPE_CHECKING:
-    from robot_agent.core.controller import ControllerConfig
+    from robot_agent.core.controller_config import ControllerConfig
 
 TIME_EPSILON = 1e-9  # seconds: sums of control periods are not exact in binary
 STOP = ports.Command(0.0, 0.0)  # stand still

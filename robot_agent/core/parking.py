@@ -31,7 +31,7 @@ from robot_agent.core.motion import STOP, TIME_EPSILON, Motion, along_radius, di
 from wire import numeric, protocol
 
 if TYPE_CHECKING:
-    from robot_agent.core.controller import ControllerConfig
+    from robot_agent.core.controller_config import ControllerConfig
 
 
 class Parking:

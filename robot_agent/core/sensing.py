@@ -22,7 +22,7 @@ from wire import numeric
 from wire.rng import Stream
 
 if TYPE_CHECKING:
-    from robot_agent.core.controller import ControllerConfig
+    from robot_agent.core.controller_config import ControllerConfig
 
 QualityEstimator = Callable[[np.ndarray], "float | None"]
 

@@ -45,17 +45,16 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
 
+from robot_agent.core.controller_config import (
+    NEVER_SETTLE,
+    STRATEGIES,
+    VOTING,
+    ControllerConfig,
+    StrategyName,
+)
 from wire import protocol
 from wire.rng import Stream
-
-if TYPE_CHECKING:
-    from robot_agent.core.controller_config import ControllerConfig
-
-StrategyName = Literal["paper", "dmvd", "dmmd", "dc"]
-STRATEGIES: tuple[StrategyName, ...] = ("paper", "dmvd", "dmmd", "dc")
-VOTING: tuple[StrategyName, ...] = ("dmvd", "dmmd", "dc")
 
 
 @dataclass(frozen=True)
@@ -204,10 +203,6 @@ class VoteBeliefs:
             self.decided_site = self.site
             self.decision_time = t
             self.decision_trips = self.trips
-
-
-# A liar's settle count: it never decides, so it keeps coming back to lie.
-NEVER_SETTLE = 1_000_000
 
 
 def never_settles(config: ControllerConfig) -> ControllerConfig:

@@ -2,7 +2,9 @@
 outside the emulator over a link to the run's bridge (``link/``).
 
 The link program is chosen before anything else is imported: it runs where there is no
-Zenoh (a Raspberry Pi robot, a test bench), and must not need it.
+Zenoh (a Raspberry Pi robot, a test bench), and must not need it. The choice is made here,
+above both: the link imports the robot's core, so the robot's package may not import the
+link.
 """
 
 from __future__ import annotations
