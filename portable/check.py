@@ -30,6 +30,7 @@ import concurrent.futures
 import hashlib
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -148,6 +149,7 @@ class Check:
     native: dict[str, dict[str, Any]] = field(default_factory=dict)
     native_done: threading.Event = field(default_factory=threading.Event)
     processes: list[subprocess.Popen[str]] = field(default_factory=list)
+    stopping: bool = False
 
     @property
     def by_key(self) -> dict[str, Job]:
@@ -191,7 +193,7 @@ class Check:
                 process.wait()
             finally:
                 timer.cancel()
-        if not done or process.returncode != 0:
+        if (not done or process.returncode != 0) and not self.stopping:
             tail = [
                 line
                 for line in errors_file.read_text().splitlines()
@@ -334,27 +336,34 @@ class Check:
             for index, group in enumerate(chunks(self.jobs, self.workers))
         ]
         parts.sort(key=lambda part: -sum(job.seconds for job in part[1]))
-        with concurrent.futures.ThreadPoolExecutor(max_workers=self.workers) as pool:
-            first = pool.submit(self.native_probe, native)
-            futures = [first]
-            if with_c_robot:
-                futures.append(pool.submit(self.c_robot, c_robot_seed))
-            futures += [pool.submit(self.probe, *part) for part in parts]
-            try:
-                for future in futures:
-                    future.result()
-            except BaseException:
-                self.native_done.set()
-                for process in self.processes:
-                    if process.poll() is None:
-                        process.kill()
-                raise
+        pool = concurrent.futures.ThreadPoolExecutor(max_workers=self.workers)
+        futures = [pool.submit(self.native_probe, native)]
+        if with_c_robot:
+            futures.append(pool.submit(self.c_robot, c_robot_seed))
+        futures += [pool.submit(self.probe, *part) for part in parts]
+        try:
+            for future in futures:
+                future.result()
+        finally:
+            # Interrupted (or failed): what has not started never starts, and every probe
+            # still running is stopped; a step of the C robot's ends by its own timeout.
+            self.stopping = True
+            self.native_done.set()
+            pool.shutdown(wait=False, cancel_futures=True)
+            for process in self.processes:
+                if process.poll() is None:
+                    process.kill()
 
     def native_probe(self, machine: Machine) -> None:
         try:
             self.probe(machine, self.jobs, 0)
         finally:
             self.native_done.set()
+
+
+def stopped(number: int, frame: object) -> None:
+    """SIGTERM: stop as on Ctrl-C (the probes started are stopped)."""
+    raise KeyboardInterrupt
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -402,7 +411,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{os.nice(0)}, load {Path('/proc/loadavg').read_text().split()[0]}"
     )
     check = Check(jobs, chosen, cache, tally, args.jobs)
-    check.run(not args.no_c_robot, args.c_robot_seed)
+    signal.signal(signal.SIGTERM, stopped)
+    try:
+        check.run(not args.no_c_robot, args.c_robot_seed)
+    except KeyboardInterrupt:
+        print("check-portable: interrupted", file=sys.stderr)
+        return 130
     elapsed = time.monotonic() - tally.started
     where = ", ".join(machine.name for machine in chosen[1:])
     c_part = "" if args.no_c_robot else " and the C robot on aarch64"

@@ -14,7 +14,8 @@ form; the run's summary, for its digest and per-robot results, is taken on its w
 ``deploy.inprocess.engine.run_in_process``.
 
 Lines, in order: ``{"about": ...}`` (the machine as this interpreter sees it), one
-``{"key": ..., "record": ..., "run": ..., "seconds": ...}`` per job (or ``{"key": ...,
+``{"key": ..., "record": ..., "run": ..., "seconds": ...}`` per job (the record without
+its wall times, which are the machine's; or ``{"key": ...,
 "error": ...}``), then ``{"done": ...}`` with the modules of this repository that were
 loaded from compiled extensions rather than from their ``.py`` files.
 """
@@ -34,6 +35,8 @@ import traceback
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TextIO
+
+from portable.published import without_wall
 
 REPO = Path(__file__).resolve().parent.parent
 PROJECT_PACKAGES = (
@@ -222,6 +225,8 @@ def main(argv: list[str] | None = None) -> int:
             emit(out, {"key": spec["key"], "error": traceback.format_exc()[-3000:]})
             continue
         seconds = round(time.perf_counter() - started, 1)
+        if isinstance(record, dict):
+            record = without_wall(record)
         emit(out, {"key": spec["key"], "record": record, "run": result, "seconds": seconds})
     emit(out, {"done": {"compiled": compiled_modules()}})
     return 0
