@@ -333,7 +333,8 @@ def render_doc(runs: Sequence[Run], before: Sequence[Run], figure: str) -> str:
         "swarm (`world_server/core/layout.py`). Made by `benchmarks/scale_consensus.py`:\n",
         f"```\n{COMMANDS}\n```\n",
         "Sim times are exact: a lockstep run is deterministic, in one process or over "
-        "Zenoh, on any CPU (the portable kernel, [kernel.md](kernel.md)). Wall times are "
+        "Zenoh, on every CPU `make check-portable` checks (the portable kernel, "
+        "[kernel.md](kernel.md)). Wall times are "
         "indicative only: the machine (2 cores) ran other work beside these runs. "
         "`tests/test_scale_doc.py` checks that this page is what the results file gives; "
         "`make check-published` (`pytest --published`, which CI runs) runs 10 robots seeds "

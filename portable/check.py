@@ -226,9 +226,8 @@ class Check:
     def say_compiled(self, machine: Machine, done: dict[str, Any], part: int) -> None:
         compiled = done.get("compiled", [])
         if compiled and part == 0:
-            self.tally.say(
-                f"{machine.name:8} ran {len(compiled)} compiled modules of the repository"
-            )
+            shown = ", ".join(compiled[:4]) + (", ..." if len(compiled) > 4 else "")
+            self.tally.say(f"{machine.name:8} ran {len(compiled)} compiled modules: {shown}")
 
     def judge(self, machine: Machine, line: dict[str, Any]) -> None:
         job = self.by_key[line["key"]]
@@ -418,20 +417,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("check-portable: interrupted", file=sys.stderr)
         return 130
     elapsed = time.monotonic() - tally.started
-    where = ", ".join(machine.name for machine in chosen[1:])
-    c_part = "" if args.no_c_robot else " and the C robot on aarch64"
+    what = f"{len(jobs)} runs on {', '.join(machine.name for machine in chosen[1:])}"
+    if not args.no_c_robot:
+        what += " and the C robot on aarch64"
     if tally.failures:
         print("\nDifferences and failures:", flush=True)
         for failure in tally.failures:
             print(f"* {failure}")
         print(
             f"check-portable: {len(tally.failures)} of {tally.compared} comparisons FAILED "
-            f"({len(jobs)} runs on {where}{c_part}), {elapsed:.0f} s"
+            f"({what}), {elapsed:.0f} s"
         )
         return 1
     print(
-        f"check-portable: all {tally.compared} comparisons matched ({len(jobs)} runs on "
-        f"{where} as natively and as published{c_part}), {elapsed:.0f} s"
+        f"check-portable: all {tally.compared} comparisons matched ({what}: the native "
+        f"results and the published records), {elapsed:.0f} s"
     )
     return 0
 
