@@ -46,6 +46,7 @@ from portable.published import Job
 
 REPO = published.REPO
 MACHINES = ("haswell", "nehalem", "aarch64")
+AARCH64 = ("aarch64", "cortex-a72")  # cortex-a72: only when asked for
 DEFAULT_SAMPLE = 3
 PROBE_TIMEOUT = 5400.0  # wall seconds for one probe process
 
@@ -74,9 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--machines",
         nargs="+",
-        choices=MACHINES,
+        choices=[*MACHINES, "cortex-a72"],
         default=list(MACHINES),
-        help="the emulated machines (default: all)",
+        help="the emulated machines (default: haswell nehalem aarch64; cortex-a72 on request)",
     )
     parser.add_argument("--no-c-robot", action="store_true", help="leave the C robot out")
     parser.add_argument(
@@ -205,7 +206,7 @@ class Check:
                 f"{machine.name}: the probe ended with exit code {process.returncode} before "
                 f"{len(missing)} run(s) ({', '.join(missing[:3])}): {' / '.join(tail)}",
             )
-            self.tally.say(f"{machine.name:8} probe FAILED (exit {process.returncode})")
+            self.tally.say(f"{machine.name:10} probe FAILED (exit {process.returncode})")
 
     def judge_machine(self, machine: Machine, about: dict[str, Any], part: int) -> None:
         """Each emulated interpreter must be on the CPU its machine names (it prints once
@@ -219,7 +220,7 @@ class Check:
             simd = ",".join(about.get("numpy_simd", [])) or "nothing beyond its baseline"
             state = "" if not problems else "  NOT THE CPU IT SHOULD BE: " + "; ".join(problems)
             self.tally.say(
-                f"{machine.name:8} {about.get('machine')}, Python {about.get('python')}, numpy "
+                f"{machine.name:10} {about.get('machine')}, Python {about.get('python')}, numpy "
                 f"{about.get('numpy')} finds {simd}{state}"
             )
 
@@ -227,11 +228,11 @@ class Check:
         compiled = done.get("compiled", [])
         if compiled and part == 0:
             shown = ", ".join(compiled[:4]) + (", ..." if len(compiled) > 4 else "")
-            self.tally.say(f"{machine.name:8} ran {len(compiled)} compiled modules: {shown}")
+            self.tally.say(f"{machine.name:10} ran {len(compiled)} compiled modules: {shown}")
 
     def judge(self, machine: Machine, line: dict[str, Any]) -> None:
         job = self.by_key[line["key"]]
-        label = f"{machine.name:8} {job.key:44}"
+        label = f"{machine.name:10} {job.key:44}"
         if "error" in line:
             last = line["error"].strip().splitlines()[-1]
             self.tally.add(False, f"{machine.name} {job.key}: {last}")
@@ -286,18 +287,18 @@ class Check:
             problems = c_robot.flags(build)
         except SetupError as error:
             add(False, f"C robot: {error}")
-            say(f"c-robot  FAILED: {error}")
+            say(f"c-robot    FAILED: {error}")
             return
         add(not problems, "C robot: the cross build's flags: " + "; ".join(problems[:3]))
         say(
-            f"c-robot  {build.target}: compile flags "
+            f"c-robot    {build.target}: compile flags "
             + ("-ffp-contract=off, no -march" if not problems else "WRONG: " + problems[0])
         )
         tests = c_robot.unit_tests(build)
         ok = tests.failed == 0 and tests.passed > 0 and tests.key_files.endswith(" 0 failed")
         add(ok, f"C robot: unit tests under qemu: {tests.failed} failed ({tests.output[-300:]})")
         say(
-            f"c-robot  unit tests under {' '.join(build.emulator())}: {tests.passed} passed, "
+            f"c-robot    unit tests under {' '.join(build.emulator())}: {tests.passed} passed, "
             f"{tests.failed} failed ({tests.key_files})"
         )
         if not build.binary.exists():
@@ -307,7 +308,7 @@ class Check:
             run = c_robot.lockstep(build, seed)
         except (RuntimeError, subprocess.SubprocessError, json.JSONDecodeError) as error:
             add(False, f"C robot: the lockstep run failed: {str(error)[-300:]}")
-            say(f"c-robot  lockstep run FAILED: {str(error)[-200:]}")
+            say(f"c-robot    lockstep run FAILED: {str(error)[-200:]}")
             return
         same = run["same"] and run["programs_ended"] == len(c_robot.OUTSIDE)
         add(
@@ -316,7 +317,7 @@ class Check:
             f"all-emulated run {run['reference_digest']} ({run})",
         )
         say(
-            f"c-robot  lockstep over UDP, robots {c_robot.OUTSIDE} in C on aarch64, seed {seed}: "
+            f"c-robot    lockstep over UDP, robots {c_robot.OUTSIDE} in C on aarch64, seed {seed}: "
             f"{run['digest']} "
             + (
                 "the same run as all emulated"
@@ -387,7 +388,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     tools = []
     if {"haswell", "nehalem"} & set(names):
         tools.append("qemu-x86_64")
-    if "aarch64" in names or not args.no_c_robot:
+    if set(AARCH64) & set(names) or not args.no_c_robot:
         tools.append("qemu-aarch64")
     if not args.no_c_robot:
         tools.append(c_robot.CROSS)
@@ -395,11 +396,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         machines.ensure_tools(tools, tally.say)
         chosen = [machines.native()]
+        python = machines.Aarch64Python(cache / "aarch64")
+        if set(AARCH64) & set(names):
+            python.prepare(tally.say)
         for name in names:
-            if name == "aarch64":
-                python = machines.Aarch64Python(cache / "aarch64")
-                python.prepare(tally.say)
-                chosen.append(python.machine())
+            if name in AARCH64:
+                chosen.append(python.machine(None if name == "aarch64" else name))
             else:
                 chosen.append(machines.haswell() if name == "haswell" else machines.nehalem())
     except SetupError as error:

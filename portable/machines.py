@@ -4,9 +4,11 @@
 * ``haswell``: x86-64 without AVX-512 (``qemu-x86_64 -cpu Haswell-v4``: AVX2 and FMA; numpy
   finds X86_V3, not X86_V4), the same interpreter and virtual environment.
 * ``nehalem``: x86-64-v2, no AVX at all (``qemu-x86_64 -cpu Nehalem``: SSE4.2), the same.
-* ``aarch64``: 64-bit ARM (``qemu-aarch64``): Debian's arm64 Python 3.11, taken from
-  Debian's packages into a folder (nothing is installed on this machine), with
-  requirements/run.lock installed into another from PyPI's manylinux aarch64 wheels.
+* ``aarch64``: 64-bit ARM (``qemu-aarch64``, its default CPU, with SVE): Debian's arm64
+  Python 3.11, taken from Debian's packages into a folder (nothing is installed on this
+  machine), with requirements/run.lock installed into another from PyPI's manylinux
+  aarch64 wheels; ``cortex-a72`` (not in the default check): the same on a Raspberry Pi
+  4's CPU, where numpy finds nothing beyond its baseline.
 
 qemu-user runs one program of another CPU in this machine's kernel. A program that one of
 them starts is not emulated: the probes start none (portable/probe.py). Compiled modules
@@ -149,6 +151,7 @@ class Machine:
             "haswell": ("x86_64", {"X86_V3"}, {"X86_V4"}),
             "nehalem": ("x86_64", set(), {"X86_V3", "X86_V4"}),
             "aarch64": ("aarch64", set(), set()),
+            "cortex-a72": ("aarch64", set(), {"ASIMDHP", "ASIMDDP", "ASIMDFHM", "SVE"}),
         }
         if self.name not in wanted:
             return []
@@ -216,12 +219,15 @@ class Aarch64Python:
     def python(self) -> Path:
         return self.root / "usr" / "bin" / "python3.11"
 
-    def machine(self) -> Machine:
+    def machine(self, cpu: str | None = None) -> Machine:
+        """qemu's default aarch64 CPU (``max``: SVE, dot products, half floats), or the
+        one named (``cortex-a72``, a Raspberry Pi 4's: none of those; numpy's baseline)."""
         paths = os.pathsep.join([str(REPO), str(self.site)])
         return Machine(
-            "aarch64",
-            "aarch64 (qemu-aarch64, Debian's arm64 Python 3.11, the lock's aarch64 wheels)",
-            ("qemu-aarch64", "-L", str(self.root)),
+            cpu or "aarch64",
+            f"aarch64 (qemu-aarch64{f' -cpu {cpu}' if cpu else ''}, Debian's arm64 Python 3.11, "
+            "the lock's aarch64 wheels)",
+            ("qemu-aarch64", *(("-cpu", cpu) if cpu else ()), "-L", str(self.root)),
             (str(self.python), "-s"),
             (("PYTHONPATH", paths), ("PYTHONNOUSERSITE", "1")),
         )

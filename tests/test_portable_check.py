@@ -117,6 +117,10 @@ def test_each_emulated_machine_must_report_the_cpu_it_names() -> None:
     arm = machines.Aarch64Python(Path("/nonexistent")).machine()
     assert arm.expect({"machine": "aarch64", "numpy_simd": ["ASIMDHP"]}) == []
     assert arm.expect({"machine": "x86_64", "numpy_simd": []}) != []
+    pi = machines.Aarch64Python(Path("/nonexistent")).machine("cortex-a72")
+    assert pi.prefix[:3] == ("qemu-aarch64", "-cpu", "cortex-a72")
+    assert pi.expect({"machine": "aarch64", "numpy_simd": []}) == []
+    assert pi.expect({"machine": "aarch64", "numpy_simd": ["ASIMDHP"]}) != []
 
 
 def test_no_probe_inherits_what_masks_cpu_features(monkeypatch: pytest.MonkeyPatch) -> None:
