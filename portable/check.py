@@ -117,6 +117,15 @@ def chunks(jobs: Sequence[Job], count: int) -> list[list[Job]]:
     return [members for _, members in groups if members]
 
 
+def probe_line(text: str) -> dict[str, Any] | None:
+    """A line of the probe's (a JSON object), or None for anything else."""
+    try:
+        line = json.loads(text)
+    except ValueError:
+        return None
+    return line if isinstance(line, dict) else None
+
+
 @dataclass
 class Tally:
     """Every comparison made, and the differences found; thread-safe, it also prints."""
@@ -182,7 +191,10 @@ class Check:
             try:
                 assert process.stdout is not None
                 for text in process.stdout:
-                    line = json.loads(text)
+                    line = probe_line(text)
+                    if line is None:  # not the probe's: a library's own output
+                        errors.write(f"(on standard output) {text}")
+                        continue
                     if "about" in line:
                         self.judge_machine(machine, line["about"], part)
                     elif "done" in line:

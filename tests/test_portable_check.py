@@ -180,3 +180,12 @@ def test_a_records_name_is_its_content() -> None:
     record = json.loads('{"b": [1, 2], "a": 0.1}')
     assert check.record_hash(record) == check.record_hash({"a": 0.1, "b": [1, 2]})
     assert check.record_hash(record) != check.record_hash({"a": 0.1, "b": [1, 3]})
+
+
+def test_only_the_probes_json_objects_are_its_lines() -> None:
+    assert check.probe_line('{"key": "kernel", "seconds": 0.1}\n') == {
+        "key": "kernel",
+        "seconds": 0.1,
+    }
+    assert check.probe_line("OpenCV: a warning\n") is None
+    assert check.probe_line("1\n") is None
