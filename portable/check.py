@@ -423,6 +423,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{len(jobs)} runs on {', '.join(m.name for m in chosen)}; niceness "
         f"{os.nice(0)}, load {Path('/proc/loadavg').read_text().split()[0]}"
     )
+    for machine in chosen[1:]:
+        tally.say(f"{machine.name:10} {machine.title}")
     check = Check(jobs, chosen, cache, tally, args.jobs)
     signal.signal(signal.SIGTERM, stopped)
     try:
