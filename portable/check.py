@@ -15,6 +15,7 @@ run of its seed.
 
     python -m portable                       # the fixed runs and a sample of 3 (seed 0)
     python -m portable --sample 6 --seed 7   # another sample of published runs
+    python -m portable --sample 6 --seed 7 --sample-only --machines haswell aarch64
     python -m portable --list                # which runs, without running them
     python -m portable --machines haswell --no-c-robot --runs section5/default/n5/s3
 
@@ -65,6 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"other published runs to add to the fixed ones (default: {DEFAULT_SAMPLE})",
     )
     parser.add_argument("--seed", type=int, default=0, help="the sample's seed (default: 0)")
+    parser.add_argument(
+        "--sample-only", action="store_true", help="the sample without the fixed runs"
+    )
     parser.add_argument(
         "--runs",
         nargs="+",
@@ -386,7 +390,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.jobs < 1:
         parser.error("--jobs must be 1 or more")
     try:
-        jobs = published.choose(args.sample, args.seed, args.runs)
+        jobs = published.choose(args.sample, args.seed, args.runs, not args.sample_only)
     except KeyError as error:
         parser.error(f"--runs: no such run {error} (--list shows the keys of some)")
     except (OSError, ValueError) as error:

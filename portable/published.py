@@ -194,13 +194,13 @@ def sample(jobs: dict[str, Job], count: int, seed: int, exclude: Iterable[str]) 
     return chosen
 
 
-def choose(count: int, seed: int, only: Sequence[str] = ()) -> list[Job]:
-    """The jobs of a check: the fixed ones and a sample of ``count`` (or exactly the keys
-    of ``only``); KeyError for a key that is no job."""
+def choose(count: int, seed: int, only: Sequence[str] = (), fixed: bool = True) -> list[Job]:
+    """The jobs of a check: the fixed ones (unless not ``fixed``) and a sample of
+    ``count``, or exactly the keys of ``only``; KeyError for a key that is no job."""
     jobs = every_job()
     if only:
         return [jobs[key] for key in only]
-    return [jobs[key] for key in FIXED] + sample(jobs, count, seed, FIXED)
+    return [jobs[key] for key in FIXED if fixed] + sample(jobs, count, seed, FIXED)
 
 
 # --- the Section 4 model's Figure 1 table (docs/wellstirred.md) ---------------------------

@@ -37,6 +37,8 @@ def test_a_sample_is_the_same_for_a_seed_and_another_for_another_seed() -> None:
     assert first[: len(published.FIXED)] == list(published.FIXED)
     assert first[len(published.FIXED) :] != other[len(published.FIXED) :]
     assert len(set(first)) == len(first)
+    alone = [job.key for job in published.choose(8, 3, fixed=False)]
+    assert alone == first[len(published.FIXED) :]
 
 
 def test_a_sample_takes_each_published_file_in_turn_and_only_affordable_runs() -> None:
