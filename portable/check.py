@@ -424,7 +424,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"check-portable: error: {error}", file=sys.stderr)
         return 2
     tally.say(
-        f"{len(jobs)} runs on {', '.join(m.name for m in chosen)}; niceness "
+        f"{len(jobs)} run(s) on {', '.join(m.name for m in chosen)}; niceness "
         f"{os.nice(0)}, load {Path('/proc/loadavg').read_text().split()[0]}"
     )
     for machine in chosen[1:]:
@@ -437,7 +437,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("check-portable: interrupted", file=sys.stderr)
         return 130
     elapsed = time.monotonic() - tally.started
-    what = f"{len(jobs)} runs on {', '.join(machine.name for machine in chosen[1:])}"
+    what = f"{len(jobs)} run(s) on {', '.join(machine.name for machine in chosen[1:])}"
     if not args.no_c_robot:
         what += " and the C robot on aarch64"
     if tally.failures:
