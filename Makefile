@@ -14,6 +14,13 @@
 #   a sample of every study's runs (`swarm study NAME --check`, docs/studies.md).
 #   CI runs it after `make test`. docs/testing.md says what is published from runs but
 #   not run again by any check.
+# `make check-portable`: a sample of the published runs again on emulated CPUs (qemu-user:
+#   x86-64 without AVX-512, x86-64-v2 without AVX, aarch64) against this machine's runs
+#   and the published files, and the C robot cross-built for aarch64: its unit tests and
+#   a lockstep run under qemu-aarch64 (portable/check.py; `.venv/bin/python -m portable
+#   --help` for a larger sample). As root it installs qemu-user and the aarch64 cross
+#   compiler when they are missing; what it downloads is kept in .portable/. CI runs it
+#   after `make check-published`.
 # All of them create .venv and install the project on first use (and again when the
 # lock changes): the exact versions and hashes of requirements/run.lock (make run) or
 # requirements/test.lock (the rest), then the project itself without dependencies.
@@ -28,7 +35,7 @@ UV_VERSION := 0.13.9
 LOCK_OPTIONS := --generate-hashes --universal --fork-strategy fewest --python-version 3.11
 TEST_WORKERS ?= 2
 
-.PHONY: run test test-fast check-published explore lint bench lock c-robot clean cores clean-cores
+.PHONY: run test test-fast check-published check-portable explore lint bench lock c-robot clean cores clean-cores
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -79,6 +86,10 @@ check-published: $(VENV)/.installed-test
 	$(BIN)/swarm section5 --check
 	$(BIN)/python -m pytest --published --durations=20
 
+check-portable: $(VENV)/.installed-test
+	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m portable
+
 # The property tests with fresh random examples (make test repeats the same ones).
 explore: $(VENV)/.installed-test
 	HYPOTHESIS_PROFILE=explore $(BIN)/python -m pytest tests/test_decision.py \
@@ -99,5 +110,5 @@ lock: | $(BIN)/python
 	$(BIN)/uv pip compile pyproject.toml --extra test --extra cores $(LOCK_OPTIONS) -o $(TEST_LOCK)
 
 clean: clean-cores
-	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache .mypy_cache
+	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache .mypy_cache .portable
 	$(MAKE) -C c_robot clean

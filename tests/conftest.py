@@ -11,11 +11,14 @@ The tests in ``tiers.PUBLISHED`` run published runs again: they run with ``--pub
 Every test of a module in ``tiers.FAST`` but those in ``tiers.SLOW`` is marked ``fast``
 (``make test-fast`` runs ``pytest -m fast``), and while it runs, starting a process, using
 the network or opening a Zenoh session fails it: a module that does belongs in
-``tiers.FULL_ONLY``.
+``tiers.FULL_ONLY``. What a library makes once per machine by starting a process (its
+caches, ``warm_caches``) is made before the first fast test, outside the guard, so that the
+first run on a new machine, or with an empty HOME, passes as every later one does.
 """
 
 from __future__ import annotations
 
+import functools
 import multiprocessing.process
 import os
 import shutil
@@ -99,11 +102,21 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         items[:] = kept
 
 
+@functools.cache
+def warm_caches() -> None:
+    """Make what a library makes on first use by starting a process, as the first run on
+    a machine would: matplotlib's font list, which it builds by asking fontconfig
+    (``fc-list``) when its cache (in MPLCONFIGDIR, by default under XDG_CACHE_HOME or
+    HOME) has none, and reads from that cache on every later run."""
+    import matplotlib.font_manager  # noqa: F401  (importing it loads or builds the list)
+
+
 @pytest.fixture(autouse=True)
 def _fast_tests_start_nothing(
     request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch
 ) -> Iterator[None]:
     if request.node.get_closest_marker("fast") is not None:
+        warm_caches()
         refuse_processes_and_networks(monkeypatch, request.node.nodeid)
     yield
 

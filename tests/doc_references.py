@@ -41,8 +41,19 @@ TOP_LEVEL = (
     "benchmarks",
     "docs",
     "examples",
+    "portable",
 )
-SKIPPED = {".venv", ".git", "__pycache__", ".mypy_cache", ".ruff_cache", ".pytest_cache"}
+# Not the repository's code: .portable/ holds make check-portable's downloads (another
+# interpreter's standard library, the lock's packages for aarch64).
+SKIPPED = {
+    ".venv",
+    ".git",
+    "__pycache__",
+    ".mypy_cache",
+    ".ruff_cache",
+    ".pytest_cache",
+    ".portable",
+}
 
 PATH = re.compile(r"(?<![\w./<>-])((?:" + "|".join(TOP_LEVEL) + r")/[\w./<>{}*-]*)")
 # A placeholder (``runs/<run-id>.mcap``, ``robot-{id}.json5``, ``*.mcap``) ends what can be

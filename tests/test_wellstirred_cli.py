@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -137,6 +138,26 @@ def test_figures_are_written(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     assert figure1.read_bytes().startswith(PNG_MAGIC)
     assert figure2.read_bytes().startswith(PNG_MAGIC)
     assert "wrote" in captured.err
+
+
+def test_figures_are_written_on_a_machine_where_matplotlib_never_ran(tmp_path: Path) -> None:
+    """The fast tier's test of the figures in a fresh pytest with an empty HOME and caches:
+    matplotlib builds its font list there by starting fontconfig, which the fast tier's
+    guard refuses inside a test (tests/conftest.py makes it before)."""
+    empty = {name: tmp_path / name.lower() for name in ("HOME", "XDG_CACHE_HOME", "MPLCONFIGDIR")}
+    for folder in empty.values():
+        folder.mkdir()
+    test = "tests/test_wellstirred_cli.py::test_figures_are_written"
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", test],
+        cwd=Path(__file__).resolve().parent.parent,
+        env={**os.environ, **{name: str(folder) for name, folder in empty.items()}},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stdout[-3000:]
+    assert any(empty["MPLCONFIGDIR"].iterdir()), "matplotlib kept no font list there"
 
 
 @pytest.mark.parametrize(

@@ -1,5 +1,8 @@
 /* The C robot's unit tests: every conformance vector of tests/vectors/ that concerns a
-   robot, read at test time (usage: unit-tests VECTOR_DIR). Prints "N passed, N failed". */
+   robot, read at test time (usage: unit-tests VECTOR_DIR). Prints "N passed, N failed".
+   The key-file cases run the c-robot program next to this one (the folder of argv[0]),
+   through the command prefix in C_ROBOT_EMULATOR if it is set (a cross build under
+   qemu-user; c_robot/Makefile). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -10,6 +13,7 @@
 
 int passed, failed;
 const char *vector_dir;
+char program_dir[1024];
 
 void check(int ok, const char *what, const char *name) {
     if (ok) {
@@ -33,6 +37,16 @@ JNode *load(const char *file) {
 
 int main(int argc, char **argv) {
     vector_dir = argc > 1 ? argv[1] : "../tests/vectors";
+    const char *slash = strrchr(argv[0], '/');
+    if (slash == NULL) {
+        strcpy(program_dir, ".");
+    } else if ((size_t)(slash - argv[0]) < sizeof program_dir) {
+        memcpy(program_dir, argv[0], (size_t)(slash - argv[0]));
+        program_dir[slash - argv[0]] = '\0';
+    } else {
+        printf("FAIL the program's folder is longer than %zu bytes\n", sizeof program_dir - 1);
+        return 1;
+    }
     struct {
         const char *name;
         void (*fn)(void);

@@ -2,6 +2,8 @@
 #define TESTS_H
 #include "jdom.h"
 extern int passed, failed;
+/* The folder of the unit-tests program; the build puts c-robot in the same folder. */
+extern char program_dir[];
 void check(int ok, const char *what, const char *name);
 JNode *load(const char *file);
 void test_numeric(void);

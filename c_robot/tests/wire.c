@@ -506,33 +506,36 @@ void test_messages(void) {
 #include <sys/wait.h>
 #include <unistd.h>
 
-#define KEY_FILE "build/key-file-vector.key"
-
-/* Run build/c-robot on a key file against a UDP socket of this test: its exit code (it
-   gives up after 0.01 s without a bridge: 1; a key file it refuses: 2). */
-static int run_program(int port) {
-    char command[512];
+/* Run the c-robot next to the unit tests (through C_ROBOT_EMULATOR's command prefix, if
+   set) on a key file against a UDP socket of this test: its exit code (it gives up after
+   0.01 s without a bridge: 1; a key file it refuses: 2). */
+static int run_program(const char *key_file, int port) {
+    const char *emulator = getenv("C_ROBOT_EMULATOR");
+    char command[3072];
     snprintf(command, sizeof command,
-             "./build/c-robot --link udp://127.0.0.1:%d --id 8 --key-file " KEY_FILE
+             "%s %s/c-robot --link udp://127.0.0.1:%d --id 8 --key-file %s"
              " --give-up 0.01 --log-level error >/dev/null 2>&1",
-             port);
+             emulator ? emulator : "", program_dir, port, key_file);
     int status = system(command);
     return status != -1 && WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
-static int write_key_file(const char *text) {
-    FILE *file = fopen(KEY_FILE, "w");
+static int write_key_file(const char *key_file, const char *text) {
+    FILE *file = fopen(key_file, "w");
     if (!file) return -1;
     fputs(text, file);
     fclose(file);
-    return chmod(KEY_FILE, 0600);
+    return chmod(key_file, 0600);
 }
 
 void test_key_files(void) {
     JNode *root = load("key_file.json");
     if (!root) return;
-    if (access("./build/c-robot", X_OK) != 0) {
-        check(0, "key_file.json", "build/c-robot is not built (make -C c_robot)");
+    char program[1100], key_file[1100];
+    snprintf(program, sizeof program, "%s/c-robot", program_dir);
+    snprintf(key_file, sizeof key_file, "%s/key-file-vector.key", program_dir);
+    if (access(program, X_OK) != 0) {
+        check(0, "key_file.json", "c-robot is not built next to unit-tests (make -C c_robot)");
         return;
     }
     int fd = socket(AF_INET, SOCK_DGRAM, 0);
@@ -555,7 +558,9 @@ void test_key_files(void) {
         JNode *v = valid->items[i];
         while (recv(fd, buf, sizeof buf, MSG_DONTWAIT) > 0) {
         }
-        int code = write_key_file(jdom_str(v, "utf8")) == 0 ? run_program(port) : -1;
+        int code = write_key_file(key_file, jdom_str(v, "utf8")) == 0
+                       ? run_program(key_file, port)
+                       : -1;
         /* its hello is tagged under the link key of the key the file holds */
         ssize_t n = recv(fd, buf, sizeof buf, MSG_DONTWAIT);
         Frame f;
@@ -567,9 +572,11 @@ void test_key_files(void) {
     JNode *invalid = jdom_get(root, "invalid");
     for (size_t i = 0; i < invalid->count; i++) {
         JNode *v = invalid->items[i];
-        int code = write_key_file(jdom_str(v, "utf8")) == 0 ? run_program(port) : -1;
+        int code = write_key_file(key_file, jdom_str(v, "utf8")) == 0
+                       ? run_program(key_file, port)
+                       : -1;
         check(code == 2, "key_file.json invalid: exit code 2", jdom_str(v, "name"));
     }
-    unlink(KEY_FILE);
+    unlink(key_file);
     close(fd);
 }
