@@ -282,3 +282,35 @@ def test_same_commands_give_bit_identical_worlds() -> None:
     first, second = run_world(seed=9), run_world(seed=9)
     assert first == second
     assert run_world(seed=10)[0] != first[0]
+
+
+# --- one robot at a time, or all at once: the same bits --------------------------------
+
+
+def crowded_world(robots: int, seed: int) -> Physics:
+    """``robots`` robots at a swarm's start, driven at random for a few seconds."""
+    arena = layout.make_layout(10, robots, seed=seed)
+    physics = Physics(arena.arena_radius)
+    for robot_id, pose in enumerate(arena.start_poses):
+        physics.add_robot(robot_id, *pose)
+    rng = random.Random(seed)
+    for robot_id in physics.robot_ids():
+        physics.set_wheels(robot_id, rng.uniform(-0.13, 0.13), rng.uniform(-0.13, 0.13))
+    return physics
+
+
+@pytest.mark.parametrize("robots", [12, 60, 150])
+def test_the_numpy_forms_give_the_bits_of_the_robot_by_robot_ones(robots: int) -> None:
+    """Large swarms work out a substep's forces and the proximity readings with numpy
+    (``VECTOR_STEP_FROM``, ``VECTOR_PROXIMITY_FROM``): the same operations in the same
+    order, so the same bits, whatever the swarm's size."""
+    one_by_one, at_once = crowded_world(robots, 3), crowded_world(robots, 3)
+    substeps = one_by_one.substeps_for(DT)
+    for _ in range(30):
+        one_by_one._step_robot_by_robot(substeps, DT / substeps)
+        at_once._step_vectorised(substeps, DT / substeps)
+        # The robots' rows (a list read from pymunk goes on with the wall's body).
+        assert one_by_one._state_rows()[: 6 * robots] == at_once._state_rows()
+        assert one_by_one._compute_proximity() == at_once._compute_proximity_vectorised().tolist()
+    readings = one_by_one._compute_proximity()
+    assert any(0.0 < value < 1.0 for row in readings for value in row)  # robots see robots

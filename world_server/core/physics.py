@@ -25,6 +25,7 @@ from array import array
 from collections.abc import Sequence
 from typing import Final
 
+import numpy as np
 import pymunk
 from pymunk import batch
 
@@ -54,6 +55,12 @@ _STATE_FIELDS = (
 _FORCE_FIELDS = batch.BodyFields.FORCE | batch.BodyFields.TORQUE
 STATE_ROW: Final = 6  # numbers per body in a state buffer
 FORCE_ROW: Final = 3  # and in a force buffer
+# Swarm sizes from which a substep's forces, and the proximity readings, are worked out
+# with numpy for every robot at once; below, robot by robot, where numpy's cost per call
+# outweighs its work. Either way the same operations in the same order: the same bits
+# (tests/test_physics.py compares the two).
+VECTOR_STEP_FROM: Final = 128
+VECTOR_PROXIMITY_FROM: Final = 48
 
 
 def wall_segment_count(arena_radius: float, sag: float = WALL_SAG) -> int:
@@ -120,7 +127,10 @@ class Physics:
         self._sorted_ids: list[int] = []
         # What pymunk's batch API lists, STATE_ROW numbers a body: x, y, angle (unwrapped),
         # vx, vy, omega; the robots first, in insertion order, then the static wall body.
-        self._rows: list[float] = []
+        # Read as a flat list, or for a large swarm as an array of the robots' rows; the
+        # other form is made from it when asked for (``_state_rows``, ``_state_array``).
+        self._rows: list[float] | None = []
+        self._state: np.ndarray | None = None
         self._body_rows = 0
         # Made at most once per step, and cleared by it: every robot's proximity readings,
         # poses, senses and the sine and cosine of its heading.
@@ -128,10 +138,15 @@ class Physics:
         self._poses: list[tuple[float, float, float]] | None = None
         self._readings: list[list[float]] | None = None
         self._directions: tuple[list[float], list[float]] | None = None
-        # Per robot, the last angle whose sine and cosine were taken, and them.
+        self._direction_arrays: tuple[np.ndarray, np.ndarray] | None = None  # the same
+        # Per robot, the last angle whose sine and cosine were taken, and them (as lists,
+        # and as arrays for the numpy forms).
         self._direction_angle: list[float] = []
         self._direction_sin: list[float] = []
         self._direction_cos: list[float] = []
+        self._direction_angle_array = np.zeros(0)
+        self._direction_sin_array = np.zeros(0)
+        self._direction_cos_array = np.zeros(0)
         self._read_buffer = batch.Buffer()
         self._write_buffer = batch.Buffer()
 
@@ -184,9 +199,12 @@ class Physics:
         self._direction_angle.append(math.nan)  # no angle's sine taken yet
         self._direction_sin.append(0.0)
         self._direction_cos.append(0.0)
+        self._direction_angle_array = np.append(self._direction_angle_array, math.nan)
+        self._direction_sin_array = np.append(self._direction_sin_array, 0.0)
+        self._direction_cos_array = np.append(self._direction_cos_array, 0.0)
         self._read_state()
         row = STATE_ROW * (len(self._ids) - 1)
-        if self._rows[row : row + 3] != [x, y, theta]:
+        if self._state_rows()[row : row + 3] != [x, y, theta]:
             # pymunk's batch API must list robots first, in insertion order; refuse if not.
             raise RuntimeError("pymunk body order differs from insertion order")
 
@@ -210,7 +228,7 @@ class Physics:
         # Wrapped once per step for all robots, so pose(), poses() and readings() agree.
         poses = self._poses
         if poses is None:
-            rows = self._rows
+            rows = self._state_rows()
             wrap = numeric.wrap_angle
             poses = [
                 (rows[row], rows[row + 1], wrap(rows[row + 2]))
@@ -226,7 +244,7 @@ class Physics:
         physics."""
         directions = self._directions
         if directions is None:
-            rows = self._rows
+            rows = self._state_rows()
             angles, sines, cosines = self._direction_angle, self._direction_sin, self._direction_cos
             for index in range(len(self._ids)):
                 angle = rows[STATE_ROW * index + 2]
@@ -236,6 +254,39 @@ class Physics:
             directions = (sines, cosines)
             self._directions = directions
         return directions
+
+    def _heading_direction_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """``_heading_directions`` as arrays, for the numpy forms (the same values)."""
+        directions = self._direction_arrays
+        if directions is None:
+            angle = self._state_array()[:, 2]
+            changed = np.flatnonzero(angle != self._direction_angle_array)
+            if changed.size:
+                sin, cos = numeric.sincos_array(angle[changed])
+                self._direction_sin_array[changed] = sin
+                self._direction_cos_array[changed] = cos
+                self._direction_angle_array[changed] = angle[changed]
+            directions = (self._direction_sin_array, self._direction_cos_array)
+            self._direction_arrays = directions
+        return directions
+
+    def _state_rows(self) -> list[float]:
+        """The state as a flat list (STATE_ROW numbers a robot), made once per state."""
+        rows = self._rows
+        if rows is None:
+            assert self._state is not None  # one of the two forms is always there
+            rows = self._state.ravel().tolist()
+            self._rows = rows
+        return rows
+
+    def _state_array(self) -> np.ndarray:
+        """The robots' state as an array (a row of STATE_ROW each), made once per state."""
+        state = self._state
+        if state is None:
+            robots = len(self._ids)
+            state = np.array(self._state_rows()[: STATE_ROW * robots]).reshape(robots, STATE_ROW)
+            self._state = state
+        return state
 
     def readings(self, robot_ids: list[int]) -> list[list[float]]:
         """One row per robot of ``robot_ids``: its x, y, heading (as ``pose``) and its 8
@@ -298,6 +349,14 @@ class Physics:
             return
         substeps = self.substeps_for(dt)
         substep = dt / substeps
+        if robots >= VECTOR_STEP_FROM:
+            self._step_vectorised(substeps, substep)
+        else:
+            self._step_robot_by_robot(substeps, substep)
+        self._wrap_angles()
+
+    def _step_robot_by_robot(self, substeps: int, substep: float) -> None:
+        robots = len(self._ids)
         wheel_base = self.spec.wheel_base
         speeds = [0.5 * (left + right) for left, right in zip(self._left, self._right, strict=True)]
         turn_rates = [
@@ -311,7 +370,7 @@ class Physics:
         for _ in range(substeps):
             # The heading changes every substep, so the target velocity follows it.
             sines, cosines = self._heading_directions()
-            rows = self._rows
+            rows = self._state_rows()
             forces: list[float] = []
             for index in range(robots):
                 row = STATE_ROW * index
@@ -324,18 +383,45 @@ class Physics:
             batch.set_space_bodies(self.space, _FORCE_FIELDS, self._write_buffer)
             self.space.step(substep)
             self._read_state()
-        self._wrap_angles()
 
-    def _read_state(self) -> None:
+    def _step_vectorised(self, substeps: int, substep: float) -> None:
+        """``_step_robot_by_robot`` with numpy over every robot at once: the same
+        operations, element by element."""
+        robots = len(self._ids)
+        left, right = np.array(self._left), np.array(self._right)
+        speed = 0.5 * (left + right)
+        turn_rate = (right - left) / self.spec.wheel_base
+        inertia = np.array([self._mass, self._mass, self._moment])
+        forces = np.zeros((self._body_rows, FORCE_ROW))
+        for _ in range(substeps):
+            sin, cos = self._heading_direction_arrays()
+            state = self._state_array()
+            forces[:robots, 0] = speed * cos - state[:, 3]
+            forces[:robots, 1] = speed * sin - state[:, 4]
+            forces[:robots, 2] = turn_rate - state[:, 5]
+            forces[:robots] *= inertia / substep
+            self._write_buffer.set_float_buf(forces.reshape(-1))
+            batch.set_space_bodies(self.space, _FORCE_FIELDS, self._write_buffer)
+            self.space.step(substep)
+            self._read_state(vectorised=True)
+
+    def _read_state(self, *, vectorised: bool = False) -> None:
         self._read_buffer.clear()
         batch.get_space_bodies(self.space, _STATE_FIELDS, self._read_buffer)
-        state = array("d")
-        state.frombytes(self._read_buffer.float_buf())
-        rows = state.tolist()
+        buffer = self._read_buffer.float_buf()
         # pymunk lists the dynamic bodies (the robots, in insertion order) before the
         # static body that holds the wall.
-        self._body_rows = len(rows) // STATE_ROW
-        self._rows = rows
+        self._body_rows = len(buffer) // (8 * STATE_ROW)
+        if vectorised:
+            rows = np.frombuffer(buffer, dtype=np.float64).reshape(-1, STATE_ROW)
+            self._state = rows[: len(self._ids)].copy()
+            self._rows = None
+        else:
+            state = array("d")
+            state.frombytes(buffer)
+            self._rows = state.tolist()
+            self._state = None
+        self._direction_arrays = None
         self._prox = None
         self._poses = None
         self._readings = None
@@ -344,7 +430,10 @@ class Physics:
     def _wrap_angles(self) -> None:
         """Wraps every angle past ``ANGLE_BOUND`` into [-pi, pi], in pymunk and here (a
         step turns a robot by well under a radian, so checking after each is enough)."""
-        rows = self._rows
+        state = self._state
+        if state is not None and np.abs(state[:, 2]).max() <= ANGLE_BOUND:
+            return  # a large swarm's state is an array: looked at all at once
+        rows = self._state_rows()
         for index in range(len(self._ids)):
             row = STATE_ROW * index + 2
             angle = rows[row]
@@ -352,9 +441,13 @@ class Physics:
                 wrapped = numeric.wrap_angle(angle)
                 self._bodies[index].angle = wrapped
                 rows[row] = wrapped
+                if self._state is not None:
+                    self._state[index, 2] = wrapped
                 self._poses = None
                 self._readings = None
                 self._directions = None
+                self._direction_arrays = None
+                self._prox = None
 
     # --- proximity ------------------------------------------------------------------
 
@@ -374,7 +467,10 @@ class Physics:
         """Every robot's 8 readings, in insertion order (once per state)."""
         proximity = self._prox
         if proximity is None:
-            proximity = self._compute_proximity()
+            if len(self._ids) >= VECTOR_PROXIMITY_FROM:
+                proximity = self._compute_proximity_vectorised().tolist()
+            else:
+                proximity = self._compute_proximity()
             self._prox = proximity
         return proximity
 
@@ -387,7 +483,7 @@ class Physics:
         radius_squared = radius * radius
         wall_squared = self.arena_radius * self.arena_radius
         robots = len(self._ids)
-        rows = self._rows
+        rows = self._state_rows()
         sines, cosines = self._heading_directions()
         sensor_sines, sensor_cosines = self._sensor_sin, self._sensor_cos
         sensors = len(sensor_sines)
@@ -436,7 +532,7 @@ class Physics:
         the 8 neighbouring cells, so the cost grows with the bodies, not their square.
         """
         robots = len(self._ids)
-        rows = self._rows
+        rows = self._state_rows()
         reach = cutoff * cutoff
         # Cells numbered row by row, with a border of empty ones: no neighbour wraps round.
         width = math.ceil(2.0 * self.arena_radius / cutoff) + 3
@@ -468,6 +564,66 @@ class Physics:
             near.append(found)
         return near
 
+    def _compute_proximity_vectorised(self) -> np.ndarray:
+        """``_compute_proximity`` with numpy over every robot and pair at once: the same
+        operations, element by element, and the same largest reading of each ray."""
+        radius = self.spec.radius
+        reach = self.spec.prox_range
+        state = self._state_array()
+        centres = state[:, :2]
+        sin, cos = self._heading_direction_arrays()
+        sin, cos = sin[:, None], cos[:, None]
+        sensor_sin, sensor_cos = np.array(self._sensor_sin), np.array(self._sensor_cos)
+        ray_x = cos * sensor_cos - sin * sensor_sin  # (robots, 8)
+        ray_y = sin * sensor_cos + cos * sensor_sin
+        along = centres[:, :1] * ray_x + centres[:, 1:2] * ray_y
+        squared = centres[:, 0] * centres[:, 0] + centres[:, 1] * centres[:, 1]
+        inside = (self.arena_radius * self.arena_radius - squared)[:, None]
+        to_wall = -along + np.sqrt(np.maximum(along * along + inside, 0.0))
+        readings: np.ndarray = np.clip(1.0 - (to_wall - radius) / reach, 0.0, 1.0)
+
+        owners, others = self._neighbour_pairs(2.0 * radius + reach)
+        if owners.size:
+            offset = centres[others] - centres[owners]  # (pairs, 2)
+            along = offset[:, :1] * ray_x[owners] + offset[:, 1:2] * ray_y[owners]
+            squared = offset[:, 0] * offset[:, 0] + offset[:, 1] * offset[:, 1]
+            discriminant = along * along - (squared - radius * radius)[:, None]
+            root = np.sqrt(np.maximum(discriminant, 0.0))
+            near = along - root
+            far = along + root
+            hit = (discriminant >= 0.0) & (far >= radius) & (near <= radius + reach)
+            gap = np.maximum(near, radius) - radius
+            pair_readings = np.where(hit, 1.0 - gap / reach, 0.0)
+            # owners is sorted, so each robot's pairs form one run: reduce each run by max.
+            starts = np.flatnonzero(np.r_[True, owners[1:] != owners[:-1]])
+            best = np.maximum.reduceat(pair_readings, starts, axis=0)
+            rows = owners[starts]
+            readings[rows] = np.maximum(readings[rows], best)
+        return readings
+
+    def _neighbour_pairs(self, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
+        """``_neighbours`` as ordered pairs (i, j), i != j, i ascending, with numpy: the
+        same grid of cells of side ``cutoff``."""
+        count = len(self._ids)
+        centres = self._state_array()[:, :2]
+        cells = np.floor((centres + self.arena_radius) / cutoff).astype(np.int64) + 1
+        width = math.ceil(2 * self.arena_radius / cutoff) + 3  # padded: no wrap-around
+        keys = cells[:, 0] * width + cells[:, 1]
+        order = np.argsort(keys, kind="stable")
+        sorted_keys = keys[order]
+        offsets = np.array([dx * width + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1)])
+        wanted = (keys[:, None] + offsets).reshape(-1)
+        first = np.searchsorted(sorted_keys, wanted, side="left")
+        counts = np.searchsorted(sorted_keys, wanted, side="right") - first
+        total = int(counts.sum())
+        owners = np.repeat(np.repeat(np.arange(count), len(offsets)), counts)
+        run_starts = np.repeat(np.cumsum(counts) - counts, counts)
+        others = order[np.repeat(first, counts) + np.arange(total) - run_starts]
+        offset = centres[others] - centres[owners]
+        squared = offset[:, 0] * offset[:, 0] + offset[:, 1] * offset[:, 1]
+        close = (owners != others) & (squared < cutoff * cutoff)
+        return owners[close], others[close]
+
     def proximity_raycast(self, robot_id: int) -> tuple[float, ...]:
         """The same 8 readings from pymunk segment queries (slow; a reference for tests).
 
@@ -475,7 +631,8 @@ class Physics:
         """
         body = self._bodies[self._index[robot_id]]
         row = STATE_ROW * self._index[robot_id]
-        x, y, angle = self._rows[row], self._rows[row + 1], self._rows[row + 2]
+        rows = self._state_rows()
+        x, y, angle = rows[row], rows[row + 1], rows[row + 2]
         radius = self.spec.radius
         reach = self.spec.prox_range
         own = pymunk.ShapeFilter(group=robot_id + 1)
