@@ -302,8 +302,8 @@ def crowded_world(robots: int, seed: int) -> Physics:
 @pytest.mark.parametrize("robots", [12, 60, 150])
 def test_the_numpy_forms_give_the_bits_of_the_robot_by_robot_ones(robots: int) -> None:
     """Large swarms work out a substep's forces and the proximity readings with numpy
-    (``VECTOR_STEP_FROM``, ``VECTOR_PROXIMITY_FROM``): the same operations in the same
-    order, so the same bits, whatever the swarm's size."""
+    (``VECTOR_FROM``): the same operations in the same order, so the same bits, whatever
+    the swarm's size."""
     one_by_one, at_once = crowded_world(robots, 3), crowded_world(robots, 3)
     substeps = one_by_one.substeps_for(DT)
     for _ in range(30):

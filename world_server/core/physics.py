@@ -55,12 +55,12 @@ _STATE_FIELDS = (
 _FORCE_FIELDS = batch.BodyFields.FORCE | batch.BodyFields.TORQUE
 STATE_ROW: Final = 6  # numbers per body in a state buffer
 FORCE_ROW: Final = 3  # and in a force buffer
-# Swarm sizes from which a substep's forces, and the proximity readings, are worked out
+# The swarm size from which a substep's forces and the proximity readings are worked out
 # with numpy for every robot at once; below, robot by robot, where numpy's cost per call
-# outweighs its work. Either way the same operations in the same order: the same bits
-# (tests/test_physics.py compares the two).
-VECTOR_STEP_FROM: Final = 128
-VECTOR_PROXIMITY_FROM: Final = 48
+# outweighs its work (measured: robot by robot costs less at 100 robots, more at 200).
+# Either way the same operations in the same order: the same bits (tests/test_physics.py
+# compares the two).
+VECTOR_FROM: Final = 128
 
 
 def wall_segment_count(arena_radius: float, sag: float = WALL_SAG) -> int:
@@ -349,7 +349,7 @@ class Physics:
             return
         substeps = self.substeps_for(dt)
         substep = dt / substeps
-        if robots >= VECTOR_STEP_FROM:
+        if robots >= VECTOR_FROM:
             self._step_vectorised(substeps, substep)
         else:
             self._step_robot_by_robot(substeps, substep)
@@ -467,7 +467,7 @@ class Physics:
         """Every robot's 8 readings, in insertion order (once per state)."""
         proximity = self._prox
         if proximity is None:
-            if len(self._ids) >= VECTOR_PROXIMITY_FROM:
+            if len(self._ids) >= VECTOR_FROM:
                 proximity = self._compute_proximity_vectorised().tolist()
             else:
                 proximity = self._compute_proximity()
