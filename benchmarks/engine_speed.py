@@ -1,16 +1,21 @@
-"""The in-process engine's speed against another revision of this repository, in one run.
+"""A swarm's speed against another revision of this repository, in one run.
 
 For each swarm size and seed it runs ``swarm run --engine inprocess`` (lockstep, no
-recording) with the working tree and with a baseline revision checked out into a
-temporary worktree, alternating which goes first, ``--repeats`` times each, and reports
-the wall time per tick of each (the run's own ``wall_time_s`` over its ticks: start-up is
-left out; the fastest of the repeats, which is the least disturbed by anything else) and
-their ratio, the median over the seeds. Per tick, because a change to the numeric kernel
-changes how long a run lasts in sim time; ``--horizon`` caps every run at the same sim
-time so both do similar work.
+recording; ``--engine zenoh``: ``swarm run`` with its processes over Zenoh, robots laid
+out as ``swarm run`` does by default) with the working tree and with a baseline revision
+checked out into a temporary worktree, alternating which goes first, ``--repeats`` times
+each, and reports the wall time per tick of each (the run's own ``wall_time_s`` over its
+ticks: start-up is left out; the fastest of the repeats, which is the least disturbed by
+anything else), their ratio, the median over the seeds, and the real-time factors (sim
+seconds per wall second) and their ratio. Per tick, because a change to the numeric
+kernel changes how long a run lasts in sim time; ``--horizon`` caps every run at the same
+sim time so both do similar work. The working tree runs with its compiled cores when they
+are built (``make cores``); the baseline as it was.
 
     .venv/bin/python benchmarks/engine_speed.py --baseline 00d94b4 --robots 10 100 \
         --seeds 0 1 2 3 4 --horizon 200
+    .venv/bin/python benchmarks/engine_speed.py --baseline 7630779 --engine zenoh \
+        --robots 10 100 --seeds 0 1 --repeats 2 --horizon 200
 
 Check ``cat /proc/loadavg`` before and after: on a busy machine the figures mean little.
 """
@@ -30,10 +35,12 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 
 
-def run_once(tree: Path, robots: int, seed: int, horizon: float) -> dict[str, Any]:
-    """One in-process run from ``tree``'s code; its summary."""
+def run_once(tree: Path, robots: int, seed: int, horizon: float, engine: str) -> dict[str, Any]:
+    """One run from ``tree``'s code; its summary."""
     environment = dict(os.environ, PYTHONPATH=str(tree))
-    command = [sys.executable, "-m", "deploy.cli", "run", "--engine", "inprocess"]
+    command = [sys.executable, "-m", "deploy.cli", "run"]
+    if engine == "inprocess":
+        command += ["--engine", "inprocess"]
     command += ["--robots", str(robots), "--seed", str(seed), "--timeout", str(horizon)]
     command += ["--no-record", "--json", "--quiet"]
     done = subprocess.run(
@@ -57,6 +64,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     parser.add_argument("--horizon", type=float, default=200.0, help="sim seconds at most")
     parser.add_argument("--repeats", type=int, default=3, help="runs of each seed and tree")
+    parser.add_argument(
+        "--engine",
+        choices=["inprocess", "zenoh"],
+        default="inprocess",
+        help="inprocess (default), or zenoh: swarm run's processes over Zenoh",
+    )
     args = parser.parse_args(argv)
     print(f"load average before: {Path('/proc/loadavg').read_text().split()[:3]}")
     with tempfile.TemporaryDirectory(prefix="engine-speed-") as scratch:
@@ -67,8 +80,12 @@ def main(argv: list[str] | None = None) -> int:
             capture_output=True,
         )
         try:
-            print("| robots | seeds | baseline ms/tick | working tree ms/tick | ratio |")
-            print("|---:|---:|---:|---:|---:|")
+            print(f"engine: {args.engine}")
+            print(
+                "| robots | seeds | baseline ms/tick | working tree ms/tick | ratio "
+                "| baseline RTF | working tree RTF | RTF ratio |"
+            )
+            print("|---:|---:|---:|---:|---:|---:|---:|---:|")
             for robots in args.robots:
                 old: list[float] = []
                 new: list[float] = []
@@ -77,14 +94,17 @@ def main(argv: list[str] | None = None) -> int:
                     for repeat in range(args.repeats):
                         order = [baseline, REPO] if repeat % 2 == 0 else [REPO, baseline]
                         for tree in order:
-                            ms = per_tick_ms(run_once(tree, robots, seed, args.horizon))
-                            fastest[tree] = min(fastest[tree], ms)
+                            summary = run_once(tree, robots, seed, args.horizon, args.engine)
+                            fastest[tree] = min(fastest[tree], per_tick_ms(summary))
                     old.append(fastest[baseline])
                     new.append(fastest[REPO])
                 old_ms, new_ms = statistics.median(old), statistics.median(new)
+                # Sim seconds per wall second: a tick is dt = 0.1 sim s.
+                old_rtf, new_rtf = 100.0 / old_ms, 100.0 / new_ms
                 print(
                     f"| {robots} | {len(args.seeds)} | {old_ms:.3f} | {new_ms:.3f} "
-                    f"| {new_ms / old_ms:.3f} |",
+                    f"| {new_ms / old_ms:.3f} | {old_rtf:.1f} | {new_rtf:.1f} "
+                    f"| {new_rtf / old_rtf:.2f} |",
                     flush=True,
                 )
         finally:
