@@ -244,13 +244,14 @@ def published_form(job: Job, record: Any) -> Any:
 
 
 def differences(published: Any, now: Any) -> list[str]:
-    """What differs between two records, field by field (or line by line)."""
+    """What differs between two records, field by field (or line by line). Every field
+    the published record has is compared (nested ones too); a field only the fresh record
+    has is not, as ``swarm study --check`` does: a run converted from an older results
+    file kept fewer fields."""
     if isinstance(published, dict) and isinstance(now, dict):
-        return [
-            f"{name}: {published.get(name)!r} -> {now.get(name)!r}"
-            for name in sorted(published.keys() | now.keys())
-            if published.get(name) != now.get(name)
-        ]
+        from deploy.study import check
+
+        return check.differences(published, now)
     if isinstance(published, list) and isinstance(now, list) and len(published) == len(now):
         return [f"{old} -> {new}" for old, new in zip(published, now, strict=True) if old != new]
     return [] if published == now else [f"{published!r} -> {now!r}"]
