@@ -22,7 +22,7 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from enum import StrEnum
-from typing import Annotated
+from typing import Annotated, Final
 
 import msgspec
 
@@ -114,12 +114,20 @@ def check_beacon_name(text: str) -> str:
 
 
 # Formatting the enum costs more than the rest of a tick's book-keeping for a robot.
-_ROBOT_PREFIX = f"{Role.ROBOT.value}/"
-_BEACON_PREFIX = f"{Role.BEACON.value}/"
+_ROBOT_PREFIX: Final = f"{Role.ROBOT.value}/"
+_BEACON_PREFIX: Final = f"{Role.BEACON.value}/"
+# Each robot's identity, made once: the world asks for every robot's several times a tick,
+# and the same string object hashes once for the dictionaries it keys.
+_ROBOT_IDENTITIES: Final[dict[int, str]] = {}
 
 
 def robot_identity(robot: int) -> str:
-    return _ROBOT_PREFIX + str(robot)
+    identity = _ROBOT_IDENTITIES.get(robot)
+    if identity is None:
+        identity = _ROBOT_PREFIX + str(robot)
+        if 0 <= robot < MAX_ROBOTS:  # a bounded cache: only ids a swarm can have
+            _ROBOT_IDENTITIES[robot] = identity
+    return identity
 
 
 def beacon_identity(name: str) -> str:
