@@ -18,7 +18,9 @@ import hashlib
 import io
 import json
 import struct
+import subprocess
 import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -97,6 +99,24 @@ def kernel_digest() -> str:
                   numeric.exp(x), numeric.log(y), numeric.power(y, 0.37))  # fmt: skip
         digest.update(struct.pack("<7d", *values))
     return digest.hexdigest()
+
+
+def run(root: Path, environment: dict[str, str], timeout: float = 250.0) -> dict[str, Any]:
+    """This probe's results, run in a fresh interpreter from the checkout ``root`` (its
+    packages first on the path) with ``environment``."""
+    done = subprocess.run(
+        [sys.executable, str(root / "tests" / "portable_probe.py")],
+        cwd=root,
+        env=dict(environment, PYTHONPATH=str(root)),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+    if done.returncode != 0:
+        raise AssertionError(done.stderr[-2000:])
+    result: dict[str, Any] = json.loads(done.stdout)
+    return result
 
 
 def main() -> int:

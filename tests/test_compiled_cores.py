@@ -10,7 +10,6 @@ the same.
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import subprocess
@@ -18,6 +17,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import portable_probe
 import pytest
 
 from plumbing import cores
@@ -34,19 +34,7 @@ pytestmark = pytest.mark.timeout(300)
 
 def probe(root: Path) -> dict[str, Any]:
     """The probe's results with the packages of ``root``."""
-    environment = dict(os.environ, PYTHONPATH=str(root))
-    done = subprocess.run(
-        [sys.executable, str(root / "tests" / "portable_probe.py")],
-        cwd=root,
-        env=environment,
-        capture_output=True,
-        text=True,
-        timeout=250,
-        check=False,
-    )
-    assert done.returncode == 0, done.stderr[-2000:]
-    result: dict[str, Any] = json.loads(done.stdout)
-    return result
+    return portable_probe.run(root, dict(os.environ))
 
 
 def source_only(destination: Path) -> Path:

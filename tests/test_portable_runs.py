@@ -19,10 +19,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import portable_probe
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
-PROBE = REPO / "tests" / "portable_probe.py"
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -62,18 +62,7 @@ def masked_environment() -> dict[str, str]:
 
 
 def probe(environment: dict[str, str]) -> dict[str, Any]:
-    done = subprocess.run(
-        [sys.executable, str(PROBE)],
-        cwd=REPO,
-        env=environment,
-        capture_output=True,
-        text=True,
-        timeout=200,
-        check=False,
-    )
-    assert done.returncode == 0, done.stderr[-2000:]
-    result: dict[str, Any] = json.loads(done.stdout)
-    return result
+    return portable_probe.run(REPO, environment, timeout=200)
 
 
 def test_runs_are_the_same_with_every_dispatched_simd_path_masked() -> None:
