@@ -4,8 +4,9 @@ The world's ``Coordinator``, one process's ``HostedRobots`` over every robot's
 ``RobotEndpoint``, and the beacon's ``BeaconEndpoint`` exchange the same messages as over
 Zenoh (the same keys and messages; the robots' senses and acts in batches, as a process
 hosting them does), handed from one to the other in memory as they are made, typed: the
-bytes, tags and decoding a transport needs are never made (``wire.parcel``), except for
-a tap, which sees every message as it would be sent. Nothing of the
+bytes, tags and decoding a transport needs are not made for the world's and the robots'
+messages (``wire.parcel``); the beacon, which answers one tick in five, still takes its
+clock and answers in bytes, and a tap sees every message as it would be sent. Nothing of the
 tick is coded here: opening and closing ticks, the barrier, the radio and the checks of
 every input are the coordinator's and the endpoints', so a seed gives the same per-robot
 results as ``swarm run`` by construction. Like the launcher, this engine learns the run
