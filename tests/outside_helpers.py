@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import json
+import os
 import select
 import shutil
 import socket
@@ -76,8 +77,10 @@ def make_c_robot(*targets: str) -> subprocess.CompletedProcess[str]:
 
 
 def c_robot_binary() -> Path | None:
-    """The C robot, built when it is missing; None without gcc or make."""
-    if shutil.which("make") is None or shutil.which("gcc") is None:
+    """The C robot, built when it is missing; None without make or the C compiler make
+    would use (``$CC``, as the Makefile's test target asks, or gcc)."""
+    compiler = os.environ.get("CC") or "gcc"
+    if shutil.which("make") is None or shutil.which(compiler) is None:
         return None
     built = make_c_robot()
     assert built.returncode == 0, built.stdout[-2000:] + built.stderr[-2000:]

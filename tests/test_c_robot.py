@@ -22,7 +22,7 @@ pytestmark = pytest.mark.timeout(900)
 def binary() -> Path:
     built = c_robot_binary()
     if built is None:
-        pytest.skip("gcc or make is missing: the C robot cannot be built")
+        pytest.skip("the C compiler ($CC, or gcc) or make is missing: the C robot cannot be built")
     return built
 
 
