@@ -35,6 +35,7 @@ import subprocess
 import sys
 import sysconfig
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -109,11 +110,23 @@ def _shared_library() -> Path:
     return REPO / (GROUP.replace(".", "/") + "__mypyc" + suffix)
 
 
+def importable(name: str, suffixes: Sequence[str]) -> bool:
+    """Whether this interpreter's import system would load a file of this name as a module:
+    a module name and one of its extension suffixes. Another machine's build in the same
+    folder (``engine.cpython-311-x86_64-linux-gnu.so`` seen by an aarch64 Python) is not."""
+    return any(
+        name.endswith(suffix) and name.removesuffix(suffix).isidentifier() for suffix in suffixes
+    )
+
+
 def _compiled_files() -> list[Path]:
-    """Every compiled module in the folders the cores come from, ours or not."""
-    suffixes = tuple(importlib.machinery.EXTENSION_SUFFIXES)
+    """Every compiled module this interpreter would import from the folders the cores come
+    from, ours or not."""
+    suffixes = importlib.machinery.EXTENSION_SUFFIXES
     folders = sorted({(REPO / module).parent for module in MODULES})
-    return [path for folder in folders for path in folder.iterdir() if path.name.endswith(suffixes)]
+    return [
+        path for folder in folders for path in folder.iterdir() if importable(path.name, suffixes)
+    ]
 
 
 def _strays() -> list[Path]:

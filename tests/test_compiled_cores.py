@@ -10,6 +10,7 @@ the same.
 
 from __future__ import annotations
 
+import importlib.machinery
 import os
 import shutil
 import subprocess
@@ -74,3 +75,31 @@ def test_what_compiled_code_cannot_show_holds_in_the_source(tmp_path: Path) -> N
     )
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-1000:]
     assert " skipped" not in done.stdout.splitlines()[-1], done.stdout[-500:]
+
+
+def test_only_what_this_interpreter_would_import_can_shadow_a_source() -> None:
+    aarch64 = (".cpython-311-aarch64-linux-gnu.so", ".abi3.so", ".so")
+    assert cores.importable("engine.cpython-311-aarch64-linux-gnu.so", aarch64)
+    assert cores.importable("engine.so", aarch64)
+    assert cores.importable("cores__mypyc.abi3.so", aarch64)
+    # A build of the same tree by an x86-64 Python: the aarch64 one never loads it.
+    assert not cores.importable("engine.cpython-311-x86_64-linux-gnu.so", aarch64)
+    assert not cores.importable("engine.py", aarch64)
+
+
+def test_another_machines_build_in_the_tree_is_not_stale(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A tree shared by two machines (the portability check runs an emulated aarch64 Python
+    on the tree this one built) keeps both builds; each sees only its own."""
+    monkeypatch.setattr(cores, "REPO", tmp_path)
+    for module in cores.MODULES:
+        (tmp_path / module).parent.mkdir(parents=True, exist_ok=True)
+    folder = tmp_path / Path(cores.MODULES[0]).parent
+    (folder / "engine.cpython-311-sparc64-linux-gnu.so").write_bytes(b"")
+    assert cores.status().state == "interpreted"
+    leftover = folder / ("leftover" + importlib.machinery.EXTENSION_SUFFIXES[0])
+    leftover.write_bytes(b"")
+    found = cores.status()
+    assert found.state == "stale"
+    assert leftover.name in found.why
