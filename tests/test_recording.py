@@ -476,3 +476,40 @@ def test_the_recorder_yields_the_cpu_only_to_a_swarm_that_leaves_it_idle_time() 
     assert recorder_niceness(ROBOTS_PER_PROCESS) == 10  # one robot process
     assert recorder_niceness(ROBOTS_PER_PROCESS + 1) == 0  # it would fall behind for good
     assert recorder_niceness(500) == 0
+
+
+def _index_entries(robots: int, ticks: int, chunk_size: int | None) -> tuple[int, int]:
+    """(chunks, channel offsets held in their indexes) of a recording of ``robots``
+    robots' senses over ``ticks`` ticks: what the MCAP writer keeps in memory to the end."""
+    keys = protocol.Keys("chunks")
+    stream = io.BytesIO()
+    mcap = writer.McapRecorder(
+        stream, keys, RunDescription("chunks", 1, robots, 10), chunk_size=chunk_size
+    )
+    for tick in range(ticks):
+        mcap.record(
+            _sample(keys.world_clock, protocol.encode(protocol.Clock(v=1, tick=tick, t=tick / 10)))
+        )
+        for robot in range(robots):
+            sense = protocol.Sense(
+                v=1, tick=tick, t=tick / 10, x=0.1, y=0.01 * robot, theta=0.0,
+                prox=[0.0] * 8, rx=0, camera=False,
+            )  # fmt: skip
+            mcap.record(_sample(keys.sense(robot), protocol.encode(sense)))
+    mcap.finish()
+    stream.seek(0)
+    summary = make_reader(stream).get_summary()
+    assert summary is not None
+    chunks = summary.chunk_indexes
+    return len(chunks), sum(len(chunk.message_index_offsets) for chunk in chunks)
+
+
+def test_a_large_swarms_recorder_holds_a_small_index() -> None:
+    """The writer keeps each chunk's index (an offset per channel in it) until the end, so
+    a large swarm gets larger chunks: fewer of them, each indexing at most every channel."""
+    assert writer.chunk_bytes(10) == writer.chunk_bytes(64) == writer.CHUNK_BYTES
+    assert writer.chunk_bytes(1000) == 1000 * writer.CHUNK_BYTES_PER_ROBOT
+    small_chunks, small_index = _index_entries(1000, 30, writer.CHUNK_BYTES)
+    chunks, index = _index_entries(1000, 30, None)
+    assert chunks * 6 <= small_chunks
+    assert index * 4 <= small_index

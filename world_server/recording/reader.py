@@ -2,7 +2,7 @@
 
 ``RecordingReader`` makes one pass over an MCAP file with ``mcap``'s stream reader and
 hands out each message as it comes: it holds one chunk of the file at a time (the writer
-makes them ``CHUNK_BYTES``), never the whole file, so what a reader of a long recording
+makes them ``chunk_bytes(robots)``), never the whole file, so what a reader of a long recording
 keeps is up to it (``swarm report``'s ``Recording``, the replay's ``Timeline``).
 
 A file cut short by a crash is read up to its last complete record: whatever stops the

@@ -57,13 +57,24 @@ from world_server.recording.records import (
 
 log = logging.getLogger("recorder")
 
-CHUNK_BYTES = 256 * 1024  # a crash loses at most the chunk being filled
+# A crash loses at most the chunk being filled. The MCAP writer keeps every chunk's index
+# (an offset per channel in the chunk, channels being per robot) until the file is closed,
+# so small chunks of a large swarm grow the recorder with the run: at 1000 robots, 256 KiB
+# chunks held about as many bytes of index in memory as they wrote to the file. A chunk
+# grows with the swarm instead, keeping a crash's loss at about the same sim time.
+CHUNK_BYTES = 256 * 1024  # up to 64 robots
+CHUNK_BYTES_PER_ROBOT = 4 * 1024
 # Rejected samples: every one counted, the first REJECTED_KEPT kept, each cut to this size.
 REJECTED_KEPT, REJECTED_SAMPLE_BYTES = 100, 1024
 # Keys of the protocol a recorder routes, at most: a run has a few per robot (sense, act,
 # status, camera, radio, log) and a few of its own. A sample on a key beyond them is
 # rejected, so that samples on ever new keys cannot grow the recorder.
 KEYS_PER_ROBOT, KEYS_OF_A_RUN = 16, 256
+
+
+def chunk_bytes(robots: int) -> int:
+    """The uncompressed size of a recording's chunks for a swarm of ``robots``."""
+    return max(CHUNK_BYTES, robots * CHUNK_BYTES_PER_ROBOT)
 
 
 @dataclass
@@ -94,7 +105,7 @@ class McapRecorder:
         run: RunDescription,
         info: protocol.WorldInfo | None = None,
         *,
-        chunk_size: int = CHUNK_BYTES,
+        chunk_size: int | None = None,
         writer: Any = None,
         keyring: auth.Keyring | None = None,
     ) -> None:
@@ -118,6 +129,8 @@ class McapRecorder:
         if writer is None:
             if stream is None:
                 raise ValueError("a recorder needs a stream to write to, or a writer")
+            if chunk_size is None:
+                chunk_size = chunk_bytes(run.robots)
             writer = Writer(stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
         self._writer = writer
         self._writer.start(library=f"bestofn-swarm recorder, {self._writer_library()}")
