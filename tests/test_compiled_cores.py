@@ -11,6 +11,7 @@ the same.
 from __future__ import annotations
 
 import importlib.machinery
+import json
 import os
 import shutil
 import subprocess
@@ -103,3 +104,39 @@ def test_another_machines_build_in_the_tree_is_not_stale(
     found = cores.status()
     assert found.state == "stale"
     assert leftover.name in found.why
+
+
+OBSERVED = """
+import json, sys
+from deploy.study.grid import Run
+from deploy.study.make import make_comparisons, make_lag
+options = ("--robots", "10", "--sites", "5", "--seed", "3", "--timeout", "2400")
+run = Run("observed", (("what", "observed"),), 3, options=options)
+print(json.dumps({"comparisons": make_comparisons(run, {}), "lag": make_lag(run, {})}))
+"""
+
+
+def observed(root: Path) -> dict[str, Any]:
+    """A run watched by the studies' interpreted subclasses of the controller
+    (deploy/study/observe.py): every comparison, and every pooling and decision."""
+    done = subprocess.run(
+        [sys.executable, "-c", OBSERVED],
+        cwd=root,
+        env=dict(os.environ, PYTHONPATH=str(root)),
+        capture_output=True,
+        text=True,
+        timeout=250,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    result: dict[str, Any] = json.loads(done.stdout)
+    return result
+
+
+def test_studies_watch_a_compiled_controller_as_they_watch_its_source(tmp_path: Path) -> None:
+    if cores.status().state != "compiled":
+        pytest.skip("the compiled cores are not built")
+    compiled = observed(REPO)
+    assert compiled["comparisons"]["comparisons"] > 0
+    assert compiled["lag"]["lag"] is not None
+    assert compiled == observed(source_only(tmp_path))

@@ -52,9 +52,13 @@ from robot_agent.core.navigation import Navigator, NavParams
 from robot_agent.core.parking import Parking, parking_rings, parking_slot
 from robot_agent.core.sensing import QualityEstimator, Sensing
 from wire import names, numeric, protocol
+from wire.compiled import mypyc_attr
 from wire.rng import Stream
 
 
+# Studies and diagnoses watch a run through interpreted subclasses (deploy/study/observe.py,
+# benchmarks/stall_diagnosis.py); compiled, a class refuses them unless it allows them.
+@mypyc_attr(allow_interpreted_subclasses=True)
 class Controller:
     """One robot's Section 5 behaviour; see the module docstring."""
 
