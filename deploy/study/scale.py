@@ -37,10 +37,10 @@ IN_PROCESS = {
 OVER_ZENOH = {10: range(1), 50: range(1), 100: range(1), 200: range(1)}
 RECORDED = {1000: range(1)}  # over Zenoh, with a recording
 TIMEOUT = {10: 6000.0, 50: 6000.0, 100: 6000.0, 200: 6000.0, 500: 12000.0, 1000: 12000.0}
-# Wall seconds a run takes, about, on a shared 2-core machine: in one process, over Zenoh
-# (the means of earlier runs; 1000 robots not measured yet).
-COST = {10: 1.2, 50: 12.0, 100: 83.0, 200: 131.0, 500: 1460.0, 1000: 3600.0}
-ZENOH_COST = {10: 12.0, 50: 28.0, 100: 56.0, 200: 133.0, 1000: 14400.0}
+# Wall seconds a run takes, about, on a shared 2-core machine with the compiled cores: in one
+# process, over Zenoh (the means of the published runs, docs/studies/scale.jsonl).
+COST = {10: 0.4, 50: 2.9, 100: 12.2, 200: 52.3, 500: 532.0, 1000: 2401.0}
+ZENOH_COST = {10: 9.6, 50: 25.9, 100: 40.6, 200: 97.1, 1000: 2466.0}
 ZENOH_WALL_LIMIT = 12 * 3600.0
 BEFORE_FILE = "docs/scale-before.json"
 
