@@ -101,11 +101,13 @@ def kernel_digest() -> str:
     return digest.hexdigest()
 
 
-def run(root: Path, environment: dict[str, str], timeout: float = 250.0) -> dict[str, Any]:
-    """This probe's results, run in a fresh interpreter from the checkout ``root`` (its
-    packages first on the path) with ``environment``."""
-    done = subprocess.run(
-        [sys.executable, str(root / "tests" / "portable_probe.py")],
+def python_from(
+    root: Path, arguments: list[str], environment: dict[str, str], timeout: float = 250.0
+) -> subprocess.CompletedProcess[str]:
+    """``python ARGUMENTS`` in a fresh interpreter from the checkout ``root`` (its packages
+    first on the path) with ``environment``; its output captured."""
+    return subprocess.run(
+        [sys.executable, *arguments],
         cwd=root,
         env=dict(environment, PYTHONPATH=str(root)),
         capture_output=True,
@@ -113,6 +115,12 @@ def run(root: Path, environment: dict[str, str], timeout: float = 250.0) -> dict
         timeout=timeout,
         check=False,
     )
+
+
+def run(root: Path, environment: dict[str, str], timeout: float = 250.0) -> dict[str, Any]:
+    """This probe's results, run in a fresh interpreter from the checkout ``root`` (its
+    packages first on the path) with ``environment``."""
+    done = python_from(root, [str(root / "tests" / "portable_probe.py")], environment, timeout)
     if done.returncode != 0:
         raise AssertionError(done.stderr[-2000:])
     result: dict[str, Any] = json.loads(done.stdout)

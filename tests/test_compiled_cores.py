@@ -14,8 +14,6 @@ import importlib.machinery
 import json
 import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -65,15 +63,8 @@ def test_what_compiled_code_cannot_show_holds_in_the_source(tmp_path: Path) -> N
     if cores.status().state != "compiled":
         pytest.skip("the compiled cores are not built: those tests run in the suite itself")
     root = source_only(tmp_path)
-    done = subprocess.run(
-        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "0", *BY_FRAME],
-        cwd=root,
-        env=dict(os.environ, PYTHONPATH=str(root)),
-        capture_output=True,
-        text=True,
-        timeout=250,
-        check=False,
-    )
+    pytest_args = ["-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "0", *BY_FRAME]
+    done = portable_probe.python_from(root, pytest_args, dict(os.environ))
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-1000:]
     assert " skipped" not in done.stdout.splitlines()[-1], done.stdout[-500:]
 
@@ -119,15 +110,7 @@ print(json.dumps({"comparisons": make_comparisons(run, {}), "lag": make_lag(run,
 def observed(root: Path) -> dict[str, Any]:
     """A run watched by the studies' interpreted subclasses of the controller
     (deploy/study/observe.py): every comparison, and every pooling and decision."""
-    done = subprocess.run(
-        [sys.executable, "-c", OBSERVED],
-        cwd=root,
-        env=dict(os.environ, PYTHONPATH=str(root)),
-        capture_output=True,
-        text=True,
-        timeout=250,
-        check=False,
-    )
+    done = portable_probe.python_from(root, ["-c", OBSERVED], dict(os.environ))
     assert done.returncode == 0, done.stderr[-3000:]
     result: dict[str, Any] = json.loads(done.stdout)
     return result
