@@ -30,8 +30,6 @@ typedef struct {
 
 /* the nonce of the latest asking */
 const uint8_t *questions_latest(const Questions *q);
-#define OUT_QUEUE_BYTES (512 * 1024)
-#define OUT_QUEUE_FRAMES 256
 
 typedef struct {
     uint32_t robot;
@@ -42,7 +40,7 @@ typedef struct {
     char run[MAX_NAME + 1], root[MAX_NAME + 1];
     int encrypted;
     double ping_every;
-    uint8_t controller[8192];
+    uint8_t controller[WELCOME_CONTROLLER_BYTES];
     size_t controller_size;
     uint8_t robot_nonce[8], bridge_nonce[8];
     int open;
@@ -82,7 +80,7 @@ typedef struct {
     int proving_count;
     int ended;
     int has_last_status;
-    uint8_t last_status[32 * 1024];
+    uint8_t last_status[STATUS_BYTES];
     size_t last_status_size;
     uint8_t last_status_attachment[32];
     double status_again_at;

@@ -9,10 +9,6 @@
 #include "controller.h"
 #include "messages.h"
 
-#ifndef PENDING_BYTES
-#define PENDING_BYTES (1024 * 1024)
-#endif
-#define PENDING_MESSAGES 4000
 #define TICK_WINDOW 100
 #define MAX_WORLDS 16
 
