@@ -128,6 +128,16 @@ class LinkRobot:
         for event in self.client.receive(data, now):
             self._take(event, now)
 
+    def hearing(self, now: float) -> None:
+        """A frame is arriving on a serial line: the session is alive, and no question is
+        asked again while it comes (it may be the answer: a map of 1000 sites takes 5 s at
+        115200 baud, and each question asked again would bring one more)."""
+        self.client.hearing(now)
+        if self.asking is not None:
+            self.asking.again_at = max(self.asking.again_at, now + ASK_EVERY)
+        for ask in self.proving.values():
+            ask.again_at = max(ask.again_at, now + PROVE_EVERY)
+
     def stop(self) -> None:
         self.client.bye(codec.ByeReason.GOING_AWAY)
 

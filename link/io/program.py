@@ -71,6 +71,8 @@ def serve(
                 now = time.monotonic()
                 for data, _ in hub.receive(name, now):
                     program.receive(data, now)
+                if hub.receiving(name):
+                    program.hearing(now)  # a long frame under way is not silence
                 _send(program, hub, now)  # answer at once
             hub.take_closed()  # the session notices by the bridge's silence, and says hello
         if hub.is_open("link"):
