@@ -379,8 +379,10 @@ static void answered(LinkRobot *p, const uint8_t *payload, size_t size,
         return;
     }
     p->has_endpoint = 1;
-    log_info("robot %d: %d sites, clock %s, seed %lld: running", p->robot, info.n_sites,
-             info.lockstep ? "lockstep" : "realtime", (long long)info.seed);
+    char seed[21];
+    format_int(info.seed, seed);
+    log_info("robot %d: %d sites, clock %s, seed %s: running", p->robot, info.n_sites,
+             info.lockstep ? "lockstep" : "realtime", seed);
     send_status(p, endpoint_status(p->endpoint, 0), now);
     prove_sorted_worlds(p, now);
 }

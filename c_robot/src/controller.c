@@ -268,6 +268,20 @@ static void parking_slot(Controller *c, int site, double *sx, double *sy) {
     *sy = radii[0] * sine;
 }
 
+/* whether parking_slot's rings and slots fit this build's room (MAX_RINGS, MAX_RING_SLOTS):
+   the run's parking settings in this arena, checked once at start */
+static int parking_fits(const Controller *c) {
+    const ControllerConfig *k = &c->config;
+    double pitch = 2 * c->robot_radius + k->park_lane;
+    double radius = c->arena_radius - k->park_clearance;
+    for (int rings = 0; radius >= c->inner_radius || rings == 0; rings++) {
+        double step = rings == 0 ? k->park_spacing / radius : pitch / radius;
+        if (rings == MAX_RINGS || NK_TWO_PI / step >= (double)MAX_RING_SLOTS + 1) return 0;
+        radius = c->arena_radius - k->park_clearance - (rings + 1) * pitch;
+    }
+    return 1;
+}
+
 static void parking_begin(Controller *c, int site, double t) {
     parking_slot(c, site, &c->slot_x, &c->slot_y);
     c->has_slot = 1;
@@ -524,6 +538,10 @@ int controller_init(Controller *c, int robot_id, const WorldInfo *world,
     c->phase = P_TO_SITE;
     c->changed = 1;
     c->best_distance = INFINITY;
+    if (!parking_fits(c)) {
+        *why = "the parking settings need more rings or slots than this build holds";
+        return -1;
+    }
     return 0;
 }
 
@@ -646,8 +664,8 @@ static void listen(Controller *c, NextHeard next, void *ctx) {
         }
         const char *sender = heard.sender;
         if (!strcmp(sender, c->name) && p->id == c->robot_id) continue; /* our own echo */
-        char claimed[24];
-        snprintf(claimed, sizeof claimed, "%lld", (long long)p->id);
+        char claimed[21];
+        format_int(p->id, claimed);
         if (strcmp(sender, claimed) != 0) {
             c->rejected += 1; /* a robot claiming someone else's id */
             continue;

@@ -234,7 +234,16 @@ static int step(Endpoint *e, const Sense *sense_in, const PendingItem **rx, int 
     /* Radio.poll, then decode_received as the controller listens */
     RxCursor cursor = {e, rx, rx_count, 0};
     static Command command;
+#ifdef STEP_PROBE
+    step_probe(1);
+#endif
     controller_step(e->controller, &reading, next_heard, &cursor, &command);
+#ifdef STEP_PROBE
+    step_probe(0);
+#endif
+    e->steps += 1;
+    e->left = command.left;
+    e->right = command.right;
     int count = 0;
     int64_t radio_tx = 0;
     if (command.broadcast) {

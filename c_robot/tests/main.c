@@ -35,6 +35,12 @@ JNode *load(const char *file) {
     return n;
 }
 
+JNode *cases_json(void) {
+    static JNode *root;
+    if (root == NULL) root = jdom_parse_file("tests/cases.json");
+    return root;
+}
+
 int main(int argc, char **argv) {
     vector_dir = argc > 1 ? argv[1] : "../tests/vectors";
     const char *slash = strrchr(argv[0], '/');

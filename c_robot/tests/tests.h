@@ -6,6 +6,8 @@ extern int passed, failed;
 extern char program_dir[];
 void check(int ok, const char *what, const char *name);
 JNode *load(const char *file);
+/* tests/cases.json, read once for every group that uses it */
+JNode *cases_json(void);
 void test_numeric(void);
 void test_rng(void);
 void test_fsum(void);

@@ -527,8 +527,43 @@ void test_messages(void) {
     check(check_message("Clock", huge, 24 + 100), "messages", "whitespace after the object");
 }
 
-/* --- key files (key_file.json), read by the program itself --------------------------- */
+/* --- key files (key_file.json) ------------------------------------------------------ */
 
+#include "keyfile.h"
+
+/* each file read from its bytes, as the firmware reads its key record's: the key of robot 8
+   and the run, or refused */
+static void key_files_read(JNode *root) {
+    unsigned char want[32];
+    jdom_hex(jdom_str(root, "key_hex"), want, 32);
+    JNode *valid = jdom_get(root, "valid");
+    for (size_t i = 0; i < valid->count; i++) {
+        const char *text = jdom_str(valid->items[i], "utf8");
+        char run[MAX_NAME + 1];
+        unsigned char key[32];
+        const char *why;
+        int ok = key_file_read((const uint8_t *)text, strlen(text), 8, run, key, &why) ==
+                     KEY_FILE_OK &&
+                 !memcmp(key, want, 32) && !strcmp(run, jdom_str(root, "run"));
+        check(ok, "key_file.json valid: its key and run", jdom_str(valid->items[i], "name"));
+    }
+    JNode *invalid = jdom_get(root, "invalid");
+    for (size_t i = 0; i < invalid->count; i++) {
+        const char *text = jdom_str(invalid->items[i], "utf8");
+        char run[MAX_NAME + 1];
+        unsigned char key[32];
+        const char *why;
+        check(key_file_read((const uint8_t *)text, strlen(text), 8, run, key, &why) != KEY_FILE_OK,
+              "key_file.json invalid: refused", jdom_str(invalid->items[i], "name"));
+    }
+}
+
+#ifdef C_ROBOT_BARE_METAL
+void test_key_files(void) {
+    JNode *root = load("key_file.json");
+    if (root) key_files_read(root);
+}
+#else
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
@@ -558,9 +593,11 @@ static int write_key_file(const char *key_file, const char *text) {
     return chmod(key_file, 0600);
 }
 
+/* ... and by the program itself, from a file (on Linux) */
 void test_key_files(void) {
     JNode *root = load("key_file.json");
     if (!root) return;
+    key_files_read(root);
     char program[1100], key_file[1100];
     snprintf(program, sizeof program, "%s/c-robot", program_dir);
     snprintf(key_file, sizeof key_file, "%s/key-file-vector.key", program_dir);
@@ -610,3 +647,4 @@ void test_key_files(void) {
     unlink(key_file);
     close(fd);
 }
+#endif
