@@ -21,6 +21,13 @@
 #   --help` for a larger sample). As root it installs qemu-user and the aarch64 cross
 #   compiler when they are missing; what it downloads is kept in .portable/. CI runs it
 #   after `make check-published`.
+# `make check-mcu`: the robot in C as Cortex-M4F firmware under qemu-system-arm
+#   (portable/mcu.py): its RAM and flash against their budgets, its unit tests on
+#   mps2-an386, a build without entropy refusing to start, and lockstep runs with it as
+#   robot 9 on netduinoplus2 over a serial line (seeds 0 and 3, and 7 and 8 with camera
+#   noise) against the all-emulated runs. Without arm-none-eabi-gcc and newlib,
+#   qemu-system-arm or socat it says what is missing and skips (exit 0). CI runs it after
+#   `make check-portable`, installing Debian's packages for it as root.
 # All of them create .venv and install the project on first use (and again when the
 # lock changes): the exact versions and hashes of requirements/run.lock (make run) or
 # requirements/test.lock (the rest), then the project itself without dependencies.
@@ -35,7 +42,7 @@ UV_VERSION := 0.13.9
 LOCK_OPTIONS := --generate-hashes --universal --fork-strategy fewest --python-version 3.11
 TEST_WORKERS ?= 2
 
-.PHONY: run test test-fast check-published check-portable explore lint bench lock c-robot clean cores clean-cores
+.PHONY: run test test-fast check-published check-portable check-mcu explore lint bench lock c-robot clean cores clean-cores
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -89,6 +96,10 @@ check-published: $(VENV)/.installed-test
 check-portable: $(VENV)/.installed-test
 	$(BIN)/python -m plumbing.cores build
 	$(BIN)/python -m portable
+
+check-mcu: $(VENV)/.installed-test
+	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m portable.mcu
 
 # The property tests with fresh random examples (make test repeats the same ones).
 explore: $(VENV)/.installed-test

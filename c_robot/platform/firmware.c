@@ -26,6 +26,7 @@ static LinkRobot program;
 static Deframer deframer;
 static MotorGuard guard;
 static long framing_refused[R_COUNT]; /* the serial framing's refusals (corrupt, oversize) */
+static size_t largest_frame; /* the longest link frame received (a camera frame's PNG in it) */
 
 /* what the steps cost, in clock ticks (under qemu -icount, instructions: docs/porting.md):
    a step as the firmware takes it (from the tick's last input to the act sealed: the
@@ -72,6 +73,7 @@ static void on_frame(void *ctx, uint8_t *frame, size_t size, int refusal) {
         framing_refused[refusal]++;
         return;
     }
+    if (size > largest_frame) largest_frame = size;
     int64_t before = program.has_endpoint ? program.endpoint->steps : 0;
     uint64_t start = board_clock();
     link_robot_receive(&program, frame, size, now);
@@ -106,12 +108,13 @@ static void report(void) {
                          "{\"firmware\": {\"steps\": %ld, \"step_ticks_total\": %s, "
                          "\"step_ticks_worst\": %s, \"controller_ticks_total\": %s, "
                          "\"controller_ticks_worst\": %s, \"clock_hz\": %lu, "
-                         "\"stack_peak\": %lu, \"heap_peak\": %lu, \"framing_refused\": %ld, "
-                         "\"overruns\": %lu, \"motor_stops\": %ld, \"queue_dropped\": %ld}}\n",
+                         "\"stack_peak\": %lu, \"heap_peak\": %lu, \"largest_frame\": %lu, "
+                         "\"framing_refused\": %ld, \"overruns\": %lu, \"motor_stops\": %ld, "
+                         "\"queue_dropped\": %ld}}\n",
                          (long)cost.count, total, worst, controller_total, controller_worst,
                          (unsigned long)board_clock_hz,
                          (unsigned long)board_stack_peak(), (unsigned long)board_heap_peak(),
-                         refused, (unsigned long)board_link_overruns(), guard.stops,
+                         (unsigned long)largest_frame, refused, (unsigned long)board_link_overruns(), guard.stops,
                          program.client.queue_dropped);
     board_log(line, n);
 }

@@ -344,3 +344,94 @@ void test_client(void) {
     check(strstr(summary, "\"sessions\": 1") && strstr(summary, "\"refused\": {\"replayed\": 1}"),
           "client", summary);
 }
+
+/* --- a serial line's long frames, and the firmware's platform pieces ------------------ */
+
+#include "key_record.h"
+#include "motor_guard.h"
+
+static void test_hearing(void) {
+    link_robot_init(&robot, 8, "demo", robot_key);
+    link_robot_wake(&robot, 0.0);
+    client_clear(&robot.client);
+    const char *welcome = "{\"v\":1,\"run\":\"demo\",\"root\":\"bestofn\",\"cipher\":\"none\","
+                          "\"ping_every\":0.5,\"silence\":3.0,\"controller\":{\"dwell\":3.0}}";
+    from_bridge(F_WELCOME, (const uint8_t *)welcome, strlen(welcome), 0, 0.0);
+    client_clear(&robot.client); /* the ping and the question for the map */
+    int types[16];
+    Frame frames[16];
+    int asked = 0;
+    for (double t = 0.5; t <= 5.51; t += 0.5) { /* a long frame arriving all along */
+        link_robot_hearing(&robot, t);
+        link_robot_wake(&robot, t);
+        asked += sent_types(types, frames, 16);
+    }
+    check(robot.client.open && asked == 0, "serial line",
+          "a frame under way: the session holds, and nothing is asked again");
+    link_robot_wake(&robot, 6.5);
+    check(sent_types(types, frames, 16) == 1 && types[0] == F_DATA, "serial line",
+          "the question again 1 s after the last bytes");
+    link_robot_wake(&robot, 8.5);
+    check(!robot.client.open, "serial line", "silence 3 s after the last bytes heard");
+}
+
+static void test_motor_guard(void) {
+    MotorGuard guard;
+    double left, right;
+    motor_guard_init(&guard, 0.3);
+    motor_guard_wheels(&guard, 0.0, &left, &right);
+    int ok = left == 0.0 && right == 0.0;
+    motor_guard_command(&guard, 1.0, 0.1, -0.05);
+    motor_guard_wheels(&guard, 1.29, &left, &right);
+    ok &= left == 0.1 && right == -0.05 && guard.stops == 0;
+    motor_guard_wheels(&guard, 1.3, &left, &right);
+    ok &= left == 0.0 && right == 0.0 && guard.stops == 1;
+    motor_guard_wheels(&guard, 1.4, &left, &right);
+    ok &= guard.stops == 1; /* stopped once, not again */
+    motor_guard_command(&guard, 1.5, 0.0, 0.0);
+    motor_guard_wheels(&guard, 2.0, &left, &right);
+    ok &= guard.stops == 1; /* wheels already still: nothing stopped */
+    check(ok, "motor guard", "a command holds for the timeout, then the wheels stop");
+}
+
+static size_t make_record(uint8_t *record, uint32_t robot_id, const char *text) {
+    uint32_t n = (uint32_t)strlen(text);
+    memcpy(record, "BOKR", 4);
+    for (int i = 0; i < 4; i++) {
+        record[4 + i] = (uint8_t)(robot_id >> (8 * i));
+        record[8 + i] = (uint8_t)(n >> (8 * i));
+    }
+    memcpy(record + 12, text, n);
+    uint32_t crc = crc32_of(record, 12 + n);
+    for (int i = 0; i < 4; i++) record[12 + n + i] = (uint8_t)(crc >> (8 * i));
+    return 16 + n;
+}
+
+static void test_key_record(void) {
+    static uint8_t record[512];
+    const char *text = "{\"v\":1,\"run\":\"demo\",\"keys\":{\"robot/9\":\"" /* 32 bytes of 0xab */
+                       "abababababababababababababababababababababababababababababababab\"}}";
+    size_t size = make_record(record, 9, text);
+    int robot_id;
+    const uint8_t *found;
+    size_t found_size;
+    const char *why;
+    int ok = key_record_read(record, sizeof record, &robot_id, &found, &found_size, &why) == 0 &&
+             robot_id == 9 && found_size == strlen(text) && !memcmp(found, text, found_size);
+    check(ok, "key record", "read back: the robot and its key file");
+    record[20] ^= 1;
+    check(key_record_read(record, sizeof record, &robot_id, &found, &found_size, &why) != 0,
+          "key record", "a changed byte: its CRC does not check out");
+    record[20] ^= 1;
+    check(key_record_read(record, size - 1, &robot_id, &found, &found_size, &why) != 0,
+          "key record", "longer than the flash that holds it");
+    memset(record, 0xFF, sizeof record);
+    check(key_record_read(record, sizeof record, &robot_id, &found, &found_size, &why) != 0,
+          "key record", "erased flash is no record");
+}
+
+void test_platform(void) {
+    test_hearing();
+    test_motor_guard();
+    test_key_record();
+}
