@@ -299,7 +299,7 @@ def lockstep(elf: Path, seed: int, extra: Sequence[str], baud: int, icount: bool
         "firmware_exit": qemu.returncode if qemu is not None else None,
         "program": program,
         "firmware": figures,
-        "log_tail": lines[-3:],
+        "log_tail": [line for line in lines if "WARNING" in line or "ERROR" in line][-4:],
     }
 
 
@@ -407,8 +407,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             except (RuntimeError, OSError, subprocess.SubprocessError) as error:
                 tally.result(False, f"{what}: {error}")
                 continue
+            clean = found["firmware"].get("overruns") == 0  # no byte lost by the ring
             tally.result(
-                found["same"] and found["firmware_exit"] == 0,
+                found["same"] and found["firmware_exit"] == 0 and clean,
                 run_line(what, baud, found, args.icount),
             )
     return finish(tally)
@@ -418,17 +419,21 @@ def run_line(what: str, baud: int, found: dict[str, Any], icount: bool) -> str:
     line = (
         f"{what}: robot {OUTSIDE} on netduinoplus2 at {baud} baud, digest "
         f"{found['digest']} (all emulated {found['reference_digest']}), sim "
-        f"{found['sim_time_s']} s in {found['wall_time_s']} s, stalls {found['stalls']}"
+        f"{found['sim_time_s']} s in {found['wall_time_s']} s, stalls {found['stalls']}, "
+        f"departures {found['departures']}, link sessions {found['program'].get('sessions')}"
     )
     figures = found["firmware"]
     if figures:
         line += (
             f"; firmware: {figures['steps']} steps, largest frame "
             f"{figures['largest_frame']} B, stack peak {figures['stack_peak']} B, heap peak "
-            f"{figures['heap_peak']} B, exit {found['firmware_exit']}"
+            f"{figures['heap_peak']} B, bytes lost {figures['overruns']}, frames refused "
+            f"{figures['framing_refused']}, exit {found['firmware_exit']}"
         )
         if icount:
             line += "; " + instructions(figures)
+    if not found["same"]:
+        line += "; the firmware's log ends: " + " | ".join(found["log_tail"])
     return line
 
 

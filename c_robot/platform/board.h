@@ -24,6 +24,10 @@ uint32_t board_link_overruns(void);
    UART paces itself at its baud rate). */
 void board_link_write(const uint8_t *bytes, size_t size);
 
+/* Wait for the next interrupt (a byte received, the clock's tick, at most 1 ms): what the
+   processor does while the robot has nothing to do. */
+void board_idle(void);
+
 /* The log's sink: one line, with its newline (a second UART here). */
 void board_log(const char *line, size_t size);
 

@@ -166,6 +166,7 @@ int main(void) {
         if (heard && deframer_receiving(&deframer))
             link_robot_hearing(&program, now); /* a long frame under way is not silence */
         drive(now);
+        if (!heard) board_idle(); /* until a byte comes or the clock ticks */
     }
     link_robot_stop(&program); /* nothing more to say after a BYE 1; a BYE 2 otherwise */
     send_outgoing();

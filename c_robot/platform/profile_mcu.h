@@ -1,7 +1,7 @@
 /* The limits of a robot on a microcontroller (src/limits.h): runs of up to 10 sites and 16
-   robots, and the world's camera frames, 64 x 48 RGB PNGs (5 to 9.4 KB with the camera's
-   noise, at most 9.3 KB + 100 B of PNG around 9,264 bytes stored). Given to every compile of
-   the firmware with -include. The RAM it takes is measured by the build (make -C c_robot
+   robots, and the world's camera frames, 64 x 48 RGB PNGs (noise makes them larger: at
+   most about 9.3 KB, their 9,264 bytes of rows stored uncompressed). Given to every compile
+   of the firmware with -include. The RAM it takes is measured by the build (make -C c_robot
    firmware prints it; docs/porting.md, "On a microcontroller"). A map, a message or a
    frame past these is refused and counted, never overrun. */
 #ifndef CR_PROFILE_MCU_H
