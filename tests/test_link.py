@@ -245,6 +245,21 @@ def test_a_paced_line_hands_bytes_on_as_the_line_carries_them_each_frame_in_time
     assert line.deadline is None and line.held_bytes == 0
 
 
+def test_a_paced_line_drops_the_frames_not_begun_and_finishes_the_one_under_way() -> None:
+    """When a session ends, what waits for it on the line is dropped (the next session's
+    welcome would wait behind it), but the frame whose bytes are going finishes whole."""
+    line = pacing.PacedLine(115200)
+    done = line.put(b"x" * 11520, 0.0)  # 1 s of line
+    line.put(b"y" * 11520, 0.0)
+    line.put(b"z" * 100, 0.0)
+    line.take(0.5)
+    assert line.discard_waiting(0.5) == 2
+    assert line.busy_until == pytest.approx(done) and line.held_bytes == 11520
+    rest, completed = line.take(1.0)
+    assert completed == 1 and line.held_bytes == 0 and set(rest) == {ord("x")}
+    assert line.put(b"next", 1.0) == pytest.approx(1.0 + 40 / 115200)  # free again
+
+
 def test_a_frame_under_way_on_a_serial_line_keeps_the_session_at_both_ends() -> None:
     """Bytes of a frame arriving (hearing) restart the silence at either end; and the bridge
     does not count as the robot's silence the time its own frames take to reach the robot,

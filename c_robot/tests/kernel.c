@@ -121,7 +121,7 @@ void test_rng(void) {
     for (size_t i = 0; i < seeds->count; i++) {
         JNode *s = seeds->items[i];
         char text[256];
-        int n = snprintf(text, sizeof text, "%lld", jdom_get(s, "run_seed")->integer);
+        int n = format_int(jdom_get(s, "run_seed")->integer, text); /* nano has no %lld */
         JNode *parts = jdom_get(s, "parts");
         for (size_t k = 0; k < parts->count; k++) {
             JNode *p = parts->items[k];

@@ -154,8 +154,8 @@ void test_decision(void) {
             if (ok) controller_parking_slot(c, site, &x, &y);
             double wx = hexd(s->items[2]->str), wy = hexd(s->items[3]->str);
             char name[96];
-            snprintf(name, sizeof name, "%lld robots: robot %d, site %d",
-                     jdom_get(p, "robots")->integer, robot, site);
+            snprintf(name, sizeof name, "%d robots: robot %d, site %d",
+                     (int)jdom_get(p, "robots")->integer, robot, site);
             check(ok && !memcmp(&x, &wx, 8) && !memcmp(&y, &wy, 8), "parking slot", name);
         }
     }

@@ -84,6 +84,19 @@ class PacedLine:
             completed += 1
         return b"".join(due), completed
 
+    def discard_waiting(self, now: float) -> int:
+        """Drop the frames not begun by ``now`` (the one under way goes on to its end, so
+        the far end gets no broken frame); how many. The line is free again once the frame
+        under way is done."""
+        kept = 0
+        while kept < len(self.held) and self.held[kept].start < now:
+            kept += 1
+        dropped = len(self.held) - kept
+        for _ in range(dropped):
+            self.held_bytes -= len(self.held.pop().data)
+        self.pacer.free_at = self.held[-1].done if self.held else min(self.pacer.free_at, now)
+        return dropped
+
     @property
     def deadline(self) -> float | None:
         """When ``take`` has the next slice of bytes (None: nothing held)."""

@@ -129,6 +129,11 @@ class Hub:
         transport = self.transports.get(name)
         return transport.busy_until if isinstance(transport, SerialLine) else None
 
+    def discard_waiting(self, name: Hashable, now: float) -> int:
+        """On serial line ``name``, drop the frames not begun yet; how many."""
+        transport = self.transports.get(name)
+        return transport.discard_waiting(now) if isinstance(transport, SerialLine) else 0
+
     def send(self, name: Hashable, frame: bytes, target: Hashable, now: float) -> None:
         """Send ``frame`` (to ``target``, for a UDP server) on transport ``name``; dropped
         while it is closed, as on a line that is down."""

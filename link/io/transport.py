@@ -156,6 +156,11 @@ class SerialLine(Closing):
         """Whether a frame is under way: bytes of it read, its closing zero not yet."""
         return self.deframer.receiving
 
+    def discard_waiting(self, now: float) -> int:
+        """Drop the frames whose first byte has not gone yet (a session that ended); how
+        many."""
+        return self.line.discard_waiting(now)
+
     def send(self, frame: bytes, target: Hashable, now: float) -> None:
         encoded = codec.serial_encode(frame)
         if self.line.held_bytes + len(encoded) > MAX_PENDING_BYTES:

@@ -424,6 +424,9 @@ class Bridge:
                 self._publish_stats(now, force=True)
             elif isinstance(event, SessionClosed):
                 self.presence.gone(event.robot)
+                # What waits on a serial line for the session that ended would hold up the
+                # next one's welcome behind it (a map of 1000 sites is 5 s at 115200 baud).
+                self.hub.discard_waiting(event.robot, now)
                 self._publish_stats(now, force=True)
 
     def _relay(self, message: Message) -> None:
