@@ -2104,8 +2104,129 @@ BUILDERS: tuple[Callable[[], TypeVectors], ...] = (
 )
 
 
-def build() -> dict[str, str]:
-    """File name -> the text of that vector file."""
+# --- the controller ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ControllerTrack:
+    """One robot of one run, from its first step to ``AFTER`` steps past the first time it
+    fired ``until`` (phase, event)."""
+
+    name: str
+    about: str
+    sites: int
+    seed: int
+    robot: int
+    until: tuple[str, str]
+    # ControllerConfig's settings beyond the defaults
+    settings: dict[str, Any] = field(default_factory=dict)
+
+
+# Every run: ten robots, the paper's settings (swarm run's defaults), a radio that loses 30 %
+# of the copies it delivers and camera noise of 10 (docs/robustness.md's settings).
+CONTROLLER_RUN: dict[str, Any] = {"robots": 10, "drop": 0.3, "camera_noise": 10.0}
+AFTER = 10
+CONTROLLER_TRACKS = (
+    ControllerTrack(
+        "displaced",
+        "three trips, a decision, parking, and a crowd pushing the parked robot out of its "
+        "slot: it drives back",
+        sites=10,
+        seed=13,
+        robot=5,
+        until=("stopped", "displaced"),
+    ),
+    ControllerTrack(
+        "lingering",
+        "the paper's fix for isolated robots (linger 10 s, n = 5): a decided robot stays at "
+        "the nest broadcasting before it parks",
+        sites=5,
+        seed=69,
+        robot=9,
+        until=("lingering", "lingered"),
+        settings={"linger": 10.0},
+    ),
+    ControllerTrack(
+        "site_unseen",
+        "three frames of a site in a row show no panel (robots in the way): the pair is "
+        "given up and the robot goes home",
+        sites=10,
+        seed=532,
+        robot=4,
+        until=("sensing", "site_unseen"),
+    ),
+    ControllerTrack(
+        "waiting",
+        "home at the nest's centre without having heard the beacon (lost copies): the robot "
+        "waits there until it hears it",
+        sites=10,
+        seed=436,
+        robot=2,
+        until=("waiting", "heard_beacon"),
+    ),
+    ControllerTrack(
+        "leg_timed_out",
+        "a leg given 10 s (travel_timeout 10, travel_crawl 0.1 m/s; the default 120 s never "
+        "runs out in a swarm of ten): the robot gives the site up and goes home",
+        sites=10,
+        seed=0,
+        robot=1,
+        until=("to_site", "leg_timed_out"),
+        settings={"travel_timeout": 10.0, "travel_crawl": 0.1},
+    ),
+)
+
+
+def controller_vectors() -> str:
+    """Tracks of real runs, step by step (deploy/conformance/vectors.py, docs/controller.md)."""
+    from deploy.conformance import capture, vectors
+    from robot_agent.core.controller import ControllerConfig
+    from world_server.core.camera import CameraNoise
+    from world_server.core.radio import RadioConfig
+    from world_server.core.world import World, WorldConfig
+
+    tracks = []
+    for spec in CONTROLLER_TRACKS:
+        world = WorldConfig(
+            run="vectors",
+            seed=spec.seed,
+            num_sites=spec.sites,
+            num_robots=CONTROLLER_RUN["robots"],
+            radio=RadioConfig(drop=CONTROLLER_RUN["drop"]),
+            camera_noise=CameraNoise(pixel_sigma=CONTROLLER_RUN["camera_noise"]),
+        )
+        config = ControllerConfig(**spec.settings)
+        caught = capture.capture_run(world, config, [spec.robot])
+        steps = caught.steps[spec.robot]
+        end = next(index for index, step in enumerate(steps) if tuple(spec.until) in step.events)
+        tracks.append(
+            vectors.track_from_steps(
+                name=spec.name,
+                about=spec.about,
+                run={**CONTROLLER_RUN, "sites": spec.sites, "seed": spec.seed, **spec.settings},
+                robot=spec.robot,
+                world=World(world).info,
+                controller=config,
+                steps=steps[: end + 1 + AFTER],
+            )
+        )
+    about = [
+        "Tracks of real runs (tests/make_vectors.py, CONTROLLER_TRACKS): one robot each, "
+        "from its first step to 10 steps past the transition it was chosen for.",
+        "in: the step's reading (t, x, y, theta, prox), the radio messages in delivery "
+        "order ([sender, payload]), the frame (an index into frames: PNG, base64) or null.",
+        "out: what the controller gives: wheel speeds, capture, broadcasts, the phase after "
+        "the step; events, opinion (full precision) and status only when there are any, or "
+        "they changed.",
+        "docs/controller.md says how a port uses them; swarm conformance drives a program "
+        "with them over the link.",
+    ]
+    return vectors.dump(about, tracks)
+
+
+def build(*, controller: bool = True) -> dict[str, str]:
+    """File name -> the text of that vector file (``controller``: the controller vectors
+    too, which run swarms)."""
     files = {vectors.file: vectors.content() for vectors in (make() for make in BUILDERS)}
     files["udp_frame.json"] = udp_frame_vectors()
     files["auth.json"] = auth_vectors()
@@ -2115,10 +2236,13 @@ def build() -> dict[str, str]:
     files["batch.json"] = batch_vectors()
     files["numeric.json"] = numeric_vectors()
     files["rng.json"] = rng_vectors()
-    return {
+    texts = {
         name: json.dumps(content, indent=1, ensure_ascii=False) + "\n"
         for name, content in files.items()
     }
+    if controller:
+        texts["controller.json"] = controller_vectors()
+    return texts
 
 
 def main(argv: list[str] | None = None) -> int:

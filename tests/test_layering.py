@@ -48,8 +48,17 @@ ADAPTERS = [
 ]
 # The rooms of the ``swarm`` command: the launcher (``swarm run`` and what starts runs),
 # security (keys, certificates, access control), reports (what is made of runs), studies
-# (the runs behind the published pages, ``swarm study``).
-OUTER = ["deploy", "deploy/launcher", "deploy/security", "deploy/reports", "deploy/study", "viewer"]
+# (the runs behind the published pages, ``swarm study``), conformance (a port checked against
+# the controller, ``swarm conformance``).
+OUTER = [
+    "deploy",
+    "deploy/launcher",
+    "deploy/security",
+    "deploy/reports",
+    "deploy/study",
+    "deploy/conformance",
+    "viewer",
+]
 # The package roots that hold only layers and a ``__main__`` that starts one.
 ROOTS = ["robot_agent", "world_server", "nest_beacon", "link"]
 FOLDERS = PURE + ADAPTERS + OUTER + ROOTS
@@ -119,6 +128,7 @@ ALLOWED: dict[str, set[str]] = {
     - {"deploy", "deploy/reports", "deploy/launcher", "deploy/study"},
     "deploy/launcher": set(FOLDERS) - {"deploy", "deploy/launcher", "deploy/study"},
     "deploy/study": set(FOLDERS) - {"deploy", "deploy/study"},
+    "deploy/conformance": set(FOLDERS) - {"deploy", "deploy/conformance", "deploy/study"},
     "deploy": set(FOLDERS) - {"deploy"},
 }
 # What ``robot-agent --link`` may not import, directly or through any module of this

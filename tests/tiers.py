@@ -32,6 +32,7 @@ FAST = frozenset(
         "test_camera_vision",
         "test_clock",
         "test_controller",
+        "test_controller_vectors",
         "test_coordinator",
         "test_decision",
         "test_defence",
@@ -76,6 +77,9 @@ FAST = frozenset(
 )
 
 SLOW = {
+    "test_controller_vectors::test_the_file_is_what_the_generator_makes_from_its_runs": (
+        "five in-process swarms of ten robots: about 3 s with the compiled cores, 30 s without"
+    ),
     "test_navigation::test_ten_robots_keep_cycling_through_a_crowded_nest": (
         "two 10-robot swarms cycling through the nest: about 12 s"
     ),

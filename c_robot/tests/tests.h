@@ -17,4 +17,5 @@ void test_messages(void);
 void test_png(void);
 void test_decision(void);
 void test_client(void);
+void test_controller_vectors(void);
 #endif
