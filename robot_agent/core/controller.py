@@ -55,6 +55,10 @@ from wire import names, numeric, protocol
 from wire.compiled import mypyc_attr
 from wire.rng import Stream
 
+# A deaf robot waiting at the nest's centre drives back only once pushed farther than this
+# many nest tolerances from it.
+WAIT_SLACK = 2
+
 
 # Studies and diagnoses watch a run through interpreted subclasses (deploy/study/observe.py,
 # benchmarks/stall_diagnosis.py); compiled, a class refuses them unless it allows them.
@@ -340,7 +344,7 @@ class Controller:
         if self._hears_beacon(self._motion.leg_start):
             self._fire("heard_beacon", reading)
             return ports.Command(0.0, 0.0, broadcasts=self._broadcasts())
-        if distance(reading, self._nest) <= 2 * self.config.nest_tolerance:
+        if distance(reading, self._nest) <= WAIT_SLACK * self.config.nest_tolerance:
             return STOP  # pushed a little: not worth driving back yet
         left, right, _ = self._motion.drive_to(reading, self._nest, self.config.nest_tolerance)
         return ports.Command(left, right)
@@ -428,6 +432,7 @@ def _nothing(reading: ports.BodyReading) -> None:
 # parking_slot and parking_rings live in robot_agent/core/parking.py; they are exported here
 # too, where tests and benchmarks have always imported them from.
 __all__ = [
+    "WAIT_SLACK",
     "Controller",
     "ControllerConfig",
     "QualityEstimator",
