@@ -36,6 +36,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "deploy.study.cli",
         "the studies behind the published pages: run what is missing, render, check",
     ),
+    "conformance": (
+        "deploy.conformance.cli",
+        "check a program that speaks the link against the controller, tick by tick",
+    ),
     "router": ("deploy.launcher.router", "a Zenoh router (a Python session; no zenohd needed)"),
     "view": ("viewer.replay", "replay a recording in the browser, on the live view's page"),
 }

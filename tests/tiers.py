@@ -32,6 +32,7 @@ FAST = frozenset(
         "test_camera_vision",
         "test_clock",
         "test_controller",
+        "test_controller_doc",
         "test_controller_vectors",
         "test_coordinator",
         "test_decision",
@@ -94,6 +95,7 @@ SLOW = {
 FULL_ONLY = {
     "test_attacks": "attacks live runs over Zenoh",
     "test_c_robot": "builds the C robot and runs swarms with it over UDP and serial links",
+    "test_conformance": "builds C robots and runs programs over UDP and serial links, and swarms",
     "test_attacks_presence": "attacks live runs over Zenoh (presence and freshness)",
     "test_byzantine": "a real run with Byzantine robots",
     "test_endings": "starts swarms",
@@ -149,6 +151,7 @@ FAST_TESTS = frozenset(
         "test_ending_rule::test_the_in_process_engine_stops_on_a_signal_or_the_wall_limit_at_once",
         "test_ending_rule::test_the_stop_signals_have_their_posix_numbers",
         "test_ending_rule::test_when_conditions_coincide_the_first_in_the_rules_order_decides",
+        "test_conformance::test_bad_arguments_exit_with_code_2_and_one_line",
         "test_endings::test_an_unwritable_recording_path_is_refused_before_anything_starts",
         "test_endings::test_the_help_documents_each_endings_exit_code",
         "test_experiment::test_bad_arguments_exit_with_code_2_and_one_line",

@@ -48,13 +48,19 @@ class Capture:
 
 
 def capture_run(
-    world: WorldConfig, config: ControllerConfig, robots: Collection[int], **engine: Any
+    world: WorldConfig,
+    config: ControllerConfig,
+    robots: Collection[int],
+    *,
+    controller: type[Controller] = Controller,
+    **engine: Any,
 ) -> Capture:
     """Run ``world`` with ``config`` to its end (``engine``: more of ``run_in_process``'s
-    arguments: the beacon, the time limits, hooks); every step of ``robots``."""
+    arguments: the beacon, the time limits, hooks); every step of ``robots``. Each robot's
+    controller is a ``controller`` (a subclass, to run another one)."""
     steps: dict[int, list[Step]] = {robot: [] for robot in robots}
 
-    class Watched(Controller):
+    class Watched(controller):  # type: ignore[valid-type,misc]
         """The controller, with each step written down (it changes nothing)."""
 
         def __init__(self, *args: Any, **kwargs: Any) -> None:
