@@ -172,9 +172,10 @@ def _vectors_part(
         if found is None:
             print(f"  track {track.name}: {len(track.ticks)} ticks, every output as expected")
             return
-        print(f"  track {track.name}: differs at tick {found.tick}")
+        print(f"  track {track.name}: differs at {found.where}")
         print(f"    {_difference(found)}")
-        _print_inputs(track, found.tick)
+        if found.tick >= 0:
+            _print_inputs(track, found.tick)
         tail = program.log_tail()
         if tail:
             print("    the program's last lines:")

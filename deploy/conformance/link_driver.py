@@ -184,16 +184,17 @@ class LinkedProgram:
 
     def close(self) -> None:
         """Tell the program the run ended (BYE 1), let it exit, and stop what is left."""
+        self.closing = True
         try:
             if self.peer.connected:
-                self.closing = True
                 self.peer.close(codec.ByeReason.RUN_ENDED)
                 self._flush()
             if self.process is not None:
-                self.closing = True
                 deadline = time.monotonic() + EXIT_TIMEOUT
                 while self.process.poll() is None and time.monotonic() < deadline:
                     self._turn(min(deadline, time.monotonic() + 0.05))
+        except (ProgramFailedError, OSError):
+            pass  # the track's verdict is in; what the program does now changes nothing
         finally:
             if self.process is not None:
                 stop(self.process)
@@ -469,8 +470,8 @@ def run_tracks(
                     program.start()
                     found = program.run_track()
                 except ProgramFailedError as failure:
-                    found = Divergence(
-                        track.name, 0, failure.field, failure.expected, failure.received
+                    found = Divergence(  # before its first tick
+                        track.name, -1, failure.field, failure.expected, failure.received
                     )
             finally:
                 program.close()

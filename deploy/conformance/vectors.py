@@ -243,14 +243,18 @@ class Divergence:
     """The first output that differs from a track: where, and the two values."""
 
     track: str
-    tick: int
+    tick: int  # -1: before the first tick (the program did not start, connect or ask)
     field: str
     expected: Any
     received: Any
 
+    @property
+    def where(self) -> str:
+        return f"tick {self.tick}" if self.tick >= 0 else "its start"
+
     def describe(self) -> str:
         return (
-            f"track {self.track!r}, tick {self.tick}: {self.field}: expected "
+            f"track {self.track!r}, {self.where}: {self.field}: expected "
             f"{_shown(self.expected)}, received {_shown(self.received)}"
         )
 
