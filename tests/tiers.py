@@ -79,7 +79,7 @@ FAST = frozenset(
 
 SLOW = {
     "test_controller_vectors::test_the_file_is_what_the_generator_makes_from_its_runs": (
-        "five in-process swarms of ten robots: about 3 s with the compiled cores, 30 s without"
+        "five in-process swarms of ten robots: about 3 s with the compiled cores, 8 s without"
     ),
     "test_navigation::test_ten_robots_keep_cycling_through_a_crowded_nest": (
         "two 10-robot swarms cycling through the nest: about 12 s"
