@@ -22,8 +22,9 @@ from pathlib import Path
 from rich.console import Console
 
 from deploy.reports import sweep
-from deploy.study import check, grid, page, results, runner
+from deploy.study import check, grid, lock, page, results, runner
 from deploy.study.catalogue import studies, study_named
+from deploy.study.declare import Study
 from deploy.study.state import State, state_of
 from plumbing import cliargs
 from plumbing.cliargs import UsageError
@@ -93,6 +94,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="DIR",
         help="where recorded runs over Zenoh write their MCAP files (default: ROOT/runs/studies)",
     )
+    parser.add_argument(
+        "--new",
+        action="store_true",
+        help="ROOT may be a new folder (made if need be) without the study's results file or "
+        "pages; without it such a ROOT is refused",
+    )
+    parser.add_argument(
+        "--wait",
+        action="store_true",
+        help="when another runner is making the study's runs into the same results file, wait "
+        "for it to end (without it: exit 2, naming the runner)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress display")
     sweep.add_executor_options(parser)
 
@@ -101,8 +114,12 @@ def run(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
     try:
         if args.list:
+            if args.only:
+                raise UsageError("--list names every study: it takes no --only")
+            check_root(args.root, args.new)
             return list_studies(args)
         if args.name is None and args.check:
+            check_root(args.root, args.new)
             return check_every_study(args, console)
         if args.name is None:
             raise UsageError("give a study's name (swarm study --list names them)")
@@ -110,6 +127,12 @@ def run(args: argparse.Namespace) -> int:
         only = grid.parse_only(args.only)
         if args.sample is not None and not args.check:
             raise UsageError("--sample goes with --check")
+        if args.render and only:
+            raise UsageError(
+                "--render writes the whole study's pages: it takes no --only (--status shows "
+                "part of it)"
+            )
+        check_root(args.root, args.new, study)
         state = state_of(study, args.root, only)
     except ValueError as error:
         raise UsageError(str(error)) from None
@@ -125,10 +148,18 @@ def run(args: argparse.Namespace) -> int:
     if args.check:
         return check_runs(state, executor, args.sample or DEFAULT_SAMPLE, console)
     recordings = args.recordings or args.root / "runs" / "studies"
+
+    def waiting(holder: str) -> None:
+        console.print(f"{study.results} is being made by {holder}: waiting for it to end")
+
     try:
-        failures = runner.run_missing(
-            state, args.root, executor, recordings, console, quiet=args.quiet
-        )
+        with lock.holding(args.root / study.results, wait=args.wait, waiting=waiting):
+            state = state_of(study, args.root, only)  # what is missing once the lock is ours
+            failures = runner.run_missing(
+                state, args.root, executor, recordings, console, quiet=args.quiet
+            )
+    except lock.BusyError as error:
+        raise UsageError(str(error)) from None
     except OSError as error:  # the results file cannot be written
         raise UsageError(f"{error.filename or study.results}: {error.strerror}") from None
     for line in runner.failures_text(failures):
@@ -136,6 +167,24 @@ def run(args: argparse.Namespace) -> int:
     after = state_of(study, args.root, only)
     print(f"{len(after.done)} done, {len(after.missing)} missing")
     return 1 if failures else 0
+
+
+def check_root(root: Path, new: bool, study: Study | None = None) -> None:
+    """UsageError unless ``root`` is a folder that holds the study's results file or its
+    pages (a repository with the study), or ``new`` says a new one is meant (then made)."""
+    if new:
+        root.mkdir(parents=True, exist_ok=True)
+        return
+    if not root.is_dir():
+        raise UsageError(f"--root {root}: no such folder (--new starts a new one there)")
+    if study is None:
+        return
+    held = [study.results, *(page.path for page in study.pages)]
+    if not any((root / path).exists() for path in held):
+        raise UsageError(
+            f"--root {root} holds none of study {study.name}'s files ({', '.join(held)}): "
+            "not a checkout with this study (--new starts a new one there)"
+        )
 
 
 def list_studies(args: argparse.Namespace) -> int:
