@@ -36,6 +36,7 @@ FAST = frozenset(
         "test_decision",
         "test_defence",
         "test_docs",
+        "test_effects",
         "test_equations",
         "test_follower_freshness",
         "test_fuzz",

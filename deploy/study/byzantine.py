@@ -20,7 +20,7 @@ from typing import Any
 from deploy.study import tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
-from deploy.study.wilson import share
+from deploy.analysis.wilson import share
 from wire.rng import Stream
 
 MODES = ("liar", "inverted", "silent")

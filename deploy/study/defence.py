@@ -18,7 +18,7 @@ from deploy.study import tables
 from deploy.study.byzantine import MAX_BYZANTINE, byzantine_ids
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
-from deploy.study.wilson import share
+from deploy.analysis.wilson import share
 from wire.rng import Stream
 
 SITES = 10

@@ -27,7 +27,7 @@ from typing import Any
 from deploy.study import tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point, text
-from deploy.study.wilson import share
+from deploy.analysis.wilson import share
 
 ROBOTS, SITES = 10, 10
 TIMEOUT = 1800.0  # sim seconds

@@ -119,7 +119,7 @@ def row(run: dict[str, Any]) -> str:
 def per_size(runs: list[dict[str, Any]]) -> str:
     """One line per swarm size: runs in consensus (with its 95% interval), sim time to
     consensus, wall time."""
-    from deploy.study.wilson import share
+    from deploy.analysis.wilson import share
 
     lines = [
         "| robots | runs | consensus (95% interval) | correct | sim time to consensus, median "

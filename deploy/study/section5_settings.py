@@ -22,7 +22,7 @@ from typing import Any
 from deploy.study import lag, tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point, Scalar
-from deploy.study.wilson import share
+from deploy.analysis.wilson import share
 
 ROBOTS = 10
 SITES = (5, 8, 10)

@@ -21,7 +21,7 @@ from deploy.study import tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point, product
 from deploy.study.make import WELLSTIRRED_AGENTS
-from deploy.study.wilson import share
+from deploy.analysis.wilson import share
 
 STRATEGIES = ("paper", "dmvd", "dmmd", "dc")
 WELLSTIRRED_OPTIONS = (5, 10, 20, 50, 100)

@@ -8,7 +8,7 @@ import statistics
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from deploy.study.wilson import share, wilson
+from deploy.analysis.wilson import share, wilson
 
 VERDICTS = ("correct", "wrong", "split", "undecided")
 
