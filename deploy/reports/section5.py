@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from deploy.analysis import section5_tables as tables
+from deploy.analysis.wilson import wilson
 from deploy.reports import pages, sweep
 from plumbing import cliargs
 
@@ -373,11 +374,19 @@ def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
             if not values:
                 continue
             steps = sorted(set(values))
+            bounds = [wilson(values.count(step), len(values)) for step in steps]
+            shares = [values.count(step) / len(values) for step in steps]
             axis.bar(
                 [step + offset for step in steps],
-                [values.count(step) / len(values) for step in steps],
+                shares,
                 width=0.4,
                 color=colour,
+                yerr=[
+                    [share - low for share, (low, _) in zip(shares, bounds, strict=True)],
+                    [high - share for share, (_, high) in zip(shares, bounds, strict=True)],
+                ],
+                capsize=2,
+                ecolor="dimgrey",
                 label="default" if variant == "default" else f"--linger {tables.LINGER:g}",
             )
         paper = [
@@ -388,11 +397,15 @@ def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
         for step in sorted(set(paper)):
             axis.plot(step - 0.2, paper.count(step) / max(len(paper), 1), "k_", markersize=14)
         axis.axvline(n / 2, linestyle="--", color="tab:red", label=f"n/2 = {n / 2:g}")
-        axis.set_title(f"n = {n}: {seeds} seeds (black: seeds 0-9, default)")
+        axis.set_title(f"n = {n}: {seeds} seeds")
         axis.set_xlabel("the swarm's steps (last robot)")
         axis.set_ylabel("share of runs")
         axis.xaxis.get_major_locator().set_params(integer=True)
         axis.legend(fontsize=8)
+    figure.suptitle(
+        "black: seeds 0-9 alone, default; error bars: 95% Wilson interval of the share of runs",
+        fontsize="small",
+    )
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)

@@ -17,10 +17,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from deploy.analysis.wilson import share
 from deploy.study import tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
-from deploy.analysis.wilson import share
 from wire.rng import Stream
 
 MODES = ("liar", "inverted", "silent")
@@ -116,30 +116,48 @@ def cells(records: Records) -> list[dict[str, Any]]:
                 "runs": len(runs),
                 **{verdict: tables.count(runs, verdict) for verdict in tables.VERDICTS},
                 "liar_won": sum(bool(result.get("liar_won")) for result in results),
-                "median_time": tables.median(
-                    result["sim_time_s"]
-                    for result in results
+                "times": {
+                    run["seed"]: result["sim_time_s"]
+                    for run, result in zip(runs, results, strict=True)
                     if result["verdict"] in ("correct", "wrong")
-                ),
+                },
             }
         )
     return rows
 
 
+CONSENSUS_RUNS = ("run with consensus", "runs with consensus")
+
+
 def table(records: Records) -> str:
     lines = [
         "| n | mode | Byzantine | defence | correct (95% interval) | wrong consensus | split "
-        "| undecided at timeout | median consensus time (sim s) |",
-        "|---:|---|---:|---|---:|---:|---:|---:|---:|",
+        "| undecided at timeout | median consensus time (sim s) | against the paper's "
+        "controller: ratio of medians (95% interval) |",
+        "|---:|---|---:|---|---:|---:|---:|---:|---:|---:|",
     ]
-    for row in cells(records):
-        wrong = f"{row['wrong']}"
+    rows = cells(records)
+    for row in rows:
+        runs = row["runs"]
+        wrong = tables.counted(row["wrong"], runs)
         if row["mode"] == "liar" and row["count"] > 0:
-            wrong += f" ({row['liar_won']} the liars' site)"
+            wrong += f", {row['liar_won']} the liars' site"
+        paper = next(
+            other
+            for other in rows
+            if other["defence"] == "paper"
+            and (other["mode"], other["count"]) == (row["mode"], row["count"])
+        )
+        against = (
+            "1 (the baseline)"
+            if row["defence"] == "paper"
+            else tables.compare_times(row["times"], paper["times"], CONSENSUS_RUNS)
+        )
         lines.append(
             f"| {SITES} | {row['mode']} | {row['count']} | {LABELS[row['defence']]} "
-            f"| {share(row['correct'], row['runs'])} | {wrong} | {row['split']} "
-            f"| {row['undecided']} | {tables.number(row['median_time'])} |"
+            f"| {share(row['correct'], runs)} | {wrong} | {tables.counted(row['split'], runs)} "
+            f"| {tables.counted(row['undecided'], runs)} "
+            f"| {tables.number(tables.median(row['times'].values()))} | {against} |"
         )
     return "\n".join(lines)
 

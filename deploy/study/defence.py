@@ -14,11 +14,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from deploy.analysis.wilson import share
 from deploy.study import tables
 from deploy.study.byzantine import MAX_BYZANTINE, byzantine_ids
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
-from deploy.analysis.wilson import share
 from wire.rng import Stream
 
 SITES = 10
@@ -94,6 +94,11 @@ def rows(records: Records) -> list[dict[str, Any]]:
                 "runs": len(runs),
                 **{verdict: tables.count(runs, verdict) for verdict in tables.VERDICTS},
                 "liar_won": sum(bool(result.get("liar_won")) for result in results),
+                "times": {
+                    run["seed"]: result["sim_time_s"]
+                    for run, result in zip(runs, results, strict=True)
+                    if result["verdict"] == "correct"
+                },
                 "median": tables.median(times),
                 "mean": tables.mean(times),
             }
@@ -109,21 +114,35 @@ def label(defence: str) -> str:
 
 def table(records: Records) -> str:
     lines = [
-        "| robots | liars | defence | runs | correct (95% interval) | wrong consensus (the "
-        "liars' site) "
-        "| split | undecided | sim s to consensus, median (mean), correct runs |",
-        "|---:|---:|---|---:|---:|---:|---:|---:|---|",
+        "| robots | liars | defence | runs | correct (95% interval) | wrong consensus "
+        "| split | undecided | sim s to consensus, median (mean), correct runs | against no "
+        "defence: ratio of medians (95% interval) |",
+        "|---:|---:|---|---:|---:|---:|---:|---:|---|---:|",
     ]
-    for row in rows(records):
+    found = rows(records)
+    for row in found:
         timing = (
             "-"
             if row["median"] is None
             else f"{tables.number(row['median'])} ({tables.number(row['mean'])})"
         )
+        bare = next(
+            other
+            for other in found
+            if other["defence"] == "none"
+            and (other["robots"], other["liars"]) == (row["robots"], row["liars"])
+        )
+        against = (
+            "1 (the baseline)"
+            if row["defence"] == "none"
+            else tables.compare_times(row["times"], bare["times"])
+        )
+        runs = row["runs"]
         lines.append(
-            f"| {row['robots']} | {row['liars']} | {label(row['defence'])} | {row['runs']} "
-            f"| {share(row['correct'], row['runs'])} | {row['wrong']} ({row['liar_won']}) "
-            f"| {row['split']} | {row['undecided']} | {timing} |"
+            f"| {row['robots']} | {row['liars']} | {label(row['defence'])} | {runs} "
+            f"| {share(row['correct'], runs)} | {tables.counted(row['wrong'], runs)}, "
+            f"{row['liar_won']} the liars' site | {tables.counted(row['split'], runs)} "
+            f"| {tables.counted(row['undecided'], runs)} | {timing} | {against} |"
         )
     return "\n".join(lines)
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from deploy.analysis import effects
 from deploy.reports import pages
 from deploy.study import results
 from deploy.study.declare import Records, Study
@@ -68,7 +69,12 @@ def made_block(study: Study, records: Records) -> str:
         )
     lines.append(
         "A share of runs is shown with its 95% Wilson interval, `7/10 (39-90%)`: the rate "
-        "the runs are consistent with."
+        "the runs are consistent with (bounds rounded outwards, to a decimal where whole "
+        "percent would reach 0% or 100%). A share of robots or poolings, which the runs "
+        "group, has a 95% bootstrap interval with whole runs resampled. Times are compared "
+        "as the ratio of medians and its 95% bootstrap interval, `1.18 (0.95-1.43)` (runs "
+        "of one seed resampled together; `deploy/analysis/effects.py`); with fewer than "
+        f"{effects.MIN_RUNS} runs on a side no time is compared."
     )
     return "\n".join(lines)
 

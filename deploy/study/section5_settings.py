@@ -19,10 +19,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from deploy.analysis import effects
+from deploy.analysis.wilson import percent_bound, share
 from deploy.study import lag, tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point, Scalar
-from deploy.analysis.wilson import share
 
 ROBOTS = 10
 SITES = (5, 8, 10)
@@ -99,6 +100,9 @@ def row(runs: Sequence[dict[str, Any]], n: int) -> dict[str, Any]:
         if (sizes := [size for robot in result["robots"]["pools"] for size in robot])
     ]
     times = [result["sim_time_s"] for result in results if swarm_steps(result) is not None]
+    per_run = [
+        [size for robot in result["robots"]["pools"] for size in robot] for result in results
+    ]
     if len(finished) >= 2:
         q1, median, q3 = statistics.quantiles(finished, n=4, method="inclusive")
     else:  # one run: its value; none: nothing
@@ -116,7 +120,15 @@ def row(runs: Sequence[dict[str, Any]], n: int) -> dict[str, Any]:
         "pool_mean": tables.mean(pools),
         "run_pool_over3": sum(mean > 3 for mean in run_pool_means),
         "alone": sum(size == 1 for size in pools) / max(len(pools), 1),
+        "alone_interval": effects.clustered_share(
+            [sum(size == 1 for size in sizes) for sizes in per_run], [len(s) for s in per_run]
+        ),
         "time": tables.mean(times),
+        "times": {
+            run["seed"]: result["sim_time_s"]
+            for run, result in zip(runs, results, strict=True)
+            if swarm_steps(result) is not None
+        },
     }
 
 
@@ -133,11 +145,11 @@ def describe(setting: str) -> str:
 
 def settings_table(records: Records) -> str:
     lines = [
-        "| setting | n | runs | right | swarm steps median (IQR) | mean | within n/2 (95% "
-        "interval) "
-        "| strictly below | mean pool | runs with mean pool > 3 | pooled alone | sim s to "
-        "consensus |",
-        "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| setting | n | runs | right (95% interval) | swarm steps median (IQR) | mean | within "
+        "n/2 (95% interval) | strictly below | mean pool | runs with mean pool > 3 | pooled "
+        "alone (95% interval) | sim s to consensus: mean / median | median time against the "
+        "defaults: ratio (95% interval) |",
+        "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for setting in SETTINGS:
         for n in SITES:
@@ -145,17 +157,41 @@ def settings_table(records: Records) -> str:
             if not runs:
                 continue
             r = row(runs, n)
+            defaults = records.where(setting="default", sites=n)
+            against = (
+                "1 (the baseline)"
+                if setting == "default"
+                else tables.compare_times(r["times"], row(defaults, n)["times"], CONSENSUS_RUNS)
+                if defaults
+                else "-"
+            )
             missing = r["runs"] - r["consensus"]
-            right = f"{r['correct']}" + (f" ({missing} without consensus)" if missing else "")
+            right = share(r["correct"], r["runs"]) + (
+                f" ({missing} without consensus)" if missing else ""
+            )
             lines.append(
                 f"| {describe(setting)} | {n} | {r['runs']} | {right} "
                 f"| {_steps(r)} | "
                 f"{tables.number(r['mean_swarm'], 2)} "
                 f"| {share(r['within'], r['runs'])} | {share(r['below'], r['runs'])} "
-                f"| {tables.number(r['pool_mean'], 2)} | {r['run_pool_over3']} | {r['alone']:.0%} "
-                f"| {tables.number(r['time'])} |"
+                f"| {tables.number(r['pool_mean'], 2)} "
+                f"| {tables.counted(r['run_pool_over3'], r['runs'])} "
+                f"| {_pct(r['alone'])} ({_interval(r['alone_interval'])}) "
+                f"| {tables.number(r['time'])} / "
+                f"{tables.number(tables.median(r['times'].values()))} "
+                f"| {against} |"
             )
     return "\n".join(lines)
+
+
+CONSENSUS_RUNS = ("run with consensus", "runs with consensus")
+
+
+def _interval(found: effects.Estimate | None) -> str:
+    """``22-28%``: a share's 95% bootstrap interval in whole percent, rounded outwards."""
+    if found is None:
+        return "-"
+    return f"{percent_bound(found.low, upper=False)}-{percent_bound(found.high, upper=True)}%"
 
 
 # --- why the last robot lags ---------------------------------------------------------------
@@ -164,14 +200,39 @@ def settings_table(records: Records) -> str:
 def lag_summaries(records: Records) -> list[dict[str, Any]]:
     summaries = []
     for n in SITES:
-        analysed = [
-            found
-            for run in records.where(setting="default", sites=n)
-            if (found := tables.result(run).get("lag")) is not None
-        ]
+        analysed = lag_analyses(records, n)
         if analysed:
             summaries.append(lag.summarise(analysed, n))
     return summaries
+
+
+def lag_analyses(records: Records, n: int) -> list[dict[str, Any]]:
+    """The lag measures of each observed default run of ``n`` (``lag.analyse``)."""
+    return [
+        found
+        for run in records.where(setting="default", sites=n)
+        if (found := tables.result(run).get("lag")) is not None
+    ]
+
+
+def lag_intervals(analysed: list[dict[str, Any]]) -> dict[str, effects.Estimate | None]:
+    """The 95% intervals of the lag table's shares of events (poolings, decisions), each
+    by resampling whole runs: the events of one run are not independent."""
+
+    def alone(key: str) -> effects.Estimate | None:
+        return effects.clustered_share(
+            [sum(size == 1 for _, size in run[key]) for run in analysed],
+            [len(run[key]) for run in analysed],
+        )
+
+    return {
+        "last_alone": alone("last_pools_by_trip"),
+        "other_alone": alone("other_pools_by_trip"),
+        "at_nest": effects.clustered_share(
+            [int(run["last_phases"].get(lag.GROUPS[0], 0)) for run in analysed],
+            [sum(int(count) for count in run["last_phases"].values()) for run in analysed],
+        ),
+    }
 
 
 def lag_tables(records: Records) -> str:
@@ -180,16 +241,21 @@ def lag_tables(records: Records) -> str:
         return "The observed runs of the default settings are not made yet."
     lines = [
         "| n | runs | runs over n/2 (95% interval) | last robot: mean pool, pooled alone "
-        "| the others: mean pool, pooled alone | last robot at the nest when another decided "
-        "| runs the last robot finished alone | its trips after all others decided (mean) |",
+        "(95% interval) | the others: mean pool, pooled alone (95% interval) | last robot at "
+        "the nest when another decided (95% interval) | runs the last robot finished alone "
+        "(95% interval) | its trips after all others decided (mean) |",
         "|---|---:|---:|---|---|---:|---:|---:|",
     ]
     for s in summaries:
+        shares = lag_intervals(lag_analyses(records, s["n"]))
         lines.append(
             f"| {s['n']} | {s['runs']} | {share(s['late_runs'], s['runs'])} "
             f"| {_f(s['last_pool_mean'])}, {_pct(s['last_alone'])} "
+            f"({_interval(shares['last_alone'])}) "
             f"| {_f(s['other_pool_mean'])}, {_pct(s['other_alone'])} "
-            f"| {s['last_phases'].get('at the nest', 0.0):.0%} | {s['runs_with_lone_finish']} "
+            f"({_interval(shares['other_alone'])}) "
+            f"| {s['last_phases'].get('at the nest', 0.0):.0%} ({_interval(shares['at_nest'])}) "
+            f"| {share(s['runs_with_lone_finish'], s['runs'])} "
             f"| {_f(s['trips_after_others_mean'])} |"
         )
     lines += ["", "Mean pool size by trip (pool sizes over time), the last robot (the others):", ""]
