@@ -21,15 +21,17 @@ def test_the_ratio_of_medians_and_its_interval() -> None:
     assert found is not None
     assert found.value == pytest.approx(1.2)
     assert 1.0 < found.low < 1.2 < found.high < 1.45
-    same = effects.median_ratio([100.0] * 5, [50.0] * 4)
+    same = effects.median_ratio([100.0] * 6, [50.0] * 7)
     assert same == effects.Estimate(2.0, 2.0, 2.0)  # no spread, no width
 
 
 def test_too_few_runs_compare_no_time() -> None:
-    assert effects.median_ratio(TIMES[:2], TIMES) is None
+    """Fewer than 6 runs: even their range holds the median less than 95% of the time."""
+    assert effects.median_ratio(TIMES[:5], TIMES) is None
     assert effects.median_ratio(TIMES, TIMES[:1]) is None
-    assert effects.median_interval(TIMES[:2]) is None
-    assert effects.a_faster(TIMES, TIMES[:2]) is None
+    assert effects.median_ratio(TIMES[:6], TIMES[:6]) is not None
+    assert effects.median_interval(TIMES[:5]) is None
+    assert effects.a_faster(TIMES, TIMES[:5]) is None
     assert effects.estimate_text(None) == "-"
 
 
@@ -42,13 +44,14 @@ def test_an_interval_depends_on_the_runs_alone() -> None:
 
 
 def test_the_chance_that_one_run_is_faster_than_another() -> None:
-    assert effects.a_faster([1.0, 2.0, 3.0], [4.0, 5.0, 6.0]) == effects.Estimate(1.0, 1.0, 1.0)
-    assert effects.a_faster([4.0, 5.0, 6.0], [1.0, 2.0, 3.0]) == effects.Estimate(0.0, 0.0, 0.0)
+    fast, slow = [1.0, 2.0, 3.0] * 2, [4.0, 5.0, 6.0] * 2
+    assert effects.a_faster(fast, slow) == effects.Estimate(1.0, 1.0, 1.0)
+    assert effects.a_faster(slow, fast) == effects.Estimate(0.0, 0.0, 0.0)
     even = effects.a_faster(TIMES, TIMES)
     assert even is not None and even.value == 0.5 and even.low < 0.5 < even.high
     # A run given up is slower than any finished run, and ties with the others given up.
     given_up = [math.inf] * 7 + [1000.0, 1100.0, 1200.0]
-    found = effects.a_faster([900.0, 950.0, 1050.0], given_up)
+    found = effects.a_faster([900.0, 950.0, 1050.0] * 2, given_up)
     assert found is not None and found.value == pytest.approx((10 + 10 + 9) / 30)
 
 
@@ -99,3 +102,22 @@ def test_a_95_percent_interval_holds_the_true_ratio_about_95_times_in_100() -> N
 def test_intervals_are_printed_outwards() -> None:
     assert effects.estimate_text(effects.Estimate(1.18, 0.9549, 1.4211)) == "1.18 (0.95-1.43)"
     assert effects.outwards(0.5, 2.0, 1) == "0.5-2.0"
+
+
+def test_runs_paired_by_seed_are_resampled_together() -> None:
+    by_seed = dict(enumerate(TIMES))
+    # The same runs (two settings that change nothing): 1, with no width.
+    assert effects.paired_median_ratio(by_seed, by_seed) == effects.Estimate(1.0, 1.0, 1.0)
+    # Each seed 10% slower, whatever its time: the pairing sees it exactly.
+    slower = {seed: 1.1 * time for seed, time in by_seed.items()}
+    found = effects.paired_median_ratio(slower, by_seed)
+    assert found is not None and found.low == pytest.approx(1.1) == found.high
+    apart = effects.median_ratio(list(slower.values()), TIMES)
+    assert apart is not None and apart.high - apart.low > 0.2  # unpaired: a spread of seeds
+    # A seed in one group only counts in that group's median.
+    fewer = {seed: time for seed, time in slower.items() if seed != 3}
+    found = effects.paired_median_ratio(fewer, by_seed)
+    assert found is not None and found.value == pytest.approx(
+        float(np.median(list(fewer.values())) / np.median(TIMES))
+    )
+    assert effects.paired_median_ratio(dict(list(by_seed.items())[:5]), by_seed) is None
