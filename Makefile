@@ -11,7 +11,8 @@
 #   docs/section5-runs.json, `swarm section5 --check`; about 7 minutes of both cores), the
 #   tables of docs/section5.md and the data of Figures 4 and 5 made from them; then the
 #   tests that run published runs again (tests/tiers.py PUBLISHED: `pytest --published`):
-#   a sample of every study's runs (`swarm study NAME --check`, docs/studies.md).
+#   a sample of every study's runs, one of each kind, drawn from CHECK_SEED (`swarm study
+#   NAME --check --sample-seed S`, docs/studies.md).
 #   CI runs it after `make test`. docs/testing.md says what is published from runs but
 #   not run again by any check.
 # `make check-portable`: a sample of the published runs again on emulated CPUs (qemu-user:
@@ -34,6 +35,9 @@ TEST_LOCK := requirements/test.lock
 UV_VERSION := 0.13.9
 LOCK_OPTIONS := --generate-hashes --universal --fork-strategy fewest --python-version 3.11
 TEST_WORKERS ?= 2
+# The seed of the studies' sample in make check-published: the day's date, so each day's
+# check makes other runs (make check-published CHECK_SEED=20250314 draws that day's again).
+CHECK_SEED ?= $(shell date -u +%Y%m%d)
 
 .PHONY: run test test-fast check-published check-portable explore lint bench lock c-robot clean cores clean-cores
 
@@ -84,7 +88,7 @@ test-fast: $(VENV)/.installed-test
 check-published: $(VENV)/.installed-test
 	$(BIN)/python -m plumbing.cores build
 	$(BIN)/swarm section5 --check
-	$(BIN)/python -m pytest --published --durations=20
+	STUDY_CHECK_SEED=$(CHECK_SEED) $(BIN)/python -m pytest --published --durations=20
 
 check-portable: $(VENV)/.installed-test
 	$(BIN)/python -m plumbing.cores build

@@ -111,6 +111,8 @@ def test_render_writes_the_blocks_and_files_from_the_results_alone(
         (["nosuch"], "no study 'nosuch' (there are strategies, byzantine"),
         ([], "give a study's name"),
         (["tiny", "--sample", "2"], "--sample goes with --check"),
+        (["tiny", "--sample-seed", "2"], "--sample-seed goes with --check"),
+        (["tiny", "--status", "--sample-budget", "9"], "--sample-budget goes with --check"),
         (["tiny", "--only", "robots=10"], "--only robots=...: no such parameter"),
         (["tiny", "--only", "drop=0.5"], "--only drop=0.5: no run has it (drop: 0, 0.2)"),
         (["tiny", "--only", "drop"], "give NAME=VALUE"),

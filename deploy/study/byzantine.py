@@ -228,4 +228,7 @@ STUDY = Study(
     source="deploy/study/byzantine.py",
     pages=(Page("docs/byzantine.md", lambda records: {"results": results_block(records)}),),
     outputs=(Output("docs/byzantine.png", plot),),
+    kinds=lambda run: (
+        "no Byzantine robot" if run.param("mode") == "none" else f"{run.param('mode')} robots"
+    ),
 )

@@ -77,6 +77,9 @@ class Study:
     outputs: Sequence[Output] = ()
     about: str = ""  # one line on what it measures, for --list
     results_file: str | None = None
+    # The kinds of run it has, by name (``swarm study --check`` makes one of each):
+    # without it, how a run is made and its swarm's size (``check.default_kind``).
+    kinds: Callable[[Run], str] | None = None
 
     @property
     def results(self) -> str:

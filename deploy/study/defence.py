@@ -190,4 +190,8 @@ STUDY = Study(
     source="deploy/study/defence.py",
     pages=(Page("docs/byzantine.md", lambda records: {"defence": "\n" + table(records) + "\n"}),),
     outputs=(Output("docs/byzantine-defence.png", plot),),
+    kinds=lambda run: (
+        f"a {run.param('robots')}-robot swarm, "
+        + ("the paper's pooling" if run.param("defence") == "none" else "trimmed pooling")
+    ),
 )

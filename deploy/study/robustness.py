@@ -63,6 +63,13 @@ SETUPS = (
 )
 LABELS = {setup.key: setup.label for setup in SETUPS}
 BASE = ("--robots", str(ROBOTS), "--sites", str(SITES))
+# The kinds of run, by sweep (``swarm study robustness --check`` makes one of each).
+KINDS = {
+    "drop": "radio loss, observed",
+    "noise": "camera noise, observed",
+    "sensing": "the camera alone",
+    "processes": "over Zenoh",
+}
 
 
 def points() -> list[Point]:
@@ -486,5 +493,9 @@ STUDY = Study(
     outputs=(
         Output("docs/robustness_drop.png", plot_drop),
         Output("docs/robustness_noise.png", plot_noise),
+    ),
+    kinds=lambda run: (
+        KINDS[str(run.param("sweep"))]
+        + (" with lighting" if dict(run.params).get("lighting") else "")
     ),
 )

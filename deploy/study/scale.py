@@ -392,4 +392,5 @@ STUDY = Study(
         ),
     ),
     outputs=(Output("docs/scale.png", plot),),
+    kinds=lambda run: "in one process" if run.kind == "inprocess" else "over Zenoh",
 )

@@ -348,4 +348,11 @@ STUDY = Study(
         Output("docs/section5-lag.png", plot_lag),
         Output("docs/section5-lag.json", write_lag_json),
     ),
+    kinds=lambda run: (
+        "the defaults, observed for the lag"
+        if run.kind == "lag"
+        else "a setting no option has (the e-puck's speed)"
+        if run.configs
+        else "a setting of swarm run"
+    ),
 )

@@ -273,4 +273,9 @@ STUDY = Study(
     source="deploy/study/strategies.py",
     pages=(Page("docs/strategies.md", blocks),),
     outputs=(Output("docs/strategies.png", plot),),
+    kinds=lambda run: (
+        "a well-stirred cell"
+        if run.param("part") == "wellstirred"
+        else f"a {run.param('robots')}-robot swarm"
+    ),
 )
