@@ -241,6 +241,12 @@ def outwards(low: float, high: float, digits: int) -> str:
     return f"{down:.{digits}f}-{up:.{digits}f}"
 
 
+def times_text(estimate: Estimate, digits: int = 2, more: str = "") -> str:
+    """``1.18 times (95% interval 0.95-1.43)``, ``more`` added inside the brackets."""
+    bounds = outwards(estimate.low, estimate.high, digits)
+    return f"{estimate.value:.{digits}f} times (95% interval {bounds}{more})"
+
+
 def estimate_text(estimate: Estimate | None, digits: int = 2) -> str:
     """``1.18 (0.95-1.42)``: the value and its interval, rounded outwards; ``-`` for none."""
     if estimate is None:

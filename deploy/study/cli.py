@@ -271,6 +271,8 @@ def render(state: State, root: Path, console: Console) -> int:
         raise UsageError(str(error)) from None
     for path in written:
         console.print(f"wrote {path}")
+    for problem in page.stale_prose(study, records, root):  # prose is written by hand
+        console.print(f"[yellow]the prose is stale[/]: {problem}")
     if records.missing:
         console.print(
             f"[yellow]{records.missing} of the {records.declared} runs of {study.name} are "

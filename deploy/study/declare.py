@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from deploy.study.grid import Point, Run, expand
+from deploy.study.prose import Claim
 
 RESULTS_FOLDER = "docs/studies"
 
@@ -43,17 +44,20 @@ class Records:
 
 
 Blocks = Callable[[Records], dict[str, str]]
+Claims = Callable[[Records], Sequence[Claim]]
 
 
 @dataclass(frozen=True)
 class Page:
     """A Markdown page the study writes blocks into (between markers that name
     ``swarm study NAME --render``); ``made`` says whether it also gets the study's
-    "Made by" block (``made``): every page but README."""
+    "Made by" block (``made``): every page but README. ``claims``: the numbers its prose
+    reads from the runs (``deploy/study/prose.py``), checked, not written."""
 
     path: str
     blocks: Blocks
     made: bool = True
+    claims: Claims | None = None
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from deploy.analysis import effects
 from deploy.reports import pages
-from deploy.study import results
+from deploy.study import prose, results
 from deploy.study.declare import Records, Study
 
 
@@ -122,8 +122,9 @@ def write(study: Study, records: Records, root: Path) -> list[Path]:
 
 
 def stale_blocks(study: Study, records: Records, root: Path) -> list[str]:
-    """The blocks of the study's pages that differ from what its runs give (figures and
-    data files are not compared: they are drawn from the same records)."""
+    """The blocks of the study's pages that differ from what its runs give, and the
+    numbers of their prose that do (figures and data files are not compared: they are
+    drawn from the same records)."""
     problems = []
     for relative, blocks in rendered(study, records).items():
         text = (root / relative).read_text()
@@ -133,4 +134,14 @@ def stale_blocks(study: Study, records: Records, root: Path) -> list[str]:
                 problems.append(f"{relative}: no block {name!r} of `{command(study)}`")
             elif shown != content.strip("\n"):
                 problems.append(f"{relative}: block {name!r} is not what the runs give")
+    return problems + stale_prose(study, records, root)
+
+
+def stale_prose(study: Study, records: Records, root: Path) -> list[str]:
+    """The numbers of the study's pages' prose that are not what its runs give."""
+    problems = []
+    for declared in study.pages:
+        if declared.claims is not None:
+            text = (root / declared.path).read_text()
+            problems += prose.stale(text, declared.claims(records), declared.path)
     return problems

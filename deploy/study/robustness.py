@@ -364,8 +364,16 @@ def failing_table(records: Records) -> str:
     return "\n".join(lines)
 
 
+def _prose() -> Any:
+    """The page's findings and claims (``robustness_prose``, which reads this module)."""
+    from deploy.study import robustness_prose
+
+    return robustness_prose
+
+
 def page_blocks(records: Records) -> dict[str, str]:
     return {
+        **_prose().blocks(records),
         "drop": drop_table(records),
         "claim": claim(records),
         "sensing": sensing_table(records),
@@ -489,7 +497,9 @@ STUDY = Study(
     about="radio loss, camera noise and lighting against alpha > 0 and the log-linear pool",
     points=points,
     source="deploy/study/robustness.py",
-    pages=(Page("docs/robustness.md", page_blocks),),
+    pages=(
+        Page("docs/robustness.md", page_blocks, claims=lambda records: _prose().claims(records)),
+    ),
     outputs=(
         Output("docs/robustness_drop.png", plot_drop),
         Output("docs/robustness_noise.png", plot_noise),
