@@ -171,6 +171,7 @@ FAST_TESTS = frozenset(
         "test_run_parts::test_the_inbox_takes_a_signal_whatever_else_filled_it",
         "test_run_parts::test_the_launcher_looks_with_its_clock_given_and_takes_a_signal_as_an_event",
         "test_run_parts::test_the_log_relay_holds_lines_for_the_recorder_and_publishes_none_once_detached",
+        "test_section5::test_a_number_of_the_text_that_the_runs_do_not_give_is_named",
         "test_section5::test_a_runs_file_that_lacks_runs_or_has_other_settings_is_reported",
         "test_section5::test_blocks_are_replaced_between_their_markers",
         "test_section5::test_check_finds_a_run_that_changed",

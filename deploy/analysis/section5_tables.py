@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from deploy.analysis import effects
+from deploy.analysis.prose import Claim
 from deploy.analysis.wilson import share
 
 PAPER_SEEDS = 10  # the paper ran each n ten times: seeds 0..9 are "the paper's ten runs"
@@ -371,3 +372,85 @@ def blocks(records: Sequence[dict[str, Any]], meta: dict[str, Any]) -> dict[str,
         "detail": detail_table(records),
         "runs": runs_table(records, "default"),
     }
+
+
+# --- the numbers docs/section5.md's prose reads from the runs ------------------------------
+
+
+def claims(records: Sequence[dict[str, Any]]) -> list[Claim]:
+    """The numbers of docs/section5.md's hand-written text that these runs give (the text
+    of the settings study's sections is checked by that study)."""
+    if not select(records, "default", SITES[-1]) or not select(records, "linger", SITES[-1]):
+        return []
+    found = []
+    every_right = all(record["correct"] for record in records)
+    found.append(
+        Claim(
+            "Every run, of {}, reaches consensus on the best site"
+            if every_right
+            else "Not every run, of {}, reaches consensus on the best site",
+            (str(len(records)),),
+        )
+    )
+    defaults = {n: select(records, "default", n) for n in SITES}
+    means = [statistics.fmean(pools_of(runs)) for runs in defaults.values()]
+    largest = max(max(pools_of(runs)) for runs in defaults.values())
+    found.append(
+        Claim(
+            "about {} to {} opinions on average (the table), at most {} of the ten robots",
+            (f"{min(means):.1f}", f"{max(means):.1f}", str(largest)),
+        )
+    )
+    shares = {n: robots_within(runs, n) for n, runs in defaults.items()}
+    medians = {n: statistics.median(_robot_steps(runs)) for n, runs in defaults.items()}
+    found.append(
+        Claim(
+            "({}% and {}% of robots; the median robot needs {} and {} trips)",
+            (
+                _whole(shares[8]),
+                _whole(shares[10]),
+                _number(medians[8]),
+                _number(medians[10]),
+            ),
+        )
+    )
+    ten = select(records, "default", SITES[-1], PAPER_SEEDS)
+    found.append(Claim("from our seeds 0-9 ({}/10 for n = 10)", (str(_within(ten, SITES[-1])[0]),)))
+    found.append(Claim("Most robots manage it ({}%)", (_whole(shares[5]),)))
+    linger = {n: select(records, "linger", n) for n in SITES}
+    counted = {n: _within(runs, n) for n, runs in linger.items()}
+    run_means = [statistics.fmean(pools(record)) for record in linger[10] if pools(record)]
+    found.append(
+        Claim(
+            "with `--linger 10` the defaults give n = 10 within n/2 in {}% of {} runs and {}% "
+            "strictly below, with a mean pool of {} ({} runs of {} average above 3, since "
+            "decided robots join pools), n = 8 in {}% and n = 5 in {}% (first table)",
+            (
+                _percent_of(counted[10][0], counted[10][2]),
+                str(counted[10][2]),
+                _percent_of(counted[10][1], counted[10][2]),
+                f"{statistics.fmean(pools_of(linger[10])):.2f}",
+                str(sum(mean > 3 for mean in run_means)),
+                str(len(run_means)),
+                _percent_of(counted[8][0], counted[8][2]),
+                _percent_of(counted[5][0], counted[5][2]),
+            ),
+        )
+    )
+    return found
+
+
+def pools_of(records: Sequence[dict[str, Any]]) -> list[int]:
+    return [size for record in records for size in pools(record)]
+
+
+def _robot_steps(records: Sequence[dict[str, Any]]) -> list[int]:
+    return [step for record in records for step in decided_steps(record)]
+
+
+def _whole(found: effects.Estimate | None) -> str:
+    return "-" if found is None else f"{100 * found.value:.0f}"
+
+
+def _percent_of(count: int, total: int) -> str:
+    return f"{100 * count / total:.0f}" if total else "-"

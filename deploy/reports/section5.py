@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from deploy.analysis import prose
 from deploy.analysis import section5_tables as tables
 from deploy.analysis.wilson import wilson
 from deploy.reports import pages, sweep
@@ -183,6 +184,8 @@ def write_all(root: Path, records: Sequence[dict[str, Any]], meta: dict[str, Any
             text = replace_block(text, name, rendered[name])
         path.write_text(text)
         written.append(path)
+        for problem in prose.stale(text, tables.claims(records), relative):
+            print(f"the prose is stale: {problem}", file=sys.stderr)  # written by hand
     written += plot_all(root, records)
     return written
 
@@ -250,6 +253,7 @@ def check_all(root: Path, fresh: Sequence[dict[str, Any]]) -> list[str]:
     rendered = tables.blocks(merged, meta)
     for relative, names in MARKDOWN.items():
         text = (root / relative).read_text()
+        problems += prose.stale(text, tables.claims(merged), relative)
         for name in names:
             block = read_block(text, name)
             if block is None:

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from deploy.analysis.prose import Claim
 from deploy.study.grid import Point, Run, expand
-from deploy.study.prose import Claim
 
 RESULTS_FOLDER = "docs/studies"
 

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from deploy.analysis import effects
+from deploy.analysis import effects, prose
 from deploy.reports import pages
-from deploy.study import prose, results
+from deploy.study import results
 from deploy.study.declare import Records, Study
 
 

@@ -8,12 +8,12 @@ import statistics
 from typing import Any
 
 from deploy.analysis import effects
+from deploy.analysis.prose import Claim, fixed
 from deploy.analysis.wilson import share, wilson
 from deploy.study import robustness as study
 from deploy.study import tables
 from deploy.study.declare import Records
 from deploy.study.grid import text
-from deploy.study.prose import Claim, fixed
 
 ALPHA0, ALPHA01, LOGLINEAR = (setup.key for setup in study.SETUPS)
 

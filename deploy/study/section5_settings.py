@@ -332,6 +332,13 @@ def plot_lag(records: Records, path: Path) -> None:
     plt.close(figure)
 
 
+def _prose_claims(records: Records) -> Any:
+    """The numbers of the page's text (``section5_prose``, which reads this module)."""
+    from deploy.study import section5_prose
+
+    return section5_prose.claims(records)
+
+
 STUDY = Study(
     name="section5-settings",
     title="Section 5: the settings the paper leaves open, and why the last robot lags",
@@ -342,6 +349,7 @@ STUDY = Study(
         Page(
             "docs/section5.md",
             lambda records: {"lag": lag_tables(records), "settings": settings_table(records)},
+            claims=_prose_claims,
         ),
     ),
     outputs=(

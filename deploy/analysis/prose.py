@@ -8,7 +8,7 @@ s"``), and the numbers the runs give, printed as the prose prints them. ``stale`
 each claim in the page's prose (outside the generated blocks, any run of whitespace
 matching any other) and names every number that is not what the runs give, or the claim
 the prose no longer says. ``tests/test_study_pages.py`` runs it for every study's pages,
-``tests/test_section5.py`` for Section 5's.
+``swarm section5 --check`` and ``tests/test_section5.py`` for Section 5's.
 
 A number that is a bound is printed rounded outwards (``up to 70 % loss the mean stays
 within 1.27 times``, for a ratio of 1.265): ``up`` and ``down``.
