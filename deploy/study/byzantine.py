@@ -220,13 +220,32 @@ def plot(records: Records, path: Path) -> None:
     plt.close(figure)
 
 
+def _prose() -> Any:
+    """The pages' text and security.md's table (``byzantine_prose``, which reads this)."""
+    from deploy.study import byzantine_prose
+
+    return byzantine_prose
+
+
 STUDY = Study(
     name="byzantine",
     title="Byzantine robots, the main table",
     about="liars, inverted and silent robots against alpha > 0 and the log-linear pool",
     points=points,
     source="deploy/study/byzantine.py",
-    pages=(Page("docs/byzantine.md", lambda records: {"results": results_block(records)}),),
+    pages=(
+        Page(
+            "docs/byzantine.md",
+            lambda records: {"results": results_block(records)},
+            claims=lambda records: _prose().claims(records),
+        ),
+        Page(
+            "docs/security.md",
+            lambda records: {"byzantine": _prose().security_table(records)},
+            made=False,
+            claims=lambda records: _prose().security_claims(records),
+        ),
+    ),
     outputs=(Output("docs/byzantine.png", plot),),
     kinds=lambda run: (
         "no Byzantine robot" if run.param("mode") == "none" else f"{run.param('mode')} robots"

@@ -182,13 +182,26 @@ def plot(records: Records, path: Path) -> None:
     plt.close(figure)
 
 
+def _claims(records: Records) -> Any:
+    """The numbers of the page's text on the defence (``byzantine_prose``)."""
+    from deploy.study import byzantine_prose
+
+    return byzantine_prose.defence_claims(records)
+
+
 STUDY = Study(
     name="defence",
     title="the defence against liars",
     about="trimmed pooling against 0-3 liars of 10 and 10% and 20% liars of 50",
     points=points,
     source="deploy/study/defence.py",
-    pages=(Page("docs/byzantine.md", lambda records: {"defence": "\n" + table(records) + "\n"}),),
+    pages=(
+        Page(
+            "docs/byzantine.md",
+            lambda records: {"defence": "\n" + table(records) + "\n"},
+            claims=_claims,
+        ),
+    ),
     outputs=(Output("docs/byzantine-defence.png", plot),),
     kinds=lambda run: (
         f"a {run.param('robots')}-robot swarm, "

@@ -25,8 +25,9 @@ from typing import Any
 import numpy as np
 
 from deploy.analysis import effects
+from deploy.analysis.prose import Claim
 from deploy.analysis.wilson import share
-from deploy.study import tables
+from deploy.study import results, tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
 
@@ -318,6 +319,57 @@ def page_blocks(records: Records) -> dict[str, str]:
     }
 
 
+def claims(records: Records) -> list[Claim]:
+    """The numbers of the page's text that the runs give."""
+    by_key = {record["key"]: record for record in records.runs}
+    recorded = by_key.get("engine=zenoh robots=1000 seed=0")
+    twin = by_key.get("engine=inprocess robots=1000 seed=0")
+    found = []
+    if recorded is not None and twin is not None:
+        digest = tables.result(recorded)["digest"]
+        same = digest == tables.result(twin)["digest"]
+        found.append(
+            Claim(
+                (
+                    "is the in-process run of the same seed, bit for bit (the same digest, "
+                    f"`{digest}`)"
+                    if same
+                    else "is not the in-process run of the same seed"
+                )
+                + ": 20 robot processes of 50 robots, the world, the beacon and the recorder, "
+                "{} times faster than real time on the 2-core machine. Its recording ({} GB)",
+                (
+                    f"{tables.result(recorded)['sim_time_s'] / recorded['wall_s']:.1f}",
+                    f"{recorded['recording']['bytes'] / 1e9:.1f}",
+                ),
+            )
+        )
+    commits = results.made_with(list(records.runs))
+    if len(commits) == 2:
+        (most, _), (fewest, count) = commits.items()
+        odd = [record for record in records.runs if record.get("commit") == fewest]
+        sizes = sorted({record["params"]["robots"] for record in odd})
+        seeds = [record["seed"] for record in odd]
+        words = {1: "One run", 2: "Two runs", 3: "Three runs"}
+        found.append(
+            Claim(
+                f"{words.get(count, f'{count} runs')} ({', '.join(map(str, sizes))} robots, "
+                f"{tables.seeds(seeds)}) were made at commit {fewest}, with the lock of that "
+                f"time; every other run at {most}.",
+                (),
+            )
+        )
+    first = by_key.get("engine=inprocess robots=500 seed=0")
+    if first is not None:
+        found.append(
+            Claim(
+                f"gives the same run (digest `{tables.result(first)['digest']}`, {{}} s).",
+                (f"{tables.result(first)['sim_time_s']:.1f}",),
+            )
+        )
+    return found
+
+
 def plot(records: Records, path: Path) -> None:
     """Every run's sim time to consensus against the swarm's size (log-log), each size's
     median with its 95% interval, and the power law fitted to the runs with its band."""
@@ -384,7 +436,7 @@ STUDY = Study(
     points=points,
     source="deploy/study/scale.py",
     pages=(
-        Page("docs/scale.md", page_blocks),
+        Page("docs/scale.md", page_blocks, claims=claims),
         Page(
             "README.md",
             lambda records: {"per-size": per_size(engine_runs(records, "inprocess"))},

@@ -265,13 +265,20 @@ def _accuracy(axis: Any, rows: list[dict[str, Any]], style: str, colour: str) ->
     )
 
 
+def _prose_claims(records: Records) -> Any:
+    """The numbers of the page's text (``strategies_prose``, which reads this module)."""
+    from deploy.study import strategies_prose
+
+    return strategies_prose.claims(records)
+
+
 STUDY = Study(
     name="strategies",
     title="rivals in the swarm",
     about="the paper's strategy against DMVD, DMMD and DC: well-stirred and in the swarm",
     points=points,
     source="deploy/study/strategies.py",
-    pages=(Page("docs/strategies.md", blocks),),
+    pages=(Page("docs/strategies.md", blocks, claims=_prose_claims),),
     outputs=(Output("docs/strategies.png", plot),),
     kinds=lambda run: (
         "a well-stirred cell"
