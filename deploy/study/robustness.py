@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from deploy.analysis import effects
-from deploy.analysis.wilson import share
+from deploy.analysis.wilson import interval, share
 from deploy.study import tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point, text
@@ -140,6 +140,10 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
         "time_max": max(times) if times else None,
         "comparisons": comparisons / len(results),
         "wrong_share": sum(result["wrong_comparisons"] for result in results) / max(comparisons, 1),
+        "wrong_interval": effects.clustered_share(
+            [result["wrong_comparisons"] for result in results],
+            [result["comparisons"] for result in results],
+        ),
         "best_eliminated": sum(result["best_eliminated"] for result in results) / len(results),
     }
 
@@ -249,8 +253,8 @@ def sensing_table(records: Records) -> str:
         return "The sensing runs are not made yet."
     lines = [
         f"| σ | best (ρ = {first['best_quality']:.3g}): mean (sd) | second (ρ = "
-        f"{first['second_quality']:.3g}): mean (sd) | frames with no site found "
-        "| P(best reads below second) |",
+        f"{first['second_quality']:.3g}): mean (sd) | frames with no site found (95% interval) "
+        "| P(best reads below second) (95% interval) |",
         "|---|---|---|---|---|",
     ]
 
@@ -262,10 +266,16 @@ def sensing_table(records: Records) -> str:
     for sigma in SENSING_SIGMAS:
         if (found := runs.get(sigma)) is None:
             continue
-        swapped = "-" if not found["pairs"] else f"{100 * found['swapped'] / found['pairs']:.1f} %"
+        swapped = (
+            "-"
+            if not found["pairs"]
+            else f"{100 * found['swapped'] / found['pairs']:.1f} % "
+            f"({interval(found['swapped'], found['pairs'])})"
+        )
         lines.append(
             f"| {text(sigma)} | {cell(found['best'])} | {cell(found['second'])} "
-            f"| {100 * found['missed'] / (2 * found['frames']):.0f} % | {swapped} |"
+            f"| {100 * found['missed'] / (2 * found['frames']):.0f} % "
+            f"({interval(found['missed'], 2 * found['frames'])}) | {swapped} |"
         )
     return "\n".join(lines)
 
@@ -288,11 +298,21 @@ def noise_rows(
     return rows
 
 
+def _percent_interval(value: float, found: effects.Estimate | None) -> str:
+    """``2.7 % (1.9-3.6%)``: a share of comparisons and its 95% interval (whole runs
+    resampled: the comparisons of one run are not independent)."""
+    if found is None:
+        return f"{100 * value:.1f} %"
+    low = effects.outwards(100 * found.low, 100 * found.high, 1)
+    return f"{100 * value:.1f} % ({low}%)"
+
+
 def noise_table(rows: list[dict[str, Any]]) -> str:
     lines = [
         "| σ | controller | correct (95% interval) | wrong consensus | split/timeout "
         "| consensus time s: mean / median / max | median time against α = 0 at this σ: "
-        "ratio (95% interval) | comparisons/run | wrong comparisons | best eliminated/run |",
+        "ratio (95% interval) | comparisons/run | wrong comparisons (95% interval) | best "
+        "eliminated/run |",
         "|---|---|---|---|---|---|---:|---|---|---|",
     ]
     for row in rows:
@@ -312,7 +332,8 @@ def noise_table(rows: list[dict[str, Any]]) -> str:
             f"{share(row['correct'], runs)} "
             f"| {tables.counted(row['wrong'], runs)} | {tables.counted(row['split'], runs)} "
             f"| {_times(row)} | {against} | {row['comparisons']:.1f} "
-            f"| {100 * row['wrong_share']:.1f} % | {row['best_eliminated']:.2f} |"
+            f"| {_percent_interval(row['wrong_share'], row['wrong_interval'])} "
+            f"| {row['best_eliminated']:.2f} |"
         )
     return "\n".join(lines)
 
