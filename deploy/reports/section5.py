@@ -14,8 +14,9 @@ on every executor). Seeds 0-9 stand for the paper's ten runs per n.
   figures themselves and docs/section5-distribution.png;
 * ``--check`` runs every published run again (all 600 of docs/section5-runs.json, about
   7 minutes on 2 cores; ``make check-published``, which CI runs) and names everything that
-  differs: each run, the Markdown blocks, the figures' data, and runs missing from the file
-  or settings that differ from the code's. The PNGs are not compared (they are drawn from
+  differs: each run, the Markdown blocks, the figures' data, the numbers of the page's
+  text (``section5_tables.claims``), and runs missing from the file or settings that differ
+  from the code's. The PNGs are not compared (they are drawn from
   the checked data). ``--check --sample`` runs seeds 0-9 only (60 runs) and says which
   published runs it did not check.
 
