@@ -1,6 +1,6 @@
-"""The numbers docs/byzantine.md's and docs/security.md's text read from the studies
-``byzantine`` and ``defence``, checked against their runs (``prose.Claim``), and the table
-of security.md's section on Byzantine robots, rendered from the runs."""
+"""The numbers docs/byzantine.md's and docs/security.md's text read from the study
+``byzantine``, checked against its runs (``prose.Claim``), and the table of security.md's
+section on Byzantine robots, rendered from the runs."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from typing import Any
 
 from deploy.analysis import effects
 from deploy.analysis.prose import Claim, fixed
-from deploy.analysis.wilson import percent_bound, share, wilson
-from deploy.study import byzantine as study
+from deploy.analysis.wilson import share
+from deploy.study import byzantine_runs as study
 from deploy.study import tables
 from deploy.study.declare import Records
 
@@ -209,89 +209,5 @@ def security_claims(records: Records) -> list[Claim]:
             "median consensus takes {} s (paper), {} s, {} s and {} s (log-linear): {}, {} and "
             "{} times the paper's",
             (*_times(cells), *_ratios(cells, "liar", 0)),
-        ),
-    ]
-
-
-# --- the defence study's text ---------------------------------------------------------------
-
-
-def defence_claims(records: Records) -> list[Claim]:
-    """The numbers of byzantine.md's findings on trimmed pooling."""
-    from deploy.study import defence
-
-    rows = {(row["robots"], row["liars"], row["defence"]): row for row in defence.rows(records)}
-    wanted = sum(len(defence.LIARS[r]) * len(defence.DEFENCES[r]) for r in defence.LIARS)
-    if len(rows) < wanted:
-        return []
-
-    def right(robots: int, liars: int, name: str) -> tuple[str, str]:
-        row = rows[robots, liars, name]
-        return str(row["correct"]), str(row["runs"])
-
-    def cost(robots: int, name: str) -> tuple[str, str, str]:
-        row, bare = rows[robots, 0, name], rows[robots, 0, "none"]
-        ratio = effects.paired_median_ratio(row["times"], bare["times"])
-        assert ratio is not None
-        low, high = effects.outwards(ratio.low, ratio.high, 2).split("-")
-        return fixed(ratio.value, 2), low, high
-
-    small, large = sorted(defence.LIARS)
-    lowest = {
-        runs: percent_bound(wilson(runs, runs)[0], upper=False)
-        for runs in (defence.SEEDS[small].stop, defence.SEEDS[large].stop)
-    }
-    split_one = rows[small, 1, "none"]["split"]
-    return [
-        Claim(
-            "{} of {} correct is consistent with a rate as low as {}%, {} of {} with {}%",
-            (
-                str(defence.SEEDS[small].stop),
-                str(defence.SEEDS[small].stop),
-                lowest[defence.SEEDS[small].stop],
-                str(defence.SEEDS[large].stop),
-                str(defence.SEEDS[large].stop),
-                lowest[defence.SEEDS[large].stop],
-            ),
-        ),
-        Claim(
-            "One liar among 10: {} of {} runs correct with trimmed pooling (F = 1), against {} "
-            "of {} with the paper's pooling (the other {} split). 10% liars among 50 (5 "
-            "liars): {} of {} correct with F = 5 and with F = 10, against {} of {} (all split) "
-            "with the paper's pooling.",
-            (
-                *right(small, 1, "trimmed:1"),
-                *right(small, 1, "none"),
-                str(split_one),
-                *right(large, 5, "trimmed:5"),
-                *right(large, 5, "none"),
-            ),
-        ),
-        Claim(
-            "10 robots, {} s with F = 1 against {} s ({} times, 95% interval {}-{}); 50 robots, "
-            "{} s with F = 5 ({} times, {}-{}) and {} s with F = 10 ({} times, {}-{}) against "
-            "{} s.",
-            (
-                fixed(rows[small, 0, "trimmed:1"]["median"]),
-                fixed(rows[small, 0, "none"]["median"]),
-                *cost(small, "trimmed:1"),
-                fixed(rows[large, 0, "trimmed:5"]["median"]),
-                *cost(large, "trimmed:5"),
-                fixed(rows[large, 0, "trimmed:10"]["median"]),
-                *cost(large, "trimmed:10"),
-                fixed(rows[large, 0, "none"]["median"]),
-            ),
-        ),
-        Claim(
-            "With F = 1 among 10, 2 liars (20%) leave {} of {} runs correct and 3 liars (30%) "
-            "{} of {}, most of the others split; with F = 5 among 50, 10 liars (20%) leave {} "
-            "of {}. Set to F = 10, the 50-robot swarm was correct in {} of {} runs with 10 "
-            "liars",
-            (
-                *right(small, 2, "trimmed:1"),
-                *right(small, 3, "trimmed:1"),
-                *right(large, 10, "trimmed:5"),
-                *right(large, 10, "trimmed:10"),
-            ),
         ),
     ]

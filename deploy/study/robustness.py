@@ -19,49 +19,33 @@ each site comparison judged against the true qualities):
 from __future__ import annotations
 
 import itertools
-import statistics
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from deploy.analysis import effects
 from deploy.analysis.wilson import interval, share
-from deploy.study import tables
+from deploy.study import robustness_prose, tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point, text
-
-ROBOTS, SITES = 10, 10
-TIMEOUT = 1800.0  # sim seconds
-DROPS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)
-CLAIM_DROP = 0.3
-SIGMAS = (0.0, 100.0, 120.0, 140.0, 150.0, 160.0, 170.0, 180.0)
-FAILING = (150.0, 160.0, 170.0, 180.0)  # the levels run with 40 seeds
-SENSING_SIGMAS = (0.0, 60.0, 100.0, 120.0, 140.0, 150.0, 160.0, 170.0, 180.0)
-LIGHTING = 0.3
-LIGHTING_SIGMAS = (0.0, 100.0)
-SEEDS = range(10)
-MORE_SEEDS = range(40)
-
-
-@dataclass(frozen=True)
-class Setup:
-    """A controller set-up of the noise sweep, as ``swarm run`` options."""
-
-    key: str
-    label: str
-    options: tuple[str, ...]
-
-
-SETUPS = (
-    Setup("alpha0", "α = 0, MProdOp (paper)", ()),
-    Setup("alpha01", "α = 0.1, MProdOp", ("--alpha", "0.1", "--threshold", "0.99")),
-    Setup(
-        "loglinear",
-        "α = 0.1, log-linear pool",
-        ("--alpha", "0.1", "--threshold", "0.99", "--pooling", "loglinear"),
-    ),
+from deploy.study.robustness_runs import (
+    CLAIM_DROP,
+    DROPS,
+    FAILING,
+    LABELS,
+    LIGHTING,
+    LIGHTING_SIGMAS,
+    MORE_SEEDS,
+    ROBOTS,
+    SEEDS,
+    SENSING_SIGMAS,
+    SETUPS,
+    SIGMAS,
+    SITES,
+    TIMEOUT,
+    claim_numbers,
+    summarise,
 )
-LABELS = {setup.key: setup.label for setup in SETUPS}
+
 BASE = ("--robots", str(ROBOTS), "--sites", str(SITES))
 # The kinds of run, by sweep (``swarm study robustness --check`` makes one of each).
 KINDS = {
@@ -118,36 +102,6 @@ def points() -> list[Point]:
 # --- the page ------------------------------------------------------------------------------
 
 
-def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """A point's runs: accuracy, failures, consensus times and comparisons."""
-    results = [tables.result(run) for run in runs]
-    times = [result["sim_time_s"] for result in results if result["consensus"]]
-    by_seed = {
-        run["seed"]: result["sim_time_s"]
-        for run, result in zip(runs, results, strict=True)
-        if result["consensus"]
-    }
-    comparisons = sum(result["comparisons"] for result in results)
-    return {
-        "runs": len(results),
-        "correct": sum(result["correct"] for result in results),
-        "wrong": sum(result["consensus"] and not result["correct"] for result in results),
-        "split": sum(not result["consensus"] for result in results),
-        "times": times,
-        "by_seed": by_seed,
-        "time_mean": tables.mean(times),
-        "time_median": tables.median(times),
-        "time_max": max(times) if times else None,
-        "comparisons": comparisons / len(results),
-        "wrong_share": sum(result["wrong_comparisons"] for result in results) / max(comparisons, 1),
-        "wrong_interval": effects.clustered_share(
-            [result["wrong_comparisons"] for result in results],
-            [result["comparisons"] for result in results],
-        ),
-        "best_eliminated": sum(result["best_eliminated"] for result in results) / len(results),
-    }
-
-
 def _times(row: dict[str, Any]) -> str:
     return " / ".join(tables.number(row[name]) for name in ("time_mean", "time_median", "time_max"))
 
@@ -167,43 +121,13 @@ def drop_table(records: Records) -> str:
             against = (
                 "1 (the baseline)"
                 if level == 0.0
-                else tables.compare_times(row["by_seed"], baseline, CONSENSUS_RUNS)
+                else tables.compare_times(row["by_seed"], baseline, tables.CONSENSUS_RUNS)
             )
             lines.append(
                 f"| {text(level)} | {share(row['correct'], row['runs'])} | {_times(row)} "
                 f"| {against} | {row['comparisons']:.1f} |"
             )
     return "\n".join(lines)
-
-
-CONSENSUS_RUNS = ("run with consensus", "runs with consensus")
-
-
-def claim_numbers(records: Records) -> dict[str, Any] | None:
-    """The 30% claim, drop 0.3 against drop 0 seed by seed: what the claim block and the
-    page's findings say (None before those runs are made)."""
-    clean = {run["seed"]: tables.result(run) for run in records.where(sweep="drop", drop=0.0)}
-    lossy = {
-        run["seed"]: tables.result(run) for run in records.where(sweep="drop", drop=CLAIM_DROP)
-    }
-    seeds = sorted(set(clean) & set(lossy))
-    if not seeds:
-        return None
-    before = [clean[seed]["sim_time_s"] for seed in seeds]
-    after = [lossy[seed]["sim_time_s"] for seed in seeds]
-    ratios = [b / a for a, b in zip(before, after, strict=True)]
-    return {
-        "seeds": seeds,
-        "right_clean": sum(clean[s]["correct"] for s in seeds),
-        "right_lossy": sum(lossy[s]["correct"] for s in seeds),
-        "median_clean": statistics.median(before),
-        "median_lossy": statistics.median(after),
-        "ratio": effects.paired_median_ratio(
-            {seed: lossy[seed]["sim_time_s"] for seed in seeds},
-            {seed: clean[seed]["sim_time_s"] for seed in seeds},
-        ),
-        "per_seed": (min(ratios), max(ratios)),
-    }
 
 
 def claim(records: Records) -> str:
@@ -324,7 +248,7 @@ def noise_table(rows: list[dict[str, Any]]) -> str:
         against = (
             "1 (the baseline)"
             if row is paper
-            else tables.compare_times(row["by_seed"], paper["by_seed"], CONSENSUS_RUNS)
+            else tables.compare_times(row["by_seed"], paper["by_seed"], tables.CONSENSUS_RUNS)
         )
         runs = row["runs"]
         lines.append(
@@ -378,23 +302,16 @@ def failing_table(records: Records) -> str:
         cells = [f"{tables.number(tables.median(baseline.values()))}"]
         cells += [
             f"{tables.number(tables.median(times[setup.key].values()))}, "
-            f"{tables.compare_times(times[setup.key], baseline, CONSENSUS_RUNS)}"
+            f"{tables.compare_times(times[setup.key], baseline, tables.CONSENSUS_RUNS)}"
             for setup in SETUPS[1:]
         ]
         lines.append(f"| {text(sigma)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
-def _prose() -> Any:
-    """The page's findings and claims (``robustness_prose``, which reads this module)."""
-    from deploy.study import robustness_prose
-
-    return robustness_prose
-
-
 def page_blocks(records: Records) -> dict[str, str]:
     return {
-        **_prose().blocks(records),
+        **robustness_prose.blocks(records),
         "drop": drop_table(records),
         "claim": claim(records),
         "sensing": sensing_table(records),
@@ -518,9 +435,7 @@ STUDY = Study(
     about="radio loss, camera noise and lighting against alpha > 0 and the log-linear pool",
     points=points,
     source="deploy/study/robustness.py",
-    pages=(
-        Page("docs/robustness.md", page_blocks, claims=lambda records: _prose().claims(records)),
-    ),
+    pages=(Page("docs/robustness.md", page_blocks, claims=robustness_prose.claims),),
     outputs=(
         Output("docs/robustness_drop.png", plot_drop),
         Output("docs/robustness_noise.png", plot_noise),

@@ -10,7 +10,7 @@ from typing import Any
 from deploy.analysis import effects
 from deploy.analysis.prose import Claim, fixed
 from deploy.analysis.wilson import share, wilson
-from deploy.study import robustness as study
+from deploy.study import robustness_runs as study
 from deploy.study import tables
 from deploy.study.declare import Records
 from deploy.study.grid import text

@@ -10,7 +10,7 @@ from typing import Any
 
 from deploy.analysis import effects
 from deploy.analysis.prose import Claim, fixed
-from deploy.study import section5_settings as study
+from deploy.study import section5_settings_runs as study
 from deploy.study import tables
 from deploy.study.declare import Records
 

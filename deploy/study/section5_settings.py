@@ -14,34 +14,25 @@ from __future__ import annotations
 
 import json
 import math
-import statistics
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from deploy.analysis import effects
 from deploy.analysis.wilson import percent_bound, share
-from deploy.study import lag, tables
+from deploy.study import lag, section5_prose, tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point, Scalar
-
-ROBOTS = 10
-SITES = (5, 8, 10)
-SEEDS = range(100)
-TIMEOUT = 1800.0  # sim seconds: swarm run's default
-SETTINGS = (
-    "default",
-    "dwell=1.5",
-    "dwell=4",
-    "dwell=4.5",
-    "dwell=6",
-    "dwell=10",
-    "broadcast_period=0.1",
-    "broadcast_period=1",
-    "beacon_period=5",
-    "beacon_range=0.3",
-    "max_wheel_speed=0.065",
+from deploy.study.section5_settings_runs import (
+    ROBOTS,
+    SEEDS,
+    SETTINGS,
+    SITES,
+    TIMEOUT,
+    lag_analyses,
+    lag_summaries,
+    row,
 )
+
 OPTIONS = ("dwell", "broadcast_period", "beacon_period", "beacon_range")  # swarm run's
 SPEC = ("max_wheel_speed",)  # the e-puck's, no option
 COST = 4.0  # wall seconds a run takes, about
@@ -83,55 +74,6 @@ def points() -> list[Point]:
 # --- the settings table --------------------------------------------------------------------
 
 
-def swarm_steps(result: dict[str, Any]) -> int | None:
-    steps = result["robots"]["steps"]
-    if result["ended"] != "consensus" or any(step is None for step in steps):
-        return None
-    return int(max(steps))
-
-
-def row(runs: Sequence[dict[str, Any]], n: int) -> dict[str, Any]:
-    results = [tables.result(run) for run in runs]
-    finished = [value for result in results if (value := swarm_steps(result)) is not None]
-    pools = [size for result in results for robot in result["robots"]["pools"] for size in robot]
-    run_pool_means = [
-        statistics.fmean(sizes)
-        for result in results
-        if (sizes := [size for robot in result["robots"]["pools"] for size in robot])
-    ]
-    times = [result["sim_time_s"] for result in results if swarm_steps(result) is not None]
-    per_run = [
-        [size for robot in result["robots"]["pools"] for size in robot] for result in results
-    ]
-    if len(finished) >= 2:
-        q1, median, q3 = statistics.quantiles(finished, n=4, method="inclusive")
-    else:  # one run: its value; none: nothing
-        q1 = median = q3 = float(finished[0]) if finished else math.nan
-    return {
-        "runs": len(results),
-        "consensus": len(finished),
-        "correct": sum(result["correct"] for result in results),
-        "within": sum(value <= n / 2 for value in finished),
-        "below": sum(value < n / 2 for value in finished),
-        "median": median,
-        "q1": q1,
-        "q3": q3,
-        "mean_swarm": tables.mean(finished),
-        "pool_mean": tables.mean(pools),
-        "run_pool_over3": sum(mean > 3 for mean in run_pool_means),
-        "alone": sum(size == 1 for size in pools) / max(len(pools), 1),
-        "alone_interval": effects.clustered_share(
-            [sum(size == 1 for size in sizes) for sizes in per_run], [len(s) for s in per_run]
-        ),
-        "time": tables.mean(times),
-        "times": {
-            run["seed"]: result["sim_time_s"]
-            for run, result in zip(runs, results, strict=True)
-            if swarm_steps(result) is not None
-        },
-    }
-
-
 def _steps(r: dict[str, Any]) -> str:
     """The swarm steps' median and IQR, ``-`` without a run in consensus."""
     if math.isnan(r["median"]):
@@ -161,7 +103,9 @@ def settings_table(records: Records) -> str:
             against = (
                 "1 (the baseline)"
                 if setting == "default"
-                else tables.compare_times(r["times"], row(defaults, n)["times"], CONSENSUS_RUNS)
+                else tables.compare_times(
+                    r["times"], row(defaults, n)["times"], tables.CONSENSUS_RUNS
+                )
                 if defaults
                 else "-"
             )
@@ -184,9 +128,6 @@ def settings_table(records: Records) -> str:
     return "\n".join(lines)
 
 
-CONSENSUS_RUNS = ("run with consensus", "runs with consensus")
-
-
 def _interval(found: effects.Estimate | None) -> str:
     """``22-28%``: a share's 95% bootstrap interval in whole percent, rounded outwards."""
     if found is None:
@@ -195,24 +136,6 @@ def _interval(found: effects.Estimate | None) -> str:
 
 
 # --- why the last robot lags ---------------------------------------------------------------
-
-
-def lag_summaries(records: Records) -> list[dict[str, Any]]:
-    summaries = []
-    for n in SITES:
-        analysed = lag_analyses(records, n)
-        if analysed:
-            summaries.append(lag.summarise(analysed, n))
-    return summaries
-
-
-def lag_analyses(records: Records, n: int) -> list[dict[str, Any]]:
-    """The lag measures of each observed default run of ``n`` (``lag.analyse``)."""
-    return [
-        found
-        for run in records.where(setting="default", sites=n)
-        if (found := tables.result(run).get("lag")) is not None
-    ]
 
 
 def lag_intervals(analysed: list[dict[str, Any]]) -> dict[str, effects.Estimate | None]:
@@ -332,13 +255,6 @@ def plot_lag(records: Records, path: Path) -> None:
     plt.close(figure)
 
 
-def _prose_claims(records: Records) -> Any:
-    """The numbers of the page's text (``section5_prose``, which reads this module)."""
-    from deploy.study import section5_prose
-
-    return section5_prose.claims(records)
-
-
 STUDY = Study(
     name="section5-settings",
     title="Section 5: the settings the paper leaves open, and why the last robot lags",
@@ -349,7 +265,7 @@ STUDY = Study(
         Page(
             "docs/section5.md",
             lambda records: {"lag": lag_tables(records), "settings": settings_table(records)},
-            claims=_prose_claims,
+            claims=section5_prose.claims,
         ),
     ),
     outputs=(

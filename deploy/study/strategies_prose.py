@@ -8,7 +8,7 @@ from typing import Any
 from deploy.analysis import effects
 from deploy.analysis.prose import Claim, down, fixed, up
 from deploy.analysis.wilson import wilson
-from deploy.study import strategies as study
+from deploy.study import strategies_runs as study
 from deploy.study.declare import Records
 
 

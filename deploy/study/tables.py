@@ -12,6 +12,8 @@ from deploy.analysis import effects
 from deploy.analysis.wilson import interval, share, wilson
 
 VERDICTS = ("correct", "wrong", "split", "undecided")
+# How a time comparison names the runs it needs (``compare_times``' ``what``).
+CONSENSUS_RUNS = ("run with consensus", "runs with consensus")
 
 
 def number(value: float | None, digits: int = 0) -> str:
