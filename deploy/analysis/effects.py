@@ -27,7 +27,10 @@ of each size on their own.
 
 Every resampling draws from the project's generator (``wire.rng.Stream``, specified in
 docs/porting.md), seeded by the SHA-256 of the values it resamples, in sorted order: the
-same runs give the same interval, in any order, on any machine and with any numpy.
+same runs give the same interval, in any order, on any machine and with any numpy. What
+is computed from them is too: medians and percentiles select, sums of floats add in order
+(``_sum``: numpy's reductions take another order on another SIMD path), and logarithms,
+exponentials and powers are the portable kernel's (``wire.numeric``).
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from wire import numeric
 from wire.rng import Stream
 
 RESAMPLES = 4000
@@ -180,9 +184,9 @@ class PowerLaw:
 
     def curve(self, sizes: Sequence[float]) -> tuple[Floats, Floats, Floats]:
         """The fitted time at each size and its pointwise 95% interval."""
-        logs = np.log(np.asarray(sizes, dtype=np.float64))
-        central = self.scale.value * np.exp(self.exponent.value * logs)
-        resampled = np.exp(self.fits[:, :1] + self.fits[:, 1:] * logs[None, :])
+        logs = numeric.log_array(np.asarray(sizes, dtype=np.float64))
+        central = self.scale.value * numeric.exp_array(self.exponent.value * logs)
+        resampled = numeric.exp_array(self.fits[:, :1] + self.fits[:, 1:] * logs[None, :])
         ordered = np.sort(resampled, axis=0)
         last = len(ordered) - 1
         low = ordered[math.floor(LOW * last)]
@@ -190,11 +194,18 @@ class PowerLaw:
         return central, low, high
 
 
+def _sum(values: Floats) -> Floats:
+    """Sums along the last axis, added in order (the same bits on every CPU)."""
+    summed: Floats = np.cumsum(values, axis=-1)[..., -1]
+    return summed
+
+
 def _fit(logs: Floats, times: Floats) -> tuple[Floats, Floats]:
     """Least-squares (intercept, slope) per row of ``logs`` and ``times`` (log values)."""
-    mean_x = logs.mean(axis=-1, keepdims=True)
-    mean_y = times.mean(axis=-1, keepdims=True)
-    slope = ((logs - mean_x) * (times - mean_y)).sum(axis=-1) / ((logs - mean_x) ** 2).sum(axis=-1)
+    count = logs.shape[-1]
+    mean_x = (_sum(logs) / count)[..., None]
+    mean_y = (_sum(times) / count)[..., None]
+    slope = _sum((logs - mean_x) * (times - mean_y)) / _sum((logs - mean_x) ** 2)
     intercept = mean_y[..., 0] - slope * mean_x[..., 0]
     return intercept, slope
 
@@ -207,11 +218,11 @@ def power_law(sizes: Sequence[float], times: Sequence[float]) -> PowerLaw | None
     points = sorted(zip(sizes, times, strict=True))
     sizes = [size for size, _ in points]
     times = [time for _, time in points]
-    x = np.log(np.asarray(sizes, dtype=np.float64))
-    y = np.log(np.asarray(times, dtype=np.float64))
+    x = numeric.log_array(np.asarray(sizes, dtype=np.float64))
+    y = numeric.log_array(np.asarray(times, dtype=np.float64))
     intercept, slope = _fit(x[None, :], y[None, :])
     residual = y - (intercept[0] + slope[0] * x)
-    r2 = 1.0 - float((residual**2).sum() / ((y - y.mean()) ** 2).sum())
+    r2 = 1.0 - float(_sum(residual**2) / _sum((y - _sum(y) / len(y)) ** 2))
     stream = stream_for(list(sizes), list(times))
     columns = []
     for size in sorted(set(sizes)):  # resample within each size, sizes in order
@@ -221,11 +232,15 @@ def power_law(sizes: Sequence[float], times: Sequence[float]) -> PowerLaw | None
     fitted_intercepts, fitted_slopes = _fit(x[picks], y[picks])
     fits = np.stack([fitted_intercepts, fitted_slopes], axis=1)
     slope_low, slope_high = percentiles(fitted_slopes)
-    scale_low, scale_high = percentiles(np.exp(fitted_intercepts))
+    scale_low, scale_high = percentiles(numeric.exp_array(fitted_intercepts))
     return PowerLaw(
         exponent=Estimate(float(slope[0]), slope_low, slope_high),
-        scale=Estimate(float(math.exp(intercept[0])), scale_low, scale_high),
-        doubling=Estimate(2 ** float(slope[0]), 2**slope_low, 2**slope_high),
+        scale=Estimate(numeric.exp(float(intercept[0])), scale_low, scale_high),
+        doubling=Estimate(
+            numeric.power(2.0, float(slope[0])),
+            numeric.power(2.0, slope_low),
+            numeric.power(2.0, slope_high),
+        ),
         r2=r2,
         runs=len(sizes),
         fits=fits,
