@@ -291,10 +291,8 @@ def before_block(records: Records, root: Path) -> str:
         faster = effects.a_faster(
             [_time_or_gave_up(run) for run in new], [_time_or_gave_up(run) for run in old]
         )
-        walls = tables.compare_times(
-            {run["seed"]: run["wall_s"] for run in new},
-            {run["seed"]: run["wall_s"] for run in old},
-            ("run", "runs"),
+        walls = tables.compare_times(  # unpaired: a seed's run differs before and after
+            [run["wall_s"] for run in new], [run["wall_s"] for run in old], ("run", "runs")
         )
         lines.append(
             f"| {robots} | {seeds[0]}-{seeds[-1]} | "
