@@ -221,3 +221,20 @@ def test_a_second_runner_on_one_results_file_is_refused_and_named(
         (line,) = capsys.readouterr().err.strip().splitlines()
         assert f"is being made by pid {os.getpid()} on " in line and "give --wait" in line
     assert results.load(results_file).runs == {}  # the second runner made nothing
+
+
+def test_a_check_prints_its_sample_and_the_command_that_draws_it_again(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A failure of make check-published can be made again: the check names its seed."""
+    root = _tiny_root(tmp_path, made=6)  # results that the code does not give: it fails
+    arguments = ["tiny", "--check", "--parallel", "1", "--sample-seed", "5", "--sample", "2"]
+    assert _study(root, *arguments) == 1
+    printed = capsys.readouterr().out.splitlines()
+    command = "swarm study tiny --check --sample-seed 5 --sample 2"
+    assert printed[0] == f"tiny: sample seed 5 (`{command}` draws it again):"
+    assert printed[1].startswith("  inprocess: ")
+    drawn = printed[1]
+    assert len(drawn.split(", ")) == 2  # two of the kind
+    assert _study(root, *command.split()[2:], "--parallel", "1") == 1
+    assert capsys.readouterr().out.splitlines()[1] == drawn  # the same runs, drawn again

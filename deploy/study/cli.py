@@ -334,9 +334,11 @@ def check_runs(state: State, executor: sweep.ExecutorSpec, draw: Draw, console: 
         budget=draw.budget,
     )
     chosen = drawn.runs
-    again = f"swarm study {study.name} --check --sample-seed {draw.seed}" + (
-        f" --sample {draw.per_kind}" if draw.per_kind != DEFAULT_SAMPLE else ""
-    )
+    again = f"swarm study {study.name} --check --sample-seed {draw.seed}"
+    if draw.per_kind != DEFAULT_SAMPLE:
+        again += f" --sample {draw.per_kind}"
+    if draw.budget != check.BUDGET * draw.per_kind:
+        again += f" --sample-budget {draw.budget:g}"
     print(f"{study.name}: sample seed {draw.seed} (`{again}` draws it again):")
     for kind, runs in drawn.kinds.items():
         print(f"  {kind}: {', '.join(run.key for run in runs)}")
