@@ -16,7 +16,7 @@ seconds, then lets the run end. Each process's peak resident set (VmHWM) is read
 * ``clean``: no flood (what each process takes anyway);
 * ``replayed-acts-realtime`` (case 4 of docs/security.md): ``--clock realtime``, old
   acts and radio transmissions replayed (the freshness checks of
-  world_server/core/intake.py and wire/guard.py refuse them);
+  world_server/core/intake.py and bestofn_swarm/wire/guard.py refuse them);
 * ``replayed-acts-statuses``: lockstep, old acts and statuses replayed;
 * ``empty``: empty messages on the acts' and statuses' keys;
 * ``junk-1mb``: 1 MiB of random bytes on the status keys;
@@ -25,8 +25,8 @@ seconds, then lets the run end. Each process's peak resident set (VmHWM) is read
   the status keys for the launcher.
 
 It also prints what one queued message holds beyond its bytes in each inbox there is
-(tracemalloc), the overhead ``plumbing.inbox`` charges for, and (``--fill``) what an inbox
-filled to its cap with small messages adds to a process's resident set, charged as now
+(tracemalloc), the overhead ``bestofn_swarm.plumbing.inbox`` charges for, and (``--fill``) what an
+inbox filled to its cap with small messages adds to a process's resident set, charged as now
 and as without the per-message overhead (payload and attachment only): a flood only fills
 an inbox when its process falls behind, which on a given machine it may not, so this is
 the bound a flood reaches at worst. The world server has no inbox (each Zenoh callback
@@ -63,11 +63,11 @@ sys.path.insert(0, str(REPO))
 
 import zenoh  # noqa: E402
 
+from bestofn_swarm.plumbing import inbox as inbox_module  # noqa: E402
+from bestofn_swarm.plumbing.tcp import free_port  # noqa: E402
+from bestofn_swarm.plumbing.zenoh_session import open_session  # noqa: E402
+from bestofn_swarm.wire import batch, protocol  # noqa: E402
 from deploy.launcher.supervisor import RUN_ID_ENV  # noqa: E402
-from plumbing import inbox as inbox_module  # noqa: E402
-from plumbing.tcp import free_port  # noqa: E402
-from plumbing.zenoh_session import open_session  # noqa: E402
-from wire import batch, protocol  # noqa: E402
 
 CASES = (
     "clean",

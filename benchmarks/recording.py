@@ -31,16 +31,16 @@ from typing import Any
 
 from mcap.reader import make_reader
 
-from wire.names import Role
+from bestofn_swarm.wire.names import Role
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from bestofn_swarm.plumbing.tcp import free_port  # noqa: E402
+from bestofn_swarm.plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
+from bestofn_swarm.wire import protocol  # noqa: E402
+from bestofn_swarm.wire.endings import RESULT_CODES  # noqa: E402
 from deploy.reports import report  # noqa: E402
-from plumbing.tcp import free_port  # noqa: E402
-from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
-from wire import protocol  # noqa: E402
-from wire.endings import RESULT_CODES  # noqa: E402
 from world_server.recorder.write_loop import FINISH_QUIET  # noqa: E402
 
 SIM_SECONDS = {10: 100.0, 100: 60.0}

@@ -17,15 +17,15 @@ import sys
 import time
 from pathlib import Path
 
-from wire.names import Role
+from bestofn_swarm.wire.names import Role
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from bestofn_swarm.plumbing.tcp import free_port, wait_for_port  # noqa: E402
+from bestofn_swarm.plumbing.zenoh_session import open_session  # noqa: E402
+from bestofn_swarm.wire import protocol  # noqa: E402
 from deploy.launcher.processes import ProcessGroup, python_module  # noqa: E402
-from plumbing.tcp import free_port, wait_for_port  # noqa: E402
-from plumbing.zenoh_session import open_session  # noqa: E402
-from wire import protocol  # noqa: E402
 
 
 def time_to_ready(robots: int, spawn: str) -> float:

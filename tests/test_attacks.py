@@ -35,13 +35,13 @@ from swarm_helpers import (
     unique_run_id,
 )
 
+from bestofn_swarm.plumbing import run_keys
+from bestofn_swarm.plumbing.world_info import ask, fetch_world_info
+from bestofn_swarm.wire import auth, batch, names, protocol
+from bestofn_swarm.wire.names import Role
 from deploy.launcher.processes import python_module
-from plumbing import run_keys
-from plumbing.world_info import ask, fetch_world_info
 from robot_agent.core import tick_assembly
 from robot_agent.node import robot_node as node
-from wire import auth, batch, names, protocol
-from wire.names import Role
 from world_server.core.layout import make_layout
 
 pytestmark = pytest.mark.timeout(180)

@@ -30,7 +30,7 @@ import zenoh
 from swarm_helpers import processes_of, run_swarm, unique_run_id
 from test_attacks import SMALL, Attacked, assert_right_consensus, attacked_run
 
-from wire.names import Role
+from bestofn_swarm.wire.names import Role
 
 pytestmark = pytest.mark.timeout(300)
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pytest
 
+from bestofn_swarm.wire import auth, guard, names, protocol
+from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from nest_beacon.core.endpoint import BeaconEndpoint, Outgoing, OutputKind
-from wire import auth, guard, names, protocol
-from wire.rng import Stream
 
 SECRET = bytes(range(32))
 KEYS = protocol.Keys("beacon")

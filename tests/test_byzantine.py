@@ -14,6 +14,8 @@ from fakes import FakeSwarm, make_swarm
 from mcap.reader import make_reader
 from swarm_helpers import run_swarm, unique_run_id
 
+from bestofn_swarm.wire import names, protocol, settings
+from bestofn_swarm.wire.rng import Stream
 from deploy.analysis.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from deploy.cli import main as swarm_main
 from robot_agent.core import byzantine, decision, ports
@@ -22,8 +24,6 @@ from robot_agent.core.controller import ControllerConfig
 from robot_agent.node import cli as node
 from robot_agent.node import options
 from robot_agent.node.options import RobotAgentConfig
-from wire import names, protocol, settings
-from wire.rng import Stream
 from world_server.core.layout import make_layout
 
 # --- the wrappers, on a lone robot in the fake world -----------------------------------
@@ -205,11 +205,11 @@ def test_robot_agent_refuses_bad_switches_with_code_2(
 def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
+    from bestofn_swarm.plumbing.inbox import BoundedInbox
     from deploy.cli import build_parser
     from deploy.launcher.plan import plan_from_args
     from deploy.launcher.supervisor import Supervisor
     from deploy.security.credentials import RunNetwork
-    from plumbing.inbox import BoundedInbox
 
     parser = build_parser(["run"])
     seed, sites = 4, 6

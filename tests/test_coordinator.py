@@ -9,8 +9,8 @@ from typing import Any, Literal
 
 import pytest
 
-from wire import auth, batch, names, protocol
-from wire.names import Role
+from bestofn_swarm.wire import auth, batch, names, protocol
+from bestofn_swarm.wire.names import Role
 from world_server.core.coordinator import NO_ID_LEFT, UNAUTHENTICATED, Coordinator
 from world_server.core.events import (
     Answered,

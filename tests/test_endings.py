@@ -29,8 +29,8 @@ from swarm_helpers import (
     unique_run_id,
 )
 
+from bestofn_swarm.plumbing.tcp import free_port
 from deploy.reports import report
-from plumbing.tcp import free_port
 
 pytestmark = pytest.mark.timeout(180)
 

@@ -30,9 +30,9 @@ from swarm_helpers import (
     unique_run_id,
 )
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon, BeaconConfig
-from wire import protocol
-from wire.rng import Stream
 from world_server.core.camera import CameraNoise
 from world_server.core.layout import make_layout
 from world_server.core.radio import sender_order

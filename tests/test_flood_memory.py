@@ -24,7 +24,7 @@ import zenoh
 from swarm_helpers import REPO, kill_leftovers, loopback_router, processes_of, swarm_command
 from swarm_helpers import unique_run_id as new_run_id
 
-from wire import batch, protocol
+from bestofn_swarm.wire import batch, protocol
 
 pytestmark = pytest.mark.timeout(240)
 

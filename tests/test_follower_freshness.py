@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import pytest
 
+from bestofn_swarm.wire import auth, names, protocol
 from deploy.cli import build_parser
 from deploy.launcher.follower import Follower, Heard, Kind
 from deploy.launcher.plan import plan_from_args
-from wire import auth, names, protocol
 
 KEYRING = auth.Keyring(secret=bytes(range(32)))
 

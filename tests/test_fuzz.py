@@ -12,14 +12,14 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.wire import auth, protocol
+from bestofn_swarm.wire.rng import Stream
 from deploy.launcher.follower import Follower, Heard, Kind
 from deploy.launcher.plan import plan_from_args
-from plumbing.inbox import BoundedInbox
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import RobotEndpoint
 from robot_agent.node.robot_node import Event, EventKind, RobotNode
-from wire import auth, protocol
-from wire.rng import Stream
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event as WorldEvent
 from world_server.core.events import EventKind as WorldEventKind

@@ -1,4 +1,4 @@
-"""What each receiver checks before it believes a message (wire/guard.py and its
+"""What each receiver checks before it believes a message (bestofn_swarm/wire/guard.py and its
 users), without processes: tick windows, one world at a time, a robot's memory budget, the
 world's handling of replays, foreign ids and senders that leave."""
 
@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import pytest
 
+from bestofn_swarm.wire import auth, guard, protocol
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import InputKind, RobotEndpoint
 from robot_agent.core.tick_assembly import PENDING_BYTES
-from wire import auth, guard, protocol
-from wire.rng import Stream
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event as WorldEvent
 from world_server.core.events import EventKind

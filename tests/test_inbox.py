@@ -1,5 +1,5 @@
-"""The bounded inbox (plumbing/inbox.py) charges what a queued message really costs, and the
-recorder's writer keeps no more keys than a run has (world_server/recording/writer.py)."""
+"""The bounded inbox (bestofn_swarm/plumbing/inbox.py) charges what a queued message really costs,
+and the recorder's writer keeps no more keys than a run has (world_server/recording/writer.py)."""
 
 from __future__ import annotations
 
@@ -13,14 +13,14 @@ from typing import Any
 
 import pytest
 
+from bestofn_swarm.plumbing.inbox import ITEM_OVERHEAD_BYTES, BoundedInbox, message_bytes
+from bestofn_swarm.wire import protocol
 from deploy.launcher.follower import Heard, Kind
 from nest_beacon.node.beacon_node import Event as BeaconEvent
 from nest_beacon.node.beacon_node import EventKind as BeaconKind
-from plumbing.inbox import ITEM_OVERHEAD_BYTES, BoundedInbox, message_bytes
 from robot_agent.node.robot_node import Event as RobotEvent
 from robot_agent.node.robot_node import EventKind as RobotKind
 from robot_agent.node.robot_node import LatestSenses
-from wire import protocol
 from world_server.core.events import Event, EventKind
 from world_server.recording import writer
 from world_server.recording.description import RunDescription

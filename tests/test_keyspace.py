@@ -1,15 +1,15 @@
-"""The key table (wire/keyspace.py): every key of the run is read back as its kind and the
-name it gives, its speaker is whose key tags it, and the readers and the access control
+"""The key table (bestofn_swarm/wire/keyspace.py): every key of the run is read back as its kind and
+the name it gives, its speaker is whose key tags it, and the readers and the access control
 that go by it agree with it."""
 
 from __future__ import annotations
 
 import pytest
 
+from bestofn_swarm.wire import keyspace, names, protocol
+from bestofn_swarm.wire.keyspace import Party
 from deploy.security import zenoh_acl
-from viewer.core import decode
-from wire import keyspace, names, protocol
-from wire.keyspace import Party
+from deploy.viewer.core import decode
 from world_server.recording import records
 
 KEYS = protocol.Keys("run-1")

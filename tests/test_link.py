@@ -1,6 +1,6 @@
 """The link between a robot outside the emulator and the bridge, without sockets: frames
-(link/core/codec.py), the robot's end of a session (``LinkClient``) against the bridge's
-(``LinkPeer``) in memory, refusals of what is forged, replayed, oversized or out of place,
+(bestofn_swarm/link/core/codec.py), the robot's end of a session (``LinkClient``) against the
+bridge's (``LinkPeer``) in memory, refusals of what is forged, replayed, oversized or out of place,
 and the impairment that makes a link worse on purpose."""
 
 from __future__ import annotations
@@ -13,9 +13,12 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from link.core import codec, pacing
-from link.core.impairment import ImpairedDirection, LinkImpairment
-from link.core.peer import (
+from bestofn_swarm.link.core import codec, pacing
+from bestofn_swarm.link.core.session import LinkClient, LinkData, Lost, Welcomed
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
+from world_server.bridge.core.impairment import ImpairedDirection, LinkImpairment
+from world_server.bridge.core.peer import (
     FRAME_BURST,
     MAX_FROM_ROBOT_BYTES,
     PING_TIMEOUT,
@@ -24,9 +27,6 @@ from link.core.peer import (
     SessionClosed,
     SessionOpened,
 )
-from link.core.session import LinkClient, LinkData, Lost, Welcomed
-from wire import protocol
-from wire.rng import Stream
 
 ROBOT_KEY = bytes(range(32))
 KEY = codec.link_key(ROBOT_KEY)
@@ -431,8 +431,8 @@ class ProgramOnABridge:
     world server does."""
 
     def __init__(self, instance: str = "w-1") -> None:
-        from link.core.robot import LinkRobot
-        from wire import auth, names
+        from bestofn_swarm.wire import auth, names
+        from robot_agent.core.link_robot import LinkRobot
 
         self.auth = auth
         self.secret = auth.Keyring(secret=bytes(32))  # the world's
@@ -531,7 +531,7 @@ def test_the_program_follows_a_world_token_only_once_that_world_answers_for_it()
     asked to answer for itself (world/info with its instance), followed once it does, and
     one that no world answers for is asked PROVE_TRIES times, PROVE_EVERY apart, then
     counted as a rejection, the robot still on its world."""
-    from link.core.robot import PROVE_EVERY, PROVE_TRIES
+    from robot_agent.core.link_robot import PROVE_EVERY, PROVE_TRIES
 
     bench = ProgramOnABridge(instance="w-1")
     bench.exchange()
@@ -556,7 +556,7 @@ def test_the_program_follows_a_world_token_only_once_that_world_answers_for_it()
 def test_an_answer_slower_than_the_repeats_still_brings_the_map_and_the_proof() -> None:
     """A question asked again does not void the ones before it: over a relay slower than
     ASK_EVERY and PROVE_EVERY (a link with a long delay) the first answers still count."""
-    from link.core.robot import ASK_EVERY, PROVE_EVERY
+    from robot_agent.core.link_robot import ASK_EVERY, PROVE_EVERY
 
     bench = ProgramOnABridge(instance="w-1")
     bench.slow = True

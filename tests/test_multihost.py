@@ -27,8 +27,8 @@ RUN, SEED, SITES, ROBOTS = "multihost", 3, 5, 4
 
 OBSERVER = """
 import json, sys, time
-from wire import protocol
-from plumbing.zenoh_session import open_session
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.plumbing.zenoh_session import open_session
 keys = protocol.Keys(sys.argv[2])
 statuses = {}
 session = open_session("client", [sys.argv[1]])

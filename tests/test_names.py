@@ -9,8 +9,8 @@ from collections.abc import Callable
 import msgspec
 import pytest
 
+from bestofn_swarm.wire import names, protocol
 from examples import udp_radio
-from wire import names, protocol
 
 NOT_NAMES = ["ünïcode", "run\n", "a b", "a/b", "x" * 65, "", "*", "é"]
 NAMES = ["run", "exp-N10-n5-r01", "a.b_c", "x" * 64, "0"]

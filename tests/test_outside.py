@@ -24,7 +24,7 @@ from outside_helpers import (
 )
 from swarm_helpers import processes_of
 
-from link.core import codec
+from bestofn_swarm.link.core import codec
 
 pytestmark = pytest.mark.timeout(900)
 
@@ -239,7 +239,7 @@ def test_a_mixed_run_is_recorded_reported_and_replayed_with_its_outside_robots(
     tmp_path: Path,
 ) -> None:
     from deploy.reports.report import read_recording, rebuild_summary, run_summary
-    from viewer.replay import ReplaySource, load
+    from deploy.viewer.replay import ReplaySource, load
 
     path = tmp_path / "mixed.mcap"
     options = ["--robots", "3", "--sites", "3", "--seed", "0", "--record", str(path)]

@@ -21,22 +21,22 @@ from typing import Any
 
 import pytest
 
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.wire import protocol
 from deploy.inprocess.engine import run_in_process
 from examples.udp_radio import UdpRadioStats
-from plumbing.inbox import BoundedInbox
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import InputKind, OutputKind, RobotEndpoint
 from robot_agent.core.simulated import SimulatedPorts
 from robot_agent.node.robot_node import Event, EventKind, RobotNode
-from wire import protocol
 from world_server.core.world import World, WorldConfig
 
 REPO = Path(__file__).resolve().parent.parent
 if not hasattr(ports.control_step, "__code__"):
     pytest.skip(
-        "ports.control_step is compiled (plumbing/cores.py) and leaves no frame to tell its "
-        "caller by; tests/test_compiled_cores.py runs this module from the source",
+        "ports.control_step is compiled (bestofn_swarm/plumbing/cores.py) and leaves no frame "
+        "to tell its caller by; tests/test_compiled_cores.py runs this module from the source",
         allow_module_level=True,
     )
 CONTRACT = ports.control_step.__code__

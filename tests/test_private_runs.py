@@ -28,9 +28,9 @@ from swarm_helpers import (
     unique_run_id,
 )
 
+from bestofn_swarm.wire.endings import Ending
 from deploy.reports import report
 from deploy.security import credentials
-from wire.endings import Ending
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -126,8 +126,8 @@ PROCESSES = {
     "robot-agent": ["robot_agent.node", "--id", "0"],
     "nest-beacon": ["nest_beacon"],
     "recorder": ["world_server.recorder", "--out", "never.mcap"],
-    "viewer": ["viewer.live"],
-    "foxglove-live": ["viewer.foxglove_live"],
+    "viewer": ["deploy.viewer.live"],
+    "foxglove-live": ["deploy.viewer.foxglove_live"],
 }
 
 
@@ -159,7 +159,15 @@ def test_a_router_with_a_configuration_that_never_ends_is_refused_in_one_line() 
 def test_run_keys_out_an_existing_file_is_one_line(tmp_path: Path) -> None:
     existing = tmp_path / "keys"
     existing.write_text("")
-    command = [sys.executable, "-m", "plumbing.run_keys", "--run-id", "r", "--robots", "2"]
+    command = [
+        sys.executable,
+        "-m",
+        "bestofn_swarm.plumbing.run_keys",
+        "--run-id",
+        "r",
+        "--robots",
+        "2",
+    ]
     done = subprocess.run(
         [*command, "--out", str(existing)], cwd=REPO, capture_output=True, timeout=60
     )

@@ -25,9 +25,9 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
 from swarm_helpers import REPO, kill_leftovers, loopback_router, run_swarm, unique_run_id
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.names import Role
 from deploy.reports import report
-from wire import protocol
-from wire.names import Role
 from world_server.core.layout import make_layout
 from world_server.recorder import options as recorder_options
 from world_server.recording import foxglove, records, writer
@@ -393,7 +393,7 @@ def test_a_query_is_waited_for_while_worth_it_and_given_up_when_not() -> None:
     and gives up at once when the recorder stops making progress."""
     import threading
 
-    from plumbing.world_info import ask
+    from bestofn_swarm.plumbing.world_info import ask
 
     def answer_late(query: Any) -> None:
         def later() -> None:

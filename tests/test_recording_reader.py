@@ -16,7 +16,7 @@ import pytest
 from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
 
-from wire import protocol
+from bestofn_swarm.wire import protocol
 from world_server.recording.description import RunDescription
 from world_server.recording.reader import RecordedMessage, RecordingReader
 from world_server.recording.records import RUN_METADATA, START_METADATA

@@ -19,10 +19,10 @@ from typing import Any
 import pytest
 from swarm_helpers import REPO, swarm_command
 
+from bestofn_swarm.wire import protocol
 from deploy.analysis.summary import run_digest
 from deploy.cli import main
 from deploy.reports import report
-from wire import protocol
 from world_server.core.layout import make_layout
 from world_server.recording.description import RunDescription
 from world_server.recording.writer import McapRecorder, Sample

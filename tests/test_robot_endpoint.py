@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 from fakes import make_world_info
 
+from bestofn_swarm.wire import auth, batch, guard, names, protocol
 from robot_agent.core import ports
 from robot_agent.core.endpoint import InputKind, OutputKind, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
 from robot_agent.core.tick_assembly import TickAssembly, TickRefused
-from wire import auth, batch, guard, names, protocol
 
 SECRET = bytes(range(32))
 ROBOT = 3

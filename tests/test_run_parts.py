@@ -13,6 +13,9 @@ from typing import Any, cast
 import pytest
 import zenoh
 
+from bestofn_swarm.plumbing import stop_signals
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.endings import Halt, Stop, TimeLimit
 from deploy.cli import build_parser
 from deploy.launcher.faults import FaultSchedule
 from deploy.launcher.follower import Heard, Kind
@@ -21,9 +24,6 @@ from deploy.launcher.log_relay import LogRelay
 from deploy.launcher.plan import Fault, FaultAction, RunPlan, plan_from_args
 from deploy.launcher.processes import ProcessGroup
 from deploy.launcher.signals import StopSignals
-from plumbing import stop_signals
-from wire import protocol
-from wire.endings import Halt, Stop, TimeLimit
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -27,7 +27,7 @@ from swarm_helpers import (
     wait_for_processes,
 )
 
-from wire import protocol
+from bestofn_swarm.wire import protocol
 
 pytestmark = pytest.mark.timeout(240)
 

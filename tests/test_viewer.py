@@ -35,14 +35,14 @@ from swarm_helpers import (
 from websockets.sync.client import connect
 from websockets.typing import Subprotocol
 
-from plumbing.tcp import free_port
-from plumbing.world_info import ask
-from viewer import replay
-from viewer.core import model
-from viewer.core.decode import Delivery, InvalidSampleError, decode_sample
-from viewer.live import MAX_DELIVERIES, LiveSource
-from wire import auth, names, protocol
-from wire.endings import Ending
+from bestofn_swarm.plumbing.tcp import free_port
+from bestofn_swarm.plumbing.world_info import ask
+from bestofn_swarm.wire import auth, names, protocol
+from bestofn_swarm.wire.endings import Ending
+from deploy.viewer import replay
+from deploy.viewer.core import model
+from deploy.viewer.core.decode import Delivery, InvalidSampleError, decode_sample
+from deploy.viewer.live import MAX_DELIVERIES, LiveSource
 from world_server.core.layout import make_layout
 from world_server.recording.description import RunDescription
 from world_server.recording.writer import McapRecorder, Sample

@@ -2,8 +2,8 @@
 
 Certificates are made in a temporary directory (the cryptography package); the router is a
 Python Zenoh session in router mode in a subprocess on a free loopback TLS port, killed
-by pid; every client opens through ``plumbing.zenoh_session`` with ``--zenoh-config``'s
-code path (multicast scouting off).
+by pid; every client opens through ``bestofn_swarm.plumbing.zenoh_session`` with
+``--zenoh-config``'s code path (multicast scouting off).
 """
 
 from __future__ import annotations
@@ -22,11 +22,11 @@ from pathlib import Path, PurePath
 import pytest
 import zenoh
 
+from bestofn_swarm.plumbing import run_keys, zenoh_session
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.names import Role
 from deploy.launcher.processes import python_module
 from deploy.security import certificates, zenoh_acl
-from plumbing import run_keys, zenoh_session
-from wire import protocol
-from wire.names import Role
 from world_server.core.layout import make_layout
 
 REPO = Path(__file__).resolve().parent.parent
@@ -39,7 +39,7 @@ SETTLE = 0.3  # seconds given to a forbidden message to show up after its sentin
 
 ROUTER_SCRIPT = """
 import sys
-from plumbing import zenoh_session
+from bestofn_swarm.plumbing import zenoh_session
 session = zenoh_session.open_session("router", listen=[sys.argv[2]], config_file=sys.argv[1])
 print("ready", flush=True)
 sys.stdin.read()  # serve until the test closes stdin (or kills this process)

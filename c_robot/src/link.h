@@ -1,4 +1,4 @@
-/* Link frames (docs/protocol.md "The link to a robot outside the emulator"; link/core/codec.py). */
+/* Link frames (docs/protocol.md "The link to a robot outside the emulator"; bestofn_swarm/link/core/codec.py). */
 #ifndef CR_LINK_H
 #define CR_LINK_H
 #include <stddef.h>
@@ -75,7 +75,7 @@ long serial_encode(const uint8_t *frame, size_t size, uint8_t *out, size_t cap);
 /* one zero-delimited chunk (no zero) -> frame; the frame size, or -refusal */
 long serial_decode(const uint8_t *chunk, size_t size, uint8_t *out, size_t cap);
 
-/* Cuts a byte stream at zeros (link/core/codec.py Deframer). */
+/* Cuts a byte stream at zeros (bestofn_swarm/link/core/codec.py Deframer). */
 typedef struct {
     uint8_t buffer[LINK_MAX_ENCODED_BYTES + 1];
     size_t used;

@@ -11,9 +11,9 @@ from typing import Any
 
 import msgspec
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.endings import Ending, Stop, TimeLimit, ending_of
 from robot_agent.core import byzantine
-from wire import protocol
-from wire.endings import Ending, Stop, TimeLimit, ending_of
 
 
 @dataclass

@@ -23,7 +23,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from wire import protocol
+from bestofn_swarm.wire import protocol
 
 # A decided robot's progress towards its slot: a new closest approach by at least this
 # many body lengths (a robot pushed back and forth by its neighbours gets no closer).

@@ -5,8 +5,8 @@ The world's ``Coordinator``, one process's ``HostedRobots`` over every robot's
 Zenoh (the same keys and messages; the robots' senses and acts in batches, as a process
 hosting them does), handed from one to the other in memory as they are made, typed: the
 bytes, tags and decoding a transport needs are not made for the world's and the robots'
-messages (``wire.parcel``); the beacon, which answers one tick in five, still takes its
-clock and answers in bytes, and a tap sees every message as it would be sent. Nothing of the
+messages (``bestofn_swarm.wire.parcel``); the beacon, which answers one tick in five, still takes
+its clock and answers in bytes, and a tap sees every message as it would be sent. Nothing of the
 tick is coded here: opening and closing ticks, the barrier, the radio and the checks of
 every input are the coordinator's and the endpoints', so a seed gives the same per-robot
 results as ``swarm run`` by construction. Like the launcher, this engine learns the run
@@ -28,6 +28,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from bestofn_swarm.wire import batch, protocol, shape
+from bestofn_swarm.wire.endings import Halt, Look, Stop, stop_reason
+from bestofn_swarm.wire.names import Role
+from bestofn_swarm.wire.rng import Stream
 from deploy.analysis.summary import RobotRecord, RunOutcome, build_summary
 from deploy.analysis.watchdog import Watchdog, default_stall_window
 from nest_beacon.core.beacon import Beacon, BeaconConfig
@@ -37,10 +41,6 @@ from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import InputKind, Outgoing, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
 from robot_agent.core.parking import ParkingSlots
-from wire import batch, protocol, shape
-from wire.endings import Halt, Look, Stop, stop_reason
-from wire.names import Role
-from wire.rng import Stream
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event, EventKind, Output, Publish
 from world_server.core.world import World, WorldConfig
@@ -366,7 +366,8 @@ def _look(
     watchdog: Watchdog,
     hooks: EngineHooks,
 ) -> Look:
-    """What this engine sees at the end of a tick (``wire.endings.stop_reason`` decides)."""
+    """What this engine sees at the end of a tick (``bestofn_swarm.wire.endings.stop_reason``
+    decides)."""
     decided = all(record.decided_site is not None for record in honest)
     return Look(
         sim_time=sim_time,

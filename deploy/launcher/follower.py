@@ -22,12 +22,12 @@ from typing import Any
 
 import zenoh
 
+from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
+from bestofn_swarm.wire import auth, keyspace, protocol
 from deploy.analysis.summary import RobotRecord
 from deploy.analysis.watchdog import Watchdog
 from deploy.launcher.plan import RunPlan
-from plumbing.inbox import BoundedInbox, message_bytes
 from robot_agent.core.parking import ParkingSlots
-from wire import auth, keyspace, protocol
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
 

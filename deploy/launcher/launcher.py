@@ -5,7 +5,7 @@ directory; TLS on loopback with ``--secure``; a client of the router ``--connect
 the recorder, the nest beacon and the robot processes (``supervisor.py``); follows what
 they publish (``follower.py``) and shows progress (``console.py``); kills and restarts
 robots when their ``--kill`` and ``--restart`` sim time comes (``faults.py``); stops when
-``wire.endings.stop_reason`` says so; stops every process it started, by pid, however
+``bestofn_swarm.wire.endings.stop_reason`` says so; stops every process it started, by pid, however
 the run ends; prints a summary that says how it ended, hands it to the recorder
 (``recording.py``) and exits with that ending's code (``swarm run --help``).
 ``--engine inprocess`` runs the same computation in this process instead
@@ -33,6 +33,11 @@ from typing import Any
 
 from rich.console import Console
 
+from bestofn_swarm.plumbing.cliargs import UsageError
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.plumbing.lifecycle import die_with_launcher
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.endings import Ending, Halt, Look, Stop, stop_reason
 from deploy.analysis.summary import RunOutcome, build_summary
 from deploy.launcher.console import decided_progress, describe_ending, print_summary, say
 from deploy.launcher.faults import FaultSchedule
@@ -44,11 +49,6 @@ from deploy.launcher.processes import Child
 from deploy.launcher.recording import RecorderProgress, finish_recording
 from deploy.launcher.signals import Signalled, StopSignals
 from deploy.launcher.supervisor import StartError, Supervisor
-from plumbing.cliargs import UsageError
-from plumbing.inbox import BoundedInbox
-from plumbing.lifecycle import die_with_launcher
-from wire import protocol
-from wire.endings import Ending, Halt, Look, Stop, stop_reason
 from world_server.core.layout import make_layout
 
 __all__ = ["add_arguments", "run"]
@@ -127,7 +127,7 @@ class Swarm:
             log.info("%s robot %d at sim time %.1f", fault.action, fault.robot, sim_time)
 
     def look(self, signalled: bool) -> Halt | None:
-        """Whether the run stops now, and why (``wire.endings.stop_reason``)."""
+        """Whether the run stops now, and why (``bestofn_swarm.wire.endings.stop_reason``)."""
         supervisor, follower = self.supervisor, self.follower
         for robot in supervisor.crashed_robots():
             follower.crashed(robot)

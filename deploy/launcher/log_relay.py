@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from wire import auth, names, protocol
+from bestofn_swarm.wire import auth, names, protocol
 
 MAX_LINE = 4096  # characters of a line that are published
 

@@ -12,8 +12,8 @@ from typing import Any
 
 import zenoh
 
-from plumbing.world_info import ask
-from wire import auth, names, protocol
+from bestofn_swarm.plumbing.world_info import ask
+from bestofn_swarm.wire import auth, names, protocol
 
 # Waiting for the recorder after the run: given up once its file has not grown for
 # RECORDER_PATIENCE wall seconds, and after RECORDER_LONGEST_WAIT in any case.

@@ -24,6 +24,13 @@ from typing import Any
 
 import zenoh
 
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.plumbing.private_files import make_private_folder
+from bestofn_swarm.plumbing.tcp import wait_for_port
+from bestofn_swarm.plumbing.world_info import ask, fetch_world_info
+from bestofn_swarm.plumbing.zenoh_session import open_session
+from bestofn_swarm.wire import auth, names, protocol, settings
+from bestofn_swarm.wire.names import Role
 from deploy.launcher.follower import subscribe
 from deploy.launcher.log_relay import LogRelay
 from deploy.launcher.outside import link_keys_env, write_key_files
@@ -31,13 +38,6 @@ from deploy.launcher.plan import RunPlan
 from deploy.launcher.processes import Child, ProcessGroup, python_module
 from deploy.security import zenoh_acl
 from deploy.security.credentials import RunNetwork
-from plumbing.inbox import BoundedInbox
-from plumbing.private_files import make_private_folder
-from plumbing.tcp import wait_for_port
-from plumbing.world_info import ask, fetch_world_info
-from plumbing.zenoh_session import open_session
-from wire import auth, names, protocol, settings
-from wire.names import Role
 
 log = logging.getLogger("swarm.run")
 

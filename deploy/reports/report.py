@@ -39,6 +39,9 @@ from typing import Any
 
 import msgspec
 
+from bestofn_swarm.plumbing.private_files import make_private_folder, open_private, write_private
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.endings import ENDINGS
 from deploy.analysis.summary import (
     RobotRecord,
     RunOutcome,
@@ -47,9 +50,6 @@ from deploy.analysis.summary import (
     run_digest,
 )
 from deploy.analysis.watchdog import Watchdog
-from plumbing.private_files import make_private_folder, open_private, write_private
-from wire import protocol
-from wire.endings import ENDINGS
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
 from world_server.recording.reader import RecordedMessage, RecordingReader, run_description
@@ -1076,7 +1076,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
 
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
     missing = [str(path) for path in args.recordings if not path.is_file()]
     if missing:

@@ -34,9 +34,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bestofn_swarm.plumbing import cliargs
 from deploy.analysis import section5_tables as tables
 from deploy.reports import pages, sweep
-from plumbing import cliargs
 
 RUNS_FILE = "docs/section5-runs.json"
 MARKDOWN = {"docs/section5.md": ("summary", "detail", "runs")}
@@ -400,7 +400,7 @@ def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
 
 def _render(root: Path) -> int:
     """Write everything again from the published runs, keeping their provenance."""
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
     try:
         meta, records = read_runs(root)
@@ -463,7 +463,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
     root: Path = args.root
     if (args.write or args.check or args.render) and not all(
@@ -509,7 +509,7 @@ def run(args: argparse.Namespace) -> int:
 def _check(root: Path, sample: bool, executor: sweep.ExecutorSpec, progress: Any) -> int:
     """Run the published runs again (seeds 0-9 with ``sample``); print every difference and
     what was not checked; 1 if anything differs."""
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
     try:
         _, published = read_runs(root)

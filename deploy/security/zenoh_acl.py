@@ -5,7 +5,7 @@ the certificate's common name is its identity (``robot-3``, ``world``, ``beacon-
 ``observer``, ``launcher``, ``recorder``, ``viewer``, ``foxglove``; routers use their host
 name). The router's
 access control denies by default and allows each identity exactly its part of the
-protocol (wire/protocol.py), so a robot can only publish its own ``act``,
+protocol (bestofn_swarm/wire/protocol.py), so a robot can only publish its own ``act``,
 ``status`` and ``radio/tx/<id>`` and only the world server can publish ``sense``,
 ``camera`` and ``radio/rx``. See deploy/zenoh/README.md.
 
@@ -28,19 +28,19 @@ from dataclasses import dataclass
 from pathlib import Path, PurePath
 from typing import Any
 
+from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.plumbing.bounded_read import CERTIFICATE_BYTES, read_bounded
+from bestofn_swarm.plumbing.private_files import make_private_folder, write_private
+from bestofn_swarm.wire import keyspace, names, protocol
+from bestofn_swarm.wire.keyspace import Party
+from bestofn_swarm.wire.names import Role
 from deploy.security.certificates import create_ca, is_ip, issue_all
-from plumbing import cliargs
-from plumbing.bounded_read import CERTIFICATE_BYTES, read_bounded
-from plumbing.private_files import make_private_folder, write_private
-from wire import keyspace, names, protocol
-from wire.keyspace import Party
-from wire.names import Role
 
 DEFAULT_PORT = cliargs.ZENOH_PORT
 DEFAULT_ROUTER = "router"
-# Certificate names of the processes that are neither robots nor beacons (wire/names.py):
-# the observers of swarm run --view and --foxglove are readers with a token (and the page a
-# queryable) of their own; OBSERVER is any other reader.
+# Certificate names of the processes that are neither robots nor beacons
+# (bestofn_swarm/wire/names.py): the observers of swarm run --view and --foxglove are readers with a
+# token (and the page a queryable) of their own; OBSERVER is any other reader.
 OBSERVER, LAUNCHER, RECORDER, WORLD = names.OBSERVER, names.LAUNCHER, names.RECORDER, names.WORLD
 VIEWER, FOXGLOVE = names.VIEWER, names.FOXGLOVE
 # The bridge to robots outside the emulator: its own session publishes the links' figures;
@@ -109,8 +109,8 @@ class SwarmPlan:
 # --- access control ------------------------------------------------------------------
 
 
-# Who may say what, from the key table (wire/keyspace.py): the kinds each party publishes,
-# and the kinds the world sends each robot or beacon alone.
+# Who may say what, from the key table (bestofn_swarm/wire/keyspace.py): the kinds each party
+# publishes, and the kinds the world sends each robot or beacon alone.
 WORLD_SPEAKS = keyspace.published_by(Party.WORLD)
 ROBOT_SPEAKS = keyspace.published_by(Party.ROBOT, Party.HOST, Party.SENDER)
 ROBOT_HEARS = keyspace.inputs_of(Party.ROBOT, Party.HOST, Party.RECEIVER)

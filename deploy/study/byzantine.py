@@ -17,11 +17,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bestofn_swarm.wire.rng import Stream
 from deploy.study import tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
 from deploy.study.wilson import share
-from wire.rng import Stream
 
 MODES = ("liar", "inverted", "silent")
 MAX_BYZANTINE = 3

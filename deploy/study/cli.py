@@ -21,12 +21,12 @@ from pathlib import Path
 
 from rich.console import Console
 
+from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.plumbing.cliargs import UsageError
 from deploy.reports import sweep
 from deploy.study import check, grid, page, results, runner
 from deploy.study.catalogue import studies, study_named
 from deploy.study.state import State, state_of
-from plumbing import cliargs
-from plumbing.cliargs import UsageError
 
 DEFAULT_SAMPLE = 3
 REPOSITORY = results.CODE_ROOT

@@ -14,12 +14,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from bestofn_swarm.wire.rng import Stream
 from deploy.study import tables
 from deploy.study.byzantine import MAX_BYZANTINE, byzantine_ids
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
 from deploy.study.wilson import share
-from wire.rng import Stream
 
 SITES = 10
 TIMEOUT = 2400.0  # sim seconds

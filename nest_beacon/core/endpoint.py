@@ -9,9 +9,9 @@ it no clock and does not wait for it before then, so the beacon follows one tick
 message as (payload, attachment) and returns what to send as data: the tick's radio
 transmissions, then the ack, each sealed with the beacon's key.
 
-It believes a clock only with the world's tag (``wire.auth``), as a ``Clock`` whose sim
-time is its tick's, within the tick window of its last tick (``wire.guard``); a refusal is
-counted (``rejected``, reported in every ack), a tick already answered is stale and
+It believes a clock only with the world's tag (``bestofn_swarm.wire.auth``), as a ``Clock`` whose
+sim time is its tick's, within the tick window of its last tick (``bestofn_swarm.wire.guard``); a
+refusal is counted (``rejected``, reported in every ack), a tick already answered is stale and
 dropped quietly. It follows one world server: a new one counts ticks and sim time from
 zero again (the window is forgotten, and the beacon transmits on its next tick); the same
 one back after an outage is rejoined at whatever tick it has reached.
@@ -24,8 +24,8 @@ import logging
 import math
 from typing import NamedTuple
 
+from bestofn_swarm.wire import auth, guard, names, protocol
 from nest_beacon.core.beacon import Beacon
-from wire import auth, guard, names, protocol
 
 log = logging.getLogger(__name__)
 
@@ -114,8 +114,8 @@ class BeaconEndpoint:
 
     def world_appeared(self, instance: str) -> None:
         """A world server's liveliness token, proved the world's (it answered for it with
-        the run's key: ``plumbing.world_info.world_proved``): the first is followed; when
-        the followed one is gone, another is a new world; the followed one again is the
+        the run's key: ``bestofn_swarm.plumbing.world_info.world_proved``): the first is followed;
+        when the followed one is gone, another is a new world; the followed one again is the
         same world back."""
         seen = self.worlds.appeared(instance)
         if seen == "new":

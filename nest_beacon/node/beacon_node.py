@@ -20,12 +20,12 @@ from dataclasses import dataclass
 
 import zenoh
 
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.plumbing.world_info import world_proved
+from bestofn_swarm.plumbing.zenoh_session import reliable_publisher
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.names import Role
 from nest_beacon.core.endpoint import BeaconEndpoint
-from plumbing.inbox import BoundedInbox
-from plumbing.world_info import world_proved
-from plumbing.zenoh_session import reliable_publisher
-from wire import protocol
-from wire.names import Role
 
 log = logging.getLogger("nest_beacon")
 INBOX_BYTES = 16 * 2**20

@@ -16,6 +16,14 @@ from collections.abc import Sequence
 
 import zenoh
 
+from bestofn_swarm.plumbing import cliargs, cores, run_keys, settings_cli
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.plumbing.lifecycle import die_with_launcher
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.plumbing.world_info import fetch_world_info
+from bestofn_swarm.plumbing.zenoh_session import check_config_files, open_from_args
+from bestofn_swarm.wire import names, protocol
+from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon
 from nest_beacon.core.endpoint import BeaconEndpoint
 from nest_beacon.node.beacon_node import (
@@ -26,14 +34,6 @@ from nest_beacon.node.beacon_node import (
     EventKind,
 )
 from nest_beacon.node.options import NEST_BEACON_OPTIONS, NestBeaconConfig
-from plumbing import cliargs, cores, run_keys, settings_cli
-from plumbing.inbox import BoundedInbox
-from plumbing.lifecycle import die_with_launcher
-from plumbing.stop_signals import on_stop_signals
-from plumbing.world_info import fetch_world_info
-from plumbing.zenoh_session import check_config_files, open_from_args
-from wire import names, protocol
-from wire.rng import Stream
 
 log = logging.getLogger("nest_beacon")
 

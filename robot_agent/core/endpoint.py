@@ -4,13 +4,14 @@ A transport hands ``RobotEndpoint`` each message it receives for the robot as (i
 kind, payload, attachment) and sends what comes back: Zenoh in ``robot_agent/node``, and
 any link that carries the same (key, payload, attachment) triples. The endpoint
 
-* checks every input in one place: the tag of the robot's own run key (``wire.auth``),
-  the decoding (``wire.protocol``), sim time against the tick (``wire.guard``), the tick
-  window and the budget of pending inputs (``tick_assembly``); a refusal is counted in
-  ``rejects`` and reported in the robot's status, never raised;
+* checks every input in one place: the tag of the robot's own run key (``bestofn_swarm.wire.auth``),
+  the decoding (``bestofn_swarm.wire.protocol``), sim time against the tick
+  (``bestofn_swarm.wire.guard``), the tick window and the budget of pending inputs
+  (``tick_assembly``); a refusal is counted in ``rejects`` and reported in the robot's status, never
+  raised;
 * gathers inputs into ticks (``tick_assembly``) and steps the controller once a tick is
   complete, through ``SimulatedPorts`` (the port contract's control step);
-* follows one world server (``wire.guard.WorldFollower``): a new one counts ticks from
+* follows one world server (``bestofn_swarm.wire.guard.WorldFollower``): a new one counts ticks from
   zero, so the pending ticks are forgotten and its sim time is shifted by the last time
   seen (the controller's clock never runs backwards); the same one back after an outage
   is rejoined at whatever tick it has reached;
@@ -32,11 +33,11 @@ from typing import Any, Final, TypeVar
 
 import msgspec
 
+from bestofn_swarm.wire import auth, guard, names, protocol
+from bestofn_swarm.wire.parcel import Encoder, Parcel
 from robot_agent.core.ports import RejectCounter, RobotController
 from robot_agent.core.simulated import SimulatedPorts
 from robot_agent.core.tick_assembly import ReadyTick, TickAssembly
-from wire import auth, guard, names, protocol
-from wire.parcel import Encoder, Parcel
 
 log = logging.getLogger(__name__)
 Meta = TypeVar("Meta", protocol.RadioRxMeta, protocol.CameraMeta)
@@ -61,7 +62,7 @@ class OutputKind(enum.StrEnum):
 
 class Outgoing(Parcel):
     """One message to send, of ``kind``: ``message`` for a core in the same process,
-    ``payload`` with ``attachment`` (sealed) for a transport (``wire.parcel``)."""
+    ``payload`` with ``attachment`` (sealed) for a transport (``bestofn_swarm.wire.parcel``)."""
 
     def __init__(
         self,
@@ -278,9 +279,10 @@ class RobotEndpoint:
 
     def world_appeared(self, instance: str) -> None:
         """A world server's liveliness token, proved the world's (it answered for it with
-        the run's key: ``plumbing.world_info.world_proved``): the first is followed; when
-        the followed one is gone, another is a new world; the followed one again is the
-        same world back. A token alone is a hint anyone can give: see world_unproven."""
+        the run's key: ``bestofn_swarm.plumbing.world_info.world_proved``): the first is
+        followed; when the followed one is gone, another is a new world; the followed one
+        again is the same world back. A token alone is a hint anyone can give: see
+        world_unproven."""
         seen = self.worlds.appeared(instance)
         if seen == "new":
             log.warning("robot %d: a new world server appeared; resuming", self.robot_id)

@@ -3,18 +3,18 @@
 The process hosting the robots ``first`` to ``last`` is one trust boundary: its robots share
 its memory, and so its keys. So the world sends their senses as one batch on
 ``host/<first>/sense`` and takes their acts as one batch on ``host/<first>/act``
-(``wire/batch.py``), each sealed once with the process's own key, that of the host identity
-``host/<first>-<last>`` (``wire/names.py``), which the world takes only for those robots.
-Everything else a robot sends or receives (radio, camera, status, and its senses until the
-world has learnt the batched path) stays on its own keys, sealed with its own key.
+(``bestofn_swarm/wire/batch.py``), each sealed once with the process's own key, that of the host
+identity ``host/<first>-<last>`` (``bestofn_swarm/wire/names.py``), which the world takes only for
+those robots. Everything else a robot sends or receives (radio, camera, status, and its senses until
+the world has learnt the batched path) stays on its own keys, sealed with its own key.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 
+from bestofn_swarm.wire import auth, batch, names, protocol
 from robot_agent.core.endpoint import Outgoing, OutputKind, RobotEndpoint, Step
-from wire import auth, batch, names, protocol
 
 
 class HostedRobots:

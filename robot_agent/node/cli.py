@@ -5,8 +5,8 @@ need (an id for ``--id auto``, the world's map), builds each robot's controller 
 endpoint, and runs them as ``RobotNode`` s (``robot_node.py``) until it is stopped.
 
 Trust: in a keyed run a robot holds only its own run key; it believes an input only with
-that key's tag (wire/auth.py), only for a tick within reach of its last one, and holds at
-most PENDING_BYTES of inputs for ticks it has not reached (robot_agent/core/endpoint.py).
+that key's tag (bestofn_swarm/wire/auth.py), only for a tick within reach of its last one, and holds
+at most PENDING_BYTES of inputs for ticks it has not reached (robot_agent/core/endpoint.py).
 """
 
 from __future__ import annotations
@@ -20,13 +20,19 @@ from collections.abc import Sequence
 
 import zenoh
 
-from plumbing import cliargs, cores, run_keys, settings_cli
-from plumbing.inbox import BoundedInbox
-from plumbing.lifecycle import die_with_launcher
-from plumbing.stop_signals import on_stop_signals
-from plumbing.trace import open_trace
-from plumbing.world_info import ask, fetch_world_info
-from plumbing.zenoh_session import certificate_name, check_config_files, open_from_args
+from bestofn_swarm.plumbing import cliargs, cores, run_keys, settings_cli
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.plumbing.lifecycle import die_with_launcher
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.plumbing.trace import open_trace
+from bestofn_swarm.plumbing.world_info import ask, fetch_world_info
+from bestofn_swarm.plumbing.zenoh_session import (
+    certificate_name,
+    check_config_files,
+    open_from_args,
+)
+from bestofn_swarm.wire import auth, names, protocol
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import byzantine
 from robot_agent.core.endpoint import RobotEndpoint
 from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig, hosted_byzantine
@@ -41,8 +47,6 @@ from robot_agent.node.robot_node import (
     RobotNode,
     serve,
 )
-from wire import auth, names, protocol
-from wire.rng import Stream
 
 log = logging.getLogger("robot_agent")
 

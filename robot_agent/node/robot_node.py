@@ -5,7 +5,7 @@ one robot or many. What a robot does with what it receives (checks, tick assembl
 control step, sealing what it sends) is ``robot_agent.core.endpoint.RobotEndpoint``;
 ``RobotNode`` subscribes to its inputs, hands them over and publishes what comes back.
 A process hosting several robots answers for all of them in one batch of acts per input
-that stepped them, on its first robot's session (``host/<first>/act``, wire/batch.py;
+that stepped them, on its first robot's session (``host/<first>/act``, bestofn_swarm/wire/batch.py;
 ``HostBatch`` around ``robot_agent.core.hosting.HostedRobots``); the world then sends
 their senses in one batch too. A batch is sealed once, with the process's own key (the
 host identity's); every robot keeps its own keys for radio, status, camera and liveliness.
@@ -39,14 +39,14 @@ from dataclasses import dataclass
 
 import zenoh
 
-from plumbing.inbox import BoundedInbox
-from plumbing.trace import TraceWriter, now
-from plumbing.world_info import world_proved
-from plumbing.zenoh_session import reliable_publisher
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.plumbing.trace import TraceWriter, now
+from bestofn_swarm.plumbing.world_info import world_proved
+from bestofn_swarm.plumbing.zenoh_session import reliable_publisher
+from bestofn_swarm.wire import auth, protocol
+from bestofn_swarm.wire.names import Role
 from robot_agent.core.endpoint import InputKind, Outgoing, OutputKind, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
-from wire import auth, protocol
-from wire.names import Role
 
 log = logging.getLogger("robot_agent")
 
@@ -159,7 +159,7 @@ class RobotNode:
         # nothing, so none publishes on a session being closed.
         self.closed = False
         self._declared: list[object] = []
-        self.trace = trace  # --trace: one line per step (plumbing/trace.py)
+        self.trace = trace  # --trace: one line per step (bestofn_swarm/plumbing/trace.py)
         self.host: HostBatch | None = None  # set when its acts go out in its process's batch
         # Real time: where its senses wait to be stepped, newest only (None: in the callback).
         self.latest = latest

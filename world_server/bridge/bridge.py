@@ -17,14 +17,14 @@ may say) and a link (``LinkPeer`` over UDP or a serial line):
   the robot process does; the robot's own token is presence (``presence.py``).
 
 On top, every link frame carries its own tag under the robot's link key with a session
-nonce and a sequence number (link/core/codec.py), checked by the peer before anything is
-forwarded. The bridge pings each program, and publishes each link's figures (round trip,
+nonce and a sequence number (bestofn_swarm/link/core/codec.py), checked by the peer before anything
+is forwarded. The bridge pings each program, and publishes each link's figures (round trip,
 loss, frames, refusals: ``LinkStats`` on ``link/<id>/stats``, sealed as the bridge) every
 second and whenever a link opens or closes. A link can be made worse on purpose
 (``impairment.py``).
 
 Threads: Zenoh's callbacks only queue what they bring (a bounded inbox) and wake the loop;
-one thread owns the peers and the link transports (a ``link.io.hub.Hub``, the loop
+one thread owns the peers and the link transports (a ``bestofn_swarm.link.io.hub.Hub``, the loop
 ``robot-agent --link`` runs on too), and publishes.
 """
 
@@ -45,15 +45,15 @@ from typing import Any
 import msgspec
 import zenoh
 
-from link.core import codec
-from link.core.impairment import ImpairedDirection, LinkImpairment
-from link.core.peer import LinkPeer, Message, PeerEvent, SessionClosed, SessionOpened
-from link.io.hub import Hub
-from link.io.transport import SerialLine, UdpServer
-from plumbing.inbox import BoundedInbox
-from plumbing.zenoh_session import reliable_publisher
-from wire import auth, names, protocol
-from wire.names import Role
+from bestofn_swarm.link.core import codec
+from bestofn_swarm.link.io.hub import Hub
+from bestofn_swarm.link.io.transport import SerialLine, UdpServer
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.plumbing.zenoh_session import reliable_publisher
+from bestofn_swarm.wire import auth, names, protocol
+from bestofn_swarm.wire.names import Role
+from world_server.bridge.core.impairment import ImpairedDirection, LinkImpairment
+from world_server.bridge.core.peer import LinkPeer, Message, PeerEvent, SessionClosed, SessionOpened
 from world_server.bridge.presence import Presence
 
 log = logging.getLogger("bridge")

@@ -21,9 +21,9 @@ from typing import Any
 
 import zenoh
 
-from link.core import codec
-from wire import protocol
-from wire.names import Role
+from bestofn_swarm.link.core import codec
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.names import Role
 
 log = logging.getLogger("bridge")
 

@@ -27,8 +27,8 @@ from enum import StrEnum
 import msgspec
 import numpy as np
 
-from wire import auth, batch, names, protocol
-from wire.names import Role
+from bestofn_swarm.wire import auth, batch, names, protocol
+from bestofn_swarm.wire.names import Role
 from world_server.core.clock import Pacer
 from world_server.core.counters import Counters
 from world_server.core.events import (

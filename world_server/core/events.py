@@ -13,8 +13,8 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
-from wire import auth
-from wire.parcel import Encoder, Parcel
+from bestofn_swarm.wire import auth
+from bestofn_swarm.wire.parcel import Encoder, Parcel
 
 
 class EventKind(StrEnum):
@@ -55,7 +55,7 @@ class Event:
 class Publish(Parcel):
     """A message to publish, reliably (blocking rather than dropping under congestion):
     ``message`` for a core in the same process, ``payload`` and ``attachment`` (encoded
-    and sealed on demand) for a transport (``wire.parcel``)."""
+    and sealed on demand) for a transport (``bestofn_swarm.wire.parcel``)."""
 
     def __init__(
         self,
@@ -105,7 +105,7 @@ class ReplyError:
 
 
 class Moment(StrEnum):
-    """Points in the work of a tick that ``--trace`` times (plumbing/trace.py)."""
+    """Points in the work of a tick that ``--trace`` times (bestofn_swarm/plumbing/trace.py)."""
 
     OPEN_START = "open_start"  # the tick's inputs start going out
     OPENED = "opened"  # they are all out

@@ -3,7 +3,7 @@
 Trust: a message is taken only with its sender's run-key tag (in a keyed run), from a
 robot of the swarm or a beacon, for the tick under way (lockstep), or (real time) for a
 tick the world has reached, not too far behind it and after the sender's last message
-taken (``wire.guard.realtime_refused``: an authentic message replayed is refused); a
+taken (``bestofn_swarm.wire.guard.realtime_refused``: an authentic message replayed is refused); a
 radio sender sends at most MAX_TX_PER_TICK messages in a tick, each sequence number once.
 An input that fails a check is rejected and counted (``Counters``; a radio message also
 by the radio); a sender's own message that comes after its tick, or after it left (or
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import msgspec
 
-from wire import auth, batch, guard, names, protocol
+from bestofn_swarm.wire import auth, batch, guard, names, protocol
 from world_server.core.clock import Barrier
 from world_server.core.counters import Counters
 from world_server.core.events import Event
@@ -71,8 +71,8 @@ class TickIntake:
 
     def take_acts(self, event: Event) -> dict[int, Host]:
         """Take a batch of acts from a process hosting the robots ``first`` to ``last``
-        (``host/<first>/act``, its identity's tag over it; wire/batch.py), each entry as
-        that robot's act; an entry of any other robot is refused and counted. The batch
+        (``host/<first>/act``, its identity's tag over it; bestofn_swarm/wire/batch.py), each entry
+        as that robot's act; an entry of any other robot is refused and counted. The batch
         routes it teaches: robot -> the process, for each robot whose act was taken as its
         answer to the tick under way. Only such an act teaches a route: an old batch,
         replayed, must not divert the senses of robots that answer elsewhere now."""

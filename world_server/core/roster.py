@@ -9,7 +9,7 @@ router can declare one. It joins once its identity has proved itself present wit
 authenticated query of ``world/info`` (each robot and beacon asks it as it starts and
 whenever a world server appears), so tokens without keys never take part, never fill
 MAX_BEACONS and never hold a tick up. A robot whose process answers in batches gets its
-senses in its process's batch (wire/batch.py) until its process's first robot goes. A
+senses in its process's batch (bestofn_swarm/wire/batch.py) until its process's first robot goes. A
 beacon takes part in the ticks it answers: every tick until its first answer, then the
 tick each answer names (``Ack.next_tick``).
 """
@@ -19,8 +19,8 @@ from __future__ import annotations
 import logging
 from typing import NamedTuple
 
-from wire import names, protocol
-from wire.names import Role
+from bestofn_swarm.wire import names, protocol
+from bestofn_swarm.wire.names import Role
 from world_server.core.counters import Counters
 from world_server.core.world import World
 
@@ -39,7 +39,7 @@ class Host(NamedTuple):
 
     @property
     def identity(self) -> str:
-        """Whose key seals its batches (wire/names.py)."""
+        """Whose key seals its batches (bestofn_swarm/wire/names.py)."""
         return names.host_identity(self.first, self.last)
 
     def hosts(self, robot: int) -> bool:
@@ -54,7 +54,7 @@ class Token(NamedTuple):
 
     @property
     def identity(self) -> str:
-        """Whose key proves it (wire/names.py)."""
+        """Whose key proves it (bestofn_swarm/wire/names.py)."""
         if self.role == Role.ROBOT:
             return names.robot_identity(int(self.ident))
         return names.beacon_identity(self.ident)

@@ -8,7 +8,7 @@ import logging
 import time
 from typing import Any
 
-from wire import auth, names, protocol
+from bestofn_swarm.wire import auth, names, protocol
 from world_server.recording.writer import McapRecorder, Sample
 
 log = logging.getLogger("recorder")

@@ -19,13 +19,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from plumbing import cliargs, run_keys, settings_cli
-from plumbing.inbox import BoundedInbox, message_bytes
-from plumbing.lifecycle import die_with_launcher
-from plumbing.private_files import open_private
-from plumbing.stop_signals import on_stop_signals
-from wire import auth, names, protocol
-from wire.names import Role
+from bestofn_swarm.plumbing import cliargs, run_keys, settings_cli
+from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
+from bestofn_swarm.plumbing.lifecycle import die_with_launcher
+from bestofn_swarm.plumbing.private_files import open_private
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.wire import auth, names, protocol
+from bestofn_swarm.wire.names import Role
 from world_server.recorder.finish import query_parts
 from world_server.recorder.options import RECORDER_OPTIONS, build_parser
 from world_server.recorder.write_loop import STOP, Finish, write_loop
@@ -50,7 +50,7 @@ def _world_info(
     session: Any, keys: protocol.Keys, timeout: float, keyring: auth.Keyring | None
 ) -> protocol.WorldInfo | None:
     """The world's info if a world server answers in time (it gives dt and robot size)."""
-    from plumbing.world_info import fetch_world_info
+    from bestofn_swarm.plumbing.world_info import fetch_world_info
 
     try:
         return fetch_world_info(session, keys, timeout, keyring, names.RECORDER)
@@ -71,7 +71,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             2, f"recorder: error: --config is of run {run.run_id!r}, not --run-id {args.run_id!r}\n"
         )
     cliargs.configure_logging("recorder", args.log_level)
-    from plumbing.zenoh_session import check_config_files, open_from_args
+    from bestofn_swarm.plumbing.zenoh_session import check_config_files, open_from_args
 
     check_config_files(parser, args)  # before the keys' warning: one line if it fails
     keyring = run_keys.from_args(parser, args, "recorder")

@@ -9,8 +9,8 @@ import threading
 import time
 from typing import Any
 
-from plumbing.inbox import BoundedInbox
-from wire import protocol
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.wire import protocol
 from world_server.recorder.finish import finish_on_query, refused
 from world_server.recording.writer import McapRecorder, Sample
 

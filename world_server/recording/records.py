@@ -2,8 +2,8 @@
 types of the samples it records and their JSON Schemas, and which key is which kind.
 
 One channel per key, topic = the key, schema encoding ``jsonschema`` with the schema
-generated from the message's one definition in ``wire/protocol.py`` (refs inlined), message
-encoding ``json``. Radio samples are recorded as ``{"meta": <attachment>, "payload":
+generated from the message's one definition in ``bestofn_swarm/wire/protocol.py`` (refs inlined),
+message encoding ``json``. Radio samples are recorded as ``{"meta": <attachment>, "payload":
 <payload>}`` (``RadioTxRecord``, ``RadioRxRecord``); camera frames as
 ``foxglove.CompressedImage``; samples refused as ``RejectedSample``. The writer
 (``writer.py``) and the reader (``reader.py``) both go by these names.
@@ -16,7 +16,7 @@ from typing import Any
 
 import msgspec
 
-from wire import keyspace, protocol
+from bestofn_swarm.wire import keyspace, protocol
 from world_server.recording import foxglove
 
 START_METADATA = "bestofn.start"  # written when recording begins
@@ -104,9 +104,10 @@ def message_schema(kind: str) -> dict[str, Any]:
 
 
 def classify(keys: protocol.Keys, key: str) -> str | None:
-    """The kind of sample a key carries (its name in the key table, ``wire/keyspace.py``),
-    or None for a key outside the protocol, or whose name no robot, beacon or process of a
-    run can have. A host's batch is recorded as its robots' own messages (``writer.py``)."""
+    """The kind of sample a key carries (its name in the key table,
+    ``bestofn_swarm/wire/keyspace.py``), or None for a key outside the protocol, or whose name no
+    robot, beacon or process of a run can have. A host's batch is recorded as its robots' own
+    messages (``writer.py``)."""
     found = keyspace.classify(keys, key)
     if found is None or found.kind.name in ("host_sense", "host_act"):
         return None

@@ -6,7 +6,7 @@ forwards.
 What a recording holds (see docs/recording.md; the record types in ``records.py``):
 
 * one channel per key, topic = the key, schema encoding ``jsonschema`` with the schema
-  generated from the message's one definition in ``wire/protocol.py`` (refs
+  generated from the message's one definition in ``bestofn_swarm/wire/protocol.py`` (refs
   inlined), message encoding ``json``, the payload bytes as they were on the wire. Radio
   samples are recorded as ``{"meta": <attachment>, "payload": <payload>}``; camera frames
   as ``foxglove.CompressedImage``;
@@ -39,7 +39,7 @@ from typing import IO, Any, NamedTuple
 import msgspec
 from mcap.writer import CompressionType, Writer
 
-from wire import auth, batch, keyspace, names, protocol
+from bestofn_swarm.wire import auth, batch, keyspace, names, protocol
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
 from world_server.core.pooling import LINK_SECONDS, Pooling, PoolingTracker
@@ -110,7 +110,8 @@ class McapRecorder:
         keyring: auth.Keyring | None = None,
     ) -> None:
         """``writer``: where records go instead of an MCAP file in ``stream``; any object
-        with ``mcap.writer.Writer``'s methods (Foxglove live passes one; viewer/foxglove_live.py).
+        with ``mcap.writer.Writer``'s methods (Foxglove live passes one;
+        deploy/viewer/foxglove_live.py).
         """
         self.keys = keys
         self.keyring = keyring  # None: an unauthenticated run, every tag-less sample taken
@@ -231,7 +232,7 @@ class McapRecorder:
 
     def record(self, sample: Sample) -> None:
         """Record one sample, in the order samples arrived; a batch (``host/<first>/sense``
-        or ``act``, wire/batch.py) as the robots' own messages it carries."""
+        or ``act``, bestofn_swarm/wire/batch.py) as the robots' own messages it carries."""
         if sample.key.startswith(self._host_prefix):
             self._record_batch(sample)
         else:

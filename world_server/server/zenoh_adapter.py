@@ -21,11 +21,11 @@ from typing import Any, cast
 
 import zenoh
 
-from plumbing.trace import TraceWriter, now
-from plumbing.world_info import NOT_THIS_INSTANCE
-from plumbing.zenoh_session import reliable_publisher, reliable_put
-from wire import auth, batch, protocol
-from wire.names import Role
+from bestofn_swarm.plumbing.trace import TraceWriter, now
+from bestofn_swarm.plumbing.world_info import NOT_THIS_INSTANCE
+from bestofn_swarm.plumbing.zenoh_session import reliable_publisher, reliable_put
+from bestofn_swarm.wire import auth, batch, protocol
+from bestofn_swarm.wire.names import Role
 from world_server.core.coordinator import UNAUTHENTICATED, Coordinator
 from world_server.core.events import (
     Event,
@@ -167,7 +167,7 @@ class WorldServer:
 
     def stop(self) -> None:
         """Stop the loop (from any thread; not from a signal handler: ``Event.set`` takes a
-        lock, plumbing/stop_signals.py)."""
+        lock, bestofn_swarm/plumbing/stop_signals.py)."""
         self._stopping.set()
 
     # --- the loop ----------------------------------------------------------------------
