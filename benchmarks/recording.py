@@ -38,7 +38,7 @@ sys.path.insert(0, str(REPO))
 
 from bestofn_swarm.plumbing.tcp import free_port  # noqa: E402
 from bestofn_swarm.plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
-from bestofn_swarm.wire import protocol  # noqa: E402
+from bestofn_swarm.wire import keyspace, protocol  # noqa: E402
 from bestofn_swarm.wire.endings import RESULT_CODES  # noqa: E402
 from deploy.reports import report  # noqa: E402
 from world_server.recorder.write_loop import FINISH_QUIET  # noqa: E402
@@ -151,7 +151,7 @@ def flood(count: int, folder: Path) -> None:
     """Messages per second the recorder process takes in and writes, losing none."""
     print(f"\n== recorder capacity: {count} sense messages from one publisher ==")
     run_id = f"flood-{int(time.time())}"
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     out = folder / "flood.mcap"
     router = open_session("router", listen=[endpoint])
@@ -180,11 +180,13 @@ def flood(count: int, folder: Path) -> None:
         cwd=REPO,
     )
     try:
-        while not list(router.liveliness().get(keys.alive(Role.RECORDER, 0), timeout=1.0)):
+        while not list(router.liveliness().get(keys.token(Role.RECORDER, 0), timeout=1.0)):
             if recorder.poll() is not None:
                 raise RuntimeError("the recorder did not start")
             time.sleep(0.05)
-        publishers = [reliable_publisher(router, keys.sense(robot)) for robot in range(100)]
+        publishers = [
+            reliable_publisher(router, keys.of(keyspace.SENSE, robot)) for robot in range(100)
+        ]
         payloads = [
             protocol.encode(
                 protocol.Sense(
@@ -205,7 +207,7 @@ def flood(count: int, folder: Path) -> None:
         for index in range(count):
             publishers[index % 100].put(payloads[index // 100])
         published = time.monotonic() - started
-        replies = list(router.get(keys.recorder_finish, payload=b"{}", timeout=600.0))
+        replies = list(router.get(keys.of(keyspace.RECORDER_FINISH), payload=b"{}", timeout=600.0))
         finished = time.monotonic() - started
         exit_code = recorder.wait(timeout=60)
     finally:

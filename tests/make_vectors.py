@@ -52,7 +52,8 @@ import msgspec
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bestofn_swarm.link.core import codec
-from bestofn_swarm.wire import auth, batch, names, numeric, protocol
+from bestofn_swarm.wire import auth, batch, keyspace, names, numeric, protocol
+from bestofn_swarm.wire.keyspace import Part
 from bestofn_swarm.wire.rng import Stream, seed_of
 from examples.udp_radio import MAX_RADIO_PAYLOAD_BYTES, encode_frame
 
@@ -1248,17 +1249,17 @@ def link_frame_vectors() -> dict[str, Any]:
     key = codec.link_key(robot_key)
     cipher_key = codec.session_key(key, LINK_ROBOT_NONCE, LINK_BRIDGE_NONCE)
     other_key = codec.link_key(keyring.key(names.robot_identity(9)) or b"")
-    keys = protocol.Keys("demo")
+    keys = keyspace.Keys("demo")
     act = protocol.encode(
         protocol.Act(v=1, tick=42, left=0.13, right=0.1, capture=False, radio_tx=0)
     )
-    act_tag = keyring.seal(identity, keys.act(LINK_ROBOT), act)
+    act_tag = keyring.seal(identity, keys.of(keyspace.ACT, LINK_ROBOT), act)
     sense = protocol.encode(
         protocol.Sense(
             v=1, tick=42, t=4.2, x=0.31, y=-0.12, theta=1.5708, prox=[0.0] * 8, rx=0, camera=False
         )
     )
-    sense_tag = keyring.seal(identity, keys.sense(LINK_ROBOT), sense)
+    sense_tag = keyring.seal(identity, keys.of(keyspace.SENSE, LINK_ROBOT), sense)
 
     def welcome_body(cipher: codec.Cipher) -> bytes:
         return codec.encode_welcome(
@@ -1288,8 +1289,11 @@ def link_frame_vectors() -> dict[str, Any]:
             kind, from_bridge, robot, robot_nonce, bridge_nonce, seq, body, encrypted
         )
 
-    def data(kind: codec.DataKind, payload: bytes, attachment: bytes | None = None) -> bytes:
+    def data(kind: keyspace.LinkCode, payload: bytes, attachment: bytes | None = None) -> bytes:
         return codec.encode_data(kind, payload, attachment)
+
+    world_up = keyspace.link(keyspace.ALIVE_WORLD)
+    world_down = keyspace.link(keyspace.ALIVE_WORLD, Part.GONE)
 
     def sealed(item: codec.Frame, with_key: bytes = key) -> bytes:
         cipher = codec.session_key(with_key, item.robot_nonce, item.bridge_nonce)
@@ -1306,8 +1310,8 @@ def link_frame_vectors() -> dict[str, Any]:
     }
     query: dict[str, dict[str, Any]] = {}
     for purpose, (payload, nonce) in questions.items():
-        asked = auth.query_seal(keyring, identity, keys.world_info, payload, nonce)
-        answer = auth.reply_seal(keyring, identity, keys.world_info, world_info, nonce)
+        asked = auth.query_seal(keyring, identity, keys.of(keyspace.INFO), payload, nonce)
+        answer = auth.reply_seal(keyring, identity, keys.of(keyspace.INFO), world_info, nonce)
         assert asked is not None and answer is not None
         query[purpose] = {
             "question": (payload, asked, nonce),
@@ -1317,19 +1321,19 @@ def link_frame_vectors() -> dict[str, Any]:
     def query_vector(purpose: str, part: str) -> dict[str, Any]:
         _, attachment, nonce = query[purpose][part]
         return {
-            "key_expr": keys.world_info,
+            "key_expr": keys.of(keyspace.INFO),
             "identity": identity,
             "nonce_hex": nonce.hex(),
             "metadata_hex": attachment[auth.TAG_BYTES :].hex(),
             "tag_hex": attachment[: auth.TAG_BYTES].hex(),
         }
 
-    act_body = data(codec.DataKind.ACT, act, act_tag)
-    sense_body = data(codec.DataKind.SENSE, sense, sense_tag)
-    map_question = data(codec.DataKind.INFO_QUERY, *query["map"]["question"][:2])
-    map_answer = data(codec.DataKind.INFO_REPLY, *query["map"]["answer"][:2])
-    proof_question = data(codec.DataKind.INFO_QUERY, *query["proof"]["question"][:2])
-    proof_answer = data(codec.DataKind.INFO_REPLY, *query["proof"]["answer"][:2])
+    act_body = data(keyspace.link(keyspace.ACT), act, act_tag)
+    sense_body = data(keyspace.link(keyspace.SENSE), sense, sense_tag)
+    map_question = data(keyspace.link(keyspace.INFO), *query["map"]["question"][:2])
+    map_answer = data(keyspace.link(keyspace.INFO, Part.REPLY), *query["map"]["answer"][:2])
+    proof_question = data(keyspace.link(keyspace.INFO), *query["proof"]["question"][:2])
+    proof_answer = data(keyspace.link(keyspace.INFO, Part.REPLY), *query["proof"]["answer"][:2])
     ping_one = (1).to_bytes(8, "big")
     run_ended = bytes((codec.ByeReason.RUN_ENDED,))
     cases: list[tuple[str, codec.Frame, dict[str, Any] | None]] = [
@@ -1363,7 +1367,7 @@ def link_frame_vectors() -> dict[str, Any]:
         ("pong", frame(codec.FrameType.PONG, False, 3, ping_one), None),
         (
             "world_up",
-            frame(codec.FrameType.DATA, True, 2, data(codec.DataKind.WORLD_UP, instance)),
+            frame(codec.FrameType.DATA, True, 2, data(world_up, instance)),
             None,
         ),
         (
@@ -1382,13 +1386,13 @@ def link_frame_vectors() -> dict[str, Any]:
                 codec.FrameType.DATA,
                 True,
                 3,
-                data(codec.DataKind.INFO_ERROR, b"not this world instance"),
+                data(keyspace.link(keyspace.INFO, Part.ERROR), b"not this world instance"),
             ),
             None,
         ),
         (
             "world_down",
-            frame(codec.FrameType.DATA, True, 4, data(codec.DataKind.WORLD_DOWN, instance)),
+            frame(codec.FrameType.DATA, True, 4, data(world_down, instance)),
             None,
         ),
         ("bye_run_ended", frame(codec.FrameType.BYE, True, 3, run_ended), None),
@@ -1416,7 +1420,7 @@ def link_frame_vectors() -> dict[str, Any]:
             kind, payload, attachment = codec.decode_data(item.body)
             vector["data"] = {
                 "kind": kind.name,
-                "kind_byte": int(kind),
+                "kind_byte": kind.code,
                 "attachment_hex": (attachment or b"").hex(),
                 "payload_utf8": payload.decode(),
             }
@@ -1455,7 +1459,7 @@ def link_frame_vectors() -> dict[str, Any]:
          oversize, act_frame + bytes(codec.MAX_FRAME_BYTES)),
         ("robot_frame_over_32_kib", "the bridge refuses a robot's frame over 32 KiB before "
          "reading it; the robot reads the header first", plain, unexpected, oversize,
-         sealed(frame(codec.FrameType.DATA, False, 4, data(codec.DataKind.STATUS,
+         sealed(frame(codec.FrameType.DATA, False, 4, data(keyspace.link(keyspace.STATUS),
                                                               bytes(32 * 1024))))),
         ("tag_changed", "the tag does not check out", plain, unexpected, forged,
          flipped(act_frame, -1)),

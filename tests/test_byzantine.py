@@ -14,7 +14,7 @@ from fakes import FakeSwarm, make_swarm
 from mcap.reader import make_reader
 from swarm_helpers import run_swarm, unique_run_id
 
-from bestofn_swarm.wire import names, protocol, settings
+from bestofn_swarm.wire import keyspace, names, protocol, settings
 from bestofn_swarm.wire.rng import Stream
 from deploy.analysis.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from deploy.cli import main as swarm_main
@@ -395,12 +395,12 @@ def test_a_real_run_with_a_liar_and_an_inverted_robot_matches_the_in_process_run
     assert (summary["consensus"], summary["chosen_site"]) == (True, liar_site)
     assert liar_site != summary["best_site"]
 
-    keys = protocol.Keys(summary["run_id"])
+    keys = keyspace.Keys(summary["run_id"])
     broadcasts: dict[int, list[dict[str, Any]]] = {robot: [] for robot in range(robots)}
     with open(path, "rb") as stream:
         for _, channel, message in make_reader(stream).iter_messages():
             for robot in range(robots):
-                if channel.topic == keys.radio_tx(names.robot_name(robot)):
+                if channel.topic == keys.of(keyspace.RADIO_TX, names.robot_name(robot)):
                     broadcasts[robot].append(json.loads(message.data)["payload"])
     claim = byzantine.one_hot(liar_site, sites)
     lies = broadcasts[1]

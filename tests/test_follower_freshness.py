@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import pytest
 
-from bestofn_swarm.wire import auth, names, protocol
+from bestofn_swarm.wire import auth, keyspace, names, protocol
 from deploy.cli import build_parser
-from deploy.launcher.follower import Follower, Heard, Kind
+from deploy.launcher.follower import Follower, Heard
 from deploy.launcher.plan import plan_from_args
 
 KEYRING = auth.Keyring(secret=bytes(range(32)))
@@ -33,8 +33,8 @@ def state(follower: Follower, tick: int, x: float) -> Heard:
             stalls=0,
         )
     )
-    key = follower.keys.world_state
-    return Heard(Kind.STATE, key, payload, KEYRING.seal(names.WORLD, key, payload))
+    key = follower.keys.of(keyspace.STATE)
+    return Heard(keyspace.STATE, key, payload, KEYRING.seal(names.WORLD, key, payload))
 
 
 def test_an_old_world_state_replayed_is_refused_and_counted(follower: Follower) -> None:

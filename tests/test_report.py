@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 from swarm_helpers import REPO, swarm_command
 
-from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire import keyspace, protocol
 from deploy.analysis.summary import run_digest
 from deploy.cli import main
 from deploy.reports import report
@@ -69,7 +69,7 @@ def make_recording(
     """Write a recording of a made-up run, without the clock and senses of the ticks in
     ``lost``. Returns two file sizes: before the last status message, and before the
     records that finishing the file adds."""
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     best = make_layout(sites, ROBOTS, SEED).best_site
     stream = io.BytesIO()
     mcap = McapRecorder(
@@ -87,7 +87,7 @@ def make_recording(
     for tick in range(400):
         if tick in lost:
             continue
-        put(keys.world_clock, protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * 0.1)))
+        put(keys.of(keyspace.CLOCK), protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * 0.1)))
         for robot in range(ROBOTS):
             sense = protocol.Sense(
                 v=1,
@@ -100,15 +100,15 @@ def make_recording(
                 rx=0,
                 camera=False,
             )
-            put(keys.sense(robot), protocol.encode(sense))
+            put(keys.of(keyspace.SENSE, robot), protocol.encode(sense))
     before_last = 0
     for robot, pools in POOLS.items():
-        put(keys.status(robot), _status(robot, 0, [], None, uniform))
+        put(keys.of(keyspace.STATUS, robot), _status(robot, 0, [], None, uniform))
         for trip in range(1, len(pools) + 1):
             last = trip == len(pools)
             before_last = stream.tell()
             put(
-                keys.status(robot),
+                keys.of(keyspace.STATUS, robot),
                 _status(
                     robot,
                     100 * trip + robot,

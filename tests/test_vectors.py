@@ -240,7 +240,7 @@ def test_link_frame_vectors_read_and_seal_to_their_bytes(vector: dict[str, Any])
     assert codec.Deframer().feed(serial) == [data]
     if "data" in vector:
         kind, payload, attachment = codec.decode_data(frame.body)
-        assert (kind.name, int(kind)) == (vector["data"]["kind"], vector["data"]["kind_byte"])
+        assert (kind.name, kind.code) == (vector["data"]["kind"], vector["data"]["kind_byte"])
         assert payload.decode() == vector["data"]["payload_utf8"]
         assert (attachment or b"").hex() == vector["data"]["attachment_hex"]
     if frame.type is codec.FrameType.WELCOME:

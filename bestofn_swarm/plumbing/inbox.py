@@ -20,9 +20,13 @@ from __future__ import annotations
 import queue
 import threading
 from collections.abc import Hashable
-from typing import Generic, TypeVar
+from typing import Final, Generic, Literal, TypeVar
 
 Item = TypeVar("Item")
+
+# What a process's inbox carries beside the samples of the key table: its stop signal.
+Stop = Literal["stop"]
+STOP: Final[Stop] = "stop"
 
 DEFAULT_MAX_BYTES = 64 * 2**20
 ITEM_OVERHEAD_BYTES = 512

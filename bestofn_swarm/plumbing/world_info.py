@@ -14,7 +14,7 @@ from typing import Any
 
 import zenoh
 
-from bestofn_swarm.wire import auth, names, protocol
+from bestofn_swarm.wire import auth, keyspace, names, protocol
 
 
 def ask(
@@ -85,7 +85,7 @@ NOT_THIS_INSTANCE = "not this world instance"  # a world's answer for another's 
 
 def world_proved(
     session: zenoh.Session,
-    keys: protocol.Keys,
+    keys: keyspace.Keys,
     keyring: auth.Keyring | None,
     identity: str,
     instance: str,
@@ -102,7 +102,12 @@ def world_proved(
     world's answer comes at once, so a fake token costs a few quick questions."""
     for _ in range(attempts):
         answers, _ = ask(
-            session, keys.world_info, keyring, identity, payload=instance.encode(), timeout=timeout
+            session,
+            keys.of(keyspace.INFO),
+            keyring,
+            identity,
+            payload=instance.encode(),
+            timeout=timeout,
         )
         if answers:
             return True
@@ -111,7 +116,7 @@ def world_proved(
 
 def fetch_world_info(
     session: zenoh.Session,
-    keys: protocol.Keys,
+    keys: keyspace.Keys,
     timeout: float,
     keyring: auth.Keyring | None = None,
     identity: str = names.LAUNCHER,
@@ -120,7 +125,7 @@ def fetch_world_info(
     deadline = time.monotonic() + timeout
     last_error = "no reply"
     while time.monotonic() < deadline:
-        answers, refused = ask(session, keys.world_info, keyring, identity)
+        answers, refused = ask(session, keys.of(keyspace.INFO), keyring, identity)
         if refused:
             last_error = refused[-1]
         for answer in answers:
@@ -129,4 +134,4 @@ def fetch_world_info(
             except protocol.ProtocolError as error:
                 last_error = f"invalid world/info: {error}"
         time.sleep(0.1)
-    raise TimeoutError(f"no world server answered on {keys.world_info} ({last_error})")
+    raise TimeoutError(f"no world server answered on {keys.of(keyspace.INFO)} ({last_error})")

@@ -17,7 +17,6 @@ from typing import Annotated, Any, Literal, TypeVar
 import msgspec
 
 from bestofn_swarm.wire import names
-from bestofn_swarm.wire.names import Role
 
 VERSION: Literal[1] = 1
 DEFAULT_ROOT = "bestofn"
@@ -279,6 +278,20 @@ RadioPayload = OpinionPayload | BeaconPayload | VotePayload
 RobotBroadcast = OpinionPayload | VotePayload
 
 
+class RadioTxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """A ``radio/tx/<sender>`` sample as a recording keeps it: its metadata and payload."""
+
+    meta: RadioTxMeta
+    payload: RadioPayload
+
+
+class RadioRxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """A ``radio/rx/<receiver>`` sample as a recording keeps it: its metadata and payload."""
+
+    meta: RadioRxMeta
+    payload: RadioPayload
+
+
 # --- robot -> anyone -----------------------------------------------------------------
 
 Phase = Literal[
@@ -356,116 +369,6 @@ class LinkStats(Message, frozen=True):
     bytes_out: _Count
     impaired: _Count  # frames dropped on purpose (--link-loss)
     refused: LinkRefusals
-
-
-# --- keys ----------------------------------------------------------------------------
-
-
-class Keys:
-    """Key expressions of one swarm: ``<root>/<run>/...`` (see docs/protocol.md)."""
-
-    def __init__(self, run: str, root: str = DEFAULT_ROOT) -> None:
-        names.check_name(root, "root")
-        names.check_name(run, "run id")
-        self.root = root
-        self.run = run
-        self.prefix = f"{root}/{run}"
-
-    @property
-    def all(self) -> str:
-        return f"{self.prefix}/**"
-
-    @property
-    def world_info(self) -> str:
-        return f"{self.prefix}/world/info"
-
-    @property
-    def world_clock(self) -> str:
-        return f"{self.prefix}/world/clock"
-
-    @property
-    def world_state(self) -> str:
-        return f"{self.prefix}/world/state"
-
-    @property
-    def world_join(self) -> str:
-        return f"{self.prefix}/world/join"
-
-    @property
-    def world_stats(self) -> str:
-        return f"{self.prefix}/world/stats"
-
-    def sense(self, robot: int | str) -> str:
-        return f"{self.prefix}/robot/{robot}/sense"
-
-    def camera(self, robot: int | str) -> str:
-        return f"{self.prefix}/robot/{robot}/camera"
-
-    def act(self, robot: int | str) -> str:
-        return f"{self.prefix}/robot/{robot}/act"
-
-    def status(self, robot: int | str) -> str:
-        return f"{self.prefix}/robot/{robot}/status"
-
-    def host_sense(self, lead: int | str) -> str:
-        """The senses of every robot a process hosts, as one batch (bestofn_swarm/wire/batch.py);
-        ``lead`` is the first robot the process hosts."""
-        return f"{self.prefix}/host/{lead}/sense"
-
-    def host_act(self, lead: int | str) -> str:
-        """The acts of robots one process hosts, as one batch (bestofn_swarm/wire/batch.py)."""
-        return f"{self.prefix}/host/{lead}/act"
-
-    def beacon_ack(self, beacon: str) -> str:
-        return f"{self.prefix}/beacon/{beacon}/ack"
-
-    def beacon_clock(self, beacon: str) -> str:
-        """The clock of the ticks a beacon answers (``Ack.next_tick``), sent to it alone."""
-        return f"{self.prefix}/beacon/{beacon}/clock"
-
-    def radio_tx(self, sender: int | str) -> str:
-        return f"{self.prefix}/radio/tx/{sender}"
-
-    def radio_rx(self, receiver: int | str) -> str:
-        return f"{self.prefix}/radio/rx/{receiver}"
-
-    def log(self, process: str) -> str:
-        return f"{self.prefix}/log/{process}"
-
-    def link_stats(self, robot: int | str) -> str:
-        """A robot outside the emulator: its link's figures, from the bridge (LinkStats)."""
-        return f"{self.prefix}/link/{robot}/stats"
-
-    @property
-    def recorder_finish(self) -> str:
-        """Queryable of the recorder: the payload is the run summary (JSON); it replies once
-        the recording is complete on disk."""
-        return f"{self.prefix}/recorder/finish"
-
-    @property
-    def viewer_finish(self) -> str:
-        """Queryable of the live view: the payload is the run summary (JSON); it replies once
-        every connected page was sent how the run ended."""
-        return f"{self.prefix}/viewer/finish"
-
-    def alive(self, role: Role, ident: int | str) -> str:
-        return f"{self.prefix}/alive/{role}/{ident}"
-
-    @property
-    def all_alive(self) -> str:
-        """Every liveliness token of the run."""
-        return f"{self.prefix}/alive/**"
-
-    def last_chunk(self, key: str) -> str:
-        return key.rsplit("/", 1)[-1]
-
-    def robot_of(self, key: str, section: str = "robot") -> int | None:
-        """The robot id in ``<prefix>/robot/<id>/<leaf>`` (or ``<prefix>/<section>/<id>/<leaf>``:
-        a host's lead robot in ``host/<id>/act``), or None if it is not one."""
-        parts = key[len(self.prefix) + 1 :].split("/") if key.startswith(self.prefix + "/") else []
-        if len(parts) == 3 and parts[0] == section:
-            return names.robot_of_name(parts[1])
-        return None
 
 
 # --- codec ---------------------------------------------------------------------------

@@ -4,6 +4,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "kinds.h" /* enum DataKind: generated from the table of message kinds */
+
 #define LINK_HEADER_BYTES 33
 #define LINK_TAG_BYTES 16
 #define LINK_NONCE_BYTES 8
@@ -17,11 +19,6 @@
 #define LINK_PING_BODY_BYTES 8
 
 enum FrameType { F_HELLO = 1, F_WELCOME = 2, F_DATA = 3, F_PING = 4, F_PONG = 5, F_BYE = 6 };
-enum DataKind {
-    K_SENSE = 1, K_CAMERA = 2, K_RADIO_RX = 3, K_INFO_REPLY = 4, K_INFO_ERROR = 5,
-    K_WORLD_UP = 6, K_WORLD_DOWN = 7, K_ACT = 16, K_RADIO_TX = 17, K_STATUS = 18,
-    K_INFO_QUERY = 19
-};
 enum ByeReason { BYE_RUN_ENDED = 1, BYE_GOING_AWAY = 2, BYE_REPLACED = 3 };
 enum Refusal {
     R_NONE = 0, R_MALFORMED, R_OVERSIZE, R_CORRUPT, R_FORGED, R_REPLAYED, R_UNEXPECTED,

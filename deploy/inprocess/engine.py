@@ -28,7 +28,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from bestofn_swarm.wire import batch, protocol, shape
+from bestofn_swarm.wire import batch, keyspace, protocol, shape
 from bestofn_swarm.wire.endings import Halt, Look, Stop, stop_reason
 from bestofn_swarm.wire.names import Role
 from bestofn_swarm.wire.rng import Stream
@@ -36,13 +36,14 @@ from deploy.analysis.summary import RobotRecord, RunOutcome, build_summary
 from deploy.analysis.watchdog import Watchdog, default_stall_window
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from nest_beacon.core.endpoint import BeaconEndpoint
+from nest_beacon.core.endpoint import Outgoing as BeaconOutgoing
 from robot_agent.core import byzantine
 from robot_agent.core.controller import Controller, ControllerConfig
-from robot_agent.core.endpoint import InputKind, Outgoing, RobotEndpoint, Step
+from robot_agent.core.endpoint import Outgoing, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
 from robot_agent.core.parking import ParkingSlots
 from world_server.core.coordinator import Coordinator
-from world_server.core.events import Event, EventKind, Output, Publish
+from world_server.core.events import Event, Output, Publish
 from world_server.core.world import World, WorldConfig
 
 # The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
@@ -117,10 +118,11 @@ class _Bus:
         self.beacon_name = beacon.name
         # Where each robot's inputs come in: its own keys (its senses, until the world has
         # learnt the batched path; camera frames; radio deliveries).
-        self.inputs: dict[str, tuple[RobotEndpoint, InputKind]] = {}
+        self.inputs: dict[str, tuple[RobotEndpoint, keyspace.KeyKind]] = {}
         for endpoint in robots:
             for kind, key in endpoint.input_keys.items():
                 self.inputs[key] = (endpoint, kind)
+        self.state_key = keys.of(keyspace.STATE)
         self.last_state: protocol.WorldState | None = None
 
     def start(self) -> None:
@@ -129,9 +131,9 @@ class _Bus:
         instance = "in-process"
         for endpoint in self.host.by_id.values():
             endpoint.world_appeared(instance)
-            self._event(Event(EventKind.ALIVE, keys.alive(Role.ROBOT, endpoint.robot_id)))
+            self._event(Event(keyspace.ALIVE_ROBOT, keys.token(Role.ROBOT, endpoint.robot_id)))
         self.beacon.world_appeared(instance)
-        self._event(Event(EventKind.ALIVE, keys.alive(Role.BEACON, self.beacon_name)))
+        self._event(Event(keyspace.ALIVE_BEACON, keys.token(Role.BEACON, self.beacon_name)))
         self.coordinator.begin(0.0)
 
     def run_tick(self) -> None:
@@ -169,17 +171,17 @@ class _Bus:
             self._send_acts()
         elif key == self.beacon.clock_key:
             for message in self.beacon.receive_clock(output.payload, output.attachment):
-                self._beacon_sent(message.key, message.payload, message.attachment)
-        elif key == self.keys.world_state:
+                self._beacon_sent(message)
+        elif key == self.state_key:
             self.last_state = output.message
 
     def _stepped(self, step: Step | None) -> None:
         if step is None:
             return
         for message in step.transmissions:
-            self._sent(EventKind.TX, message, message.meta)
+            self._sent(message, message.meta)
         if step.act is not None:
-            self._sent(EventKind.ACT, step.act, step.act.message)
+            self._sent(step.act, step.act.message)
         else:
             self.host.hold(step)
         if step.status is not None:
@@ -188,7 +190,7 @@ class _Bus:
     def _send_acts(self) -> None:
         acts = self.host.take_acts()
         if acts is not None:
-            self._sent(EventKind.ACTS, acts, acts.message)
+            self._sent(acts, acts.message)
 
     def _status(self, message: Outgoing, published: bool = True) -> None:
         """A robot's status: to the tap (if it was published), and to what follows the run."""
@@ -198,20 +200,20 @@ class _Bus:
         self.records[status.id].update(status)
         self.watchdog.status(status)
 
-    def _sent(self, kind: EventKind, message: Outgoing, typed: object) -> None:
+    def _sent(self, message: Outgoing, typed: object) -> None:
         """A robot's message (or its host's batch): to the tap, and to the world, typed
         (a radio message as its payload and its ``RadioTxMeta``)."""
         if self.tap is not None:
             self.tap(message.key, message.payload, message.attachment)
-        payload = message.message if kind is EventKind.TX else b""
+        kind = message.kind
+        payload = message.message if kind is keyspace.RADIO_TX else b""
         self._event(Event(kind, message.key, payload, message=typed))
 
-    def _beacon_sent(self, key: str, payload: bytes, attachment: bytes | None) -> None:
+    def _beacon_sent(self, message: BeaconOutgoing) -> None:
         """The beacon's message, as bytes: to the tap, and to the world."""
-        kind = EventKind.ACK if key == self.keys.beacon_ack(self.beacon_name) else EventKind.TX
         if self.tap is not None:
-            self.tap(key, payload, attachment)
-        self._event(Event(kind, key, payload, attachment))
+            self.tap(message.key, message.payload, message.attachment)
+        self._event(Event(message.kind, message.key, message.payload, message.attachment))
 
     def _event(self, event: Event) -> None:
         self.coordinator.take(event, 0.0)
@@ -244,7 +246,7 @@ def run_in_process(
     hooks = hooks or EngineHooks()
     started = hooks.wall_clock() if hooks.wall_clock is not None else 0.0
     world = World(world_config)
-    keys = protocol.Keys(world_config.run)
+    keys = keyspace.Keys(world_config.run)
     beacon_config = beacon_config or BeaconConfig()
     beacon = Beacon(beacon_config, Stream.named(world_config.seed, "beacon", beacon_config.name))
     behaviours = byzantine.resolve_liar_sites(

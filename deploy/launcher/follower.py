@@ -17,13 +17,13 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from enum import StrEnum
 from typing import Any
 
 import zenoh
 
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
 from bestofn_swarm.wire import auth, keyspace, protocol
+from bestofn_swarm.wire.keyspace import Party
 from deploy.analysis.summary import RobotRecord
 from deploy.analysis.watchdog import Watchdog
 from deploy.launcher.plan import RunPlan
@@ -34,21 +34,11 @@ from world_server.core.layout import make_layout
 log = logging.getLogger("swarm.run")
 
 
-class Kind(StrEnum):
-    """What the launcher hears."""
-
-    STATUS = "status"  # robot/<id>/status
-    CLOCK = "clock"  # world/clock
-    STATE = "state"  # world/state
-    ACK = "ack"  # beacon/<name>/ack
-    LINK = "link"  # link/<id>/stats: a robot outside the emulator, from the bridge
-
-
 @dataclass(frozen=True)
 class Heard:
     """One sample as it came, not yet checked."""
 
-    kind: Kind
+    kind: keyspace.KeyKind
     key: str
     payload: bytes
     attachment: bytes | None = None
@@ -59,12 +49,12 @@ class Heard:
 
 
 def subscribe(
-    session: zenoh.Session, keys: protocol.Keys, inbox: BoundedInbox[Any], clock: bool
+    session: zenoh.Session, keys: keyspace.Keys, inbox: BoundedInbox[Any], clock: bool
 ) -> list[Any]:
     """Queue every status, state and ack of the run in ``inbox``, and every clock if
     ``clock`` (a fault falls due at a sim time); the subscribers."""
 
-    def queue_as(kind: Kind) -> Callable[[zenoh.Sample], None]:
+    def queue_as(kind: keyspace.KeyKind) -> Callable[[zenoh.Sample], None]:
         def callback(sample: zenoh.Sample) -> None:
             extra = sample.attachment.to_bytes() if sample.attachment is not None else None
             heard = Heard(kind, str(sample.key_expr), sample.payload.to_bytes(), extra)
@@ -72,15 +62,11 @@ def subscribe(
 
         return callback
 
-    watched = {
-        Kind.STATUS: keys.status("*"),
-        Kind.STATE: keys.world_state,
-        Kind.ACK: keys.beacon_ack("*"),
-        Kind.LINK: keys.link_stats("*"),
-    }
-    if clock:
-        watched[Kind.CLOCK] = keys.world_clock
-    return [session.declare_subscriber(key, queue_as(kind)) for kind, key in watched.items()]
+    # What the launcher hears, the key table says; the clock only when it is needed.
+    watched = [
+        kind for kind in keyspace.heard_by(Party.LAUNCHER) if clock or kind is not keyspace.CLOCK
+    ]
+    return [session.declare_subscriber(keys.every(kind), queue_as(kind)) for kind in watched]
 
 
 class Follower:
@@ -89,7 +75,7 @@ class Follower:
     it rejected itself."""
 
     def __init__(self, plan: RunPlan, clock: Callable[[], float]) -> None:
-        self.keys = protocol.Keys(plan.run_id)
+        self.keys = keyspace.Keys(plan.run_id)
         self.clock = clock  # wall seconds: when the run started ticking
         self.byzantine = frozenset(plan.byzantine_robots)
         self.records = {robot: RobotRecord(robot) for robot in range(plan.robots)}
@@ -119,7 +105,7 @@ class Follower:
         self.last_state: protocol.WorldState | None = None
         self.beacon_rejected: dict[str, int] = {}  # the beacons' own counts, from their acks
         self.rejected = 0  # samples the launcher did not believe (or had no room for)
-        self._logged_rejections: set[Kind] = set()
+        self._logged_rejections: set[keyspace.KeyKind] = set()
 
     # --- taking samples -------------------------------------------------------------
 
@@ -139,10 +125,10 @@ class Follower:
         key, payload, attachment = heard.key, heard.payload, heard.attachment
         # Whose tag the key carries, and the robot or beacon it names: the key table says.
         found = keyspace.classify(self.keys, key)
-        if found is None or found.kind.name != heard.kind.value or found.speaker is None:
-            raise protocol.ProtocolError(f"{key} is not a key of this run's {heard.kind}")
+        if found is None or found.kind is not heard.kind or found.speaker is None:
+            raise protocol.ProtocolError(f"{key} is not a key of this run's {heard.kind.name}")
         identity, robot = found.speaker, found.robot
-        if heard.kind is Kind.STATUS:
+        if heard.kind is keyspace.STATUS:
             if robot not in self.records:
                 raise protocol.ProtocolError(f"no robot {robot} in this run")
             auth.unseal(keyring, identity, key, payload, attachment)
@@ -155,12 +141,12 @@ class Follower:
                 raise protocol.ProtocolError(f"status of tick {status.tick}, older than the last")
             record.update(status)
             self.watchdog.status(status)
-        elif heard.kind is Kind.ACK:
+        elif heard.kind is keyspace.ACK:
             auth.unseal(keyring, identity, key, payload, attachment)
             name = identity.partition("/")[2]
             ack = protocol.decode(payload, protocol.Ack)
             self.beacon_rejected[name] = max(self.beacon_rejected.get(name, 0), ack.rejected)
-        elif heard.kind is Kind.LINK:
+        elif heard.kind is keyspace.LINK:
             if robot not in self.outside:
                 raise protocol.ProtocolError(f"robot {robot} is not outside the emulator")
             auth.unseal(keyring, identity, key, payload, attachment)
@@ -168,7 +154,7 @@ class Follower:
             if stats.robot != robot:
                 raise protocol.ProtocolError(f"the link of robot {stats.robot} on {key}")
             self.links[robot] = stats
-        elif heard.kind is Kind.CLOCK:
+        elif heard.kind is keyspace.CLOCK:
             auth.unseal(keyring, identity, key, payload, attachment)
             self._ticked(protocol.decode(payload, protocol.Clock).t)
         else:

@@ -23,7 +23,7 @@ from rich.console import Console
 from bestofn_swarm.plumbing.cliargs import UsageError
 from bestofn_swarm.plumbing.lifecycle import die_with_launcher
 from bestofn_swarm.plumbing.private_files import make_private_folder, open_private
-from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire import keyspace
 from bestofn_swarm.wire.endings import Ending
 from deploy.inprocess import engine
 from deploy.launcher.console import decided_progress, describe_ending, print_summary
@@ -131,7 +131,7 @@ class _Recording:
             raise UsageError(f"--record {path}: {error.strerror}") from None
         run = RunDescription(plan.run_id, plan.seed, plan.robots, plan.sites, plan.config)
         info = World(config).info  # what world/info would answer: dt, robot size, sites
-        return cls(stream, McapRecorder(stream, protocol.Keys(plan.run_id), run, info))
+        return cls(stream, McapRecorder(stream, keyspace.Keys(plan.run_id), run, info))
 
     def tap(self, key: str, payload: bytes, attachment: bytes | None) -> None:
         """Record one message of the run, as the recorder process would take it."""

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from bestofn_swarm.plumbing import run_keys
 from bestofn_swarm.plumbing.tcp import free_port, wait_for_port
-from bestofn_swarm.wire import auth, names, protocol
+from bestofn_swarm.wire import auth, keyspace, names, protocol
 from deploy.security import certificates, zenoh_acl
 from deploy.security.janitor import PREFIX, PrivateDirectory
 
@@ -99,7 +99,7 @@ class RunNetwork:
                 return cls(run_id, socket_endpoint(directory), True, keyring, private)
             port = free_port()
             plan = zenoh_acl.SwarmPlan(
-                protocol.Keys(run_id, root), tuple(range(robots)), (BEACON,), port=port
+                keyspace.Keys(run_id, root), tuple(range(robots)), (BEACON,), port=port
             )
             cert_dir = directory / "certs"
             ca, ca_key = directory / "ca.pem", directory / "ca.key"

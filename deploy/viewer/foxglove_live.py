@@ -35,7 +35,7 @@ from bestofn_swarm.plumbing import cliargs, run_keys
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
 from bestofn_swarm.plumbing.lifecycle import die_with_launcher
 from bestofn_swarm.plumbing.stop_signals import on_stop_signals
-from bestofn_swarm.wire import names, protocol
+from bestofn_swarm.wire import keyspace, names, protocol
 from bestofn_swarm.wire.names import Role
 from deploy.viewer.options import FOXGLOVE_PORT
 from world_server.recording.description import RunDescription
@@ -140,7 +140,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     from bestofn_swarm.plumbing.world_info import fetch_world_info
 
-    keys = protocol.Keys(args.run_id, args.root)
+    keys = keyspace.Keys(args.run_id, args.root)
     context = foxglove.Context()
     try:
         server = foxglove.start_server(
@@ -196,7 +196,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         writer = threading.Thread(target=_forward, args=(recorder, inbox), daemon=True)
         writer.start()
-        token = session.liveliness().declare_token(keys.alive(Role.FOXGLOVE, 0))
+        token = session.liveliness().declare_token(keys.token(Role.FOXGLOVE, 0))
         log.info("serving the run to Foxglove on ws://%s:%d", args.host, server.port)
         while not stopping.wait(0.2):
             pass

@@ -37,7 +37,7 @@ from typing import Any
 from bestofn_swarm.plumbing import cliargs, run_keys
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
 from bestofn_swarm.plumbing.lifecycle import die_with_launcher
-from bestofn_swarm.wire import auth, names, protocol
+from bestofn_swarm.wire import auth, keyspace, names, protocol
 from bestofn_swarm.wire.names import Role
 from deploy.viewer.core import model
 from deploy.viewer.core.decode import Decoded, Delivery, InvalidSampleError, decode_sample
@@ -62,7 +62,7 @@ class LiveSource:
     ``frame``; one lock guards what they share."""
 
     def __init__(
-        self, scene: model.Scene, keys: protocol.Keys, keyring: auth.Keyring | None
+        self, scene: model.Scene, keys: keyspace.Keys, keyring: auth.Keyring | None
     ) -> None:
         self.scene = scene
         self.keys = keys
@@ -248,7 +248,7 @@ async def _serve(args: argparse.Namespace, keyring: auth.Keyring | None) -> int:
     from bestofn_swarm.plumbing.world_info import fetch_world_info
     from bestofn_swarm.plumbing.zenoh_session import open_from_args
 
-    keys = protocol.Keys(args.run_id, args.root)
+    keys = keyspace.Keys(args.run_id, args.root)
     layout = make_layout(args.sites, args.robots, args.seed)
     try:
         session = open_from_args(args)
@@ -282,29 +282,31 @@ async def _serve(args: argparse.Namespace, keyring: auth.Keyring | None) -> int:
         subscribers = [
             session.declare_subscriber(key, on_sample)
             for key in (
-                keys.world_state,
-                keys.world_clock,
-                keys.status("*"),
-                keys.radio_rx("*"),
-                keys.link_stats("*"),
+                keys.of(keyspace.STATE),
+                keys.of(keyspace.CLOCK),
+                keys.of(keyspace.STATUS, "*"),
+                keys.of(keyspace.RADIO_RX, "*"),
+                keys.of(keyspace.LINK, "*"),
             )
         ]
 
         def on_finish(query: Any) -> None:
             payload = query.payload.to_bytes() if query.payload is not None else b""
             attachment = query.attachment.to_bytes() if query.attachment is not None else None
-            size = message_bytes(payload, attachment, keys.viewer_finish)
+            size = message_bytes(payload, attachment, keys.of(keyspace.VIEWER_FINISH))
             if finish_queries.put(query, size):
                 loop.call_soon_threadsafe(query_came.set)
             else:
-                source.refuse(f"{keys.viewer_finish}: no room for another finish query")
+                source.refuse(
+                    f"{keys.of(keyspace.VIEWER_FINISH)}: no room for another finish query"
+                )
                 query.reply_err(b"the view has no room for the query")
                 query.drop()
 
-        queryable = session.declare_queryable(keys.viewer_finish, on_finish)
+        queryable = session.declare_queryable(keys.of(keyspace.VIEWER_FINISH), on_finish)
         server = ViewServer(source, fps=args.fps)
         port = await server.start(args.host, args.port)
-        token = session.liveliness().declare_token(keys.alive(Role.VIEWER, 0))
+        token = session.liveliness().declare_token(keys.token(Role.VIEWER, 0))
         log.info("serving the live view on http://%s:%d/", args.host, port)
         finisher = asyncio.create_task(
             _finish_on_query(finish_queries, query_came, source, server, keys)
@@ -341,10 +343,10 @@ async def _finish_on_query(
     came: asyncio.Event,
     source: LiveSource,
     server: ViewServer,
-    keys: protocol.Keys,
+    keys: keyspace.Keys,
 ) -> None:
     """Show how the run ended when the launcher says so; refuse (and count) anyone else."""
-    key = keys.viewer_finish
+    key = keys.of(keyspace.VIEWER_FINISH)
     while True:
         query = await _next_query(queries, came)
         payload = query.payload.to_bytes() if query.payload is not None else b""

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 
-from bestofn_swarm.wire import auth, batch, names, protocol
-from robot_agent.core.endpoint import Outgoing, OutputKind, RobotEndpoint, Step
+from bestofn_swarm.wire import auth, batch, keyspace, names, protocol
+from robot_agent.core.endpoint import Outgoing, RobotEndpoint, Step
 
 
 class HostedRobots:
@@ -37,8 +37,8 @@ class HostedRobots:
         for endpoint in endpoints:
             endpoint.batched = True
         keys = self.lead.keys
-        self.sense_key = keys.host_sense(self.first)
-        self.act_key = keys.host_act(self.first)
+        self.sense_key = keys.of(keyspace.HOST_SENSE, self.first)
+        self.act_key = keys.of(keyspace.HOST_ACT, self.first)
         self._acts: list[tuple[int, protocol.Act]] = []
 
     def senses(
@@ -83,7 +83,7 @@ class HostedRobots:
         acts = batch.ActBatch(self.last, self._acts)
         self._acts = []
         return Outgoing(
-            OutputKind.HOST_ACT,
+            keyspace.HOST_ACT,
             self.act_key,
             acts,
             batch.encode_act_batch,

@@ -21,11 +21,12 @@ from dataclasses import dataclass, field
 
 from bestofn_swarm.link.core import codec
 from bestofn_swarm.link.core.session import LinkClient, LinkData, Lost, Welcomed
-from bestofn_swarm.wire import auth, names, protocol, settings
+from bestofn_swarm.wire import auth, keyspace, names, protocol, settings
+from bestofn_swarm.wire.keyspace import Part, Party
 from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import byzantine
 from robot_agent.core.controller_config import ControllerConfig
-from robot_agent.core.endpoint import InputKind, Outgoing, OutputKind, RobotEndpoint
+from robot_agent.core.endpoint import Outgoing, RobotEndpoint
 
 log = logging.getLogger("link.robot")
 
@@ -44,18 +45,10 @@ PROVE_EVERY = 2.0
 # RECENT_QUESTIONS counts, so a relay slower than ASK_EVERY or PROVE_EVERY (a link with a
 # long delay) still brings the map and the proofs.
 RECENT_QUESTIONS = 8
-# The link's kind of each input the robot's endpoint takes, and of each message it sends.
-# Inputs that come before the robot can step (none, normally: the bridge makes it present
-# only once it has sent its first status) are dropped and counted.
-INPUT_OF = {
-    codec.DataKind.SENSE: InputKind.SENSE,
-    codec.DataKind.RADIO_RX: InputKind.RADIO_RX,
-    codec.DataKind.CAMERA: InputKind.CAMERA,
-}
-OUTPUT_OF = {
-    OutputKind.RADIO_TX: codec.DataKind.RADIO_TX,
-    OutputKind.ACT: codec.DataKind.ACT,
-}
+# The link carries the robot's inputs and what it sends under their kinds' frame codes
+# (the key table's). Inputs that come before the robot can step (none, normally: the bridge
+# makes it present only once it has sent its first status) are dropped and counted.
+INPUTS = frozenset(keyspace.link(kind) for kind in keyspace.heard_by(Party.ROBOT))
 
 
 @dataclass
@@ -166,31 +159,37 @@ class LinkRobot:
 
     def _received(self, event: LinkData, now: float) -> None:
         kind = event.kind
-        if kind is codec.DataKind.INFO_REPLY:
+        if kind is keyspace.link(keyspace.INFO, Part.REPLY):
             self._answered(event.payload, event.attachment, now)
-        elif kind is codec.DataKind.INFO_ERROR:  # a token's question goes unanswered: a retry
+        elif kind is keyspace.link(
+            keyspace.INFO, Part.ERROR
+        ):  # a token's question goes unanswered: a retry
             log.info("a world refused a question on world/info: %r", event.payload[:200])
-        elif kind in (codec.DataKind.WORLD_UP, codec.DataKind.WORLD_DOWN):
+        elif kind in (
+            keyspace.link(keyspace.ALIVE_WORLD),
+            keyspace.link(keyspace.ALIVE_WORLD, Part.GONE),
+        ):
             self._world(kind, event.payload, now)
-        elif (input_kind := INPUT_OF.get(kind)) is not None:
+        elif kind in INPUTS:
             if self.endpoint is None:
                 self.dropped[kind.name.lower()] += 1
                 return
-            step = self.endpoint.receive(input_kind, event.payload, event.attachment)
+            step = self.endpoint.receive(kind.kind, event.payload, event.attachment)
             if step is None:
                 return
             for message in step.outgoing:  # its transmissions, its act, its status if new
-                if message.kind is OutputKind.STATUS:
+                if message.kind is keyspace.STATUS:
                     self._send_status(message, now)
                 else:
-                    self.client.send(OUTPUT_OF[message.kind], message.payload, message.attachment)
+                    code = keyspace.link(message.kind)
+                    self.client.send(code, message.payload, message.attachment)
 
-    def _world(self, kind: codec.DataKind, payload: bytes, now: float) -> None:
+    def _world(self, kind: keyspace.LinkCode, payload: bytes, now: float) -> None:
         """A world token the bridge reports, appeared or gone. The bridge is trusted with
         nothing the robot believes: an appeared token is followed only once that world
         answers for itself (``_prove``)."""
         instance = payload.decode(errors="replace")[: names.MAX_NAME_LENGTH]
-        if kind is codec.DataKind.WORLD_UP:
+        if kind is keyspace.link(keyspace.ALIVE_WORLD):
             self.worlds.add(instance)
             if self.endpoint is not None and instance not in self.proving:
                 self._prove(instance, now, 1)
@@ -202,10 +201,10 @@ class LinkRobot:
 
     # --- the map -------------------------------------------------------------------
 
-    def _keys(self) -> protocol.Keys:
+    def _keys(self) -> keyspace.Keys:
         welcome = self.client.welcome
         assert welcome is not None
-        return protocol.Keys(welcome.run, welcome.root)
+        return keyspace.Keys(welcome.run, welcome.root)
 
     def _question(self, instance: str) -> tuple[bytes, bytes | None]:
         """A question on ``world/info`` in the robot's name with a fresh nonce
@@ -213,9 +212,9 @@ class LinkRobot:
         (empty: any). Its nonce and attachment."""
         nonce = secrets.token_bytes(auth.NONCE_BYTES)
         payload = instance.encode()
-        key = self._keys().world_info
+        key = self._keys().of(keyspace.INFO)
         attachment = auth.query_seal(self.keyring, self.identity, key, payload, nonce)
-        self.client.send(codec.DataKind.INFO_QUERY, payload, attachment)
+        self.client.send(keyspace.link(keyspace.INFO), payload, attachment)
         return nonce, attachment
 
     def _ask(self, now: float) -> None:
@@ -240,7 +239,9 @@ class LinkRobot:
         """Whether an answer on world/info is the world's answer to ``ask`` (to any of its
         last RECENT_QUESTIONS askings)."""
         try:
-            nonce = self.keyring.open(self.identity, self._keys().world_info, payload, attachment)
+            nonce = self.keyring.open(
+                self.identity, self._keys().of(keyspace.INFO), payload, attachment
+            )
         except auth.AuthError:
             return False
         return nonce in ask.nonces
@@ -274,7 +275,7 @@ class LinkRobot:
                     self.endpoint.world_appeared(instance)
                 return
 
-    def _build(self, keys: protocol.Keys, info: protocol.WorldInfo) -> RobotEndpoint:
+    def _build(self, keys: keyspace.Keys, info: protocol.WorldInfo) -> RobotEndpoint:
         """The robot as every robot of the run is built (robot_agent/node/cli.py): the
         run's controller settings, its generator from the world's seed and its id.
         ValueError if the settings or the map are refused."""
@@ -296,7 +297,7 @@ class LinkRobot:
 
     def _send_status(self, status: Outgoing, now: float) -> None:
         """Send the robot's status, and again every STATUS_EVERY until it changes."""
-        self.client.send(codec.DataKind.STATUS, status.payload, status.attachment)
+        self.client.send(keyspace.link(keyspace.STATUS), status.payload, status.attachment)
         self.last_status = status
         self.status_again_at = now + STATUS_EVERY
 

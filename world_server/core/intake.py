@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import msgspec
 
-from bestofn_swarm.wire import auth, batch, guard, names, protocol
+from bestofn_swarm.wire import auth, batch, guard, keyspace, names, protocol
 from world_server.core.clock import Barrier
 from world_server.core.counters import Counters
 from world_server.core.events import Event
@@ -30,7 +30,7 @@ class TickIntake:
     def __init__(
         self,
         world: World,
-        keys: protocol.Keys,
+        keys: keyspace.Keys,
         counters: Counters,
         keyring: auth.Keyring | None = None,
     ) -> None:
@@ -54,7 +54,7 @@ class TickIntake:
     def take_act(self, event: Event) -> int | None:
         """Take one robot's act; the robot, if its act was taken as its answer to the tick
         under way."""
-        robot = self.keys.robot_of(event.key)
+        robot = self.keys.robot_of(keyspace.ACT, event.key)
         if robot is None or not self.world.is_member(robot):
             self.counters.reject(event.key, "not a robot of the swarm")
             return None
@@ -76,7 +76,7 @@ class TickIntake:
         routes it teaches: robot -> the process, for each robot whose act was taken as its
         answer to the tick under way. Only such an act teaches a route: an old batch,
         replayed, must not divert the senses of robots that answer elsewhere now."""
-        first = self.keys.robot_of(event.key, "host")
+        first = self.keys.robot_of(keyspace.HOST_ACT, event.key)
         if first is None or not self.world.is_member(first):
             self.counters.reject(event.key, "not a robot of the swarm")
             return {}
@@ -125,7 +125,7 @@ class TickIntake:
     def take_ack(self, event: Event) -> tuple[str, protocol.Ack] | None:
         """Take a beacon's answer: its identity and its ack if the tick under way took it
         (lockstep) or it came from a beacon taking part (real time)."""
-        name = self.keys.last_chunk(event.key.rsplit("/", 1)[0])
+        name = self.keys.ident_of(keyspace.ACK, event.key) or ""
         if not names.is_beacon_name(name):
             self.counters.reject(event.key, f"no beacon of this run is called {name!r}")
             return None
@@ -158,7 +158,7 @@ class TickIntake:
 
     def take_tx(self, event: Event) -> None:
         """Take a radio message for the medium, to transmit when the tick closes."""
-        sender = self.keys.last_chunk(event.key)
+        sender = self.keys.ident_of(keyspace.RADIO_TX, event.key) or ""
         robot = names.robot_of_name(sender)
         if robot is not None and not self.world.is_member(robot):
             robot = None

@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 from typing import NamedTuple
 
-from bestofn_swarm.wire import names, protocol
+from bestofn_swarm.wire import keyspace, names
 from bestofn_swarm.wire.names import Role
 from world_server.core.counters import Counters
 from world_server.core.world import World
@@ -62,7 +62,7 @@ class Token(NamedTuple):
 
 class Roster:
     def __init__(
-        self, world: World, keys: protocol.Keys, counters: Counters, proof: bool = False
+        self, world: World, keys: keyspace.Keys, counters: Counters, proof: bool = False
     ) -> None:
         """``proof``: a token joins only once its identity proved itself present (a keyed
         run); otherwise (no keys to prove anything with) a token joins on its own."""
@@ -87,10 +87,14 @@ class Roster:
         """The robot's or beacon's token ``key`` is; None for other roles (the world, the
         recorder), which the barrier does not involve, and for a robot outside the swarm
         or a beacon name no beacon can have (rejected if ``count``)."""
-        parts = key[len(self.keys.prefix) + 1 :].split("/")
-        if len(parts) != 3 or parts[0] != "alive" or parts[1] not in (Role.ROBOT, Role.BEACON):
+        role = ident = None
+        for candidate in (Role.ROBOT, Role.BEACON):
+            ident = self.keys.ident_of(keyspace.TOKEN_OF[candidate], key)
+            if ident is not None:
+                role = candidate
+                break
+        if role is None or ident is None:
             return None
-        role, ident = Role(parts[1]), parts[2]
         if role == Role.ROBOT:
             robot = names.robot_of_name(ident)
             valid = robot is not None and self.world.is_member(robot)
@@ -170,7 +174,7 @@ class Roster:
                 self.world.join_robot(robot)
             elif ident not in self.world.beacons() and len(self.world.beacons()) >= MAX_BEACONS:
                 self.counters.reject(
-                    self.keys.alive(Role.BEACON, ident), f"more than {MAX_BEACONS} beacons"
+                    self.keys.token(Role.BEACON, ident), f"more than {MAX_BEACONS} beacons"
                 )
             else:
                 self.world.join_beacon(ident)

@@ -103,7 +103,7 @@ def message_schema(kind: str) -> dict[str, Any]:
     return inline_refs(protocol.json_schema(MESSAGE_TYPES[kind]))
 
 
-def classify(keys: protocol.Keys, key: str) -> str | None:
+def classify(keys: keyspace.Keys, key: str) -> str | None:
     """The kind of sample a key carries (its name in the key table,
     ``bestofn_swarm/wire/keyspace.py``), or None for a key outside the protocol, or whose name no
     robot, beacon or process of a run can have. A host's batch is recorded as its robots' own

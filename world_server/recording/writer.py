@@ -101,7 +101,7 @@ class McapRecorder:
     def __init__(
         self,
         stream: IO[bytes] | None,
-        keys: protocol.Keys,
+        keys: keyspace.Keys,
         run: RunDescription,
         info: protocol.WorldInfo | None = None,
         *,
@@ -267,14 +267,15 @@ class McapRecorder:
     def _record_batch(self, sample: Sample) -> None:
         """A batch, checked against its host's tag, as the JSON messages of its robots (the
         same bytes as each robot's own message on its key)."""
-        leaf = sample.key.rsplit("/", 1)[-1]
-        first = self.keys.robot_of(sample.key, "host")
-        if first is None or leaf not in ("sense", "act"):
+        found = keyspace.classify(self.keys, sample.key)
+        first = None if found is None else found.robot
+        if found is None or first is None or found.kind.recorded is not keyspace.Recorded.BATCH:
             self.reject(sample, "not a key of the protocol")
             return
+        of_senses = found.kind is keyspace.HOST_SENSE
         try:
             entries: list[tuple[int, msgspec.Struct]]
-            if leaf == "sense":
+            if of_senses:
                 senses = batch.decode_senses(sample.payload)
                 last, entries = senses.last, list(zip(senses.robots, senses.senses, strict=True))
             else:
@@ -290,12 +291,14 @@ class McapRecorder:
             except auth.AuthError as error:
                 self.reject(sample, f"{identity}: {error}")
                 return
-        per_robot = self.keys.sense if leaf == "sense" else self.keys.act
+        per_robot = keyspace.SENSE if of_senses else keyspace.ACT
         for robot, message in entries:
             if not first <= robot <= last:
                 self.reject(sample, f"batch: robot {robot} is not one {identity} hosts")
                 continue
-            entry = Sample(per_robot(robot), protocol.encode(message), None, sample.wall_ns)
+            entry = Sample(
+                self.keys.of(per_robot, robot), protocol.encode(message), None, sample.wall_ns
+            )
             self._record_one(entry, checked=True)
 
     def _route(self, key: str) -> tuple[Callable[[Sample], None], str | None]:

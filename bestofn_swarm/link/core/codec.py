@@ -46,7 +46,7 @@ from cobs import cobs
 from cryptography.exceptions import InvalidTag
 from cryptography.hazmat.primitives.ciphers.aead import ChaCha20Poly1305
 
-from bestofn_swarm.wire import names
+from bestofn_swarm.wire import keyspace, names
 
 MAGIC = b"BL"
 VERSION = 1
@@ -85,24 +85,9 @@ class FrameType(enum.IntEnum):
     BYE = 6  # either way: the session ends now (the body says why)
 
 
-class DataKind(enum.IntEnum):
-    """What a DATA frame carries: a message on one of the robot's keys, or the world's."""
-
-    SENSE = 1  # robot/<id>/sense
-    CAMERA = 2  # robot/<id>/camera
-    RADIO_RX = 3  # radio/rx/<id>
-    INFO_REPLY = 4  # the world's answer on world/info
-    INFO_ERROR = 5  # an error answer on world/info (its text as the payload)
-    WORLD_UP = 6  # a world server's liveliness token appeared (payload: its instance)
-    WORLD_DOWN = 7  # ... or went
-    ACT = 16  # robot/<id>/act
-    RADIO_TX = 17  # radio/tx/<id>
-    STATUS = 18  # robot/<id>/status
-    INFO_QUERY = 19  # a query on world/info (its attachment: nonce, identity, tag)
-
-
-TO_ROBOT = frozenset(kind for kind in DataKind if kind < DataKind.ACT)
-FROM_ROBOT = frozenset(kind for kind in DataKind if kind >= DataKind.ACT)
+# What a DATA frame carries, a message on one of the robot's keys or the world's, is a
+# frame code of the key table (bestofn_swarm/wire/keyspace.py ``LINK_CODES``): codes below
+# 16 go to the robot, the others come from it.
 
 
 class ByeReason(enum.IntEnum):
@@ -316,31 +301,32 @@ def open_frame(data: bytes, key: bytes, cipher_key: bytes | None = None) -> Fram
 # --- bodies --------------------------------------------------------------------------------
 
 
-def encode_data(kind: DataKind, payload: bytes, attachment: bytes | None) -> bytes:
+def encode_data(kind: keyspace.LinkCode, payload: bytes, attachment: bytes | None) -> bytes:
     """A DATA body: kind, the attachment's length (0: none), the attachment, the payload."""
     extra = attachment or b""
     if len(extra) > MAX_ATTACHMENT_BYTES:
         raise LinkError(Refusal.OVERSIZE, f"an attachment of {len(extra)} bytes")
-    body = DATA_HEADER.pack(kind, len(extra)) + extra + payload
+    body = DATA_HEADER.pack(kind.code, len(extra)) + extra + payload
     if len(body) > MAX_BODY_BYTES:
         raise LinkError(Refusal.OVERSIZE, f"a message of {len(body)} bytes")
     return body
 
 
-def decode_data(body: bytes) -> tuple[DataKind, bytes, bytes | None]:
+def decode_data(body: bytes) -> tuple[keyspace.LinkCode, bytes, bytes | None]:
     """(kind, payload, attachment or None) of a DATA body; LinkError if it is not one."""
     if len(body) < DATA_HEADER.size:
         raise LinkError(Refusal.MALFORMED, "a data body shorter than its header")
-    kind, length = DATA_HEADER.unpack_from(body)
-    if kind not in DataKind._value2member_map_:
-        raise LinkError(Refusal.MALFORMED, f"unknown data kind {kind}")
+    code, length = DATA_HEADER.unpack_from(body)
+    kind = keyspace.LINK_CODES.get(code)
+    if kind is None:
+        raise LinkError(Refusal.MALFORMED, f"unknown data kind {code}")
     if length > MAX_ATTACHMENT_BYTES:
         raise LinkError(Refusal.MALFORMED, f"an attachment of {length} bytes")
     end = DATA_HEADER.size + length
     if len(body) < end:
         raise LinkError(Refusal.MALFORMED, "the attachment runs past the body")
     attachment = body[DATA_HEADER.size : end] if length else None
-    return DataKind(kind), body[end:], attachment
+    return kind, body[end:], attachment
 
 
 def check_body(frame: Frame) -> None:

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from bestofn_swarm.link.core import codec
+from bestofn_swarm.wire import keyspace
 
 log = logging.getLogger("link.session")
 
@@ -38,7 +39,7 @@ class Welcomed:
 class LinkData:
     """A message of the run for the robot."""
 
-    kind: codec.DataKind
+    kind: keyspace.LinkCode
     payload: bytes
     attachment: bytes | None
 
@@ -125,7 +126,7 @@ class LinkClient:
 
     # --- sending -------------------------------------------------------------------------
 
-    def send(self, kind: codec.DataKind, payload: bytes, attachment: bytes | None) -> bool:
+    def send(self, kind: keyspace.LinkCode, payload: bytes, attachment: bytes | None) -> bool:
         """Queue one message of the robot; False if there is no session to carry it (or it
         is too big for a frame: counted as refused)."""
         if not self.open:
@@ -193,7 +194,7 @@ class LinkClient:
             return [self._lose(f"the bridge said bye ({reason.name.lower()})", now, ended)]
         if frame.type is codec.FrameType.DATA:
             kind, payload, attachment = codec.decode_data(frame.body)
-            if kind not in codec.TO_ROBOT:
+            if not kind.to_robot:
                 raise codec.LinkError(codec.Refusal.UNEXPECTED, f"{kind.name} is not for a robot")
             return [LinkData(kind, payload, attachment)]
         return []  # a pong: the bridge measures round trips, not this end

@@ -39,20 +39,20 @@ class InvalidSampleError(Exception):
 VIEWED = frozenset({"state", "clock", "link", "status", "radio_rx"})
 
 
-def _viewed(keys: protocol.Keys, key: str) -> keyspace.Classified | None:
+def _viewed(keys: keyspace.Keys, key: str) -> keyspace.Classified | None:
     """The key, read by the key table, if the view uses it."""
     found = keyspace.classify(keys, key)
     return found if found is not None and found.kind.name in VIEWED else None
 
 
-def speaker(keys: protocol.Keys, key: str) -> str | None:
+def speaker(keys: keyspace.Keys, key: str) -> str | None:
     """The identity whose tag a sample on ``key`` must carry, if the view uses the key."""
     found = _viewed(keys, key)
     return None if found is None else found.speaker
 
 
 def decode_sample(
-    keys: protocol.Keys,
+    keys: keyspace.Keys,
     key: str,
     payload: bytes,
     attachment: bytes | None,

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 from bestofn_swarm.link.core import codec
 from bestofn_swarm.link.core.pacing import TokenBucket, percentile
-from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire import keyspace, protocol
 
 log = logging.getLogger("bridge")
 
@@ -50,7 +50,7 @@ class SessionClosed:
 @dataclass(frozen=True)
 class Message:
     robot: int
-    kind: codec.DataKind
+    kind: keyspace.LinkCode
     payload: bytes
     attachment: bytes | None
 
@@ -152,7 +152,7 @@ class LinkPeer:
 
     # --- sending -----------------------------------------------------------------------
 
-    def send(self, kind: codec.DataKind, payload: bytes, attachment: bytes | None) -> bool:
+    def send(self, kind: keyspace.LinkCode, payload: bytes, attachment: bytes | None) -> bool:
         """Relay one message of the run to the robot; False if no session carries it (or it
         cannot go in a frame: a camera frame too big for the link, counted)."""
         if self.session is None:
@@ -287,7 +287,7 @@ class LinkPeer:
             return self._close(f"the program said bye ({reason.name.lower()})")
         elif frame.type is codec.FrameType.DATA:
             kind, payload, attachment = codec.decode_data(frame.body)
-            if kind not in codec.FROM_ROBOT:
+            if kind.to_robot:
                 raise codec.LinkError(codec.Refusal.UNEXPECTED, f"{kind.name} is not a robot's")
             return [Message(self.robot, kind, payload, attachment)]
         else:
