@@ -45,7 +45,7 @@ PROJECT_PACKAGES = (
     "deploy",
     "benchmarks",
 )
-# Per robot: what the run digest covers (deploy/analysis/summary.py), and its id.
+# Per robot: what the run digest covers (world_server/observer/summary.py), and its id.
 ROBOT_FIELDS = ("id", "decided_site", "steps", "decision_time_s", "pool_sizes")
 
 

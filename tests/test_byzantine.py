@@ -16,7 +16,6 @@ from swarm_helpers import run_swarm, unique_run_id
 
 from bestofn_swarm.wire import keyspace, names, protocol, settings
 from bestofn_swarm.wire.rng import Stream
-from deploy.analysis.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
 from deploy.cli import main as swarm_main
 from robot_agent.core import byzantine, decision, ports
 from robot_agent.core.byzantine import Behaviour, ByzantineRobot
@@ -25,6 +24,12 @@ from robot_agent.node import cli as node
 from robot_agent.node import options
 from robot_agent.node.options import RobotAgentConfig
 from world_server.core.layout import make_layout
+from world_server.observer.summary import (
+    RobotRecord,
+    RunOutcome,
+    build_summary,
+    byzantine_in_config,
+)
 
 # --- the wrappers, on a lone robot in the fake world -----------------------------------
 

@@ -31,6 +31,7 @@ PURE = [
     "robot_agent/core",
     "robot_agent/wellstirred",
     "world_server/core",
+    "world_server/observer",
     "world_server/bridge/core",
     "nest_beacon/core",
     "deploy/viewer/core",
@@ -94,8 +95,11 @@ ALLOWED: dict[str, set[str]] = {
     "bestofn_swarm/link/io": {"bestofn_swarm/wire", "bestofn_swarm/link/core"},
     "robot_agent/core": {"bestofn_swarm/wire", "bestofn_swarm/link/core"},
     "world_server/core": {"bestofn_swarm/wire"},
+    # Watching a run: records, the watchdog, the ending and the summary; the parking slots and
+    # the liars' declarations are the robot's own.
+    "world_server/observer": {"bestofn_swarm/wire", "world_server/core", "robot_agent/core"},
     "nest_beacon/core": {"bestofn_swarm/wire"},
-    "deploy/viewer/core": {"bestofn_swarm/wire", "world_server/core"},
+    "deploy/viewer/core": {"bestofn_swarm/wire", "world_server/core", "world_server/observer"},
     "robot_agent/wellstirred": {"robot_agent/core", "bestofn_swarm/wire"},
     "robot_agent/node": {"bestofn_swarm/wire", "robot_agent/core", "bestofn_swarm/plumbing"},
     # The robot's end of the link: its program, on the link's loop and transports.
@@ -107,7 +111,7 @@ ALLOWED: dict[str, set[str]] = {
         "bestofn_swarm/plumbing",
     },
     "world_server/server": {"bestofn_swarm/wire", "world_server/core", "bestofn_swarm/plumbing"},
-    "world_server/recording": {"bestofn_swarm/wire", "world_server/core"},
+    "world_server/recording": {"bestofn_swarm/wire", "world_server/core", "world_server/observer"},
     "world_server/recorder": {
         "bestofn_swarm/wire",
         "world_server/core",
@@ -137,14 +141,14 @@ ALLOWED: dict[str, set[str]] = {
         "world_server/recording",
     },
     # What a run decided and when it ends (summary, digest, watchdog), and the tables of runs.
-    "deploy/analysis": {"bestofn_swarm/wire", "robot_agent/core"},
+    "deploy/analysis": set(),
     # The in-process engine: the world's, the robots' and the beacon's cores on one bus.
     "deploy/inprocess": {
         "bestofn_swarm/wire",
         "robot_agent/core",
         "world_server/core",
+        "world_server/observer",
         "nest_beacon/core",
-        "deploy/analysis",
     },
     "deploy/security": {"bestofn_swarm/wire", "bestofn_swarm/plumbing"},
     "deploy/reports": set(FOLDERS)

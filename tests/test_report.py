@@ -20,10 +20,10 @@ import pytest
 from swarm_helpers import REPO, swarm_command
 
 from bestofn_swarm.wire import keyspace, protocol
-from deploy.analysis.summary import run_digest
 from deploy.cli import main
 from deploy.reports import report
 from world_server.core.layout import make_layout
+from world_server.observer.summary import run_digest
 from world_server.recording.description import RunDescription
 from world_server.recording.writer import McapRecorder, Sample
 

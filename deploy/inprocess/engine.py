@@ -32,8 +32,6 @@ from bestofn_swarm.wire import batch, keyspace, protocol, shape
 from bestofn_swarm.wire.endings import Halt, Look, Stop, stop_reason
 from bestofn_swarm.wire.names import Role
 from bestofn_swarm.wire.rng import Stream
-from deploy.analysis.summary import RobotRecord, RunOutcome, build_summary
-from deploy.analysis.watchdog import Watchdog, default_stall_window
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from nest_beacon.core.endpoint import BeaconEndpoint
 from nest_beacon.core.endpoint import Outgoing as BeaconOutgoing
@@ -45,6 +43,8 @@ from robot_agent.core.parking import ParkingSlots
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event, Output, Publish
 from world_server.core.world import World, WorldConfig
+from world_server.observer.summary import RobotRecord, RunOutcome, build_summary
+from world_server.observer.watchdog import Watchdog, default_stall_window
 
 # The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
 # world/state (the world server's default --state-every): both see the same samples.

@@ -12,7 +12,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from bestofn_swarm.wire.endings import Ending, TimeLimit
-from deploy.analysis.summary import describe
+from world_server.observer.summary import describe
 
 
 def decided_progress(console: Console, quiet: bool) -> Progress:

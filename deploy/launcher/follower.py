@@ -24,12 +24,12 @@ import zenoh
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
 from bestofn_swarm.wire import auth, keyspace, protocol
 from bestofn_swarm.wire.keyspace import Party
-from deploy.analysis.summary import RobotRecord
-from deploy.analysis.watchdog import Watchdog
 from deploy.launcher.plan import RunPlan
 from robot_agent.core.parking import ParkingSlots
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
+from world_server.observer.summary import RobotRecord
+from world_server.observer.watchdog import Watchdog
 
 log = logging.getLogger("swarm.run")
 

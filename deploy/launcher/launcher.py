@@ -38,7 +38,6 @@ from bestofn_swarm.plumbing.inbox import BoundedInbox
 from bestofn_swarm.plumbing.lifecycle import die_with_launcher
 from bestofn_swarm.wire import protocol
 from bestofn_swarm.wire.endings import Ending, Halt, Look, Stop, stop_reason
-from deploy.analysis.summary import RunOutcome, build_summary
 from deploy.launcher.console import decided_progress, describe_ending, print_summary, say
 from deploy.launcher.faults import FaultSchedule
 from deploy.launcher.follower import Follower, Heard
@@ -50,6 +49,7 @@ from deploy.launcher.recording import RecorderProgress, finish_recording
 from deploy.launcher.signals import Signalled, StopSignals
 from deploy.launcher.supervisor import StartError, Supervisor
 from world_server.core.layout import make_layout
+from world_server.observer.summary import RunOutcome, build_summary
 
 __all__ = ["add_arguments", "run"]
 

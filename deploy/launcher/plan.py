@@ -22,7 +22,6 @@ from typing import Any
 from bestofn_swarm.plumbing.private_files import make_private_folder
 from bestofn_swarm.plumbing.tcp import free_port
 from bestofn_swarm.wire import settings
-from deploy.analysis.watchdog import default_stall_window, default_world_stop_window
 from deploy.launcher.outside import OutsidePlan, outside_plan
 from deploy.launcher.switches import SWITCHES, RunSwitches, run_switches
 from deploy.viewer.options import VIEW_OPTIONS, Observer, observers
@@ -31,6 +30,7 @@ from robot_agent.core import byzantine
 from robot_agent.node.options import RobotAgentConfig
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
+from world_server.observer.watchdog import default_stall_window, default_world_stop_window
 from world_server.recorder.options import DEFAULT_NICENESS
 from world_server.recording.description import RunDescription
 

@@ -7,7 +7,7 @@ The run summary comes from the recording's ``bestofn.run`` metadata record when 
 one, else it is rebuilt from the robots' status messages (the same code that
 ``swarm run`` uses); a recorded summary that lacks a field the report needs gets it from
 the rebuilt one, with a warning. Each run is labelled with how it ended (``ended``: see
-``deploy/analysis/summary.py``); one whose recording says nothing of its end, and whose robots
+``world_server/observer/summary.py``); one whose recording says nothing of its end, and whose robots
 did not all decide, is labelled ``aborted``. Aggregates over runs (steps, pool sizes)
 take only the runs that ended in consensus; the others are counted by ending.
 Writes, into ``--out``:
@@ -42,16 +42,16 @@ import msgspec
 from bestofn_swarm.plumbing.private_files import make_private_folder, open_private, write_private
 from bestofn_swarm.wire import protocol
 from bestofn_swarm.wire.endings import ENDINGS
-from deploy.analysis.summary import (
+from world_server.core.body import EPUCK
+from world_server.core.layout import make_layout
+from world_server.observer.summary import (
     RobotRecord,
     RunOutcome,
     build_summary,
     byzantine_in_config,
     run_digest,
 )
-from deploy.analysis.watchdog import Watchdog
-from world_server.core.body import EPUCK
-from world_server.core.layout import make_layout
+from world_server.observer.watchdog import Watchdog
 from world_server.recording.reader import RecordedMessage, RecordingReader, run_description
 from world_server.recording.records import RUN_METADATA
 
