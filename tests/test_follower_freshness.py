@@ -43,7 +43,7 @@ def test_an_old_world_state_replayed_is_refused_and_counted(follower: Follower) 
     assert follower.take(state(follower, 200, 0.0), KEYRING)  # the last one again: harmless
     for tick, x in ((100, 0.5), (150, -0.5)):  # old ones, with other poses
         assert not follower.take(state(follower, tick, x), KEYRING)
-    assert follower.rejected == 2
-    assert follower.last_state is not None and follower.last_state.tick == 200
-    assert follower.sim_time == pytest.approx(20.0)
+    assert follower.run.rejected == 2
+    assert follower.run.last_state is not None and follower.run.last_state.tick == 200
+    assert follower.run.sim_time == pytest.approx(20.0)
     assert follower.take(state(follower, 210, 0.0), KEYRING)  # the world goes on

@@ -350,17 +350,17 @@ def _launcher_took(follower: Follower, kind: str, leaf: str, payload: bytes) -> 
     that kind changed to the message (the launcher keeps nothing of a rejected one)."""
     if kind == "status":
         robot = follower.keys.robot_of(keyspace.STATUS, f"{follower.keys.prefix}/{leaf}")
-        record = follower.records.get(robot) if robot is not None else None
+        record = follower.run.records.get(robot) if robot is not None else None
         old = record.status if record is not None else None
         return lambda: record is not None and record.status is not old
     if kind == "clock":
-        follower.sim_time = -1.0  # no clock has this time
-        return lambda: follower.sim_time != -1.0
+        follower.run.sim_time = -1.0  # no clock has this time
+        return lambda: follower.run.sim_time != -1.0
     if kind == "state":
-        old_state = follower.last_state
-        return lambda: follower.last_state is not old_state
-    follower.beacon_rejected.clear()
-    return lambda: bool(follower.beacon_rejected)
+        old_state = follower.run.last_state
+        return lambda: follower.run.last_state is not old_state
+    follower.run.beacon_rejected.clear()
+    return lambda: bool(follower.run.beacon_rejected)
 
 
 STATUS = protocol.encode(
@@ -427,12 +427,12 @@ def test_the_launcher_survives_any_status_clock_or_state(
     rejected, exactly one of the two; in a keyed run nothing untagged is believed."""
     follower = observer.follower
     for kind, leaf, payload, attachment in events:
-        before = follower.rejected
+        before = follower.run.rejected
         took = _launcher_took(follower, kind, leaf, payload)
         heard = Heard(keyspace.BY_NAME[kind], f"{follower.keys.prefix}/{leaf}", payload, attachment)
         believed = follower.take(heard, observer.keyring)
         assert believed == took()
-        assert follower.rejected - before == (0 if believed else 1), (kind, leaf, payload)
+        assert follower.run.rejected - before == (0 if believed else 1), (kind, leaf, payload)
         if believed:
             assert observer.keyring is None
             assert _decodes(payload, LAUNCHER_KINDS[kind])

@@ -153,7 +153,7 @@ def test_the_launcher_looks_with_its_clock_given_and_takes_a_signal_as_an_event(
     assert swarm.look(signalled=False) is None
     swarm.inbox.put(_clock_message(12.5, plan))
     assert not swarm.take_events(until=now[0])
-    assert swarm.follower.sim_time == 12.5 and swarm.follower.started_at == 1000.0
+    assert swarm.follower.run.sim_time == 12.5 and swarm.follower.started_at == 1000.0
     swarm.signalled(signal.SIGINT)
     assert swarm.take_events(until=now[0])  # the relay's event: a stop signal came
     assert swarm.look(signalled=True) == Halt(Stop.INTERRUPTED)
@@ -171,4 +171,4 @@ def test_the_inbox_takes_a_signal_whatever_else_filled_it() -> None:
     swarm.inbox.put(_clock_message(1.0, plan), 100)
     swarm.signalled(signal.SIGTERM)
     assert swarm.take_events(until=swarm.clock())
-    assert swarm.follower.rejected == 1 and swarm.follower.sim_time == 0.0
+    assert swarm.follower.run.rejected == 1 and swarm.follower.run.sim_time == 0.0

@@ -41,7 +41,7 @@ from bestofn_swarm.wire import auth, keyspace, names, protocol
 from bestofn_swarm.wire.endings import Ending
 from deploy.viewer import replay
 from deploy.viewer.core import model
-from deploy.viewer.core.decode import Delivery, InvalidSampleError, decode_sample
+from deploy.viewer.core.decode import InvalidSampleError, decode_sample
 from deploy.viewer.live import MAX_DELIVERIES, LiveSource
 from world_server.core.layout import make_layout
 from world_server.recording.description import RunDescription
@@ -408,6 +408,10 @@ def _status(robot: int, *, tick: int = 1, trips: int = 0) -> protocol.Status:
     )
 
 
+# A radio message as the medium delivers it (the beacon's).
+BEACON_PAYLOAD = protocol.encode(protocol.BeaconPayload(v=1, id="nest", seq=1))
+
+
 def test_every_sample_passes_one_gate_that_rejects_what_is_not_a_valid_message() -> None:
     keys = keyspace.Keys("gate")
 
@@ -415,18 +419,20 @@ def test_every_sample_passes_one_gate_that_rejects_what_is_not_a_valid_message()
         return decode_sample(keys, key, payload, attachment, keyring=None)
 
     clock = protocol.encode(protocol.Clock(v=1, tick=3, t=0.3))
-    assert gate(keys.of(keyspace.CLOCK), clock, None) == protocol.Clock(v=1, tick=3, t=0.3)
+    assert gate(keys.of(keyspace.CLOCK), clock, None).message == protocol.Clock(v=1, tick=3, t=0.3)
     assert gate(keys.of(keyspace.SENSE, 1), b"{}", None) is None  # a key the view does not use
     with pytest.raises(InvalidSampleError, match="status of robot 4"):
         gate(keys.of(keyspace.STATUS, 3), protocol.encode(_status(4)), None)
     with pytest.raises(InvalidSampleError):
         gate(keys.of(keyspace.STATE), b'{"v":1,"tick":-1}', None)
     with pytest.raises(InvalidSampleError, match="without metadata"):
+        gate(keys.of(keyspace.RADIO_RX, 2), BEACON_PAYLOAD, None)
+    with pytest.raises(InvalidSampleError):  # not a radio message
         gate(keys.of(keyspace.RADIO_RX, 2), b"{}", None)
     meta = protocol.encode(protocol.RadioRxMeta(v=1, tick=5, sender="7", seq=1, sent_tick=4))
-    delivery = gate(keys.of(keyspace.RADIO_RX, 2), b"{}", meta)
-    assert isinstance(delivery, Delivery) and delivery.receiver == 2
-    assert gate(keys.of(keyspace.RADIO_RX, "07"), b"{}", meta) is None  # no robot is spelt "07"
+    delivery = gate(keys.of(keyspace.RADIO_RX, 2), BEACON_PAYLOAD, meta)
+    assert delivery.kind is keyspace.RADIO_RX and delivery.robot == 2
+    assert gate(keys.of(keyspace.RADIO_RX, "07"), BEACON_PAYLOAD, meta) is None  # no "07"
 
 
 def test_in_a_keyed_run_the_gate_checks_each_tag_with_its_speakers_key() -> None:
@@ -441,7 +447,8 @@ def test_in_a_keyed_run_the_gate_checks_each_tag_with_its_speakers_key() -> None
 
     clock = protocol.encode(protocol.Clock(v=1, tick=3, t=0.3))
     sealed = keyring.seal(names.WORLD, keys.of(keyspace.CLOCK), clock)
-    assert gate(keys.of(keyspace.CLOCK), clock, sealed) == protocol.Clock(v=1, tick=3, t=0.3)
+    opened = gate(keys.of(keyspace.CLOCK), clock, sealed)
+    assert opened.message == protocol.Clock(v=1, tick=3, t=0.3)
     for attachment in (
         None,
         keyring.seal(names.robot_identity(0), keys.of(keyspace.CLOCK), clock),
@@ -455,7 +462,7 @@ def test_in_a_keyed_run_the_gate_checks_each_tag_with_its_speakers_key() -> None
             keys.of(keyspace.STATUS, 3),
             status,
             keyring.seal("robot/3", keys.of(keyspace.STATUS, 3), status),
-        ).id
+        ).message.id
         == 3
     )
     with pytest.raises(InvalidSampleError, match="not tagged by robot/3's key"):
@@ -465,9 +472,9 @@ def test_in_a_keyed_run_the_gate_checks_each_tag_with_its_speakers_key() -> None
             keyring.seal("robot/4", keys.of(keyspace.STATUS, 3), status),
         )
     meta = protocol.encode(protocol.RadioRxMeta(v=1, tick=5, sender="7", seq=1, sent_tick=4))
-    key, payload = keys.of(keyspace.RADIO_RX, 2), b"{}"
+    key, payload = keys.of(keyspace.RADIO_RX, 2), BEACON_PAYLOAD
     delivery = gate(key, payload, keyring.seal("robot/2", key, payload, meta))
-    assert isinstance(delivery, Delivery) and (delivery.receiver, delivery.meta.sender) == (2, "7")
+    assert (delivery.robot, delivery.meta.sender) == (2, "7")
     with pytest.raises(InvalidSampleError, match="robot/2"):  # the sender's key is not it
         gate(key, payload, keyring.seal("robot/7", key, payload, meta))
     with pytest.raises(InvalidSampleError, match="without metadata"):
@@ -524,7 +531,7 @@ def test_the_bridge_keeps_the_newest_state_and_a_bounded_list_of_deliveries() ->
         )
         source.take(keys.of(keyspace.STATE), protocol.encode(state), None)
         meta = protocol.RadioRxMeta(v=1, tick=tick, sender="1", seq=tick, sent_tick=tick)
-        source.take(keys.of(keyspace.RADIO_RX, 0), b"{}", protocol.encode(meta))
+        source.take(keys.of(keyspace.RADIO_RX, 0), BEACON_PAYLOAD, protocol.encode(meta))
     source.take(keys.of(keyspace.STATE), b"not json", None)
     frame = source.frame()
     assert frame["radio"]["sent"] == 4999  # the newest state, nothing queued behind it

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, Final
 
-from bestofn_swarm.wire import batch, names, protocol
+from bestofn_swarm.wire import auth, batch, names, protocol
 
 
 class Party(StrEnum):
@@ -461,6 +461,23 @@ def classify(keys: Keys, key: str) -> Classified | None:
     return None
 
 
+def ident_in(kind: KeyKind, key: str) -> str | None:
+    """The placeholder chunk of ``key`` read as a key of ``kind`` whatever its root and run
+    (a recording's topic): "" for a kind without one, None if ``key`` is not such a key."""
+    chunks = key.split("/")
+    if len(chunks) < len(kind.pattern) + 2:
+        return None
+    ident = ""
+    for chunk, expected in zip(chunks[-len(kind.pattern) :], kind.pattern, strict=True):
+        if expected.startswith("{"):
+            if not _names_one(expected, chunk):
+                return None
+            ident = chunk
+        elif chunk != expected:
+            return None
+    return ident
+
+
 def _names_one(placeholder: str, chunk: str) -> bool:
     if placeholder in ("{robot}", "{lead}"):
         return names.robot_of_name(chunk) is not None
@@ -554,7 +571,7 @@ def open_message(
         meta = None
         if kind.metadata is not None:
             if not metadata:
-                raise SampleError(f"{kind.name} without its metadata")
+                raise SampleError(f"{kind.name} without metadata")
             meta = protocol.decode(metadata, kind.metadata)
     except protocol.ProtocolError as error:
         raise SampleError(f"{kind.name}: {error}") from None
@@ -563,6 +580,31 @@ def open_message(
         if str(named) != ident:
             raise SampleError(f"{kind.name} of robot {named} on the key of {ident}")
     return Opened(kind, ident, message, meta)
+
+
+def open_sample(
+    keys: Keys,
+    key: str,
+    payload: bytes,
+    attachment: bytes | None,
+    *,
+    keyring: auth.Keyring | None,
+    kinds: frozenset[KeyKind] | None = None,
+) -> Opened | None:
+    """The one gate of a live sample: its key read by the table (None: a key outside
+    ``kinds``, or outside the table), its tag checked against its speaker's key (in a keyed
+    run), then its contents (``open_message``). Raises SampleError."""
+    found = classify(keys, key)
+    if found is None or (kinds is not None and found.kind not in kinds):
+        return None
+    identity = found.speaker
+    if identity is None:
+        raise SampleError(f"{key}: not a key a single speaker tags")
+    try:
+        metadata = auth.unseal(keyring, identity, key, payload, attachment)
+    except auth.AuthError as error:
+        raise SampleError(f"{key}: {identity}: {error}") from None
+    return open_message(found.kind, found.ident, payload, metadata)
 
 
 def open_recorded(kind: KeyKind, ident: str | None, data: bytes) -> Opened:

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bestofn_swarm.wire import batch, keyspace, protocol, shape
-from bestofn_swarm.wire.endings import Halt, Look, Stop, stop_reason
+from bestofn_swarm.wire.endings import Halt, Look, stop_reason
 from bestofn_swarm.wire.names import Role
 from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon, BeaconConfig
@@ -43,7 +43,7 @@ from robot_agent.core.parking import ParkingSlots
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event, Output, Publish
 from world_server.core.world import World, WorldConfig
-from world_server.observer.summary import RobotRecord, RunOutcome, build_summary
+from world_server.observer.observer import RunObserver
 from world_server.observer.watchdog import Watchdog, default_stall_window
 
 # The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
@@ -92,15 +92,13 @@ class _Bus:
         robots: list[RobotEndpoint],
         beacon: BeaconEndpoint,
         *,
-        records: dict[int, RobotRecord],
-        watchdog: Watchdog,
+        run: RunObserver,
         hooks: EngineHooks,
     ) -> None:
         keys = robots[0].keys
         self.keys = keys
         self.world = world
-        self.records = records
-        self.watchdog = watchdog
+        self.run = run
         self.tap = hooks.tap
         self.queue: deque[Output] = deque()
         self.coordinator = Coordinator(
@@ -196,9 +194,7 @@ class _Bus:
         """A robot's status: to the tap (if it was published), and to what follows the run."""
         if published and self.tap is not None:
             self.tap(message.key, message.payload, message.attachment)
-        status: protocol.Status = message.message
-        self.records[status.id].update(status)
-        self.watchdog.status(status)
+        self.run.status(message.message)
 
     def _sent(self, message: Outgoing, typed: object) -> None:
         """A robot's message (or its host's batch): to the tap, and to the world, typed
@@ -253,7 +249,6 @@ def run_in_process(
         byzantine_robots or {}, world_config.num_sites, world.layout.best_site, world_config.seed
     )
     endpoints: list[RobotEndpoint] = []
-    records: dict[int, RobotRecord] = {}
     for robot_id in range(world_config.num_robots):
         rng = Stream.named(world_config.seed, "robot", robot_id)
         behaviour = behaviours.get(robot_id)
@@ -265,7 +260,6 @@ def run_in_process(
         endpoints.append(
             RobotEndpoint(robot_id, keys=keys, controller=controller, world=world.info)
         )
-        records[robot_id] = RobotRecord(robot_id)
     if stall_window is None:
         stall_window = default_stall_window(
             world.layout.arena_radius,
@@ -275,19 +269,22 @@ def run_in_process(
             beacon_config.outages,
             time_limit=timeout,
         )
-    watchdog = Watchdog(
-        records,
-        stall_window,
-        body_length=2 * world_config.spec.radius,
-        slot_of=ParkingSlots.of_world(world.info, controller_config).slot,
+    robots = range(world_config.num_robots)
+    run = RunObserver(
+        robots,
+        watchdog=Watchdog(
+            robots,
+            stall_window,
+            body_length=2 * world_config.spec.radius,
+            slot_of=ParkingSlots.of_world(world.info, controller_config).slot,
+        ),
+        byzantine=behaviours,
     )
-    honest = [record for robot_id, record in records.items() if robot_id not in behaviours]
     bus = _Bus(
         world,
         endpoints,
         BeaconEndpoint(beacon, keys, world_config.dt, keyring=None),
-        records=records,
-        watchdog=watchdog,
+        run=run,
         hooks=hooks,
     )
     bus.start()
@@ -299,7 +296,7 @@ def run_in_process(
     gc.freeze()
     gc.set_threshold(RUN_COLLECT_THRESHOLD, *thresholds[1:])
     try:
-        halt = _run_ticks(bus, timeout=timeout, honest=honest, hooks=hooks, on_tick=on_tick)
+        halt = _run_ticks(bus, timeout=timeout, hooks=hooks, on_tick=on_tick)
     finally:
         gc.set_threshold(*thresholds)
         gc.unfreeze()
@@ -309,29 +306,23 @@ def run_in_process(
     bus.stop()
     state = bus.last_state
     if state is not None:
-        watchdog.poses(state.t, [(pose.id, pose.x, pose.y) for pose in state.robots])
+        run.state(state)
     wall = hooks.wall_clock() - started if hooks.wall_clock is not None else 0.0
-    return build_summary(
-        RunOutcome(
-            run_id=world_config.run,
-            num_robots=world_config.num_robots,
-            num_sites=world_config.num_sites,
-            seed=world_config.seed,
-            best_site=world.layout.best_site,
-            sim_time_s=world.t,
-            wall_time_s=wall,
-            timed_out=halt.stop is Stop.TIMEOUT,
-            radio=world.state().radio,
-            world_rejected=bus.coordinator.counters.rejected,
-            stalls=bus.coordinator.counters.stalls,
-            observer_rejected=0,
-            config=hooks.config,
-            stop=halt.stop,
-            timeout_kind=halt.limit,
-            stuck=watchdog.stuck(),
-            byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
-        ),
-        records.values(),
+    return run.summary(
+        run_id=world_config.run,
+        num_robots=world_config.num_robots,
+        num_sites=world_config.num_sites,
+        seed=world_config.seed,
+        best_site=world.layout.best_site,
+        sim_time_s=world.t,
+        wall_time_s=wall,
+        world=bus.coordinator.state(),
+        departures=0,
+        observer_rejected=0,
+        config=hooks.config,
+        stop=halt.stop,
+        timeout_kind=halt.limit,
+        byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
     )
 
 
@@ -339,23 +330,25 @@ def _run_ticks(
     bus: _Bus,
     *,
     timeout: float,
-    honest: list[RobotRecord],
     hooks: EngineHooks,
     on_tick: Callable[[World], None] | None,
 ) -> Halt:
     """Tick until the stop rule says the run ends; why it ended."""
-    world, watchdog = bus.world, bus.watchdog
+    world, run = bus.world, bus.run
+    honest = run.honest()
     while True:
         bus.run_tick()
         if on_tick is not None:
             on_tick(world)
         if world.tick % hooks.poses_every == 0:
+            # The watchdog sees the robots' positions once a tick's statuses are all in,
+            # as the launcher does when world/state comes.
             state = bus.last_state
             if state is not None and state.tick == world.tick:
-                watchdog.poses(state.t, [(pose.id, pose.x, pose.y) for pose in state.robots])
+                run.state(state)
             if hooks.progress is not None:
-                hooks.progress(_progress(world.t, bus.records))
-        halt = stop_reason(_look(world.t, timeout, honest, watchdog, hooks))
+                hooks.progress(Progress(world.t, run.decided(), run.trips()))
+        halt = stop_reason(_look(world.t, timeout, run, honest, hooks))
         if halt is not None:
             return halt
         bus.close_tick()
@@ -364,37 +357,23 @@ def _run_ticks(
 def _look(
     sim_time: float,
     timeout: float,
-    honest: list[RobotRecord],
-    watchdog: Watchdog,
+    run: RunObserver,
+    honest: list[int],
     hooks: EngineHooks,
 ) -> Look:
     """What this engine sees at the end of a tick (``bestofn_swarm.wire.endings.stop_reason``
     decides)."""
-    decided = all(record.decided_site is not None for record in honest)
+    decided = run.all_decided(honest)
     return Look(
         sim_time=sim_time,
         sim_limit=timeout,
         all_decided=decided,
-        last_decision=_last_decision(honest) if decided else 0.0,
-        stalled=watchdog.stalled(sim_time),
+        last_decision=run.last_decision(honest) if decided else 0.0,
+        stalled=run.stalled(sim_time),
         wall_time=hooks.since_launch() if hooks.since_launch is not None else 0.0,
         wall_limit=hooks.wall_timeout,
         signalled=hooks.stop_signal() if hooks.stop_signal is not None else False,
     )
-
-
-def _last_decision(records: list[RobotRecord]) -> float:
-    """The sim time at which the last of ``records`` decided (0 if none did)."""
-    return max(
-        (record.status.decision_time or 0.0 for record in records if record.status is not None),
-        default=0.0,
-    )
-
-
-def _progress(sim_time: float, records: Mapping[int, RobotRecord]) -> Progress:
-    decided = sum(1 for record in records.values() if record.decided_site is not None)
-    trips = sum(record.status.trips for record in records.values() if record.status)
-    return Progress(sim_time, decided, trips)
 
 
 __all__ = ["POSES_EVERY", "EngineHooks", "Progress", "Tap", "run_in_process"]

@@ -10,11 +10,12 @@ was sent that last frame, then answers. In a keyed run only the launcher's query
 counted. Stopped by a signal instead, it tells the pages that the run stopped.
 
 It only listens: it publishes nothing the swarm reads, so it cannot change a decision.
-Zenoh callbacks pass every sample through ``deploy.viewer.core.decode.decode_sample``, which checks
-its tag against the run's keys (``swarm run`` hands the view the run secret, like the
-recorder) before it decodes anything, and keep only the newest message per key (and a
-bounded list of radio deliveries): the page needs the current state, not a history, so a
-slow page or a busy machine never makes a queue grow.
+Zenoh callbacks pass every sample through ``deploy.viewer.core.decode.decode_sample``, the
+key table's gate, which checks its tag against the run's keys (``swarm run`` hands the view
+the run secret, like the recorder) before it decodes anything, and feed the run's observer
+(``world_server/observer/observer.py``), which keeps the latest of each robot (and a bounded
+list of radio deliveries): the page needs the current state, not a history, so a slow page
+or a busy machine never makes a queue grow.
 """
 
 from __future__ import annotations
@@ -37,15 +38,16 @@ from typing import Any
 from bestofn_swarm.plumbing import cliargs, run_keys
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
 from bestofn_swarm.plumbing.lifecycle import die_with_launcher
-from bestofn_swarm.wire import auth, keyspace, names, protocol
+from bestofn_swarm.wire import auth, keyspace, names
 from bestofn_swarm.wire.names import Role
 from deploy.viewer.core import model
-from deploy.viewer.core.decode import Decoded, Delivery, InvalidSampleError, decode_sample
+from deploy.viewer.core.decode import InvalidSampleError, decode_sample
 from deploy.viewer.options import VIEW_PORT
 from deploy.viewer.server import ViewServer
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
-from world_server.core.pooling import Pooling, PoolingTracker
+from world_server.core.pooling import Pooling
+from world_server.observer.observer import RunObserver
 
 log = logging.getLogger("viewer")
 
@@ -58,8 +60,9 @@ FINISH_QUERY_BYTES = 2**20
 
 
 class LiveSource:
-    """The run as the bridge sees it. Zenoh threads call ``take``; the server's loop calls
-    ``frame``; one lock guards what they share."""
+    """The run as the page sees it: the run's observer, fed what Zenoh brings. Zenoh
+    threads call ``take``; the server's loop calls ``frame``; one lock guards the observer
+    and what else they share."""
 
     def __init__(
         self, scene: model.Scene, keys: keyspace.Keys, keyring: auth.Keyring | None
@@ -67,30 +70,27 @@ class LiveSource:
         self.scene = scene
         self.keys = keys
         self.keyring = keyring  # None: an unauthenticated run (no tags to check)
-        self.robots: dict[int, model.RobotView] = {}
+        self.run = RunObserver(range(scene.robots), poolings=True, open_roster=True)
         self.poolings: collections.deque[Pooling] = collections.deque(maxlen=1000)
-        self.tracker = PoolingTracker()
-        self.clock: protocol.Clock | None = None
-        self.counters: protocol.WorldState | None = None
         self.rejected = 0
         self.ended: dict[str, Any] | None = None
         self._first_clock_wall: float | None = None
         self._lock = threading.Lock()
-        # Newest message per key, waiting for the next frame (bounded by the number of keys).
-        self._pending_status: dict[int, protocol.Status] = {}
-        self.links: dict[int, protocol.LinkStats] = {}  # robots outside: their links
-        self._pending_state: protocol.WorldState | None = None
-        self._deliveries: collections.deque[Delivery] = collections.deque(maxlen=MAX_DELIVERIES)
+        # The radio deliveries since the last frame, at most MAX_DELIVERIES (sender, receiver).
+        self._deliveries: collections.deque[tuple[str, int]] = collections.deque(
+            maxlen=MAX_DELIVERIES
+        )
 
     def take(self, key: str, payload: bytes, attachment: bytes | None) -> None:
         """One sample from Zenoh (any thread)."""
         try:
-            message = decode_sample(self.keys, key, payload, attachment, keyring=self.keyring)
+            opened = decode_sample(self.keys, key, payload, attachment, keyring=self.keyring)
+            if opened is None:
+                return
+            with self._lock:
+                self._keep(opened)
         except InvalidSampleError as error:
             self.refuse(str(error))
-            return
-        if message is not None:
-            self._keep(message)
 
     def refuse(self, reason: str) -> None:
         """Count a sample or query that is not drawn; the first is logged."""
@@ -100,33 +100,24 @@ class LiveSource:
         if first:
             log.warning("refused a sample or query (logged once): %s", reason[:300])
 
-    def _keep(self, message: Decoded) -> None:
-        with self._lock:
-            if isinstance(message, protocol.Status):
-                self._pending_status[message.id] = message
-                # Poolings are counted in order here, not at frame time, so that none is
-                # missed when several statuses of one robot arrive between two frames.
-                pooling, _ = self.tracker.on_status(message)
-                if pooling is not None:
-                    self.poolings.append(pooling)
-            elif isinstance(message, protocol.WorldState):
-                if self._pending_state is None or message.tick >= self._pending_state.tick:
-                    self._pending_state = message
-            elif isinstance(message, protocol.LinkStats):
-                self.links[message.robot] = message
-            elif isinstance(message, protocol.Clock):
-                if self._first_clock_wall is None:
-                    self._first_clock_wall = time.monotonic()
-                if self.clock is None or message.tick >= self.clock.tick:
-                    self.clock = message
-            else:
-                self._deliveries.append(message)
-                self.tracker.on_delivery(
-                    message.receiver, message.meta.sender, message.meta.tick * self._dt()
-                )
+    def _keep(self, opened: keyspace.Opened) -> None:
+        """Feed the observer (under the lock). Poolings are counted in order here, not at
+        frame time, so that none is missed when several statuses of one robot arrive
+        between two frames."""
+        run = self.run
+        if opened.kind is keyspace.CLOCK and self._first_clock_wall is None:
+            self._first_clock_wall = time.monotonic()
+        if opened.kind is keyspace.RADIO_RX and opened.robot is not None:
+            meta = opened.meta
+            self._deliveries.append((meta.sender, opened.robot))
+            run.delivery(opened.robot, meta.sender, meta.tick * self._dt())
+            return
+        noted = run.take(opened)
+        if noted.pooling is not None:
+            self.poolings.append(noted.pooling)
 
     def _dt(self) -> float:
-        clock = self.clock
+        clock = self.run.last_clock
         return clock.t / clock.tick if clock is not None and clock.tick else 0.1
 
     def finish(self, summary: dict[str, Any] | None, fallback: str = "stopped") -> None:
@@ -141,45 +132,31 @@ class LiveSource:
 
     def frame(self) -> dict[str, Any]:
         with self._lock:
-            for robot, status in self._pending_status.items():
-                self.robots.setdefault(robot, model.RobotView()).status = status
-            self._pending_status.clear()
-            state, self._pending_state = self._pending_state, None
-            if state is not None:
-                self.counters = state
-                for pose in state.robots:
-                    self.robots.setdefault(pose.id, model.RobotView()).pose = (
-                        pose.x,
-                        pose.y,
-                        pose.theta,
-                    )
-            deliveries = [(d.meta.sender, d.receiver) for d in self._deliveries]
+            run = self.run
+            clock = run.last_clock
+            t = clock.t if clock is not None else 0.0
+            elapsed = time.monotonic() - self._first_clock_wall if self._first_clock_wall else 0.0
+            deliveries = list(self._deliveries)
             self._deliveries.clear()
-            clock = self.clock
-            started = self._first_clock_wall
-            ended = self.ended
-            rejected = self.rejected
-            poolings = list(self.poolings)
-            links = dict(self.links)
-        t = clock.t if clock is not None else 0.0
-        elapsed = time.monotonic() - started if started is not None else 0.0
-        return model.frame(
-            self.scene,
-            t=t,
-            tick=clock.tick if clock is not None else 0,
-            robots=self.robots,
-            counters=self.counters,
-            poolings=poolings,
-            deliveries=deliveries,
-            real_time_factor=t / elapsed if elapsed > 0.5 else None,
-            ended=ended,
-            links=links,
-            extra={"rejected": rejected},
-        )
+            return model.frame(
+                self.scene,
+                t=t,
+                tick=clock.tick if clock is not None else 0,
+                robots=model.views_of(run),
+                decided=run.decided(),
+                counters=run.last_state,
+                poolings=list(self.poolings),
+                deliveries=deliveries,
+                real_time_factor=t / elapsed if elapsed > 0.5 else None,
+                ended=self.ended,
+                links=dict(run.links),
+                extra={"rejected": self.rejected},
+            )
 
     def opinion(self, robot: int) -> dict[str, Any]:
         with self._lock:
-            return model.opinion_message(robot, self.robots.get(robot))
+            record = self.run.records.get(robot)
+            return model.opinion_message(robot, None if record is None else record.status)
 
     def command(self, message: dict[str, Any]) -> None:
         """A live run takes no commands from a page."""

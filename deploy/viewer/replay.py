@@ -25,25 +25,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import msgspec
-
-from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire import keyspace, protocol
+from bestofn_swarm.wire.keyspace import Party
 from deploy.viewer.core import model
 from deploy.viewer.options import VIEW_PORT
 from deploy.viewer.server import ViewServer
 from world_server.core.layout import make_layout
-from world_server.core.pooling import LINK_SECONDS, Pooling, PoolingTracker
+from world_server.core.pooling import LINK_SECONDS, Pooling
+from world_server.observer.observer import RunObserver
 from world_server.recording.reader import RecordedMessage, RecordingReader
 from world_server.recording.records import RUN_METADATA
 
 SPEEDS = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
 MAX_DELIVERIES_PER_FRAME = 2000
-
-
-class _RadioRx(msgspec.Struct):
-    """A recorded ``radio/rx`` sample: only its metadata is needed here."""
-
-    meta: protocol.RadioRxMeta
 
 
 @dataclass
@@ -70,6 +64,8 @@ class Timeline:
     deliveries: list[tuple[float, str, int]] = field(default_factory=list)
     poolings: list[Pooling] = field(default_factory=list)
     decisions: list[tuple[float, int]] = field(default_factory=list)
+    # The robots decided, as the run's observer counted them after each status in sim time.
+    decided: list[tuple[float, int]] = field(default_factory=list)
     # Robots outside the emulator: their links' figures as the bridge reported them.
     link_times: dict[int, list[float]] = field(default_factory=dict)
     links: dict[int, list[protocol.LinkStats]] = field(default_factory=dict)
@@ -86,70 +82,57 @@ class Timeline:
         return max(ends)
 
 
-def _robot_in(topic: str) -> int | None:
-    parts = topic.rsplit("/", 3)
-    for part in parts[-2:]:
-        if part.isdigit():
-            return int(part)
-    return None
-
-
 class _Loader:
-    """Puts the messages the page shows into a timeline, one at a time."""
+    """Puts the messages the page shows into a timeline, one at a time: each through the key
+    table's gate (``keyspace.open_recorded``), to the timeline's indexes and to the run's
+    observer, which finds the poolings and decisions and counts the robots decided."""
 
     def __init__(self, timeline: Timeline, with_sense: bool) -> None:
         self.timeline = timeline
-        self.with_sense = with_sense
-        self.tracker = PoolingTracker()
-        self.decoders: dict[str, msgspec.json.Decoder[Any]] = {
-            "bestofn.WorldState": msgspec.json.Decoder(protocol.WorldState),
-            "bestofn.Status": msgspec.json.Decoder(protocol.Status),
-            "bestofn.Clock": msgspec.json.Decoder(protocol.Clock),
-            "bestofn.RadioRxRecord": msgspec.json.Decoder(_RadioRx),
-            "bestofn.Sense": msgspec.json.Decoder(protocol.Sense),
-            "bestofn.LinkStats": msgspec.json.Decoder(protocol.LinkStats),
-        }
+        self.run = RunObserver((), poolings=True, open_roster=True)
+        shown = {*keyspace.heard_by(Party.VIEWER), *([keyspace.SENSE] if with_sense else [])}
+        self.kinds = {kind.schema: kind for kind in shown if kind.schema is not None}
 
     def message(self, message: RecordedMessage) -> None:
-        topic, schema = message.topic, message.schema
-        decoder = self.decoders.get(schema)
-        if decoder is None or (schema == "bestofn.Sense" and not self.with_sense):
+        kind = self.kinds.get(message.schema)
+        ident = None if kind is None else keyspace.ident_in(kind, message.topic)
+        if kind is None or ident is None:
             return
         try:
-            value = decoder.decode(message.data)
-        except (msgspec.DecodeError, msgspec.ValidationError):
+            opened = keyspace.open_recorded(kind, ident or None, message.data)
+        except keyspace.SampleError:
             return  # the report counts these; the page just does not draw them
-        timeline = self.timeline
-        if isinstance(value, protocol.WorldState):
+        timeline, value = self.timeline, opened.message
+        if kind is keyspace.STATE:
             timeline.state_times.append(value.t)
             timeline.states.append(value)
-        elif isinstance(value, protocol.Status):
+        elif kind is keyspace.STATUS:
             timeline.statuses.setdefault(value.id, []).append(value)
             timeline.status_times.setdefault(value.id, []).append(value.t)
-            pooling, decided = self.tracker.on_status(value)
-            if pooling is not None:
-                timeline.poolings.append(pooling)
-            if decided:
+            try:
+                noted = self.run.status(value)
+            except keyspace.SampleError:
+                return
+            if noted.pooling is not None:
+                timeline.poolings.append(noted.pooling)
+            if noted.decided:
                 timeline.decisions.append((value.t, value.id))
-        elif isinstance(value, protocol.Clock):
+            timeline.decided.append((value.t, self.run.decided()))
+        elif kind is keyspace.CLOCK:
             if value.tick:
                 timeline.dt = value.t / value.tick
             timeline.clock_times.append(value.t)
             timeline.clock_walls.append(message.publish_time)
-        elif isinstance(value, _RadioRx):
-            receiver = _robot_in(topic)
-            if receiver is not None:
-                t = value.meta.tick * timeline.dt
-                timeline.deliveries.append((t, value.meta.sender, receiver))
-                self.tracker.on_delivery(receiver, value.meta.sender, t)
-        elif isinstance(value, protocol.LinkStats):
+        elif kind is keyspace.RADIO_RX and opened.robot is not None:
+            t = opened.meta.tick * timeline.dt
+            timeline.deliveries.append((t, opened.meta.sender, opened.robot))
+            self.run.delivery(opened.robot, opened.meta.sender, t)
+        elif kind is keyspace.LINK:
             timeline.link_times.setdefault(value.robot, []).append(message.log_time / 1e9)
             timeline.links.setdefault(value.robot, []).append(value)
-        elif isinstance(value, protocol.Sense):
-            robot = _robot_in(topic)
-            if robot is not None:
-                poses = timeline.sense_poses.setdefault(robot, [])
-                poses.append((value.t, value.x, value.y, value.theta))
+        elif kind is keyspace.SENSE and opened.robot is not None:
+            poses = timeline.sense_poses.setdefault(opened.robot, [])
+            poses.append((value.t, value.x, value.y, value.theta))
 
 
 def load(path: Path) -> Timeline:
@@ -215,6 +198,7 @@ def _sort(timeline: Timeline) -> None:
     timeline.deliveries.sort(key=lambda delivery: delivery[0])
     timeline.poolings.sort(key=lambda pooling: pooling.t)
     timeline.decisions.sort()
+    timeline.decided.sort(key=lambda entry: entry[0])
 
 
 # --- looking up one moment ---------------------------------------------------------------
@@ -259,6 +243,12 @@ def links_at(timeline: Timeline, t: float) -> dict[int, protocol.LinkStats]:
         index = max(bisect.bisect_right(times, t) - 1, 0)
         found[robot] = timeline.links[robot][index]
     return found
+
+
+def decided_at(timeline: Timeline, t: float) -> int:
+    """The robots decided at sim time ``t``, as the run's observer counted them."""
+    index = bisect.bisect_right(timeline.decided, (t, 1 << 62))
+    return timeline.decided[index - 1][1] if index else 0
 
 
 def counters_at(timeline: Timeline, t: float) -> protocol.WorldState | None:
@@ -342,6 +332,7 @@ class ReplaySource:
             t=t,
             tick=round(t / timeline.dt) if timeline.dt else 0,
             robots=self.robots_at(t),
+            decided=decided_at(timeline, t),
             counters=counters_at(timeline, t),
             poolings=timeline.poolings[recent:],
             deliveries=deliveries,
@@ -367,7 +358,8 @@ class ReplaySource:
         }
 
     def opinion(self, robot: int) -> dict[str, Any]:
-        return model.opinion_message(robot, self.robots_at(self.t).get(robot))
+        view = self.robots_at(self.t).get(robot)
+        return model.opinion_message(robot, None if view is None else view.status)
 
     def command(self, message: dict[str, Any]) -> None:
         op = message.get("op")

@@ -24,6 +24,7 @@ from world_server.core.camera import site_colour_bgr
 from world_server.core.layout import Layout
 from world_server.core.palette import PHASE_COLOURS, UNKNOWN_PHASE_COLOUR, Rgba
 from world_server.core.pooling import LINK_SECONDS, Pooling
+from world_server.observer.observer import RunObserver
 
 # The page's legend, in the order of a trip. Each phase keeps the colour it has in the
 # recording's Foxglove scene (world_server.core.palette.PHASE_COLOURS).
@@ -125,6 +126,18 @@ class RobotView:
     status: protocol.Status | None = None
 
 
+def views_of(run: RunObserver) -> dict[int, RobotView]:
+    """Each robot the observer knows, as the page draws it."""
+    robots = set(run.poses) | {robot for robot, record in run.records.items() if record.status}
+    return {
+        robot: RobotView(
+            run.poses.get(robot),
+            record.status if (record := run.records.get(robot)) is not None else None,
+        )
+        for robot in robots
+    }
+
+
 def leading(opinion: Sequence[float]) -> tuple[int, float]:
     site = max(range(len(opinion)), key=opinion.__getitem__)
     return site, opinion[site]
@@ -173,6 +186,7 @@ def frame(
     t: float,
     tick: int,
     robots: Mapping[int, RobotView],
+    decided: int,
     counters: protocol.WorldState | None,
     poolings: Iterable[Pooling] = (),
     deliveries: Sequence[tuple[str, int]] = (),
@@ -192,7 +206,7 @@ def frame(
         "tick": tick,
         "rtf": None if real_time_factor is None else round(real_time_factor, 1),
         "robots": rows,
-        "decided": sum(1 for status in statuses if status.decided_site is not None),
+        "decided": decided,
         "total": scene.robots,
         "trips": sum(status.trips for status in statuses),
         "radio": {
@@ -226,9 +240,8 @@ def link_row(stats: protocol.LinkStats) -> dict[str, Any]:
     }
 
 
-def opinion_message(robot: int, view: RobotView | None) -> dict[str, Any]:
+def opinion_message(robot: int, status: protocol.Status | None) -> dict[str, Any]:
     """The whole opinion vector of one robot, for the page's detail panel."""
-    status = view.status if view is not None else None
     return {
         "type": "opinion",
         "robot": robot,
