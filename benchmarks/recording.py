@@ -8,7 +8,7 @@
 2. Published vs recorded, for every recorded run: each message kind's count in the file
    against the count its publishers declared or must have sent (Sense.rx, Sense.camera,
    Act/Ack.radio_tx, contiguous ticks, the world's own radio counters); see
-   ``deploy.reports.report.audit``.
+   ``deploy.reports.audit.audit``.
 3. Capacity: a recorder process on a loopback router, flooded with ``--flood`` sense
    messages from one publisher as fast as Zenoh takes them; the time until its finish
    query is answered gives the messages per second it records, and the file must hold all.
@@ -40,7 +40,7 @@ from bestofn_swarm.plumbing.tcp import free_port  # noqa: E402
 from bestofn_swarm.plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
 from bestofn_swarm.wire import keyspace, protocol  # noqa: E402
 from bestofn_swarm.wire.endings import RESULT_CODES  # noqa: E402
-from deploy.reports import report  # noqa: E402
+from deploy.reports import audit, collect  # noqa: E402
 from world_server.recorder.write_loop import FINISH_QUIET  # noqa: E402
 
 SIM_SECONDS = {10: 100.0, 100: 60.0}
@@ -93,10 +93,10 @@ def overhead(robots: int, seed: int, sim_seconds: float, repeats: int, folder: P
                 f"bench-{robots}-{repeat}-{'rec' if path else 'norec'}-{int(time.time())}",
             )
             if path is not None:
-                recording = report.read_recording(path)
+                recording = collect.read_recording(path)
                 result["bytes"] = path.stat().st_size
                 result["messages"] = recording.messages.total()
-                audits.append((report.audit(recording), result["summary"]))
+                audits.append((audit.audit(recording), result["summary"]))
             rows[mode].append(result)
             summary = result["summary"]
             print(
@@ -127,17 +127,17 @@ def overhead(robots: int, seed: int, sim_seconds: float, repeats: int, folder: P
         f"{f0:.1f}x -> {f1:.1f}x)"
     )
     print("  published (declared) vs recorded, every recorded run:")
-    for audit, summary in audits:
+    for found, summary in audits:
         lost = {
             kind: c["expected"] - c["recorded"]
-            for kind, c in audit.items()
+            for kind, c in found.items()
             if c["expected"] != c["recorded"]
         }
-        total = sum(c["recorded"] for c in audit.values())
+        total = sum(c["recorded"] for c in found.values())
         delivered = summary["radio"]["delivered"]
         print(
             f"    {total} protocol messages recorded; radio/rx recorded "
-            f"{audit['radio/rx/*']['recorded']} of {delivered} the world delivered; "
+            f"{found['radio/rx/*']['recorded']} of {delivered} the world delivered; "
             f"mismatches: {lost or 'none'}"
         )
     kinds = audits[0][0] if audits else {}
@@ -215,7 +215,7 @@ def flood(count: int, folder: Path) -> None:
             recorder.kill()
             recorder.wait()
         router.close()
-    recording = report.read_recording(out)
+    recording = collect.read_recording(out)
     recorded = recording.messages["bestofn.Sense"]
     with open(out, "rb") as stream:  # publish time = when the recorder's callback got it
         last_arrival = max(

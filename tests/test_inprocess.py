@@ -17,7 +17,8 @@ import pytest
 from swarm_helpers import REPO, kill_leftovers, swarm_command
 
 from deploy import cli
-from deploy.reports.report import read_recording, run_summary
+from deploy.reports.collect import read_recording
+from deploy.reports.rows import run_summary
 
 pytestmark = pytest.mark.timeout(180)
 

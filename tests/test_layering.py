@@ -138,6 +138,7 @@ ALLOWED: dict[str, set[str]] = {
         "bestofn_swarm/plumbing",
         "deploy/viewer/core",
         "world_server/core",
+        "world_server/observer",
         "world_server/recording",
     },
     # What a run decided and when it ends (summary, digest, watchdog), and the tables of runs.

@@ -238,7 +238,8 @@ def test_forged_replayed_and_oversized_frames_are_refused_counted_and_change_not
 def test_a_mixed_run_is_recorded_reported_and_replayed_with_its_outside_robots(
     tmp_path: Path,
 ) -> None:
-    from deploy.reports.report import read_recording, rebuild_summary, run_summary
+    from deploy.reports.collect import read_recording, rebuild_summary
+    from deploy.reports.rows import run_summary
     from deploy.viewer.replay import ReplaySource, load
 
     path = tmp_path / "mixed.mcap"

@@ -29,7 +29,7 @@ from swarm_helpers import (
 )
 
 from bestofn_swarm.wire.endings import Ending
-from deploy.reports import report
+from deploy.reports import collect
 from deploy.security import credentials
 
 pytestmark = pytest.mark.timeout(180)
@@ -100,7 +100,7 @@ def test_a_recording_and_traces_are_private_in_a_folder_anyone_may_enter(
     assert refused.returncode != 0 and b"Permission denied" in refused.stderr
     assert another_user_reads(written[0]).returncode != 0
     # The owner reads all of it.
-    assert report.read_recording(recording).summary is not None
+    assert collect.read_recording(recording).summary is not None
 
 
 def test_an_experiment_s_logs_and_report_are_private(shared_folder: Path) -> None:
@@ -286,4 +286,4 @@ def test_a_crashed_world_server_is_reported_as_the_router_gone(tmp_path: Path) -
     assert "the world server, the run's router, is gone" in said
     assert "Traceback" not in said
     # Stopped, the recorder closed the file without the summary: whole and readable.
-    assert report.read_recording(recording).complete
+    assert collect.read_recording(recording).complete

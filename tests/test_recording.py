@@ -27,7 +27,7 @@ from swarm_helpers import REPO, kill_leftovers, loopback_router, run_swarm, uniq
 
 from bestofn_swarm.wire import keyspace, protocol
 from bestofn_swarm.wire.names import Role
-from deploy.reports import report
+from deploy.reports import audit, collect, report
 from world_server.core.layout import make_layout
 from world_server.recorder import options as recorder_options
 from world_server.recording import foxglove, records, writer
@@ -241,14 +241,14 @@ def test_metadata_holds_config_versions_seed_and_summary(run: Run) -> None:
 
 @pytest.mark.timeout(180)
 def test_nothing_published_is_missing_from_the_recording(run: Run) -> None:
-    recording = report.read_recording(run.path)
+    recording = collect.read_recording(run.path)
     assert recording.complete and recording.problem is None
-    audit = report.audit(recording)
-    for kind, counts in audit.items():
+    found = audit.audit(recording)
+    for kind, counts in found.items():
         assert counts["recorded"] == counts["expected"], kind
-    assert audit["radio/rx/*"]["recorded"] == run.summary["radio"]["delivered"] > 0
-    assert audit["robot/*/camera"]["recorded"] > 0
-    rebuilt = report.rebuild_summary(recording)
+    assert found["radio/rx/*"]["recorded"] == run.summary["radio"]["delivered"] > 0
+    assert found["robot/*/camera"]["recorded"] > 0
+    rebuilt = collect.rebuild_summary(recording)
     assert rebuilt["per_robot"] == run.summary["per_robot"]
     # The recording's run is the run: the same digest, from its status messages alone.
     assert rebuilt["digest"] == run.summary["digest"]

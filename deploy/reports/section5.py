@@ -335,7 +335,7 @@ def _as_summary(record: dict[str, Any]) -> dict[str, Any]:
 
 
 def plot_all(root: Path, records: Sequence[dict[str, Any]]) -> list[Path]:
-    from deploy.reports.report import plot_boxes
+    from deploy.reports.figures import plot_boxes
 
     written = []
     for (variant, figure), data_path in FIGURE_DATA.items():
@@ -355,7 +355,7 @@ def plot_all(root: Path, records: Sequence[dict[str, Any]]) -> list[Path]:
 
 def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
     """Per n: the share of runs by the swarm's steps, default and --linger, seeds 0-9 marked."""
-    from deploy.reports.report import _pyplot
+    from deploy.reports.figures import _pyplot
 
     plt = _pyplot()
     figure, axes = plt.subplots(1, len(tables.SITES), figsize=(5 * len(tables.SITES), 3.8))
