@@ -25,6 +25,7 @@ from outside_helpers import (
 from swarm_helpers import processes_of
 
 from bestofn_swarm.link.core import codec
+from bestofn_swarm.wire import keyspace
 
 pytestmark = pytest.mark.timeout(900)
 
@@ -251,7 +252,7 @@ def test_a_mixed_run_is_recorded_reported_and_replayed_with_its_outside_robots(
     assert code == 0, stderr
     assert summary is not None
     recording = read_recording(path)
-    assert recording.complete and recording.messages["bestofn.LinkStats"] > 0
+    assert recording.complete and recording.messages[keyspace.LINK.name] > 0
     assert recording.messages.get("bestofn.RejectedSample", 0) == 0
     reported = run_summary(recording)
     assert reported["links"]["2"]["transport"] == "udp"

@@ -417,7 +417,7 @@ def test_a_recording_is_read_keeping_one_robots_statuses_and_a_trace_each(
     assert recording.opinion_robot == 0
     assert [status.trips for status in recording.opinions] == list(range(len(POOLS[0]) + 1))
     for robot, trace in recording.robots_heard.items():
-        assert trace.record.pool_sizes == POOLS[robot]
+        assert recording.observer.records[robot].pool_sizes == POOLS[robot]
         assert trace.trail.seen == 400 and trace.trail.last == (0.399, 0.1 * robot)
     chosen = collect.read_recording(tmp_path / "a.mcap", opinion_robot=1)
     assert chosen.opinion_robot == 1 and len(chosen.opinions) == len(POOLS[1]) + 1

@@ -96,6 +96,12 @@ class KeyKind:
         return found[0] if found else None
 
     @property
+    def label(self) -> str:
+        """Its keys for every robot, beacon or process, as a reader names them
+        (``robot/*/sense``)."""
+        return "/".join("*" if chunk.startswith("{") else chunk for chunk in self.pattern)
+
+    @property
     def schema(self) -> str | None:
         """The MCAP schema name of its recorded samples; None if not recorded as a sample."""
         if self.recorded is Recorded.MESSAGE:

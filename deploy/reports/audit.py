@@ -7,7 +7,8 @@ import itertools
 from collections import Counter
 from collections.abc import Sequence
 
-from deploy.reports.collect import Recording
+from bestofn_swarm.wire import keyspace
+from deploy.reports.collect import Recording, TickSpan
 
 
 def audit(recording: Recording) -> dict[str, dict[str, int]]:
@@ -21,30 +22,29 @@ def audit(recording: Recording) -> dict[str, dict[str, int]]:
     """
     counts = recording.messages
     declared = recording.declared
-    state_expected = _states_expected(recording.state_ticks)
-    return {
-        "world/clock": {"expected": recording.clock.expected, "recorded": recording.clock.count},
-        "world/state": {"expected": state_expected, "recorded": len(recording.state_ticks)},
-        "robot/*/sense": {
-            "expected": sum(span.expected for span in recording.sense.values()),
-            "recorded": sum(span.count for span in recording.sense.values()),
+
+    def spans(found: dict[int, TickSpan]) -> dict[str, int]:
+        return {
+            "expected": sum(span.expected for span in found.values()),
+            "recorded": sum(span.count for span in found.values()),
+        }
+
+    status = counts[keyspace.STATUS.name]
+    found = {
+        keyspace.CLOCK: {"expected": recording.clock.expected, "recorded": recording.clock.count},
+        keyspace.STATE: {
+            "expected": _states_expected(recording.state_ticks),
+            "recorded": len(recording.state_ticks),
         },
-        "robot/*/act": {
-            "expected": sum(span.expected for span in recording.act.values()),
-            "recorded": sum(span.count for span in recording.act.values()),
-        },
-        "beacon/*/ack": {"expected": recording.ack.expected, "recorded": recording.ack.count},
-        "robot/*/camera": {
-            "expected": declared.camera,
-            "recorded": counts["foxglove.CompressedImage"],
-        },
-        "radio/tx/*": {"expected": declared.tx, "recorded": counts["bestofn.RadioTxRecord"]},
-        "radio/rx/*": {"expected": declared.rx, "recorded": counts["bestofn.RadioRxRecord"]},
-        "robot/*/status": {
-            "expected": counts["bestofn.Status"] + declared.status_gaps,
-            "recorded": counts["bestofn.Status"],
-        },
+        keyspace.SENSE: spans(recording.sense),
+        keyspace.ACT: spans(recording.act),
+        keyspace.ACK: {"expected": recording.ack.expected, "recorded": recording.ack.count},
+        keyspace.CAMERA: {"expected": declared.camera, "recorded": counts[keyspace.CAMERA.name]},
+        keyspace.RADIO_TX: {"expected": declared.tx, "recorded": counts[keyspace.RADIO_TX.name]},
+        keyspace.RADIO_RX: {"expected": declared.rx, "recorded": counts[keyspace.RADIO_RX.name]},
+        keyspace.STATUS: {"expected": status + declared.status_gaps, "recorded": status},
     }
+    return {kind.label: entry for kind, entry in found.items()}
 
 
 def _states_expected(ticks: Sequence[int]) -> int:

@@ -10,22 +10,15 @@ import json
 import math
 from array import array
 from collections import Counter
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import msgspec
-
-from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire import keyspace, protocol
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
-from world_server.observer.summary import (
-    RobotRecord,
-    RunOutcome,
-    build_summary,
-    byzantine_in_config,
-)
+from world_server.observer.observer import RunObserver
+from world_server.observer.summary import byzantine_in_config
 from world_server.observer.watchdog import Watchdog
 from world_server.recording.reader import RecordedMessage, RecordingReader, run_description
 from world_server.recording.records import RUN_METADATA
@@ -128,21 +121,19 @@ class Trail:
 
 @dataclass
 class RobotTrace:
-    """What a report keeps of one robot, whatever the length of the run: its summary
-    record, its last status, its progress (the stall watchdog's, for ``stuck``) and its
-    thinned trail."""
+    """What a report keeps of one robot beyond what the run's observer keeps, whatever the
+    length of the run: its last status (for the gaps in its counters) and its thinned
+    trail."""
 
     id: int
-    record: RobotRecord
-    progress: Watchdog
     trail: Trail = field(default_factory=Trail)
     last: protocol.Status | None = None
 
-    @classmethod
-    def new(cls, robot: int) -> RobotTrace:
-        # Robots are independent in the watchdog: one each, so robots can join as heard.
-        # Its window plays no part in ``stuck``.
-        return cls(robot, RobotRecord(robot), Watchdog([robot], 1.0, 2 * EPUCK.radius))
+
+def _observer() -> RunObserver:
+    """The observer a report feeds: robots join as they are heard, and the watchdog only
+    says where each undecided robot is stuck (its window plays no part)."""
+    return RunObserver((), watchdog=Watchdog((), math.inf, 2 * EPUCK.radius), open_roster=True)
 
 
 @dataclass
@@ -153,8 +144,9 @@ class Recording:
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     complete: bool = False  # the file ends with its footer
     problem: str | None = None  # why reading stopped early, if it did
-    messages: Counter[str] = field(default_factory=Counter)  # by schema name
+    messages: Counter[str] = field(default_factory=Counter)  # by kind, or by schema name
     robots_heard: dict[int, RobotTrace] = field(default_factory=dict)  # by robot id
+    observer: RunObserver = field(default_factory=_observer)  # the run, as its messages tell it
     opinion_robot: int | None = None  # whose every status is kept, for the opinion figure
     opinions: list[protocol.Status] = field(default_factory=list)  # that robot's statuses
     sense: dict[int, TickSpan] = field(default_factory=dict)
@@ -163,15 +155,26 @@ class Recording:
     clock: TickSpan = field(default_factory=TickSpan)
     state_ticks: list[int] = field(default_factory=list)
     declared: Declared = field(default_factory=Declared)
-    last_clock: protocol.Clock | None = None
-    last_state: protocol.WorldState | None = None
     first_clock_wall_ns: int | None = None
     last_clock_wall_ns: int | None = None
-    links: dict[int, protocol.LinkStats] = field(default_factory=dict)  # robots outside
+
+    @property
+    def last_clock(self) -> protocol.Clock | None:
+        return self.observer.last_clock
+
+    @property
+    def last_state(self) -> protocol.WorldState | None:
+        return self.observer.last_state
+
+    @property
+    def links(self) -> dict[int, protocol.LinkStats]:
+        """The robots outside the emulator: their links, as the bridge last reported."""
+        return self.observer.links
 
     @property
     def undecodable(self) -> int:
-        """Recorded messages this report could not decode as their schema's type."""
+        """Recorded messages this report could not take: not valid messages of their kind,
+        or making no sense against the run (a status older than the robot's last)."""
         return sum(n for name, n in self.messages.items() if name.startswith("undecodable "))
 
     @property
@@ -232,65 +235,79 @@ class Recording:
 
 
 class _Collector:
-    """Decodes the messages a report needs, one at a time; counts the rest."""
+    """Takes the messages a report needs, one at a time, through the key table's gate
+    (``keyspace.open_recorded``) to the run's observer and the report's own counts; counts
+    the rest by kind."""
+
+    # What a report reads of a recording (the rest it only counts).
+    READS = (
+        keyspace.SENSE,
+        keyspace.ACT,
+        keyspace.STATUS,
+        keyspace.ACK,
+        keyspace.CLOCK,
+        keyspace.STATE,
+        keyspace.LINK,
+    )
 
     def __init__(self, recording: Recording) -> None:
         self.recording = recording
         # --robot: keep that robot's statuses for the opinion figure, and only its.
         self.opinion_robot_fixed = recording.opinion_robot is not None
-        self.status = msgspec.json.Decoder(protocol.Status)
-        self.sense = msgspec.json.Decoder(protocol.Sense)
-        self.act = msgspec.json.Decoder(protocol.Act)
-        self.ack = msgspec.json.Decoder(protocol.Ack)
-        self.clock = msgspec.json.Decoder(protocol.Clock)
-        self.state = msgspec.json.Decoder(protocol.WorldState)
-        self.link = msgspec.json.Decoder(protocol.LinkStats)
+        self.kinds = keyspace.by_schema()
+        self.reads = frozenset(self.READS)
 
     def message(self, message: RecordedMessage) -> None:
         recording = self.recording
-        topic, schema = message.topic, message.schema
-        recording.messages[schema] += 1
+        kind = self.kinds.get(message.schema)
+        recording.messages[kind.name if kind is not None else message.schema] += 1
+        if kind is None or kind not in self.reads:
+            return
+        ident = keyspace.ident_in(kind, message.topic)
         try:
-            if schema == "bestofn.Sense":
-                sense = self.sense.decode(message.data)
-                robot = _robot_of(topic)
-                recording.sense.setdefault(robot, TickSpan()).add(sense.tick)
-                trace = self._trace(robot)
-                trace.trail.add(sense.x, sense.y)
-                trace.progress.poses(sense.t, [(robot, sense.x, sense.y)])
-                recording.declared.rx += sense.rx
-                recording.declared.camera += sense.camera
-            elif schema == "bestofn.Act":
-                act = self.act.decode(message.data)
-                recording.act.setdefault(_robot_of(topic), TickSpan()).add(act.tick)
-                recording.declared.tx += act.radio_tx
-            elif schema == "bestofn.Status":
-                self._status(_robot_of(topic), self.status.decode(message.data))
-            elif schema == "bestofn.Ack":
-                ack = self.ack.decode(message.data)
-                recording.ack.answered(ack.tick, ack.next_tick)
-                recording.declared.tx += ack.radio_tx
-            elif schema == "bestofn.Clock":
-                clock = self.clock.decode(message.data)
-                recording.clock.add(clock.tick)
-                recording.last_clock = clock
-                if recording.first_clock_wall_ns is None:
-                    recording.first_clock_wall_ns = message.publish_time
-                recording.last_clock_wall_ns = message.publish_time
-            elif schema == "bestofn.WorldState":
-                state = self.state.decode(message.data)
-                recording.state_ticks.append(state.tick)
-                recording.last_state = state
-            elif schema == "bestofn.LinkStats":
-                stats = self.link.decode(message.data)
-                recording.links[stats.robot] = stats
-        except (msgspec.DecodeError, msgspec.ValidationError, ValueError):
-            recording.messages["undecodable " + schema] += 1
+            if ident is None:
+                raise keyspace.SampleError(f"{message.topic} is no key of {kind.name}")
+            opened = keyspace.open_recorded(kind, ident or None, message.data)
+            self._take(opened, message.publish_time)
+        except keyspace.SampleError:
+            recording.messages["undecodable " + kind.name] += 1
+
+    def _take(self, opened: keyspace.Opened, publish_time: int) -> None:
+        recording, kind, value, robot = self.recording, opened.kind, opened.message, opened.robot
+        observer = recording.observer
+        if kind is keyspace.SENSE and robot is not None:
+            recording.sense.setdefault(robot, TickSpan()).add(value.tick)
+            self._trace(robot).trail.add(value.x, value.y)
+            observer.pose(robot, value.t, (value.x, value.y, value.theta))
+            recording.declared.rx += value.rx
+            recording.declared.camera += value.camera
+        elif kind is keyspace.ACT and robot is not None:
+            recording.act.setdefault(robot, TickSpan()).add(value.tick)
+            recording.declared.tx += value.radio_tx
+        elif kind is keyspace.STATUS and robot is not None:
+            self._status(robot, value)
+        elif kind is keyspace.ACK:
+            recording.ack.answered(value.tick, value.next_tick)
+            recording.declared.tx += value.radio_tx
+        elif kind is keyspace.CLOCK:
+            recording.clock.add(value.tick)
+            observer.clock(value)
+            if recording.first_clock_wall_ns is None:
+                recording.first_clock_wall_ns = publish_time
+            recording.last_clock_wall_ns = publish_time
+        elif kind is keyspace.STATE:
+            recording.state_ticks.append(value.tick)
+            observer.last_state = value  # its poses are not the report's: senses are
+        elif kind is keyspace.LINK:
+            observer.link(value)
 
     def _trace(self, robot: int) -> RobotTrace:
         trace = self.recording.robots_heard.get(robot)
         if trace is None:
-            trace = self.recording.robots_heard[robot] = RobotTrace.new(robot)
+            trace = self.recording.robots_heard[robot] = RobotTrace(robot)
+            watchdog = self.recording.observer.watchdog
+            if watchdog is not None:  # where the robot is, for where it is stuck
+                watchdog.join(robot)
         return trace
 
     def _status(self, robot: int, status: protocol.Status) -> None:
@@ -302,8 +319,7 @@ class _Collector:
             skipped += max(status.poolings - previous.poolings - 1, 0)
             recording.declared.status_gaps += skipped
         trace.last = status
-        trace.record.update(status)
-        trace.progress.status(status)
+        recording.observer.status(status)
         # The opinion figure's robot: the one asked for, else the lowest id heard (a lower
         # one heard later starts its history at its first status, so that is whole too).
         if recording.opinion_robot is None or (
@@ -312,11 +328,6 @@ class _Collector:
             recording.opinion_robot, recording.opinions = robot, []
         if robot == recording.opinion_robot:
             recording.opinions.append(status)
-
-
-def _robot_of(topic: str) -> int:
-    """The robot id in ``<root>/<run>/robot/<id>/<leaf>``."""
-    return int(topic.rsplit("/", 2)[-2])
 
 
 def read_recording(path: Path, opinion_robot: int | None = None) -> Recording:
@@ -339,16 +350,13 @@ def read_recording(path: Path, opinion_robot: int | None = None) -> Recording:
 
 
 def rebuild_summary(recording: Recording) -> dict[str, Any]:
-    """The ``swarm run --json`` summary, from the status messages in the recording."""
-    records = {robot: RobotRecord(robot) for robot in range(recording.robots or 0)}
-    for robot, trace in recording.robots_heard.items():
-        if trace.last is not None:  # its statuses, not only its poses
-            records[robot] = trace.record
-    for robot, stats in recording.links.items():  # robots outside the emulator
-        record = records.setdefault(robot, RobotRecord(robot))
-        record.outside = stats.transport
+    """The ``swarm run --json`` summary, from the messages in the recording (the run's
+    observer, as they fed it)."""
+    observer = recording.observer
+    for robot in range(recording.robots or 0):
+        observer.join(robot)
     num_sites = recording.sites or _sites_from_statuses(recording) or 2
-    num_robots = recording.robots or len(records)
+    num_robots = recording.robots or len(observer.records)
     seed = recording.seed or 0
     layout = recording.layout
     best = (
@@ -356,43 +364,23 @@ def rebuild_summary(recording: Recording) -> dict[str, Any]:
         if layout
         else make_layout(num_sites, max(num_robots, 1), seed).best_site
     )
-    state = recording.last_state
     clock = recording.last_clock
     wall = 0.0
     if recording.first_clock_wall_ns is not None and recording.last_clock_wall_ns is not None:
         wall = (recording.last_clock_wall_ns - recording.first_clock_wall_ns) / 1e9
-    return build_summary(
-        RunOutcome(
-            run_id=recording.run_id,
-            num_robots=num_robots,
-            num_sites=num_sites,
-            seed=seed,
-            best_site=best,
-            sim_time_s=clock.t if clock else 0.0,
-            wall_time_s=wall,
-            timed_out=False,
-            radio=state.radio if state else protocol.RadioCounters(),
-            world_rejected=state.rejected if state else 0,
-            stalls=state.stalls if state else 0,
-            departures=state.departures if state else 0,
-            observer_rejected=recording.undecodable,
-            config=recording.config,
-            stuck=_stuck(recording, records),
-            byzantine=byzantine_in_config(recording.config),
-            links=recording.links,
-        ),
-        records.values(),
+    return observer.summary(
+        run_id=recording.run_id,
+        num_robots=num_robots,
+        num_sites=num_sites,
+        seed=seed,
+        best_site=best,
+        sim_time_s=clock.t if clock else 0.0,
+        wall_time_s=wall,
+        world=recording.last_state,
+        observer_rejected=recording.undecodable,
+        config=recording.config,
+        byzantine=byzantine_in_config(recording.config),
     )
-
-
-def _stuck(recording: Recording, records: Mapping[int, RobotRecord]) -> list[dict[str, Any]]:
-    """Where each undecided robot is stuck, and since when: each robot's watchdog, fed its
-    statuses and poses as they were read."""
-    stuck: list[dict[str, Any]] = []
-    for robot in sorted(records):
-        trace = recording.robots_heard.get(robot) or RobotTrace.new(robot)
-        stuck += trace.progress.stuck()
-    return stuck
 
 
 def _sites_from_statuses(recording: Recording) -> int | None:

@@ -108,13 +108,23 @@ class RunObserver:
             self.delivery(opened.robot, opened.meta.sender, self.sim_time if t is None else t)
         return NOTHING
 
+    def join(self, robot: int) -> RobotRecord:
+        """A robot of the run not known until now (a recording read without its
+        description): its record."""
+        record = self.records.get(robot)
+        if record is None:
+            record = self.records[robot] = RobotRecord(robot)
+        if self.watchdog is not None:
+            self.watchdog.join(robot)
+        return record
+
     def status(self, status: protocol.Status) -> Noted:
         """A robot's status."""
         record = self.records.get(status.id)
         if record is None:
             if not self.open_roster:
                 raise keyspace.SampleError(f"no robot {status.id} in this run")
-            record = self.records[status.id] = RobotRecord(status.id)
+            record = self.join(status.id)
         if record.status and status.tick < record.status.tick and not record.restarting:
             # Authentic but old: someone replaying what it heard, not the robot.
             raise keyspace.SampleError(f"status of tick {status.tick}, older than the last")
@@ -160,7 +170,7 @@ class RunObserver:
         if stats.robot not in self.outside and not self.open_roster:
             raise keyspace.SampleError(f"robot {stats.robot} is not outside the emulator")
         self.links[stats.robot] = stats
-        self.records.setdefault(stats.robot, RobotRecord(stats.robot)).outside = stats.transport
+        self.join(stats.robot).outside = stats.transport
 
     def delivery(self, receiver: int, sender: str, t: float) -> None:
         """A radio message the medium delivered at sim time ``t`` (whom poolings joined)."""

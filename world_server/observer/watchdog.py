@@ -136,6 +136,11 @@ class Watchdog:
             robot: _Progress(robot, phase_since=start, last_progress=start) for robot in robots
         }
 
+    def join(self, robot_id: int, start: float = 0.0) -> None:
+        """Follow one more robot (one heard that was not known at the start)."""
+        if robot_id not in self._robots:
+            self._robots[robot_id] = _Progress(robot_id, phase_since=start, last_progress=start)
+
     def status(self, status: protocol.Status) -> None:
         """A robot's status: progress if it completed a step of its task since the last."""
         robot = self._robots.get(status.id)
