@@ -56,11 +56,11 @@ $(VENV)/.installed-test: $(TEST_LOCK) pyproject.toml | $(BIN)/python
 	touch $@ $(VENV)/.installed
 
 run: $(VENV)/.installed
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/swarm run
 
 test: $(VENV)/.installed-test
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
@@ -68,30 +68,30 @@ test: $(VENV)/.installed-test
 	else echo "make test: no C compiler ($${CC:-gcc}): the C robot's unit tests are skipped"; fi
 	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=20
 
-# The compiled cores (plumbing/cores.py): mypyc builds the pure modules of the tick in
+# The compiled cores (bestofn_swarm/plumbing/cores.py): mypyc builds the pure modules of the tick in
 # place, again whenever one of them changes; without a C compiler or mypyc, make says so
 # and the source runs. `make clean-cores` removes them.
 cores: $(VENV)/.installed
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 
 clean-cores:
-	@if [ -x $(BIN)/python ]; then $(BIN)/python -m plumbing.cores clean; fi
+	@if [ -x $(BIN)/python ]; then $(BIN)/python -m bestofn_swarm.plumbing.cores clean; fi
 
 # The robot in C (c_robot/build/c-robot): gcc or cc, and make.
 c-robot:
 	$(MAKE) -C c_robot
 
 test-fast: $(VENV)/.installed-test
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/python -m pytest -m fast
 
 check-published: $(VENV)/.installed-test
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/swarm section5 --check
 	STUDY_CHECK_SEED=$(CHECK_SEED) $(BIN)/python -m pytest --published --durations=20
 
 check-portable: $(VENV)/.installed-test
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/python -m portable
 
 # The property tests with fresh random examples (make test repeats the same ones).

@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
+from bestofn_swarm.wire.rng import Stream
 from deploy.analysis import effects
-from wire.rng import Stream
 
 TIMES = [111.6, 141.1, 135.1, 187.1, 134.6, 121.6, 156.6, 156.6, 125.1, 150.1]
 

@@ -43,6 +43,7 @@ FAST = frozenset(
         "test_guard",
         "test_inbox",
         "test_keyspace",
+        "test_kinds_spelled_once",
         "test_layering",
         "test_link",
         "test_names",

@@ -25,12 +25,12 @@ How consensus time grows with swarm size is fitted as a power law, time = a N^b,
 squares on log time against log N, every run one point; its interval resamples the runs
 of each size on their own.
 
-Every resampling draws from the project's generator (``wire.rng.Stream``, specified in
+Every resampling draws from the project's generator (``bestofn_swarm.wire.rng.Stream``, specified in
 docs/porting.md), seeded by the SHA-256 of the values it resamples, in sorted order: the
 same runs give the same interval, in any order, on any machine and with any numpy. What
 is computed from them is too: medians and percentiles select, sums of floats add in order
 (``_sum``: numpy's reductions take another order on another SIMD path), and logarithms,
-exponentials and powers are the portable kernel's (``wire.numeric``).
+exponentials and powers are the portable kernel's (``bestofn_swarm.wire.numeric``).
 """
 
 from __future__ import annotations
@@ -43,8 +43,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from wire import numeric
-from wire.rng import Stream
+from bestofn_swarm.wire import numeric
+from bestofn_swarm.wire.rng import Stream
 
 RESAMPLES = 4000
 MIN_RUNS = 6  # fewer runs in a group: no time to compare (see above)

@@ -35,11 +35,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bestofn_swarm.plumbing import cliargs
 from deploy.analysis import prose
 from deploy.analysis import section5_tables as tables
 from deploy.analysis.wilson import wilson
 from deploy.reports import pages, sweep
-from plumbing import cliargs
 
 RUNS_FILE = "docs/section5-runs.json"
 MARKDOWN = {"docs/section5.md": ("summary", "detail", "runs")}
@@ -341,7 +341,7 @@ def _as_summary(record: dict[str, Any]) -> dict[str, Any]:
 
 
 def plot_all(root: Path, records: Sequence[dict[str, Any]]) -> list[Path]:
-    from deploy.reports.report import plot_boxes
+    from deploy.reports.figures import plot_boxes
 
     written = []
     for (variant, figure), data_path in FIGURE_DATA.items():
@@ -361,7 +361,7 @@ def plot_all(root: Path, records: Sequence[dict[str, Any]]) -> list[Path]:
 
 def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
     """Per n: the share of runs by the swarm's steps, default and --linger, seeds 0-9 marked."""
-    from deploy.reports.report import _pyplot
+    from deploy.reports.figures import _pyplot
 
     plt = _pyplot()
     figure, axes = plt.subplots(1, len(tables.SITES), figsize=(5 * len(tables.SITES), 3.8))
@@ -418,7 +418,7 @@ def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
 
 def _render(root: Path) -> int:
     """Write everything again from the published runs, keeping their provenance."""
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
     try:
         meta, records = read_runs(root)
@@ -481,7 +481,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
     root: Path = args.root
     if (args.write or args.check or args.render) and not all(
@@ -527,7 +527,7 @@ def run(args: argparse.Namespace) -> int:
 def _check(root: Path, sample: bool, executor: sweep.ExecutorSpec, progress: Any) -> int:
     """Run the published runs again (seeds 0-9 with ``sample``); print every difference and
     what was not checked; 1 if anything differs."""
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
     try:
         _, published = read_runs(root)

@@ -16,6 +16,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from bestofn_swarm.wire.rng import Stream
 from deploy.analysis.wilson import share
 from deploy.study import byzantine_prose, tables
 from deploy.study.byzantine_runs import (
@@ -31,7 +32,6 @@ from deploy.study.byzantine_runs import (
 )
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
-from wire.rng import Stream
 
 
 def byzantine_ids(seed: int, robots: int, count: int) -> list[int]:

@@ -21,8 +21,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from bestofn_swarm.wire.rng import Stream, seed_of
 from deploy.study import grid
-from wire.rng import Stream, seed_of
 
 BUDGET = 60.0  # recorded wall seconds a study's sample may take, in all (one core)
 

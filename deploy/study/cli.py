@@ -22,13 +22,13 @@ from pathlib import Path
 
 from rich.console import Console
 
+from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.plumbing.cliargs import UsageError
 from deploy.reports import sweep
 from deploy.study import check, grid, lock, page, results, runner
 from deploy.study.catalogue import studies, study_named
 from deploy.study.declare import Study
 from deploy.study.state import State, state_of
-from plumbing import cliargs
-from plumbing.cliargs import UsageError
 
 DEFAULT_SAMPLE = 1  # runs of each kind
 REPOSITORY = results.CODE_ROOT

@@ -14,6 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from bestofn_swarm.wire.rng import Stream
 from deploy.analysis import effects
 from deploy.analysis.prose import Claim, fixed
 from deploy.analysis.wilson import percent_bound, share, wilson
@@ -22,7 +23,6 @@ from deploy.study.byzantine import byzantine_ids
 from deploy.study.byzantine_runs import MAX_BYZANTINE
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
-from wire.rng import Stream
 
 SITES = 10
 TIMEOUT = 2400.0  # sim seconds
