@@ -11,8 +11,8 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-from plumbing import cores
-from plumbing.cliargs import UsageError
+from bestofn_swarm.plumbing import cores
+from bestofn_swarm.plumbing.cliargs import UsageError
 
 __all__ = ["SUBCOMMANDS", "UsageError", "main"]
 
@@ -41,7 +41,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "check a program that speaks the link against the controller, tick by tick",
     ),
     "router": ("deploy.launcher.router", "a Zenoh router (a Python session; no zenohd needed)"),
-    "view": ("viewer.replay", "replay a recording in the browser, on the live view's page"),
+    "view": ("deploy.viewer.replay", "replay a recording in the browser, on the live view's page"),
 }
 
 

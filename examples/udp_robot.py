@@ -31,13 +31,13 @@ import numpy as np
 # Run as a script (python examples/udp_robot.py), the repository root is not on the path.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.wire import names, protocol
+from bestofn_swarm.wire.rng import Stream
 from examples.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
-from plumbing import cliargs
-from plumbing.stop_signals import on_stop_signals
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
-from wire import names, protocol
-from wire.rng import Stream
 
 PANEL_FRACTION = 0.7  # of each site's share of the wall that its coloured panel covers
 CAMERA_REACH = 0.3  # metres: a panel further away is too small to judge

@@ -16,11 +16,11 @@ import pytest
 from outside_helpers import C_ROBOT, c_robot_binary
 from swarm_helpers import REPO, swarm_cli
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
 from deploy.conformance import swarm, vectors
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.navigation import NavParams
-from wire import protocol
-from wire.rng import Stream
 
 pytestmark = pytest.mark.timeout(900)
 
@@ -77,7 +77,7 @@ def test_the_c_robot_conforms_over_a_serial_line(binary: Path) -> None:
 
 
 def test_the_python_program_conforms() -> None:
-    code, lines = conformance("--no-swarm", sys.executable, "-m", "link")
+    code, lines = conformance("--no-swarm", sys.executable, "-m", "robot_agent.link")
     assert code == 0, "\n".join(lines)
     assert lines[-1] == "PASS: every tick of 5 tracks (1655 ticks) over UDP"
 

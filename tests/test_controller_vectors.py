@@ -13,11 +13,11 @@ from pathlib import Path
 import make_vectors
 import pytest
 
+from bestofn_swarm.wire.rng import Stream
 from deploy.conformance import vectors
 from robot_agent.core import phases
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.navigation import NavParams
-from wire.rng import Stream
 
 FILE = Path(__file__).resolve().parent / "vectors" / "controller.json"
 TRACKS = vectors.load(FILE)

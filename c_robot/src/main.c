@@ -57,7 +57,7 @@ static double now_monotonic(void) {
     return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
-/* --- the link's address (link/core/codec.py parse_address) --------------------------------- */
+/* --- the link's address (bestofn_swarm/link/core/codec.py parse_address) --------------------------------- */
 
 typedef struct {
     int udp;
@@ -116,7 +116,7 @@ static int parse_address(const char *text, Address *a) {
     return -1;
 }
 
-/* --- the key file (wire/auth.py keyring_from_text; program.py read_key_file) ---------- */
+/* --- the key file (bestofn_swarm/wire/auth.py keyring_from_text; program.py read_key_file) ---------- */
 
 static int hex_key(const char *text, uint8_t out[32]) {
     /* bytes.fromhex: pairs of hex digits, whitespace allowed between them */
@@ -241,7 +241,7 @@ static void read_key_file(const char *path, int robot, char *run, uint8_t key[32
     }
 }
 
-/* --- transports (link/io/transport.py) -------------------------------------- */
+/* --- transports (bestofn_swarm/link/io/transport.py) -------------------------------------- */
 
 typedef struct {
     int fd;

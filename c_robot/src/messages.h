@@ -1,4 +1,4 @@
-/* The project's messages (wire/protocol.py) a robot decodes or encodes, with msgspec's
+/* The project's messages (bestofn_swarm/wire/protocol.py) a robot decodes or encodes, with msgspec's
    checks: version, unknown and missing fields, types, bounds, lengths, names. */
 #ifndef CR_MESSAGES_H
 #define CR_MESSAGES_H

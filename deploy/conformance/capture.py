@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 
+from bestofn_swarm.wire import protocol
 from deploy.inprocess.engine import run_in_process
 from robot_agent.core import phases, ports
 from robot_agent.core.controller import Controller, ControllerConfig
-from wire import protocol
 from world_server.core.world import WorldConfig
 
 

@@ -28,8 +28,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from bestofn_swarm.plumbing.cliargs import UsageError
 from deploy.conformance import link_driver, swarm, vectors
-from plumbing.cliargs import UsageError
 
 VECTORS = Path(__file__).resolve().parents[2] / "tests" / "vectors" / "controller.json"
 WINDOW = 3  # ticks shown before the one that differs

@@ -30,13 +30,14 @@ from typing import IO, Any
 
 import msgspec
 
+from bestofn_swarm.link.core import codec
+from bestofn_swarm.link.io.hub import Hub
+from bestofn_swarm.link.io.transport import SerialLine, UdpServer
+from bestofn_swarm.plumbing import run_keys
+from bestofn_swarm.wire import auth, keyspace, names, protocol, settings
+from bestofn_swarm.wire.keyspace import Part
 from deploy.conformance.vectors import Divergence, Tick, Track, first_difference
-from link.core import codec
-from link.core.peer import LinkPeer, Message, SessionClosed
-from link.io.hub import Hub
-from link.io.transport import SerialLine, UdpServer
-from plumbing import run_keys
-from wire import auth, names, protocol, settings
+from world_server.bridge.core.peer import LinkPeer, Message, SessionClosed
 
 RUN = "conformance"
 READY_TIMEOUT = 60.0  # seconds for a program to start, say hello and ask for its map
@@ -112,7 +113,7 @@ class LinkedProgram:
         self.track = track
         self.robot = track.robot
         self.identity = names.robot_identity(self.robot)
-        self.keys = protocol.Keys(RUN)
+        self.keys = keyspace.Keys(RUN)
         self.keyring = auth.Keyring(secret=secrets.token_bytes(32))
         robot_key = self.keyring.key(self.identity)
         assert robot_key is not None
@@ -289,9 +290,9 @@ class LinkedProgram:
                     sent_tick=max(0, number - 1),
                 )
             )
-            key = self.keys.radio_rx(names.robot_name(self.robot))
+            key = self.keys.of(keyspace.RADIO_RX, names.robot_name(self.robot))
             self._send(
-                codec.DataKind.RADIO_RX,
+                keyspace.link(keyspace.RADIO_RX),
                 payload,
                 self.keyring.seal(self.identity, key, payload, meta),
             )
@@ -307,15 +308,19 @@ class LinkedProgram:
                     encoding="png",
                 )
             )
-            key = self.keys.camera(self.robot)
+            key = self.keys.of(keyspace.CAMERA, self.robot)
             self._send(
-                codec.DataKind.CAMERA, frame, self.keyring.seal(self.identity, key, frame, meta)
+                keyspace.link(keyspace.CAMERA),
+                frame,
+                self.keyring.seal(self.identity, key, frame, meta),
             )
         sense = protocol.encode(tick.sense())
-        key = self.keys.sense(self.robot)
-        self._send(codec.DataKind.SENSE, sense, self.keyring.seal(self.identity, key, sense))
+        key = self.keys.of(keyspace.SENSE, self.robot)
+        self._send(
+            keyspace.link(keyspace.SENSE), sense, self.keyring.seal(self.identity, key, sense)
+        )
 
-    def _send(self, kind: codec.DataKind, payload: bytes, attachment: bytes | None) -> None:
+    def _send(self, kind: keyspace.LinkCode, payload: bytes, attachment: bytes | None) -> None:
         if not self.peer.send(kind, payload, attachment):
             raise ProgramFailedError("link", "an open session", "none (the program went quiet)")
         self._flush()
@@ -386,14 +391,14 @@ class LinkedProgram:
 
     def _message(self, message: Message) -> None:
         kind, payload, attachment = message.kind, message.payload, message.attachment
-        if kind is codec.DataKind.INFO_QUERY:
+        if kind is keyspace.link(keyspace.INFO):
             self._answer_question(payload, attachment)
             return
         keys, robot = self.keys, self.robot
         key = {
-            codec.DataKind.ACT: keys.act(robot),
-            codec.DataKind.RADIO_TX: keys.radio_tx(names.robot_name(robot)),
-            codec.DataKind.STATUS: keys.status(robot),
+            keyspace.link(keyspace.ACT): keys.of(keyspace.ACT, robot),
+            keyspace.link(keyspace.RADIO_TX): keys.of(keyspace.RADIO_TX, names.robot_name(robot)),
+            keyspace.link(keyspace.STATUS): keys.of(keyspace.STATUS, robot),
         }[kind]
         what = kind.name.lower()
         try:
@@ -403,10 +408,10 @@ class LinkedProgram:
                 what, f"a {what} tagged with the robot's run key", str(error)
             ) from None
         try:
-            if kind is codec.DataKind.ACT:
+            if kind is keyspace.link(keyspace.ACT):
                 act = protocol.decode(payload, protocol.Act)
                 self.answers.setdefault(act.tick, Answer()).act = act
-            elif kind is codec.DataKind.RADIO_TX:
+            elif kind is keyspace.link(keyspace.RADIO_TX):
                 meta = protocol.decode(metadata, protocol.RadioTxMeta)
                 broadcast = protocol.decode_radio(payload)
                 value = json.loads(protocol.encode(broadcast))
@@ -428,19 +433,19 @@ class LinkedProgram:
         self.asked += 1
         try:
             identity, nonce = auth.query_open(
-                self.keyring, self.keys.world_info, payload, attachment
+                self.keyring, self.keys.of(keyspace.INFO), payload, attachment
             )
         except auth.AuthError as error:
             raise ProgramFailedError(
-                "world/info", "a question tagged with the robot's key", str(error)
+                keyspace.INFO.label, "a question tagged with the robot's key", str(error)
             ) from None
         if payload:
             # A proof of a world instance: none was reported, so none answers.
-            self._send(codec.DataKind.INFO_ERROR, b"not this world instance", None)
+            self._send(keyspace.link(keyspace.INFO, Part.ERROR), b"not this world instance", None)
             return
         info = protocol.encode(self.world)
-        sealed = auth.reply_seal(self.keyring, identity, self.keys.world_info, info, nonce)
-        self._send(codec.DataKind.INFO_REPLY, info, sealed)
+        sealed = auth.reply_seal(self.keyring, identity, self.keys.of(keyspace.INFO), info, nonce)
+        self._send(keyspace.link(keyspace.INFO, Part.REPLY), info, sealed)
 
 
 def run_tracks(

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from bestofn_swarm.wire import keyspace
 from deploy.conformance import capture, vectors
 from deploy.conformance.link_driver import pty_pair, stop
 from deploy.inprocess import engine
@@ -33,7 +34,6 @@ from deploy.launcher import options as launcher_options
 from deploy.launcher.outside import free_udp_port
 from deploy.launcher.plan import plan_from_args
 from robot_agent.core.controller import Controller
-from wire import protocol
 from world_server.core.world import World
 from world_server.recording.reader import RecordingReader
 
@@ -212,12 +212,10 @@ def first_divergence(
     or first was given other inputs (None if it never did in what was recorded); and how
     many ticks were compared."""
     robot = track.robot
-    prefix = f"{protocol.DEFAULT_ROOT}/{summary['run_id']}/"
+    keys = keyspace.Keys(summary["run_id"])
     topics = {
-        f"{prefix}robot/{robot}/act": "act",
-        f"{prefix}radio/tx/{robot}": "tx",
-        f"{prefix}robot/{robot}/status": "status",
-        f"{prefix}robot/{robot}/sense": "sense",
+        keys.of(kind, robot): kind
+        for kind in (keyspace.ACT, keyspace.RADIO_TX, keyspace.STATUS, keyspace.SENSE)
     }
     acts: dict[int, dict[str, Any]] = {}
     sent: dict[int, list[dict[str, Any]]] = {}
@@ -229,11 +227,11 @@ def first_divergence(
             if kind is None:
                 continue
             value = json.loads(message.data)
-            if kind == "act":
+            if kind is keyspace.ACT:
                 acts[value["tick"]] = value
-            elif kind == "tx":
+            elif kind is keyspace.RADIO_TX:
                 sent.setdefault(value["meta"]["tick"], []).append(value["payload"])
-            elif kind == "status":
+            elif kind is keyspace.STATUS:
                 statuses.setdefault(value["tick"], value)  # the first of a tick; repeats follow
             else:
                 senses[value["tick"]] = value

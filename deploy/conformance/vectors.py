@@ -31,12 +31,12 @@ from typing import Any
 
 import msgspec
 
+from bestofn_swarm.wire import protocol, settings
+from bestofn_swarm.wire.rng import Stream
 from deploy.conformance.capture import Step, frame_png
 from robot_agent.core import ports, vision
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.phases import TRANSITIONS
-from wire import protocol, settings
-from wire.rng import Stream
 
 FORMAT = 1
 

@@ -5,8 +5,8 @@ The world's ``Coordinator``, one process's ``HostedRobots`` over every robot's
 Zenoh (the same keys and messages; the robots' senses and acts in batches, as a process
 hosting them does), handed from one to the other in memory as they are made, typed: the
 bytes, tags and decoding a transport needs are not made for the world's and the robots'
-messages (``wire.parcel``); the beacon, which answers one tick in five, still takes its
-clock and answers in bytes, and a tap sees every message as it would be sent. Nothing of the
+messages (``bestofn_swarm.wire.parcel``); the beacon, which answers one tick in five, still takes
+its clock and answers in bytes, and a tap sees every message as it would be sent. Nothing of the
 tick is coded here: opening and closing ticks, the barrier, the radio and the checks of
 every input are the coordinator's and the endpoints', so a seed gives the same per-robot
 results as ``swarm run`` by construction. Like the launcher, this engine learns the run
@@ -28,22 +28,23 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from deploy.analysis.summary import RobotRecord, RunOutcome, build_summary
-from deploy.analysis.watchdog import Watchdog, default_stall_window
+from bestofn_swarm.wire import batch, keyspace, protocol, shape
+from bestofn_swarm.wire.endings import Halt, Look, stop_reason
+from bestofn_swarm.wire.names import Role
+from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from nest_beacon.core.endpoint import BeaconEndpoint
+from nest_beacon.core.endpoint import Outgoing as BeaconOutgoing
 from robot_agent.core import byzantine
 from robot_agent.core.controller import Controller, ControllerConfig
-from robot_agent.core.endpoint import InputKind, Outgoing, RobotEndpoint, Step
+from robot_agent.core.endpoint import Outgoing, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
 from robot_agent.core.parking import ParkingSlots
-from wire import batch, protocol, shape
-from wire.endings import Halt, Look, Stop, stop_reason
-from wire.names import Role
-from wire.rng import Stream
 from world_server.core.coordinator import Coordinator
-from world_server.core.events import Event, EventKind, Output, Publish
+from world_server.core.events import Event, Output, Publish
 from world_server.core.world import World, WorldConfig
+from world_server.observer.observer import RunObserver
+from world_server.observer.watchdog import Watchdog, default_stall_window
 
 # The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
 # world/state (the world server's default --state-every): both see the same samples.
@@ -91,15 +92,13 @@ class _Bus:
         robots: list[RobotEndpoint],
         beacon: BeaconEndpoint,
         *,
-        records: dict[int, RobotRecord],
-        watchdog: Watchdog,
+        run: RunObserver,
         hooks: EngineHooks,
     ) -> None:
         keys = robots[0].keys
         self.keys = keys
         self.world = world
-        self.records = records
-        self.watchdog = watchdog
+        self.run = run
         self.tap = hooks.tap
         self.queue: deque[Output] = deque()
         self.coordinator = Coordinator(
@@ -117,10 +116,11 @@ class _Bus:
         self.beacon_name = beacon.name
         # Where each robot's inputs come in: its own keys (its senses, until the world has
         # learnt the batched path; camera frames; radio deliveries).
-        self.inputs: dict[str, tuple[RobotEndpoint, InputKind]] = {}
+        self.inputs: dict[str, tuple[RobotEndpoint, keyspace.KeyKind]] = {}
         for endpoint in robots:
             for kind, key in endpoint.input_keys.items():
                 self.inputs[key] = (endpoint, kind)
+        self.state_key = keys.of(keyspace.STATE)
         self.last_state: protocol.WorldState | None = None
 
     def start(self) -> None:
@@ -129,9 +129,9 @@ class _Bus:
         instance = "in-process"
         for endpoint in self.host.by_id.values():
             endpoint.world_appeared(instance)
-            self._event(Event(EventKind.ALIVE, keys.alive(Role.ROBOT, endpoint.robot_id)))
+            self._event(Event(keyspace.ALIVE_ROBOT, keys.token(Role.ROBOT, endpoint.robot_id)))
         self.beacon.world_appeared(instance)
-        self._event(Event(EventKind.ALIVE, keys.alive(Role.BEACON, self.beacon_name)))
+        self._event(Event(keyspace.ALIVE_BEACON, keys.token(Role.BEACON, self.beacon_name)))
         self.coordinator.begin(0.0)
 
     def run_tick(self) -> None:
@@ -169,17 +169,17 @@ class _Bus:
             self._send_acts()
         elif key == self.beacon.clock_key:
             for message in self.beacon.receive_clock(output.payload, output.attachment):
-                self._beacon_sent(message.key, message.payload, message.attachment)
-        elif key == self.keys.world_state:
+                self._beacon_sent(message)
+        elif key == self.state_key:
             self.last_state = output.message
 
     def _stepped(self, step: Step | None) -> None:
         if step is None:
             return
         for message in step.transmissions:
-            self._sent(EventKind.TX, message, message.meta)
+            self._sent(message, message.meta)
         if step.act is not None:
-            self._sent(EventKind.ACT, step.act, step.act.message)
+            self._sent(step.act, step.act.message)
         else:
             self.host.hold(step)
         if step.status is not None:
@@ -188,30 +188,28 @@ class _Bus:
     def _send_acts(self) -> None:
         acts = self.host.take_acts()
         if acts is not None:
-            self._sent(EventKind.ACTS, acts, acts.message)
+            self._sent(acts, acts.message)
 
     def _status(self, message: Outgoing, published: bool = True) -> None:
         """A robot's status: to the tap (if it was published), and to what follows the run."""
         if published and self.tap is not None:
             self.tap(message.key, message.payload, message.attachment)
-        status: protocol.Status = message.message
-        self.records[status.id].update(status)
-        self.watchdog.status(status)
+        self.run.status(message.message)
 
-    def _sent(self, kind: EventKind, message: Outgoing, typed: object) -> None:
+    def _sent(self, message: Outgoing, typed: object) -> None:
         """A robot's message (or its host's batch): to the tap, and to the world, typed
         (a radio message as its payload and its ``RadioTxMeta``)."""
         if self.tap is not None:
             self.tap(message.key, message.payload, message.attachment)
-        payload = message.message if kind is EventKind.TX else b""
+        kind = message.kind
+        payload = message.message if kind is keyspace.RADIO_TX else b""
         self._event(Event(kind, message.key, payload, message=typed))
 
-    def _beacon_sent(self, key: str, payload: bytes, attachment: bytes | None) -> None:
+    def _beacon_sent(self, message: BeaconOutgoing) -> None:
         """The beacon's message, as bytes: to the tap, and to the world."""
-        kind = EventKind.ACK if key == self.keys.beacon_ack(self.beacon_name) else EventKind.TX
         if self.tap is not None:
-            self.tap(key, payload, attachment)
-        self._event(Event(kind, key, payload, attachment))
+            self.tap(message.key, message.payload, message.attachment)
+        self._event(Event(message.kind, message.key, message.payload, message.attachment))
 
     def _event(self, event: Event) -> None:
         self.coordinator.take(event, 0.0)
@@ -244,14 +242,13 @@ def run_in_process(
     hooks = hooks or EngineHooks()
     started = hooks.wall_clock() if hooks.wall_clock is not None else 0.0
     world = World(world_config)
-    keys = protocol.Keys(world_config.run)
+    keys = keyspace.Keys(world_config.run)
     beacon_config = beacon_config or BeaconConfig()
     beacon = Beacon(beacon_config, Stream.named(world_config.seed, "beacon", beacon_config.name))
     behaviours = byzantine.resolve_liar_sites(
         byzantine_robots or {}, world_config.num_sites, world.layout.best_site, world_config.seed
     )
     endpoints: list[RobotEndpoint] = []
-    records: dict[int, RobotRecord] = {}
     for robot_id in range(world_config.num_robots):
         rng = Stream.named(world_config.seed, "robot", robot_id)
         behaviour = behaviours.get(robot_id)
@@ -263,7 +260,6 @@ def run_in_process(
         endpoints.append(
             RobotEndpoint(robot_id, keys=keys, controller=controller, world=world.info)
         )
-        records[robot_id] = RobotRecord(robot_id)
     if stall_window is None:
         stall_window = default_stall_window(
             world.layout.arena_radius,
@@ -273,19 +269,22 @@ def run_in_process(
             beacon_config.outages,
             time_limit=timeout,
         )
-    watchdog = Watchdog(
-        records,
-        stall_window,
-        body_length=2 * world_config.spec.radius,
-        slot_of=ParkingSlots.of_world(world.info, controller_config).slot,
+    robots = range(world_config.num_robots)
+    run = RunObserver(
+        robots,
+        watchdog=Watchdog(
+            robots,
+            stall_window,
+            body_length=2 * world_config.spec.radius,
+            slot_of=ParkingSlots.of_world(world.info, controller_config).slot,
+        ),
+        byzantine=behaviours,
     )
-    honest = [record for robot_id, record in records.items() if robot_id not in behaviours]
     bus = _Bus(
         world,
         endpoints,
         BeaconEndpoint(beacon, keys, world_config.dt, keyring=None),
-        records=records,
-        watchdog=watchdog,
+        run=run,
         hooks=hooks,
     )
     bus.start()
@@ -297,7 +296,7 @@ def run_in_process(
     gc.freeze()
     gc.set_threshold(RUN_COLLECT_THRESHOLD, *thresholds[1:])
     try:
-        halt = _run_ticks(bus, timeout=timeout, honest=honest, hooks=hooks, on_tick=on_tick)
+        halt = _run_ticks(bus, timeout=timeout, hooks=hooks, on_tick=on_tick)
     finally:
         gc.set_threshold(*thresholds)
         gc.unfreeze()
@@ -307,29 +306,23 @@ def run_in_process(
     bus.stop()
     state = bus.last_state
     if state is not None:
-        watchdog.poses(state.t, [(pose.id, pose.x, pose.y) for pose in state.robots])
+        run.state(state)
     wall = hooks.wall_clock() - started if hooks.wall_clock is not None else 0.0
-    return build_summary(
-        RunOutcome(
-            run_id=world_config.run,
-            num_robots=world_config.num_robots,
-            num_sites=world_config.num_sites,
-            seed=world_config.seed,
-            best_site=world.layout.best_site,
-            sim_time_s=world.t,
-            wall_time_s=wall,
-            timed_out=halt.stop is Stop.TIMEOUT,
-            radio=world.state().radio,
-            world_rejected=bus.coordinator.counters.rejected,
-            stalls=bus.coordinator.counters.stalls,
-            observer_rejected=0,
-            config=hooks.config,
-            stop=halt.stop,
-            timeout_kind=halt.limit,
-            stuck=watchdog.stuck(),
-            byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
-        ),
-        records.values(),
+    return run.summary(
+        run_id=world_config.run,
+        num_robots=world_config.num_robots,
+        num_sites=world_config.num_sites,
+        seed=world_config.seed,
+        best_site=world.layout.best_site,
+        sim_time_s=world.t,
+        wall_time_s=wall,
+        world=bus.coordinator.state(),
+        departures=0,
+        observer_rejected=0,
+        config=hooks.config,
+        stop=halt.stop,
+        timeout_kind=halt.limit,
+        byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
     )
 
 
@@ -337,23 +330,25 @@ def _run_ticks(
     bus: _Bus,
     *,
     timeout: float,
-    honest: list[RobotRecord],
     hooks: EngineHooks,
     on_tick: Callable[[World], None] | None,
 ) -> Halt:
     """Tick until the stop rule says the run ends; why it ended."""
-    world, watchdog = bus.world, bus.watchdog
+    world, run = bus.world, bus.run
+    honest = run.honest()
     while True:
         bus.run_tick()
         if on_tick is not None:
             on_tick(world)
         if world.tick % hooks.poses_every == 0:
+            # The watchdog sees the robots' positions once a tick's statuses are all in,
+            # as the launcher does when world/state comes.
             state = bus.last_state
             if state is not None and state.tick == world.tick:
-                watchdog.poses(state.t, [(pose.id, pose.x, pose.y) for pose in state.robots])
+                run.state(state)
             if hooks.progress is not None:
-                hooks.progress(_progress(world.t, bus.records))
-        halt = stop_reason(_look(world.t, timeout, honest, watchdog, hooks))
+                hooks.progress(Progress(world.t, run.decided(), run.trips()))
+        halt = stop_reason(_look(world.t, timeout, run, honest, hooks))
         if halt is not None:
             return halt
         bus.close_tick()
@@ -362,36 +357,23 @@ def _run_ticks(
 def _look(
     sim_time: float,
     timeout: float,
-    honest: list[RobotRecord],
-    watchdog: Watchdog,
+    run: RunObserver,
+    honest: list[int],
     hooks: EngineHooks,
 ) -> Look:
-    """What this engine sees at the end of a tick (``wire.endings.stop_reason`` decides)."""
-    decided = all(record.decided_site is not None for record in honest)
+    """What this engine sees at the end of a tick (``bestofn_swarm.wire.endings.stop_reason``
+    decides)."""
+    decided = run.all_decided(honest)
     return Look(
         sim_time=sim_time,
         sim_limit=timeout,
         all_decided=decided,
-        last_decision=_last_decision(honest) if decided else 0.0,
-        stalled=watchdog.stalled(sim_time),
+        last_decision=run.last_decision(honest) if decided else 0.0,
+        stalled=run.stalled(sim_time),
         wall_time=hooks.since_launch() if hooks.since_launch is not None else 0.0,
         wall_limit=hooks.wall_timeout,
         signalled=hooks.stop_signal() if hooks.stop_signal is not None else False,
     )
-
-
-def _last_decision(records: list[RobotRecord]) -> float:
-    """The sim time at which the last of ``records`` decided (0 if none did)."""
-    return max(
-        (record.status.decision_time or 0.0 for record in records if record.status is not None),
-        default=0.0,
-    )
-
-
-def _progress(sim_time: float, records: Mapping[int, RobotRecord]) -> Progress:
-    decided = sum(1 for record in records.values() if record.decided_site is not None)
-    trips = sum(record.status.trips for record in records.values() if record.status)
-    return Progress(sim_time, decided, trips)
 
 
 __all__ = ["POSES_EVERY", "EngineHooks", "Progress", "Tap", "run_in_process"]

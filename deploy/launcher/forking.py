@@ -8,7 +8,7 @@ as the command would. Its stderr goes to a pipe the launcher reads, like a subpr
 
 Two things make the children die with the launcher, even on SIGKILL. The fork server
 stops when its liveness pipe from the launcher reaches end of file, and each child asks
-for a SIGTERM when the fork server dies (plumbing/lifecycle.py). But multiprocessing
+for a SIGTERM when the fork server dies (bestofn_swarm/plumbing/lifecycle.py). But multiprocessing
 hands every forked child a copy of that pipe's write end (and of the resource tracker's),
 so that children could start processes of their own; robots never do, and as long as
 one of them held the pipe open, the fork server never saw the launcher die, and the
@@ -29,7 +29,7 @@ from multiprocessing import forkserver, resource_tracker
 from multiprocessing.connection import Connection
 from typing import IO, Any
 
-from plumbing.lifecycle import PARENT_ENV, die_with_launcher
+from bestofn_swarm.plumbing.lifecycle import PARENT_ENV, die_with_launcher
 
 PRELOAD = [
     "deploy.launcher.fork_server_group",

@@ -19,18 +19,18 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
-from deploy.analysis.watchdog import default_stall_window, default_world_stop_window
+from bestofn_swarm.plumbing.private_files import make_private_folder
+from bestofn_swarm.plumbing.tcp import free_port
+from bestofn_swarm.wire import settings
 from deploy.launcher.outside import OutsidePlan, outside_plan
 from deploy.launcher.switches import SWITCHES, RunSwitches, run_switches
+from deploy.viewer.options import VIEW_OPTIONS, Observer, observers
 from nest_beacon.node.options import NestBeaconConfig
-from plumbing.private_files import make_private_folder
-from plumbing.tcp import free_port
 from robot_agent.core import byzantine
 from robot_agent.node.options import RobotAgentConfig
-from viewer.options import VIEW_OPTIONS, Observer, observers
-from wire import settings
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
+from world_server.observer.watchdog import default_stall_window, default_world_stop_window
 from world_server.recorder.options import DEFAULT_NICENESS
 from world_server.recording.description import RunDescription
 

@@ -3,7 +3,7 @@ process), the clock, radio medium and camera (the world server), the nest beacon
 ``--beacon-*``) and the robot faults (the launcher itself).
 
 ``swarm run`` and ``swarm experiment`` both take all of them. Each option is made from its
-setting's one definition on the config dataclass (``wire/settings.py``), and the
+setting's one definition on the config dataclass (``bestofn_swarm/wire/settings.py``), and the
 processes of a run are handed the configs these options make, each as one JSON object.
 """
 
@@ -15,12 +15,12 @@ from typing import Annotated, Any, ClassVar, NamedTuple
 
 from msgspec import Meta
 
+from bestofn_swarm.plumbing.settings_cli import Options
+from bestofn_swarm.wire import settings
+from bestofn_swarm.wire.settings import Flag
 from nest_beacon.core.beacon import BeaconConfig
-from plumbing.settings_cli import Options
 from robot_agent.core import byzantine
 from robot_agent.core.controller_config import ControllerConfig
-from wire import settings
-from wire.settings import Flag
 from world_server.server.options import WorldServerConfig
 
 

@@ -14,8 +14,9 @@ on every executor). Seeds 0-9 stand for the paper's ten runs per n.
   figures themselves and docs/section5-distribution.png;
 * ``--check`` runs every published run again (all 600 of docs/section5-runs.json, about
   7 minutes on 2 cores; ``make check-published``, which CI runs) and names everything that
-  differs: each run, the Markdown blocks, the figures' data, and runs missing from the file
-  or settings that differ from the code's. The PNGs are not compared (they are drawn from
+  differs: each run, the Markdown blocks, the figures' data, the numbers of the page's
+  text (``section5_tables.claims``), and runs missing from the file or settings that differ
+  from the code's. The PNGs are not compared (they are drawn from
   the checked data). ``--check --sample`` runs seeds 0-9 only (60 runs) and says which
   published runs it did not check.
 
@@ -34,9 +35,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bestofn_swarm.plumbing import cliargs
+from deploy.analysis import prose
 from deploy.analysis import section5_tables as tables
+from deploy.analysis.wilson import wilson
 from deploy.reports import pages, sweep
-from plumbing import cliargs
 
 RUNS_FILE = "docs/section5-runs.json"
 MARKDOWN = {"docs/section5.md": ("summary", "detail", "runs")}
@@ -182,6 +185,8 @@ def write_all(root: Path, records: Sequence[dict[str, Any]], meta: dict[str, Any
             text = replace_block(text, name, rendered[name])
         path.write_text(text)
         written.append(path)
+        for problem in prose.stale(text, tables.claims(records), relative):
+            print(f"the prose is stale: {problem}", file=sys.stderr)  # written by hand
     written += plot_all(root, records)
     return written
 
@@ -249,6 +254,7 @@ def check_all(root: Path, fresh: Sequence[dict[str, Any]]) -> list[str]:
     rendered = tables.blocks(merged, meta)
     for relative, names in MARKDOWN.items():
         text = (root / relative).read_text()
+        problems += prose.stale(text, tables.claims(merged), relative)
         for name in names:
             block = read_block(text, name)
             if block is None:
@@ -335,7 +341,7 @@ def _as_summary(record: dict[str, Any]) -> dict[str, Any]:
 
 
 def plot_all(root: Path, records: Sequence[dict[str, Any]]) -> list[Path]:
-    from deploy.reports.report import plot_boxes
+    from deploy.reports.figures import plot_boxes
 
     written = []
     for (variant, figure), data_path in FIGURE_DATA.items():
@@ -355,7 +361,7 @@ def plot_all(root: Path, records: Sequence[dict[str, Any]]) -> list[Path]:
 
 def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
     """Per n: the share of runs by the swarm's steps, default and --linger, seeds 0-9 marked."""
-    from deploy.reports.report import _pyplot
+    from deploy.reports.figures import _pyplot
 
     plt = _pyplot()
     figure, axes = plt.subplots(1, len(tables.SITES), figsize=(5 * len(tables.SITES), 3.8))
@@ -373,11 +379,19 @@ def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
             if not values:
                 continue
             steps = sorted(set(values))
+            bounds = [wilson(values.count(step), len(values)) for step in steps]
+            shares = [values.count(step) / len(values) for step in steps]
             axis.bar(
                 [step + offset for step in steps],
-                [values.count(step) / len(values) for step in steps],
+                shares,
                 width=0.4,
                 color=colour,
+                yerr=[
+                    [share - low for share, (low, _) in zip(shares, bounds, strict=True)],
+                    [high - share for share, (_, high) in zip(shares, bounds, strict=True)],
+                ],
+                capsize=2,
+                ecolor="dimgrey",
                 label="default" if variant == "default" else f"--linger {tables.LINGER:g}",
             )
         paper = [
@@ -388,11 +402,15 @@ def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
         for step in sorted(set(paper)):
             axis.plot(step - 0.2, paper.count(step) / max(len(paper), 1), "k_", markersize=14)
         axis.axvline(n / 2, linestyle="--", color="tab:red", label=f"n/2 = {n / 2:g}")
-        axis.set_title(f"n = {n}: {seeds} seeds (black: seeds 0-9, default)")
+        axis.set_title(f"n = {n}: {seeds} seeds")
         axis.set_xlabel("the swarm's steps (last robot)")
         axis.set_ylabel("share of runs")
         axis.xaxis.get_major_locator().set_params(integer=True)
         axis.legend(fontsize=8)
+    figure.suptitle(
+        "black: seeds 0-9 alone, default; error bars: 95% Wilson interval of the share of runs",
+        fontsize="small",
+    )
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
@@ -400,7 +418,7 @@ def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
 
 def _render(root: Path) -> int:
     """Write everything again from the published runs, keeping their provenance."""
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
     try:
         meta, records = read_runs(root)
@@ -463,7 +481,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
     root: Path = args.root
     if (args.write or args.check or args.render) and not all(
@@ -509,7 +527,7 @@ def run(args: argparse.Namespace) -> int:
 def _check(root: Path, sample: bool, executor: sweep.ExecutorSpec, progress: Any) -> int:
     """Run the published runs again (seeds 0-9 with ``sample``); print every difference and
     what was not checked; 1 if anything differs."""
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
     try:
         _, published = read_runs(root)

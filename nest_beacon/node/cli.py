@@ -16,6 +16,14 @@ from collections.abc import Sequence
 
 import zenoh
 
+from bestofn_swarm.plumbing import cliargs, cores, run_keys, settings_cli
+from bestofn_swarm.plumbing.inbox import STOP, BoundedInbox
+from bestofn_swarm.plumbing.lifecycle import die_with_launcher
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.plumbing.world_info import fetch_world_info
+from bestofn_swarm.plumbing.zenoh_session import check_config_files, open_from_args
+from bestofn_swarm.wire import keyspace, names
+from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon
 from nest_beacon.core.endpoint import BeaconEndpoint
 from nest_beacon.node.beacon_node import (
@@ -23,17 +31,8 @@ from nest_beacon.node.beacon_node import (
     MAX_MESSAGE_BYTES,
     BeaconNode,
     Event,
-    EventKind,
 )
 from nest_beacon.node.options import NEST_BEACON_OPTIONS, NestBeaconConfig
-from plumbing import cliargs, cores, run_keys, settings_cli
-from plumbing.inbox import BoundedInbox
-from plumbing.lifecycle import die_with_launcher
-from plumbing.stop_signals import on_stop_signals
-from plumbing.world_info import fetch_world_info
-from plumbing.zenoh_session import check_config_files, open_from_args
-from wire import names, protocol
-from wire.rng import Stream
 
 log = logging.getLogger("nest_beacon")
 
@@ -72,9 +71,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.exit(2, "nest-beacon: error: the beacon needs its own key and the world's\n")
     rng = Stream.named(process_config.seed, "beacon", name)
     beacon = Beacon(config, rng)
-    keys = protocol.Keys(args.run_id, args.root)
+    keys = keyspace.Keys(args.run_id, args.root)
     inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
-    on_stop_signals(lambda _: inbox.put(Event(EventKind.STOP), control=True))
+    on_stop_signals(lambda _: inbox.put(Event(STOP), control=True))
     try:
         session = open_from_args(args)
     except zenoh.ZError as error:

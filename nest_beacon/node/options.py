@@ -9,10 +9,10 @@ from typing import Annotated
 
 from msgspec import Meta
 
+from bestofn_swarm.plumbing.settings_cli import Options
+from bestofn_swarm.wire import protocol, settings
+from bestofn_swarm.wire.settings import Flag
 from nest_beacon.core.beacon import BeaconConfig
-from plumbing.settings_cli import Options
-from wire import protocol, settings
-from wire.settings import Flag
 
 
 @dataclass(frozen=True)

@@ -29,10 +29,10 @@ from typing import Literal, cast, get_args
 import msgspec
 import numpy as np
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import ports, vision, voting
 from robot_agent.core.controller import Controller, ControllerConfig, QualityEstimator
-from wire import protocol
-from wire.rng import Stream
 
 Mode = Literal["liar", "inverted", "silent"]
 MODES: tuple[str, ...] = get_args(Mode)

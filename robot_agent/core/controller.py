@@ -3,8 +3,9 @@
 Each control period the transport calls ``step(reading, received)`` with what the body
 sensed and the radio messages that arrived, and applies the returned ``Command`` (wheel
 speeds, a camera request, opinion broadcasts). The controller reads no clock (time is
-``reading.t``), draws randomness only from the ``wire.rng.Stream`` it is given, and does no
-I/O, so the same code runs over Zenoh, in tests, or on a real robot (``ports.control_step``).
+``reading.t``), draws randomness only from the ``bestofn_swarm.wire.rng.Stream`` it is given, and
+does no I/O, so the same code runs over Zenoh, in tests, or on a real robot
+(``ports.control_step``).
 
 One cycle ("trip"):
 
@@ -45,15 +46,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
+from bestofn_swarm.wire import names, numeric, protocol
+from bestofn_swarm.wire.compiled import mypyc_attr
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import phases, ports, strategies, vision
 from robot_agent.core.controller_config import ControllerConfig
 from robot_agent.core.motion import STOP, TIME_EPSILON, Motion, along_radius, distance
 from robot_agent.core.navigation import Navigator, NavParams
 from robot_agent.core.parking import Parking, parking_rings, parking_slot
 from robot_agent.core.sensing import QualityEstimator, Sensing
-from wire import names, numeric, protocol
-from wire.compiled import mypyc_attr
-from wire.rng import Stream
 
 # A deaf robot waiting at the nest's centre drives back only once pushed farther than this
 # many nest tolerances from it.

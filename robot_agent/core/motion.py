@@ -13,9 +13,9 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from bestofn_swarm.wire import numeric
 from robot_agent.core import ports
 from robot_agent.core.navigation import Navigator
-from wire import numeric
 
 if TYPE_CHECKING:
     from robot_agent.core.controller_config import ControllerConfig

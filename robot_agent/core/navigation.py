@@ -31,9 +31,9 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from wire import numeric
-from wire.numeric import wrap_angle
-from wire.rng import Stream
+from bestofn_swarm.wire import numeric
+from bestofn_swarm.wire.numeric import wrap_angle
+from bestofn_swarm.wire.rng import Stream
 
 # e-puck sensors ps0..ps7 in the robot's frame (radians, 0 = ahead, counter-clockwise
 # positive). Mirrors world_server.core.physics.EPUCK_PROX_ANGLES, which robot_agent must not

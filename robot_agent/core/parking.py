@@ -26,9 +26,9 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+from bestofn_swarm.wire import numeric, protocol
 from robot_agent.core import ports
 from robot_agent.core.motion import STOP, TIME_EPSILON, Motion, along_radius, distance
-from wire import numeric, protocol
 
 if TYPE_CHECKING:
     from robot_agent.core.controller_config import ControllerConfig

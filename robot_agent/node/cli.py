@@ -5,8 +5,8 @@ need (an id for ``--id auto``, the world's map), builds each robot's controller 
 endpoint, and runs them as ``RobotNode`` s (``robot_node.py``) until it is stopped.
 
 Trust: in a keyed run a robot holds only its own run key; it believes an input only with
-that key's tag (wire/auth.py), only for a tick within reach of its last one, and holds at
-most PENDING_BYTES of inputs for ticks it has not reached (robot_agent/core/endpoint.py).
+that key's tag (bestofn_swarm/wire/auth.py), only for a tick within reach of its last one, and holds
+at most PENDING_BYTES of inputs for ticks it has not reached (robot_agent/core/endpoint.py).
 """
 
 from __future__ import annotations
@@ -20,13 +20,19 @@ from collections.abc import Sequence
 
 import zenoh
 
-from plumbing import cliargs, cores, run_keys, settings_cli
-from plumbing.inbox import BoundedInbox
-from plumbing.lifecycle import die_with_launcher
-from plumbing.stop_signals import on_stop_signals
-from plumbing.trace import open_trace
-from plumbing.world_info import ask, fetch_world_info
-from plumbing.zenoh_session import certificate_name, check_config_files, open_from_args
+from bestofn_swarm.plumbing import cliargs, cores, run_keys, settings_cli
+from bestofn_swarm.plumbing.inbox import STOP, BoundedInbox
+from bestofn_swarm.plumbing.lifecycle import die_with_launcher
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.plumbing.trace import open_trace
+from bestofn_swarm.plumbing.world_info import ask, fetch_world_info
+from bestofn_swarm.plumbing.zenoh_session import (
+    certificate_name,
+    check_config_files,
+    open_from_args,
+)
+from bestofn_swarm.wire import auth, keyspace, names, protocol
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import byzantine
 from robot_agent.core.endpoint import RobotEndpoint
 from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig, hosted_byzantine
@@ -35,14 +41,11 @@ from robot_agent.node.robot_node import (
     INBOX_BYTES_PER_ROBOT,
     MAX_MESSAGE_BYTES,
     Event,
-    EventKind,
     HostBatch,
     LatestSenses,
     RobotNode,
     serve,
 )
-from wire import auth, names, protocol
-from wire.rng import Stream
 
 log = logging.getLogger("robot_agent")
 
@@ -60,7 +63,7 @@ class NoKeyError(Exception):
 
 def ask_for_id(
     session: zenoh.Session,
-    keys: protocol.Keys,
+    keys: keyspace.Keys,
     timeout: float,
     keyring: auth.Keyring | None = None,
 ) -> int:
@@ -75,19 +78,19 @@ def ask_for_id(
         asker = robots[0] if robots else names.robot_identity(0)
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        answers, refused = ask(session, keys.world_join, keyring, asker)
+        answers, refused = ask(session, keys.of(keyspace.JOIN), keyring, asker)
         for answer in answers:
             try:
                 robot = protocol.decode(answer, protocol.JoinReply).id
             except protocol.ProtocolError as error:
-                raise TimeoutError(f"invalid answer on {keys.world_join}: {error}") from None
+                raise TimeoutError(f"invalid answer on {keys.of(keyspace.JOIN)}: {error}") from None
             if keyring is not None and not keyring.holds(names.robot_identity(robot)):
                 raise NoKeyError(f"the world server gave id {robot}, whose key this process lacks")
             return robot
         if refused and not answers:
             raise TimeoutError(f"the world server gave no id: {refused[-1]}")
         time.sleep(0.2)
-    raise TimeoutError(f"no world server answered on {keys.world_join}")
+    raise TimeoutError(f"no world server answered on {keys.of(keyspace.JOIN)}")
 
 
 def certificate_robot(config_file: str | None) -> int | None:
@@ -184,12 +187,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     for robot in fixed:
         if keyring is not None and not keyring.holds(names.robot_identity(robot)):
             parser.exit(2, f"robot-agent: error: the run keys hold no key for robot {robot}\n")
-    keys = protocol.Keys(args.run_id, args.root)
+    keys = keyspace.Keys(args.run_id, args.root)
     inbox: BoundedInbox[Event] = BoundedInbox(
         INBOX_BYTES + INBOX_BYTES_PER_ROBOT * len(args.ids), MAX_MESSAGE_BYTES
     )
     lock = threading.Lock()  # the robots of this process: one thread at a time
-    on_stop_signals(lambda _: inbox.put(Event(-1, EventKind.STOP), control=True))
+    on_stop_signals(lambda _: inbox.put(Event(-1, STOP), control=True))
     sessions: list[zenoh.Session] = []
     nodes: list[RobotNode] = []
     host: HostBatch | None = None

@@ -11,11 +11,11 @@ from typing import Annotated
 
 from msgspec import Meta
 
-from plumbing.settings_cli import Options
+from bestofn_swarm.plumbing.settings_cli import Options
+from bestofn_swarm.wire import protocol, settings
+from bestofn_swarm.wire.settings import Flag
 from robot_agent.core import byzantine
 from robot_agent.core.controller_config import ControllerConfig
-from wire import protocol, settings
-from wire.settings import Flag
 
 
 @dataclass(frozen=True)

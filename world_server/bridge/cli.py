@@ -21,15 +21,15 @@ from pathlib import Path
 
 import zenoh
 
-from link.core import codec
-from link.core.impairment import LinkImpairment
-from plumbing import cliargs, cores, run_keys
-from plumbing.lifecycle import die_with_launcher
-from plumbing.stop_signals import on_stop_signals
-from plumbing.zenoh_session import open_from_args, open_session, session_mode
-from wire import names
+from bestofn_swarm.link.core import codec
+from bestofn_swarm.plumbing import cliargs, cores, run_keys
+from bestofn_swarm.plumbing.lifecycle import die_with_launcher
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.plumbing.zenoh_session import open_from_args, open_session, session_mode
+from bestofn_swarm.wire import names
 from world_server.bridge import keys as link_keys
 from world_server.bridge.bridge import Bridge, BridgeConfig, LinkedRobot
+from world_server.bridge.core.impairment import LinkImpairment
 
 log = logging.getLogger("bridge")
 

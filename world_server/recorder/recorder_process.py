@@ -19,13 +19,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from plumbing import cliargs, run_keys, settings_cli
-from plumbing.inbox import BoundedInbox, message_bytes
-from plumbing.lifecycle import die_with_launcher
-from plumbing.private_files import open_private
-from plumbing.stop_signals import on_stop_signals
-from wire import auth, names, protocol
-from wire.names import Role
+from bestofn_swarm.plumbing import cliargs, run_keys, settings_cli
+from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
+from bestofn_swarm.plumbing.lifecycle import die_with_launcher
+from bestofn_swarm.plumbing.private_files import open_private
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.wire import auth, keyspace, names, protocol
+from bestofn_swarm.wire.names import Role
 from world_server.recorder.finish import query_parts
 from world_server.recorder.options import RECORDER_OPTIONS, build_parser
 from world_server.recorder.write_loop import STOP, Finish, write_loop
@@ -47,10 +47,10 @@ def _lower_priority(niceness: int) -> None:
 
 
 def _world_info(
-    session: Any, keys: protocol.Keys, timeout: float, keyring: auth.Keyring | None
+    session: Any, keys: keyspace.Keys, timeout: float, keyring: auth.Keyring | None
 ) -> protocol.WorldInfo | None:
     """The world's info if a world server answers in time (it gives dt and robot size)."""
-    from plumbing.world_info import fetch_world_info
+    from bestofn_swarm.plumbing.world_info import fetch_world_info
 
     try:
         return fetch_world_info(session, keys, timeout, keyring, names.RECORDER)
@@ -71,7 +71,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             2, f"recorder: error: --config is of run {run.run_id!r}, not --run-id {args.run_id!r}\n"
         )
     cliargs.configure_logging("recorder", args.log_level)
-    from plumbing.zenoh_session import check_config_files, open_from_args
+    from bestofn_swarm.plumbing.zenoh_session import check_config_files, open_from_args
 
     check_config_files(parser, args)  # before the keys' warning: one line if it fails
     keyring = run_keys.from_args(parser, args, "recorder")
@@ -81,7 +81,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _lower_priority(args.niceness)
     import zenoh
 
-    keys = protocol.Keys(args.run_id, args.root)
+    keys = keyspace.Keys(args.run_id, args.root)
     out = Path(args.out)
     try:
         stream = open_private(out, "wb")  # a recording holds the whole run: its owner's
@@ -102,7 +102,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     def on_finish(query: zenoh.Query) -> None:
         """The finish query, after what came before it; refused at once if no room."""
         payload, attachment = query_parts(query)
-        size = message_bytes(payload, attachment, keys.recorder_finish)
+        size = message_bytes(payload, attachment, keys.of(keyspace.RECORDER_FINISH))
         if not inbox.put(Finish(query), size, once=True):
             query.reply_err(b"the recorder has no room for the query")
             query.drop()
@@ -115,7 +115,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     with session, stream:
         subscriber = session.declare_subscriber(keys.all, on_sample)
-        queryable = session.declare_queryable(keys.recorder_finish, on_finish)
+        queryable = session.declare_queryable(keys.of(keyspace.RECORDER_FINISH), on_finish)
         info = _world_info(session, keys, args.info_timeout, keyring)
         recorder = McapRecorder(stream, keys, run, info, keyring=keyring)
         done = threading.Event()
@@ -126,7 +126,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             daemon=True,
         )
         writer.start()
-        token = session.liveliness().declare_token(keys.alive(Role.RECORDER, 0))
+        token = session.liveliness().declare_token(keys.token(Role.RECORDER, 0))
         log.info("recording %s to %s", keys.all, out)
         while not done.wait(0.2):  # wake up for signals
             pass

@@ -16,12 +16,12 @@ from collections.abc import Sequence
 
 import zenoh
 
-from plumbing import cliargs, cores, run_keys, settings_cli
-from plumbing.lifecycle import die_with_launcher
-from plumbing.stop_signals import on_stop_signals
-from plumbing.trace import open_trace
-from plumbing.zenoh_session import check_config_files, open_from_args, session_mode
-from wire import protocol
+from bestofn_swarm.plumbing import cliargs, cores, run_keys, settings_cli
+from bestofn_swarm.plumbing.lifecycle import die_with_launcher
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.plumbing.trace import open_trace
+from bestofn_swarm.plumbing.zenoh_session import check_config_files, open_from_args, session_mode
+from bestofn_swarm.wire import keyspace
 from world_server.core.world import World, WorldConfig
 from world_server.server.options import WORLD_SERVER_OPTIONS, WorldServerConfig, world_server_config
 from world_server.server.zenoh_adapter import WorldServer
@@ -76,7 +76,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if keyring is not None and keyring.secret is None:
         parser.exit(2, "world-server: error: the world server needs the run secret\n")
     world = World(config.world)
-    keys = protocol.Keys(args.run_id, args.root)
+    keys = keyspace.Keys(args.run_id, args.root)
     try:
         session = open_from_args(args)
     except zenoh.ZError as error:
