@@ -35,7 +35,8 @@ session = open_session("client", [sys.argv[1]])
 session.declare_subscriber(
     keys.of(keyspace.STATUS, "*"),
     lambda s: statuses.__setitem__(
-        keys.robot_of(str(s.key_expr)), protocol.decode(s.payload.to_bytes(), protocol.Status)
+        keys.robot_of(keyspace.STATUS, str(s.key_expr)),
+        protocol.decode(s.payload.to_bytes(), protocol.Status),
     ),
 )
 deadline = time.monotonic() + float(sys.argv[4])

@@ -35,7 +35,7 @@ from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from nest_beacon.core.endpoint import BeaconEndpoint
 from nest_beacon.core.endpoint import Outgoing as BeaconOutgoing
-from robot_agent.core import byzantine
+from robot_agent.core import builder, byzantine
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import Outgoing, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
@@ -250,15 +250,15 @@ def run_in_process(
     )
     endpoints: list[RobotEndpoint] = []
     for robot_id in range(world_config.num_robots):
-        rng = Stream.named(world_config.seed, "robot", robot_id)
-        behaviour = behaviours.get(robot_id)
-        controller = (
-            controller_factory(robot_id, world.info, controller_config, rng)
-            if behaviour is None
-            else byzantine.build_controller(robot_id, world.info, controller_config, rng, behaviour)
-        )
         endpoints.append(
-            RobotEndpoint(robot_id, keys=keys, controller=controller, world=world.info)
+            builder.build_robot(
+                robot_id,
+                world.info,
+                controller_config,
+                keys=keys,
+                behaviour=behaviours.get(robot_id),
+                factory=controller_factory,
+            )
         )
     if stall_window is None:
         stall_window = default_stall_window(

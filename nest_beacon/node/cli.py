@@ -69,8 +69,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     identity = names.beacon_identity(name)
     if keyring is not None and not (keyring.holds(identity) and keyring.holds(names.WORLD)):
         parser.exit(2, "nest-beacon: error: the beacon needs its own key and the world's\n")
-    rng = Stream.named(process_config.seed, "beacon", name)
-    beacon = Beacon(config, rng)
     keys = keyspace.Keys(args.run_id, args.root)
     inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
     on_stop_signals(lambda _: inbox.put(Event(STOP), control=True))
@@ -85,6 +83,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         except TimeoutError as error:
             print(f"nest-beacon: {error}", file=sys.stderr)
             return 1
+        if process_config.seed is not None and process_config.seed != info.seed:
+            print(
+                f"nest-beacon: error: --seed {process_config.seed} is not the seed of the world "
+                f"of run {info.run} ({info.seed}); leave --seed out to take the world's",
+                file=sys.stderr,
+            )
+            return 2
+        beacon = Beacon(config, Stream.named(info.seed, "beacon", name))
         endpoint = BeaconEndpoint(beacon, keys, info.dt, keyring)
         node = BeaconNode(endpoint, session=session, keys=keys, inbox=inbox)
         node.start()

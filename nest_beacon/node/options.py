@@ -19,7 +19,11 @@ from nest_beacon.core.beacon import BeaconConfig
 class NestBeaconConfig:
     """The beacon and the run seed its flakiness draws from."""
 
-    seed: Annotated[protocol.Seed, Meta(description="run seed"), Flag()] = 0
+    seed: Annotated[
+        protocol.Seed | None,
+        Meta(description="run seed: must be the world's (the beacon's flakiness draws from it)"),
+        Flag(default_text="the world's"),
+    ] = None
     beacon: BeaconConfig = field(default_factory=BeaconConfig)
 
     def __post_init__(self) -> None:

@@ -23,8 +23,7 @@ from bestofn_swarm.link.core import codec
 from bestofn_swarm.link.core.session import LinkClient, LinkData, Lost, Welcomed
 from bestofn_swarm.wire import auth, keyspace, names, protocol, settings
 from bestofn_swarm.wire.keyspace import Part, Party
-from bestofn_swarm.wire.rng import Stream
-from robot_agent.core import byzantine
+from robot_agent.core import builder
 from robot_agent.core.controller_config import ControllerConfig
 from robot_agent.core.endpoint import Outgoing, RobotEndpoint
 
@@ -276,14 +275,13 @@ class LinkRobot:
                 return
 
     def _build(self, keys: keyspace.Keys, info: protocol.WorldInfo) -> RobotEndpoint:
-        """The robot as every robot of the run is built (robot_agent/node/cli.py): the
+        """The robot as every robot of the run is built (robot_agent/core/builder.py): the
         run's controller settings, its generator from the world's seed and its id.
         ValueError if the settings or the map are refused."""
         welcome = self.client.welcome
         assert welcome is not None
         config = settings.decode(bytes(welcome.controller), ControllerConfig)
-        rng = Stream.named(info.seed, "robot", self.robot)
-        controller = byzantine.build_controller(self.robot, info, config, rng)
+        robot = builder.build_robot(self.robot, info, config, keys=keys, keyring=self.keyring)
         log.info(
             "robot %d: %d sites, clock %s, seed %d: running",
             self.robot,
@@ -291,9 +289,7 @@ class LinkRobot:
             info.clock,
             info.seed,
         )
-        return RobotEndpoint(
-            self.robot, keys=keys, controller=controller, world=info, keyring=self.keyring
-        )
+        return robot
 
     def _send_status(self, status: Outgoing, now: float) -> None:
         """Send the robot's status, and again every STATUS_EVERY until it changes."""

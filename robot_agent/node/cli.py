@@ -32,9 +32,7 @@ from bestofn_swarm.plumbing.zenoh_session import (
     open_from_args,
 )
 from bestofn_swarm.wire import auth, keyspace, names, protocol
-from bestofn_swarm.wire.rng import Stream
-from robot_agent.core import byzantine
-from robot_agent.core.endpoint import RobotEndpoint
+from robot_agent.core import builder
 from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig, hosted_byzantine
 from robot_agent.node.robot_node import (
     INBOX_BYTES,
@@ -209,21 +207,19 @@ def main(argv: Sequence[str] | None = None) -> int:
                 robot = ask_for_id(session, keys, args.info_timeout, keyring)
             identity = names.robot_identity(robot)
             info = fetch_world_info(session, keys, args.info_timeout, keyring, identity)
-            rng = Stream.named(agent.seed, "robot", robot)
             try:
-                controller = byzantine.build_controller(
-                    robot, info, config, rng, misbehaving.get(robot)
+                builder.run_seed(info, agent.seed)
+                endpoint = builder.build_robot(
+                    robot,
+                    info,
+                    config,
+                    keys=keys,
+                    keyring=keyring.only([identity]) if keyring is not None else None,
+                    behaviour=misbehaving.get(robot),
                 )
-            except ValueError as error:  # e.g. a liar's site the world does not have
+            except ValueError as error:  # another run's seed; a liar's site the world lacks
                 print(f"robot-agent: error: {error}", file=sys.stderr)
                 return 2
-            endpoint = RobotEndpoint(
-                robot,
-                keys=keys,
-                controller=controller,
-                world=info,
-                keyring=keyring.only([identity]) if keyring is not None else None,
-            )
             if info.clock == "realtime" and latest is None:
                 latest = LatestSenses()
                 latest.start()

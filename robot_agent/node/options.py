@@ -24,10 +24,13 @@ class RobotAgentConfig:
     and which of its robots misbehave (a fault experiment)."""
 
     seed: Annotated[
-        protocol.Seed,
-        Meta(description="run seed; each robot's RNG derives from it and its id"),
-        Flag(),
-    ] = 0
+        protocol.Seed | None,
+        Meta(
+            description="run seed: must be the world's (each robot's generator derives from "
+            "the world's seed and its id)"
+        ),
+        Flag(default_text="the world's"),
+    ] = None
     controller: ControllerConfig = field(default_factory=ControllerConfig)
     byzantine: Annotated[
         tuple[byzantine.ByzantineRobot, ...],
