@@ -118,6 +118,7 @@ FULL_ONLY = {
     "test_udp_radio": "UDP sockets and robot processes",
     "test_viewer": "starts swarms, the viewer and a browser",
     "test_wellstirred_cli": "runs the installed command in a process",
+    "test_wheel": "builds a wheel, installs it in a venv and runs its commands in processes",
     "test_zenoh_acl": "Zenoh sessions and processes",
 }
 
