@@ -52,6 +52,7 @@ FAST = frozenset(
         "test_physics",
         "test_pooling",
         "test_pooling_controller",
+        "test_process_main",
         "test_portable_check",
         "test_ports_contract",
         "test_protocol_doc",
