@@ -56,6 +56,7 @@ FAST = frozenset(
         "test_physics",
         "test_pooling",
         "test_pooling_controller",
+        "test_process_main",
         "test_portable_check",
         "test_ports_contract",
         "test_protocol_doc",
@@ -127,6 +128,7 @@ FULL_ONLY = {
     "test_udp_radio": "UDP sockets and robot processes",
     "test_viewer": "starts swarms, the viewer and a browser",
     "test_wellstirred_cli": "runs the installed command in a process",
+    "test_wheel": "builds a wheel, installs it in a venv and runs its commands in processes",
     "test_zenoh_acl": "Zenoh sessions and processes",
 }
 

@@ -39,7 +39,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
+from bestofn_swarm.plumbing import checkout
+from bestofn_swarm.plumbing.cliargs import UsageError
+
+REPO = checkout.ROOT  # where the packages are: the cores are built next to their sources
 
 # The modules compiled, by path from the repository's root: the numeric kernel, the
 # robot's controller and its tick, and the world's tick. Every one is in a pure folder
@@ -163,6 +166,8 @@ def status() -> Status:
     if strays:
         return Status("stale", f"{strays[0].relative_to(REPO)} is not one of the cores")
     if not built and not _shared_library().exists():
+        if checkout.found() is None:
+            return Status("interpreted", "an installed copy: they are built in a checkout only")
         return Status("interpreted", "not built; `make cores` builds them")
     try:
         manifest = json.loads(MANIFEST.read_text())
@@ -279,6 +284,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.action == "clean":
         print(f"compiled cores: removed {clean()} files; the source runs")
         return 0
+    if args.action == "build":
+        try:  # built in place, next to their sources: in a checkout
+            checkout.needed("building the compiled cores", "let the source run (the reference)")
+        except UsageError as error:
+            parser.exit(2, f"{parser.prog}: error: {error}\n")
     found = build(force=args.force) if args.action == "build" else status()
     print(found.line)
     return 1 if found.state == "stale" else 0

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.plumbing import checkout, cliargs
 from deploy.analysis import prose
 from deploy.analysis import section5_tables as tables
 from deploy.analysis.wilson import wilson
@@ -50,7 +50,6 @@ FIGURE_DATA = {
     ("linger", 5): "docs/fig5-linger.json",
 }
 DISTRIBUTION_FIGURE = "docs/section5-distribution.png"
-CODE_ROOT = Path(__file__).resolve().parent.parent
 
 
 COMMAND = "swarm section5"
@@ -475,34 +474,36 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--root",
         type=Path,
-        default=Path.cwd(),
-        help="the repository to write into or check (default: the current directory)",
+        default=None,
+        help="the repository to write into or check (default: the checkout this code runs from)",
     )
 
 
 def run(args: argparse.Namespace) -> int:
     from bestofn_swarm.plumbing.cliargs import UsageError
 
-    root: Path = args.root
-    if (args.write or args.check or args.render) and not all(
-        (root / path).exists() for path in MARKDOWN
-    ):
-        raise UsageError(f"{root} has no docs/section5.md: use --root")
+    root: Path | None = args.root
+    if args.write or args.check or args.render:
+        if root is None:  # an installed copy has no published pages
+            root = checkout.needed("swarm section5 --write, --render and --check", "give --root")
+        if not all((root / path).exists() for path in MARKDOWN):
+            raise UsageError(f"{root} has no docs/section5.md: give --root a checkout")
     if args.sample and not args.check:
         raise UsageError("--sample goes with --check")
+    code = checkout.found()
 
     def progress(done: int, total: int) -> None:
         if done % 10 == 0 or done == total:
             print(f"\r{done}/{total} runs", end="" if done < total else "\n", file=sys.stderr)
 
-    if args.render:
+    if args.render and root is not None:
         return _render(root)
     executor = sweep.executor_from_args(args)
-    if args.check:
+    if args.check and root is not None:
         return _check(root, args.sample, executor, progress)
     # The code that runs is this package's, wherever --root points: its state, before the
-    # runs (edits made while they run do not count).
-    commit, dirty = pages.git_state(CODE_ROOT, published_paths())
+    # runs (edits made while they run do not count); none for an installed copy.
+    commit, dirty = pages.git_state(code, published_paths()) if code else (None, False)
     records = simulate(tasks_for(args.seeds), executor, progress)
     meta = {
         "command": f"swarm section5 --seeds {args.seeds} --write",
@@ -513,7 +514,7 @@ def run(args: argparse.Namespace) -> int:
         "sites": list(tables.SITES),
         "variants": tables.VARIANTS,
     }
-    if args.write:
+    if args.write and root is not None:
         for path in write_all(root, records, meta):
             print(f"wrote {path}", file=sys.stderr)
         return 0

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from rich.console import Console
 
-from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.plumbing import checkout, cliargs
 from bestofn_swarm.plumbing.cliargs import UsageError
 from deploy.reports import sweep
 from deploy.study import check, grid, lock, page, results, runner
@@ -31,7 +31,6 @@ from deploy.study.declare import Study
 from deploy.study.state import State, state_of
 
 DEFAULT_SAMPLE = 1  # runs of each kind
-REPOSITORY = results.CODE_ROOT
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -93,9 +92,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--root",
         type=Path,
-        default=REPOSITORY,
-        help="the repository whose results files and pages are read and written (default: this "
-        "one)",
+        default=None,
+        help="the repository whose results files and pages are read and written (default: the "
+        "checkout this code runs from)",
     )
     parser.add_argument(
         "--declared",
@@ -130,6 +129,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
+    if args.root is None:  # an installed copy has no results files or pages
+        args.root = checkout.needed("swarm study", "give --root CHECKOUT")
     try:
         if args.list:
             if args.only:

@@ -22,20 +22,17 @@ beyond that.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import logging
-import os
 import sys
 import threading
 import time
 from collections.abc import Sequence
 from typing import Any
 
-from bestofn_swarm.plumbing import cliargs, run_keys
+from bestofn_swarm.plumbing import cliargs, process_main
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
-from bestofn_swarm.plumbing.lifecycle import die_with_launcher
 from bestofn_swarm.plumbing.stop_signals import on_stop_signals
-from bestofn_swarm.wire import keyspace, names, protocol
+from bestofn_swarm.wire import names, protocol
 from bestofn_swarm.wire.names import Role
 from deploy.viewer.options import FOXGLOVE_PORT
 from world_server.recording.description import RunDescription
@@ -121,26 +118,24 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    die_with_launcher()
     parser = build_parser()
-    args = parser.parse_args(argv)
-    cliargs.configure_logging("foxglove-live", args.log_level)
-    from bestofn_swarm.plumbing.zenoh_session import check_config_files, open_from_args
-
-    check_config_files(parser, args)  # before the keys' warning: one line if it fails
-    keyring = run_keys.from_args(parser, args, "foxglove-live")
-    if keyring is not None and keyring.secret is None:
+    begun = process_main.begin(
+        "foxglove-live",
+        parser,
+        argv,
+        process_main.no_settings,
+        runs_cores=False,
         # Like the recorder, it checks every identity's tags: only the secret gives them all.
-        parser.exit(2, "foxglove-live: error: Foxglove live needs the run secret\n")
-    if args.niceness:
-        with contextlib.suppress(AttributeError, OSError):
-            os.nice(args.niceness)
+        needs_secret="Foxglove live",
+        lower_priority=True,
+    )
+    args, keyring, keys = begun.args, begun.keyring, begun.keys
     import foxglove
     import zenoh
 
     from bestofn_swarm.plumbing.world_info import fetch_world_info
+    from bestofn_swarm.plumbing.zenoh_session import open_from_args
 
-    keys = keyspace.Keys(args.run_id, args.root)
     context = foxglove.Context()
     try:
         server = foxglove.start_server(

@@ -26,7 +26,6 @@ import collections
 import contextlib
 import json
 import logging
-import os
 import queue
 import signal
 import sys
@@ -35,9 +34,8 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from bestofn_swarm.plumbing import cliargs, run_keys
+from bestofn_swarm.plumbing import cliargs, process_main
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
-from bestofn_swarm.plumbing.lifecycle import die_with_launcher
 from bestofn_swarm.wire import auth, keyspace, names
 from bestofn_swarm.wire.names import Role
 from deploy.viewer.core import model
@@ -198,34 +196,33 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    die_with_launcher()
     parser = build_parser()
-    args = parser.parse_args(argv)
-    cliargs.configure_logging("viewer", args.log_level)
-    from bestofn_swarm.plumbing.zenoh_session import check_config_files
-
-    check_config_files(parser, args)  # before the keys' warning: one line if it fails
-    keyring = run_keys.from_args(parser, args, "viewer")
-    if keyring is not None and keyring.secret is None:
+    begun = process_main.begin(
+        "viewer",
+        parser,
+        argv,
+        process_main.no_settings,
+        runs_cores=False,
         # It checks the world's and every robot's tags: only the secret gives all their keys.
-        parser.exit(2, "viewer: error: the view needs the run secret\n")
-    if args.niceness:  # before Zenoh starts its threads, so that they inherit it
-        with contextlib.suppress(AttributeError, OSError):
-            os.nice(args.niceness)
+        needs_secret="the view",
+        lower_priority=True,
+    )
+    args = begun.args
     try:
-        return asyncio.run(_serve(args, keyring))
+        return asyncio.run(_serve(args, begun.keyring, begun.keys))
     except OSError as error:  # the port is taken, or the host is not an address here
         print(f"viewer: cannot serve on {args.host}:{args.port}: {error}", file=sys.stderr)
         return 1
 
 
-async def _serve(args: argparse.Namespace, keyring: auth.Keyring | None) -> int:
+async def _serve(
+    args: argparse.Namespace, keyring: auth.Keyring | None, keys: keyspace.Keys
+) -> int:
     import zenoh
 
     from bestofn_swarm.plumbing.world_info import fetch_world_info
     from bestofn_swarm.plumbing.zenoh_session import open_from_args
 
-    keys = keyspace.Keys(args.run_id, args.root)
     layout = make_layout(args.sites, args.robots, args.seed)
     try:
         session = open_from_args(args)

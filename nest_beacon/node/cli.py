@@ -16,13 +16,12 @@ from collections.abc import Sequence
 
 import zenoh
 
-from bestofn_swarm.plumbing import cliargs, cores, run_keys, settings_cli
+from bestofn_swarm.plumbing import cliargs, process_main, settings_cli
 from bestofn_swarm.plumbing.inbox import STOP, BoundedInbox
-from bestofn_swarm.plumbing.lifecycle import die_with_launcher
 from bestofn_swarm.plumbing.stop_signals import on_stop_signals
 from bestofn_swarm.plumbing.world_info import fetch_world_info
-from bestofn_swarm.plumbing.zenoh_session import check_config_files, open_from_args
-from bestofn_swarm.wire import keyspace, names
+from bestofn_swarm.plumbing.zenoh_session import open_from_args
+from bestofn_swarm.wire import names
 from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon
 from nest_beacon.core.endpoint import BeaconEndpoint
@@ -55,21 +54,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def beacon_config(parser: argparse.ArgumentParser, args: argparse.Namespace) -> NestBeaconConfig:
+    config: NestBeaconConfig = settings_cli.config_from(parser, args, NEST_BEACON_OPTIONS)
+    return config
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    cores.check()  # stale compiled cores would run old code
-    die_with_launcher()
     parser = build_parser()
-    args = parser.parse_args(argv)
-    process_config: NestBeaconConfig = settings_cli.config_from(parser, args, NEST_BEACON_OPTIONS)
+    begun = process_main.begin("nest-beacon", parser, argv, beacon_config)
+    args, process_config, keyring, keys = begun.args, begun.settings, begun.keyring, begun.keys
     config = process_config.beacon
     name = config.name
-    cliargs.configure_logging("nest-beacon", args.log_level)
-    check_config_files(parser, args)
-    keyring = run_keys.from_args(parser, args, "nest-beacon")
     identity = names.beacon_identity(name)
     if keyring is not None and not (keyring.holds(identity) and keyring.holds(names.WORLD)):
         parser.exit(2, "nest-beacon: error: the beacon needs its own key and the world's\n")
-    keys = keyspace.Keys(args.run_id, args.root)
     inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
     on_stop_signals(lambda _: inbox.put(Event(STOP), control=True))
     try:

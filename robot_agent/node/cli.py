@@ -17,22 +17,18 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import zenoh
 
-from bestofn_swarm.plumbing import cliargs, cores, run_keys, settings_cli
+from bestofn_swarm.plumbing import cliargs, process_main, settings_cli
 from bestofn_swarm.plumbing.inbox import STOP, BoundedInbox
-from bestofn_swarm.plumbing.lifecycle import die_with_launcher
 from bestofn_swarm.plumbing.stop_signals import on_stop_signals
 from bestofn_swarm.plumbing.trace import open_trace
 from bestofn_swarm.plumbing.world_info import ask, fetch_world_info
-from bestofn_swarm.plumbing.zenoh_session import (
-    certificate_name,
-    check_config_files,
-    open_from_args,
-)
+from bestofn_swarm.plumbing.zenoh_session import certificate_name, open_from_args
 from bestofn_swarm.wire import auth, keyspace, names, protocol
-from robot_agent.core import builder
+from robot_agent.core import builder, byzantine
 from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig, hosted_byzantine
 from robot_agent.node.robot_node import (
     INBOX_BYTES,
@@ -163,29 +159,40 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    cores.check()  # stale compiled cores would run old code
-    die_with_launcher()
-    parser = build_parser()
-    args = parser.parse_args(argv)
+@dataclass(frozen=True)
+class AgentSettings:
+    """What robot-agent's command line asks for, checked."""
+
+    agent: RobotAgentConfig
+    fixed: list[int]  # the robots given by id (not ``--id auto``)
+    misbehaving: dict[int, byzantine.Behaviour]
+
+
+def agent_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> AgentSettings:
     fixed = [robot for robot in args.ids if robot is not None]
     if len(set(fixed)) != len(fixed):
         parser.exit(2, "robot-agent: error: the same --id is given twice\n")
     if None in args.ids and "{id}" in (args.zenoh_config or ""):
         parser.exit(2, "robot-agent: error: --id auto cannot fill '{id}' in --zenoh-config\n")
     agent: RobotAgentConfig = settings_cli.config_from(parser, args, AGENT_OPTIONS)
-    config = agent.controller
     try:
         misbehaving = hosted_byzantine(agent.byzantine, fixed)
     except ValueError as error:
         parser.exit(2, f"robot-agent: error: {error}\n")
-    cliargs.configure_logging("robot-agent", args.log_level)
-    check_config_files(parser, args, fixed)
-    keyring = run_keys.from_args(parser, args, "robot-agent")
-    for robot in fixed:
-        if keyring is not None and not keyring.holds(names.robot_identity(robot)):
-            parser.exit(2, f"robot-agent: error: the run keys hold no key for robot {robot}\n")
-    keys = keyspace.Keys(args.run_id, args.root)
+    return AgentSettings(agent, fixed, misbehaving)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    begun = process_main.begin(
+        "robot-agent", parser, argv, agent_settings, config_robots=lambda found: found.fixed
+    )
+    args, keyring, keys = begun.args, begun.keyring, begun.keys
+    agent, misbehaving = begun.settings.agent, begun.settings.misbehaving
+    config = agent.controller
+    for given in begun.settings.fixed:
+        if keyring is not None and not keyring.holds(names.robot_identity(given)):
+            parser.exit(2, f"robot-agent: error: the run keys hold no key for robot {given}\n")
     inbox: BoundedInbox[Event] = BoundedInbox(
         INBOX_BYTES + INBOX_BYTES_PER_ROBOT * len(args.ids), MAX_MESSAGE_BYTES
     )

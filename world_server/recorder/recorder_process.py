@@ -9,9 +9,9 @@ query (``finish.py``) or a stop signal.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import logging
-import os
 import sys
 import threading
 import time
@@ -19,9 +19,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from bestofn_swarm.plumbing import cliargs, run_keys, settings_cli
+from bestofn_swarm.plumbing import process_main, settings_cli
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
-from bestofn_swarm.plumbing.lifecycle import die_with_launcher
 from bestofn_swarm.plumbing.private_files import open_private
 from bestofn_swarm.plumbing.stop_signals import on_stop_signals
 from bestofn_swarm.wire import auth, keyspace, names, protocol
@@ -38,14 +37,6 @@ INBOX_BYTES = 256 * 2**20  # what may wait for the writer thread, at most
 MAX_SAMPLE_BYTES = protocol.MAX_CAMERA_FRAME_BYTES + 1024  # a frame and its attachment
 
 
-def _lower_priority(niceness: int) -> None:
-    """Yield the CPU to the swarm; a platform without nice() just records at full priority."""
-    try:
-        os.nice(niceness)
-    except (AttributeError, OSError) as error:
-        log.info("could not lower the recorder's priority: %s", error)
-
-
 def _world_info(
     session: Any, keys: keyspace.Keys, timeout: float, keyring: auth.Keyring | None
 ) -> protocol.WorldInfo | None:
@@ -59,10 +50,8 @@ def _world_info(
         return None
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    die_with_launcher()
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def recorded_run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> RunDescription:
+    """The run being recorded (``--config`` or the options), checked against ``--run-id``."""
     run: RunDescription = settings_cli.config_from(
         parser, args, RECORDER_OPTIONS, {"run_id": args.run_id}
     )
@@ -70,18 +59,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.exit(
             2, f"recorder: error: --config is of run {run.run_id!r}, not --run-id {args.run_id!r}\n"
         )
-    cliargs.configure_logging("recorder", args.log_level)
-    from bestofn_swarm.plumbing.zenoh_session import check_config_files, open_from_args
+    return run
 
-    check_config_files(parser, args)  # before the keys' warning: one line if it fails
-    keyring = run_keys.from_args(parser, args, "recorder")
-    if keyring is not None and keyring.secret is None:
-        parser.exit(2, "recorder: error: the recorder needs the run secret\n")
-    if args.niceness:  # before Zenoh starts its threads, so that they inherit it
-        _lower_priority(args.niceness)
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    begun = process_main.begin(
+        "recorder",
+        parser,
+        argv,
+        recorded_run,
+        runs_cores=False,
+        needs_secret="the recorder",
+        lower_priority=True,
+    )
+    args, run, keyring, keys = begun.args, begun.settings, begun.keyring, begun.keys
     import zenoh
 
-    keys = keyspace.Keys(args.run_id, args.root)
+    from bestofn_swarm.plumbing.zenoh_session import open_from_args
+
     out = Path(args.out)
     try:
         stream = open_private(out, "wb")  # a recording holds the whole run: its owner's
