@@ -70,8 +70,6 @@ def test_a_wall_time_limit_ends_the_run_as_a_wall_timeout(
     "options",
     [
         ["--clock", "realtime"],
-        ["--kill", "1@10"],
-        ["--restart", "1@10"],
         ["--robots-per-process", "2"],
         ["--spawn", "exec"],
         ["--connect", "tcp/127.0.0.1:7447"],

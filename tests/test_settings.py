@@ -179,7 +179,7 @@ def test_a_config_goes_to_a_child_and_back_unchanged(config_type: type) -> None:
         ('{"controller": {"alpha": 0.2}}', "threshold below 1"),
         ('{"controller": {"dwel": 3}}', "unknown setting 'controller.dwel'"),
         ('{"seed": -1}', ">= 0"),
-        ('{"seed": "1"}', "Expected `int`"),
+        ('{"seed": "1"}', "Expected `int | null`"),
         ('{"byzantine": [{"robot": 1, "behaviour": {"mode": "lie"}}]}', "Invalid enum"),
         ("[1]", "Expected `object`"),
         ("{", "truncated"),

@@ -97,6 +97,7 @@ SLOW = {
 
 FULL_ONLY = {
     "test_attacks": "attacks live runs over Zenoh",
+    "test_fault_plugins": "runs swarms with faults in one process and over Zenoh",
     "test_robot_builder": "starts a world, a beacon and robots by hand over Zenoh, and a swarm",
     "test_c_robot": "builds the C robot and runs swarms with it over UDP and serial links",
     "test_conformance": "builds C robots and runs programs over UDP and serial links, and swarms",

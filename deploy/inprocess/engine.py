@@ -24,7 +24,7 @@ from __future__ import annotations
 import gc
 import math
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -35,7 +35,7 @@ from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from nest_beacon.core.endpoint import BeaconEndpoint
 from nest_beacon.core.endpoint import Outgoing as BeaconOutgoing
-from robot_agent.core import builder, byzantine
+from robot_agent.core import builder, byzantine, faults
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import Outgoing, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
@@ -94,11 +94,13 @@ class _Bus:
         *,
         run: RunObserver,
         hooks: EngineHooks,
+        rebuild: Callable[[int], RobotEndpoint] | None = None,
     ) -> None:
         keys = robots[0].keys
         self.keys = keys
         self.world = world
         self.run = run
+        self.rebuild = rebuild  # a robot started afresh (a fault)
         self.tap = hooks.tap
         self.queue: deque[Output] = deque()
         self.coordinator = Coordinator(
@@ -122,6 +124,33 @@ class _Bus:
                 self.inputs[key] = (endpoint, kind)
         self.state_key = keys.of(keyspace.STATE)
         self.last_state: protocol.WorldState | None = None
+
+    # --- faults.Engine: what a fault may do to this run, at a tick boundary ----------
+
+    def kill(self, robot: int) -> bool:
+        """The robot stops for good, as when its process dies over Zenoh: the world sees its
+        token go (its body stays, a stopped obstacle), and nothing reaches it any more.
+        Whether it was running."""
+        was_running = self.world.is_live(robot)
+        if was_running:
+            token = self.keys.token(Role.ROBOT, robot)
+            self._event(Event(keyspace.ALIVE_ROBOT, token, gone=True))
+        self.run.killed(robot)
+        return was_running
+
+    def restart(self, robot: int) -> None:
+        """The robot afresh: a new controller (as the robot builder makes it) in its old
+        body, which joins at the next tick as a restarted process's token does."""
+        if self.rebuild is None:
+            raise ValueError("this run cannot start a robot afresh")
+        endpoint = self.rebuild(robot)
+        endpoint.batched = True  # its acts go in the batch, as its predecessor's did
+        self.host.by_id[robot] = endpoint
+        for kind, key in endpoint.input_keys.items():
+            self.inputs[key] = (endpoint, kind)
+        endpoint.world_appeared("in-process")
+        self.run.restarted(robot)
+        self._event(Event(keyspace.ALIVE_ROBOT, self.keys.token(Role.ROBOT, robot)))
 
     def start(self) -> None:
         """The processes' liveliness, as the coordinator would see their tokens; tick 0."""
@@ -225,6 +254,7 @@ def run_in_process(
     on_tick: Callable[[World], None] | None = None,
     controller_factory: type[Controller] = Controller,
     byzantine_robots: Mapping[int, byzantine.Behaviour] | None = None,
+    robot_faults: Sequence[faults.RobotFault] = (),
     hooks: EngineHooks | None = None,
 ) -> dict[str, Any]:
     """Run until every robot decided, the watchdog finds the run stalled (no undecided
@@ -236,8 +266,11 @@ def run_in_process(
     Controller); ``on_tick`` sees the world once every answer of a tick is in, before it
     closes. ``byzantine_robots`` makes those robots misbehave as ``swarm run --byzantine``
     does (a liar without a site claims ``byzantine.default_liar_site``); the run ends when
-    every honest robot has decided. ``hooks``: progress, an outside stop, a tap of every
-    message (a recording), wall time.
+    every honest robot has decided. ``robot_faults``: the faults of robots the run declares
+    (``swarm run --kill``, ``--restart``, ``--motor-failure``: robot_agent/core/faults.py),
+    applied at tick boundaries as the launcher applies them, or built into the robots'
+    controllers; the summary's ``faults`` lists those applied. ``hooks``: progress, an
+    outside stop, a tap of every message (a recording), wall time.
     """
     hooks = hooks or EngineHooks()
     started = hooks.wall_clock() if hooks.wall_clock is not None else 0.0
@@ -248,18 +281,19 @@ def run_in_process(
     behaviours = byzantine.resolve_liar_sites(
         byzantine_robots or {}, world_config.num_sites, world.layout.best_site, world_config.seed
     )
-    endpoints: list[RobotEndpoint] = []
-    for robot_id in range(world_config.num_robots):
-        endpoints.append(
-            builder.build_robot(
-                robot_id,
-                world.info,
-                controller_config,
-                keys=keys,
-                behaviour=behaviours.get(robot_id),
-                factory=controller_factory,
-            )
+
+    def build(robot_id: int) -> RobotEndpoint:
+        return builder.build_robot(
+            robot_id,
+            world.info,
+            controller_config,
+            keys=keys,
+            behaviour=behaviours.get(robot_id),
+            factory=controller_factory,
+            robot_faults=robot_faults,
         )
+
+    endpoints = [build(robot_id) for robot_id in range(world_config.num_robots)]
     if stall_window is None:
         stall_window = default_stall_window(
             world.layout.arena_radius,
@@ -286,7 +320,9 @@ def run_in_process(
         BeaconEndpoint(beacon, keys, world_config.dt, keyring=None),
         run=run,
         hooks=hooks,
+        rebuild=build,
     )
+    schedule = faults.Schedule(robot_faults)
     bus.start()
     # Everything made so far lives for the whole run: the collector need not look at it
     # again until the run ends, and what a tick makes is freed by reference counting, so
@@ -296,19 +332,20 @@ def run_in_process(
     gc.freeze()
     gc.set_threshold(RUN_COLLECT_THRESHOLD, *thresholds[1:])
     try:
-        halt = _run_ticks(bus, timeout=timeout, hooks=hooks, on_tick=on_tick)
+        halt = _run_ticks(bus, schedule, timeout=timeout, hooks=hooks, on_tick=on_tick)
     finally:
         gc.set_threshold(*thresholds)
         gc.unfreeze()
-    # Every robot's state at the end (not published: its status changes are).
-    for endpoint in endpoints:
+    # Every robot's state at the end (not published: its status changes are), as the
+    # robot runs now (a robot started afresh: its new controller's).
+    for endpoint in bus.host.by_id.values():
         bus._status(endpoint.status(world.tick), published=False)
     bus.stop()
     state = bus.last_state
     if state is not None:
         run.state(state)
     wall = hooks.wall_clock() - started if hooks.wall_clock is not None else 0.0
-    return run.summary(
+    summary = run.summary(
         run_id=world_config.run,
         num_robots=world_config.num_robots,
         num_sites=world_config.num_sites,
@@ -317,17 +354,20 @@ def run_in_process(
         sim_time_s=world.t,
         wall_time_s=wall,
         world=bus.coordinator.state(),
-        departures=0,
+        departures=bus.coordinator.counters.departures,
         observer_rejected=0,
         config=hooks.config,
         stop=halt.stop,
         timeout_kind=halt.limit,
         byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
     )
+    summary["faults"] = [applied.record() for applied in schedule.applied]
+    return summary
 
 
 def _run_ticks(
     bus: _Bus,
+    schedule: faults.Schedule,
     *,
     timeout: float,
     hooks: EngineHooks,
@@ -338,6 +378,8 @@ def _run_ticks(
     honest = run.honest()
     while True:
         bus.run_tick()
+        if schedule.pending and schedule.apply_due(bus, world.t):
+            honest = [robot for robot in run.honest() if not run.records[robot].killed]
         if on_tick is not None:
             on_tick(world)
         if world.tick % hooks.poses_every == 0:
@@ -348,7 +390,8 @@ def _run_ticks(
                 run.state(state)
             if hooks.progress is not None:
                 hooks.progress(Progress(world.t, run.decided(), run.trips()))
-        halt = stop_reason(_look(world.t, timeout, run, honest, hooks))
+        look = _look(world.t, timeout, run=run, honest=honest, hooks=hooks, schedule=schedule)
+        halt = stop_reason(look)
         if halt is not None:
             return halt
         bus.close_tick()
@@ -357,13 +400,16 @@ def _run_ticks(
 def _look(
     sim_time: float,
     timeout: float,
+    *,
     run: RunObserver,
     honest: list[int],
     hooks: EngineHooks,
+    schedule: faults.Schedule,
 ) -> Look:
     """What this engine sees at the end of a tick (``bestofn_swarm.wire.endings.stop_reason``
-    decides)."""
-    decided = run.all_decided(honest)
+    decides): ``honest``, the honest robots still running."""
+    # A restart to come will make progress: the run waits for it, as the launcher does.
+    decided = run.all_decided(honest) and not schedule.restart_pending()
     return Look(
         sim_time=sim_time,
         sim_limit=timeout,

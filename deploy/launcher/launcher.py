@@ -4,7 +4,8 @@ Starts the world server (the Zenoh router of the run, on a Unix socket in a priv
 directory; TLS on loopback with ``--secure``; a client of the router ``--connect`` names),
 the recorder, the nest beacon and the robot processes (``supervisor.py``); follows what
 they publish (``follower.py``) and shows progress (``console.py``); kills and restarts
-robots when their ``--kill`` and ``--restart`` sim time comes (``faults.py``); stops when
+robots when their ``--kill`` and ``--restart`` sim time comes (the faults' plug-ins,
+robot_agent/core/faults.py, given the launcher as their ``Engine``); stops when
 ``bestofn_swarm.wire.endings.stop_reason`` says so; stops every process it started, by pid, however
 the run ends; prints a summary that says how it ended, hands it to the recorder
 (``recording.py``) and exits with that ending's code (``swarm run --help``).
@@ -39,15 +40,15 @@ from bestofn_swarm.plumbing.lifecycle import die_with_launcher
 from bestofn_swarm.wire import protocol
 from bestofn_swarm.wire.endings import Ending, Halt, Look, Stop, stop_reason
 from deploy.launcher.console import decided_progress, describe_ending, print_summary, say
-from deploy.launcher.faults import FaultSchedule
 from deploy.launcher.follower import Follower, Heard
 from deploy.launcher.inprocess import run_inprocess
 from deploy.launcher.options import add_arguments
-from deploy.launcher.plan import FaultAction, RunPlan, plan_from_args
+from deploy.launcher.plan import RunPlan, plan_from_args
 from deploy.launcher.processes import Child
 from deploy.launcher.recording import RecorderProgress, finish_recording
 from deploy.launcher.signals import Signalled, StopSignals
 from deploy.launcher.supervisor import StartError, Supervisor
+from robot_agent.core import faults
 from world_server.core.layout import make_layout
 
 __all__ = ["add_arguments", "run"]
@@ -78,7 +79,7 @@ class Swarm:
         self.inbox: BoundedInbox[Heard | Signalled] = BoundedInbox(EVENTS_BYTES, MAX_EVENT_BYTES)
         self.supervisor = Supervisor(plan, self.inbox, echo)
         self.follower = Follower(plan, clock)
-        self.faults = FaultSchedule(plan.faults)
+        self.faults = faults.Schedule(plan.faults)
         self.crash: Child | None = None  # the process whose death ended the run
         self.ended_at: float | None = None
         self.departures = 0  # the world's count before the swarm was stopped (stopping adds)
@@ -114,16 +115,25 @@ class Swarm:
         return signalled
 
     def inject_due_faults(self) -> None:
-        """Kill and restart the robots whose fault's sim time has come."""
-        sim_time = self.follower.run.sim_time
-        for fault in self.faults.due(sim_time):
-            was_running = self.supervisor.kill_robot(fault.robot)
-            restarting = fault.action is FaultAction.RESTART
-            self.follower.run.killed(fault.robot, restarting=restarting)
-            if restarting:
-                self.supervisor.restart_robot(fault.robot)
-            self.faults.note(fault, sim_time, was_running)
-            log.info("%s robot %d at sim time %.1f", fault.action, fault.robot, sim_time)
+        """Apply the faults whose sim time has come (this is a tick boundary: the world
+        said its new sim time)."""
+        for applied in self.faults.apply_due(self, self.follower.run.sim_time):
+            log.info(
+                "%s robot %d at sim time %.1f", applied.action, applied.robot, applied.applied_at_s
+            )
+
+    # --- faults.Engine: what a fault may do to this run -------------------------------
+
+    def kill(self, robot: int) -> bool:
+        """SIGKILL the robot's process; whether it was running."""
+        was_running = self.supervisor.kill_robot(robot)
+        self.follower.run.killed(robot)
+        return was_running
+
+    def restart(self, robot: int) -> None:
+        """A fresh process for the robot (killed first)."""
+        self.follower.run.restarted(robot)
+        self.supervisor.restart_robot(robot)
 
     def look(self, signalled: bool) -> Halt | None:
         """Whether the run stops now, and why (``bestofn_swarm.wire.endings.stop_reason``)."""
@@ -280,7 +290,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
     )
     if signum is not None:
         summary["signal"] = signal.Signals(signum).name
-    summary["faults"] = swarm.faults.applied
+    summary["faults"] = [applied.record() for applied in swarm.faults.applied]
     summary["recording"] = str(plan.record) if plan.record else None
     supervisor.finish_observers(summary)
     if not args.quiet:

@@ -19,7 +19,7 @@ from bestofn_swarm.plumbing.settings_cli import Options
 from bestofn_swarm.wire import settings
 from bestofn_swarm.wire.settings import Flag
 from nest_beacon.core.beacon import BeaconConfig
-from robot_agent.core import byzantine
+from robot_agent.core import byzantine, faults
 from robot_agent.core.controller_config import ControllerConfig
 from world_server.server.options import WorldServerConfig
 
@@ -51,24 +51,22 @@ class RobotAtTime(NamedTuple):
 
 @dataclass(frozen=True)
 class RobotFaults:
-    """Faults the launcher applies to robots: kills, restarts, Byzantine robots."""
+    """The faults of robots a run declares, one switch each (each a plug-in of both
+    engines: robot_agent/core/faults.py), and its Byzantine robots."""
 
     FLAG_GROUP: ClassVar[str] = "robot faults"
 
     kill: Annotated[
-        tuple[RobotAtTime, ...],
-        Meta(
-            description="SIGKILL robot ROBOT's process at SIMTIME sim seconds; the swarm "
-            "goes on without it"
-        ),
-        Flag(metavar="ROBOT@SIMTIME"),
+        tuple[RobotAtTime, ...], Meta(description=faults.Kill.HELP), Flag(metavar="ROBOT@SIMTIME")
     ] = ()
     restart: Annotated[
         tuple[RobotAtTime, ...],
-        Meta(
-            description="start a fresh process for robot ROBOT at SIMTIME; it is killed "
-            "first if still running, and rejoins with a new controller and its old body"
-        ),
+        Meta(description=faults.Restart.HELP),
+        Flag(metavar="ROBOT@SIMTIME"),
+    ] = ()
+    motor_failure: Annotated[
+        tuple[RobotAtTime, ...],
+        Meta(description=faults.MotorFailure.HELP),
         Flag(metavar="ROBOT@SIMTIME"),
     ] = ()
     byzantine: Annotated[
@@ -81,6 +79,14 @@ class RobotFaults:
         ),
         Flag(metavar="ROBOT[:MODE]"),
     ] = ()
+
+    def robot_faults(self) -> list[faults.RobotFault]:
+        """Every fault of a robot declared, as the plug-in its switch names."""
+        return [
+            kind(robot, at)
+            for kind in faults.FAULTS
+            for robot, at in getattr(self, kind.SWITCH.replace("-", "_"))
+        ]
 
 
 CONTROLLER = Options(ControllerConfig)

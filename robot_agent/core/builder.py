@@ -8,9 +8,11 @@ run ``swarm run --seed 7`` makes."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from bestofn_swarm.wire import auth, keyspace, protocol
 from bestofn_swarm.wire.rng import Stream
-from robot_agent.core import byzantine, ports
+from robot_agent.core import byzantine, faults, ports
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import RobotEndpoint
 
@@ -37,12 +39,17 @@ def build_controller(
     *,
     behaviour: byzantine.Behaviour | None = None,
     factory: type[Controller] = Controller,
+    robot_faults: Sequence[faults.RobotFault] = (),
 ) -> ports.RobotController:
     """Robot ``robot_id``'s controller in ``world``: its generator is the world's seed's
     stream for the robot (docs/kernel.md), honest unless ``behaviour`` says how it
-    misbehaves. Raises ValueError for a behaviour the world cannot have (a liar's site)."""
+    misbehaves, and wrapped by each of ``robot_faults`` that changes what it does (a motor
+    failure). Raises ValueError for a behaviour the world cannot have (a liar's site)."""
     rng = Stream.named(world.seed, "robot", robot_id)
-    return byzantine.build_controller(robot_id, world, config, rng, behaviour, factory=factory)
+    controller = byzantine.build_controller(
+        robot_id, world, config, rng, behaviour, factory=factory
+    )
+    return faults.wrapped(controller, faults.wrapping(robot_faults, robot_id))
 
 
 def build_robot(
@@ -54,10 +61,18 @@ def build_robot(
     keyring: auth.Keyring | None = None,
     behaviour: byzantine.Behaviour | None = None,
     factory: type[Controller] = Controller,
+    robot_faults: Sequence[faults.RobotFault] = (),
 ) -> RobotEndpoint:
     """Robot ``robot_id`` of ``world``: its controller (``build_controller``) in its end of
     the wire, holding ``keyring`` (its own key; None: an unkeyed run)."""
-    controller = build_controller(robot_id, world, config, behaviour=behaviour, factory=factory)
+    controller = build_controller(
+        robot_id,
+        world,
+        config,
+        behaviour=behaviour,
+        factory=factory,
+        robot_faults=robot_faults,
+    )
     return RobotEndpoint(robot_id, keys=keys, controller=controller, world=world, keyring=keyring)
 
 

@@ -223,8 +223,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     keys=keys,
                     keyring=keyring.only([identity]) if keyring is not None else None,
                     behaviour=misbehaving.get(robot),
+                    robot_faults=[spec.fault() for spec in agent.faults],
                 )
-            except ValueError as error:  # another run's seed; a liar's site the world lacks
+            except ValueError as error:  # another run's seed; a liar's site; a fault unknown
                 print(f"robot-agent: error: {error}", file=sys.stderr)
                 return 2
             if info.clock == "realtime" and latest is None:

@@ -16,6 +16,7 @@ from bestofn_swarm.wire import protocol, settings
 from bestofn_swarm.wire.settings import Flag
 from robot_agent.core import byzantine
 from robot_agent.core.controller_config import ControllerConfig
+from robot_agent.core.faults import FaultSpec
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,14 @@ class RobotAgentConfig:
             "fault experiment; swarm run --byzantine chooses a liar's site itself)"
         ),
         Flag(metavar="ROBOT:MODE"),
+    ] = ()
+
+    faults: Annotated[
+        tuple[FaultSpec, ...],
+        Meta(
+            description="the faults of its robots that change what their controllers do (a "
+            "motor failure), as swarm run declared them (robot_agent/core/faults.py)"
+        ),
     ] = ()
 
     def __post_init__(self) -> None:

@@ -185,17 +185,19 @@ class RunObserver:
         if self.watchdog is not None:
             self.watchdog.retired(robot)
 
-    def killed(self, robot: int, *, restarting: bool) -> None:
-        """The robot was stopped on purpose (a fault); a restarted robot starts afresh,
-        undecided, from now."""
-        record = self.records[robot]
-        record.killed = not restarting
+    def killed(self, robot: int) -> None:
+        """The robot was stopped on purpose (a fault): it holds nothing up."""
+        self.records[robot].killed = True
         if self.watchdog is not None:
             self.watchdog.retired(robot)
-        if restarting:
-            record.restarted()
-            if self.watchdog is not None:
-                self.watchdog.restarted(robot, self.sim_time)
+
+    def restarted(self, robot: int) -> None:
+        """The robot was started afresh (a fault): it starts undecided, from now."""
+        record = self.records[robot]
+        record.killed = False
+        record.restarted()
+        if self.watchdog is not None:
+            self.watchdog.restarted(robot, self.sim_time)
 
     def departed(self, present: Iterable[int]) -> None:
         """The run ends: an outside robot whose link is down is not among those that
