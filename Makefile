@@ -11,7 +11,8 @@
 #   docs/section5-runs.json, `swarm section5 --check`; about 7 minutes of both cores), the
 #   tables of docs/section5.md and the data of Figures 4 and 5 made from them; then the
 #   tests that run published runs again (tests/tiers.py PUBLISHED: `pytest --published`):
-#   a sample of every study's runs (`swarm study NAME --check`, docs/studies.md).
+#   a sample of every study's runs, one of each kind, drawn from CHECK_SEED (`swarm study
+#   NAME --check --sample-seed S`, docs/studies.md).
 #   CI runs it after `make test`. docs/testing.md says what is published from runs but
 #   not run again by any check.
 # `make check-portable`: a sample of the published runs again on emulated CPUs (qemu-user:
@@ -41,6 +42,9 @@ TEST_LOCK := requirements/test.lock
 UV_VERSION := 0.13.9
 LOCK_OPTIONS := --generate-hashes --universal --fork-strategy fewest --python-version 3.11
 TEST_WORKERS ?= 2
+# The seed of the studies' sample in make check-published: the day's date, so each day's
+# check makes other runs (make check-published CHECK_SEED=20250314 draws that day's again).
+CHECK_SEED ?= $(shell date -u +%Y%m%d)
 
 .PHONY: run test test-fast check-published check-portable check-mcu explore lint bench lock c-robot clean cores clean-cores
 
@@ -59,11 +63,11 @@ $(VENV)/.installed-test: $(TEST_LOCK) pyproject.toml | $(BIN)/python
 	touch $@ $(VENV)/.installed
 
 run: $(VENV)/.installed
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/swarm run
 
 test: $(VENV)/.installed-test
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
@@ -71,34 +75,34 @@ test: $(VENV)/.installed-test
 	else echo "make test: no C compiler ($${CC:-gcc}): the C robot's unit tests are skipped"; fi
 	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=20
 
-# The compiled cores (plumbing/cores.py): mypyc builds the pure modules of the tick in
+# The compiled cores (bestofn_swarm/plumbing/cores.py): mypyc builds the pure modules of the tick in
 # place, again whenever one of them changes; without a C compiler or mypyc, make says so
 # and the source runs. `make clean-cores` removes them.
 cores: $(VENV)/.installed
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 
 clean-cores:
-	@if [ -x $(BIN)/python ]; then $(BIN)/python -m plumbing.cores clean; fi
+	@if [ -x $(BIN)/python ]; then $(BIN)/python -m bestofn_swarm.plumbing.cores clean; fi
 
 # The robot in C (c_robot/build/c-robot): gcc or cc, and make.
 c-robot:
 	$(MAKE) -C c_robot
 
 test-fast: $(VENV)/.installed-test
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/python -m pytest -m fast
 
 check-published: $(VENV)/.installed-test
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/swarm section5 --check
-	$(BIN)/python -m pytest --published --durations=20
+	STUDY_CHECK_SEED=$(CHECK_SEED) $(BIN)/python -m pytest --published --durations=20
 
 check-portable: $(VENV)/.installed-test
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/python -m portable
 
 check-mcu: $(VENV)/.installed-test
-	$(BIN)/python -m plumbing.cores build
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/python -m portable.mcu
 
 # The property tests with fresh random examples (make test repeats the same ones).

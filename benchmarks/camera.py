@@ -22,9 +22,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core.vision import decode_frame, estimate_quality
-from wire import protocol
-from wire.rng import Stream
 from world_server.core.camera import CameraNoise, CameraRenderer
 from world_server.core.layout import make_layout
 

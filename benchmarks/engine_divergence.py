@@ -31,9 +31,9 @@ from mcap.stream_reader import StreamReader
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from bestofn_swarm.wire import protocol  # noqa: E402
 from deploy.study.make import ZENOH_ROBOTS_PER_PROCESS as ROBOTS_PER_PROCESS  # noqa: E402
 from deploy.study.make import ZENOH_STALL_TIMEOUT  # noqa: E402
-from wire import protocol  # noqa: E402
 
 TOLERANCE = 1e-9  # metres and radians: the runs must agree exactly, up to float printing
 

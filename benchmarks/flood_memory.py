@@ -16,7 +16,7 @@ seconds, then lets the run end. Each process's peak resident set (VmHWM) is read
 * ``clean``: no flood (what each process takes anyway);
 * ``replayed-acts-realtime`` (case 4 of docs/security.md): ``--clock realtime``, old
   acts and radio transmissions replayed (the freshness checks of
-  world_server/core/intake.py and wire/guard.py refuse them);
+  world_server/core/intake.py and bestofn_swarm/wire/guard.py refuse them);
 * ``replayed-acts-statuses``: lockstep, old acts and statuses replayed;
 * ``empty``: empty messages on the acts' and statuses' keys;
 * ``junk-1mb``: 1 MiB of random bytes on the status keys;
@@ -25,8 +25,8 @@ seconds, then lets the run end. Each process's peak resident set (VmHWM) is read
   the status keys for the launcher.
 
 It also prints what one queued message holds beyond its bytes in each inbox there is
-(tracemalloc), the overhead ``plumbing.inbox`` charges for, and (``--fill``) what an inbox
-filled to its cap with small messages adds to a process's resident set, charged as now
+(tracemalloc), the overhead ``bestofn_swarm.plumbing.inbox`` charges for, and (``--fill``) what an
+inbox filled to its cap with small messages adds to a process's resident set, charged as now
 and as without the per-message overhead (payload and attachment only): a flood only fills
 an inbox when its process falls behind, which on a given machine it may not, so this is
 the bound a flood reaches at worst. The world server has no inbox (each Zenoh callback
@@ -63,11 +63,11 @@ sys.path.insert(0, str(REPO))
 
 import zenoh  # noqa: E402
 
+from bestofn_swarm.plumbing import inbox as inbox_module  # noqa: E402
+from bestofn_swarm.plumbing.tcp import free_port  # noqa: E402
+from bestofn_swarm.plumbing.zenoh_session import open_session  # noqa: E402
+from bestofn_swarm.wire import batch, keyspace, protocol  # noqa: E402
 from deploy.launcher.supervisor import RUN_ID_ENV  # noqa: E402
-from plumbing import inbox as inbox_module  # noqa: E402
-from plumbing.tcp import free_port  # noqa: E402
-from plumbing.zenoh_session import open_session  # noqa: E402
-from wire import batch, protocol  # noqa: E402
 
 CASES = (
     "clean",
@@ -235,7 +235,7 @@ def flood_from(
 
 def run_case(case: str, args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
     run_id = f"flood-{uuid.uuid4().hex[:8]}"
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     router = subprocess.Popen(
@@ -277,14 +277,26 @@ def run_case(case: str, args: argparse.Namespace, workdir: Path) -> dict[str, An
             captured.tick = protocol.decode(sample.payload.to_bytes(), protocol.Clock).tick
 
     replayed = {
-        "replayed-acts-realtime": [keys.act("*"), keys.host_act("*"), keys.radio_tx("*")],
-        "replayed-acts-statuses": [keys.act("*"), keys.host_act("*"), keys.status("*")],
-        "empty": [keys.act("*"), keys.host_act("*"), keys.status("*")],
-        "junk-1mb": [keys.status("*")],
+        "replayed-acts-realtime": [
+            keys.of(keyspace.ACT, "*"),
+            keys.of(keyspace.HOST_ACT, "*"),
+            keys.of(keyspace.RADIO_TX, "*"),
+        ],
+        "replayed-acts-statuses": [
+            keys.of(keyspace.ACT, "*"),
+            keys.of(keyspace.HOST_ACT, "*"),
+            keys.of(keyspace.STATUS, "*"),
+        ],
+        "empty": [
+            keys.of(keyspace.ACT, "*"),
+            keys.of(keyspace.HOST_ACT, "*"),
+            keys.of(keyspace.STATUS, "*"),
+        ],
+        "junk-1mb": [keys.of(keyspace.STATUS, "*")],
     }.get(case, [])
     for key in replayed:
         subscribers.append(session.declare_subscriber(key, hear))
-    subscribers.append(session.declare_subscriber(keys.world_clock, on_clock))
+    subscribers.append(session.declare_subscriber(keys.of(keyspace.CLOCK), on_clock))
     launcher = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     watch = PeakWatch(run_id, router.pid)
     sent = 0
@@ -303,13 +315,20 @@ def run_case(case: str, args: argparse.Namespace, workdir: Path) -> dict[str, An
                 junk = os.urandom(MIB)
 
                 def messages() -> list[tuple[str, bytes, bytes | None]]:
-                    return [(keys.status(robot), junk, None) for robot in range(10)]
+                    return [(keys.of(keyspace.STATUS, robot), junk, None) for robot in range(10)]
 
             elif case == "junk-largest":
                 largest: list[tuple[str, bytes, bytes | None]] = [
-                    (keys.host_act(0), os.urandom(batch.MAX_BATCH_BYTES), None),
-                    (keys.camera(0), os.urandom(protocol.MAX_CAMERA_FRAME_BYTES), None),
-                    *((keys.status(robot), os.urandom(60 * 1024), None) for robot in range(10)),
+                    (keys.of(keyspace.HOST_ACT, 0), os.urandom(batch.MAX_BATCH_BYTES), None),
+                    (
+                        keys.of(keyspace.CAMERA, 0),
+                        os.urandom(protocol.MAX_CAMERA_FRAME_BYTES),
+                        None,
+                    ),
+                    *(
+                        (keys.of(keyspace.STATUS, robot), os.urandom(60 * 1024), None)
+                        for robot in range(10)
+                    ),
                 ]
 
                 def messages() -> list[tuple[str, bytes, bytes | None]]:
@@ -364,19 +383,17 @@ def per_robot(summary: dict[str, Any] | None) -> list[tuple[Any, ...]] | None:
 def queued_overheads() -> dict[str, float]:
     """Bytes one queued message holds beyond its payload, attachment and key, per inbox
     (the world has none: ``NO_INBOX``)."""
-    from deploy.launcher.follower import Heard, Kind
+    from deploy.launcher.follower import Heard
     from nest_beacon.node.beacon_node import Event as BeaconEvent
-    from nest_beacon.node.beacon_node import EventKind as BeaconKind
     from robot_agent.node.robot_node import Event as RobotEvent
-    from robot_agent.node.robot_node import EventKind as RobotKind
     from world_server.recording.writer import Sample
 
     key = "bestofn/flood-0000/robot/7/act"
     makers: dict[str, Callable[[bytes, bytes], Any]] = {
         "recorder": lambda p, a: Sample(key[:-1] + "t", p, a, time.time_ns()),
-        "launcher": lambda p, a: Heard(Kind.STATUS, key[:-1] + "t", p, a),
-        "robot": lambda p, a: RobotEvent(1, RobotKind.RX, p, a),
-        "beacon": lambda p, a: BeaconEvent(BeaconKind.CLOCK, p, a),
+        "launcher": lambda p, a: Heard(keyspace.STATUS, key[:-1] + "t", p, a),
+        "robot": lambda p, a: RobotEvent(1, keyspace.RADIO_RX, p, a),
+        "beacon": lambda p, a: BeaconEvent(keyspace.BEACON_CLOCK, p, a),
     }
     found = {}
     for name, make in makers.items():
@@ -415,14 +432,14 @@ def fill_one(process: str, charged_as: str) -> None:
         inbox_module.ITEM_OVERHEAD_BYTES = 0
     inbox: Any = inbox_module.BoundedInbox(cap)
     key = f"bestofn/flood-00000000/{leaf}"
-    from deploy.launcher.follower import Heard, Kind
+    from deploy.launcher.follower import Heard
     from world_server.recording.writer import Sample
 
     def queued(key: str, payload: bytes, tag: bytes) -> Any:
         """What the process's Zenoh callback queues for such a message."""
         if process == "recorder":
             return Sample(key, payload, tag, time.time_ns())
-        return Heard(Kind.STATUS, key, payload, tag)
+        return Heard(keyspace.STATUS, key, payload, tag)
 
     def rss_mb() -> float:
         for line in Path("/proc/self/status").read_text().splitlines():

@@ -34,7 +34,7 @@ from foxglove.messages import (
     Vector3,
 )
 
-from wire import protocol
+from bestofn_swarm.wire import protocol
 from world_server.core.camera import CameraRenderer
 from world_server.core.layout import make_layout
 from world_server.recording import foxglove

@@ -76,7 +76,7 @@ def stop(processes: Sequence[subprocess.Popen[bytes]]) -> None:
 
 # The link robot program: ``robot-agent --link``'s, or another that takes its options (the
 # robot in C, benchmarks/c_robot_runs.py).
-PYTHON_PROGRAM = (sys.executable, "-m", "link")
+PYTHON_PROGRAM = (sys.executable, "-m", "robot_agent.link")
 
 
 def outside_run(

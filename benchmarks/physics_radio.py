@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from wire import names
+from bestofn_swarm.wire import names
 from world_server.core import layout
 from world_server.core.physics import MAX_SUBSTEP, Physics, wrap_angle
 from world_server.core.radio import RadioConfig, RadioMedium, sender_order

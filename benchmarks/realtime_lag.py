@@ -30,8 +30,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from link.core.pacing import percentile  # noqa: E402
-from wire import protocol  # noqa: E402
+from bestofn_swarm.link.core.pacing import percentile  # noqa: E402
+from bestofn_swarm.wire import protocol  # noqa: E402
 from world_server.recording.reader import RecordingReader  # noqa: E402
 
 PERCENTILES = (50, 90, 99)

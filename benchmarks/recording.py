@@ -8,7 +8,7 @@
 2. Published vs recorded, for every recorded run: each message kind's count in the file
    against the count its publishers declared or must have sent (Sense.rx, Sense.camera,
    Act/Ack.radio_tx, contiguous ticks, the world's own radio counters); see
-   ``deploy.reports.report.audit``.
+   ``deploy.reports.audit.audit``.
 3. Capacity: a recorder process on a loopback router, flooded with ``--flood`` sense
    messages from one publisher as fast as Zenoh takes them; the time until its finish
    query is answered gives the messages per second it records, and the file must hold all.
@@ -31,16 +31,16 @@ from typing import Any
 
 from mcap.reader import make_reader
 
-from wire.names import Role
+from bestofn_swarm.wire.names import Role
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from deploy.reports import report  # noqa: E402
-from plumbing.tcp import free_port  # noqa: E402
-from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
-from wire import protocol  # noqa: E402
-from wire.endings import RESULT_CODES  # noqa: E402
+from bestofn_swarm.plumbing.tcp import free_port  # noqa: E402
+from bestofn_swarm.plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
+from bestofn_swarm.wire import keyspace, protocol  # noqa: E402
+from bestofn_swarm.wire.endings import RESULT_CODES  # noqa: E402
+from deploy.reports import audit, collect  # noqa: E402
 from world_server.recorder.write_loop import FINISH_QUIET  # noqa: E402
 
 SIM_SECONDS = {10: 100.0, 100: 60.0}
@@ -93,10 +93,10 @@ def overhead(robots: int, seed: int, sim_seconds: float, repeats: int, folder: P
                 f"bench-{robots}-{repeat}-{'rec' if path else 'norec'}-{int(time.time())}",
             )
             if path is not None:
-                recording = report.read_recording(path)
+                recording = collect.read_recording(path)
                 result["bytes"] = path.stat().st_size
                 result["messages"] = recording.messages.total()
-                audits.append((report.audit(recording), result["summary"]))
+                audits.append((audit.audit(recording), result["summary"]))
             rows[mode].append(result)
             summary = result["summary"]
             print(
@@ -127,17 +127,17 @@ def overhead(robots: int, seed: int, sim_seconds: float, repeats: int, folder: P
         f"{f0:.1f}x -> {f1:.1f}x)"
     )
     print("  published (declared) vs recorded, every recorded run:")
-    for audit, summary in audits:
+    for found, summary in audits:
         lost = {
             kind: c["expected"] - c["recorded"]
-            for kind, c in audit.items()
+            for kind, c in found.items()
             if c["expected"] != c["recorded"]
         }
-        total = sum(c["recorded"] for c in audit.values())
+        total = sum(c["recorded"] for c in found.values())
         delivered = summary["radio"]["delivered"]
         print(
             f"    {total} protocol messages recorded; radio/rx recorded "
-            f"{audit['radio/rx/*']['recorded']} of {delivered} the world delivered; "
+            f"{found['radio/rx/*']['recorded']} of {delivered} the world delivered; "
             f"mismatches: {lost or 'none'}"
         )
     kinds = audits[0][0] if audits else {}
@@ -151,7 +151,7 @@ def flood(count: int, folder: Path) -> None:
     """Messages per second the recorder process takes in and writes, losing none."""
     print(f"\n== recorder capacity: {count} sense messages from one publisher ==")
     run_id = f"flood-{int(time.time())}"
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     out = folder / "flood.mcap"
     router = open_session("router", listen=[endpoint])
@@ -180,11 +180,13 @@ def flood(count: int, folder: Path) -> None:
         cwd=REPO,
     )
     try:
-        while not list(router.liveliness().get(keys.alive(Role.RECORDER, 0), timeout=1.0)):
+        while not list(router.liveliness().get(keys.token(Role.RECORDER, 0), timeout=1.0)):
             if recorder.poll() is not None:
                 raise RuntimeError("the recorder did not start")
             time.sleep(0.05)
-        publishers = [reliable_publisher(router, keys.sense(robot)) for robot in range(100)]
+        publishers = [
+            reliable_publisher(router, keys.of(keyspace.SENSE, robot)) for robot in range(100)
+        ]
         payloads = [
             protocol.encode(
                 protocol.Sense(
@@ -205,7 +207,7 @@ def flood(count: int, folder: Path) -> None:
         for index in range(count):
             publishers[index % 100].put(payloads[index // 100])
         published = time.monotonic() - started
-        replies = list(router.get(keys.recorder_finish, payload=b"{}", timeout=600.0))
+        replies = list(router.get(keys.of(keyspace.RECORDER_FINISH), payload=b"{}", timeout=600.0))
         finished = time.monotonic() - started
         exit_code = recorder.wait(timeout=60)
     finally:
@@ -213,7 +215,7 @@ def flood(count: int, folder: Path) -> None:
             recorder.kill()
             recorder.wait()
         router.close()
-    recording = report.read_recording(out)
+    recording = collect.read_recording(out)
     recorded = recording.messages["bestofn.Sense"]
     with open(out, "rb") as stream:  # publish time = when the recorder's callback got it
         last_arrival = max(

@@ -17,22 +17,22 @@ import sys
 import time
 from pathlib import Path
 
-from wire.names import Role
+from bestofn_swarm.wire.names import Role
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from bestofn_swarm.plumbing.tcp import free_port, wait_for_port  # noqa: E402
+from bestofn_swarm.plumbing.zenoh_session import open_session  # noqa: E402
+from bestofn_swarm.wire import keyspace  # noqa: E402
 from deploy.launcher.processes import ProcessGroup, python_module  # noqa: E402
-from plumbing.tcp import free_port, wait_for_port  # noqa: E402
-from plumbing.zenoh_session import open_session  # noqa: E402
-from wire import protocol  # noqa: E402
 
 
 def time_to_ready(robots: int, spawn: str) -> float:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     run = f"startup-{spawn}-{robots}"
-    keys = protocol.Keys(run)
+    keys = keyspace.Keys(run)
     group = ProcessGroup()
     try:
         world = group.start(
@@ -58,7 +58,7 @@ def time_to_ready(robots: int, spawn: str) -> float:
         ready: set[str] = set()
         with open_session("client", [endpoint]) as session:
             session.liveliness().declare_subscriber(
-                keys.alive(Role.ROBOT, "*"),
+                keys.token(Role.ROBOT, "*"),
                 lambda sample: ready.add(str(sample.key_expr)),
                 history=True,
             )

@@ -60,16 +60,16 @@ sys.path.insert(0, str(REPO))
 import zenoh  # noqa: E402
 
 from benchmarks.process_cpu import in_process_options  # noqa: E402
+from bestofn_swarm.plumbing.tcp import free_port  # noqa: E402
+from bestofn_swarm.plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
+from bestofn_swarm.wire.endings import RESULT_CODES  # noqa: E402
 from deploy.reports import pages  # noqa: E402
-from plumbing.tcp import free_port  # noqa: E402
-from plumbing.zenoh_session import open_session, reliable_publisher  # noqa: E402
-from wire.endings import RESULT_CODES  # noqa: E402
 
 TARGETS = {10: 50.0, 50: 10.0, 100: 2.0, 200: 3.0, 500: 1.0}
 
 ECHO_ROBOT = """
 import sys, time
-from plumbing.zenoh_session import open_session, reliable_publisher
+from bestofn_swarm.plumbing.zenoh_session import open_session, reliable_publisher
 robot, endpoint = sys.argv[1], sys.argv[2]
 session = open_session("client", [endpoint])
 act = reliable_publisher(session, f"floor/robot/{robot}/act")

@@ -5,7 +5,7 @@ that a busy machine slows each way alike, and reports real-time factors and thei
 ratios to the unkeyed run:
 
 * ``--no-keys``: no tags, every message believed (as before run keys);
-* the default: every message tagged and checked with run keys (wire/auth.py),
+* the default: every message tagged and checked with run keys (bestofn_swarm/wire/auth.py),
   the router on a Unix socket in a private directory;
 * ``--secure``: run keys, and TLS on loopback with a certificate per process and the
   access control (deploy/security/credentials.py).
@@ -38,8 +38,8 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from benchmarks.swarm_speed import messaging_floor  # noqa: E402
-from plumbing.tcp import free_port  # noqa: E402
-from wire import auth, protocol  # noqa: E402
+from bestofn_swarm.plumbing.tcp import free_port  # noqa: E402
+from bestofn_swarm.wire import auth, protocol  # noqa: E402
 
 MODES = {"unkeyed": ["--no-keys"], "keyed": [], "secure": ["--secure"]}
 

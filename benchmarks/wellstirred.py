@@ -27,8 +27,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from plumbing import cliargs
-from wellstirred.model import (
+from bestofn_swarm.plumbing import cliargs
+from robot_agent.wellstirred.model import (
     FIGURE1_OPTIONS,
     FIGURE1_POOLS,
     Cell,

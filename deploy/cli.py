@@ -11,8 +11,8 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-from plumbing import cores
-from plumbing.cliargs import UsageError
+from bestofn_swarm.plumbing import cores
+from bestofn_swarm.plumbing.cliargs import UsageError
 
 __all__ = ["SUBCOMMANDS", "UsageError", "main"]
 
@@ -36,8 +36,12 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "deploy.study.cli",
         "the studies behind the published pages: run what is missing, render, check",
     ),
+    "conformance": (
+        "deploy.conformance.cli",
+        "check a program that speaks the link against the controller, tick by tick",
+    ),
     "router": ("deploy.launcher.router", "a Zenoh router (a Python session; no zenohd needed)"),
-    "view": ("viewer.replay", "replay a recording in the browser, on the live view's page"),
+    "view": ("deploy.viewer.replay", "replay a recording in the browser, on the live view's page"),
 }
 
 

@@ -21,12 +21,12 @@ from pathlib import Path
 # Run as a script (python examples/udp_beacon.py), the repository root is not on the path.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
 from examples.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 from nest_beacon.core.beacon import Beacon, BeaconConfig
-from plumbing import cliargs
-from plumbing.stop_signals import on_stop_signals
-from wire import protocol
-from wire.rng import Stream
 
 STOP = threading.Event()
 

@@ -32,7 +32,7 @@ import sys
 from dataclasses import dataclass, replace
 from types import TracebackType
 
-from wire import names
+from bestofn_swarm.wire import names
 
 log = logging.getLogger(__name__)
 

@@ -31,13 +31,12 @@ import numpy as np
 # Run as a script (python examples/udp_robot.py), the repository root is not on the path.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.wire import names, protocol
 from examples.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
-from plumbing import cliargs
-from plumbing.stop_signals import on_stop_signals
-from robot_agent.core import ports
+from robot_agent.core import builder, ports
 from robot_agent.core.controller import Controller, ControllerConfig
-from wire import names, protocol
-from wire.rng import Stream
 
 PANEL_FRACTION = 0.7  # of each site's share of the wall that its coloured panel covers
 CAMERA_REACH = 0.3  # metres: a panel further away is too small to judge
@@ -165,9 +164,9 @@ def _is_beacon(payload: bytes) -> bool:
         return False  # left for ports.decode_received to count
 
 
-def circular_world(num_sites: int, arena_radius: float = 0.75) -> protocol.WorldInfo:
-    """The Section 5 arena: an e-puck's geometry, n sites evenly spaced on the wall, the
-    nest at the centre. A port may load its own map instead (``--world``)."""
+def circular_world(num_sites: int, arena_radius: float = 0.75, seed: int = 0) -> protocol.WorldInfo:
+    """The Section 5 arena of run seed ``seed``: an e-puck's geometry, n sites evenly spaced
+    on the wall, the nest at the centre. A port may load its own map instead (``--world``)."""
     sites = [
         protocol.Site(
             index,
@@ -179,7 +178,7 @@ def circular_world(num_sites: int, arena_radius: float = 0.75) -> protocol.World
     return protocol.WorldInfo(
         v=protocol.VERSION,
         run="udp",
-        seed=0,
+        seed=seed,
         dt=0.1,
         arena_radius=arena_radius,
         nest=protocol.Nest(0.0, 0.0, 0.2),
@@ -206,9 +205,10 @@ def run(args: argparse.Namespace) -> dict[str, object]:
     pose = (world.nest.x + ring * math.cos(angle), world.nest.y + ring * math.sin(angle), angle)
     body = StubBody(clock, world, args.qualities, pose)
     config = ControllerConfig(dwell=args.dwell)
-    # The determinism rule: every random draw comes from this one seeded stream.
-    rng = Stream.named(args.seed, "robot", args.id)
-    controller = Controller(args.id, world, config, rng)
+    # The determinism rule: every random draw comes from the world's seed's stream for this
+    # robot, as every robot of the project is built (robot_agent/core/builder.py).
+    controller = builder.build_controller(args.id, world, config, factory=Controller)
+    assert isinstance(controller, Controller)
     rejects = ports.RejectCounter()
     with UdpRadio(
         names.robot_name(args.id),
@@ -239,9 +239,11 @@ def run(args: argparse.Namespace) -> dict[str, object]:
 
 def load_world(args: argparse.Namespace) -> protocol.WorldInfo:
     if args.world is None:
-        return circular_world(len(args.qualities))
+        return circular_world(len(args.qualities), seed=args.seed or 0)
     with open(args.world, "rb") as file:
-        return protocol.decode(file.read(), protocol.WorldInfo)
+        world = protocol.decode(file.read(), protocol.WorldInfo)
+    builder.run_seed(world, args.seed)  # a --seed must be the world's
+    return world
 
 
 def qualities(text: str) -> list[float]:
@@ -266,8 +268,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--seed",
         type=cliargs.seed,
-        default=0,
-        help="run seed; the robot's RNG derives from it and its id",
+        default=None,
+        help="run seed of the Section 5 arena (default: 0), or, with --world, the world's "
+        "seed again (checked); the robot's RNG derives from the world's seed and its id",
     )
     parser.add_argument(
         "--qualities",

@@ -38,18 +38,14 @@ from portable.published import without_wall
 
 REPO = Path(__file__).resolve().parent.parent
 PROJECT_PACKAGES = (
-    "wire",
+    "bestofn_swarm",
     "robot_agent",
     "world_server",
     "nest_beacon",
     "deploy",
-    "plumbing",
-    "wellstirred",
-    "viewer",
-    "link",
     "benchmarks",
 )
-# Per robot: what the run digest covers (deploy/analysis/summary.py), and its id.
+# Per robot: what the run digest covers (world_server/observer/summary.py), and its id.
 ROBOT_FIELDS = ("id", "decided_site", "steps", "decision_time_s", "pool_sizes")
 
 

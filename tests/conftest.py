@@ -34,7 +34,7 @@ import zenoh
 from hypothesis import settings
 from tiers import is_fast, is_published
 
-from plumbing import cores
+from bestofn_swarm.plumbing import cores
 
 # No per-example deadline in either: timing varies on a loaded CI machine.
 settings.register_profile("repeatable", derandomize=True, deadline=None, print_blob=True)

@@ -29,14 +29,11 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 # The top-level folders a path of the repository starts with.
 TOP_LEVEL = (
-    "wire",
+    "bestofn_swarm",
     "robot_agent",
     "world_server",
     "nest_beacon",
-    "plumbing",
     "deploy",
-    "viewer",
-    "wellstirred",
     "tests",
     "benchmarks",
     "docs",
@@ -67,8 +64,6 @@ DOTTED = re.compile(r"^(python -m )?([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)+)(?:\(.*\))?
 CAMEL = re.compile(r"^_?[A-Z][a-z0-9]+(?:[A-Z][A-Za-z0-9]*)*$")
 HEADING = re.compile(r"^#+\s+(.*)$", re.MULTILINE)
 
-# Zenoh keys that look like paths of the repository (``viewer/`` is a folder too).
-KEYS_NOT_PATHS = {"viewer/finish", "viewer/0"}
 # Dotted names whose first part is a module's short name but, in the docs, something else:
 # fields of the run's summary (JSON), Foxglove's schema names, a ``Layout`` object.
 NOT_MODULES = {"summary", "world", "foxglove", "layout"}
@@ -102,9 +97,7 @@ def references_in(text: str, document: str) -> Iterator[Reference]:
     """Every name of the repository ``text`` gives, read as the document at ``document``
     (its links are relative to it)."""
     for match in PATH.finditer(text):
-        path = match.group(1).rstrip(".,;:")
-        if path not in KEYS_NOT_PATHS:
-            yield Reference(document, "path", path)
+        yield Reference(document, "path", match.group(1).rstrip(".,;:"))
     for match in LINK.finditer(text):
         yield Reference(document, "link", match.group(1))
     for match in CODE_SPAN.finditer(FENCE.sub("", text)):

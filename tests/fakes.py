@@ -26,12 +26,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from bestofn_swarm.wire import names, protocol
+from bestofn_swarm.wire.numeric import wrap_angle
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.navigation import EPUCK_PROX_ANGLES
-from wire import names, protocol
-from wire.numeric import wrap_angle
-from wire.rng import Stream
 
 if TYPE_CHECKING:
     from world_server.core.physics import Physics

@@ -3,15 +3,15 @@
     python tests/make_vectors.py           # (re)write the files from protocol.py
     python tests/make_vectors.py --check   # exit 1 if a file differs from what it would write
 
-One file per message type of ``wire/protocol.py``, plus ``udp_frame.json`` for the
+One file per message type of ``bestofn_swarm/wire/protocol.py``, plus ``udp_frame.json`` for the
 UDP radio's framing (``examples/udp_radio.py``), ``auth.json`` for run keys and
-message tags (``wire/auth.py``), ``batch.json`` for the binary batches of a process
-hosting several robots and their host's tag (``wire/batch.py``), ``tick.json`` for one
+message tags (``bestofn_swarm/wire/auth.py``), ``batch.json`` for the binary batches of a process
+hosting several robots and their host's tag (``bestofn_swarm/wire/batch.py``), ``tick.json`` for one
 lockstep tick of a robot on Zenoh: what arrives, what the port contract hands the
 controller, what goes out (``robot_agent/core/simulated.py``), ``link_frame.json`` for the
-link to a robot outside the emulator (``link/core/codec.py``: frames, and what each end of
-a session counts for a frame it refuses) and ``key_file.json`` for the key files such a
-robot reads (``plumbing/run_keys.py``). Each message file holds:
+link to a robot outside the emulator (``bestofn_swarm/link/core/codec.py``: frames, and what each
+end of a session counts for a frame it refuses) and ``key_file.json`` for the key files such a
+robot reads (``bestofn_swarm/plumbing/run_keys.py``). Each message file holds:
 
 * ``valid``: messages with the exact bytes ``protocol.encode`` produces for them (as a
   UTF-8 string and as hex). A decoder must accept them; an encoder that wants to be
@@ -27,9 +27,9 @@ to 1 (within 1e-6). docs/porting.md explains how a port in another language uses
 ``tests/test_vectors.py`` checks the files against the codec and against this script.
 
 ``numeric.json`` and ``rng.json`` are the portable numeric kernel's and the generator's
-(``wire/numeric.py``, ``wire/rng.py``, docs/kernel.md): inputs and outputs as the hex of
-their IEEE-754 bits, so that a port compares bit for bit; ``tests/test_numeric.py``
-checks them.
+(``bestofn_swarm/wire/numeric.py``, ``bestofn_swarm/wire/rng.py``, docs/kernel.md): inputs and
+outputs as the hex of their IEEE-754 bits, so that a port compares bit for bit;
+``tests/test_numeric.py`` checks them.
 """
 
 from __future__ import annotations
@@ -51,10 +51,11 @@ import msgspec
 # installed package).
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from bestofn_swarm.link.core import codec
+from bestofn_swarm.wire import auth, batch, keyspace, names, numeric, protocol
+from bestofn_swarm.wire.keyspace import Part
+from bestofn_swarm.wire.rng import Stream, seed_of
 from examples.udp_radio import MAX_RADIO_PAYLOAD_BYTES, encode_frame
-from link.core import codec
-from wire import auth, batch, names, numeric, protocol
-from wire.rng import Stream, seed_of
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
 
@@ -1080,8 +1081,8 @@ def auth_vectors() -> dict[str, Any]:
 
 
 def batch_vectors() -> dict[str, Any]:
-    """Batches of a process hosting robots 3 to 4 (wire/batch.py), byte for byte: what each
-    decodes to (the robots' own messages), the host's tag over it, and bytes to refuse."""
+    """Batches of a process hosting robots 3 to 4 (bestofn_swarm/wire/batch.py), byte for byte: what
+    each decodes to (the robots' own messages), the host's tag over it, and bytes to refuse."""
     keyring = auth.Keyring(secret=AUTH_SECRET)
     identity = names.host_identity(3, 4)
     senses = [
@@ -1211,14 +1212,14 @@ LINK_WORLD = "8d2f5e4a1b3c6d7e"  # a world server's instance (its Zenoh id), as 
 # to is the vector's ``refusal`` for that end.
 LINK_RECEIVERS = {
     "robot": (
-        "robot 8's program (link/core/session.py LinkClient): it said hello with "
+        "robot 8's program (bestofn_swarm/link/core/session.py LinkClient): it said hello with "
         "robot_nonce_hex and took the vector 'welcome' (session 'plain') or "
         "'welcome_encrypted' (session 'encrypted'), and no frame of the bridge since; in "
         "session 'hello' it said hello and took nothing yet"
     ),
     "bridge": (
-        "the bridge's end of robot 8 (link/core/peer.py LinkPeer), serving the welcome of "
-        "the vector 'welcome' (session 'plain') or 'welcome_encrypted' (session "
+        "the bridge's end of robot 8 (world_server/bridge/core/peer.py LinkPeer), serving the "
+        "welcome of the vector 'welcome' (session 'plain') or 'welcome_encrypted' (session "
         "'encrypted') with the bridge nonce bridge_nonce_hex: it answered the vector "
         "'hello' and took 'ping_from_the_robot' (or 'ping_from_the_robot_encrypted'), so "
         "the session is open and the robot's sequence number 1 is taken"
@@ -1237,9 +1238,9 @@ def _link_world_info() -> bytes:
 
 
 def link_frame_vectors() -> dict[str, Any]:
-    """Frames of the link to a robot outside the emulator (link/core/codec.py, docs/protocol.md):
-    the keys, a session's frames both ways (plain and encrypted, the questions on world/info
-    and their answers), their serial encoding, frames a receiver refuses with the counter
+    """Frames of the link to a robot outside the emulator (bestofn_swarm/link/core/codec.py,
+    docs/protocol.md): the keys, a session's frames both ways (plain and encrypted, the questions on
+    world/info and their answers), their serial encoding, frames a receiver refuses with the counter
     each end adds it to, and sequences of frames with what a receiver does with each."""
     keyring = auth.Keyring(secret=AUTH_SECRET)
     identity = names.robot_identity(LINK_ROBOT)
@@ -1248,17 +1249,17 @@ def link_frame_vectors() -> dict[str, Any]:
     key = codec.link_key(robot_key)
     cipher_key = codec.session_key(key, LINK_ROBOT_NONCE, LINK_BRIDGE_NONCE)
     other_key = codec.link_key(keyring.key(names.robot_identity(9)) or b"")
-    keys = protocol.Keys("demo")
+    keys = keyspace.Keys("demo")
     act = protocol.encode(
         protocol.Act(v=1, tick=42, left=0.13, right=0.1, capture=False, radio_tx=0)
     )
-    act_tag = keyring.seal(identity, keys.act(LINK_ROBOT), act)
+    act_tag = keyring.seal(identity, keys.of(keyspace.ACT, LINK_ROBOT), act)
     sense = protocol.encode(
         protocol.Sense(
             v=1, tick=42, t=4.2, x=0.31, y=-0.12, theta=1.5708, prox=[0.0] * 8, rx=0, camera=False
         )
     )
-    sense_tag = keyring.seal(identity, keys.sense(LINK_ROBOT), sense)
+    sense_tag = keyring.seal(identity, keys.of(keyspace.SENSE, LINK_ROBOT), sense)
 
     def welcome_body(cipher: codec.Cipher) -> bytes:
         return codec.encode_welcome(
@@ -1288,8 +1289,11 @@ def link_frame_vectors() -> dict[str, Any]:
             kind, from_bridge, robot, robot_nonce, bridge_nonce, seq, body, encrypted
         )
 
-    def data(kind: codec.DataKind, payload: bytes, attachment: bytes | None = None) -> bytes:
+    def data(kind: keyspace.LinkCode, payload: bytes, attachment: bytes | None = None) -> bytes:
         return codec.encode_data(kind, payload, attachment)
+
+    world_up = keyspace.link(keyspace.ALIVE_WORLD)
+    world_down = keyspace.link(keyspace.ALIVE_WORLD, Part.GONE)
 
     def sealed(item: codec.Frame, with_key: bytes = key) -> bytes:
         cipher = codec.session_key(with_key, item.robot_nonce, item.bridge_nonce)
@@ -1297,7 +1301,7 @@ def link_frame_vectors() -> dict[str, Any]:
 
     # The questions on world/info (kind 19) and the world's answers (kind 4): a query's
     # attachment is tag || nonce || identity, its answer's tag || nonce, both tags under
-    # the robot's run key (wire/auth.py query_seal, reply_seal).
+    # the robot's run key (bestofn_swarm/wire/auth.py query_seal, reply_seal).
     world_info = _link_world_info()
     instance = LINK_WORLD.encode()
     questions = {
@@ -1306,8 +1310,8 @@ def link_frame_vectors() -> dict[str, Any]:
     }
     query: dict[str, dict[str, Any]] = {}
     for purpose, (payload, nonce) in questions.items():
-        asked = auth.query_seal(keyring, identity, keys.world_info, payload, nonce)
-        answer = auth.reply_seal(keyring, identity, keys.world_info, world_info, nonce)
+        asked = auth.query_seal(keyring, identity, keys.of(keyspace.INFO), payload, nonce)
+        answer = auth.reply_seal(keyring, identity, keys.of(keyspace.INFO), world_info, nonce)
         assert asked is not None and answer is not None
         query[purpose] = {
             "question": (payload, asked, nonce),
@@ -1317,19 +1321,19 @@ def link_frame_vectors() -> dict[str, Any]:
     def query_vector(purpose: str, part: str) -> dict[str, Any]:
         _, attachment, nonce = query[purpose][part]
         return {
-            "key_expr": keys.world_info,
+            "key_expr": keys.of(keyspace.INFO),
             "identity": identity,
             "nonce_hex": nonce.hex(),
             "metadata_hex": attachment[auth.TAG_BYTES :].hex(),
             "tag_hex": attachment[: auth.TAG_BYTES].hex(),
         }
 
-    act_body = data(codec.DataKind.ACT, act, act_tag)
-    sense_body = data(codec.DataKind.SENSE, sense, sense_tag)
-    map_question = data(codec.DataKind.INFO_QUERY, *query["map"]["question"][:2])
-    map_answer = data(codec.DataKind.INFO_REPLY, *query["map"]["answer"][:2])
-    proof_question = data(codec.DataKind.INFO_QUERY, *query["proof"]["question"][:2])
-    proof_answer = data(codec.DataKind.INFO_REPLY, *query["proof"]["answer"][:2])
+    act_body = data(keyspace.link(keyspace.ACT), act, act_tag)
+    sense_body = data(keyspace.link(keyspace.SENSE), sense, sense_tag)
+    map_question = data(keyspace.link(keyspace.INFO), *query["map"]["question"][:2])
+    map_answer = data(keyspace.link(keyspace.INFO, Part.REPLY), *query["map"]["answer"][:2])
+    proof_question = data(keyspace.link(keyspace.INFO), *query["proof"]["question"][:2])
+    proof_answer = data(keyspace.link(keyspace.INFO, Part.REPLY), *query["proof"]["answer"][:2])
     ping_one = (1).to_bytes(8, "big")
     run_ended = bytes((codec.ByeReason.RUN_ENDED,))
     cases: list[tuple[str, codec.Frame, dict[str, Any] | None]] = [
@@ -1363,7 +1367,7 @@ def link_frame_vectors() -> dict[str, Any]:
         ("pong", frame(codec.FrameType.PONG, False, 3, ping_one), None),
         (
             "world_up",
-            frame(codec.FrameType.DATA, True, 2, data(codec.DataKind.WORLD_UP, instance)),
+            frame(codec.FrameType.DATA, True, 2, data(world_up, instance)),
             None,
         ),
         (
@@ -1382,13 +1386,13 @@ def link_frame_vectors() -> dict[str, Any]:
                 codec.FrameType.DATA,
                 True,
                 3,
-                data(codec.DataKind.INFO_ERROR, b"not this world instance"),
+                data(keyspace.link(keyspace.INFO, Part.ERROR), b"not this world instance"),
             ),
             None,
         ),
         (
             "world_down",
-            frame(codec.FrameType.DATA, True, 4, data(codec.DataKind.WORLD_DOWN, instance)),
+            frame(codec.FrameType.DATA, True, 4, data(world_down, instance)),
             None,
         ),
         ("bye_run_ended", frame(codec.FrameType.BYE, True, 3, run_ended), None),
@@ -1416,7 +1420,7 @@ def link_frame_vectors() -> dict[str, Any]:
             kind, payload, attachment = codec.decode_data(item.body)
             vector["data"] = {
                 "kind": kind.name,
-                "kind_byte": int(kind),
+                "kind_byte": kind.code,
                 "attachment_hex": (attachment or b"").hex(),
                 "payload_utf8": payload.decode(),
             }
@@ -1455,7 +1459,7 @@ def link_frame_vectors() -> dict[str, Any]:
          oversize, act_frame + bytes(codec.MAX_FRAME_BYTES)),
         ("robot_frame_over_32_kib", "the bridge refuses a robot's frame over 32 KiB before "
          "reading it; the robot reads the header first", plain, unexpected, oversize,
-         sealed(frame(codec.FrameType.DATA, False, 4, data(codec.DataKind.STATUS,
+         sealed(frame(codec.FrameType.DATA, False, 4, data(keyspace.link(keyspace.STATUS),
                                                               bytes(32 * 1024))))),
         ("tag_changed", "the tag does not check out", plain, unexpected, forged,
          flipped(act_frame, -1)),
@@ -1645,9 +1649,9 @@ def link_frame_vectors() -> dict[str, Any]:
 
 
 def key_file_vectors() -> dict[str, Any]:
-    """Key files as ``robot-agent --link`` reads them (plumbing/run_keys.py read_key_file,
-    wire/auth.py keyring_from_text): the run, and the key of the robot it is for; and files
-    it refuses (the program exits 2)."""
+    """Key files as ``robot-agent --link`` reads them (bestofn_swarm/plumbing/run_keys.py
+    read_key_file, bestofn_swarm/wire/auth.py keyring_from_text): the run, and the key of the robot
+    it is for; and files it refuses (the program exits 2)."""
     keyring = auth.Keyring(secret=AUTH_SECRET)
     identity = names.robot_identity(LINK_ROBOT)
     robot_key = keyring.key(identity) or b""
@@ -1661,7 +1665,8 @@ def key_file_vectors() -> dict[str, Any]:
     valid = [
         ("one_robot", "what swarm run writes (robot-8.key)",
          text({"v": 1, "run": "demo", "keys": {identity: own}})),
-        ("the_secret", "the run secret: the robot derives its key (wire/auth.py derive_key)",
+        ("the_secret",
+         "the run secret: the robot derives its key (bestofn_swarm/wire/auth.py derive_key)",
          text({"v": 1, "run": "demo", "secret": AUTH_SECRET.hex()})),
         ("a_host", "a process's keys: its robots' and its host identity's",
          text({"v": 1, "run": "demo",
@@ -2018,9 +2023,9 @@ def numeric_vectors() -> dict[str, Any]:
             )
     return {
         "type": "NumericKernel",
-        "about": "inputs and outputs of wire/numeric.py as the hex of their IEEE-754 bits "
-        '(big-endian; any NaN is "nan"); sincos gives (sin, cos); atan2 takes (y, x); '
-        "power takes (x, y)",
+        "about": "inputs and outputs of bestofn_swarm/wire/numeric.py as the hex of their "
+        'IEEE-754 bits (big-endian; any NaN is "nan"); sincos gives (sin, cos); atan2 takes '
+        "(y, x); power takes (x, y)",
         "cases": cases,
     }
 
@@ -2071,8 +2076,8 @@ def rng_vectors() -> dict[str, Any]:
     ]  # fmt: skip
     return {
         "type": "Stream",
-        "about": "wire/rng.py: each case seeds a Stream, makes the calls in order and "
-        "lists what each returned (floats as the hex of their IEEE-754 bits; 64-bit "
+        "about": "bestofn_swarm/wire/rng.py: each case seeds a Stream, makes the calls in order "
+        "and lists what each returned (floats as the hex of their IEEE-754 bits; 64-bit "
         "integers (seeds, states, next_u64) as 16 hex digits; shuffle: the list after it; "
         "fork: the new stream's state); seed_of: run seed and parts to seed",
         "cases": cases,
@@ -2104,8 +2109,129 @@ BUILDERS: tuple[Callable[[], TypeVectors], ...] = (
 )
 
 
-def build() -> dict[str, str]:
-    """File name -> the text of that vector file."""
+# --- the controller ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ControllerTrack:
+    """One robot of one run, from its first step to ``AFTER`` steps past the first time it
+    fired ``until`` (phase, event)."""
+
+    name: str
+    about: str
+    sites: int
+    seed: int
+    robot: int
+    until: tuple[str, str]
+    # ControllerConfig's settings beyond the defaults
+    settings: dict[str, Any] = field(default_factory=dict)
+
+
+# Every run: ten robots, the paper's settings (swarm run's defaults), a radio that loses 30 %
+# of the copies it delivers and camera noise of 10 (docs/robustness.md's settings).
+CONTROLLER_RUN: dict[str, Any] = {"robots": 10, "drop": 0.3, "camera_noise": 10.0}
+AFTER = 10
+CONTROLLER_TRACKS = (
+    ControllerTrack(
+        "displaced",
+        "three trips, a decision, parking, and a crowd pushing the parked robot out of its "
+        "slot: it drives back",
+        sites=10,
+        seed=13,
+        robot=5,
+        until=("stopped", "displaced"),
+    ),
+    ControllerTrack(
+        "lingering",
+        "the paper's fix for isolated robots (linger 10 s, n = 5): a decided robot stays at "
+        "the nest broadcasting before it parks",
+        sites=5,
+        seed=69,
+        robot=9,
+        until=("lingering", "lingered"),
+        settings={"linger": 10.0},
+    ),
+    ControllerTrack(
+        "site_unseen",
+        "three frames of a site in a row show no panel (robots in the way): the pair is "
+        "given up and the robot goes home",
+        sites=10,
+        seed=532,
+        robot=4,
+        until=("sensing", "site_unseen"),
+    ),
+    ControllerTrack(
+        "waiting",
+        "home at the nest's centre without having heard the beacon (lost copies): the robot "
+        "waits there until it hears it",
+        sites=10,
+        seed=436,
+        robot=2,
+        until=("waiting", "heard_beacon"),
+    ),
+    ControllerTrack(
+        "leg_timed_out",
+        "a leg given 10 s (travel_timeout 10, travel_crawl 0.1 m/s; the default 120 s never "
+        "runs out in a swarm of ten): the robot gives the site up and goes home",
+        sites=10,
+        seed=0,
+        robot=1,
+        until=("to_site", "leg_timed_out"),
+        settings={"travel_timeout": 10.0, "travel_crawl": 0.1},
+    ),
+)
+
+
+def controller_vectors() -> str:
+    """Tracks of real runs, step by step (deploy/conformance/vectors.py, docs/controller.md)."""
+    from deploy.conformance import capture, vectors
+    from robot_agent.core.controller import ControllerConfig
+    from world_server.core.camera import CameraNoise
+    from world_server.core.radio import RadioConfig
+    from world_server.core.world import World, WorldConfig
+
+    tracks = []
+    for spec in CONTROLLER_TRACKS:
+        world = WorldConfig(
+            run="vectors",
+            seed=spec.seed,
+            num_sites=spec.sites,
+            num_robots=CONTROLLER_RUN["robots"],
+            radio=RadioConfig(drop=CONTROLLER_RUN["drop"]),
+            camera_noise=CameraNoise(pixel_sigma=CONTROLLER_RUN["camera_noise"]),
+        )
+        config = ControllerConfig(**spec.settings)
+        caught = capture.capture_run(world, config, [spec.robot])
+        steps = caught.steps[spec.robot]
+        end = next(index for index, step in enumerate(steps) if tuple(spec.until) in step.events)
+        tracks.append(
+            vectors.track_from_steps(
+                name=spec.name,
+                about=spec.about,
+                run={**CONTROLLER_RUN, "sites": spec.sites, "seed": spec.seed, **spec.settings},
+                robot=spec.robot,
+                world=World(world).info,
+                controller=config,
+                steps=steps[: end + 1 + AFTER],
+            )
+        )
+    about = [
+        "Tracks of real runs (tests/make_vectors.py, CONTROLLER_TRACKS): one robot each, "
+        "from its first step to 10 steps past the transition it was chosen for.",
+        "in: the step's reading (t, x, y, theta, prox), the radio messages in delivery "
+        "order ([sender, payload]), the frame (an index into frames: PNG, base64) or null.",
+        "out: what the controller gives: wheel speeds, capture, broadcasts, the phase after "
+        "the step; events, opinion (full precision) and status only when there are any, or "
+        "they changed.",
+        "docs/controller.md says how a port uses them; swarm conformance drives a program "
+        "with them over the link.",
+    ]
+    return vectors.dump(about, tracks)
+
+
+def build(*, controller: bool = True) -> dict[str, str]:
+    """File name -> the text of that vector file (``controller``: the controller vectors
+    too, which run swarms)."""
     files = {vectors.file: vectors.content() for vectors in (make() for make in BUILDERS)}
     files["udp_frame.json"] = udp_frame_vectors()
     files["auth.json"] = auth_vectors()
@@ -2115,10 +2241,13 @@ def build() -> dict[str, str]:
     files["batch.json"] = batch_vectors()
     files["numeric.json"] = numeric_vectors()
     files["rng.json"] = rng_vectors()
-    return {
+    texts = {
         name: json.dumps(content, indent=1, ensure_ascii=False) + "\n"
         for name, content in files.items()
     }
+    if controller:
+        texts["controller.json"] = controller_vectors()
+    return texts
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,5 +1,5 @@
 """Helpers for tests of robots outside the emulator: ``swarm run --external`` with the
-outside programs started by the test (``python -m link``, or the C robot,
+outside programs started by the test (``python -m robot_agent.link``, or the C robot,
 ``c_robot/build/c-robot``), on loopback UDP or a pseudo-terminal pair made by ``socat``.
 Every process is killed by pid at the end."""
 
@@ -52,7 +52,7 @@ def in_process(options: Sequence[str]) -> dict[str, Any]:
 
 def program(link: str, robot: int, key_file: Path, *extra: str) -> subprocess.Popen[bytes]:
     """The outside robot's program, as a porter starts it."""
-    command = [sys.executable, "-m", "link", "--link", link, "--id", str(robot)]
+    command = [sys.executable, "-m", "robot_agent.link", "--link", link, "--id", str(robot)]
     return subprocess.Popen(
         [*command, "--key-file", str(key_file), "--give-up", "60", *extra],
         cwd=REPO,

@@ -25,11 +25,11 @@ from typing import Any
 
 import numpy as np
 
+from bestofn_swarm.wire import numeric
+from bestofn_swarm.wire.rng import Stream
 from deploy import cli
-from wellstirred import model as wellstirred
-from wellstirred import voting
-from wire import numeric
-from wire.rng import Stream
+from robot_agent.wellstirred import model as wellstirred
+from robot_agent.wellstirred import voting
 
 # Each a list of `swarm run` options; all in process, lockstep, no recording.
 RUNS: list[list[str]] = [

@@ -22,9 +22,9 @@ from typing import Any
 import pytest
 import zenoh
 
+from bestofn_swarm.plumbing.tcp import free_port
+from bestofn_swarm.plumbing.zenoh_session import open_session
 from deploy.launcher.supervisor import RUN_ID_ENV
-from plumbing.tcp import free_port
-from plumbing.zenoh_session import open_session
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -35,13 +35,13 @@ from swarm_helpers import (
     unique_run_id,
 )
 
+from bestofn_swarm.plumbing import run_keys
+from bestofn_swarm.plumbing.world_info import ask, fetch_world_info
+from bestofn_swarm.wire import auth, batch, keyspace, names, protocol
+from bestofn_swarm.wire.names import Role
 from deploy.launcher.processes import python_module
-from plumbing import run_keys
-from plumbing.world_info import ask, fetch_world_info
 from robot_agent.core import tick_assembly
 from robot_agent.node import robot_node as node
-from wire import auth, batch, names, protocol
-from wire.names import Role
 from world_server.core.layout import make_layout
 
 pytestmark = pytest.mark.timeout(180)
@@ -55,7 +55,7 @@ class Attacked:
     """A live run and the attacker's session on its router."""
 
     run_id: str
-    keys: protocol.Keys
+    keys: keyspace.Keys
     session: zenoh.Session
     process: subprocess.Popen[bytes]
     ticks: list[int] = field(default_factory=list)
@@ -80,7 +80,7 @@ class Attacked:
 def attacked_run(*options: str) -> Iterator[Attacked]:
     """``swarm run`` on a router the test holds, with the test's session on it."""
     run_id = unique_run_id("attack")
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     with loopback_router() as (session, endpoint):
         command = swarm_command(
             "run", "--run-id", run_id, "--json", "--quiet", "--connect", endpoint, *options
@@ -95,7 +95,7 @@ def attacked_run(*options: str) -> Iterator[Attacked]:
                 clock = protocol.decode(sample.payload.to_bytes(), protocol.Clock)
                 attacked.ticks.append(clock.tick)
 
-        subscriber = session.declare_subscriber(keys.world_clock, on_clock)
+        subscriber = session.declare_subscriber(keys.of(keyspace.CLOCK), on_clock)
         try:
             yield attacked
         finally:
@@ -156,7 +156,7 @@ KEYED = pytest.mark.parametrize("keys", [[], ["--no-keys"]], ids=["keyed", "no-k
 def test_a_liveliness_token_of_a_robot_outside_the_swarm_is_refused(keys: list[str]) -> None:
     with attacked_run(*SMALL, "--no-record", *keys) as run:
         run.wait_for_tick(10)
-        token = run.session.liveliness().declare_token(run.keys.alive(Role.ROBOT, 99999))
+        token = run.session.liveliness().declare_token(run.keys.token(Role.ROBOT, 99999))
         code, summary, stderr = run.finish()
         token.undeclare()
     assert_right_consensus(code, summary, stderr)
@@ -172,7 +172,7 @@ def test_a_forged_clock_far_in_the_future_does_not_silence_the_beacon(keys: list
     with attacked_run(*SMALL, "--no-record", *keys) as run:
         run.wait_for_tick(10)
         forged = protocol.Clock(v=1, tick=run.tick + 1, t=1e9)
-        run.session.put(run.keys.beacon_clock("nest"), protocol.encode(forged))
+        run.session.put(run.keys.of(keyspace.BEACON_CLOCK, "nest"), protocol.encode(forged))
         code, summary, stderr = run.finish()
     assert_right_consensus(code, summary, stderr)
     assert summary is not None and summary["rejected"]["beacon"] == 1
@@ -187,7 +187,7 @@ def test_a_forged_sense_for_the_last_tick_does_not_freeze_a_robot(keys: list[str
             forged = protocol.Sense(
                 v=1, tick=tick, t=t, x=0, y=0, theta=0, prox=[0.0] * 8, rx=0, camera=False
             )
-            run.session.put(run.keys.sense(0), protocol.encode(forged))
+            run.session.put(run.keys.of(keyspace.SENSE, 0), protocol.encode(forged))
         code, summary, stderr = run.finish()
     assert_right_consensus(code, summary, stderr)
     assert summary is not None and summary["per_robot"][0]["rejected"] == 2
@@ -223,16 +223,36 @@ def test_forged_and_malformed_batches_are_refused_and_counted() -> None:
         )
         forged_tag = b"\x00" * auth.TAG_BYTES
         to_world = [
-            (run.keys.host_act(0), acts, forged_tag),  # the world: 1 (not host/0-2's tag)
-            (run.keys.host_act(0), b"BNA1\xff\xff", None),  # 1: malformed
-            (run.keys.host_act(0), b"\x00" * (batch.MAX_BATCH_BYTES + 1), None),  # 1: oversized
-            (run.keys.host_act(99_999), batch.encode_acts(99_999, []), None),  # 1: no robot
+            (
+                run.keys.of(keyspace.HOST_ACT, 0),
+                acts,
+                forged_tag,
+            ),  # the world: 1 (not host/0-2's tag)
+            (run.keys.of(keyspace.HOST_ACT, 0), b"BNA1\xff\xff", None),  # 1: malformed
+            (
+                run.keys.of(keyspace.HOST_ACT, 0),
+                b"\x00" * (batch.MAX_BATCH_BYTES + 1),
+                None,
+            ),  # 1: oversized
+            (
+                run.keys.of(keyspace.HOST_ACT, 99_999),
+                batch.encode_acts(99_999, []),
+                None,
+            ),  # 1: no robot
         ]
         to_host = [
-            (run.keys.host_sense(0), senses, None),  # robot 0, for its process: untagged
-            (run.keys.host_sense(0), senses, forged_tag),  # robot 0: a forged tag
-            (run.keys.host_sense(0), b"BNS1", None),  # robot 0: malformed
-            (run.keys.host_sense(0), twice, None),  # robot 0: robot 2 twice (and no tag)
+            (
+                run.keys.of(keyspace.HOST_SENSE, 0),
+                senses,
+                None,
+            ),  # robot 0, for its process: untagged
+            (run.keys.of(keyspace.HOST_SENSE, 0), senses, forged_tag),  # robot 0: a forged tag
+            (run.keys.of(keyspace.HOST_SENSE, 0), b"BNS1", None),  # robot 0: malformed
+            (
+                run.keys.of(keyspace.HOST_SENSE, 0),
+                twice,
+                None,
+            ),  # robot 0: robot 2 twice (and no tag)
         ]
         for key, payload, attachment in [*to_world, *to_host]:
             run.session.put(
@@ -259,13 +279,15 @@ def test_a_copied_act_in_a_batch_of_the_attacker_s_does_not_divert_a_robot_s_sen
         def on_act(sample: zenoh.Sample) -> None:
             seen.append(sample.payload.to_bytes())
 
-        subscriber = run.session.declare_subscriber(run.keys.act(1), on_act)
+        subscriber = run.session.declare_subscriber(run.keys.of(keyspace.ACT, 1), on_act)
         run.wait_for_tick(10)
         subscriber.undeclare()
         act = protocol.decode(seen[-1], protocol.Act)
         copied = batch.encode_acts(2, [(1, msgspec.structs.replace(act, tick=run.tick))])
         run.session.put(
-            run.keys.host_act(2), copied, congestion_control=zenoh.CongestionControl.BLOCK
+            run.keys.of(keyspace.HOST_ACT, 2),
+            copied,
+            congestion_control=zenoh.CongestionControl.BLOCK,
         )
         code, summary, stderr = run.finish()
     assert_right_consensus(code, summary, stderr)
@@ -281,7 +303,7 @@ def test_a_host_that_speaks_for_a_robot_it_does_not_host_is_refused_for_that_rob
     counts that entry each time, takes robot 2's answer from robot 2's own process, and
     learns no route for robot 2 (its senses would go to a process that does not run it)."""
     run_id = unique_run_id("host")
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     assert (
         run_keys.main(
             [
@@ -334,17 +356,19 @@ def test_a_host_that_speaks_for_a_robot_it_does_not_host_is_refused_for_that_rob
                 return
             act = protocol.Act(v=1, tick=tick, left=0.1, right=0.1, capture=False, radio_tx=0)
             payload = batch.encode_acts(1, [(2, act)])
-            key = keys.host_act(0)
+            key = keys.of(keyspace.HOST_ACT, 0)
             session.put(key, payload, attachment=host.seal(identity, key, payload))
             forged.append(tick)
 
-        session.declare_subscriber(keys.world_clock, on_clock)
+        session.declare_subscriber(keys.of(keyspace.CLOCK), on_clock)
         try:
             assert _wait_until(lambda: len(forged) >= 10, 60), "the run never got going"
             last = ticks[-1]
             assert _wait_until(lambda: ticks[-1] >= last + 30, 60), "the world stopped ticking"
             assert all(process.poll() is None for process in started), "a process exited"
-            answers, refused = ask(session, keys.world_stats, secret, names.LAUNCHER, timeout=5.0)
+            answers, refused = ask(
+                session, keys.of(keyspace.STATS), secret, names.LAUNCHER, timeout=5.0
+            )
             assert answers, refused
             stats = protocol.decode(answers[0], protocol.WorldState)
         finally:
@@ -364,7 +388,9 @@ def test_only_the_launcher_can_finish_the_recording(tmp_path: Path) -> None:
     with attacked_run(*SMALL, "--record", str(recording)) as run:
         run.wait_for_tick(10)
         forged = json.dumps({"run_id": "forged", "correct": True}).encode()
-        replies = list(run.session.get(run.keys.recorder_finish, payload=forged, timeout=5.0))
+        replies = list(
+            run.session.get(run.keys.of(keyspace.RECORDER_FINISH), payload=forged, timeout=5.0)
+        )
         code, summary, stderr = run.finish()
     assert_right_consensus(code, summary, stderr)
     assert not [reply for reply in replies if reply.ok is not None]
@@ -395,7 +421,7 @@ def test_forged_decisions_do_not_end_the_run() -> None:
                 decision_trips=1,
                 comparison=None,
             )
-            run.session.put(run.keys.status(robot), protocol.encode(status))
+            run.session.put(run.keys.of(keyspace.STATUS, robot), protocol.encode(status))
         code, summary, stderr = run.finish()
     assert_right_consensus(code, summary, stderr)
     assert summary is not None and summary["rejected"]["observer"] == ROBOTS
@@ -415,11 +441,11 @@ def test_forged_opinions_on_the_radio_are_not_believed(path: str) -> None:
                     meta = protocol.RadioRxMeta(
                         v=1, tick=tick + 1, sender=str(other), seq=10_000 + tick, sent_tick=tick
                     )
-                    key = run.keys.radio_rx(robot)
+                    key = run.keys.of(keyspace.RADIO_RX, robot)
                     payload = one_hot(wrong_site(), other)
                 else:  # to the medium, in the robot's own name
                     meta = protocol.RadioTxMeta(v=1, tick=tick, seq=10_000 + tick)
-                    key = run.keys.radio_tx(robot)
+                    key = run.keys.of(keyspace.RADIO_TX, robot)
                     payload = one_hot(wrong_site(), robot)
                 run.session.put(key, payload, attachment=protocol.encode(meta))
                 sent[0] += 1
@@ -477,7 +503,7 @@ def test_a_flood_of_radio_messages_for_future_ticks_does_not_grow_a_robot(keyed:
                 v=1, tick=run.tick + 5 + index % 500, sender="1", seq=index, sent_tick=run.tick
             )
             run.session.put(
-                run.keys.radio_rx(0),
+                run.keys.of(keyspace.RADIO_RX, 0),
                 junk,
                 attachment=protocol.encode(meta),
                 congestion_control=zenoh.CongestionControl.BLOCK,
@@ -497,7 +523,7 @@ def test_junk_on_the_run_keys_does_not_blow_up_the_recording(tmp_path: Path) -> 
         junk = os.urandom(2**20)  # 1 MiB that does not compress
         for index in range(100):
             run.session.put(
-                run.keys.status(index % ROBOTS),
+                run.keys.of(keyspace.STATUS, index % ROBOTS),
                 junk,
                 congestion_control=zenoh.CongestionControl.BLOCK,
             )
@@ -520,7 +546,7 @@ def test_a_sender_that_leaves_with_its_transmission_queued_does_not_crash_the_wo
     """Robot 2 (or a second beacon), played by the test with its own key, transmits in a
     tick and leaves before answering it: the world drops the transmission (late) and goes on."""
     run_id = unique_run_id("leave")
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     assert run_keys.main(["--run-id", run_id, "--robots", "3", "--out", str(tmp_path)]) == 0
     secret = run_keys.from_text((tmp_path / "secret.json").read_text(), run_id)
     mine = run_keys.from_text((tmp_path / "robot-2.json").read_text(), run_id)
@@ -552,7 +578,10 @@ def test_a_sender_that_leaves_with_its_transmission_queued_does_not_crash_the_wo
 
         def transmit(tick: int) -> None:
             """One radio message in this tick, and no answer to it."""
-            key, payload = keys.radio_tx(name), b'{"kind":"beacon","v":1,"id":"x","seq":1}'
+            key, payload = (
+                keys.of(keyspace.RADIO_TX, name),
+                b'{"kind":"beacon","v":1,"id":"x","seq":1}',
+            )
             meta = protocol.encode(protocol.RadioTxMeta(v=1, tick=tick, seq=1))
             session.put(key, payload, attachment=keyring.seal(identity, key, payload, meta))
             sent.append(tick)
@@ -569,12 +598,12 @@ def test_a_sender_that_leaves_with_its_transmission_queued_does_not_crash_the_wo
             if tick >= joined_at[0] + 10:  # by now in the world's barrier
                 transmit(tick)
             else:  # a well-behaved beacon until then
-                key = keys.beacon_ack(name)
+                key = keys.of(keyspace.ACK, name)
                 ack = protocol.encode(protocol.Ack(v=1, tick=tick, radio_tx=0))
                 session.put(key, ack, attachment=keyring.seal(identity, key, ack))
 
-        session.declare_subscriber(keys.world_clock, on_clock)
-        session.declare_subscriber(keys.sense(2), on_sense)
+        session.declare_subscriber(keys.of(keyspace.CLOCK), on_clock)
+        session.declare_subscriber(keys.of(keyspace.SENSE, 2), on_sense)
         try:
             if role == "beacon":
                 assert _wait_until(lambda: len(ticks) > 3, 60), "the run never started"
@@ -582,14 +611,16 @@ def test_a_sender_that_leaves_with_its_transmission_queued_does_not_crash_the_wo
             # As every robot and beacon does: prove itself present (world/info with its key),
             # then declare its token, which the world takes only with that proof.
             fetch_world_info(session, keys, 60.0, keyring, identity)
-            token = session.liveliness().declare_token(keys.alive(Role(role), name))
+            token = session.liveliness().declare_token(keys.token(Role(role), name))
             assert _wait_until(lambda: bool(sent), 60), "the test's sender never took part"
             tick = sent[0]
             time.sleep(0.5)  # the world has it queued, and waits for an answer that never comes
             token.undeclare()  # ... and leaves
             assert _wait_until(lambda: ticks[-1] >= tick + 20, 60), "the world stopped ticking"
             assert started[0].poll() is None, "the world server exited"
-            answers, refused = ask(session, keys.world_stats, secret, names.LAUNCHER, timeout=5.0)
+            answers, refused = ask(
+                session, keys.of(keyspace.STATS), secret, names.LAUNCHER, timeout=5.0
+            )
             assert answers, refused
             stats = protocol.decode(answers[0], protocol.WorldState)
         finally:

@@ -30,7 +30,8 @@ import zenoh
 from swarm_helpers import processes_of, run_swarm, unique_run_id
 from test_attacks import SMALL, Attacked, assert_right_consensus, attacked_run
 
-from wire.names import Role
+from bestofn_swarm.wire import keyspace
+from bestofn_swarm.wire.names import Role
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -76,7 +77,7 @@ def test_fake_beacon_tokens_before_the_real_beacon_neither_join_nor_crowd_it_out
     with attacked_run(*ISSUE_RUN, "--no-record") as run:
         liveliness = run.session.liveliness()
         tokens = [
-            liveliness.declare_token(run.keys.alive(Role.BEACON, f"fake{index}"))
+            liveliness.declare_token(run.keys.token(Role.BEACON, f"fake{index}"))
             for index in range(20)
         ]
         code, summary, stderr = run.finish(timeout=240)
@@ -100,10 +101,10 @@ def test_fake_world_tokens_coming_and_going_are_not_followed(clean: dict[str, An
     and the run ends as a clean one, robot for robot."""
     with attacked_run(*ISSUE_RUN, "--no-record") as run:
         liveliness = run.session.liveliness()
-        token = liveliness.declare_token(run.keys.alive(Role.WORLD, "fake0"))
+        token = liveliness.declare_token(run.keys.token(Role.WORLD, "fake0"))
         run.wait_for_tick(1, timeout=120)  # every robot started (tick 0 waits for them)
         for index in range(1, 31):
-            replacement = liveliness.declare_token(run.keys.alive(Role.WORLD, f"fake{index}"))
+            replacement = liveliness.declare_token(run.keys.token(Role.WORLD, f"fake{index}"))
             time.sleep(0.05)
             token.undeclare()
             token = replacement
@@ -202,7 +203,7 @@ def test_replayed_world_states_do_not_hide_a_stall(
     assert undecided
     options = ("--no-record", "--spawn", "exec", "--stall-window", "30")
     with attacked_run(*ISSUE_RUN, *options) as run:
-        states, subscriber = recorder(run, run.keys.world_state)
+        states, subscriber = recorder(run, run.keys.of(keyspace.STATE))
         pids = [robot_process(run.run_id, robot) for robot in undecided]
         run.wait_for_tick(FREEZE_TICK, timeout=180)
         frozen.extend(pids)
@@ -234,7 +235,11 @@ def test_in_real_time_replayed_acts_and_radio_are_refused_and_counted(replayed: 
     reaches the world is refused (not after its sender's last) and counted, and the run
     reaches the right consensus; the radio takes no replayed message."""
     with attacked_run(*SMALL, "--no-record", *REALTIME) as run:
-        key = run.keys.act(0) if replayed == "act" else run.keys.radio_tx("*")
+        key = (
+            run.keys.of(keyspace.ACT, 0)
+            if replayed == "act"
+            else run.keys.of(keyspace.RADIO_TX, "*")
+        )
         heard, subscriber = recorder(run, key)
         run.wait_for_tick(50)
         subscriber.undeclare()

@@ -1,5 +1,6 @@
-"""Run keys and message tags (wire/auth.py), key files and the launcher's hand-over of
-keys (plumbing/run_keys.py), and a run's private directory (deploy/security/credentials.py)."""
+"""Run keys and message tags (bestofn_swarm/wire/auth.py), key files and the launcher's hand-over of
+keys (bestofn_swarm/plumbing/run_keys.py), and a run's private directory
+(deploy/security/credentials.py)."""
 
 from __future__ import annotations
 
@@ -15,9 +16,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from bestofn_swarm.plumbing import run_keys
+from bestofn_swarm.wire import auth
 from deploy.security.credentials import RunNetwork
-from plumbing import run_keys
-from wire import auth
 
 VECTORS = json.loads((Path(__file__).parent / "vectors" / "auth.json").read_text())
 PROTOCOL_DOC = (Path(__file__).resolve().parent.parent / "docs" / "protocol.md").read_text()

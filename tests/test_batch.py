@@ -1,5 +1,5 @@
-"""The batch codec (wire/batch.py): what it encodes reads back as the very messages a robot
-would send or receive alone, and anything that is not exactly a valid batch is refused
+"""The batch codec (bestofn_swarm/wire/batch.py): what it encodes reads back as the very messages a
+robot would send or receive alone, and anything that is not exactly a valid batch is refused
 whole, with a BatchError, never another exception."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from wire import batch, names, protocol
+from bestofn_swarm.wire import batch, names, protocol
 
 VALUES = np.array(
     [

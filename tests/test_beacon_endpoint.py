@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import pytest
 
+from bestofn_swarm.wire import auth, guard, keyspace, names, protocol
+from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon, BeaconConfig
-from nest_beacon.core.endpoint import BeaconEndpoint, Outgoing, OutputKind
-from wire import auth, guard, names, protocol
-from wire.rng import Stream
+from nest_beacon.core.endpoint import BeaconEndpoint, Outgoing
 
 SECRET = bytes(range(32))
-KEYS = protocol.Keys("beacon")
+KEYS = keyspace.Keys("beacon")
 RUN_KEYS = auth.Keyring(secret=SECRET)  # the world's and the beacon's keys derive from it
 DT = 0.1
 IDENTITY = names.beacon_identity("nest")
@@ -27,11 +27,11 @@ def clock(
     tick: int, *, keyring: auth.Keyring | None = RUN_KEYS, t: float | None = None
 ) -> tuple[bytes, bytes | None]:
     payload = protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * DT if t is None else t))
-    return payload, auth.seal(keyring, names.WORLD, KEYS.beacon_clock("nest"), payload)
+    return payload, auth.seal(keyring, names.WORLD, KEYS.of(keyspace.BEACON_CLOCK, "nest"), payload)
 
 
 def ack(message: Outgoing) -> protocol.Ack:
-    assert message.kind is OutputKind.ACK and message.key == KEYS.beacon_ack("nest")
+    assert message.kind is keyspace.ACK and message.key == KEYS.of(keyspace.ACK, "nest")
     return protocol.decode(message.payload, protocol.Ack)
 
 
@@ -39,10 +39,10 @@ def test_each_tick_is_answered_and_a_transmission_sent_when_due() -> None:
     endpoint = beacon()
     answers = [endpoint.receive_clock(*clock(tick)) for tick in range(7)]
     assert [[message.kind for message in answer] for answer in answers] == [
-        [OutputKind.RADIO_TX, OutputKind.ACK],
-        *[[OutputKind.ACK]] * 4,
-        [OutputKind.RADIO_TX, OutputKind.ACK],
-        [OutputKind.ACK],
+        [keyspace.RADIO_TX, keyspace.ACK],
+        *[[keyspace.ACK]] * 4,
+        [keyspace.RADIO_TX, keyspace.ACK],
+        [keyspace.ACK],
     ]
     assert [(ack(answer[-1]).tick, ack(answer[-1]).radio_tx) for answer in answers] == [
         (tick, 1 if tick in (0, 5) else 0) for tick in range(7)
@@ -50,7 +50,7 @@ def test_each_tick_is_answered_and_a_transmission_sent_when_due() -> None:
     # Each ack names the next tick with a transmission due: the world skips those between.
     assert [ack(answer[-1]).next_tick for answer in answers] == [5, 5, 5, 5, 5, 10, 10]
     sent = answers[5][0]
-    assert sent.key == KEYS.radio_tx("nest")
+    assert sent.key == KEYS.of(keyspace.RADIO_TX, "nest")
     assert protocol.decode(sent.payload, protocol.BeaconPayload).seq == 2
 
 
@@ -58,7 +58,7 @@ def test_what_the_beacon_sends_is_sealed_with_its_own_key() -> None:
     endpoint = beacon()
     for message in endpoint.receive_clock(*clock(0)):
         metadata = RUN_KEYS.open(IDENTITY, message.key, message.payload, message.attachment)
-        if message.kind is OutputKind.RADIO_TX:
+        if message.kind is keyspace.RADIO_TX:
             meta = protocol.decode(metadata, protocol.RadioTxMeta)
             assert (meta.tick, meta.seq) == (0, 1)
         with pytest.raises(auth.AuthError):  # not in the world's name
@@ -80,10 +80,19 @@ def test_a_repeated_or_old_clock_is_not_answered_nor_counted() -> None:
     [
         clock(1, keyring=None),  # untagged
         clock(1, keyring=auth.Keyring(secret=bytes(32))),  # another run's world
-        (clock(1)[0], RUN_KEYS.seal(IDENTITY, KEYS.beacon_clock("nest"), clock(1)[0])),  # beacon
+        (
+            clock(1)[0],
+            RUN_KEYS.seal(IDENTITY, KEYS.of(keyspace.BEACON_CLOCK, "nest"), clock(1)[0]),
+        ),  # beacon
         clock(1, t=0.5),  # sim time not its tick's
-        (b"[]", RUN_KEYS.seal(names.WORLD, KEYS.beacon_clock("nest"), b"[]")),  # no clock
-        (clock(1)[0], RUN_KEYS.seal(names.WORLD, KEYS.world_clock, clock(1)[0])),  # another key
+        (
+            b"[]",
+            RUN_KEYS.seal(names.WORLD, KEYS.of(keyspace.BEACON_CLOCK, "nest"), b"[]"),
+        ),  # no clock
+        (
+            clock(1)[0],
+            RUN_KEYS.seal(names.WORLD, KEYS.of(keyspace.CLOCK), clock(1)[0]),
+        ),  # another key
         clock(guard.TICK_WINDOW + 5 + 1),  # beyond the window of tick 0 (and a period)
     ],
     ids=[
@@ -138,7 +147,7 @@ def test_a_new_world_is_followed_from_its_tick_zero() -> None:
     endpoint.world_vanished("first")
     endpoint.world_appeared("second")
     answer = endpoint.receive_clock(*clock(0))  # its tick 0, and a transmission at once
-    assert [message.kind for message in answer] == [OutputKind.RADIO_TX, OutputKind.ACK]
+    assert [message.kind for message in answer] == [keyspace.RADIO_TX, keyspace.ACK]
     assert endpoint.rejected == 0
 
 

@@ -14,7 +14,8 @@ from fakes import FakeSwarm, make_swarm
 from mcap.reader import make_reader
 from swarm_helpers import run_swarm, unique_run_id
 
-from deploy.analysis.summary import RobotRecord, RunOutcome, build_summary, byzantine_in_config
+from bestofn_swarm.wire import keyspace, names, protocol, settings
+from bestofn_swarm.wire.rng import Stream
 from deploy.cli import main as swarm_main
 from robot_agent.core import byzantine, decision, ports
 from robot_agent.core.byzantine import Behaviour, ByzantineRobot
@@ -22,9 +23,13 @@ from robot_agent.core.controller import ControllerConfig
 from robot_agent.node import cli as node
 from robot_agent.node import options
 from robot_agent.node.options import RobotAgentConfig
-from wire import names, protocol, settings
-from wire.rng import Stream
 from world_server.core.layout import make_layout
+from world_server.observer.summary import (
+    RobotRecord,
+    RunOutcome,
+    build_summary,
+    byzantine_in_config,
+)
 
 # --- the wrappers, on a lone robot in the fake world -----------------------------------
 
@@ -205,11 +210,11 @@ def test_robot_agent_refuses_bad_switches_with_code_2(
 def test_swarm_run_forwards_each_switch_only_to_the_process_hosting_the_robot(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
+    from bestofn_swarm.plumbing.inbox import BoundedInbox
     from deploy.cli import build_parser
     from deploy.launcher.plan import plan_from_args
     from deploy.launcher.supervisor import Supervisor
     from deploy.security.credentials import RunNetwork
-    from plumbing.inbox import BoundedInbox
 
     parser = build_parser(["run"])
     seed, sites = 4, 6
@@ -395,12 +400,12 @@ def test_a_real_run_with_a_liar_and_an_inverted_robot_matches_the_in_process_run
     assert (summary["consensus"], summary["chosen_site"]) == (True, liar_site)
     assert liar_site != summary["best_site"]
 
-    keys = protocol.Keys(summary["run_id"])
+    keys = keyspace.Keys(summary["run_id"])
     broadcasts: dict[int, list[dict[str, Any]]] = {robot: [] for robot in range(robots)}
     with open(path, "rb") as stream:
         for _, channel, message in make_reader(stream).iter_messages():
             for robot in range(robots):
-                if channel.topic == keys.radio_tx(names.robot_name(robot)):
+                if channel.topic == keys.of(keyspace.RADIO_TX, names.robot_name(robot)):
                     broadcasts[robot].append(json.loads(message.data)["payload"])
     claim = byzantine.one_hot(liar_site, sites)
     lies = broadcasts[1]

@@ -20,9 +20,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core.vision import decode_frame, estimate_quality
-from wire import protocol
-from wire.rng import Stream
 from world_server.core.camera import (
     FLOOR_BGR,
     WALL_BGR,

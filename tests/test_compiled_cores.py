@@ -1,7 +1,7 @@
 """The compiled cores give the same runs as the source they are compiled from.
 
-``plumbing/cores.py`` builds the pure modules of a tick with mypyc; the interpreted source
-stays the reference. The probe of the portability test (a few swarms covering physics,
+``bestofn_swarm/plumbing/cores.py`` builds the pure modules of a tick with mypyc; the interpreted
+source stays the reference. The probe of the portability test (a few swarms covering physics,
 navigation, camera noise, radio and range loss, the log-linear pool, a rival strategy,
 lingering and 40 robots; the Section 4 model; the numeric kernel on a grid) runs once with
 the compiled cores and once from a copy of the source without them: every result must be
@@ -20,11 +20,11 @@ from typing import Any
 import portable_probe
 import pytest
 
-from plumbing import cores
+from bestofn_swarm.plumbing import cores
 
 REPO = Path(__file__).resolve().parent.parent
-PACKAGES = ("wire", "robot_agent", "world_server", "nest_beacon", "deploy", "plumbing",
-            "wellstirred", "viewer", "link", "examples", "tests")  # fmt: skip
+PACKAGES = ("bestofn_swarm", "robot_agent", "world_server", "nest_beacon", "deploy", "examples",
+            "tests")  # fmt: skip
 # Tests that recognise a function by its frame, which compiled code does not have: they
 # skip with the compiled cores and run here from the source.
 BY_FRAME = ("tests/test_ports_contract.py",)

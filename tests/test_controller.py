@@ -20,11 +20,11 @@ from fakes import (
     site_frame,
 )
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.numeric import wrap_angle
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import ports, vision
 from robot_agent.core.controller import Controller, ControllerConfig
-from wire import protocol
-from wire.numeric import wrap_angle
-from wire.rng import Stream
 from world_server.core.camera import CameraRenderer
 from world_server.core.layout import make_layout
 

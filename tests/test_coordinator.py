@@ -9,13 +9,13 @@ from typing import Any, Literal
 
 import pytest
 
-from wire import auth, batch, names, protocol
-from wire.names import Role
+from bestofn_swarm.wire import auth, batch, keyspace, names, protocol
+from bestofn_swarm.wire.names import Role
 from world_server.core.coordinator import NO_ID_LEFT, UNAUTHENTICATED, Coordinator
 from world_server.core.events import (
     Answered,
     Event,
-    EventKind,
+    Happening,
     Mark,
     Moment,
     Opened,
@@ -28,7 +28,7 @@ from world_server.core.roster import MAX_BEACONS, SUSPEND_AFTER, Host
 from world_server.core.world import World, WorldConfig
 from world_server.server.timeline import TickTimeline
 
-KEYS = protocol.Keys("coord")
+KEYS = keyspace.Keys("coord")
 KEYRING = auth.Keyring(secret=bytes(range(32)))
 STALL = 5.0
 START = 60.0
@@ -51,7 +51,7 @@ class Harness:
         """The ticks the world's clock announced, in order."""
         return [
             protocol.decode(out.payload, protocol.Clock).tick
-            for out in self.published(KEYS.world_clock)
+            for out in self.published(KEYS.of(keyspace.CLOCK))
         ]
 
 
@@ -80,7 +80,7 @@ def harness(
     # Every robot and the nest beacon prove themselves present first, as their processes do
     # (they ask world/info before they declare their tokens): their tokens then join.
     for identity in [*(names.robot_identity(robot) for robot in range(robots)), "beacon/nest"]:
-        coordinator.take(query(EventKind.INFO, KEYS.world_info, identity), 0.0)
+        coordinator.take(query(keyspace.INFO, KEYS.of(keyspace.INFO), identity), 0.0)
     return Harness(coordinator, outputs)
 
 
@@ -107,12 +107,12 @@ def act(
     wheels: float = 0.1,
     keyring: auth.Keyring | None = KEYRING,
 ) -> Event:
-    key = KEYS.act(robot)
+    key = KEYS.of(keyspace.ACT, robot)
     payload = protocol.encode(
         protocol.Act(v=1, tick=tick, left=wheels, right=wheels, capture=capture, radio_tx=radio_tx)
     )
     attachment = keyring.seal(names.robot_identity(robot), key, payload) if keyring else None
-    return Event(EventKind.ACT, key, payload, attachment)
+    return Event(keyspace.ACT, key, payload, attachment)
 
 
 def batch_of(
@@ -128,39 +128,41 @@ def batch_of(
         (robot, protocol.Act(v=1, tick=tick, left=0.1, right=0.1, capture=False, radio_tx=0))
         for robot, tick in answers
     ]
-    key = KEYS.host_act(first)
+    key = KEYS.of(keyspace.HOST_ACT, first)
     payload = batch.encode_acts(last, acts)
     identity = identity or names.host_identity(first, last)
     attachment = keyring.seal(identity, key, payload) if keyring else None
-    return Event(EventKind.ACTS, key, payload, attachment)
+    return Event(keyspace.HOST_ACT, key, payload, attachment)
 
 
 def ack(name: str, tick: int, radio_tx: int = 0, next_tick: int | None = None) -> Event:
-    key = KEYS.beacon_ack(name)
+    key = KEYS.of(keyspace.ACK, name)
     payload = protocol.encode(protocol.Ack(v=1, tick=tick, radio_tx=radio_tx, next_tick=next_tick))
     return Event(
-        EventKind.ACK, key, payload, KEYRING.seal(names.beacon_identity(name), key, payload)
+        keyspace.ACK, key, payload, KEYRING.seal(names.beacon_identity(name), key, payload)
     )
 
 
 def tx(sender: str, tick: int, seq: int, keyring: auth.Keyring = KEYRING) -> Event:
-    key = KEYS.radio_tx(sender)
+    key = KEYS.of(keyspace.RADIO_TX, sender)
     payload = b'{"kind":"beacon","v":1,"id":"nest","seq":1}'
     meta = protocol.encode(protocol.RadioTxMeta(v=1, tick=tick, seq=seq))
     identity = names.sender_identity(sender)
     assert identity is not None
-    return Event(EventKind.TX, key, payload, keyring.seal(identity, key, payload, meta))
+    return Event(keyspace.RADIO_TX, key, payload, keyring.seal(identity, key, payload, meta))
 
 
 def alive(role: Role, ident: str) -> Event:
-    return Event(EventKind.ALIVE, KEYS.alive(role, ident))
+    return Event(keyspace.TOKEN_OF[role], KEYS.token(role, ident))
 
 
 def gone(role: Role, ident: str) -> Event:
-    return Event(EventKind.GONE, KEYS.alive(role, ident))
+    return Event(keyspace.TOKEN_OF[role], KEYS.token(role, ident), gone=True)
 
 
-def query(kind: EventKind, key: str, identity: str, keyring: auth.Keyring = KEYRING) -> Event:
+def query(
+    kind: keyspace.KeyKind, key: str, identity: str, keyring: auth.Keyring = KEYRING
+) -> Event:
     attachment = auth.query_seal(keyring, identity, key, b"", NONCE)
     return Event(kind, key, b"", attachment, query=object())
 
@@ -184,8 +186,8 @@ def test_the_run_starts_when_the_expected_robots_and_beacons_are_live() -> None:
     h.coordinator.handle(alive(Role.BEACON, "nest"), 2.0)
     assert h.coordinator.phase == "running"
     assert h.clocks() == [0]
-    assert [len(h.published(KEYS.sense(robot))) for robot in (0, 1)] == [1, 1]
-    assert len(h.published(KEYS.world_state)) == 1  # tick 0: every state_every ticks
+    assert [len(h.published(KEYS.of(keyspace.SENSE, robot))) for robot in (0, 1)] == [1, 1]
+    assert len(h.published(KEYS.of(keyspace.STATE))) == 1  # tick 0: every state_every ticks
     assert h.coordinator.deadline == 2.0 + STALL
 
 
@@ -203,12 +205,12 @@ def test_the_start_timeout_starts_with_the_robots_there_are_but_not_with_none() 
 def test_a_stop_publishes_the_last_state_of_a_running_world_only() -> None:
     waiting = harness()
     waiting.coordinator.begin(0.0)
-    waiting.coordinator.handle(Event(EventKind.STOP), 1.0)
+    waiting.coordinator.handle(Event(Happening.STOP), 1.0)
     assert waiting.coordinator.stopped and waiting.outputs == []
     h = started()
     h.outputs.clear()
-    h.coordinator.handle(Event(EventKind.STOP), 1.0)
-    assert h.coordinator.stopped and len(h.published(KEYS.world_state)) == 1
+    h.coordinator.handle(Event(Happening.STOP), 1.0)
+    assert h.coordinator.stopped and len(h.published(KEYS.of(keyspace.STATE))) == 1
     h.coordinator.handle(alive(Role.ROBOT, "0"), 2.0)  # nothing is taken after a stop
     assert h.coordinator.deadline is None and h.coordinator.roster.pending == []
 
@@ -283,7 +285,7 @@ def test_a_join_takes_effect_when_the_tick_under_way_closes() -> None:
     assert h.coordinator.counters.late == 1
     answer_all(h, 1, 0.5, robots=(0,))
     assert h.world.tick == 2 and h.world.live_robots() == [0, 1]
-    sense = protocol.decode(h.published(KEYS.sense(1))[0].payload, protocol.Sense)
+    sense = protocol.decode(h.published(KEYS.of(keyspace.SENSE, 1))[0].payload, protocol.Sense)
     assert sense.tick == 2
     assert sorted(h.coordinator.intake.barrier.answers) == ["beacon/nest", "robot/0", "robot/1"]
 
@@ -298,7 +300,7 @@ def test_with_nobody_left_the_world_idles_and_the_next_token_closes_the_tick_at_
     assert h.world.tick == 0 and h.coordinator.counters.stalls == 0
     h.coordinator.handle(alive(Role.ROBOT, "1"), 1001.0)
     assert h.world.tick == 1 and h.world.live_robots() == [1]
-    sense = protocol.decode(h.published(KEYS.sense(1))[-1].payload, protocol.Sense)
+    sense = protocol.decode(h.published(KEYS.of(keyspace.SENSE, 1))[-1].payload, protocol.Sense)
     assert sense.tick == 1
     assert list(h.coordinator.intake.barrier.answers) == ["robot/1"]
 
@@ -320,7 +322,7 @@ def test_departures_are_counted_once_for_robots_and_beacons_taking_part() -> Non
 
 def present(h: Harness, identity: str) -> None:
     """``identity`` proves itself present: an authenticated world/info query."""
-    h.coordinator.handle(query(EventKind.INFO, KEYS.world_info, identity), 0.0)
+    h.coordinator.handle(query(keyspace.INFO, KEYS.of(keyspace.INFO), identity), 0.0)
 
 
 def test_more_than_max_beacons_beacons_are_refused() -> None:
@@ -342,7 +344,7 @@ def test_tokens_without_proof_of_presence_never_join_nor_fill_the_beacons() -> N
     h.coordinator.begin(0.0)
     for index in range(20):
         h.coordinator.handle(alive(Role.BEACON, f"fake{index}"), 0.0)
-    forged = query(EventKind.INFO, KEYS.world_info, "beacon/fake0", keyring=OTHER_RUN)
+    forged = query(keyspace.INFO, KEYS.of(keyspace.INFO), "beacon/fake0", keyring=OTHER_RUN)
     h.coordinator.handle(forged, 0.0)  # a proof without the key: refused, counted
     h.coordinator.handle(alive(Role.ROBOT, "0"), 0.0)
     h.coordinator.handle(alive(Role.ROBOT, "1"), 0.0)
@@ -379,13 +381,13 @@ def test_a_batch_route_is_learnt_from_current_acts_and_forgotten_when_the_lead_g
     h.coordinator.handle(ack("nest", 0), 0.0)
     host = Host(0, 1)
     assert h.world.tick == 1 and h.coordinator.roster.hosts == {0: host, 1: host}
-    batches = h.published(KEYS.host_sense(0))
+    batches = h.published(KEYS.of(keyspace.HOST_SENSE, 0))
     assert len(batches) == 1 and batches[0].steady
     # One tag for the batch, the host's; the senses are the robots' own (made at once).
     auth.unseal(
         KEYRING.only([host.identity]),
         host.identity,
-        KEYS.host_sense(0),
+        KEYS.of(keyspace.HOST_SENSE, 0),
         batches[0].payload,
         batches[0].attachment,
     )
@@ -393,14 +395,17 @@ def test_a_batch_route_is_learnt_from_current_acts_and_forgotten_when_the_lead_g
     assert senses.last == 1 and senses.robots == [0, 1]
     assert [sense.tick for sense in senses.senses] == [1, 1]
     assert senses.senses == h.world.senses([0, 1], {}, ()).messages()
-    assert len(h.published(KEYS.sense(1))) == 1  # tick 0's, on its own key
+    assert len(h.published(KEYS.of(keyspace.SENSE, 1))) == 1  # tick 0's, on its own key
     h.coordinator.handle(gone(Role.ROBOT, "0"), 0.0)  # the first robot's process is gone
     assert h.coordinator.roster.hosts == {}
     h.coordinator.handle(act(1, 1), 0.0)
     h.coordinator.handle(ack("nest", 1), 0.0)
     assert h.world.tick == 2
-    assert len(h.published(KEYS.host_sense(0))) == 1  # no batch for tick 2
-    assert protocol.decode(h.published(KEYS.sense(1))[-1].payload, protocol.Sense).tick == 2
+    assert len(h.published(KEYS.of(keyspace.HOST_SENSE, 0))) == 1  # no batch for tick 2
+    assert (
+        protocol.decode(h.published(KEYS.of(keyspace.SENSE, 1))[-1].payload, protocol.Sense).tick
+        == 2
+    )
 
 
 def test_a_host_speaks_only_for_the_robots_it_hosts() -> None:
@@ -426,8 +431,11 @@ def test_an_old_batch_replayed_teaches_no_route() -> None:
     h.coordinator.handle(stale, 0.0)
     assert h.coordinator.roster.hosts == {} and h.coordinator.counters.late == 2
     answer_all(h, 1)
-    assert h.published(KEYS.host_sense(0)) == []
-    assert protocol.decode(h.published(KEYS.sense(0))[-1].payload, protocol.Sense).tick == 2
+    assert h.published(KEYS.of(keyspace.HOST_SENSE, 0)) == []
+    assert (
+        protocol.decode(h.published(KEYS.of(keyspace.SENSE, 0))[-1].payload, protocol.Sense).tick
+        == 2
+    )
 
 
 # --- the beacon -----------------------------------------------------------------------
@@ -435,7 +443,7 @@ def test_an_old_batch_replayed_teaches_no_route() -> None:
 
 def beacon_clocks(h: Harness) -> list[int]:
     """The ticks the nest beacon was sent its clock for."""
-    published = h.published(KEYS.beacon_clock("nest"))
+    published = h.published(KEYS.of(keyspace.BEACON_CLOCK, "nest"))
     for message in published:
         KEYRING.open(names.WORLD, message.key, message.payload, message.attachment)
     return [protocol.decode(message.payload, protocol.Clock).tick for message in published]
@@ -460,7 +468,7 @@ def test_the_beacon_takes_part_in_the_ticks_it_answers_only() -> None:
     assert h.world.tick == 5 and h.coordinator.counters.stalls == 0
     assert beacon_clocks(h) == [0, 3, 4, 5]
     assert h.clocks() == [0, 1, 2, 3, 4, 5]  # world/clock, for observers, every tick
-    assert all(out.if_heard for out in h.published(KEYS.world_clock))
+    assert all(out.if_heard for out in h.published(KEYS.of(keyspace.CLOCK)))
 
 
 def test_a_beacon_that_leaves_and_comes_back_is_sent_every_tick_until_it_answers() -> None:
@@ -487,13 +495,13 @@ def test_real_time_closes_ticks_on_the_pacers_clock_holding_commands_capturing_o
     assert h.world.tick == 0
     h.coordinator.wake(100.11)
     assert h.world.tick == 1 and h.coordinator.deadline == pytest.approx(100.2)
-    assert len(h.published(KEYS.camera(0))) == 1
+    assert len(h.published(KEYS.of(keyspace.CAMERA, 0))) == 1
     held = h.coordinator.intake.acts[0]
     assert (held.left, held.right, held.capture) == (0.5, 0.5, False)  # the command holds
     x1 = h.world.physics.pose(0)[:2]
     h.coordinator.wake(100.21)
     assert h.world.tick == 2
-    assert len(h.published(KEYS.camera(0))) == 1  # the capture happened once
+    assert len(h.published(KEYS.of(keyspace.CAMERA, 0))) == 1  # the capture happened once
     assert h.world.physics.pose(0)[:2] != x1  # still driving
 
 
@@ -566,7 +574,7 @@ OTHER_RUN = auth.Keyring(secret=bytes(32))
 ACT_PAYLOAD = act(0, 0).payload
 
 
-def sealed(kind: EventKind, key: str, payload: bytes, identity: str) -> Event:
+def sealed(kind: keyspace.KeyKind, key: str, payload: bytes, identity: str) -> Event:
     return Event(kind, key, payload, KEYRING.seal(identity, key, payload))
 
 
@@ -575,9 +583,11 @@ def sealed(kind: EventKind, key: str, payload: bytes, identity: str) -> Event:
     [
         act(0, 0, keyring=OTHER_RUN),  # forged: another run's key
         act(0, 0, keyring=None),  # no tag in a keyed run
-        sealed(EventKind.ACT, KEYS.act(0), ACT_PAYLOAD, "robot/1"),  # robot 1 speaking for 0
-        sealed(EventKind.ACT, KEYS.act(7), ACT_PAYLOAD, "robot/7"),  # outside the swarm
-        sealed(EventKind.ACT, KEYS.act(0), b"{not json", "robot/0"),
+        sealed(
+            keyspace.ACT, KEYS.of(keyspace.ACT, 0), ACT_PAYLOAD, "robot/1"
+        ),  # robot 1 speaking for 0
+        sealed(keyspace.ACT, KEYS.of(keyspace.ACT, 7), ACT_PAYLOAD, "robot/7"),  # outside the swarm
+        sealed(keyspace.ACT, KEYS.of(keyspace.ACT, 0), b"{not json", "robot/0"),
         act(0, 5),  # a tick that has not begun
         batch_of(7, 7, (0, 0)),  # a first robot outside the swarm
         batch_of(0, 7, (0, 0)),  # a last robot outside the swarm
@@ -586,16 +596,16 @@ def sealed(kind: EventKind, key: str, payload: bytes, identity: str) -> Event:
         batch_of(0, 1, (0, 0), identity="robot/0"),  # a robot's key, not its host's
         batch_of(0, 0, (0, 0), identity=names.host_identity(0, 1)),  # another host's key
         batch_of(0, 0, (1, 0)),  # host 0-0 speaking for robot 1
-        Event(EventKind.ACTS, KEYS.host_act(0), b"BNA1 cut short"),
+        Event(keyspace.HOST_ACT, KEYS.of(keyspace.HOST_ACT, 0), b"BNA1 cut short"),
         ack("nest", 0, next_tick=0),  # the next tick it answers is not after this one
-        Event(EventKind.ACK, KEYS.beacon_ack("7"), ack("nest", 0).payload),  # no beacon name
-        Event(EventKind.ACK, KEYS.beacon_ack("nest"), ack("nest", 0).payload),  # untagged
+        Event(keyspace.ACK, KEYS.of(keyspace.ACK, "7"), ack("nest", 0).payload),  # no beacon name
+        Event(keyspace.ACK, KEYS.of(keyspace.ACK, "nest"), ack("nest", 0).payload),  # untagged
         tx("99", 0, 1),  # no robot of the swarm
         tx("0", 0, 1, keyring=OTHER_RUN),
         tx("0", 3, 1),  # radio for a tick that has not begun
         alive(Role.ROBOT, "2"),  # a token outside a swarm of two
         alive(Role.BEACON, "07"),  # all digits: a robot's name, not a beacon's
-        Event(EventKind.REFUSED, KEYS.world_info, b"no authentication tag"),
+        Event(Happening.REFUSED, KEYS.of(keyspace.INFO), b"no authentication tag"),
     ],
 )
 def test_forged_and_foreign_inputs_are_refused_and_counted(event: Event) -> None:
@@ -605,7 +615,7 @@ def test_forged_and_foreign_inputs_are_refused_and_counted(event: Event) -> None
     assert h.coordinator.counters.late == 0
     assert h.coordinator.intake.acts == {} and h.coordinator.intake.transmissions == []
     assert h.world.live_robots() == [0, 1] and h.world.beacons() == ["nest"]
-    if event.kind == EventKind.TX:  # the radio counts the medium's refusals too
+    if event.kind == keyspace.RADIO_TX:  # the radio counts the medium's refusals too
         assert h.world.radio.counters.rejected == 1
     answer_all(h, 0, 0.1)  # the tick closes as ever: nothing was taken
     assert h.world.tick == 1 and h.coordinator.counters.stalls == 0
@@ -638,7 +648,7 @@ def _reply(h: Harness, event: Event) -> Reply | ReplyError:
 
 
 def _join(h: Harness, identity: str = "robot/0") -> int | bytes:
-    reply = _reply(h, query(EventKind.JOIN, KEYS.world_join, identity))
+    reply = _reply(h, query(keyspace.JOIN, KEYS.of(keyspace.JOIN), identity))
     if isinstance(reply, ReplyError):
         return reply.reason
     auth.reply_open(
@@ -662,7 +672,7 @@ def test_join_hands_out_the_smallest_id_never_given_then_one_whose_robot_left() 
 def test_stats_answers_the_world_state_to_the_asker() -> None:
     h = started()
     h.coordinator.handle(act(0, 0, keyring=OTHER_RUN), 0.0)
-    reply = _reply(h, query(EventKind.STATS, KEYS.world_stats, names.LAUNCHER))
+    reply = _reply(h, query(keyspace.STATS, KEYS.of(keyspace.STATS), names.LAUNCHER))
     assert isinstance(reply, Reply)
     auth.reply_open(
         KEYRING, names.LAUNCHER, reply.key, reply.payload, reply.attachment, nonce=NONCE
@@ -671,10 +681,10 @@ def test_stats_answers_the_world_state_to_the_asker() -> None:
     assert (state.tick, state.rejected, len(state.robots)) == (0, 1, 2)
 
 
-@pytest.mark.parametrize("kind", [EventKind.JOIN, EventKind.STATS])
-def test_an_unauthenticated_query_is_refused_and_counted(kind: EventKind) -> None:
+@pytest.mark.parametrize("kind", [keyspace.JOIN, keyspace.STATS])
+def test_an_unauthenticated_query_is_refused_and_counted(kind: keyspace.KeyKind) -> None:
     h = started()
-    key = KEYS.world_join if kind == EventKind.JOIN else KEYS.world_stats
+    key = KEYS.of(keyspace.JOIN) if kind == keyspace.JOIN else KEYS.of(keyspace.STATS)
     forged = query(kind, key, "robot/0", keyring=OTHER_RUN)
     assert _reply(h, forged) == ReplyError(forged.query, UNAUTHENTICATED)
     assert h.coordinator.counters.rejected == 1 and h.coordinator.roster.assigned == {0, 1}
@@ -688,7 +698,10 @@ def test_what_the_world_sends_a_robot_carries_that_robots_tag() -> None:
     h.coordinator.handle(act(0, 0, capture=True), 0.0)
     answer_all(h, 0, robots=(1,))
     robot_keyring = KEYRING.only(["robot/0"])
-    for key, kind in ((KEYS.sense(0), protocol.Sense), (KEYS.camera(0), None)):
+    for key, kind in (
+        (KEYS.of(keyspace.SENSE, 0), protocol.Sense),
+        (KEYS.of(keyspace.CAMERA, 0), None),
+    ):
         message = h.published(key)[-1]
         metadata = auth.unseal(robot_keyring, "robot/0", key, message.payload, message.attachment)
         if kind is not None:
@@ -697,8 +710,8 @@ def test_what_the_world_sends_a_robot_carries_that_robots_tag() -> None:
         else:
             assert protocol.decode(metadata or b"", protocol.CameraMeta).tick == 1
             assert not message.steady
-    clock = h.published(KEYS.world_clock)[-1]
-    auth.unseal(KEYRING, names.WORLD, KEYS.world_clock, clock.payload, clock.attachment)
+    clock = h.published(KEYS.of(keyspace.CLOCK))[-1]
+    auth.unseal(KEYRING, names.WORLD, KEYS.of(keyspace.CLOCK), clock.payload, clock.attachment)
 
 
 def test_the_timeline_comes_out_in_the_order_of_the_ticks_work() -> None:

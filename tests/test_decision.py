@@ -11,6 +11,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from opinion_helpers import assert_close, assert_distribution, normalise, working_alphas
 
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core.decision import (
     choose_pair,
     decided_option,
@@ -20,7 +21,6 @@ from robot_agent.core.decision import (
     validate_alpha,
     validate_opinion,
 )
-from wire.rng import Stream
 
 # --- strategies ------------------------------------------------------------------------
 

@@ -10,11 +10,11 @@ from fakes import make_swarm
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import byzantine, defence, ports
 from robot_agent.core.beliefs import Beliefs
 from robot_agent.core.controller import ControllerConfig
 from robot_agent.core.decision import mprodop, negative_update, uniform_opinion
-from wire.rng import Stream
 
 TRIMMED = ControllerConfig(defence="trimmed", trim=1)
 

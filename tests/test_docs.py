@@ -17,9 +17,9 @@ import pytest
 from doc_references import REPO, Code, Reference, documents, problem, references, references_in
 from test_layering import ALLOWED
 
+from bestofn_swarm.wire.endings import exit_codes_help
 from deploy.cli import SUBCOMMANDS
 from deploy.study.catalogue import study_named
-from wire.endings import exit_codes_help
 
 # Names of code that is gone, in pages that say so ("as they were at the time"): the
 # profile of docs/performance.md was taken at 4f7c3a0, before the layers had folders.

@@ -1,5 +1,5 @@
-"""How a run ends, on its own (wire/endings.py): the rule both engines ask at every look,
-in every combination of conditions that hold at once; the endings' exit codes and the help
+"""How a run ends, on its own (bestofn_swarm/wire/endings.py): the rule both engines ask at every
+look, in every combination of conditions that hold at once; the endings' exit codes and the help
 made from them (tests/test_docs.py checks that docs/running.md shows that help)."""
 
 from __future__ import annotations
@@ -11,9 +11,7 @@ from typing import Any
 
 import pytest
 
-from deploy.inprocess.engine import EngineHooks, run_in_process
-from robot_agent.core.controller import ControllerConfig
-from wire.endings import (
+from bestofn_swarm.wire.endings import (
     ENDINGS,
     RESULT_CODES,
     Ending,
@@ -26,6 +24,8 @@ from wire.endings import (
     exit_codes_help,
     stop_reason,
 )
+from deploy.inprocess.engine import EngineHooks, run_in_process
+from robot_agent.core.controller import ControllerConfig
 from world_server.core.world import WorldConfig
 
 LIMIT, WALL_LIMIT = 100.0, 60.0

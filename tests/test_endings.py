@@ -29,8 +29,8 @@ from swarm_helpers import (
     unique_run_id,
 )
 
-from deploy.reports import report
-from plumbing.tcp import free_port
+from bestofn_swarm.plumbing.tcp import free_port
+from deploy.reports import collect
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -139,7 +139,7 @@ def test_a_stop_signal_to_the_job_ends_the_run_in_order(tmp_path: Path, case: st
     assert not summary["consensus"] and not summary["timed_out"]
     assert [robot["id"] for robot in summary["stuck"]] == [0, 1, 2, 3]
     if stop.record:
-        recording = report.read_recording(tmp_path / "run.mcap")
+        recording = collect.read_recording(tmp_path / "run.mcap")
         assert recording.complete and recording.summary is not None
         assert recording.summary["ended"] == "interrupted"
         assert recording.summary["stuck"] == summary["stuck"]

@@ -1,4 +1,4 @@
-"""Section 3's Equations (1)-(4) (``wellstirred.equations``), against the primitives."""
+"""Section 3's Equations (1)-(4) (``robot_agent.wellstirred.equations``), against the primitives."""
 
 from __future__ import annotations
 
@@ -10,15 +10,15 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 from opinion_helpers import assert_close, assert_distribution, normalise, working_alphas
 
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core.decision import choose_pair, mprodop, negative_update, uniform_opinion
-from wellstirred.equations import (
+from robot_agent.wellstirred.equations import (
     enumeration_terms,
     evidence_probability,
     expected_pooled_opinion,
     pooled_opinion,
     pooled_opinion_alpha0,
 )
-from wire.rng import Stream
 
 
 def test_evidence_probability() -> None:

@@ -19,7 +19,7 @@ from swarm_helpers import (
 )
 
 from deploy.cli import main
-from deploy.reports import report
+from deploy.reports import collect, report
 
 
 @pytest.mark.timeout(300)
@@ -67,7 +67,7 @@ def test_a_small_experiment_records_every_run_and_reports(tmp_path: Path) -> Non
         assert (row["robots"], row["sites"]) == (3, 5) and row["complete"]
         assert row["source"] == "metadata" and row["consensus"]
         assert row["ended"] == "consensus" and row["stuck"] == 0
-        config = json.loads(report.read_recording(Path(row["recording"])).description["config"])
+        config = json.loads(collect.read_recording(Path(row["recording"])).description["config"])
         assert config["stall_timeout"] == 5.0
         assert config["wall_timeout"] == 1800.0  # --run-timeout, passed on to every run
     for run_id in run_ids:
@@ -110,7 +110,7 @@ def test_runs_that_stall_are_results_labelled_with_their_ending(tmp_path: Path) 
     assert group["endings"] == {"stalled": 2} and group["aggregated_runs"] == 0
     assert group["swarm_steps"]["mean"] is None  # no consensus time to aggregate
     for row in result["runs"]:
-        config = json.loads(report.read_recording(Path(row["recording"])).description["config"])
+        config = json.loads(collect.read_recording(Path(row["recording"])).description["config"])
         assert config["stall_window"] == 20.0
 
 

@@ -30,9 +30,9 @@ from swarm_helpers import (
     unique_run_id,
 )
 
+from bestofn_swarm.wire import keyspace, protocol
+from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon, BeaconConfig
-from wire import protocol
-from wire.rng import Stream
 from world_server.core.camera import CameraNoise
 from world_server.core.layout import make_layout
 from world_server.core.radio import sender_order
@@ -302,7 +302,7 @@ def test_the_swarm_still_decides_right_with(switch: str, tmp_path: Path) -> None
 
 def test_robots_wait_for_a_lost_world_server_and_resume_with_a_new_one() -> None:
     run_id = unique_run_id("world-loss")
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     common = ["--run-id", run_id, "--seed", "4", "--mode", "client"]
     world_command = [
         sys.executable,
@@ -319,9 +319,9 @@ def test_robots_wait_for_a_lost_world_server_and_resume_with_a_new_one() -> None
     with loopback_router() as (session, endpoint):
         connect = ["--connect", endpoint]
         session.declare_subscriber(
-            keys.status("*"),
+            keys.of(keyspace.STATUS, "*"),
             lambda sample: statuses.__setitem__(
-                int(keys.robot_of(str(sample.key_expr)) or 0),
+                int(keys.robot_of(keyspace.STATUS, str(sample.key_expr)) or 0),
                 protocol.decode(sample.payload.to_bytes(), protocol.Status),
             ),
         )

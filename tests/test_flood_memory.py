@@ -24,7 +24,7 @@ import zenoh
 from swarm_helpers import REPO, kill_leftovers, loopback_router, processes_of, swarm_command
 from swarm_helpers import unique_run_id as new_run_id
 
-from wire import batch, protocol
+from bestofn_swarm.wire import batch, keyspace, protocol
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -106,7 +106,7 @@ def test_the_caps_table_states_a_cap_for_every_process() -> None:
 def test_a_flood_of_replays_and_junk_leaves_every_process_under_its_cap(tmp_path: Path) -> None:
     caps = stated_caps()
     run_id = new_run_id("flood")
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     heard: dict[str, tuple[bytes, bytes | None]] = {}
     ticks: list[int] = []
     with loopback_router() as (session, endpoint):
@@ -124,9 +124,13 @@ def test_a_flood_of_replays_and_junk_leaves_every_process_under_its_cap(tmp_path
 
         declared = [
             session.declare_subscriber(key, hear)
-            for key in (keys.act("*"), keys.host_act("*"), keys.status("*"))
+            for key in (
+                keys.of(keyspace.ACT, "*"),
+                keys.of(keyspace.HOST_ACT, "*"),
+                keys.of(keyspace.STATUS, "*"),
+            )
         ]
-        declared.append(session.declare_subscriber(keys.world_clock, on_clock))
+        declared.append(session.declare_subscriber(keys.of(keyspace.CLOCK), on_clock))
         command = swarm_command(
             "run", "--run-id", run_id, "--json", "--quiet", "--connect", endpoint,
             "--robots", "3", "--sites", "4", "--seed", "1", "--timeout", "600",
@@ -144,9 +148,13 @@ def test_a_flood_of_replays_and_junk_leaves_every_process_under_its_cap(tmp_path
                     time.sleep(0.05)
                 assert ticks and heard, "the run never got going"
                 junk = [
-                    (keys.host_act(0), os.urandom(batch.MAX_BATCH_BYTES), None),
-                    (keys.camera(0), os.urandom(protocol.MAX_CAMERA_FRAME_BYTES), None),
-                    (keys.status(0), os.urandom(60 * 1024), None),
+                    (keys.of(keyspace.HOST_ACT, 0), os.urandom(batch.MAX_BATCH_BYTES), None),
+                    (
+                        keys.of(keyspace.CAMERA, 0),
+                        os.urandom(protocol.MAX_CAMERA_FRAME_BYTES),
+                        None,
+                    ),
+                    (keys.of(keyspace.STATUS, 0), os.urandom(60 * 1024), None),
                 ]
                 replays = [(key, *message) for key, message in heard.items()]
                 stop_at = time.monotonic() + FLOOD_SECONDS

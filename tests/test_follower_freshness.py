@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import pytest
 
+from bestofn_swarm.wire import auth, keyspace, names, protocol
 from deploy.cli import build_parser
-from deploy.launcher.follower import Follower, Heard, Kind
+from deploy.launcher.follower import Follower, Heard
 from deploy.launcher.plan import plan_from_args
-from wire import auth, names, protocol
 
 KEYRING = auth.Keyring(secret=bytes(range(32)))
 
@@ -33,8 +33,8 @@ def state(follower: Follower, tick: int, x: float) -> Heard:
             stalls=0,
         )
     )
-    key = follower.keys.world_state
-    return Heard(Kind.STATE, key, payload, KEYRING.seal(names.WORLD, key, payload))
+    key = follower.keys.of(keyspace.STATE)
+    return Heard(keyspace.STATE, key, payload, KEYRING.seal(names.WORLD, key, payload))
 
 
 def test_an_old_world_state_replayed_is_refused_and_counted(follower: Follower) -> None:
@@ -43,7 +43,7 @@ def test_an_old_world_state_replayed_is_refused_and_counted(follower: Follower) 
     assert follower.take(state(follower, 200, 0.0), KEYRING)  # the last one again: harmless
     for tick, x in ((100, 0.5), (150, -0.5)):  # old ones, with other poses
         assert not follower.take(state(follower, tick, x), KEYRING)
-    assert follower.rejected == 2
-    assert follower.last_state is not None and follower.last_state.tick == 200
-    assert follower.sim_time == pytest.approx(20.0)
+    assert follower.run.rejected == 2
+    assert follower.run.last_state is not None and follower.run.last_state.tick == 200
+    assert follower.run.sim_time == pytest.approx(20.0)
     assert follower.take(state(follower, 210, 0.0), KEYRING)  # the world goes on

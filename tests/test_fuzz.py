@@ -12,17 +12,16 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from deploy.launcher.follower import Follower, Heard, Kind
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.wire import auth, keyspace, protocol
+from bestofn_swarm.wire.rng import Stream
+from deploy.launcher.follower import Follower, Heard
 from deploy.launcher.plan import plan_from_args
-from plumbing.inbox import BoundedInbox
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import RobotEndpoint
-from robot_agent.node.robot_node import Event, EventKind, RobotNode
-from wire import auth, protocol
-from wire.rng import Stream
+from robot_agent.node.robot_node import Event, RobotNode
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event as WorldEvent
-from world_server.core.events import EventKind as WorldEventKind
 from world_server.core.events import Output, Reply, ReplyError
 from world_server.core.world import World, WorldConfig
 
@@ -103,7 +102,7 @@ def _node() -> tuple[RobotNode, Controller, _Publisher]:
     publishes through those, never through the session."""
     info = _world_info()
     controller = Controller(1, info, ControllerConfig(), Stream(1))
-    endpoint = RobotEndpoint(1, keys=protocol.Keys("fuzz"), controller=controller, world=info)
+    endpoint = RobotEndpoint(1, keys=keyspace.Keys("fuzz"), controller=controller, world=info)
     # The session is never used: see the publishers below.
     node = RobotNode(endpoint, session=None, inbox=BoundedInbox())  # type: ignore[arg-type]
     act = _Publisher()
@@ -117,11 +116,11 @@ def _node() -> tuple[RobotNode, Controller, _Publisher]:
         st.tuples(
             st.sampled_from(
                 [
-                    EventKind.SENSE,
-                    EventKind.RX,
-                    EventKind.CAMERA,
-                    EventKind.WORLD,
-                    EventKind.NO_WORLD,
+                    keyspace.SENSE,
+                    keyspace.RADIO_RX,
+                    keyspace.CAMERA,
+                    "world",
+                    "no-world",
                 ]
             ),
             payloads(),
@@ -131,11 +130,14 @@ def _node() -> tuple[RobotNode, Controller, _Publisher]:
     )
 )
 def test_a_robot_survives_any_sequence_of_inputs(
-    events: list[tuple[EventKind, bytes, bytes | None]],
+    events: list[tuple[keyspace.KeyKind | str, bytes, bytes | None]],
 ) -> None:
     node, controller, act = _node()
     for kind, payload, attachment in events:
-        node.handle(Event(1, kind, payload, attachment))
+        if isinstance(kind, keyspace.KeyKind):
+            node.handle(Event(1, kind, payload, attachment))
+        else:  # a world server's token that appeared, or went
+            node.handle(Event(1, keyspace.ALIVE_WORLD, payload, gone=kind == "no-world"))
     opinion = controller.opinion
     assert all(value >= 0.0 and math.isfinite(value) for value in opinion)
     assert math.isclose(sum(opinion), 1.0, rel_tol=1e-9)
@@ -147,7 +149,7 @@ def _world_server(outputs: list[Output]) -> Coordinator:
     world = World(WorldConfig(run="fuzz", num_sites=5, num_robots=2))
     server = Coordinator(
         world,
-        protocol.Keys("fuzz"),
+        keyspace.Keys("fuzz"),
         outputs.append,
         stall_timeout=5.0,
         start_timeout=60.0,
@@ -233,6 +235,19 @@ def _check_message(kind: str, key: str, event: WorldEvent, change: _WorldCounts)
         assert _decodes(event.attachment, protocol.RadioTxMeta)
 
 
+# What the world server's transport hands its coordinator for each fuzzed input (a token's
+# key says whose it is: the roster reads it).
+WORLD_KINDS = {
+    "act": keyspace.ACT,
+    "ack": keyspace.ACK,
+    "tx": keyspace.RADIO_TX,
+    "alive": keyspace.ALIVE_ROBOT,
+    "gone": keyspace.ALIVE_ROBOT,
+    "join": keyspace.JOIN,
+    "stats": keyspace.STATS,
+}
+
+
 @FUZZ
 @given(
     events=st.lists(
@@ -288,7 +303,9 @@ def test_the_world_server_survives_any_sequence_of_inputs(
             continue
         query = object() if kind in ("join", "stats") else None
         outputs.clear()
-        event = WorldEvent(WorldEventKind(kind), key, payload, attachment, query=query)
+        event = WorldEvent(
+            WORLD_KINDS[kind], key, payload, attachment, query=query, gone=kind == "gone"
+        )
         server.take(event, 0.0)
         change = _WorldCounts.of(server) - before
         if kind in ("act", "ack", "tx"):
@@ -332,18 +349,18 @@ def _launcher_took(follower: Follower, kind: str, leaf: str, payload: bytes) -> 
     """Whether the launcher believed one status, clock, state or ack: what it keeps of
     that kind changed to the message (the launcher keeps nothing of a rejected one)."""
     if kind == "status":
-        robot = follower.keys.robot_of(f"{follower.keys.prefix}/{leaf}")
-        record = follower.records.get(robot) if robot is not None else None
+        robot = follower.keys.robot_of(keyspace.STATUS, f"{follower.keys.prefix}/{leaf}")
+        record = follower.run.records.get(robot) if robot is not None else None
         old = record.status if record is not None else None
         return lambda: record is not None and record.status is not old
     if kind == "clock":
-        follower.sim_time = -1.0  # no clock has this time
-        return lambda: follower.sim_time != -1.0
+        follower.run.sim_time = -1.0  # no clock has this time
+        return lambda: follower.run.sim_time != -1.0
     if kind == "state":
-        old_state = follower.last_state
-        return lambda: follower.last_state is not old_state
-    follower.beacon_rejected.clear()
-    return lambda: bool(follower.beacon_rejected)
+        old_state = follower.run.last_state
+        return lambda: follower.run.last_state is not old_state
+    follower.run.beacon_rejected.clear()
+    return lambda: bool(follower.run.beacon_rejected)
 
 
 STATUS = protocol.encode(
@@ -410,12 +427,12 @@ def test_the_launcher_survives_any_status_clock_or_state(
     rejected, exactly one of the two; in a keyed run nothing untagged is believed."""
     follower = observer.follower
     for kind, leaf, payload, attachment in events:
-        before = follower.rejected
+        before = follower.run.rejected
         took = _launcher_took(follower, kind, leaf, payload)
-        heard = Heard(Kind(kind), f"{follower.keys.prefix}/{leaf}", payload, attachment)
+        heard = Heard(keyspace.BY_NAME[kind], f"{follower.keys.prefix}/{leaf}", payload, attachment)
         believed = follower.take(heard, observer.keyring)
         assert believed == took()
-        assert follower.rejected - before == (0 if believed else 1), (kind, leaf, payload)
+        assert follower.run.rejected - before == (0 if believed else 1), (kind, leaf, payload)
         if believed:
             assert observer.keyring is None
             assert _decodes(payload, LAUNCHER_KINDS[kind])

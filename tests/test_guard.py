@@ -1,4 +1,4 @@
-"""What each receiver checks before it believes a message (wire/guard.py and its
+"""What each receiver checks before it believes a message (bestofn_swarm/wire/guard.py and its
 users), without processes: tick windows, one world at a time, a robot's memory budget, the
 world's handling of replays, foreign ids and senders that leave."""
 
@@ -6,14 +6,14 @@ from __future__ import annotations
 
 import pytest
 
+from bestofn_swarm.wire import auth, guard, keyspace, protocol
+from bestofn_swarm.wire.names import Role
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core.controller import Controller, ControllerConfig
-from robot_agent.core.endpoint import InputKind, RobotEndpoint
+from robot_agent.core.endpoint import RobotEndpoint
 from robot_agent.core.tick_assembly import PENDING_BYTES
-from wire import auth, guard, protocol
-from wire.rng import Stream
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event as WorldEvent
-from world_server.core.events import EventKind
 from world_server.core.world import Transmission, World, WorldConfig
 
 SECRET = bytes(range(32))
@@ -84,7 +84,7 @@ def _robot(keyring: auth.Keyring | None) -> RobotEndpoint:
     info = World(WorldConfig(num_sites=4, num_robots=2)).info
     controller = Controller(1, info, ControllerConfig(), Stream(1))
     return RobotEndpoint(
-        1, keys=protocol.Keys("guard"), controller=controller, world=info, keyring=keyring
+        1, keys=keyspace.Keys("guard"), controller=controller, world=info, keyring=keyring
     )
 
 
@@ -95,7 +95,7 @@ def _rx(
     meta = protocol.encode(
         protocol.RadioRxMeta(v=1, tick=tick, sender="0", seq=tick, sent_tick=tick - 1)
     )
-    key = robot.keys.radio_rx(1)
+    key = robot.keys.of(keyspace.RADIO_RX, 1)
     return payload, auth.seal(keyring, "robot/1", key, payload, meta)
 
 
@@ -108,12 +108,12 @@ def test_radio_for_future_ticks_is_held_only_within_the_robots_budget(keyed: boo
     robot.assembly.ticks.last = 10
     size, count = 20_000, 400
     for index in range(count):
-        robot.receive(InputKind.RADIO_RX, *_rx(robot, 11 + index % 100, size, keyring))
+        robot.receive(keyspace.RADIO_RX, *_rx(robot, 11 + index % 100, size, keyring))
     held = PENDING_BYTES // size
     assert robot.assembly.pending_bytes == held * size <= PENDING_BYTES
     assert robot.rejects.count == count - held
     too_far = _rx(robot, 10 + guard.TICK_WINDOW + 1, 10, keyring)
-    robot.receive(InputKind.RADIO_RX, *too_far)
+    robot.receive(keyspace.RADIO_RX, *too_far)
     assert robot.rejects.count == count - held + 1
 
 
@@ -121,8 +121,8 @@ def test_a_keyed_robot_holds_nothing_without_its_key() -> None:
     robot = _robot(auth.Keyring(secret=SECRET).only(["robot/1"]))
     forged = auth.Keyring(secret=bytes(32)).only(["robot/1"])  # another run's key
     for tick in range(1, 50):
-        robot.receive(InputKind.RADIO_RX, *_rx(robot, tick, 1000, None))
-        robot.receive(InputKind.RADIO_RX, *_rx(robot, tick, 1000, forged))
+        robot.receive(keyspace.RADIO_RX, *_rx(robot, tick, 1000, None))
+        robot.receive(keyspace.RADIO_RX, *_rx(robot, tick, 1000, forged))
     assert robot.assembly.pending == {} and robot.assembly.pending_bytes == 0
     assert robot.rejects.count == 98
 
@@ -134,7 +134,7 @@ def _world_server(keyring: auth.Keyring | None = None) -> Coordinator:
     world = World(WorldConfig(run="guard", num_sites=4, num_robots=2))
     server = Coordinator(
         world,
-        protocol.Keys("guard"),
+        keyspace.Keys("guard"),
         lambda output: None,
         stall_timeout=5.0,
         start_timeout=60.0,
@@ -148,11 +148,11 @@ def _world_server(keyring: auth.Keyring | None = None) -> Coordinator:
 
 
 def _tx(server: Coordinator, sender: int, seq: int, keyring: auth.Keyring) -> WorldEvent:
-    key = server.keys.radio_tx(sender)
+    key = server.keys.of(keyspace.RADIO_TX, sender)
     payload = b'{"kind":"opinion"}'
     meta = protocol.encode(protocol.RadioTxMeta(v=1, tick=0, seq=seq))
     return WorldEvent(
-        EventKind.TX, key, payload, keyring.seal(f"robot/{sender}", key, payload, meta)
+        keyspace.RADIO_TX, key, payload, keyring.seal(f"robot/{sender}", key, payload, meta)
     )
 
 
@@ -169,7 +169,7 @@ def test_the_world_takes_a_robots_transmission_once_per_tick() -> None:
 @pytest.mark.parametrize("ident", ["2", "99999", "01", "-1", "x"])
 def test_the_world_refuses_a_robot_token_outside_its_swarm(ident: str) -> None:
     server = _world_server()
-    server.take(WorldEvent(EventKind.ALIVE, f"{server.keys.prefix}/alive/robot/{ident}"), 0.0)
+    server.take(WorldEvent(keyspace.ALIVE_ROBOT, server.keys.token(Role.ROBOT, ident)), 0.0)
     server.roster.apply_joins()
     assert server.world.live_robots() == [0, 1]
     assert server.counters.rejected == 1

@@ -1,5 +1,5 @@
-"""The bounded inbox (plumbing/inbox.py) charges what a queued message really costs, and the
-recorder's writer keeps no more keys than a run has (world_server/recording/writer.py)."""
+"""The bounded inbox (bestofn_swarm/plumbing/inbox.py) charges what a queued message really costs,
+and the recorder's writer keeps no more keys than a run has (world_server/recording/writer.py)."""
 
 from __future__ import annotations
 
@@ -13,15 +13,13 @@ from typing import Any
 
 import pytest
 
-from deploy.launcher.follower import Heard, Kind
+from bestofn_swarm.plumbing.inbox import ITEM_OVERHEAD_BYTES, BoundedInbox, message_bytes
+from bestofn_swarm.wire import keyspace, protocol
+from deploy.launcher.follower import Heard
 from nest_beacon.node.beacon_node import Event as BeaconEvent
-from nest_beacon.node.beacon_node import EventKind as BeaconKind
-from plumbing.inbox import ITEM_OVERHEAD_BYTES, BoundedInbox, message_bytes
 from robot_agent.node.robot_node import Event as RobotEvent
-from robot_agent.node.robot_node import EventKind as RobotKind
 from robot_agent.node.robot_node import LatestSenses
-from wire import protocol
-from world_server.core.events import Event, EventKind
+from world_server.core.events import Event
 from world_server.recording import writer
 from world_server.recording.description import RunDescription
 from world_server.recording.writer import KEYS_OF_A_RUN, KEYS_PER_ROBOT, McapRecorder, Sample
@@ -87,11 +85,11 @@ def _measured_bytes(make: Callable[[bytes, bytes], Any], payload: int, count: in
 
 # What each process's inbox holds, as its Zenoh callback makes it (a key string per message).
 QUEUED: dict[str, Callable[[bytes, bytes], Any]] = {
-    "world": lambda payload, tag: Event(EventKind.ACT, KEY[:-3] + "act", payload, tag),
+    "world": lambda payload, tag: Event(keyspace.ACT, KEY[:-3] + "act", payload, tag),
     "recorder": lambda payload, tag: Sample(KEY[:-3] + "act", payload, tag, time.time_ns()),
-    "launcher": lambda payload, tag: Heard(Kind.STATUS, KEY[:-3] + "act", payload, tag),
-    "robot": lambda payload, tag: RobotEvent(1, RobotKind.RX, payload, tag),
-    "beacon": lambda payload, tag: BeaconEvent(BeaconKind.CLOCK, payload, tag),
+    "launcher": lambda payload, tag: Heard(keyspace.STATUS, KEY[:-3] + "act", payload, tag),
+    "robot": lambda payload, tag: RobotEvent(1, keyspace.RADIO_RX, payload, tag),
+    "beacon": lambda payload, tag: BeaconEvent(keyspace.BEACON_CLOCK, payload, tag),
 }
 
 
@@ -109,23 +107,23 @@ def test_the_recorder_keeps_no_more_keys_than_a_run_has_and_no_channel_for_junk(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     monkeypatch.setattr(writer, "versions", dict)  # they would ask git, in a process
-    keys = protocol.Keys("run")
+    keys = keyspace.Keys("run")
     recorder = McapRecorder(io.BytesIO(), keys, RunDescription("run", robots=2))
     status = protocol.Status(
         v=1, id=0, tick=1, t=0.1, phase="waiting", trips=0, opinion=[0.5, 0.5],
         pool_size=0, poolings=0, decided_site=None, decision_time=None, decision_trips=0,
         comparison=None,
     )  # fmt: skip
-    recorder.record(Sample(keys.status(0), protocol.encode(status), None, 0))
+    recorder.record(Sample(keys.of(keyspace.STATUS, 0), protocol.encode(status), None, 0))
     limit = KEYS_PER_ROBOT * 2 + KEYS_OF_A_RUN
     for robot in range(2, 2 * limit):  # robots of no run: junk, each on a key of its own
-        recorder.record(Sample(keys.status(robot), b"junk", None, 0))
+        recorder.record(Sample(keys.of(keyspace.STATUS, robot), b"junk", None, 0))
         recorder.record(Sample(f"{keys.prefix}/junk/{robot}", b"junk", None, 0))
     assert len(recorder._routes) == limit
     assert recorder.rejected == 2 * (2 * limit - 2)
     recorder.finish()
     channels = {channel.topic for channel in recorder._channels.values()}
-    assert keys.status(0) in channels
+    assert keys.of(keyspace.STATUS, 0) in channels
     assert not [topic for topic in channels if "/junk/" in topic or topic.endswith("/2/status")]
 
 

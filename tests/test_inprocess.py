@@ -16,8 +16,10 @@ from typing import Any
 import pytest
 from swarm_helpers import REPO, kill_leftovers, swarm_command
 
+from bestofn_swarm.wire import keyspace
 from deploy import cli
-from deploy.reports.report import read_recording, run_summary
+from deploy.reports.collect import read_recording
+from deploy.reports.rows import run_summary
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -68,8 +70,6 @@ def test_a_wall_time_limit_ends_the_run_as_a_wall_timeout(
     "options",
     [
         ["--clock", "realtime"],
-        ["--kill", "1@10"],
-        ["--restart", "1@10"],
         ["--robots-per-process", "2"],
         ["--spawn", "exec"],
         ["--connect", "tcp/127.0.0.1:7447"],
@@ -118,21 +118,14 @@ def test_its_recording_reads_like_a_swarm_run_recording(
     assert recording.ack.count == len(range(0, ticks, 5)) == recording.ack.expected
     messages = recording.messages
     # Every radio message, frame and delivery the messages declare is in the recording.
-    assert messages["bestofn.RadioRxRecord"] == recording.declared.rx > 0
-    assert messages["bestofn.RadioTxRecord"] == recording.declared.tx > 0
-    assert messages["foxglove.CompressedImage"] == recording.declared.camera > 0
+    assert messages[keyspace.RADIO_RX.name] == recording.declared.rx > 0
+    assert messages[keyspace.RADIO_TX.name] == recording.declared.tx > 0
+    assert messages[keyspace.CAMERA.name] == recording.declared.camera > 0
     assert recording.declared.status_gaps == 0
-    assert messages["bestofn.WorldState"] == len(range(0, ticks, 10)) + 1  # and the last
-    assert set(messages) == {
-        "bestofn.Ack",
-        "bestofn.Act",
-        "bestofn.Clock",
-        "bestofn.RadioRxRecord",
-        "bestofn.RadioTxRecord",
-        "bestofn.Sense",
-        "bestofn.Status",
-        "bestofn.WorldState",
-        "foxglove.CompressedImage",
+    assert messages[keyspace.STATE.name] == len(range(0, ticks, 10)) + 1  # and the last
+    recorded = [keyspace.ACK, keyspace.ACT, keyspace.CLOCK, keyspace.RADIO_RX, keyspace.RADIO_TX]
+    recorded += [keyspace.SENSE, keyspace.STATUS, keyspace.STATE, keyspace.CAMERA]
+    assert set(messages) == {kind.name for kind in recorded} | {
         "foxglove.FrameTransforms",
         "foxglove.SceneUpdate",
     }

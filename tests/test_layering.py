@@ -1,15 +1,15 @@
 """The layers, read from the source: every folder is one layer, and what it may import is
 said here once, per folder (docs/architecture.md draws the same map).
 
-* **pure** folders (every ``core/``, the wire vocabulary ``wire/``, the Section 4 model)
-  import no network, no clock, no thread, no process and no adapter: what a port to a robot
-  copies, and what tests drive without Zenoh. mypy checks exactly these folders strictly
-  (``pyproject.toml``; plus ``plumbing/``).
+* **pure** folders (every ``core/``, the wire vocabulary ``bestofn_swarm/wire/``, the
+  Section 4 model) import no network, no clock, no thread, no process and no adapter: what
+  a port to a robot copies, and what tests drive without Zenoh. mypy checks exactly these
+  folders strictly (``pyproject.toml``; plus ``bestofn_swarm/plumbing/``).
 * **adapters** (a process on Zenoh, a hardware link, the recorder) import the pure layers
-  and their own transport; the robot's hardware link (``link/``) imports no Zenoh, not
-  even through what it imports.
-* **deploy** (the ``swarm`` command) and the observers (``viewer/``) may use everything
-  but are used by nothing below them.
+  and their own transport; the robot's hardware link (``robot_agent/link/``) imports no
+  Zenoh, not even through what it imports.
+* **deploy** (the ``swarm`` command) and the observers (``deploy/viewer/``) may use
+  everything but are used by nothing below them.
 * No two folders import each other, directly or round a cycle.
 """
 
@@ -26,32 +26,46 @@ REPO = Path(__file__).resolve().parent.parent
 # The folders of the code, each one layer (a folder's own modules; its sub-folders are
 # layers of their own).
 PURE = [
-    "wire",
+    "bestofn_swarm/wire",
+    "bestofn_swarm/link/core",
     "robot_agent/core",
+    "robot_agent/wellstirred",
     "world_server/core",
+    "world_server/observer",
+    "world_server/bridge/core",
     "nest_beacon/core",
-    "viewer/core",
-    "wellstirred",
+    "deploy/viewer/core",
     "deploy/analysis",
     "deploy/inprocess",
-    "link/core",
 ]
 ADAPTERS = [
+    "bestofn_swarm/plumbing",
+    "bestofn_swarm/link/io",
     "robot_agent/node",
-    "link/io",
+    "robot_agent/link",
     "world_server/server",
     "world_server/recording",
     "world_server/recorder",
     "world_server/bridge",
     "nest_beacon/node",
-    "plumbing",
 ]
 # The rooms of the ``swarm`` command: the launcher (``swarm run`` and what starts runs),
 # security (keys, certificates, access control), reports (what is made of runs), studies
-# (the runs behind the published pages, ``swarm study``).
-OUTER = ["deploy", "deploy/launcher", "deploy/security", "deploy/reports", "deploy/study", "viewer"]
+# (the runs behind the published pages, ``swarm study``), conformance (a port checked against
+# the controller, ``swarm conformance``), the observers (``swarm view``).
+OUTER = [
+    "deploy",
+    "deploy/launcher",
+    "deploy/security",
+    "deploy/reports",
+    "deploy/study",
+    "deploy/conformance",
+    "deploy/viewer",
+]
 # The package roots that hold only layers and a ``__main__`` that starts one.
-ROOTS = ["robot_agent", "world_server", "nest_beacon", "link"]
+ROOTS = ["bestofn_swarm", "bestofn_swarm/link", "robot_agent", "world_server", "nest_beacon"]
+# The installed packages: a wheel installs exactly these (tests/test_wheel.py).
+PACKAGES = ["bestofn_swarm", "robot_agent", "world_server", "nest_beacon", "deploy"]
 FOLDERS = PURE + ADAPTERS + OUTER + ROOTS
 
 # What a pure folder never imports: the network, clocks, threads, processes, signals,
@@ -76,54 +90,82 @@ NOT_PURE = {
 }
 # Folders each folder may import (beyond itself and third-party libraries), by layer.
 ALLOWED: dict[str, set[str]] = {
-    "wire": set(),
-    "robot_agent/core": {"wire"},
-    "world_server/core": {"wire"},
-    "nest_beacon/core": {"wire"},
-    "viewer/core": {"wire", "world_server/core"},
-    "wellstirred": {"robot_agent/core", "wire"},
-    "plumbing": {"wire"},
-    "robot_agent/node": {"wire", "robot_agent/core", "plumbing"},
-    # The link's protocol (frames, sessions, the robot on it) and its loop and transports.
-    "link/core": {"wire", "robot_agent/core"},
-    "link/io": {"wire", "robot_agent/core", "link/core", "plumbing"},
-    "world_server/server": {"wire", "world_server/core", "plumbing"},
-    "world_server/recording": {"wire", "world_server/core"},
-    "world_server/recorder": {"wire", "world_server/core", "world_server/recording", "plumbing"},
+    "bestofn_swarm/wire": set(),
+    "bestofn_swarm/plumbing": {"bestofn_swarm/wire"},
+    # The link's protocol (frames, sessions) and its loop and transports, for both ends.
+    "bestofn_swarm/link/core": {"bestofn_swarm/wire"},
+    "bestofn_swarm/link/io": {"bestofn_swarm/wire", "bestofn_swarm/link/core"},
+    "robot_agent/core": {"bestofn_swarm/wire", "bestofn_swarm/link/core"},
+    "world_server/core": {"bestofn_swarm/wire"},
+    # Watching a run: records, the watchdog, the ending and the summary; the parking slots and
+    # the liars' declarations are the robot's own.
+    "world_server/observer": {"bestofn_swarm/wire", "world_server/core", "robot_agent/core"},
+    "nest_beacon/core": {"bestofn_swarm/wire"},
+    "deploy/viewer/core": {"bestofn_swarm/wire", "world_server/core", "world_server/observer"},
+    "robot_agent/wellstirred": {"robot_agent/core", "bestofn_swarm/wire"},
+    "robot_agent/node": {"bestofn_swarm/wire", "robot_agent/core", "bestofn_swarm/plumbing"},
+    # The robot's end of the link: its program, on the link's loop and transports.
+    "robot_agent/link": {
+        "bestofn_swarm/wire",
+        "robot_agent/core",
+        "bestofn_swarm/link/core",
+        "bestofn_swarm/link/io",
+        "bestofn_swarm/plumbing",
+    },
+    "world_server/server": {"bestofn_swarm/wire", "world_server/core", "bestofn_swarm/plumbing"},
+    "world_server/recording": {"bestofn_swarm/wire", "world_server/core", "world_server/observer"},
+    "world_server/recorder": {
+        "bestofn_swarm/wire",
+        "world_server/core",
+        "world_server/recording",
+        "bestofn_swarm/plumbing",
+    },
     # The bridge is the other end of the robots' links: their protocol and transports.
-    "world_server/bridge": {"wire", "plumbing", "link/core", "link/io"},
-    "nest_beacon/node": {"wire", "nest_beacon/core", "plumbing"},
+    "world_server/bridge/core": {"bestofn_swarm/wire", "bestofn_swarm/link/core"},
+    "world_server/bridge": {
+        "bestofn_swarm/wire",
+        "bestofn_swarm/plumbing",
+        "bestofn_swarm/link/core",
+        "bestofn_swarm/link/io",
+        "world_server/bridge/core",
+    },
+    "nest_beacon/node": {"bestofn_swarm/wire", "nest_beacon/core", "bestofn_swarm/plumbing"},
+    "bestofn_swarm": set(),
+    "bestofn_swarm/link": set(),
     "robot_agent": {"robot_agent/node"},
-    "link": {"link/io"},
     "world_server": {"world_server/server", "world_server/recorder", "world_server/bridge"},
     "nest_beacon": {"nest_beacon/node"},
-    "viewer": {
-        "wire",
-        "plumbing",
-        "viewer/core",
+    "deploy/viewer": {
+        "bestofn_swarm/wire",
+        "bestofn_swarm/plumbing",
+        "deploy/viewer/core",
         "world_server/core",
+        "world_server/observer",
         "world_server/recording",
     },
     # What a run decided and when it ends (summary, digest, watchdog), and the tables of runs.
-    "deploy/analysis": {"wire", "robot_agent/core"},
+    "deploy/analysis": {"bestofn_swarm/wire"},
     # The in-process engine: the world's, the robots' and the beacon's cores on one bus.
     "deploy/inprocess": {
-        "wire",
+        "bestofn_swarm/wire",
         "robot_agent/core",
         "world_server/core",
+        "world_server/observer",
         "nest_beacon/core",
-        "deploy/analysis",
     },
-    "deploy/security": {"wire", "plumbing"},
+    "deploy/security": {"bestofn_swarm/wire", "bestofn_swarm/plumbing"},
     "deploy/reports": set(FOLDERS)
-    - {"deploy", "deploy/reports", "deploy/launcher", "deploy/study"},
-    "deploy/launcher": set(FOLDERS) - {"deploy", "deploy/launcher", "deploy/study"},
-    "deploy/study": set(FOLDERS) - {"deploy", "deploy/study"},
-    "deploy": set(FOLDERS) - {"deploy"},
+    - {"deploy", "deploy/reports", "deploy/launcher", "deploy/study", "bestofn_swarm"},
+    "deploy/launcher": set(FOLDERS)
+    - {"deploy", "deploy/launcher", "deploy/study", "bestofn_swarm"},
+    "deploy/study": set(FOLDERS) - {"deploy", "deploy/study", "bestofn_swarm"},
+    "deploy/conformance": set(FOLDERS)
+    - {"deploy", "deploy/conformance", "deploy/study", "bestofn_swarm"},
+    "deploy": set(FOLDERS) - {"deploy", "bestofn_swarm"},
 }
 # What ``robot-agent --link`` may not import, directly or through any module of this
 # repository it imports: it runs where there is no Zenoh.
-LINK_PROGRAM = "link.io.program"
+LINK_PROGRAM = "robot_agent.link.program"
 LINK_FORBIDDEN = {"zenoh"}
 
 
@@ -165,7 +207,7 @@ def test_every_package_folder_is_a_layer() -> None:
     """A new folder of code must be given its layer here before it can be imported."""
     packages = {
         str(init.parent.relative_to(REPO))
-        for root in ["wire", *ROOTS, "plumbing", "deploy", "viewer", "wellstirred"]
+        for root in PACKAGES
         for init in (REPO / root).rglob("__init__.py")
         if ".venv" not in init.parts
     }
@@ -252,10 +294,10 @@ def reached_imports(module: str) -> dict[str, str]:
 
 
 def test_reached_imports_follows_the_repository() -> None:
-    reached = reached_imports("link.io.hub")
-    assert reached["link.io.transport"] == "link.io.hub"
-    assert reached["serial"] == "link.io.transport"  # one step further
-    assert reached["cobs"] == "link.core.codec"  # two steps further
+    reached = reached_imports("bestofn_swarm.link.io.hub")
+    assert reached["bestofn_swarm.link.io.transport"] == "bestofn_swarm.link.io.hub"
+    assert reached["serial"] == "bestofn_swarm.link.io.transport"  # one step further
+    assert reached["cobs"] == "bestofn_swarm.link.core.codec"  # two steps further
     assert reached_imports("world_server.bridge.cli")["zenoh"] == "world_server.bridge.cli"
 
 
@@ -322,7 +364,7 @@ def module_graph() -> dict[str, set[str]]:
     import module`` is an import of the module, not of its package."""
     paths = {
         module_name(path): path
-        for root in [*ROOTS, "wire", "plumbing", "deploy", "viewer", "wellstirred"]
+        for root in PACKAGES
         for path in (REPO / root).rglob("*.py")
         if ".venv" not in path.parts
     }
@@ -352,11 +394,18 @@ def test_no_import_cycle_between_packages() -> None:
     not import the link: ``robot-agent`` chooses between them from ``deploy/``)."""
     graph: dict[str, set[str]] = {}
     for module, targets in module_graph().items():
-        package = module.split(".")[0]
+        package = package_of(module)
         graph.setdefault(package, set()).update(
-            target.split(".")[0] for target in targets if target.split(".")[0] != package
+            package_of(target) for target in targets if package_of(target) != package
         )
     assert find_cycle(graph) is None
+
+
+def package_of(module: str) -> str:
+    """The package a module belongs to: an installed package, or one of the shared layers
+    under ``bestofn_swarm`` (each a package of its own)."""
+    parts = module.split(".")
+    return ".".join(parts[:2]) if parts[0] == "bestofn_swarm" and len(parts) > 1 else parts[0]
 
 
 def test_the_cycle_checks_find_cycles() -> None:
@@ -372,4 +421,4 @@ def test_mypy_checks_exactly_the_pure_folders_strictly() -> None:
         if override.get("disallow_untyped_defs")
     )
     pure = {folder.replace("/", ".") + ".*" for folder in PURE}
-    assert set(strict) - {"plumbing.*"} == pure
+    assert set(strict) - {"bestofn_swarm.plumbing.*"} == pure

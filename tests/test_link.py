@@ -1,6 +1,6 @@
 """The link between a robot outside the emulator and the bridge, without sockets: frames
-(link/core/codec.py), the robot's end of a session (``LinkClient``) against the bridge's
-(``LinkPeer``) in memory, refusals of what is forged, replayed, oversized or out of place,
+(bestofn_swarm/link/core/codec.py), the robot's end of a session (``LinkClient``) against the
+bridge's (``LinkPeer``) in memory, refusals of what is forged, replayed, oversized or out of place,
 and the impairment that makes a link worse on purpose."""
 
 from __future__ import annotations
@@ -13,9 +13,13 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from link.core import codec, pacing
-from link.core.impairment import ImpairedDirection, LinkImpairment
-from link.core.peer import (
+from bestofn_swarm.link.core import codec, pacing
+from bestofn_swarm.link.core.session import LinkClient, LinkData, Lost, Welcomed
+from bestofn_swarm.wire import keyspace, protocol
+from bestofn_swarm.wire.keyspace import Part
+from bestofn_swarm.wire.rng import Stream
+from world_server.bridge.core.impairment import ImpairedDirection, LinkImpairment
+from world_server.bridge.core.peer import (
     FRAME_BURST,
     MAX_FROM_ROBOT_BYTES,
     PING_TIMEOUT,
@@ -24,9 +28,6 @@ from link.core.peer import (
     SessionClosed,
     SessionOpened,
 )
-from link.core.session import LinkClient, LinkData, Lost, Welcomed
-from wire import protocol
-from wire.rng import Stream
 
 ROBOT_KEY = bytes(range(32))
 KEY = codec.link_key(ROBOT_KEY)
@@ -100,7 +101,7 @@ def frame(kind: codec.FrameType = codec.FrameType.DATA, **changes: object) -> co
         "robot_nonce": b"\x01" * 8,
         "bridge_nonce": b"\x02" * 8,
         "seq": 1,
-        "body": codec.encode_data(codec.DataKind.ACT, b'{"v":1}', b"t" * 16),
+        "body": codec.encode_data(keyspace.link(keyspace.ACT), b'{"v":1}', b"t" * 16),
     }
     fields.update(changes)
     return codec.Frame(**fields)  # type: ignore[arg-type]
@@ -114,7 +115,7 @@ def test_a_frame_is_its_header_body_and_tag_and_reads_back() -> None:
     assert int.from_bytes(data[5:9], "big") == ROBOT
     assert len(data) == codec.HEADER_BYTES + len(sent.body) + codec.TAG_BYTES
     assert codec.open_frame(data, KEY) == sent
-    assert codec.decode_data(sent.body) == (codec.DataKind.ACT, b'{"v":1}', b"t" * 16)
+    assert codec.decode_data(sent.body) == (keyspace.link(keyspace.ACT), b'{"v":1}', b"t" * 16)
 
 
 def test_an_encrypted_frame_hides_its_body_and_checks_out_only_under_its_session_key() -> None:
@@ -318,17 +319,19 @@ def test_hello_welcome_and_the_first_frame_open_a_session_both_ends_agree_on(
     assert pair.client.cipher_key == pair.peer.session.cipher_key  # type: ignore[union-attr]
     assert (pair.client.cipher_key is None) == (cipher == "none")
     # Messages both ways, in order, as they were sent.
-    assert pair.client.send(codec.DataKind.STATUS, b"status", b"t" * 16)
-    pair.peer.send(codec.DataKind.SENSE, b"sense", b"s" * 16)
+    assert pair.client.send(keyspace.link(keyspace.STATUS), b"status", b"t" * 16)
+    pair.peer.send(keyspace.link(keyspace.SENSE), b"sense", b"s" * 16)
     pair.exchange()
-    assert pair.peer_events[-1] == Message(ROBOT, codec.DataKind.STATUS, b"status", b"t" * 16)
-    assert pair.client_events[-1] == LinkData(codec.DataKind.SENSE, b"sense", b"s" * 16)
+    assert pair.peer_events[-1] == Message(
+        ROBOT, keyspace.link(keyspace.STATUS), b"status", b"t" * 16
+    )
+    assert pair.client_events[-1] == LinkData(keyspace.link(keyspace.SENSE), b"sense", b"s" * 16)
 
 
 def test_a_replayed_or_forged_frame_is_refused_and_counted_and_changes_nothing() -> None:
     pair = Pair()
     pair.connect()
-    pair.client.send(codec.DataKind.ACT, b"act", b"t" * 16)
+    pair.client.send(keyspace.link(keyspace.ACT), b"act", b"t" * 16)
     pair.exchange()
     events = len(pair.peer_events)
     act = pair.to_peer[-1]
@@ -357,7 +360,7 @@ def test_a_frame_of_another_robot_direction_or_kind_is_refused() -> None:
         robot_nonce=session.robot_nonce,
         bridge_nonce=session.bridge_nonce,
         seq=99,
-        body=codec.encode_data(codec.DataKind.SENSE, b"x", None),
+        body=codec.encode_data(keyspace.link(keyspace.SENSE), b"x", None),
     )
     assert pair.peer.receive(codec.seal(wrong_kind, KEY), SOURCE, 0.0) == []
     assert pair.peer.refused == {"unexpected": 2}
@@ -439,7 +442,7 @@ def test_a_robot_that_floods_its_link_is_held_to_the_rate_bound() -> None:
     pair = Pair()
     pair.connect()
     for _ in range(int(FRAME_BURST) + 50):
-        pair.client.send(codec.DataKind.ACT, b"a", None)
+        pair.client.send(keyspace.link(keyspace.ACT), b"a", None)
     pair.exchange()
     assert pair.peer.refused["rate"] >= 40
 
@@ -492,12 +495,12 @@ class ProgramOnABridge:
     world server does."""
 
     def __init__(self, instance: str = "w-1") -> None:
-        from link.core.robot import LinkRobot
-        from wire import auth, names
+        from bestofn_swarm.wire import auth, names
+        from robot_agent.core.link_robot import LinkRobot
 
         self.auth = auth
         self.secret = auth.Keyring(secret=bytes(32))  # the world's
-        self.keys = protocol.Keys("demo")
+        self.keys = keyspace.Keys("demo")
         self.identity = names.robot_identity(ROBOT)
         self.instance = instance
         self.robot = LinkRobot.create(ROBOT, "demo", self.secret.only([self.identity]))
@@ -528,7 +531,7 @@ class ProgramOnABridge:
                 self.robot.receive(sent, now)
 
     def world(self, message: Message) -> None:
-        if message.kind is not codec.DataKind.INFO_QUERY:
+        if message.kind is not keyspace.link(keyspace.INFO):
             return
         if message.payload not in (b"", self.instance.encode()):
             return  # a question for another world instance: this world does not answer
@@ -538,19 +541,19 @@ class ProgramOnABridge:
         self.answer(message)
 
     def answer(self, message: Message) -> None:
-        info_key = self.keys.world_info
+        info_key = self.keys.of(keyspace.INFO)
         asker, nonce = self.auth.query_open(
             self.secret, info_key, message.payload, message.attachment
         )
         payload = protocol.encode(INFO)
         sealed = self.auth.reply_seal(self.secret, asker, info_key, payload, nonce)
-        self.peer.send(codec.DataKind.INFO_REPLY, payload, sealed)
+        self.peer.send(keyspace.link(keyspace.INFO, Part.REPLY), payload, sealed)
 
     def questions(self, instance: str) -> int:
         return sum(
             1
             for m in self.relayed
-            if m.kind is codec.DataKind.INFO_QUERY and m.payload == instance.encode()
+            if m.kind is keyspace.link(keyspace.INFO) and m.payload == instance.encode()
         )
 
 
@@ -566,23 +569,36 @@ def test_the_program_asks_for_the_map_says_it_is_there_and_steps_a_sealed_sense(
         bench.identity,
     )
     bench.exchange()
-    assert [m.kind for m in bench.relayed] == [codec.DataKind.INFO_QUERY, codec.DataKind.STATUS]
+    assert [m.kind for m in bench.relayed] == [
+        keyspace.link(keyspace.INFO),
+        keyspace.link(keyspace.STATUS),
+    ]
     status = bench.relayed[-1]
-    secret.open(identity, keys.status(ROBOT), status.payload, status.attachment)
+    secret.open(identity, keys.of(keyspace.STATUS, ROBOT), status.payload, status.attachment)
     assert protocol.decode(status.payload, protocol.Status).tick == 0
     sense = protocol.encode(
         protocol.Sense(
             v=1, tick=0, t=0.0, x=0.3, y=0.0, theta=0.0, prox=[0.0] * 8, rx=0, camera=False
         )
     )
-    peer.send(codec.DataKind.SENSE, sense, secret.seal(identity, keys.sense(ROBOT), sense))
+    peer.send(
+        keyspace.link(keyspace.SENSE),
+        sense,
+        secret.seal(identity, keys.of(keyspace.SENSE, ROBOT), sense),
+    )
     bench.exchange()
-    act = next(m for m in bench.relayed if m.kind is codec.DataKind.ACT)
-    secret.open(identity, keys.act(ROBOT), act.payload, act.attachment)  # sealed by the robot
+    act = next(m for m in bench.relayed if m.kind is keyspace.link(keyspace.ACT))
+    secret.open(
+        identity, keys.of(keyspace.ACT, ROBOT), act.payload, act.attachment
+    )  # sealed by the robot
     assert protocol.decode(act.payload, protocol.Act).tick == 0
     # A sense forged by anyone without the robot's key is refused by the program itself.
     forged = sense.replace(b'"x":0.3', b'"x":0.4')
-    peer.send(codec.DataKind.SENSE, forged, secret.seal(identity, keys.sense(ROBOT), sense))
+    peer.send(
+        keyspace.link(keyspace.SENSE),
+        forged,
+        secret.seal(identity, keys.of(keyspace.SENSE, ROBOT), sense),
+    )
     bench.exchange()
     assert robot.endpoint is not None and robot.endpoint.rejects.count == 1
 
@@ -592,18 +608,18 @@ def test_the_program_follows_a_world_token_only_once_that_world_answers_for_it()
     asked to answer for itself (world/info with its instance), followed once it does, and
     one that no world answers for is asked PROVE_TRIES times, PROVE_EVERY apart, then
     counted as a rejection, the robot still on its world."""
-    from link.core.robot import PROVE_EVERY, PROVE_TRIES
+    from robot_agent.core.link_robot import PROVE_EVERY, PROVE_TRIES
 
     bench = ProgramOnABridge(instance="w-1")
     bench.exchange()
     endpoint = bench.robot.endpoint
     assert endpoint is not None and endpoint.worlds.followed is None
-    bench.peer.send(codec.DataKind.WORLD_UP, b"w-1", None)
+    bench.peer.send(keyspace.link(keyspace.ALIVE_WORLD), b"w-1", None)
     bench.exchange()
     assert bench.questions("w-1") == 1
     assert endpoint.worlds.followed == "w-1"  # answered at once by its world
     rejected = endpoint.rejects.count
-    bench.peer.send(codec.DataKind.WORLD_UP, b"w-2", None)
+    bench.peer.send(keyspace.link(keyspace.ALIVE_WORLD), b"w-2", None)
     now = 0.0
     while now <= PROVE_EVERY * (PROVE_TRIES + 1):
         bench.exchange(now)
@@ -617,7 +633,7 @@ def test_the_program_follows_a_world_token_only_once_that_world_answers_for_it()
 def test_an_answer_slower_than_the_repeats_still_brings_the_map_and_the_proof() -> None:
     """A question asked again does not void the ones before it: over a relay slower than
     ASK_EVERY and PROVE_EVERY (a link with a long delay) the first answers still count."""
-    from link.core.robot import ASK_EVERY, PROVE_EVERY
+    from robot_agent.core.link_robot import ASK_EVERY, PROVE_EVERY
 
     bench = ProgramOnABridge(instance="w-1")
     bench.slow = True
@@ -630,7 +646,7 @@ def test_an_answer_slower_than_the_repeats_still_brings_the_map_and_the_proof() 
     endpoint = bench.robot.endpoint
     assert endpoint is not None
     bench.held.clear()
-    bench.peer.send(codec.DataKind.WORLD_UP, b"w-1", None)
+    bench.peer.send(keyspace.link(keyspace.ALIVE_WORLD), b"w-1", None)
     now = 2 * ASK_EVERY
     for _ in range(3):
         bench.exchange(now)
@@ -645,7 +661,7 @@ def test_no_question_is_asked_again_while_a_frame_is_arriving_on_a_serial_line()
     """A map of 1000 sites takes 5 s at 115200 baud: while it comes (bytes heard, its end
     not yet) the program does not ask again, which would only queue more maps behind it; it
     asks again ASK_EVERY after the line falls quiet without the answer."""
-    from link.core.robot import ASK_EVERY
+    from robot_agent.core.link_robot import ASK_EVERY
 
     bench = ProgramOnABridge(instance="w-1")
     bench.slow = True

@@ -27,15 +27,16 @@ RUN, SEED, SITES, ROBOTS = "multihost", 3, 5, 4
 
 OBSERVER = """
 import json, sys, time
-from wire import protocol
-from plumbing.zenoh_session import open_session
-keys = protocol.Keys(sys.argv[2])
+from bestofn_swarm.wire import keyspace, protocol
+from bestofn_swarm.plumbing.zenoh_session import open_session
+keys = keyspace.Keys(sys.argv[2])
 statuses = {}
 session = open_session("client", [sys.argv[1]])
 session.declare_subscriber(
-    keys.status("*"),
+    keys.of(keyspace.STATUS, "*"),
     lambda s: statuses.__setitem__(
-        keys.robot_of(str(s.key_expr)), protocol.decode(s.payload.to_bytes(), protocol.Status)
+        keys.robot_of(keyspace.STATUS, str(s.key_expr)),
+        protocol.decode(s.payload.to_bytes(), protocol.Status),
     ),
 )
 deadline = time.monotonic() + float(sys.argv[4])

@@ -9,8 +9,8 @@ from collections.abc import Callable
 import msgspec
 import pytest
 
+from bestofn_swarm.wire import keyspace, names, protocol
 from examples import udp_radio
-from wire import names, protocol
 
 NOT_NAMES = ["ünïcode", "run\n", "a b", "a/b", "x" * 65, "", "*", "é"]
 NAMES = ["run", "exp-N10-n5-r01", "a.b_c", "x" * 64, "0"]
@@ -46,7 +46,7 @@ def test_a_run_id_that_is_not_a_name_is_refused_at_the_command_line(
 def test_everything_that_checks_a_name_refuses_the_same_texts(text: str) -> None:
     assert not names.is_name(text)
     with pytest.raises(ValueError, match="invalid run id"):
-        protocol.Keys(text)
+        keyspace.Keys(text)
     with pytest.raises(msgspec.ValidationError):
         msgspec.convert(text, protocol._Name)
     with pytest.raises(ValueError):
@@ -58,7 +58,7 @@ def test_everything_that_checks_a_name_refuses_the_same_texts(text: str) -> None
 @pytest.mark.parametrize("text", NAMES)
 def test_everything_that_checks_a_name_takes_the_same_texts(text: str) -> None:
     assert names.is_name(text)
-    assert protocol.Keys(text).run == text
+    assert keyspace.Keys(text).run == text
     assert msgspec.convert(text, protocol._Name) == text
     assert names.check_identity(names.beacon_identity(text))
     assert udp_radio.sender_bytes(text) == text.encode()

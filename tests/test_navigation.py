@@ -10,9 +10,9 @@ import pytest
 from bodies import epuck_nav_params
 from fakes import MAX_SPEED, ROBOT_RADIUS, proximity, unicycle
 
+from bestofn_swarm.wire.numeric import wrap_angle
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core.navigation import Navigator, NavParams
-from wire.numeric import wrap_angle
-from wire.rng import Stream
 from world_server.core.body import EpuckSpec
 from world_server.core.layout import make_layout
 from world_server.core.physics import Physics

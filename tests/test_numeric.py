@@ -1,5 +1,5 @@
-"""The portable numeric kernel (``wire/numeric.py``) and the project's generator
-(``wire/rng.py``): accurate, the same in scalar and array form, and equal to the
+"""The portable numeric kernel (``bestofn_swarm/wire/numeric.py``) and the project's generator
+(``bestofn_swarm/wire/rng.py``): accurate, the same in scalar and array form, and equal to the
 conformance vectors of ``tests/vectors/numeric.json`` and ``rng.json`` that a port checks
 itself against (docs/kernel.md)."""
 
@@ -19,8 +19,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from wire import numeric
-from wire.rng import GAMMA, MASK, Stream, mix, seed_of
+from bestofn_swarm.wire import numeric
+from bestofn_swarm.wire.rng import GAMMA, MASK, Stream, mix, seed_of
 
 VECTORS = Path(__file__).resolve().parent / "vectors"
 

@@ -24,7 +24,8 @@ from outside_helpers import (
 )
 from swarm_helpers import processes_of
 
-from link.core import codec
+from bestofn_swarm.link.core import codec
+from bestofn_swarm.wire import keyspace
 
 pytestmark = pytest.mark.timeout(900)
 
@@ -271,8 +272,9 @@ def test_forged_replayed_and_oversized_frames_are_refused_counted_and_change_not
 def test_a_mixed_run_is_recorded_reported_and_replayed_with_its_outside_robots(
     tmp_path: Path,
 ) -> None:
-    from deploy.reports.report import read_recording, rebuild_summary, run_summary
-    from viewer.replay import ReplaySource, load
+    from deploy.reports.collect import read_recording, rebuild_summary
+    from deploy.reports.rows import run_summary
+    from deploy.viewer.replay import ReplaySource, load
 
     path = tmp_path / "mixed.mcap"
     options = ["--robots", "3", "--sites", "3", "--seed", "0", "--record", str(path)]
@@ -283,7 +285,7 @@ def test_a_mixed_run_is_recorded_reported_and_replayed_with_its_outside_robots(
     assert code == 0, stderr
     assert summary is not None
     recording = read_recording(path)
-    assert recording.complete and recording.messages["bestofn.LinkStats"] > 0
+    assert recording.complete and recording.messages[keyspace.LINK.name] > 0
     assert recording.messages.get("bestofn.RejectedSample", 0) == 0
     reported = run_summary(recording)
     assert reported["links"]["2"]["transport"] == "udp"

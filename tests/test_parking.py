@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 from bodies import epuck_nav_params
 
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core.controller import ControllerConfig, parking_rings, parking_slot
 from robot_agent.core.navigation import Navigator
-from wire.rng import Stream
 from world_server.core.layout import make_layout
 from world_server.core.physics import Physics
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from fakes import FakeBody, FakeSwarm, make_swarm
 
+from bestofn_swarm.wire import protocol
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.phases import (
@@ -20,7 +21,6 @@ from robot_agent.core.phases import (
     IllegalTransitionError,
     PhaseMachine,
 )
-from wire import protocol
 
 EDGES = {(phase, event) for phase, leaving in TRANSITIONS.items() for event in leaving}
 

@@ -8,9 +8,9 @@ from typing import Any
 import pytest
 from fakes import make_swarm
 
+from bestofn_swarm.wire import protocol
 from robot_agent.core import decision, ports
 from robot_agent.core.controller import Controller, ControllerConfig
-from wire import protocol
 
 N_ROBOTS = 10
 
@@ -45,10 +45,10 @@ def test_robot_agent_takes_pooling_from_its_command_line() -> None:
 
 
 def test_swarm_run_forwards_pooling_to_every_robot_and_records_it() -> None:
+    from bestofn_swarm.wire import settings
     from deploy.cli import build_parser
     from deploy.launcher.plan import plan_from_args
     from robot_agent.node.options import RobotAgentConfig
-    from wire import settings
 
     parser = build_parser(["run"])
     plan = plan_from_args(parser.parse_args(["run", "--pooling", "loglinear", "--no-record"]))

@@ -21,22 +21,22 @@ from typing import Any
 
 import pytest
 
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.wire import keyspace, protocol
 from deploy.inprocess.engine import run_in_process
 from examples.udp_radio import UdpRadioStats
-from plumbing.inbox import BoundedInbox
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
-from robot_agent.core.endpoint import InputKind, OutputKind, RobotEndpoint
+from robot_agent.core.endpoint import RobotEndpoint
 from robot_agent.core.simulated import SimulatedPorts
-from robot_agent.node.robot_node import Event, EventKind, RobotNode
-from wire import protocol
+from robot_agent.node.robot_node import Event, RobotNode
 from world_server.core.world import World, WorldConfig
 
 REPO = Path(__file__).resolve().parent.parent
 if not hasattr(ports.control_step, "__code__"):
     pytest.skip(
-        "ports.control_step is compiled (plumbing/cores.py) and leaves no frame to tell its "
-        "caller by; tests/test_compiled_cores.py runs this module from the source",
+        "ports.control_step is compiled (bestofn_swarm/plumbing/cores.py) and leaves no frame "
+        "to tell its caller by; tests/test_compiled_cores.py runs this module from the source",
         allow_module_level=True,
     )
 CONTRACT = ports.control_step.__code__
@@ -144,7 +144,7 @@ def test_tick_vectors_through_the_zenoh_robot(vector: dict[str, Any]) -> None:
     controller = Scripted(vector["command"])
     endpoint = RobotEndpoint(
         ROBOT,
-        keys=protocol.Keys("ticks"),
+        keys=keyspace.Keys("ticks"),
         controller=controller,
         world=World(WorldConfig(num_sites=5, num_robots=8)).info,
     )
@@ -153,16 +153,18 @@ def test_tick_vectors_through_the_zenoh_robot(vector: dict[str, Any]) -> None:
     node._tx, node._act, node._status = tx, act, _Publisher()  # type: ignore[assignment]
     endpoint.ports.radio.seq = vector["sent_before"]
     inputs = vector["in"]
-    node.handle(Event(ROBOT, EventKind.SENSE, bytes.fromhex(inputs["sense"]["hex"])))
+    node.handle(Event(ROBOT, keyspace.SENSE, bytes.fromhex(inputs["sense"]["hex"])))
     for item in inputs["radio_rx"]:
-        rx = Event(ROBOT, EventKind.RX, bytes.fromhex(item["hex"]), bytes.fromhex(item["meta_hex"]))
+        rx = Event(
+            ROBOT, keyspace.RADIO_RX, bytes.fromhex(item["hex"]), bytes.fromhex(item["meta_hex"])
+        )
         node.handle(rx)
     if inputs["camera"]:
         camera = inputs["camera"]
         node.handle(
             Event(
                 ROBOT,
-                EventKind.CAMERA,
+                keyspace.CAMERA,
                 bytes.fromhex(camera["hex"]),
                 bytes.fromhex(camera["meta_hex"]),
             )
@@ -250,28 +252,28 @@ def test_a_tick_that_arrives_as_the_robot_subscribes_is_answered() -> None:
     vector = TICKS[0]
     endpoint = RobotEndpoint(
         ROBOT,
-        keys=protocol.Keys("ticks"),
+        keys=keyspace.Keys("ticks"),
         controller=_Announcing(vector["command"]),
         world=World(WorldConfig(num_sites=5, num_robots=8)).info,
     )
     endpoint.ports.radio.seq = vector["sent_before"]
     inputs, keys = vector["in"], endpoint.input_keys
     waiting = {
-        keys[InputKind.SENSE]: [_Sample(bytes.fromhex(inputs["sense"]["hex"]), None)],
-        keys[InputKind.RADIO_RX]: [
+        keys[keyspace.SENSE]: [_Sample(bytes.fromhex(inputs["sense"]["hex"]), None)],
+        keys[keyspace.RADIO_RX]: [
             _Sample(bytes.fromhex(item["hex"]), bytes.fromhex(item["meta_hex"]))
             for item in inputs["radio_rx"]
         ],
     }
     if inputs["camera"]:
         camera = inputs["camera"]
-        waiting[keys[InputKind.CAMERA]] = [
+        waiting[keys[keyspace.CAMERA]] = [
             _Sample(bytes.fromhex(camera["hex"]), bytes.fromhex(camera["meta_hex"]))
         ]
     session = _EagerSession(waiting)
     node = RobotNode(endpoint, session=session, inbox=BoundedInbox())  # type: ignore[arg-type]
     node.start()
-    act = session.publishers[endpoint.output_keys[OutputKind.ACT]]
+    act = session.publishers[endpoint.output_keys[keyspace.ACT]]
     assert act.sent == [(bytes.fromhex(vector["out"]["act"]["hex"]), None)]
     kinds = [entry.split()[0] for entry in session.order]
     assert kinds.index("subscriber") > max(i for i, k in enumerate(kinds) if k == "publisher")

@@ -28,9 +28,9 @@ from swarm_helpers import (
     unique_run_id,
 )
 
-from deploy.reports import report
+from bestofn_swarm.wire.endings import Ending
+from deploy.reports import collect
 from deploy.security import credentials
-from wire.endings import Ending
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -100,7 +100,7 @@ def test_a_recording_and_traces_are_private_in_a_folder_anyone_may_enter(
     assert refused.returncode != 0 and b"Permission denied" in refused.stderr
     assert another_user_reads(written[0]).returncode != 0
     # The owner reads all of it.
-    assert report.read_recording(recording).summary is not None
+    assert collect.read_recording(recording).summary is not None
 
 
 def test_an_experiment_s_logs_and_report_are_private(shared_folder: Path) -> None:
@@ -126,8 +126,8 @@ PROCESSES = {
     "robot-agent": ["robot_agent.node", "--id", "0"],
     "nest-beacon": ["nest_beacon"],
     "recorder": ["world_server.recorder", "--out", "never.mcap"],
-    "viewer": ["viewer.live"],
-    "foxglove-live": ["viewer.foxglove_live"],
+    "viewer": ["deploy.viewer.live"],
+    "foxglove-live": ["deploy.viewer.foxglove_live"],
 }
 
 
@@ -159,7 +159,15 @@ def test_a_router_with_a_configuration_that_never_ends_is_refused_in_one_line() 
 def test_run_keys_out_an_existing_file_is_one_line(tmp_path: Path) -> None:
     existing = tmp_path / "keys"
     existing.write_text("")
-    command = [sys.executable, "-m", "plumbing.run_keys", "--run-id", "r", "--robots", "2"]
+    command = [
+        sys.executable,
+        "-m",
+        "bestofn_swarm.plumbing.run_keys",
+        "--run-id",
+        "r",
+        "--robots",
+        "2",
+    ]
     done = subprocess.run(
         [*command, "--out", str(existing)], cwd=REPO, capture_output=True, timeout=60
     )
@@ -278,4 +286,4 @@ def test_a_crashed_world_server_is_reported_as_the_router_gone(tmp_path: Path) -
     assert "the world server, the run's router, is gone" in said
     assert "Traceback" not in said
     # Stopped, the recorder closed the file without the summary: whole and readable.
-    assert report.read_recording(recording).complete
+    assert collect.read_recording(recording).complete

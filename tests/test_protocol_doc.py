@@ -14,9 +14,9 @@ import msgspec
 import msgspec.inspect as mi
 import pytest
 
-from link.core import codec
+from bestofn_swarm.link.core import codec
+from bestofn_swarm.wire import protocol, settings
 from robot_agent.core.controller_config import ControllerConfig
-from wire import protocol, settings
 
 REPO = Path(__file__).resolve().parent.parent
 DOC = REPO / "docs" / "protocol.md"

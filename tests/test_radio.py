@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from wire import names, protocol
+from bestofn_swarm.wire import names, protocol
 from world_server.core.radio import Delivery, RadioConfig, RadioMedium, SenderKind, sender_order
 
 pytestmark = pytest.mark.timeout(60)

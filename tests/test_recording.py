@@ -25,9 +25,9 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
 from swarm_helpers import REPO, kill_leftovers, loopback_router, run_swarm, unique_run_id
 
-from deploy.reports import report
-from wire import protocol
-from wire.names import Role
+from bestofn_swarm.wire import keyspace, protocol
+from bestofn_swarm.wire.names import Role
+from deploy.reports import audit, collect, report
 from world_server.core.layout import make_layout
 from world_server.recorder import options as recorder_options
 from world_server.recording import foxglove, records, writer
@@ -47,7 +47,7 @@ class Run:
         self.path = path
         self.run_id = run_id
         self.summary = summary
-        self.keys = protocol.Keys(run_id)
+        self.keys = keyspace.Keys(run_id)
         with open(path, "rb") as stream:
             reader = make_reader(stream)
             contents = reader.get_summary()
@@ -118,28 +118,28 @@ def test_one_channel_per_key_with_its_protocol_schema(run: Run) -> None:
     by_topic = {channel.topic: schema for schema, channel, _ in run.messages}
     keys = run.keys
     expected = {
-        keys.world_clock: "bestofn.Clock",
-        keys.world_state: "bestofn.WorldState",
-        keys.beacon_ack("nest"): "bestofn.Ack",
-        keys.radio_tx("nest"): "bestofn.RadioTxRecord",
-        keys.log("world"): "bestofn.LogLine",
+        keys.of(keyspace.CLOCK): "bestofn.Clock",
+        keys.of(keyspace.STATE): "bestofn.WorldState",
+        keys.of(keyspace.ACK, "nest"): "bestofn.Ack",
+        keys.of(keyspace.RADIO_TX, "nest"): "bestofn.RadioTxRecord",
+        keys.of(keyspace.LOG, "world"): "bestofn.LogLine",
     }
     for robot in range(ROBOTS):
         expected |= {
-            keys.sense(robot): "bestofn.Sense",
-            keys.act(robot): "bestofn.Act",
-            keys.status(robot): "bestofn.Status",
-            keys.camera(robot): foxglove.COMPRESSED_IMAGE,
-            keys.radio_tx(robot): "bestofn.RadioTxRecord",
-            keys.radio_rx(robot): "bestofn.RadioRxRecord",
+            keys.of(keyspace.SENSE, robot): "bestofn.Sense",
+            keys.of(keyspace.ACT, robot): "bestofn.Act",
+            keys.of(keyspace.STATUS, robot): "bestofn.Status",
+            keys.of(keyspace.CAMERA, robot): foxglove.COMPRESSED_IMAGE,
+            keys.of(keyspace.RADIO_TX, robot): "bestofn.RadioTxRecord",
+            keys.of(keyspace.RADIO_RX, robot): "bestofn.RadioRxRecord",
         }
     for topic, name in expected.items():
         assert by_topic[topic].name == name, topic
     # The schemas are the protocol's own definitions, not a second copy.
-    assert json.loads(by_topic[keys.sense(0)].data) == records.inline_refs(
+    assert json.loads(by_topic[keys.of(keyspace.SENSE, 0)].data) == records.inline_refs(
         protocol.json_schema(protocol.Sense)
     )
-    assert "$ref" not in by_topic[keys.world_state].data.decode()
+    assert "$ref" not in by_topic[keys.of(keyspace.STATE)].data.decode()
     assert not [topic for topic in by_topic if topic.endswith("recorder/rejected")]
 
 
@@ -241,14 +241,14 @@ def test_metadata_holds_config_versions_seed_and_summary(run: Run) -> None:
 
 @pytest.mark.timeout(180)
 def test_nothing_published_is_missing_from_the_recording(run: Run) -> None:
-    recording = report.read_recording(run.path)
+    recording = collect.read_recording(run.path)
     assert recording.complete and recording.problem is None
-    audit = report.audit(recording)
-    for kind, counts in audit.items():
+    found = audit.audit(recording)
+    for kind, counts in found.items():
         assert counts["recorded"] == counts["expected"], kind
-    assert audit["radio/rx/*"]["recorded"] == run.summary["radio"]["delivered"] > 0
-    assert audit["robot/*/camera"]["recorded"] > 0
-    rebuilt = report.rebuild_summary(recording)
+    assert found["radio/rx/*"]["recorded"] == run.summary["radio"]["delivered"] > 0
+    assert found["robot/*/camera"]["recorded"] > 0
+    rebuilt = collect.rebuild_summary(recording)
     assert rebuilt["per_robot"] == run.summary["per_robot"]
     # The recording's run is the run: the same digest, from its status messages alone.
     assert rebuilt["digest"] == run.summary["digest"]
@@ -284,17 +284,17 @@ def _sample(key: str, payload: bytes, attachment: bytes | None = None) -> writer
 
 
 def test_samples_that_do_not_decode_are_kept_raw_on_the_rejected_channel() -> None:
-    keys = protocol.Keys("rejects")
+    keys = keyspace.Keys("rejects")
     stream = io.BytesIO()
     mcap = writer.McapRecorder(stream, keys, RunDescription("rejects", 1, 2, 3))
     clock = protocol.encode(protocol.Clock(v=1, tick=5, t=0.5))
     bad = [
-        _sample(keys.sense(0), b'{"v": 1, "tick": -1}'),
-        _sample(keys.radio_tx(1), b"{}", None),
-        _sample(keys.camera(0), b"\x89PNG", b"not json"),
+        _sample(keys.of(keyspace.SENSE, 0), b'{"v": 1, "tick": -1}'),
+        _sample(keys.of(keyspace.RADIO_TX, 1), b"{}", None),
+        _sample(keys.of(keyspace.CAMERA, 0), b"\x89PNG", b"not json"),
         _sample(f"{keys.prefix}/nonsense", b"x"),
     ]
-    for sample in [_sample(keys.world_clock, clock), *bad]:
+    for sample in [_sample(keys.of(keyspace.CLOCK), clock), *bad]:
         mcap.record(sample)
     mcap.finish()
     stream.seek(0)
@@ -326,7 +326,7 @@ def test_a_bad_niceness_is_a_usage_error(niceness: str, tmp_path: Path) -> None:
 @pytest.mark.timeout(60)
 def test_sigterm_without_a_finish_query_closes_the_file_cleanly(tmp_path: Path) -> None:
     run_id = unique_run_id("rec-term")
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     out = tmp_path / "term.mcap"
     with loopback_router() as (session, endpoint):
         process = subprocess.Popen(
@@ -356,7 +356,7 @@ def test_sigterm_without_a_finish_query_closes_the_file_cleanly(tmp_path: Path) 
         )
         try:
             deadline = time.monotonic() + 30
-            while not list(session.liveliness().get(keys.alive(Role.RECORDER, 0), timeout=1.0)):
+            while not list(session.liveliness().get(keys.token(Role.RECORDER, 0), timeout=1.0)):
                 assert process.poll() is None and time.monotonic() < deadline
                 time.sleep(0.05)
             # Recording yields the CPU to the swarm (it is off the barrier's critical path).
@@ -366,7 +366,8 @@ def test_sigterm_without_a_finish_query_closes_the_file_cleanly(tmp_path: Path) 
             assert os.getpriority(os.PRIO_PROCESS, process.pid) == expected_niceness
             for tick in range(1, 4):
                 session.put(
-                    keys.world_clock, protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * 0.1))
+                    keys.of(keyspace.CLOCK),
+                    protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * 0.1)),
                 )
             time.sleep(0.5)
             process.send_signal(signal.SIGTERM)
@@ -393,7 +394,7 @@ def test_a_query_is_waited_for_while_worth_it_and_given_up_when_not() -> None:
     and gives up at once when the recorder stops making progress."""
     import threading
 
-    from plumbing.world_info import ask
+    from bestofn_swarm.plumbing.world_info import ask
 
     def answer_late(query: Any) -> None:
         def later() -> None:
@@ -481,21 +482,24 @@ def test_the_recorder_yields_the_cpu_only_to_a_swarm_that_leaves_it_idle_time() 
 def _index_entries(robots: int, ticks: int, chunk_size: int | None) -> tuple[int, int]:
     """(chunks, channel offsets held in their indexes) of a recording of ``robots``
     robots' senses over ``ticks`` ticks: what the MCAP writer keeps in memory to the end."""
-    keys = protocol.Keys("chunks")
+    keys = keyspace.Keys("chunks")
     stream = io.BytesIO()
     mcap = writer.McapRecorder(
         stream, keys, RunDescription("chunks", 1, robots, 10), chunk_size=chunk_size
     )
     for tick in range(ticks):
         mcap.record(
-            _sample(keys.world_clock, protocol.encode(protocol.Clock(v=1, tick=tick, t=tick / 10)))
+            _sample(
+                keys.of(keyspace.CLOCK),
+                protocol.encode(protocol.Clock(v=1, tick=tick, t=tick / 10)),
+            )
         )
         for robot in range(robots):
             sense = protocol.Sense(
                 v=1, tick=tick, t=tick / 10, x=0.1, y=0.01 * robot, theta=0.0,
                 prox=[0.0] * 8, rx=0, camera=False,
             )  # fmt: skip
-            mcap.record(_sample(keys.sense(robot), protocol.encode(sense)))
+            mcap.record(_sample(keys.of(keyspace.SENSE, robot), protocol.encode(sense)))
     mcap.finish()
     stream.seek(0)
     summary = make_reader(stream).get_summary()

@@ -16,7 +16,7 @@ import pytest
 from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
 
-from wire import protocol
+from bestofn_swarm.wire import keyspace, protocol
 from world_server.recording.description import RunDescription
 from world_server.recording.reader import RecordedMessage, RecordingReader
 from world_server.recording.records import RUN_METADATA, START_METADATA
@@ -30,7 +30,7 @@ class Written:
 
     def __init__(self) -> None:
         self.stream = io.BytesIO()
-        self.keys = protocol.Keys("reader-test")
+        self.keys = keyspace.Keys("reader-test")
         self.recorder = McapRecorder(
             self.stream,
             self.keys,
@@ -61,7 +61,9 @@ def write_run(*, finish: bool = True) -> Written:
     written = Written()
     keys = written.keys
     for tick in range(TICKS):
-        written.put(keys.world_clock, protocol.encode(protocol.Clock(v=1, tick=tick, t=tick / 10)))
+        written.put(
+            keys.of(keyspace.CLOCK), protocol.encode(protocol.Clock(v=1, tick=tick, t=tick / 10))
+        )
         for robot in range(ROBOTS):
             sense = protocol.Sense(
                 v=1,
@@ -74,11 +76,11 @@ def write_run(*, finish: bool = True) -> Written:
                 rx=0,
                 camera=False,
             )
-            written.put(keys.sense(robot), protocol.encode(sense))
+            written.put(keys.of(keyspace.SENSE, robot), protocol.encode(sense))
         if tick % 20 == 0:
             line = protocol.LogLine(v=1, process="world", wall_time=1.0, line=f"tick {tick}")
-            written.put(keys.log("world"), protocol.encode(line))
-            written.put(keys.sense(0), b"not a sense")  # kept on the rejected channel
+            written.put(keys.of(keyspace.LOG, "world"), protocol.encode(line))
+            written.put(keys.of(keyspace.SENSE, 0), b"not a sense")  # kept on the rejected channel
     if finish:
         written.recorder.finish({"run_id": "reader-test"})
     return written

@@ -19,11 +19,11 @@ from typing import Any
 import pytest
 from swarm_helpers import REPO, swarm_command
 
-from deploy.analysis.summary import run_digest
+from bestofn_swarm.wire import keyspace, protocol
 from deploy.cli import main
-from deploy.reports import report
-from wire import protocol
+from deploy.reports import collect, report
 from world_server.core.layout import make_layout
+from world_server.observer.summary import run_digest
 from world_server.recording.description import RunDescription
 from world_server.recording.writer import McapRecorder, Sample
 
@@ -69,7 +69,7 @@ def make_recording(
     """Write a recording of a made-up run, without the clock and senses of the ticks in
     ``lost``. Returns two file sizes: before the last status message, and before the
     records that finishing the file adds."""
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     best = make_layout(sites, ROBOTS, SEED).best_site
     stream = io.BytesIO()
     mcap = McapRecorder(
@@ -87,7 +87,7 @@ def make_recording(
     for tick in range(400):
         if tick in lost:
             continue
-        put(keys.world_clock, protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * 0.1)))
+        put(keys.of(keyspace.CLOCK), protocol.encode(protocol.Clock(v=1, tick=tick, t=tick * 0.1)))
         for robot in range(ROBOTS):
             sense = protocol.Sense(
                 v=1,
@@ -100,15 +100,15 @@ def make_recording(
                 rx=0,
                 camera=False,
             )
-            put(keys.sense(robot), protocol.encode(sense))
+            put(keys.of(keyspace.SENSE, robot), protocol.encode(sense))
     before_last = 0
     for robot, pools in POOLS.items():
-        put(keys.status(robot), _status(robot, 0, [], None, uniform))
+        put(keys.of(keyspace.STATUS, robot), _status(robot, 0, [], None, uniform))
         for trip in range(1, len(pools) + 1):
             last = trip == len(pools)
             before_last = stream.tell()
             put(
-                keys.status(robot),
+                keys.of(keyspace.STATUS, robot),
                 _status(
                     robot,
                     100 * trip + robot,
@@ -147,7 +147,7 @@ def test_the_table_has_each_runs_steps_and_pool_sizes(
     assert row["pool_mean"] == pytest.approx(15 / 7, abs=1e-3)
     assert (row["pool_min"], row["pool_max"], row["poolings"]) == (1, 3, 7)
     assert row["robots_within_half_n"] == 2 and row["within_half_n"] is False
-    assert row["digest"] == run_digest(report.rebuild_summary(report.read_recording(
+    assert row["digest"] == run_digest(collect.rebuild_summary(collect.read_recording(
         tmp_path / "a.mcap"))["per_robot"])  # fmt: skip
     (group,) = result["groups"]
     assert group["runs"] == group["correct_runs"] == 1 and group["runs_within_half_n"] == 0
@@ -181,7 +181,7 @@ def test_the_launchers_summary_is_used_when_recorded(
 ) -> None:
     path = tmp_path / "made.mcap"
     make_recording(path, "made-b")
-    rebuilt = report.rebuild_summary(report.read_recording(path))
+    rebuilt = collect.rebuild_summary(collect.read_recording(path))
     launcher_only = {"wall_time_s": 12.5}  # a field only the launcher knew
     rebuilt.update(launcher_only)
     make_recording(path, "made-b", summary=rebuilt)
@@ -221,7 +221,7 @@ def test_a_cut_short_recording_takes_the_launchers_printed_summary_when_given(
     the summary: the run's own (here: all decided) beats the truncated status messages."""
     whole = tmp_path / "whole.mcap"
     before_last, _ = make_recording(whole, "made-d", finish=False)
-    full = report.rebuild_summary(report.read_recording(whole))
+    full = collect.rebuild_summary(collect.read_recording(whole))
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(whole.read_bytes()[: before_last + 20])
     alone = report.write_report([cut], tmp_path / "alone")
@@ -320,7 +320,7 @@ def test_a_recorded_summary_that_lacks_fields_is_reported_from_the_status_messag
 ) -> None:
     path = tmp_path / "lacking.mcap"
     make_recording(path, "made-f")
-    summary = report.rebuild_summary(report.read_recording(path))
+    summary = collect.rebuild_summary(collect.read_recording(path))
     del summary["per_robot"], summary["num_sites"]
     summary["wall_time_s"] = "soon"  # a field of the wrong type
     make_recording(path, "made-f", summary=summary)
@@ -346,7 +346,7 @@ def test_aborted_and_interrupted_runs_are_labelled_and_kept_out_of_the_aggregate
     make_recording(finished, "made-g1")
     interrupted = tmp_path / "interrupted.mcap"
     make_recording(interrupted, "made-g2")
-    summary = report.rebuild_summary(report.read_recording(interrupted))
+    summary = collect.rebuild_summary(collect.read_recording(interrupted))
     summary.update(ended="interrupted", signal="SIGTERM", wall_time_s=1.0)
     make_recording(interrupted, "made-g2", summary=summary)
     # Cut short before its last robot decided, and never finished: nobody said how it ended.
@@ -392,7 +392,7 @@ def test_messages_missing_from_a_recording_are_counted_and_warned_of(tmp_path: P
 
 
 def test_a_trail_keeps_at_most_its_limit_of_evenly_spaced_points_and_the_last() -> None:
-    trail = report.Trail(limit=8)
+    trail = collect.Trail(limit=8)
     for index in range(1000):
         trail.add(float(index), -float(index))
     xs, ys = trail.points()
@@ -400,7 +400,7 @@ def test_a_trail_keeps_at_most_its_limit_of_evenly_spaced_points_and_the_last() 
     assert xs[0] == 0.0 and xs[-1] == 999.0 and ys[-1] == -999.0  # start and end kept
     steps = {b - a for a, b in itertools.pairwise(xs[:-1])}
     assert steps == {float(trail.stride)}  # evenly spaced, in order
-    short = report.Trail(limit=8)
+    short = collect.Trail(limit=8)
     for index in range(5):
         short.add(float(index), 0.0)
     assert short.points()[0] == [0.0, 1.0, 2.0, 3.0, 4.0]  # short trails whole
@@ -412,21 +412,21 @@ def test_a_recording_is_read_keeping_one_robots_statuses_and_a_trace_each(
     """Every robot's summary record and progress are kept as they are read; all the
     statuses only of the robot the opinion figure shows (the lowest id, or --robot)."""
     make_recording(tmp_path / "a.mcap", "made-a")
-    recording = report.read_recording(tmp_path / "a.mcap")
+    recording = collect.read_recording(tmp_path / "a.mcap")
     assert sorted(recording.robots_heard) == list(range(ROBOTS))
     assert recording.opinion_robot == 0
     assert [status.trips for status in recording.opinions] == list(range(len(POOLS[0]) + 1))
     for robot, trace in recording.robots_heard.items():
-        assert trace.record.pool_sizes == POOLS[robot]
+        assert recording.observer.records[robot].pool_sizes == POOLS[robot]
         assert trace.trail.seen == 400 and trace.trail.last == (0.399, 0.1 * robot)
-    chosen = report.read_recording(tmp_path / "a.mcap", opinion_robot=1)
+    chosen = collect.read_recording(tmp_path / "a.mcap", opinion_robot=1)
     assert chosen.opinion_robot == 1 and len(chosen.opinions) == len(POOLS[1]) + 1
 
 
 def test_acks_are_expected_at_the_ticks_the_beacon_named() -> None:
     """A beacon answers the ticks it names (Ack.next_tick), not every tick: only a gap
     after the tick named counts as missing acks, at the beacon's step."""
-    acks = report.AckTicks()
+    acks = collect.AckTicks()
     for tick, next_tick in ((0, 5), (5, 10), (20, 25), (25, None), (26, None), (28, None)):
         acks.answered(tick, next_tick)
     # Missing: 10 and 15 (10 named, then every 5), and 27 (the next tick named).

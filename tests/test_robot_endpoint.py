@@ -13,20 +13,20 @@ import numpy as np
 import pytest
 from fakes import make_world_info
 
+from bestofn_swarm.wire import auth, batch, guard, keyspace, names, protocol
 from robot_agent.core import ports
-from robot_agent.core.endpoint import InputKind, OutputKind, RobotEndpoint, Step
+from robot_agent.core.endpoint import RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
 from robot_agent.core.tick_assembly import TickAssembly, TickRefused
-from wire import auth, batch, guard, names, protocol
 
 SECRET = bytes(range(32))
 ROBOT = 3
-KEYS = protocol.Keys("endpoint")
+KEYS = keyspace.Keys("endpoint")
 WORLD_KEYS = auth.Keyring(secret=SECRET)  # the world server holds the run secret
 DT = make_world_info(3).dt
 PNG = bytes(cv2.imencode(".png", np.zeros((8, 8, 3), np.uint8))[1])
 
-Message = tuple[InputKind, bytes, bytes | None]
+Message = tuple[keyspace.KeyKind, bytes, bytes | None]
 
 
 class Recording:
@@ -85,7 +85,7 @@ class WorldSide:
         return auth.seal(self.keyring, names.robot_identity(self.robot), key, payload, meta)
 
     def sense(self, tick: int, *, rx: int = 0, camera: bool = False) -> Message:
-        return InputKind.SENSE, *self.sense_entry(tick, rx=rx, camera=camera)
+        return keyspace.SENSE, *self.sense_entry(tick, rx=rx, camera=camera)
 
     def sense_entry(
         self, tick: int, *, rx: int = 0, camera: bool = False, t: float | None = None
@@ -102,20 +102,24 @@ class WorldSide:
             camera=camera,
         )
         payload = protocol.encode(sense)
-        return payload, self._seal(KEYS.sense(self.robot), payload)
+        return payload, self._seal(KEYS.of(keyspace.SENSE, self.robot), payload)
 
     def rx(self, tick: int, seq: int, sender: str = "nest") -> Message:
         payload = protocol.encode(protocol.BeaconPayload(v=1, id="nest", seq=seq))
         meta = protocol.encode(
             protocol.RadioRxMeta(v=1, tick=tick, sender=sender, seq=seq, sent_tick=tick - 1)
         )
-        return InputKind.RADIO_RX, payload, self._seal(KEYS.radio_rx(self.robot), payload, meta)
+        return (
+            keyspace.RADIO_RX,
+            payload,
+            self._seal(KEYS.of(keyspace.RADIO_RX, self.robot), payload, meta),
+        )
 
     def frame(self, tick: int) -> Message:
         meta = protocol.encode(
             protocol.CameraMeta(v=1, tick=tick, width=8, height=8, encoding="png")
         )
-        return InputKind.CAMERA, PNG, self._seal(KEYS.camera(self.robot), PNG, meta)
+        return keyspace.CAMERA, PNG, self._seal(KEYS.of(keyspace.CAMERA, self.robot), PNG, meta)
 
 
 def robot_keys(robot: int = ROBOT) -> auth.Keyring:
@@ -324,30 +328,30 @@ def _bad_inputs() -> dict[str, Message]:
     sense_at_wrong_time = world.sense_entry(1, t=5.0)
     garbage = b"not a sense"
     rx_kind, rx_payload, _ = world.rx(1, seq=1)
-    rx_key = KEYS.radio_rx(ROBOT)
+    rx_key = KEYS.of(keyspace.RADIO_RX, ROBOT)
     identity = names.robot_identity(ROBOT)
     camera_meta = protocol.encode(
         protocol.CameraMeta(v=1, tick=1, width=8, height=8, encoding="png")
     )
     return {
-        "untagged": (InputKind.SENSE, payload, None),
+        "untagged": (keyspace.SENSE, payload, None),
         "another run's key": (
-            InputKind.SENSE,
+            keyspace.SENSE,
             payload,
-            OTHER_RUN.seal(identity, KEYS.sense(ROBOT), payload),
+            OTHER_RUN.seal(identity, KEYS.of(keyspace.SENSE, ROBOT), payload),
         ),
         "another robot's key": WorldSide(WORLD_KEYS, robot=4).sense(1),
         "tagged for another key": (
-            InputKind.SENSE,
+            keyspace.SENSE,
             payload,
-            WORLD_KEYS.seal(identity, KEYS.camera(ROBOT), payload),
+            WORLD_KEYS.seal(identity, KEYS.of(keyspace.CAMERA, ROBOT), payload),
         ),
         "undecodable": (
-            InputKind.SENSE,
+            keyspace.SENSE,
             garbage,
-            WORLD_KEYS.seal(identity, KEYS.sense(ROBOT), garbage),
+            WORLD_KEYS.seal(identity, KEYS.of(keyspace.SENSE, ROBOT), garbage),
         ),
-        "sim time not its tick's": (InputKind.SENSE, *sense_at_wrong_time),
+        "sim time not its tick's": (keyspace.SENSE, *sense_at_wrong_time),
         "radio without metadata": (
             rx_kind,
             rx_payload,
@@ -359,9 +363,9 @@ def _bad_inputs() -> dict[str, Message]:
             WORLD_KEYS.seal(identity, rx_key, rx_payload, camera_meta),
         ),
         "a frame with no metadata": (
-            InputKind.CAMERA,
+            keyspace.CAMERA,
             PNG,
-            WORLD_KEYS.seal(identity, KEYS.camera(ROBOT), PNG),
+            WORLD_KEYS.seal(identity, KEYS.of(keyspace.CAMERA, ROBOT), PNG),
         ),
     }
 
@@ -377,16 +381,16 @@ def test_an_input_that_fails_a_check_is_refused_and_counted(name: str) -> None:
 
 def test_an_unkeyed_robot_still_refuses_what_does_not_decode() -> None:
     robot, _, world = endpoint(keyed=False)
-    assert robot.receive(InputKind.SENSE, b"{", None) is None
+    assert robot.receive(keyspace.SENSE, b"{", None) is None
     assert robot.receive(*world.sense(1, rx=1)) is None
     payload = protocol.encode(protocol.BeaconPayload(v=1, id="nest", seq=1))
-    assert robot.receive(InputKind.RADIO_RX, payload, None) is None  # no metadata
+    assert robot.receive(keyspace.RADIO_RX, payload, None) is None  # no metadata
     assert robot.rejects.count == 2
 
 
 def test_inputs_dropped_by_the_transport_are_counted_in_the_status() -> None:
     robot, _, _ = endpoint()
-    robot.receive(InputKind.SENSE, b"{", None)
+    robot.receive(keyspace.SENSE, b"{", None)
     robot.count_dropped(3)
     status = protocol.decode(robot.status(0).payload, protocol.Status)
     assert status.rejected == 1 + 1 + 3  # the controller's, the endpoint's, the dropped
@@ -401,10 +405,10 @@ def test_what_a_robot_sends_is_sealed_so_that_its_receivers_believe_it() -> None
     step = robot.receive(*world.sense(6))
     assert step is not None
     assert [message.kind for message in step.outgoing] == [
-        OutputKind.RADIO_TX,
-        OutputKind.RADIO_TX,
-        OutputKind.ACT,
-        OutputKind.STATUS,
+        keyspace.RADIO_TX,
+        keyspace.RADIO_TX,
+        keyspace.ACT,
+        keyspace.STATUS,
     ]
     identity = names.robot_identity(ROBOT)
     opened = [
@@ -413,13 +417,15 @@ def test_what_a_robot_sends_is_sealed_so_that_its_receivers_believe_it() -> None
     ]
     sent = [protocol.decode(meta or b"", protocol.RadioTxMeta) for meta in opened[:2]]
     assert [(meta.tick, meta.seq) for meta in sent] == [(6, 1), (6, 2)]
-    assert {message.key for message in step.transmissions} == {KEYS.radio_tx(names.robot_name(3))}
+    assert {message.key for message in step.transmissions} == {
+        KEYS.of(keyspace.RADIO_TX, names.robot_name(3))
+    }
     assert step.act is not None
     act = protocol.decode(step.act.payload, protocol.Act)
     assert act == step.answer
     assert (act.tick, act.left, act.right, act.radio_tx) == (6, 0.01, -0.01, 2)
-    assert step.act.key == KEYS.act(ROBOT) and opened[2] == b""
-    assert step.status is not None and step.status.key == KEYS.status(ROBOT)
+    assert step.act.key == KEYS.of(keyspace.ACT, ROBOT) and opened[2] == b""
+    assert step.status is not None and step.status.key == KEYS.of(keyspace.STATUS, ROBOT)
     assert protocol.decode(step.status.payload, protocol.Status).tick == 6
     for message in step.outgoing:  # a forged or altered copy is not believed
         with pytest.raises(auth.AuthError):
@@ -473,7 +479,7 @@ def sense_batch(
         rx=[rx if robot == 4 else 0 for robot in robots],
         camera=[False] * len(robots),
     )
-    return payload, auth.seal(keyring, identity, KEYS.host_sense(3), payload)
+    return payload, auth.seal(keyring, identity, KEYS.of(keyspace.HOST_SENSE, 3), payload)
 
 
 def step_all(host: HostedRobots, payload: bytes, attachment: bytes | None) -> None:
@@ -485,16 +491,25 @@ def step_all(host: HostedRobots, payload: bytes, attachment: bytes | None) -> No
 
 def test_a_batch_of_senses_reaches_each_hosted_robot_and_their_acts_leave_in_one_batch() -> None:
     host, lead, other = hosted()
-    assert (host.sense_key, host.act_key) == (KEYS.host_sense(3), KEYS.host_act(3))
+    assert (host.sense_key, host.act_key) == (
+        KEYS.of(keyspace.HOST_SENSE, 3),
+        KEYS.of(keyspace.HOST_ACT, 3),
+    )
     assert lead.batched and other.batched  # their acts leave in the batch, not on their keys
     step_all(host, *sense_batch([9, 3, 4], 2, rx=1))
     assert lead.rejects.count == 1  # the entry for a robot not hosted here
     acts = host.take_acts()
-    assert acts is not None and acts.kind is OutputKind.HOST_ACT and acts.key == KEYS.host_act(3)
+    assert (
+        acts is not None
+        and acts.kind is keyspace.HOST_ACT
+        and acts.key == KEYS.of(keyspace.HOST_ACT, 3)
+    )
     # One tag for the whole batch, the host's: no robot's key speaks for it.
-    auth.unseal(WORLD_KEYS, HOST, KEYS.host_act(3), acts.payload, acts.attachment)
+    auth.unseal(WORLD_KEYS, HOST, KEYS.of(keyspace.HOST_ACT, 3), acts.payload, acts.attachment)
     with pytest.raises(auth.AuthError):
-        auth.unseal(WORLD_KEYS, "robot/3", KEYS.host_act(3), acts.payload, acts.attachment)
+        auth.unseal(
+            WORLD_KEYS, "robot/3", KEYS.of(keyspace.HOST_ACT, 3), acts.payload, acts.attachment
+        )
     [(robot, act)] = batch.decode_acts(acts.payload).acts
     assert (robot, act.tick, act.left, act.right) == (3, 2, 0.01, -0.01)
     assert host.take_acts() is None  # nothing held since

@@ -9,8 +9,8 @@ import time
 import pytest
 from swarm_helpers import REPO, swarm_command
 
-from plumbing.tcp import free_port, wait_for_port
-from plumbing.zenoh_session import open_session
+from bestofn_swarm.plumbing.tcp import free_port, wait_for_port
+from bestofn_swarm.plumbing.zenoh_session import open_session
 
 pytestmark = pytest.mark.timeout(60)
 

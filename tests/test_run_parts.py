@@ -13,17 +13,17 @@ from typing import Any, cast
 import pytest
 import zenoh
 
+from bestofn_swarm.plumbing import stop_signals
+from bestofn_swarm.wire import keyspace, protocol
+from bestofn_swarm.wire.endings import Halt, Stop, TimeLimit
 from deploy.cli import build_parser
-from deploy.launcher.faults import FaultSchedule
-from deploy.launcher.follower import Heard, Kind
+from deploy.launcher.follower import Heard
 from deploy.launcher.launcher import Swarm
 from deploy.launcher.log_relay import LogRelay
-from deploy.launcher.plan import Fault, FaultAction, RunPlan, plan_from_args
+from deploy.launcher.plan import RunPlan, plan_from_args
 from deploy.launcher.processes import ProcessGroup
 from deploy.launcher.signals import StopSignals
-from plumbing import stop_signals
-from wire import protocol
-from wire.endings import Halt, Stop, TimeLimit
+from robot_agent.core import faults
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -92,7 +92,7 @@ class _Session:
 
 
 def test_the_log_relay_holds_lines_for_the_recorder_and_publishes_none_once_detached() -> None:
-    keys = protocol.Keys("parts")
+    keys = keyspace.Keys("parts")
     echoed: list[str] = []
     relay = LogRelay(keys, lambda process, line: echoed.append(line), hold=True)
     session = _Session()
@@ -102,25 +102,55 @@ def test_the_log_relay_holds_lines_for_the_recorder_and_publishes_none_once_deta
     assert session.put_keys == []
     relay.release()
     relay.line("robot-0", "while recording")
-    assert session.put_keys == [keys.log("world"), keys.log("beacon"), keys.log("robot-0")]
+    assert session.put_keys == [
+        keys.of(keyspace.LOG, "world"),
+        keys.of(keyspace.LOG, "beacon"),
+        keys.of(keyspace.LOG, "robot-0"),
+    ]
     relay.detach()
     relay.line("world", "while closing")
     assert len(session.put_keys) == 3
     assert echoed[-1] == "while closing"  # still shown with --verbose
 
 
+class _Engine:
+    """What the faults did to a run, in order."""
+
+    def __init__(self) -> None:
+        self.done: list[tuple[str, int]] = []
+
+    def kill(self, robot: int) -> bool:
+        self.done.append(("kill", robot))
+        return robot != 1
+
+    def restart(self, robot: int) -> None:
+        self.done.append(("restart", robot))
+
+
 def test_faults_fall_due_in_sim_time_order_and_are_noted_as_the_summary_lists_them() -> None:
-    schedule = FaultSchedule(
-        [Fault(1, FaultAction.RESTART, 20.0), Fault(0, FaultAction.KILL, 10.0)]
+    engine = _Engine()
+    schedule = faults.Schedule(
+        [faults.Restart(1, 20.0), faults.Kill(0, 10.0), faults.MotorFailure(2, 5.0)]
     )
-    assert schedule.due(9.9) == [] and schedule.restart_pending()
-    (kill,) = schedule.due(15.0)
-    assert kill == Fault(0, FaultAction.KILL, 10.0)
-    schedule.note(kill, 15.04, was_running=True)
-    assert schedule.due(30.0) == [Fault(1, FaultAction.RESTART, 20.0)]
+    # A motor failure lives in the robot's controller: the engine has nothing to do.
+    assert [fault.SWITCH for fault in schedule.pending] == ["kill", "restart"]
+    assert schedule.apply_due(engine, 9.9) == [] and schedule.restart_pending()
+    (kill,) = schedule.apply_due(engine, 15.04)
+    assert (kill.robot, kill.action) == (0, "kill")
+    assert engine.done == [("kill", 0)]
+    assert schedule.apply_due(engine, 30.0)[0].action == "restart"
+    assert engine.done == [("kill", 0), ("kill", 1), ("restart", 1)]
     assert not schedule.restart_pending() and schedule.pending == []
-    assert schedule.applied == [
-        {"robot": 0, "action": "kill", "at_s": 10.0, "applied_at_s": 15.04, "was_running": True}
+    assert [applied.record() for applied in schedule.applied] == [
+        {
+            "robot": 2,
+            "action": "motor-failure",
+            "at_s": 5.0,
+            "applied_at_s": 5.0,
+            "was_running": True,
+        },
+        {"robot": 0, "action": "kill", "at_s": 10.0, "applied_at_s": 15.04, "was_running": True},
+        {"robot": 1, "action": "restart", "at_s": 20.0, "applied_at_s": 30.0, "was_running": False},
     ]
 
 
@@ -135,7 +165,9 @@ def _plan(*options: str) -> RunPlan:
 def _clock_message(t: float, plan: RunPlan) -> Heard:
     """The world's clock at ``t`` on the run's clock key (a key of another run is refused)."""
     clock = protocol.Clock(v=protocol.VERSION, tick=round(t * 10), t=t)
-    return Heard(Kind.CLOCK, protocol.Keys(plan.run_id).world_clock, protocol.encode(clock))
+    return Heard(
+        keyspace.CLOCK, keyspace.Keys(plan.run_id).of(keyspace.CLOCK), protocol.encode(clock)
+    )
 
 
 def test_the_launcher_looks_with_its_clock_given_and_takes_a_signal_as_an_event() -> None:
@@ -147,7 +179,7 @@ def test_the_launcher_looks_with_its_clock_given_and_takes_a_signal_as_an_event(
     assert swarm.look(signalled=False) is None
     swarm.inbox.put(_clock_message(12.5, plan))
     assert not swarm.take_events(until=now[0])
-    assert swarm.follower.sim_time == 12.5 and swarm.follower.started_at == 1000.0
+    assert swarm.follower.run.sim_time == 12.5 and swarm.follower.started_at == 1000.0
     swarm.signalled(signal.SIGINT)
     assert swarm.take_events(until=now[0])  # the relay's event: a stop signal came
     assert swarm.look(signalled=True) == Halt(Stop.INTERRUPTED)
@@ -165,4 +197,4 @@ def test_the_inbox_takes_a_signal_whatever_else_filled_it() -> None:
     swarm.inbox.put(_clock_message(1.0, plan), 100)
     swarm.signalled(signal.SIGTERM)
     assert swarm.take_events(until=swarm.clock())
-    assert swarm.follower.rejected == 1 and swarm.follower.sim_time == 0.0
+    assert swarm.follower.run.rejected == 1 and swarm.follower.run.sim_time == 0.0

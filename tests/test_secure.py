@@ -24,7 +24,7 @@ from swarm_helpers import (
     unique_run_id,
 )
 
-from plumbing.run_keys import KEYS_ENV
+from bestofn_swarm.plumbing.run_keys import KEYS_ENV
 
 pytestmark = pytest.mark.timeout(240)
 

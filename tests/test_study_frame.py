@@ -67,3 +67,5 @@ def test_a_studys_runs_load_into_a_data_frame(tmp_path: Path) -> None:
     assert list(frame["sim_time_s"]) == [100.0, 101.0]
     assert {"key", "engine", "seed", "consensus", "wall_s", "commit", "lock"} <= set(frame.columns)
     assert len(deploy.study.frame("scale", REPO)) == len(results.load(REPO / study.results).runs)
+    # A root given as a string is the same root.
+    assert deploy.study.frame("scale", str(tmp_path)).equals(frame)

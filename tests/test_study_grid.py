@@ -123,14 +123,61 @@ def test_the_time_left_scales_the_estimates_by_how_the_runs_went() -> None:
     assert eta.seconds_left() == 200.0
 
 
-def test_a_checks_sample_is_cheap_spread_over_points_and_the_same_every_time() -> None:
-    runs = grid.expand("s", [_point(10, range(4)), _point(500, range(2))])
-    walls = {"robots=10": 2.0, "robots=500": 1500.0}
-    records = {run.key: {"wall_s": walls[run.point]} for run in runs}
-    first = check.sample(runs, records, 2)
-    assert first == check.sample(list(reversed(runs)), records, 2)
-    assert {run.point for run in first} == {"robots=10", "robots=500"}  # one per point first
-    assert all(run.point == "robots=10" for run in check.sample(runs, records, 1))
+def test_a_checks_sample_reaches_every_kind_varies_with_its_seed_and_keeps_to_its_budget() -> None:
+    runs = grid.expand("s", [_point(10, range(20)), _point(50, range(20)), _point(500, range(2))])
+    walls = {"robots=10": 1.0, "robots=50": 20.0, "robots=500": 1500.0}
+    records = {run.key: {"wall_s": walls[run.point] + run.seed / 100} for run in runs}
+    drawn = check.sample(runs, records, seed=1)
+    # One run of each kind (how it is made and its size), the same from the same seed in
+    # any order of the runs; a kind whose every run is over the budget is named, not made.
+    assert {run.point for run in drawn.runs} == {"robots=10", "robots=50"}
+    assert list(drawn.kinds) == ["inprocess, 10 robots", "inprocess, 50 robots"]
+    assert drawn.out_of_reach == {"inprocess, 500 robots": 1500.0}
+    assert check.sample(list(reversed(runs)), records, seed=1).runs == drawn.runs
+    # Another seed draws other runs of the same kinds.
+    seeds = {tuple(run.key for run in check.sample(runs, records, seed=s).runs) for s in range(8)}
+    assert len(seeds) > 4
+    # A study's own kinds: here one of each swarm size group.
+    grouped = check.sample(
+        runs, records, seed=1, kind_of=lambda run: "small" if run.param("robots") == 10 else "big"
+    )
+    assert [run.point for run in grouped.kinds["small"]] == ["robots=10"]
+    assert [run.point for run in grouped.kinds["big"]] == ["robots=50"]  # 500: over budget
+    assert grouped.beyond == {"big": 2}
+    # Two runs of each kind within a budget of 30 s: the costliest drawn give way.
+    tight = check.sample(runs, records, seed=1, per_kind=2, budget=30.0)
+    assert sum(records[run.key]["wall_s"] for run in tight.runs) <= 30.0
+    assert {run.point for run in tight.runs} == {"robots=10", "robots=50"}  # every kind kept
+    # Each kind's cheapest run fits, but not together: a kind is never left out for it.
+    snug = check.sample(runs, records, seed=1, budget=20.5)
+    assert [run.key for run in snug.runs] == ["robots=10 seed=0", "robots=50 seed=0"]
+
+
+def test_every_kind_of_run_of_every_study_is_within_the_checks_budget() -> None:
+    """make check-published makes one run of each kind of each study: a well-stirred cell,
+    a 50-robot swarm, a run over Zenoh, the camera alone, the runs observed for the lag."""
+    from pathlib import Path
+
+    from deploy.study.state import state_of
+
+    root = Path(__file__).resolve().parent.parent
+    kinds = {}
+    for name, study in studies().items():
+        state = state_of(study, root)
+        drawn = check.sample(
+            state.done, state.loaded.runs, seed=0, kind_of=study.kinds or check.default_kind
+        )
+        assert drawn.out_of_reach == {}, name
+        assert sum(check.wall(state.loaded.runs, run) for run in drawn.runs) <= check.BUDGET
+        kinds[name] = set(drawn.kinds)
+        made = {run.kind for run in drawn.runs}
+        assert made == {run.kind for run in state.done}, name  # every way of making a run
+    assert {"a well-stirred cell", "a 50-robot swarm"} <= kinds["strategies"]
+    assert {"over Zenoh", "the camera alone"} <= kinds["robustness"]
+    assert "the defaults, observed for the lag" in kinds["section5-settings"]
+    assert kinds["scale"] == {"in one process", "over Zenoh"}
+    assert "a 50-robot swarm, trimmed pooling" in kinds["defence"]
+    assert len(kinds["byzantine"]) == 4  # no Byzantine robot, liars, inverted, silent
 
 
 def test_differences_name_each_field_of_the_published_result() -> None:

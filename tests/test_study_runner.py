@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from swarm_helpers import REPO, swarm_command
 
-from deploy.study import make, results
+from deploy.study import lock, make, results
 from deploy.study.catalogue import study_named
 
 TINY = REPO / "tests" / "study_tiny.py"
@@ -181,3 +181,43 @@ def test_a_point_over_zenoh_is_made_by_real_processes_and_recorded(
     in_process = make.make(dataclasses.replace(run, kind="inprocess", record=False))["result"]
     assert record["result"]["ended"] == "consensus"
     assert record["result"] == in_process
+
+
+@pytest.mark.timeout(400)
+def test_two_runners_on_one_results_file_make_each_run_once(root: Path, short_tmp: Path) -> None:
+    """The second runner is refused and names the first; with --wait it waits for it and
+    then finds nothing missing."""
+    results_file = root / "docs" / "studies" / "tiny.jsonl"
+    environment = {**os.environ, "TMPDIR": str(short_tmp)}
+    only = ("--only", "engine=inprocess", "--parallel", "1")
+    first = subprocess.Popen(
+        _command(root, *only), cwd=REPO, env=environment, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        held = lock.lock_path(results_file)
+        deadline = time.monotonic() + 120
+        while f"pid {first.pid} " not in (held.read_text() if held.exists() else ""):
+            assert first.poll() is None, "the first runner ended before it took the lock"
+            assert time.monotonic() < deadline, "the first runner took no lock"
+            time.sleep(0.02)
+        second = subprocess.run(
+            _command(root, *only), cwd=REPO, env=environment, capture_output=True, text=True,
+            timeout=120,
+        )  # fmt: skip
+        assert second.returncode == 2
+        assert f"is being made by pid {first.pid} on " in second.stderr
+        waited = subprocess.run(
+            _command(root, *only, "--wait"), cwd=REPO, env=environment, capture_output=True,
+            text=True, timeout=300,
+        )  # fmt: skip
+        assert waited.returncode == 0, waited.stderr[-2000:]
+        assert "waiting for it to end" in " ".join(waited.stderr.split())
+        assert waited.stdout.strip().splitlines()[-1] == f"{IN_PROCESS} done, 0 missing"
+        assert first.wait(timeout=300) == 0
+    finally:
+        if first.poll() is None:
+            os.killpg(first.pid, signal.SIGKILL)
+        first.communicate(timeout=30)
+    keys = [json.loads(line)["key"] for line in _lines(results_file) if line.strip()]
+    assert len(keys) == len(set(keys)) == IN_PROCESS  # each run made once

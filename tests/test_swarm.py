@@ -27,7 +27,7 @@ from swarm_helpers import (
     wait_for_processes,
 )
 
-from wire import protocol
+from bestofn_swarm.wire import keyspace, protocol
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -83,11 +83,11 @@ def _decisions(summary: dict[str, Any]) -> list[tuple[object, ...]]:
 
 def test_killing_a_robot_mid_run_does_not_hang_the_world() -> None:
     run_id = unique_run_id("kill")
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     with loopback_router() as (session, endpoint):
         sim_time = [0.0]
         session.declare_subscriber(
-            keys.world_clock,
+            keys.of(keyspace.CLOCK),
             lambda sample: sim_time.__setitem__(
                 0, protocol.decode(sample.payload.to_bytes(), protocol.Clock).t
             ),
@@ -144,7 +144,7 @@ def _cmdline(pid: int) -> str:
         return file.read().replace(b"\0", b" ").decode() + " "
 
 
-def _garbage(run: protocol.Keys, tick: int) -> list[tuple[str, bytes, bytes | None]]:
+def _garbage(run: keyspace.Keys, tick: int) -> list[tuple[str, bytes, bytes | None]]:
     """Malformed, wrong-version, wrong-length, NaN, oversized and impostor messages."""
     huge = b"[" + b"0," * 60_000 + b"0]"
     good_sense = protocol.encode(
@@ -165,35 +165,37 @@ def _garbage(run: protocol.Keys, tick: int) -> list[tuple[str, bytes, bytes | No
         huge,
     ]
     keys = [
-        run.sense(0),
-        run.act(0),
-        run.status(0),
-        run.world_clock,
-        run.world_state,
-        run.beacon_ack("nest"),
-        run.radio_tx(0),
-        run.radio_tx(77),
-        run.camera(0),
-        run.radio_rx(0),
-        run.log("world"),
+        run.of(keyspace.SENSE, 0),
+        run.of(keyspace.ACT, 0),
+        run.of(keyspace.STATUS, 0),
+        run.of(keyspace.CLOCK),
+        run.of(keyspace.STATE),
+        run.of(keyspace.ACK, "nest"),
+        run.of(keyspace.RADIO_TX, 0),
+        run.of(keyspace.RADIO_TX, 77),
+        run.of(keyspace.CAMERA, 0),
+        run.of(keyspace.RADIO_RX, 0),
+        run.of(keyspace.LOG, "world"),
     ]
     messages: list[tuple[str, bytes, bytes | None]] = [
         (key, payload, None) for key in keys for payload in bad
     ]
-    messages += [(run.radio_tx(1), payload, tx_meta) for payload in bad]
-    messages += [(run.radio_rx(0), payload, b"{}") for payload in bad]
-    messages.append((run.radio_tx(1), impostor, tx_meta))  # robot 1 claiming to be robot 2
-    messages.append((run.radio_tx(77), impostor, tx_meta))  # no such robot
+    messages += [(run.of(keyspace.RADIO_TX, 1), payload, tx_meta) for payload in bad]
+    messages += [(run.of(keyspace.RADIO_RX, 0), payload, b"{}") for payload in bad]
+    messages.append(
+        (run.of(keyspace.RADIO_TX, 1), impostor, tx_meta)
+    )  # robot 1 claiming to be robot 2
+    messages.append((run.of(keyspace.RADIO_TX, 77), impostor, tx_meta))  # no such robot
     return messages
 
 
 def test_malformed_payloads_on_every_key_are_rejected_and_counted() -> None:
     run_id = unique_run_id("junk")
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     with loopback_router() as (session, endpoint):
         ticks: list[int] = []
         session.declare_subscriber(
-            keys.world_clock,
+            keys.of(keyspace.CLOCK),
             lambda sample: ticks.append(
                 protocol.decode(sample.payload.to_bytes(), protocol.Clock).tick
             ),

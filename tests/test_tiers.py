@@ -32,7 +32,7 @@ FORBIDDEN = (
     "netns",
     "browser",
     "deploy.launcher.processes",
-    "plumbing.zenoh_session",
+    "bestofn_swarm.plumbing.zenoh_session",
 )
 # This module imports some of them to show that the guard refuses them.
 GUARD_TEST = "test_tiers"

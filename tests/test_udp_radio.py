@@ -19,6 +19,7 @@ from typing import Any
 import pytest
 from netns import UDP_SUBNET, Lan, lan_address, namespaces
 
+from bestofn_swarm.wire import protocol
 from examples.udp_radio import (
     MAX_DATAGRAM_BYTES,
     MAX_RADIO_PAYLOAD_BYTES,
@@ -29,7 +30,6 @@ from examples.udp_radio import (
     encode_frame,
 )
 from robot_agent.core import ports
-from wire import protocol
 
 TESTS = Path(__file__).resolve().parent
 NODE = TESTS / "udp_swarm_node.py"

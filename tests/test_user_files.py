@@ -1,7 +1,8 @@
-"""Files at a user's paths: written readable by their owner only (plumbing/private_files.py),
-read with a size limit (plumbing/bounded_read.py); key files and configurations that fail
-say so in one line with exit code 2; the sweep of run directories whose launcher is gone
-(deploy/security/janitor.py). The same against live processes: tests/test_private_runs.py."""
+"""Files at a user's paths: written readable by their owner only
+(bestofn_swarm/plumbing/private_files.py), read with a size limit
+(bestofn_swarm/plumbing/bounded_read.py); key files and configurations that fail say so in one line
+with exit code 2; the sweep of run directories whose launcher is gone (deploy/security/janitor.py).
+The same against live processes: tests/test_private_runs.py."""
 
 from __future__ import annotations
 
@@ -12,13 +13,13 @@ from pathlib import Path
 
 import pytest
 
+from bestofn_swarm.plumbing import run_keys
+from bestofn_swarm.plumbing.bounded_read import read_bounded, read_bounded_text
+from bestofn_swarm.plumbing.private_files import make_private_folder, open_private, write_private
+from bestofn_swarm.plumbing.trace import TraceWriter
+from bestofn_swarm.wire import settings
 from deploy.security import certificates
 from deploy.security.janitor import MAKER_FILE, PREFIX, PrivateDirectory, maker_alive, sweep
-from plumbing import run_keys
-from plumbing.bounded_read import read_bounded, read_bounded_text
-from plumbing.private_files import make_private_folder, open_private, write_private
-from plumbing.trace import TraceWriter
-from wire import settings
 from world_server.recording.description import json_object
 from world_server.server import cli as world_cli
 

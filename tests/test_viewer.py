@@ -35,14 +35,14 @@ from swarm_helpers import (
 from websockets.sync.client import connect
 from websockets.typing import Subprotocol
 
-from plumbing.tcp import free_port
-from plumbing.world_info import ask
-from viewer import replay
-from viewer.core import model
-from viewer.core.decode import Delivery, InvalidSampleError, decode_sample
-from viewer.live import MAX_DELIVERIES, LiveSource
-from wire import auth, names, protocol
-from wire.endings import Ending
+from bestofn_swarm.plumbing.tcp import free_port
+from bestofn_swarm.plumbing.world_info import ask
+from bestofn_swarm.wire import auth, keyspace, names, protocol
+from bestofn_swarm.wire.endings import Ending
+from deploy.viewer import replay
+from deploy.viewer.core import model
+from deploy.viewer.core.decode import InvalidSampleError, decode_sample
+from deploy.viewer.live import MAX_DELIVERIES, LiveSource
 from world_server.core.layout import make_layout
 from world_server.recording.description import RunDescription
 from world_server.recording.writer import McapRecorder, Sample
@@ -284,7 +284,7 @@ def test_swarm_view_refuses_a_missing_or_unreadable_recording(tmp_path: Path) ->
 def _made_up_recording(path: Path, *, states: bool, finish: bool) -> None:
     """A small recording written by the real recorder class, as every version wrote them."""
     run_id = "made-up"
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     layout = make_layout(3, 2, 5)
     with path.open("wb") as stream:
         mcap = McapRecorder(stream, keys, RunDescription(run_id, 5, 2, 3), chunk_size=1)
@@ -293,11 +293,11 @@ def _made_up_recording(path: Path, *, states: bool, finish: bool) -> None:
             mcap.record(Sample(key, protocol.encode(message), None, time.time_ns()))
 
         for tick in range(0, 101, 10):
-            put(keys.world_clock, protocol.Clock(v=1, tick=tick, t=tick / 10))
+            put(keys.of(keyspace.CLOCK), protocol.Clock(v=1, tick=tick, t=tick / 10))
             poses = [protocol.Pose(robot, 0.01 * tick, 0.1 * robot, 0.0) for robot in (0, 1)]
             if states:
                 put(
-                    keys.world_state,
+                    keys.of(keyspace.STATE),
                     protocol.WorldState(
                         v=1,
                         tick=tick,
@@ -320,12 +320,12 @@ def _made_up_recording(path: Path, *, states: bool, finish: bool) -> None:
                     rx=0,
                     camera=False,
                 )
-                put(keys.sense(pose.id), sense)
+                put(keys.of(keyspace.SENSE, pose.id), sense)
         for robot in (0, 1):
             decided = layout.best_site
             opinion = [1.0 if site == decided else 0.0 for site in range(3)]
             put(
-                keys.status(robot),
+                keys.of(keyspace.STATUS, robot),
                 protocol.Status(
                     v=1,
                     id=robot,
@@ -408,31 +408,37 @@ def _status(robot: int, *, tick: int = 1, trips: int = 0) -> protocol.Status:
     )
 
 
+# A radio message as the medium delivers it (the beacon's).
+BEACON_PAYLOAD = protocol.encode(protocol.BeaconPayload(v=1, id="nest", seq=1))
+
+
 def test_every_sample_passes_one_gate_that_rejects_what_is_not_a_valid_message() -> None:
-    keys = protocol.Keys("gate")
+    keys = keyspace.Keys("gate")
 
     def gate(key: str, payload: bytes, attachment: bytes | None) -> Any:
         return decode_sample(keys, key, payload, attachment, keyring=None)
 
     clock = protocol.encode(protocol.Clock(v=1, tick=3, t=0.3))
-    assert gate(keys.world_clock, clock, None) == protocol.Clock(v=1, tick=3, t=0.3)
-    assert gate(keys.sense(1), b"{}", None) is None  # a key the view does not use
+    assert gate(keys.of(keyspace.CLOCK), clock, None).message == protocol.Clock(v=1, tick=3, t=0.3)
+    assert gate(keys.of(keyspace.SENSE, 1), b"{}", None) is None  # a key the view does not use
     with pytest.raises(InvalidSampleError, match="status of robot 4"):
-        gate(keys.status(3), protocol.encode(_status(4)), None)
+        gate(keys.of(keyspace.STATUS, 3), protocol.encode(_status(4)), None)
     with pytest.raises(InvalidSampleError):
-        gate(keys.world_state, b'{"v":1,"tick":-1}', None)
+        gate(keys.of(keyspace.STATE), b'{"v":1,"tick":-1}', None)
     with pytest.raises(InvalidSampleError, match="without metadata"):
-        gate(keys.radio_rx(2), b"{}", None)
+        gate(keys.of(keyspace.RADIO_RX, 2), BEACON_PAYLOAD, None)
+    with pytest.raises(InvalidSampleError):  # not a radio message
+        gate(keys.of(keyspace.RADIO_RX, 2), b"{}", None)
     meta = protocol.encode(protocol.RadioRxMeta(v=1, tick=5, sender="7", seq=1, sent_tick=4))
-    delivery = gate(keys.radio_rx(2), b"{}", meta)
-    assert isinstance(delivery, Delivery) and delivery.receiver == 2
-    assert gate(keys.radio_rx("07"), b"{}", meta) is None  # no robot is spelt "07"
+    delivery = gate(keys.of(keyspace.RADIO_RX, 2), BEACON_PAYLOAD, meta)
+    assert delivery.kind is keyspace.RADIO_RX and delivery.robot == 2
+    assert gate(keys.of(keyspace.RADIO_RX, "07"), BEACON_PAYLOAD, meta) is None  # no "07"
 
 
 def test_in_a_keyed_run_the_gate_checks_each_tag_with_its_speakers_key() -> None:
     """The world's key for its clock, a robot's for its status, the receiving robot's for
     a delivery; the tag is stripped before the metadata is decoded."""
-    keys = protocol.Keys("gate")
+    keys = keyspace.Keys("gate")
     keyring = auth.Keyring(secret=bytes(range(32)))
     stranger = auth.Keyring(secret=bytes(32))  # another run's
 
@@ -440,32 +446,46 @@ def test_in_a_keyed_run_the_gate_checks_each_tag_with_its_speakers_key() -> None
         return decode_sample(keys, key, payload, attachment, keyring=keyring)
 
     clock = protocol.encode(protocol.Clock(v=1, tick=3, t=0.3))
-    sealed = keyring.seal(names.WORLD, keys.world_clock, clock)
-    assert gate(keys.world_clock, clock, sealed) == protocol.Clock(v=1, tick=3, t=0.3)
+    sealed = keyring.seal(names.WORLD, keys.of(keyspace.CLOCK), clock)
+    opened = gate(keys.of(keyspace.CLOCK), clock, sealed)
+    assert opened.message == protocol.Clock(v=1, tick=3, t=0.3)
     for attachment in (
         None,
-        keyring.seal(names.robot_identity(0), keys.world_clock, clock),
-        stranger.seal(names.WORLD, keys.world_clock, clock),
+        keyring.seal(names.robot_identity(0), keys.of(keyspace.CLOCK), clock),
+        stranger.seal(names.WORLD, keys.of(keyspace.CLOCK), clock),
     ):
         with pytest.raises(InvalidSampleError, match="world"):
-            gate(keys.world_clock, clock, attachment)
+            gate(keys.of(keyspace.CLOCK), clock, attachment)
     status = protocol.encode(_status(3))
-    assert gate(keys.status(3), status, keyring.seal("robot/3", keys.status(3), status)).id == 3
+    assert (
+        gate(
+            keys.of(keyspace.STATUS, 3),
+            status,
+            keyring.seal("robot/3", keys.of(keyspace.STATUS, 3), status),
+        ).message.id
+        == 3
+    )
     with pytest.raises(InvalidSampleError, match="not tagged by robot/3's key"):
-        gate(keys.status(3), status, keyring.seal("robot/4", keys.status(3), status))
+        gate(
+            keys.of(keyspace.STATUS, 3),
+            status,
+            keyring.seal("robot/4", keys.of(keyspace.STATUS, 3), status),
+        )
     meta = protocol.encode(protocol.RadioRxMeta(v=1, tick=5, sender="7", seq=1, sent_tick=4))
-    key, payload = keys.radio_rx(2), b"{}"
+    key, payload = keys.of(keyspace.RADIO_RX, 2), BEACON_PAYLOAD
     delivery = gate(key, payload, keyring.seal("robot/2", key, payload, meta))
-    assert isinstance(delivery, Delivery) and (delivery.receiver, delivery.meta.sender) == (2, "7")
+    assert (delivery.robot, delivery.meta.sender) == (2, "7")
     with pytest.raises(InvalidSampleError, match="robot/2"):  # the sender's key is not it
         gate(key, payload, keyring.seal("robot/7", key, payload, meta))
     with pytest.raises(InvalidSampleError, match="without metadata"):
         gate(key, payload, keyring.seal("robot/2", key, payload))
-    assert gate(keys.sense(1), b"{}", None) is None  # a key it does not use: not checked
+    assert (
+        gate(keys.of(keyspace.SENSE, 1), b"{}", None) is None
+    )  # a key it does not use: not checked
 
 
 def test_a_forged_status_is_counted_and_never_reaches_the_page() -> None:
-    keys = protocol.Keys("forged")
+    keys = keyspace.Keys("forged")
     keyring = auth.Keyring(secret=bytes(range(32)))
     source = LiveSource(model.Scene("forged", 0, 2, make_layout(2, 2, 0)), keys, keyring)
     state = protocol.encode(
@@ -479,18 +499,24 @@ def test_a_forged_status_is_counted_and_never_reaches_the_page() -> None:
             stalls=0,
         )
     )
-    source.take(keys.world_state, state, keyring.seal(names.WORLD, keys.world_state, state))
+    source.take(
+        keys.of(keyspace.STATE), state, keyring.seal(names.WORLD, keys.of(keyspace.STATE), state)
+    )
     honest, forged = protocol.encode(_status(1, trips=2)), protocol.encode(_status(1, trips=999))
-    source.take(keys.status(1), honest, keyring.seal("robot/1", keys.status(1), honest))
-    source.take(keys.status(1), forged, bytes(16))
-    source.take(keys.status(1), forged, None)
+    source.take(
+        keys.of(keyspace.STATUS, 1),
+        honest,
+        keyring.seal("robot/1", keys.of(keyspace.STATUS, 1), honest),
+    )
+    source.take(keys.of(keyspace.STATUS, 1), forged, bytes(16))
+    source.take(keys.of(keyspace.STATUS, 1), forged, None)
     frame = source.frame()
     assert [row[10] for row in frame["robots"]] == [2]  # trips: the honest status's
     assert frame["rejected"] == 2
 
 
 def test_the_bridge_keeps_the_newest_state_and_a_bounded_list_of_deliveries() -> None:
-    keys = protocol.Keys("bounded")
+    keys = keyspace.Keys("bounded")
     scene = model.Scene("bounded", 0, 3, make_layout(3, 3, 0))
     source = LiveSource(scene, keys, None)
     for tick in range(5000):
@@ -503,10 +529,10 @@ def test_the_bridge_keeps_the_newest_state_and_a_bounded_list_of_deliveries() ->
             rejected=0,
             stalls=0,
         )
-        source.take(keys.world_state, protocol.encode(state), None)
+        source.take(keys.of(keyspace.STATE), protocol.encode(state), None)
         meta = protocol.RadioRxMeta(v=1, tick=tick, sender="1", seq=tick, sent_tick=tick)
-        source.take(keys.radio_rx(0), b"{}", protocol.encode(meta))
-    source.take(keys.world_state, b"not json", None)
+        source.take(keys.of(keyspace.RADIO_RX, 0), BEACON_PAYLOAD, protocol.encode(meta))
+    source.take(keys.of(keyspace.STATE), b"not json", None)
     frame = source.frame()
     assert frame["radio"]["sent"] == 4999  # the newest state, nothing queued behind it
     assert frame["robots"][0][1] == pytest.approx(0.4999)
@@ -698,7 +724,7 @@ def test_a_forged_status_and_finish_are_neither_drawn_nor_believed_but_counted(
     wrong tag while the page watches, then asks the page to finish: the page draws none
     of it and counts each; Foxglove live puts the statuses on recorder/rejected."""
     run_id = unique_run_id("forged-view")
-    keys = protocol.Keys(run_id)
+    keys = keyspace.Keys(run_id)
     stranger = auth.Keyring(secret=bytes(32))  # another run's keys: tags that do not check
     view_port, foxglove_port = free_port(), free_port()
     seen, stop = FoxgloveSeen(), threading.Event()
@@ -711,7 +737,7 @@ def test_a_forged_status_and_finish_are_neither_drawn_nor_believed_but_counted(
             ticks.append(protocol.decode(sample.payload.to_bytes(), protocol.Clock).tick)
 
     with loopback_router() as (session, endpoint):
-        subscriber = session.declare_subscriber(keys.world_clock, on_clock)
+        subscriber = session.declare_subscriber(keys.of(keyspace.CLOCK), on_clock)
         # Ten robots hosted in one process: ten robot processes at 100 ticks a second on
         # 2 shared cores answered late and took 4-13x the sim time to agree, or stalled
         # (docs/performance.md, "Real time"); this test is about the page, not the layout.
@@ -735,7 +761,7 @@ def test_a_forged_status_and_finish_are_neither_drawn_nor_believed_but_counted(
             deadline = time.monotonic() + 2.0
             while time.monotonic() < deadline and process.poll() is None:
                 for robot in range(ROBOTS):
-                    key = keys.status(robot)
+                    key = keys.of(keyspace.STATUS, robot)
                     payload = protocol.encode(_status(robot, tick=ticks[-1], trips=FORGED_TRIPS))
                     session.put(
                         key,
@@ -759,9 +785,16 @@ def test_a_forged_status_and_finish_are_neither_drawn_nor_believed_but_counted(
                 time.sleep(0.05)
             forger.join()
             claim = json.dumps({"run_id": run_id, "consensus": True, "chosen_site": 0}).encode()
-            unsealed = list(session.get(keys.viewer_finish, payload=claim, timeout=5.0))
+            unsealed = list(
+                session.get(keys.of(keyspace.VIEWER_FINISH), payload=claim, timeout=5.0)
+            )
             answers, refused = ask(
-                session, keys.viewer_finish, stranger, names.LAUNCHER, payload=claim, timeout=5.0
+                session,
+                keys.of(keyspace.VIEWER_FINISH),
+                stranger,
+                names.LAUNCHER,
+                payload=claim,
+                timeout=5.0,
             )
             time.sleep(0.5)
             during = chromium.canvas_data()
@@ -790,7 +823,9 @@ def test_a_forged_status_and_finish_are_neither_drawn_nor_believed_but_counted(
     assert seen.rejected, seen.topics()
     reasons = {record["reason"].split(":", 1)[1].strip() for record in seen.rejected}
     assert reasons <= {f"not tagged by robot/{robot}'s key" for robot in range(ROBOTS)}, reasons
-    assert {record["key"] for record in seen.rejected} <= {keys.status(r) for r in range(ROBOTS)}
+    assert {record["key"] for record in seen.rejected} <= {
+        keys.of(keyspace.STATUS, r) for r in range(ROBOTS)
+    }
 
 
 def test_a_secure_run_with_both_observers_reaches_consensus_on_the_page(

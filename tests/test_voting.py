@@ -8,12 +8,12 @@ import dataclasses
 import pytest
 from fakes import make_swarm
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import ports, strategies, voting
 from robot_agent.core.beliefs import Beliefs
 from robot_agent.core.controller import ControllerConfig
 from robot_agent.core.voting import Vote, VoteBeliefs, majority, update
-from wire import protocol
-from wire.rng import Stream
 
 
 def vote(robot: int, site: int, quality: float = 0.5, t: float = 10.0, order: int = 0) -> Vote:

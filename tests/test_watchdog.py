@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import pytest
 
-from deploy.analysis.watchdog import Watchdog, default_stall_window
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.endings import ENDINGS, Stop, ending_of
 from deploy.inprocess.engine import run_in_process
 from nest_beacon.core.beacon import BeaconConfig
 from robot_agent.core.controller import ControllerConfig
-from wire import protocol
-from wire.endings import ENDINGS, Stop, ending_of
 from world_server.core.world import WorldConfig
+from world_server.observer.watchdog import Watchdog, default_stall_window
 
 BODY = 0.074  # two e-puck radii
 WINDOW = 100.0

@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from wellstirred import model as wellstirred
-from wellstirred.model import (
+from robot_agent.wellstirred import model as wellstirred
+from robot_agent.wellstirred.model import (
     Method,
     Model,
     Outcome,

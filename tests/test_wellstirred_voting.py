@@ -1,12 +1,18 @@
-"""The voting strategies in the well-stirred model (wellstirred/voting.py)."""
+"""The voting strategies in the well-stirred model (robot_agent/wellstirred/voting.py)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from wellstirred.model import cell_rng
-from wellstirred.voting import VoteModel, _step, simulate_votes, vote_cell_rng, vote_sweep
+from robot_agent.wellstirred.model import cell_rng
+from robot_agent.wellstirred.voting import (
+    VoteModel,
+    _step,
+    simulate_votes,
+    vote_cell_rng,
+    vote_sweep,
+)
 
 
 def test_a_model_refuses_what_it_cannot_run() -> None:

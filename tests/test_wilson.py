@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import doctest
+
 import pytest
 
-from deploy.study.wilson import interval, share, wilson
+from deploy.analysis import wilson as wilson_module
+from deploy.analysis.wilson import interval, share, wilson
 
 
 @pytest.mark.parametrize(
@@ -36,3 +39,29 @@ def test_a_share_is_shown_with_its_interval_rounded_outwards() -> None:
     assert share(7, 10) == "7/10 (39-90%)"
     assert share(0, 40) == "0/40 (0-9%)"
     assert share(0, 0) == "-"
+
+
+@pytest.mark.parametrize(
+    ("successes", "trials", "shown"),
+    [
+        (99, 100, "99/100 (94-99.9%)"),  # whole percent would say 100%, which it excludes
+        (1, 100, "1/100 (0.1-6%)"),  # and 0% here
+        (100, 100, "100/100 (96-100%)"),  # n of n: 100% is in the interval
+        (0, 100, "0/100 (0-4%)"),
+        (999, 1000, "999/1000 (99-99.99%)"),
+        (1, 10000, "1/10000 (0.001-1%)"),
+    ],
+)
+def test_a_bound_is_printed_to_the_digits_that_keep_it_true(
+    successes: int, trials: int, shown: str
+) -> None:
+    assert share(successes, trials) == shown
+    low, high = wilson(successes, trials)
+    printed = shown.split("(")[1].rstrip("%)").split("-")
+    assert float(printed[0]) / 100 <= low and high <= float(printed[1]) / 100  # outwards
+    assert (float(printed[1]) < 100) == (high < 1) and (float(printed[0]) > 0) == (low > 0)
+
+
+def test_the_docstrings_examples_are_what_the_code_prints() -> None:
+    tried = doctest.testmod(wilson_module)
+    assert tried.attempted >= 8 and tried.failed == 0

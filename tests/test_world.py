@@ -54,7 +54,7 @@ def test_a_robot_whose_controller_left_stops_and_stays_an_obstacle() -> None:
     world.join_robot(1)
     world.leave_robot(1)
     before = world.physics.pose(1)
-    from wire import protocol
+    from bestofn_swarm.wire import protocol
 
     act = protocol.Act(v=1, tick=0, left=0.13, right=0.13, capture=False, radio_tx=0)
     for _ in range(20):

@@ -2,8 +2,8 @@
 
 Certificates are made in a temporary directory (the cryptography package); the router is a
 Python Zenoh session in router mode in a subprocess on a free loopback TLS port, killed
-by pid; every client opens through ``plumbing.zenoh_session`` with ``--zenoh-config``'s
-code path (multicast scouting off).
+by pid; every client opens through ``bestofn_swarm.plumbing.zenoh_session`` with
+``--zenoh-config``'s code path (multicast scouting off).
 """
 
 from __future__ import annotations
@@ -22,24 +22,24 @@ from pathlib import Path, PurePath
 import pytest
 import zenoh
 
+from bestofn_swarm.plumbing import run_keys, zenoh_session
+from bestofn_swarm.wire import keyspace, protocol
+from bestofn_swarm.wire.names import Role
 from deploy.launcher.processes import python_module
 from deploy.security import certificates, zenoh_acl
-from plumbing import run_keys, zenoh_session
-from wire import protocol
-from wire.names import Role
 from world_server.core.layout import make_layout
 
 REPO = Path(__file__).resolve().parent.parent
 TEMPLATES = REPO / "deploy" / "zenoh"
 RUN = "acl-test"
-KEYS = protocol.Keys(RUN)
+KEYS = keyspace.Keys(RUN)
 ROBOTS = 3  # ids 0, 1, 2
 WAIT = 5.0  # seconds: the hard limit on any expected delivery
 SETTLE = 0.3  # seconds given to a forbidden message to show up after its sentinel
 
 ROUTER_SCRIPT = """
 import sys
-from plumbing import zenoh_session
+from bestofn_swarm.plumbing import zenoh_session
 session = zenoh_session.open_session("router", listen=[sys.argv[2]], config_file=sys.argv[1])
 print("ready", flush=True)
 sys.stdin.read()  # serve until the test closes stdin (or kills this process)
@@ -200,21 +200,27 @@ def test_a_robot_speaks_on_its_own_keys_and_asks_for_the_map(swarm: Swarm) -> No
     with swarm.open("world") as world, swarm.open("robot-1") as robot:
         world.declare_subscriber(KEYS.all, heard)
         world.liveliness().declare_subscriber(f"{KEYS.prefix}/alive/**", alive, history=True)
-        world.declare_queryable(KEYS.world_info, lambda query: query.reply(KEYS.world_info, b"map"))
+        world.declare_queryable(
+            KEYS.of(keyspace.INFO), lambda query: query.reply(KEYS.of(keyspace.INFO), b"map")
+        )
         # Declared publishers, as the robot process has: each sends only once its router
         # has told it of a matching subscriber, which the access control must allow.
-        own = {KEYS.act(1): b"act", KEYS.status(1): b"status", KEYS.radio_tx(1): b"tx"}
+        own = {
+            KEYS.of(keyspace.ACT, 1): b"act",
+            KEYS.of(keyspace.STATUS, 1): b"status",
+            KEYS.of(keyspace.RADIO_TX, 1): b"tx",
+        }
         publishers = {key: zenoh_session.reliable_publisher(robot, key) for key in own}
-        put_until_heard(publishers[KEYS.act(1)], KEYS.act(1), heard)
+        put_until_heard(publishers[KEYS.of(keyspace.ACT, 1)], KEYS.of(keyspace.ACT, 1), heard)
         for key, payload in own.items():
             publishers[key].put(payload)
-        token = robot.liveliness().declare_token(KEYS.alive(Role.ROBOT, 1))
+        token = robot.liveliness().declare_token(KEYS.token(Role.ROBOT, 1))
         for key in own:
             heard.wait_for(key)
-        alive.wait_for(KEYS.alive(Role.ROBOT, 1))
+        alive.wait_for(KEYS.token(Role.ROBOT, 1))
         assert {key: payload for key, payload in heard.received if key in own} == own
 
-        replies = list(robot.get(KEYS.world_info, timeout=WAIT))
+        replies = list(robot.get(KEYS.of(keyspace.INFO), timeout=WAIT))
         assert [reply.ok.payload.to_bytes() for reply in replies if reply.ok] == [b"map"]
         token.undeclare()
 
@@ -225,32 +231,38 @@ def test_a_robot_cannot_speak_for_another_robot_or_the_world(swarm: Swarm) -> No
     with swarm.open("world") as world, swarm.open("robot-1") as robot:
         world.declare_subscriber(KEYS.all, heard)
         world.liveliness().declare_subscriber(f"{KEYS.prefix}/alive/**", alive, history=True)
-        put_until_heard(robot, KEYS.status(1), heard)
+        put_until_heard(robot, KEYS.of(keyspace.STATUS, 1), heard)
 
         forbidden = [
-            KEYS.act(2),
-            KEYS.status(2),
-            KEYS.radio_tx(2),  # another robot's
-            KEYS.host_act(2),  # the batch of another robot's process
-            KEYS.sense(1),
-            KEYS.host_sense(1),
-            KEYS.camera(1),
-            KEYS.radio_rx(1),
-            KEYS.world_clock,  # the world's
-            KEYS.beacon_ack("nest"),
-            KEYS.log("robot-1"),
+            KEYS.of(keyspace.ACT, 2),
+            KEYS.of(keyspace.STATUS, 2),
+            KEYS.of(keyspace.RADIO_TX, 2),  # another robot's
+            KEYS.of(keyspace.HOST_ACT, 2),  # the batch of another robot's process
+            KEYS.of(keyspace.SENSE, 1),
+            KEYS.of(keyspace.HOST_SENSE, 1),
+            KEYS.of(keyspace.CAMERA, 1),
+            KEYS.of(keyspace.RADIO_RX, 1),
+            KEYS.of(keyspace.CLOCK),  # the world's
+            KEYS.of(keyspace.ACK, "nest"),
+            KEYS.of(keyspace.LOG, "robot-1"),
         ]
         for key in forbidden:  # session puts: they reach the router whoever subscribes
             robot.put(key, b"spoofed")
-        spoofed_token = robot.liveliness().declare_token(KEYS.alive(Role.ROBOT, 2))
-        own_token = robot.liveliness().declare_token(KEYS.alive(Role.ROBOT, 1))
-        robot.put(KEYS.host_act(1), b"batch")  # the acts of the process it leads
-        robot.put(KEYS.act(1), b"sentinel")  # sent after the forbidden ones, on the same link
-        heard.wait_for(KEYS.act(1))
-        alive.wait_for(KEYS.alive(Role.ROBOT, 1))
+        spoofed_token = robot.liveliness().declare_token(KEYS.token(Role.ROBOT, 2))
+        own_token = robot.liveliness().declare_token(KEYS.token(Role.ROBOT, 1))
+        robot.put(KEYS.of(keyspace.HOST_ACT, 1), b"batch")  # the acts of the process it leads
+        robot.put(
+            KEYS.of(keyspace.ACT, 1), b"sentinel"
+        )  # sent after the forbidden ones, on the same link
+        heard.wait_for(KEYS.of(keyspace.ACT, 1))
+        alive.wait_for(KEYS.token(Role.ROBOT, 1))
         time.sleep(SETTLE)
-        assert heard.heard_keys() == {KEYS.status(1), KEYS.host_act(1), KEYS.act(1)}
-        assert alive.heard_keys() == {KEYS.alive(Role.ROBOT, 1)}
+        assert heard.heard_keys() == {
+            KEYS.of(keyspace.STATUS, 1),
+            KEYS.of(keyspace.HOST_ACT, 1),
+            KEYS.of(keyspace.ACT, 1),
+        }
+        assert alive.heard_keys() == {KEYS.token(Role.ROBOT, 1)}
         spoofed_token.undeclare()
         own_token.undeclare()
 
@@ -261,11 +273,16 @@ def test_an_observer_only_listens(swarm: Swarm) -> None:
     with swarm.open("world") as world, swarm.open("observer") as observer:
         world.declare_subscriber(KEYS.all, heard)
         observer.declare_subscriber(KEYS.all, watched)
-        put_until_heard(world, KEYS.world_clock, watched)
-        for key in (KEYS.act(0), KEYS.status(0), KEYS.world_clock, KEYS.log("observer")):
+        put_until_heard(world, KEYS.of(keyspace.CLOCK), watched)
+        for key in (
+            KEYS.of(keyspace.ACT, 0),
+            KEYS.of(keyspace.STATUS, 0),
+            KEYS.of(keyspace.CLOCK),
+            KEYS.of(keyspace.LOG, "observer"),
+        ):
             observer.put(key, b"spoofed")
-        world.put(KEYS.world_state, b"sentinel")
-        watched.wait_for(KEYS.world_state)
+        world.put(KEYS.of(keyspace.STATE), b"sentinel")
+        watched.wait_for(KEYS.of(keyspace.STATE))
         time.sleep(SETTLE)
         assert not [key for key, payload in heard.received if payload == b"spoofed"]
 
@@ -285,31 +302,33 @@ def test_the_page_and_foxglove_live_declare_their_own_tokens_and_the_page_answer
     ):
         launcher.liveliness().declare_subscriber(f"{KEYS.prefix}/alive/**", alive, history=True)
         spoofed = [
-            foxglove.liveliness().declare_token(KEYS.alive(Role.VIEWER, 0)),
-            foxglove.liveliness().declare_token(KEYS.alive(Role.RECORDER, 0)),
-            viewer.liveliness().declare_token(KEYS.alive(Role.VIEWER, 1)),
+            foxglove.liveliness().declare_token(KEYS.token(Role.VIEWER, 0)),
+            foxglove.liveliness().declare_token(KEYS.token(Role.RECORDER, 0)),
+            viewer.liveliness().declare_token(KEYS.token(Role.VIEWER, 1)),
         ]
         tokens = [
-            foxglove.liveliness().declare_token(KEYS.alive(Role.FOXGLOVE, 0)),
-            viewer.liveliness().declare_token(KEYS.alive(Role.VIEWER, 0)),
+            foxglove.liveliness().declare_token(KEYS.token(Role.FOXGLOVE, 0)),
+            viewer.liveliness().declare_token(KEYS.token(Role.VIEWER, 0)),
         ]
-        alive.wait_for(KEYS.alive(Role.FOXGLOVE, 0))
-        alive.wait_for(KEYS.alive(Role.VIEWER, 0))
+        alive.wait_for(KEYS.token(Role.FOXGLOVE, 0))
+        alive.wait_for(KEYS.token(Role.VIEWER, 0))
         impostor = foxglove.declare_queryable(  # only the page may answer
-            KEYS.viewer_finish, lambda query: query.reply(KEYS.viewer_finish, b"spoofed")
+            KEYS.of(keyspace.VIEWER_FINISH),
+            lambda query: query.reply(KEYS.of(keyspace.VIEWER_FINISH), b"spoofed"),
         )
         queryable = viewer.declare_queryable(
-            KEYS.viewer_finish, lambda query: query.reply(KEYS.viewer_finish, b"ended")
+            KEYS.of(keyspace.VIEWER_FINISH),
+            lambda query: query.reply(KEYS.of(keyspace.VIEWER_FINISH), b"ended"),
         )
 
         def answers(asker: zenoh.Session) -> list[bytes]:
-            replies = asker.get(KEYS.viewer_finish, timeout=1.0)
+            replies = asker.get(KEYS.of(keyspace.VIEWER_FINISH), timeout=1.0)
             return [reply.ok.payload.to_bytes() for reply in replies if reply.ok]
 
         assert until(lambda: answers(launcher) == [b"ended"])
         assert answers(robot) == []  # a robot may not end the page
         time.sleep(SETTLE)
-        assert alive.heard_keys() == {KEYS.alive(Role.FOXGLOVE, 0), KEYS.alive(Role.VIEWER, 0)}
+        assert alive.heard_keys() == {KEYS.token(Role.FOXGLOVE, 0), KEYS.token(Role.VIEWER, 0)}
         queryable.undeclare()
         impostor.undeclare()
         for token in [*spoofed, *tokens]:
@@ -327,26 +346,35 @@ def test_the_world_senses_for_each_robot_and_only_that_robot_hears_it(swarm: Swa
         swarm.open("robot-1") as robot_1,
         swarm.open("robot-2") as robot_2,
     ):
-        robot_1.declare_subscriber(KEYS.sense(1), robot_1_hears)
-        robot_2.declare_subscriber(KEYS.sense(1), robot_2_hears)  # not its own: refused
-        robot_2.declare_subscriber(KEYS.sense(2), robot_2_hears)
-        robot_1.declare_subscriber(KEYS.host_sense(1), robot_1_hears)  # its process's batch
-        robot_2.declare_subscriber(KEYS.host_sense(1), robot_2_hears)  # another's: refused
+        robot_1.declare_subscriber(KEYS.of(keyspace.SENSE, 1), robot_1_hears)
+        robot_2.declare_subscriber(
+            KEYS.of(keyspace.SENSE, 1), robot_2_hears
+        )  # not its own: refused
+        robot_2.declare_subscriber(KEYS.of(keyspace.SENSE, 2), robot_2_hears)
+        robot_1.declare_subscriber(
+            KEYS.of(keyspace.HOST_SENSE, 1), robot_1_hears
+        )  # its process's batch
+        robot_2.declare_subscriber(
+            KEYS.of(keyspace.HOST_SENSE, 1), robot_2_hears
+        )  # another's: refused
         senses = {
-            robot: zenoh_session.reliable_publisher(world, KEYS.sense(robot)) for robot in (1, 2)
+            robot: zenoh_session.reliable_publisher(world, KEYS.of(keyspace.SENSE, robot))
+            for robot in (1, 2)
         }
-        batched = zenoh_session.reliable_publisher(world, KEYS.host_sense(1))
-        put_until_heard(senses[1], KEYS.sense(1), robot_1_hears)
-        put_until_heard(senses[2], KEYS.sense(2), robot_2_hears)
-        put_until_heard(batched, KEYS.host_sense(1), robot_1_hears)
+        batched = zenoh_session.reliable_publisher(world, KEYS.of(keyspace.HOST_SENSE, 1))
+        put_until_heard(senses[1], KEYS.of(keyspace.SENSE, 1), robot_1_hears)
+        put_until_heard(senses[2], KEYS.of(keyspace.SENSE, 2), robot_2_hears)
+        put_until_heard(batched, KEYS.of(keyspace.HOST_SENSE, 1), robot_1_hears)
         senses[1].put(b"sense 1")
         senses[2].put(b"sense 2")
         batched.put(b"batch 1")
-        assert until(lambda: (KEYS.sense(1), b"sense 1") in robot_1_hears.received)
-        assert until(lambda: (KEYS.sense(2), b"sense 2") in robot_2_hears.received)
-        assert until(lambda: (KEYS.host_sense(1), b"batch 1") in robot_1_hears.received)
+        assert until(lambda: (KEYS.of(keyspace.SENSE, 1), b"sense 1") in robot_1_hears.received)
+        assert until(lambda: (KEYS.of(keyspace.SENSE, 2), b"sense 2") in robot_2_hears.received)
+        assert until(
+            lambda: (KEYS.of(keyspace.HOST_SENSE, 1), b"batch 1") in robot_1_hears.received
+        )
         time.sleep(SETTLE)
-        assert robot_2_hears.heard_keys() == {KEYS.sense(2)}
+        assert robot_2_hears.heard_keys() == {KEYS.of(keyspace.SENSE, 2)}
 
 
 # --- the generator -------------------------------------------------------------------
@@ -354,7 +382,7 @@ def test_the_world_senses_for_each_robot_and_only_that_robot_hears_it(swarm: Swa
 
 def example_plan() -> zenoh_acl.SwarmPlan:
     """The plan the files in deploy/zenoh were written for (see its README)."""
-    return zenoh_acl.SwarmPlan(protocol.Keys("run"), robots=(0, 1))
+    return zenoh_acl.SwarmPlan(keyspace.Keys("run"), robots=(0, 1))
 
 
 @pytest.mark.parametrize(
@@ -454,7 +482,7 @@ def test_a_swarm_started_by_hand_takes_its_id_from_its_certificate_and_follows_a
         return process
 
     with swarm.open("observer") as observer:
-        observer.declare_subscriber(KEYS.status("*"), on_status)
+        observer.declare_subscriber(KEYS.of(keyspace.STATUS, "*"), on_status)
         try:
             world = start(world_command)
             start(command("nest_beacon", "beacon-nest", "secret.json"))

@@ -32,16 +32,20 @@ FAST = frozenset(
         "test_camera_vision",
         "test_clock",
         "test_controller",
+        "test_controller_doc",
+        "test_controller_vectors",
         "test_coordinator",
         "test_decision",
         "test_defence",
         "test_docs",
+        "test_effects",
         "test_equations",
         "test_follower_freshness",
         "test_fuzz",
         "test_guard",
         "test_inbox",
         "test_keyspace",
+        "test_kinds_spelled_once",
         "test_layering",
         "test_link",
         "test_names",
@@ -52,6 +56,7 @@ FAST = frozenset(
         "test_physics",
         "test_pooling",
         "test_pooling_controller",
+        "test_process_main",
         "test_portable_check",
         "test_ports_contract",
         "test_protocol_doc",
@@ -76,6 +81,9 @@ FAST = frozenset(
 )
 
 SLOW = {
+    "test_controller_vectors::test_the_file_is_what_the_generator_makes_from_its_runs": (
+        "five in-process swarms of ten robots: about 3 s with the compiled cores, 8 s without"
+    ),
     "test_navigation::test_ten_robots_keep_cycling_through_a_crowded_nest": (
         "two 10-robot swarms cycling through the nest: about 12 s"
     ),
@@ -89,7 +97,10 @@ SLOW = {
 
 FULL_ONLY = {
     "test_attacks": "attacks live runs over Zenoh",
+    "test_fault_plugins": "runs swarms with faults in one process and over Zenoh",
+    "test_robot_builder": "starts a world, a beacon and robots by hand over Zenoh, and a swarm",
     "test_c_robot": "builds the C robot and runs swarms with it over UDP and serial links",
+    "test_conformance": "builds C robots and runs programs over UDP and serial links, and swarms",
     "test_attacks_presence": "attacks live runs over Zenoh (presence and freshness)",
     "test_byzantine": "a real run with Byzantine robots",
     "test_endings": "starts swarms",
@@ -119,6 +130,7 @@ FULL_ONLY = {
     "test_udp_radio": "UDP sockets and robot processes",
     "test_viewer": "starts swarms, the viewer and a browser",
     "test_wellstirred_cli": "runs the installed command in a process",
+    "test_wheel": "builds a wheel, installs it in a venv and runs its commands in processes",
     "test_zenoh_acl": "Zenoh sessions and processes",
 }
 
@@ -146,6 +158,7 @@ FAST_TESTS = frozenset(
         "test_ending_rule::test_the_in_process_engine_stops_on_a_signal_or_the_wall_limit_at_once",
         "test_ending_rule::test_the_stop_signals_have_their_posix_numbers",
         "test_ending_rule::test_when_conditions_coincide_the_first_in_the_rules_order_decides",
+        "test_conformance::test_bad_arguments_exit_with_code_2_and_one_line",
         "test_endings::test_an_unwritable_recording_path_is_refused_before_anything_starts",
         "test_endings::test_the_help_documents_each_endings_exit_code",
         "test_experiment::test_bad_arguments_exit_with_code_2_and_one_line",
@@ -172,6 +185,7 @@ FAST_TESTS = frozenset(
         "test_run_parts::test_the_inbox_takes_a_signal_whatever_else_filled_it",
         "test_run_parts::test_the_launcher_looks_with_its_clock_given_and_takes_a_signal_as_an_event",
         "test_run_parts::test_the_log_relay_holds_lines_for_the_recorder_and_publishes_none_once_detached",
+        "test_section5::test_a_number_of_the_text_that_the_runs_do_not_give_is_named",
         "test_section5::test_a_runs_file_that_lacks_runs_or_has_other_settings_is_reported",
         "test_section5::test_blocks_are_replaced_between_their_markers",
         "test_section5::test_check_finds_a_run_that_changed",

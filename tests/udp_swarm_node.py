@@ -40,13 +40,13 @@ from fakes import ROBOT_RADIUS, FakeBody, FakeWorld, make_world_info, shuffled_q
 # Run as a script (python tests/udp_swarm_node.py), the repository root is not on the path.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.wire import names, protocol
+from bestofn_swarm.wire.rng import Stream
 from examples.udp_radio import DEFAULT_GROUP, DEFAULT_PORT, UdpRadio
 from nest_beacon.core.beacon import Beacon, BeaconConfig
-from plumbing import cliargs
 from robot_agent.core import ports
 from robot_agent.core.controller import Controller, ControllerConfig
-from wire import names, protocol
-from wire.rng import Stream
 
 STOP = threading.Event()  # set by SIGTERM: finish the step, print the summary, exit
 

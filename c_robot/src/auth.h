@@ -1,4 +1,4 @@
-/* Run keys (docs/protocol.md "Authentication"; wire/auth.py). */
+/* Run keys (docs/protocol.md "Authentication"; bestofn_swarm/wire/auth.py). */
 #ifndef CR_AUTH_H
 #define CR_AUTH_H
 #include <stddef.h>
@@ -20,6 +20,6 @@ long auth_seal(const uint8_t key[32], const char *key_expr, const uint8_t *paylo
 int auth_open(const uint8_t key[32], const char *key_expr, const uint8_t *payload,
               size_t payload_size, const uint8_t *attachment, size_t attachment_size,
               const uint8_t **metadata, size_t *metadata_size);
-/* is_identity of wire/names.py */
+/* is_identity of bestofn_swarm/wire/names.py */
 int is_identity(const char *text, size_t len);
 #endif

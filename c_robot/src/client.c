@@ -515,7 +515,7 @@ static int client_receive(LinkRobot *p, uint8_t *data, size_t size, double now) 
         refusal = link_decode_data(f.body, f.body_size, &kind, &payload, &payload_size,
                                    &attachment, &attachment_size);
         if (refusal) return refusal;
-        if (kind >= K_ACT) return R_UNEXPECTED; /* not a kind the bridge sends */
+        if (kind >= K_FIRST_FROM_ROBOT) return R_UNEXPECTED; /* not a kind the bridge sends */
         received(p, kind, payload, payload_size, attachment, attachment_size, now);
         return R_NONE;
     }

@@ -1,5 +1,5 @@
-/* The robot's end of a link session (link/core/session.py) and the program around
-   the endpoint (link/core/robot.py), without I/O. */
+/* The robot's end of a link session (bestofn_swarm/link/core/session.py) and the program around
+   the endpoint (robot_agent/core/link_robot.py), without I/O. */
 #ifndef CR_CLIENT_H
 #define CR_CLIENT_H
 #include <stddef.h>
@@ -14,7 +14,7 @@
 #define STATUS_EVERY 2.0
 /* A world token the bridge reports is followed once that world answers world/info asked
    with the token's instance: asked up to PROVE_TRIES times, PROVE_EVERY seconds apart; a
-   token no world answers for is counted as a rejection (link/core/robot.py). */
+   token no world answers for is counted as a rejection (robot_agent/core/link_robot.py). */
 #define PROVE_TRIES 5
 #define PROVE_EVERY 2.0
 /* A question asked again does not void the ones before it: an answer to any of the last

@@ -42,7 +42,7 @@ int endpoint_init(Endpoint *e, int robot_id, const char *root, const char *run,
     return controller_init(e->controller, robot_id, world, config, seed, why);
 }
 
-/* --- wire/guard.py ------------------------------------------------------------------ */
+/* --- bestofn_swarm/wire/guard.py ------------------------------------------------------------------ */
 
 static int isclose(double a, double b, double rel_tol, double abs_tol) {
     if (a == b) return 1;

@@ -1,5 +1,5 @@
 /* The robot's end of the wire (robot_agent/core/endpoint.py, tick_assembly.py,
-   simulated.py, ports.control_step; wire/guard.py): checks every input, gathers ticks,
+   simulated.py, ports.control_step; bestofn_swarm/wire/guard.py): checks every input, gathers ticks,
    steps the controller, seals what it sends. */
 #ifndef CR_ENDPOINT_H
 #define CR_ENDPOINT_H

@@ -1,5 +1,5 @@
-/* The robot's key file (docs/porting.md "The program on a link"; wire/auth.py
-   keyring_from_text, plumbing/run_keys.py read_key_file), read from its bytes: a file on
+/* The robot's key file (docs/porting.md "The program on a link"; bestofn_swarm/wire/auth.py
+   keyring_from_text, bestofn_swarm/plumbing/run_keys.py read_key_file), read from its bytes: a file on
    Linux, a record in flash on a microcontroller (platform/key_record.h). */
 #ifndef CR_KEYFILE_H
 #define CR_KEYFILE_H

@@ -135,7 +135,6 @@ int link_check_body(const Frame *f) {
     return R_NONE;
 }
 
-static int known_kind(int kind) { return (kind >= 1 && kind <= 7) || (kind >= 16 && kind <= 19); }
 
 long link_encode_data(int kind, const uint8_t *payload, size_t payload_size,
                       const uint8_t *attachment, size_t attachment_size, uint8_t *out,
@@ -155,7 +154,7 @@ int link_decode_data(const uint8_t *body, size_t size, int *kind, const uint8_t 
                      size_t *payload_size, const uint8_t **attachment,
                      size_t *attachment_size) {
     if (size < 3) return R_MALFORMED;
-    if (!known_kind(body[0])) return R_MALFORMED;
+    if (!kind_known(body[0])) return R_MALFORMED;
     size_t length = (size_t)body[1] << 8 | body[2];
     if (length > LINK_MAX_ATTACHMENT_BYTES) return R_MALFORMED;
     if (size < 3 + length) return R_MALFORMED;

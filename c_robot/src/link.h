@@ -1,10 +1,11 @@
-/* Link frames (docs/protocol.md "The link to a robot outside the emulator"; link/core/codec.py). */
+/* Link frames (docs/protocol.md "The link to a robot outside the emulator"; bestofn_swarm/link/core/codec.py). */
 #ifndef CR_LINK_H
 #define CR_LINK_H
 #include <stddef.h>
 #include <stdint.h>
 
 #include "limits.h"
+#include "kinds.h" /* enum DataKind: generated from the table of message kinds */
 
 #define LINK_HEADER_BYTES 33
 #define LINK_TAG_BYTES 16
@@ -21,11 +22,6 @@
 #define LINK_PING_BODY_BYTES 8
 
 enum FrameType { F_HELLO = 1, F_WELCOME = 2, F_DATA = 3, F_PING = 4, F_PONG = 5, F_BYE = 6 };
-enum DataKind {
-    K_SENSE = 1, K_CAMERA = 2, K_RADIO_RX = 3, K_INFO_REPLY = 4, K_INFO_ERROR = 5,
-    K_WORLD_UP = 6, K_WORLD_DOWN = 7, K_ACT = 16, K_RADIO_TX = 17, K_STATUS = 18,
-    K_INFO_QUERY = 19
-};
 enum ByeReason { BYE_RUN_ENDED = 1, BYE_GOING_AWAY = 2, BYE_REPLACED = 3 };
 enum Refusal {
     R_NONE = 0, R_MALFORMED, R_OVERSIZE, R_CORRUPT, R_FORGED, R_REPLAYED, R_UNEXPECTED,
@@ -85,8 +81,8 @@ void serial_encode_each(const uint8_t *frame, size_t size, EmitFn emit, void *ct
    chunk itself: decoded in place. */
 long serial_decode(const uint8_t *chunk, size_t size, uint8_t *out, size_t cap);
 
-/* Cuts a byte stream at zeros (link/core/codec.py Deframer), each frame decoded in its own
-   buffer. */
+/* Cuts a byte stream at zeros (bestofn_swarm/link/core/codec.py Deframer), each frame decoded in
+   its own buffer. */
 typedef struct {
     uint8_t buffer[LINK_ENCODED_CAP + 1];
     size_t used;

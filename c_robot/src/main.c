@@ -40,7 +40,7 @@ bridge says the run has ended it prints one JSON line and exits 0. */
 #define MAX_DATAGRAMS_PER_RECEIVE 256
 #define READ_BYTES 65536
 /* the serial line's bytes are written as the line would carry them, in slices of this much
-   line time (link/core/pacing.py SLICE_SECONDS) */
+   line time (bestofn_swarm/link/core/pacing.py SLICE_SECONDS) */
 #define SLICE_SECONDS 0.02
 
 static const char USAGE[] =
@@ -61,7 +61,7 @@ static double now_monotonic(void) {
     return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
-/* --- the link's address (link/core/codec.py parse_address) --------------------------------- */
+/* --- the link's address (bestofn_swarm/link/core/codec.py parse_address) --------------------------------- */
 
 typedef struct {
     int udp;
@@ -120,7 +120,7 @@ static int parse_address(const char *text, Address *a) {
     return -1;
 }
 
-/* --- the key file (wire/auth.py keyring_from_text; program.py read_key_file) ---------- */
+/* --- the key file (bestofn_swarm/wire/auth.py keyring_from_text; program.py read_key_file) ---------- */
 
 static void key_file_error(const char *format, const char *a, const char *b) {
     fprintf(stderr, "robot-agent: error: ");
@@ -150,12 +150,12 @@ static void read_key_file(const char *path, int robot, char *run, uint8_t key[32
     if (found != KEY_FILE_OK) key_file_error("%s: %s", path, why);
 }
 
-/* --- transports (link/io/transport.py) -------------------------------------- */
+/* --- transports (bestofn_swarm/link/io/transport.py) -------------------------------------- */
 
 typedef struct {
     int fd;
     int udp;
-    /* serial: the pacer (link/core/pacing.py PacedLine) and what waits to be written */
+    /* serial: the pacer (bestofn_swarm/link/core/pacing.py PacedLine) and what waits to be written */
     double baud, free_at;
     size_t slice; /* bytes handed on at a time */
     uint8_t pending[MAX_PENDING_BYTES];

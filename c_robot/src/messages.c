@@ -345,7 +345,7 @@ int decode_act(const void *data, size_t size, Act *a) {
     return DONE(r, seen, 63u) && jr_end(r);
 }
 
-/* --- LinkWelcome (link/core/codec.py) ------------------------------------------------------ */
+/* --- LinkWelcome (bestofn_swarm/link/core/codec.py) ------------------------------------------------------ */
 
 int decode_welcome(const void *data, size_t size, LinkWelcome *w) {
     static const char *const ciphers[] = {"none", "chacha20-poly1305", NULL};
@@ -371,7 +371,7 @@ int decode_welcome(const void *data, size_t size, LinkWelcome *w) {
     return DONE(r, seen, 127u) && jr_end(r);
 }
 
-/* --- ControllerConfig (robot_agent/core/controller_config.py, wire/settings.py) ------ */
+/* --- ControllerConfig (robot_agent/core/controller_config.py, bestofn_swarm/wire/settings.py) ------ */
 
 void controller_config_defaults(ControllerConfig *c) {
     memset(c, 0, sizeof *c);

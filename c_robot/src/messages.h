@@ -1,4 +1,4 @@
-/* The project's messages (wire/protocol.py) a robot decodes or encodes, with msgspec's
+/* The project's messages (bestofn_swarm/wire/protocol.py) a robot decodes or encodes, with msgspec's
    checks: version, unknown and missing fields, types, bounds, lengths, names. */
 #ifndef CR_MESSAGES_H
 #define CR_MESSAGES_H
@@ -7,7 +7,7 @@
 
 #include "limits.h"
 
-/* The protocol's bound on sites (wire/protocol.py MAX_OPTIONS): what is valid. What the
+/* The protocol's bound on sites (bestofn_swarm/wire/protocol.py MAX_OPTIONS): what is valid. What the
    robot holds is MAX_OPTIONS (limits.h), the same on the host. */
 #define PROTOCOL_MAX_OPTIONS 1000
 #define MAX_ROBOTS 100000

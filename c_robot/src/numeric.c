@@ -1,5 +1,5 @@
 /* The portable numeric kernel: fdlibm's algorithms in plain IEEE arithmetic, exactly as
-   docs/kernel.md and wire/numeric.py write them (compile with -ffp-contract=off). */
+   docs/kernel.md and bestofn_swarm/wire/numeric.py write them (compile with -ffp-contract=off). */
 #include "numeric.h"
 
 #include "limits.h"

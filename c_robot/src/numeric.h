@@ -1,4 +1,4 @@
-/* The portable numeric kernel (docs/kernel.md; wire/numeric.py is the reference). */
+/* The portable numeric kernel (docs/kernel.md; bestofn_swarm/wire/numeric.py is the reference). */
 #ifndef CR_NUMERIC_H
 #define CR_NUMERIC_H
 

@@ -1,4 +1,4 @@
-/* The generator of docs/kernel.md (wire/rng.py): SplitMix64 and the draws on it. */
+/* The generator of docs/kernel.md (bestofn_swarm/wire/rng.py): SplitMix64 and the draws on it. */
 #ifndef CR_RNG_H
 #define CR_RNG_H
 #include <stdint.h>

@@ -63,6 +63,7 @@ int main(int argc, char **argv) {
         {"messages", test_messages}, {"png+vision", test_png},
         {"decision", test_decision}, {"client", test_client},
         {"platform", test_platform},
+        {"controller", test_controller_vectors},
     };
     for (size_t i = 0; i < sizeof groups / sizeof groups[0]; i++) {
         int before_p = passed, before_f = failed;

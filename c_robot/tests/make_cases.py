@@ -10,7 +10,7 @@ from pathlib import Path
 
 import msgspec
 
-from wire import protocol
+from bestofn_swarm.wire import protocol
 
 
 def bits(x: float) -> str:
@@ -124,11 +124,11 @@ Path(__file__).with_name("cases.json").write_text(
 print(len(fsum_cases), "fsum cases,", len(format_cases), "format cases")
 
 # --- the decision math and parking (robot_agent/core/decision.py, parking.py) -------------
+from bestofn_swarm.wire import numeric  # noqa: E402
+from bestofn_swarm.wire.rng import Stream  # noqa: E402
 from robot_agent.core import decision  # noqa: E402
 from robot_agent.core.controller_config import ControllerConfig  # noqa: E402
 from robot_agent.core.parking import inner_radius, parking_slot  # noqa: E402
-from wire import numeric  # noqa: E402
-from wire.rng import Stream  # noqa: E402
 from world_server.core.layout import make_layout  # noqa: E402
 
 

@@ -13,9 +13,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import vision
-from wire import protocol
-from wire.rng import Stream
 from world_server.core.camera import CameraNoise, CameraRenderer
 from world_server.core.layout import make_layout
 

@@ -20,4 +20,5 @@ void test_png(void);
 void test_decision(void);
 void test_client(void);
 void test_platform(void);
+void test_controller_vectors(void);
 #endif

@@ -9,9 +9,14 @@ behind Figures 4 and 5. The paper's own figures are quoted as text, never comput
 
 from __future__ import annotations
 
+import math
 import statistics
 from collections.abc import Sequence
 from typing import Any
+
+from deploy.analysis import effects
+from deploy.analysis.prose import Claim
+from deploy.analysis.wilson import share
 
 PAPER_SEEDS = 10  # the paper ran each n ten times: seeds 0..9 are "the paper's ten runs"
 SITES = (5, 8, 10)
@@ -86,17 +91,11 @@ def _within(records: Sequence[dict[str, Any]], n: int) -> tuple[int, int, int]:
 
 
 def _count(within: int, below: int, runs: int, n: int) -> str:
+    """``5/10 (24-76%); 1/10 below (0.3-40%)``: runs within n/2 and strictly below, each
+    with its 95% Wilson interval."""
     if n % 2:  # n/2 is not a whole number: within and strictly below are the same runs
-        return f"{within}/{runs}"
-    return f"{within}/{runs} ({below}/{runs} below)"
-
-
-def _percent(within: int, below: int, runs: int, n: int) -> str:
-    if not runs:
-        return "-"
-    if n % 2:
-        return f"{within / runs:.0%}"
-    return f"{within / runs:.0%} ({below / runs:.0%} below)"
+        return share(within, runs)
+    return f"{share(within, runs)}; {share(below, runs)} below"
 
 
 def _steps_distribution(records: Sequence[dict[str, Any]]) -> str:
@@ -108,17 +107,21 @@ def _steps_distribution(records: Sequence[dict[str, Any]]) -> str:
 
 
 def _pool_summary(records: Sequence[dict[str, Any]]) -> str:
-    """Mean pool size over every pooling, then the highest run mean and runs above 3."""
+    """Mean pool size over every pooling, then the highest run mean and the runs above 3
+    (with the 95% interval of their share)."""
     every = [size for record in records for size in pools(record)]
     run_means = [statistics.fmean(sizes) for record in records if (sizes := pools(record))]
     if not every:
         return "-"
     over = sum(1 for mean in run_means if mean > 3)
-    return f"{statistics.fmean(every):.2f} (highest run {max(run_means):.2f}; {over} above 3)"
+    return (
+        f"{statistics.fmean(every):.2f} (highest run {max(run_means):.2f}; "
+        f"{share(over, len(run_means))} above 3)"
+    )
 
 
 def _right(records: Sequence[dict[str, Any]]) -> str:
-    return f"{sum(1 for record in records if record['correct'])}/{len(records)}"
+    return share(sum(1 for record in records if record["correct"]), len(records))
 
 
 def seeds_of(records: Sequence[dict[str, Any]]) -> int:
@@ -172,7 +175,7 @@ def summary_table(records: Sequence[dict[str, Any]], meta: dict[str, Any]) -> st
         )
         row(
             f"{label}: within n/2 (strictly below)",
-            lambda n: _percent(*_within(every("default", n), n), n),
+            lambda n: _count(*_within(every("default", n), n), n),
         )
         row(f"{label}: mean pool size", lambda n: _pool_summary(every("default", n)))
     every_label = f"{seeds} seeds" if seeds > PAPER_SEEDS else "seeds 0-9"
@@ -187,7 +190,7 @@ def summary_table(records: Sequence[dict[str, Any]], meta: dict[str, Any]) -> st
             f"{linger}, {seeds} seeds: steps median (IQR); within n/2 (below)",
             lambda n: (
                 f"{_steps_distribution(every('linger', n))}; "
-                f"{_percent(*_within(every('linger', n), n), n)}"
+                f"{_count(*_within(every('linger', n), n), n)}"
             ),
         )
         row(
@@ -218,12 +221,58 @@ def provenance(meta: dict[str, Any]) -> str:
 # --- robots and time, per variant ----------------------------------------------------------
 
 
+def robots_within(records: Sequence[dict[str, Any]], n: int) -> effects.Estimate | None:
+    """The share of the robots that decided within n/2 trips, and its 95% interval by
+    resampling whole runs (the robots of one run are not independent)."""
+    return effects.clustered_share(
+        [sum(1 for step in decided_steps(record) if step <= n / 2) for record in records],
+        [len(decided_steps(record)) for record in records],
+    )
+
+
+def times_by_seed(records: Sequence[dict[str, Any]]) -> dict[int, float]:
+    """Sim time to consensus by seed, the runs in consensus."""
+    return {
+        int(record["seed"]): float(record["sim_time_s"])
+        for record in records
+        if swarm_steps(record) is not None
+    }
+
+
+def share_interval(found: effects.Estimate) -> str:
+    """``63.2% (60.3-66.1%)``: a share to a tenth of a percent and its interval, rounded
+    outwards to a tenth (as the share is shown)."""
+    low, high = _tenth(found.low, down=True), _tenth(found.high, down=False)
+    return f"{found.value:.1%} ({low}-{high}%)"
+
+
+def _tenth(value: float, *, down: bool) -> str:
+    """A share in percent to a tenth, rounded outwards."""
+    scaled = value * 1000
+    rounded = math.floor(scaled + 1e-9) if down else math.ceil(scaled - 1e-9)
+    return f"{rounded / 10:.1f}"
+
+
+def time_against_default(records: Sequence[dict[str, Any]], variant: str, n: int) -> str:
+    """The variant's median time over the default's at n (runs paired by seed), with its
+    95% bootstrap interval."""
+    if variant == "default":
+        return "1 (the baseline)"
+    found = effects.paired_median_ratio(
+        times_by_seed(select(records, variant, n)), times_by_seed(select(records, "default", n))
+    )
+    if found is None:
+        return f"no time to compare (fewer than {effects.MIN_RUNS} runs in consensus)"
+    return effects.estimate_text(found)
+
+
 def detail_table(records: Sequence[dict[str, Any]]) -> str:
     """Per variant and n over every seed: the typical robot, time, the largest pool."""
     lines = [
-        "| variant | n | runs | robots within n/2 | robot steps median | swarm steps mean "
-        "| sim s to consensus, mean | largest pool |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| variant | n | runs | robots within n/2 (95% interval) | robot steps median | swarm "
+        "steps mean | sim s to consensus: mean / median | median time against the default: "
+        "ratio (95% interval) | largest pool |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for variant in VARIANTS:
         label = "default" if variant == "default" else f"`--linger {LINGER:g}`"
@@ -233,13 +282,15 @@ def detail_table(records: Sequence[dict[str, Any]]) -> str:
             swarm = [value for record in chosen if (value := swarm_steps(record)) is not None]
             times = [record["sim_time_s"] for record in chosen if swarm_steps(record) is not None]
             sizes = [size for record in chosen for size in pools(record)]
-            if not chosen or not steps or not swarm:
+            within = robots_within(chosen, n)
+            if not chosen or not steps or not swarm or within is None:
                 continue
             lines.append(
-                f"| {label} | {n} | {len(chosen)} "
-                f"| {sum(1 for step in steps if step <= n / 2) / len(steps):.1%} "
+                f"| {label} | {n} | {len(chosen)} | {share_interval(within)} "
                 f"| {_number(statistics.median(steps))} | {statistics.fmean(swarm):.2f} "
-                f"| {statistics.fmean(times):.0f} | {max(sizes) if sizes else '-'} |"
+                f"| {statistics.fmean(times):.0f} / {statistics.median(times):.0f} "
+                f"| {time_against_default(records, variant, n)} "
+                f"| {max(sizes) if sizes else '-'} |"
             )
     return "\n".join(lines)
 
@@ -321,3 +372,85 @@ def blocks(records: Sequence[dict[str, Any]], meta: dict[str, Any]) -> dict[str,
         "detail": detail_table(records),
         "runs": runs_table(records, "default"),
     }
+
+
+# --- the numbers docs/section5.md's prose reads from the runs ------------------------------
+
+
+def claims(records: Sequence[dict[str, Any]]) -> list[Claim]:
+    """The numbers of docs/section5.md's hand-written text that these runs give (the text
+    of the settings study's sections is checked by that study)."""
+    if not select(records, "default", SITES[-1]) or not select(records, "linger", SITES[-1]):
+        return []
+    found = []
+    every_right = all(record["correct"] for record in records)
+    found.append(
+        Claim(
+            "Every run, of {}, reaches consensus on the best site"
+            if every_right
+            else "Not every run, of {}, reaches consensus on the best site",
+            (str(len(records)),),
+        )
+    )
+    defaults = {n: select(records, "default", n) for n in SITES}
+    means = [statistics.fmean(pools_of(runs)) for runs in defaults.values()]
+    largest = max(max(pools_of(runs)) for runs in defaults.values())
+    found.append(
+        Claim(
+            "about {} to {} opinions on average (the table), at most {} of the ten robots",
+            (f"{min(means):.1f}", f"{max(means):.1f}", str(largest)),
+        )
+    )
+    shares = {n: robots_within(runs, n) for n, runs in defaults.items()}
+    medians = {n: statistics.median(_robot_steps(runs)) for n, runs in defaults.items()}
+    found.append(
+        Claim(
+            "({}% and {}% of robots; the median robot needs {} and {} trips)",
+            (
+                _whole(shares[8]),
+                _whole(shares[10]),
+                _number(medians[8]),
+                _number(medians[10]),
+            ),
+        )
+    )
+    ten = select(records, "default", SITES[-1], PAPER_SEEDS)
+    found.append(Claim("from our seeds 0-9 ({}/10 for n = 10)", (str(_within(ten, SITES[-1])[0]),)))
+    found.append(Claim("Most robots manage it ({}%)", (_whole(shares[5]),)))
+    linger = {n: select(records, "linger", n) for n in SITES}
+    counted = {n: _within(runs, n) for n, runs in linger.items()}
+    run_means = [statistics.fmean(pools(record)) for record in linger[10] if pools(record)]
+    found.append(
+        Claim(
+            "with `--linger 10` the defaults give n = 10 within n/2 in {}% of {} runs and {}% "
+            "strictly below, with a mean pool of {} ({} runs of {} average above 3, since "
+            "decided robots join pools), n = 8 in {}% and n = 5 in {}% (first table)",
+            (
+                _percent_of(counted[10][0], counted[10][2]),
+                str(counted[10][2]),
+                _percent_of(counted[10][1], counted[10][2]),
+                f"{statistics.fmean(pools_of(linger[10])):.2f}",
+                str(sum(mean > 3 for mean in run_means)),
+                str(len(run_means)),
+                _percent_of(counted[8][0], counted[8][2]),
+                _percent_of(counted[5][0], counted[5][2]),
+            ),
+        )
+    )
+    return found
+
+
+def pools_of(records: Sequence[dict[str, Any]]) -> list[int]:
+    return [size for record in records for size in pools(record)]
+
+
+def _robot_steps(records: Sequence[dict[str, Any]]) -> list[int]:
+    return [step for record in records for step in decided_steps(record)]
+
+
+def _whole(found: effects.Estimate | None) -> str:
+    return "-" if found is None else f"{100 * found.value:.0f}"
+
+
+def _percent_of(count: int, total: int) -> str:
+    return f"{100 * count / total:.0f}" if total else "-"

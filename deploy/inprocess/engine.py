@@ -5,8 +5,8 @@ The world's ``Coordinator``, one process's ``HostedRobots`` over every robot's
 Zenoh (the same keys and messages; the robots' senses and acts in batches, as a process
 hosting them does), handed from one to the other in memory as they are made, typed: the
 bytes, tags and decoding a transport needs are not made for the world's and the robots'
-messages (``wire.parcel``); the beacon, which answers one tick in five, still takes its
-clock and answers in bytes, and a tap sees every message as it would be sent. Nothing of the
+messages (``bestofn_swarm.wire.parcel``); the beacon, which answers one tick in five, still takes
+its clock and answers in bytes, and a tap sees every message as it would be sent. Nothing of the
 tick is coded here: opening and closing ticks, the barrier, the radio and the checks of
 every input are the coordinator's and the endpoints', so a seed gives the same per-robot
 results as ``swarm run`` by construction. Like the launcher, this engine learns the run
@@ -24,26 +24,27 @@ from __future__ import annotations
 import gc
 import math
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from deploy.analysis.summary import RobotRecord, RunOutcome, build_summary
-from deploy.analysis.watchdog import Watchdog, default_stall_window
+from bestofn_swarm.wire import batch, keyspace, protocol, shape
+from bestofn_swarm.wire.endings import Halt, Look, stop_reason
+from bestofn_swarm.wire.names import Role
+from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from nest_beacon.core.endpoint import BeaconEndpoint
-from robot_agent.core import byzantine
+from nest_beacon.core.endpoint import Outgoing as BeaconOutgoing
+from robot_agent.core import builder, byzantine, faults
 from robot_agent.core.controller import Controller, ControllerConfig
-from robot_agent.core.endpoint import InputKind, Outgoing, RobotEndpoint, Step
+from robot_agent.core.endpoint import Outgoing, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
 from robot_agent.core.parking import ParkingSlots
-from wire import batch, protocol, shape
-from wire.endings import Halt, Look, Stop, stop_reason
-from wire.names import Role
-from wire.rng import Stream
 from world_server.core.coordinator import Coordinator
-from world_server.core.events import Event, EventKind, Output, Publish
+from world_server.core.events import Event, Output, Publish
 from world_server.core.world import World, WorldConfig
+from world_server.observer.observer import RunObserver
+from world_server.observer.watchdog import Watchdog, default_stall_window
 
 # The watchdog sees the robots' positions as often as ``swarm run``'s launcher sees them in
 # world/state (the world server's default --state-every): both see the same samples.
@@ -91,15 +92,15 @@ class _Bus:
         robots: list[RobotEndpoint],
         beacon: BeaconEndpoint,
         *,
-        records: dict[int, RobotRecord],
-        watchdog: Watchdog,
+        run: RunObserver,
         hooks: EngineHooks,
+        rebuild: Callable[[int], RobotEndpoint] | None = None,
     ) -> None:
         keys = robots[0].keys
         self.keys = keys
         self.world = world
-        self.records = records
-        self.watchdog = watchdog
+        self.run = run
+        self.rebuild = rebuild  # a robot started afresh (a fault)
         self.tap = hooks.tap
         self.queue: deque[Output] = deque()
         self.coordinator = Coordinator(
@@ -117,11 +118,39 @@ class _Bus:
         self.beacon_name = beacon.name
         # Where each robot's inputs come in: its own keys (its senses, until the world has
         # learnt the batched path; camera frames; radio deliveries).
-        self.inputs: dict[str, tuple[RobotEndpoint, InputKind]] = {}
+        self.inputs: dict[str, tuple[RobotEndpoint, keyspace.KeyKind]] = {}
         for endpoint in robots:
             for kind, key in endpoint.input_keys.items():
                 self.inputs[key] = (endpoint, kind)
+        self.state_key = keys.of(keyspace.STATE)
         self.last_state: protocol.WorldState | None = None
+
+    # --- faults.Engine: what a fault may do to this run, at a tick boundary ----------
+
+    def kill(self, robot: int) -> bool:
+        """The robot stops for good, as when its process dies over Zenoh: the world sees its
+        token go (its body stays, a stopped obstacle), and nothing reaches it any more.
+        Whether it was running."""
+        was_running = self.world.is_live(robot)
+        if was_running:
+            token = self.keys.token(Role.ROBOT, robot)
+            self._event(Event(keyspace.ALIVE_ROBOT, token, gone=True))
+        self.run.killed(robot)
+        return was_running
+
+    def restart(self, robot: int) -> None:
+        """The robot afresh: a new controller (as the robot builder makes it) in its old
+        body, which joins at the next tick as a restarted process's token does."""
+        if self.rebuild is None:
+            raise ValueError("this run cannot start a robot afresh")
+        endpoint = self.rebuild(robot)
+        endpoint.batched = True  # its acts go in the batch, as its predecessor's did
+        self.host.by_id[robot] = endpoint
+        for kind, key in endpoint.input_keys.items():
+            self.inputs[key] = (endpoint, kind)
+        endpoint.world_appeared("in-process")
+        self.run.restarted(robot)
+        self._event(Event(keyspace.ALIVE_ROBOT, self.keys.token(Role.ROBOT, robot)))
 
     def start(self) -> None:
         """The processes' liveliness, as the coordinator would see their tokens; tick 0."""
@@ -129,9 +158,9 @@ class _Bus:
         instance = "in-process"
         for endpoint in self.host.by_id.values():
             endpoint.world_appeared(instance)
-            self._event(Event(EventKind.ALIVE, keys.alive(Role.ROBOT, endpoint.robot_id)))
+            self._event(Event(keyspace.ALIVE_ROBOT, keys.token(Role.ROBOT, endpoint.robot_id)))
         self.beacon.world_appeared(instance)
-        self._event(Event(EventKind.ALIVE, keys.alive(Role.BEACON, self.beacon_name)))
+        self._event(Event(keyspace.ALIVE_BEACON, keys.token(Role.BEACON, self.beacon_name)))
         self.coordinator.begin(0.0)
 
     def run_tick(self) -> None:
@@ -169,17 +198,17 @@ class _Bus:
             self._send_acts()
         elif key == self.beacon.clock_key:
             for message in self.beacon.receive_clock(output.payload, output.attachment):
-                self._beacon_sent(message.key, message.payload, message.attachment)
-        elif key == self.keys.world_state:
+                self._beacon_sent(message)
+        elif key == self.state_key:
             self.last_state = output.message
 
     def _stepped(self, step: Step | None) -> None:
         if step is None:
             return
         for message in step.transmissions:
-            self._sent(EventKind.TX, message, message.meta)
+            self._sent(message, message.meta)
         if step.act is not None:
-            self._sent(EventKind.ACT, step.act, step.act.message)
+            self._sent(step.act, step.act.message)
         else:
             self.host.hold(step)
         if step.status is not None:
@@ -188,30 +217,28 @@ class _Bus:
     def _send_acts(self) -> None:
         acts = self.host.take_acts()
         if acts is not None:
-            self._sent(EventKind.ACTS, acts, acts.message)
+            self._sent(acts, acts.message)
 
     def _status(self, message: Outgoing, published: bool = True) -> None:
         """A robot's status: to the tap (if it was published), and to what follows the run."""
         if published and self.tap is not None:
             self.tap(message.key, message.payload, message.attachment)
-        status: protocol.Status = message.message
-        self.records[status.id].update(status)
-        self.watchdog.status(status)
+        self.run.status(message.message)
 
-    def _sent(self, kind: EventKind, message: Outgoing, typed: object) -> None:
+    def _sent(self, message: Outgoing, typed: object) -> None:
         """A robot's message (or its host's batch): to the tap, and to the world, typed
         (a radio message as its payload and its ``RadioTxMeta``)."""
         if self.tap is not None:
             self.tap(message.key, message.payload, message.attachment)
-        payload = message.message if kind is EventKind.TX else b""
+        kind = message.kind
+        payload = message.message if kind is keyspace.RADIO_TX else b""
         self._event(Event(kind, message.key, payload, message=typed))
 
-    def _beacon_sent(self, key: str, payload: bytes, attachment: bytes | None) -> None:
+    def _beacon_sent(self, message: BeaconOutgoing) -> None:
         """The beacon's message, as bytes: to the tap, and to the world."""
-        kind = EventKind.ACK if key == self.keys.beacon_ack(self.beacon_name) else EventKind.TX
         if self.tap is not None:
-            self.tap(key, payload, attachment)
-        self._event(Event(kind, key, payload, attachment))
+            self.tap(message.key, message.payload, message.attachment)
+        self._event(Event(message.kind, message.key, message.payload, message.attachment))
 
     def _event(self, event: Event) -> None:
         self.coordinator.take(event, 0.0)
@@ -227,6 +254,7 @@ def run_in_process(
     on_tick: Callable[[World], None] | None = None,
     controller_factory: type[Controller] = Controller,
     byzantine_robots: Mapping[int, byzantine.Behaviour] | None = None,
+    robot_faults: Sequence[faults.RobotFault] = (),
     hooks: EngineHooks | None = None,
 ) -> dict[str, Any]:
     """Run until every robot decided, the watchdog finds the run stalled (no undecided
@@ -238,32 +266,34 @@ def run_in_process(
     Controller); ``on_tick`` sees the world once every answer of a tick is in, before it
     closes. ``byzantine_robots`` makes those robots misbehave as ``swarm run --byzantine``
     does (a liar without a site claims ``byzantine.default_liar_site``); the run ends when
-    every honest robot has decided. ``hooks``: progress, an outside stop, a tap of every
-    message (a recording), wall time.
+    every honest robot has decided. ``robot_faults``: the faults of robots the run declares
+    (``swarm run --kill``, ``--restart``, ``--motor-failure``: robot_agent/core/faults.py),
+    applied at tick boundaries as the launcher applies them, or built into the robots'
+    controllers; the summary's ``faults`` lists those applied. ``hooks``: progress, an
+    outside stop, a tap of every message (a recording), wall time.
     """
     hooks = hooks or EngineHooks()
     started = hooks.wall_clock() if hooks.wall_clock is not None else 0.0
     world = World(world_config)
-    keys = protocol.Keys(world_config.run)
+    keys = keyspace.Keys(world_config.run)
     beacon_config = beacon_config or BeaconConfig()
     beacon = Beacon(beacon_config, Stream.named(world_config.seed, "beacon", beacon_config.name))
     behaviours = byzantine.resolve_liar_sites(
         byzantine_robots or {}, world_config.num_sites, world.layout.best_site, world_config.seed
     )
-    endpoints: list[RobotEndpoint] = []
-    records: dict[int, RobotRecord] = {}
-    for robot_id in range(world_config.num_robots):
-        rng = Stream.named(world_config.seed, "robot", robot_id)
-        behaviour = behaviours.get(robot_id)
-        controller = (
-            controller_factory(robot_id, world.info, controller_config, rng)
-            if behaviour is None
-            else byzantine.build_controller(robot_id, world.info, controller_config, rng, behaviour)
+
+    def build(robot_id: int) -> RobotEndpoint:
+        return builder.build_robot(
+            robot_id,
+            world.info,
+            controller_config,
+            keys=keys,
+            behaviour=behaviours.get(robot_id),
+            factory=controller_factory,
+            robot_faults=robot_faults,
         )
-        endpoints.append(
-            RobotEndpoint(robot_id, keys=keys, controller=controller, world=world.info)
-        )
-        records[robot_id] = RobotRecord(robot_id)
+
+    endpoints = [build(robot_id) for robot_id in range(world_config.num_robots)]
     if stall_window is None:
         stall_window = default_stall_window(
             world.layout.arena_radius,
@@ -273,21 +303,26 @@ def run_in_process(
             beacon_config.outages,
             time_limit=timeout,
         )
-    watchdog = Watchdog(
-        records,
-        stall_window,
-        body_length=2 * world_config.spec.radius,
-        slot_of=ParkingSlots.of_world(world.info, controller_config).slot,
+    robots = range(world_config.num_robots)
+    run = RunObserver(
+        robots,
+        watchdog=Watchdog(
+            robots,
+            stall_window,
+            body_length=2 * world_config.spec.radius,
+            slot_of=ParkingSlots.of_world(world.info, controller_config).slot,
+        ),
+        byzantine=behaviours,
     )
-    honest = [record for robot_id, record in records.items() if robot_id not in behaviours]
     bus = _Bus(
         world,
         endpoints,
         BeaconEndpoint(beacon, keys, world_config.dt, keyring=None),
-        records=records,
-        watchdog=watchdog,
+        run=run,
         hooks=hooks,
+        rebuild=build,
     )
+    schedule = faults.Schedule(robot_faults)
     bus.start()
     # Everything made so far lives for the whole run: the collector need not look at it
     # again until the run ends, and what a tick makes is freed by reference counting, so
@@ -297,63 +332,66 @@ def run_in_process(
     gc.freeze()
     gc.set_threshold(RUN_COLLECT_THRESHOLD, *thresholds[1:])
     try:
-        halt = _run_ticks(bus, timeout=timeout, honest=honest, hooks=hooks, on_tick=on_tick)
+        halt = _run_ticks(bus, schedule, timeout=timeout, hooks=hooks, on_tick=on_tick)
     finally:
         gc.set_threshold(*thresholds)
         gc.unfreeze()
-    # Every robot's state at the end (not published: its status changes are).
-    for endpoint in endpoints:
+    # Every robot's state at the end (not published: its status changes are), as the
+    # robot runs now (a robot started afresh: its new controller's).
+    for endpoint in bus.host.by_id.values():
         bus._status(endpoint.status(world.tick), published=False)
     bus.stop()
     state = bus.last_state
     if state is not None:
-        watchdog.poses(state.t, [(pose.id, pose.x, pose.y) for pose in state.robots])
+        run.state(state)
     wall = hooks.wall_clock() - started if hooks.wall_clock is not None else 0.0
-    return build_summary(
-        RunOutcome(
-            run_id=world_config.run,
-            num_robots=world_config.num_robots,
-            num_sites=world_config.num_sites,
-            seed=world_config.seed,
-            best_site=world.layout.best_site,
-            sim_time_s=world.t,
-            wall_time_s=wall,
-            timed_out=halt.stop is Stop.TIMEOUT,
-            radio=world.state().radio,
-            world_rejected=bus.coordinator.counters.rejected,
-            stalls=bus.coordinator.counters.stalls,
-            observer_rejected=0,
-            config=hooks.config,
-            stop=halt.stop,
-            timeout_kind=halt.limit,
-            stuck=watchdog.stuck(),
-            byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
-        ),
-        records.values(),
+    summary = run.summary(
+        run_id=world_config.run,
+        num_robots=world_config.num_robots,
+        num_sites=world_config.num_sites,
+        seed=world_config.seed,
+        best_site=world.layout.best_site,
+        sim_time_s=world.t,
+        wall_time_s=wall,
+        world=bus.coordinator.state(),
+        departures=bus.coordinator.counters.departures,
+        observer_rejected=0,
+        config=hooks.config,
+        stop=halt.stop,
+        timeout_kind=halt.limit,
+        byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
     )
+    summary["faults"] = [applied.record() for applied in schedule.applied]
+    return summary
 
 
 def _run_ticks(
     bus: _Bus,
+    schedule: faults.Schedule,
     *,
     timeout: float,
-    honest: list[RobotRecord],
     hooks: EngineHooks,
     on_tick: Callable[[World], None] | None,
 ) -> Halt:
     """Tick until the stop rule says the run ends; why it ended."""
-    world, watchdog = bus.world, bus.watchdog
+    world, run = bus.world, bus.run
+    honest = run.honest()
     while True:
         bus.run_tick()
+        if schedule.pending and schedule.apply_due(bus, world.t):
+            honest = [robot for robot in run.honest() if not run.records[robot].killed]
         if on_tick is not None:
             on_tick(world)
         if world.tick % hooks.poses_every == 0:
+            # The watchdog sees the robots' positions once a tick's statuses are all in,
+            # as the launcher does when world/state comes.
             state = bus.last_state
             if state is not None and state.tick == world.tick:
-                watchdog.poses(state.t, [(pose.id, pose.x, pose.y) for pose in state.robots])
+                run.state(state)
             if hooks.progress is not None:
-                hooks.progress(_progress(world.t, bus.records))
-        halt = stop_reason(_look(world.t, timeout, honest, watchdog, hooks))
+                hooks.progress(Progress(world.t, run.decided(), run.trips()))
+        look = _look(world.t, timeout, run=run, honest=honest, hooks=hooks, schedule=schedule)
+        halt = stop_reason(look)
         if halt is not None:
             return halt
         bus.close_tick()
@@ -362,36 +400,26 @@ def _run_ticks(
 def _look(
     sim_time: float,
     timeout: float,
-    honest: list[RobotRecord],
-    watchdog: Watchdog,
+    *,
+    run: RunObserver,
+    honest: list[int],
     hooks: EngineHooks,
+    schedule: faults.Schedule,
 ) -> Look:
-    """What this engine sees at the end of a tick (``wire.endings.stop_reason`` decides)."""
-    decided = all(record.decided_site is not None for record in honest)
+    """What this engine sees at the end of a tick (``bestofn_swarm.wire.endings.stop_reason``
+    decides): ``honest``, the honest robots still running."""
+    # A restart to come will make progress: the run waits for it, as the launcher does.
+    decided = run.all_decided(honest) and not schedule.restart_pending()
     return Look(
         sim_time=sim_time,
         sim_limit=timeout,
         all_decided=decided,
-        last_decision=_last_decision(honest) if decided else 0.0,
-        stalled=watchdog.stalled(sim_time),
+        last_decision=run.last_decision(honest) if decided else 0.0,
+        stalled=run.stalled(sim_time),
         wall_time=hooks.since_launch() if hooks.since_launch is not None else 0.0,
         wall_limit=hooks.wall_timeout,
         signalled=hooks.stop_signal() if hooks.stop_signal is not None else False,
     )
-
-
-def _last_decision(records: list[RobotRecord]) -> float:
-    """The sim time at which the last of ``records`` decided (0 if none did)."""
-    return max(
-        (record.status.decision_time or 0.0 for record in records if record.status is not None),
-        default=0.0,
-    )
-
-
-def _progress(sim_time: float, records: Mapping[int, RobotRecord]) -> Progress:
-    decided = sum(1 for record in records.values() if record.decided_site is not None)
-    trips = sum(record.status.trips for record in records.values() if record.status)
-    return Progress(sim_time, decided, trips)
 
 
 __all__ = ["POSES_EVERY", "EngineHooks", "Progress", "Tap", "run_in_process"]

@@ -11,8 +11,8 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from deploy.analysis.summary import describe
-from wire.endings import Ending, TimeLimit
+from bestofn_swarm.wire.endings import Ending, TimeLimit
+from world_server.observer.summary import describe
 
 
 def decided_progress(console: Console, quiet: bool) -> Progress:

@@ -19,7 +19,7 @@ and JSON summary are kept in ``DIR/logs/``.
 Every run ends in a stated way (its summary's ``ended``): each gets ``--wall-timeout``
 (the experiment's ``--run-timeout``) and its own stall watchdog, and the report counts
 the endings per group. A run that outlives its wall limit by BACKSTOP seconds anyway is
-stopped from here. The runs die with the experiment (plumbing/lifecycle.py): each then
+stopped from here. The runs die with the experiment (bestofn_swarm/plumbing/lifecycle.py): each then
 stops in order, as on Ctrl-C.
 """
 
@@ -38,15 +38,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any, NoReturn
 
+from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.plumbing.cliargs import UsageError
+from bestofn_swarm.plumbing.lifecycle import PARENT_ENV
+from bestofn_swarm.plumbing.private_files import make_private_folder, open_private, write_private
+from bestofn_swarm.wire import shape
+from bestofn_swarm.wire.endings import Ending
 from deploy.launcher.options import add_engine_option
 from deploy.launcher.switches import add_swarm_switches, switches_argv
 from deploy.reports import sweep
-from plumbing import cliargs
-from plumbing.cliargs import UsageError
-from plumbing.lifecycle import PARENT_ENV
-from plumbing.private_files import make_private_folder, open_private, write_private
-from wire import shape
-from wire.endings import Ending
 
 STOP_GRACE = 30.0  # wall seconds a run has to stop after SIGINT before SIGKILL
 RUN_WALL_TIMEOUT = 1800.0  # wall seconds a run of a sweep may take, by default

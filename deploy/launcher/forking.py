@@ -8,7 +8,7 @@ as the command would. Its stderr goes to a pipe the launcher reads, like a subpr
 
 Two things make the children die with the launcher, even on SIGKILL. The fork server
 stops when its liveness pipe from the launcher reaches end of file, and each child asks
-for a SIGTERM when the fork server dies (plumbing/lifecycle.py). But multiprocessing
+for a SIGTERM when the fork server dies (bestofn_swarm/plumbing/lifecycle.py). But multiprocessing
 hands every forked child a copy of that pipe's write end (and of the resource tracker's),
 so that children could start processes of their own; robots never do, and as long as
 one of them held the pipe open, the fork server never saw the launcher die, and the
@@ -21,15 +21,19 @@ from __future__ import annotations
 
 import importlib
 import multiprocessing
+import multiprocessing.process
+import multiprocessing.util
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 from multiprocessing import forkserver, resource_tracker
 from multiprocessing.connection import Connection
 from typing import IO, Any
 
-from plumbing.lifecycle import PARENT_ENV, die_with_launcher
+from bestofn_swarm.plumbing.lifecycle import PARENT_ENV, die_with_launcher
 
 PRELOAD = [
     "deploy.launcher.fork_server_group",
@@ -112,10 +116,32 @@ class ForkedProcess:
         return int(self._process.exitcode or 0)
 
 
+# A Unix socket's path has at most 107 bytes. The fork server listens on one in a folder
+# multiprocessing makes in the temp folder; below a temp folder longer than this, that
+# socket's path would not fit ("AF_UNIX path too long"), so its folder goes under /tmp.
+MAX_TEMP_FOLDER = 60
+
+
+def _short_socket_folder() -> None:
+    """Give multiprocessing a private folder of a path short enough for a socket, where the
+    temp folder (TMPDIR) is too long for one."""
+    if len(tempfile.gettempdir()) <= MAX_TEMP_FOLDER:
+        return
+    process: Any = multiprocessing.process.current_process()  # its config is private: Any
+    config = process._config
+    if config.get("tempdir") is None:
+        folder = tempfile.mkdtemp(prefix="pymp-", dir="/tmp")  # mode 0700
+        multiprocessing.util.Finalize(
+            None, shutil.rmtree, args=(folder,), kwargs={"ignore_errors": True}, exitpriority=-100
+        )
+        config["tempdir"] = folder
+
+
 class ForkServer:
     """Forks robot (and beacon) processes from one preloaded server process."""
 
     def __init__(self, preload: list[str] | None = None) -> None:
+        _short_socket_folder()
         os.environ.update(QUIET_THREADS)  # inherited by the server when it starts
         os.environ[FORK_SERVER_OF] = str(os.getpid())
         self._context = multiprocessing.get_context("forkserver")

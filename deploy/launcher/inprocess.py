@@ -20,15 +20,15 @@ from typing import IO, Any
 
 from rich.console import Console
 
+from bestofn_swarm.plumbing.cliargs import UsageError
+from bestofn_swarm.plumbing.lifecycle import die_with_launcher
+from bestofn_swarm.plumbing.private_files import make_private_folder, open_private
+from bestofn_swarm.wire import keyspace
+from bestofn_swarm.wire.endings import Ending
 from deploy.inprocess import engine
 from deploy.launcher.console import decided_progress, describe_ending, print_summary
 from deploy.launcher.plan import RunPlan, plan_from_args
 from deploy.launcher.signals import StopSignals
-from plumbing.cliargs import UsageError
-from plumbing.lifecycle import die_with_launcher
-from plumbing.private_files import make_private_folder, open_private
-from wire import protocol
-from wire.endings import Ending
 from world_server.core.world import World, WorldConfig
 from world_server.recording.description import RunDescription
 from world_server.recording.writer import McapRecorder, Sample
@@ -85,7 +85,6 @@ def run_inprocess(args: argparse.Namespace) -> int:
     signum = signals.received if ended is Ending.INTERRUPTED else None
     if signum is not None:
         summary["signal"] = signal.Signals(signum).name
-    summary["faults"] = []
     summary["recording"] = str(plan.record) if plan.record is not None else None
     if not args.quiet:
         print(f"swarm run: {describe_ending(summary)}", file=sys.stderr)
@@ -111,6 +110,7 @@ def run_plan(plan: RunPlan, hooks: engine.EngineHooks | None = None) -> dict[str
         timeout=plan.timeout,
         stall_window=plan.stall_window,
         byzantine_robots=plan.byzantine_robots,
+        robot_faults=plan.faults,
         hooks=hooks or bare,
     )
 
@@ -131,7 +131,7 @@ class _Recording:
             raise UsageError(f"--record {path}: {error.strerror}") from None
         run = RunDescription(plan.run_id, plan.seed, plan.robots, plan.sites, plan.config)
         info = World(config).info  # what world/info would answer: dt, robot size, sites
-        return cls(stream, McapRecorder(stream, protocol.Keys(plan.run_id), run, info))
+        return cls(stream, McapRecorder(stream, keyspace.Keys(plan.run_id), run, info))
 
     def tap(self, key: str, payload: bytes, attachment: bytes | None) -> None:
         """Record one message of the run, as the recorder process would take it."""

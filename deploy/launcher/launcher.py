@@ -4,8 +4,9 @@ Starts the world server (the Zenoh router of the run, on a Unix socket in a priv
 directory; TLS on loopback with ``--secure``; a client of the router ``--connect`` names),
 the recorder, the nest beacon and the robot processes (``supervisor.py``); follows what
 they publish (``follower.py``) and shows progress (``console.py``); kills and restarts
-robots when their ``--kill`` and ``--restart`` sim time comes (``faults.py``); stops when
-``wire.endings.stop_reason`` says so; stops every process it started, by pid, however
+robots when their ``--kill`` and ``--restart`` sim time comes (the faults' plug-ins,
+robot_agent/core/faults.py, given the launcher as their ``Engine``); stops when
+``bestofn_swarm.wire.endings.stop_reason`` says so; stops every process it started, by pid, however
 the run ends; prints a summary that says how it ended, hands it to the recorder
 (``recording.py``) and exits with that ending's code (``swarm run --help``).
 ``--engine inprocess`` runs the same computation in this process instead
@@ -33,22 +34,21 @@ from typing import Any
 
 from rich.console import Console
 
-from deploy.analysis.summary import RunOutcome, build_summary
+from bestofn_swarm.plumbing.cliargs import UsageError
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.plumbing.lifecycle import die_with_launcher
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.endings import Ending, Halt, Look, Stop, stop_reason
 from deploy.launcher.console import decided_progress, describe_ending, print_summary, say
-from deploy.launcher.faults import FaultSchedule
 from deploy.launcher.follower import Follower, Heard
 from deploy.launcher.inprocess import run_inprocess
 from deploy.launcher.options import add_arguments
-from deploy.launcher.plan import FaultAction, RunPlan, plan_from_args
+from deploy.launcher.plan import RunPlan, plan_from_args
 from deploy.launcher.processes import Child
 from deploy.launcher.recording import RecorderProgress, finish_recording
 from deploy.launcher.signals import Signalled, StopSignals
 from deploy.launcher.supervisor import StartError, Supervisor
-from plumbing.cliargs import UsageError
-from plumbing.inbox import BoundedInbox
-from plumbing.lifecycle import die_with_launcher
-from wire import protocol
-from wire.endings import Ending, Halt, Look, Stop, stop_reason
+from robot_agent.core import faults
 from world_server.core.layout import make_layout
 
 __all__ = ["add_arguments", "run"]
@@ -79,7 +79,7 @@ class Swarm:
         self.inbox: BoundedInbox[Heard | Signalled] = BoundedInbox(EVENTS_BYTES, MAX_EVENT_BYTES)
         self.supervisor = Supervisor(plan, self.inbox, echo)
         self.follower = Follower(plan, clock)
-        self.faults = FaultSchedule(plan.faults)
+        self.faults = faults.Schedule(plan.faults)
         self.crash: Child | None = None  # the process whose death ended the run
         self.ended_at: float | None = None
         self.departures = 0  # the world's count before the swarm was stopped (stopping adds)
@@ -111,38 +111,47 @@ class Swarm:
                 item = self.inbox.get(timeout=0)
             except queue.Empty:
                 break
-        self.follower.rejected += self.inbox.take_dropped(None)
+        self.follower.run.rejected += self.inbox.take_dropped(None)
         return signalled
 
     def inject_due_faults(self) -> None:
-        """Kill and restart the robots whose fault's sim time has come."""
-        sim_time = self.follower.sim_time
-        for fault in self.faults.due(sim_time):
-            was_running = self.supervisor.kill_robot(fault.robot)
-            restarting = fault.action is FaultAction.RESTART
-            self.follower.killed(fault.robot, restarting=restarting)
-            if restarting:
-                self.supervisor.restart_robot(fault.robot)
-            self.faults.note(fault, sim_time, was_running)
-            log.info("%s robot %d at sim time %.1f", fault.action, fault.robot, sim_time)
+        """Apply the faults whose sim time has come (this is a tick boundary: the world
+        said its new sim time)."""
+        for applied in self.faults.apply_due(self, self.follower.run.sim_time):
+            log.info(
+                "%s robot %d at sim time %.1f", applied.action, applied.robot, applied.applied_at_s
+            )
+
+    # --- faults.Engine: what a fault may do to this run -------------------------------
+
+    def kill(self, robot: int) -> bool:
+        """SIGKILL the robot's process; whether it was running."""
+        was_running = self.supervisor.kill_robot(robot)
+        self.follower.run.killed(robot)
+        return was_running
+
+    def restart(self, robot: int) -> None:
+        """A fresh process for the robot (killed first)."""
+        self.follower.run.restarted(robot)
+        self.supervisor.restart_robot(robot)
 
     def look(self, signalled: bool) -> Halt | None:
-        """Whether the run stops now, and why (``wire.endings.stop_reason``)."""
-        supervisor, follower = self.supervisor, self.follower
+        """Whether the run stops now, and why (``bestofn_swarm.wire.endings.stop_reason``)."""
+        supervisor, follower, run = self.supervisor, self.follower, self.follower.run
         for robot in supervisor.crashed_robots():
-            follower.crashed(robot)
+            run.crashed(robot)
         self.crash = supervisor.infrastructure_crash()
-        live = supervisor.live_robots() + follower.outside_present()
+        live = supervisor.live_robots() + run.outside_present()
         # Robots join once the world ticks; a restart to come will make progress.
         waiting = not follower.started or self.faults.restart_pending()
-        all_decided = not waiting and follower.all_decided(live)
+        all_decided = not waiting and run.all_decided(live)
         return stop_reason(
             Look(
-                sim_time=follower.sim_time,
+                sim_time=run.sim_time,
                 sim_limit=self.plan.timeout,
                 all_decided=all_decided,
-                last_decision=follower.last_decision_time(live) if all_decided else 0.0,
-                stalled=not waiting and follower.watchdog.stalled(follower.sim_time),
+                last_decision=run.last_decision(live) if all_decided else 0.0,
+                stalled=not waiting and run.stalled(run.sim_time),
                 wall_time=self.clock() - self.launched_at,
                 wall_limit=self.plan.wall_timeout,
                 crashed=self.crash is not None,
@@ -154,20 +163,20 @@ class Swarm:
     def stop(self) -> protocol.WorldState | None:
         """Stop the robots and the beacon, and read the world's final counters (its last
         state if it does not answer)."""
-        supervisor, follower = self.supervisor, self.follower
+        supervisor, follower, run = self.supervisor, self.follower, self.follower.run
         self.ended_at = self.clock()
         # A world whose clock stopped (frozen, or stuck) cannot answer: its last state is
         # all there is, without waiting out a question it will not hear.
         answering = not follower.world_stopped(self.plan.world_stop_window)
         if answering and supervisor.world is not None and supervisor.world.alive():
-            before = supervisor.query_world_stats() or follower.last_state
+            before = supervisor.query_world_stats() or run.last_state
             self.departures = before.departures if before else 0
-        elif not answering and follower.last_state is not None:
-            self.departures = follower.last_state.departures
+        elif not answering and run.last_state is not None:
+            self.departures = run.last_state.departures
         supervisor.stop_swarm()
         self.take_events(until=self.clock())  # what they said last
         stats = supervisor.world_stats() if answering and supervisor.world_running() else None
-        return stats or follower.last_state
+        return stats or run.last_state
 
 
 def run(args: argparse.Namespace) -> int:
@@ -212,7 +221,7 @@ def _run_swarm(
 
 def _watch(swarm: Swarm, signals: StopSignals, console: Console, quiet: bool) -> Halt:
     """Follow the run until the ending rule stops it."""
-    plan, follower = swarm.plan, swarm.follower
+    plan, follower, run = swarm.plan, swarm.follower, swarm.follower.run
     progress = decided_progress(console, quiet)
     with progress:
         task = progress.add_task("decided", total=plan.robots, info="starting")
@@ -227,12 +236,12 @@ def _watch(swarm: Swarm, signals: StopSignals, console: Console, quiet: bool) ->
             next_look = now + LOOK_EVERY
             started_at = follower.started_at
             elapsed = now - started_at if started_at is not None else 0.0
-            factor = follower.sim_time / elapsed if elapsed > 0 else 0.0
+            factor = run.sim_time / elapsed if elapsed > 0 else 0.0
             progress.update(
                 task,
-                completed=follower.decided(),
-                info=f"{follower.decided()}/{plan.robots} decided, {follower.trips()} trips, "
-                f"sim {follower.sim_time:.0f}s, {factor:.0f}x real time"
+                completed=run.decided(),
+                info=f"{run.decided()}/{plan.robots} decided, {run.trips()} trips, "
+                f"sim {run.sim_time:.0f}s, {factor:.0f}x real time"
                 if started_at is not None
                 else "waiting for the robots to join",
             )
@@ -255,43 +264,33 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
             f"{swarm.crash.process.returncode}):\n{swarm.crash.tail()}",
             file=sys.stderr,
         )
-    follower.departed()  # before the bridge stops and every link goes
+    run = follower.run
+    run.departed(run.outside_present())  # before the bridge stops and every link goes
     stats = swarm.stop()
-    robot_crashes = [record.id for record in follower.records.values() if record.crashed]
+    robot_crashes = [record.id for record in run.records.values() if record.crashed]
     stop = halt.stop
     if robot_crashes and stop is not Stop.INTERRUPTED:
         stop = Stop.CRASHED
     started_at = follower.started_at
     wall = (swarm.ended_at or 0.0) - started_at if started_at is not None else 0.0
-    summary = build_summary(
-        RunOutcome(
-            run_id=plan.run_id,
-            num_robots=plan.robots,
-            num_sites=plan.sites,
-            seed=plan.seed,
-            best_site=make_layout(plan.sites, plan.robots, plan.seed).best_site,
-            sim_time_s=follower.sim_time,
-            wall_time_s=wall,
-            timed_out=stop is Stop.TIMEOUT,
-            radio=stats.radio if stats else protocol.RadioCounters(),
-            world_rejected=stats.rejected if stats else 0,
-            stalls=stats.stalls if stats else 0,
-            departures=swarm.departures,
-            links=follower.links,
-            observer_rejected=follower.rejected,
-            beacon_rejected=sum(follower.beacon_rejected.values()),
-            config=plan.config,
-            stop=stop,
-            timeout_kind=halt.limit if stop is Stop.TIMEOUT else None,
-            stuck=follower.watchdog.stuck(),
-            byzantine={robot: str(how) for robot, how in plan.byzantine_robots.items()},
-            robot_processes=plan.robot_processes,
-        ),
-        follower.records.values(),
+    summary = run.summary(
+        run_id=plan.run_id,
+        num_robots=plan.robots,
+        num_sites=plan.sites,
+        seed=plan.seed,
+        best_site=make_layout(plan.sites, plan.robots, plan.seed).best_site,
+        wall_time_s=wall,
+        world=stats,
+        departures=swarm.departures,
+        config=plan.config,
+        stop=stop,
+        timeout_kind=halt.limit,
+        byzantine={robot: str(how) for robot, how in plan.byzantine_robots.items()},
+        robot_processes=plan.robot_processes,
     )
     if signum is not None:
         summary["signal"] = signal.Signals(signum).name
-    summary["faults"] = swarm.faults.applied
+    summary["faults"] = [applied.record() for applied in swarm.faults.applied]
     summary["recording"] = str(plan.record) if plan.record else None
     supervisor.finish_observers(summary)
     if not args.quiet:

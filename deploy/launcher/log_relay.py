@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from wire import auth, names, protocol
+from bestofn_swarm.wire import auth, keyspace, names, protocol
 
 MAX_LINE = 4096  # characters of a line that are published
 
@@ -24,7 +24,7 @@ class LogRelay:
     """Passes each child's lines on: to ``echo``, and to the run's ``log/<process>``."""
 
     def __init__(
-        self, keys: protocol.Keys, echo: Callable[[str, str], None] | None, hold: bool
+        self, keys: keyspace.Keys, echo: Callable[[str, str], None] | None, hold: bool
     ) -> None:
         self.keys = keys
         self.echo = echo
@@ -69,6 +69,6 @@ class LogRelay:
     def _publish(self, message: protocol.LogLine) -> None:
         if self._session is None:
             return
-        key, payload = self.keys.log(message.process), protocol.encode(message)
+        key, payload = self.keys.of(keyspace.LOG, message.process), protocol.encode(message)
         attachment = auth.seal(self._keyring, names.LAUNCHER, key, payload)
         self._session.put(key, payload, attachment=attachment)

@@ -11,6 +11,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.wire import shape
+from bestofn_swarm.wire.endings import exit_codes_help
 from deploy.launcher.outside import add_outside_options
 from deploy.launcher.plan import (
     ONE_PROCESS_PER_ROBOT_UP_TO,
@@ -18,10 +21,7 @@ from deploy.launcher.plan import (
     ROBOTS_PER_PROCESS,
 )
 from deploy.launcher.switches import add_swarm_switches
-from plumbing import cliargs
-from viewer.options import add_view_options
-from wire import shape
-from wire.endings import exit_codes_help
+from deploy.viewer.options import add_view_options
 
 ENGINES = ("zenoh", "inprocess")
 

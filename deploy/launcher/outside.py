@@ -21,12 +21,12 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from link.core import codec
-from link.core.impairment import LinkImpairment
-from wire import auth, names
+from bestofn_swarm.link.core import codec
+from bestofn_swarm.wire import auth, names
 from world_server.bridge import keys as link_keys
 from world_server.bridge.bridge import LinkedRobot
 from world_server.bridge.cli import add_impairment_options, impairment_of
+from world_server.bridge.core.impairment import LinkImpairment
 
 DEFAULT_LINK_HOST = "127.0.0.1"  # the bridge listens on loopback unless told otherwise
 DEFAULT_WAIT = 60.0  # wall seconds for every outside robot to connect

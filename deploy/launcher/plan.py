@@ -15,22 +15,22 @@ import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
-from deploy.analysis.watchdog import default_stall_window, default_world_stop_window
+from bestofn_swarm.plumbing.private_files import make_private_folder
+from bestofn_swarm.plumbing.tcp import free_port
+from bestofn_swarm.wire import settings
 from deploy.launcher.outside import OutsidePlan, outside_plan
 from deploy.launcher.switches import SWITCHES, RunSwitches, run_switches
+from deploy.viewer.options import VIEW_OPTIONS, Observer, observers
 from nest_beacon.node.options import NestBeaconConfig
-from plumbing.private_files import make_private_folder
-from plumbing.tcp import free_port
 from robot_agent.core import byzantine
+from robot_agent.core.faults import RobotFault
 from robot_agent.node.options import RobotAgentConfig
-from viewer.options import VIEW_OPTIONS, Observer, observers
-from wire import settings
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
+from world_server.observer.watchdog import default_stall_window, default_world_stop_window
 from world_server.recorder.options import DEFAULT_NICENESS
 from world_server.recording.description import RunDescription
 
@@ -49,20 +49,6 @@ NICE_RECORDER_UP_TO = 25
 OUTSIDE_START_MARGIN = 30.0
 
 
-class FaultAction(StrEnum):
-    """What ``--kill`` and ``--restart`` do to a robot's process at their sim time."""
-
-    KILL = "kill"  # SIGKILL, for good
-    RESTART = "restart"  # SIGKILL, then a fresh process for the robot
-
-
-@dataclass(frozen=True)
-class Fault:
-    robot: int
-    action: FaultAction
-    at: float  # sim seconds
-
-
 @dataclass
 class RunPlan:
     """Everything needed to start one run, derived from the command line."""
@@ -78,7 +64,7 @@ class RunPlan:
     record: Path | None
     switches: RunSwitches  # the world's, the robots' and the beacon's configs
     recorder_args: list[str] = field(default_factory=list)
-    faults: list[Fault] = field(default_factory=list)
+    faults: list[RobotFault] = field(default_factory=list)  # robot_agent/core/faults.py
     robots_per_process: int = 1
     batch: bool = True  # a process hosting several robots exchanges batches with the world
     byzantine_robots: dict[int, byzantine.Behaviour] = field(default_factory=dict)
@@ -126,7 +112,10 @@ class RunPlan:
             for robot in robots
             if robot in self.byzantine_robots
         )
-        agent = RobotAgentConfig(self.seed, self.switches.controller, hosted)
+        own = tuple(
+            fault.spec for fault in self.faults if fault.robot in robots and not fault.BY_ENGINE
+        )
+        agent = RobotAgentConfig(self.seed, self.switches.controller, hosted, own)
         ids = [arg for robot in robots for arg in ("--id", str(robot))]
         batching = [] if self.batch else ["--no-batch"]
         return [*ids, *batching, "--run-id", self.run_id, "--config", settings.encode(agent)]
@@ -159,31 +148,31 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         args, run_id=run_id, seed=args.seed, sites=args.sites, robots=args.robots
     )
     robot_faults = switches.faults
-    faults = sorted(
-        [Fault(robot, FaultAction.KILL, at) for robot, at in robot_faults.kill]
-        + [Fault(robot, FaultAction.RESTART, at) for robot, at in robot_faults.restart],
-        key=lambda fault: fault.at,
-    )
+    faults = sorted(robot_faults.robot_faults(), key=lambda fault: fault.at)
     for fault in faults:
         if fault.robot >= args.robots:
             raise ValueError(
-                f"--{fault.action} {fault.robot}@...: there is no robot "
+                f"--{fault.SWITCH} {fault.robot}@...: there is no robot "
                 f"{fault.robot} in a swarm of {args.robots}"
             )
     byzantine_robots = byzantine_plan(robot_faults.byzantine, args.robots, args.sites, args.seed)
     outside = outside_plan(args, args.robots)
     for robot in outside.ids if outside is not None else []:
-        if any(fault.robot == robot for fault in faults):
-            raise ValueError(f"--kill and --restart act on a process: robot {robot} is outside")
+        for fault in faults:
+            if fault.robot == robot:
+                raise ValueError(f"--{fault.SWITCH} {robot}@...: the robot is outside")
         if robot in byzantine_robots:
             raise ValueError(f"--byzantine {robot}: the robot is outside; its program decides")
-    # A fault acts on one robot's process: one robot per process unless told otherwise.
+    # Over Zenoh, a fault the engine applies acts on one robot's process: one robot per
+    # process unless told otherwise.
+    on_processes = [fault for fault in faults if fault.BY_ENGINE]
     per_process = args.robots_per_process or (
-        1 if faults else default_robots_per_process(args.robots)
+        1 if on_processes else default_robots_per_process(args.robots)
     )
-    if faults and per_process > 1:
+    if on_processes and per_process > 1 and args.engine != "inprocess":
         raise ValueError(
-            "--kill and --restart act on one robot's process: use them with --robots-per-process 1"
+            f"--{on_processes[0].SWITCH} acts on one robot's process: use it with "
+            "--robots-per-process 1"
         )
     if args.secure and args.connect:
         raise ValueError("--secure makes the run's own TLS router: it cannot use --connect")
@@ -327,8 +316,6 @@ def refuse_unsupported(args: argparse.Namespace) -> None:
     """ValueError naming the first option of ``args`` the in-process engine cannot honour."""
     refused = [
         (args.clock == "realtime", "--clock realtime", "it runs in lockstep only"),
-        (bool(args.kill), "--kill", "it acts on a robot's process, and there is none"),
-        (bool(args.restart), "--restart", "it acts on a robot's process, and there is none"),
         (args.robots_per_process is not None, "--robots-per-process", "there are no processes"),
         (args.no_batch, "--no-batch", "there are no processes"),
         (args.spawn != "fork", "--spawn", "there are no processes to start"),

@@ -22,8 +22,8 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from bestofn_swarm.plumbing.lifecycle import PARENT_ENV
 from deploy.launcher.forking import QUIET_THREADS, ForkedProcess, ForkServer
-from plumbing.lifecycle import PARENT_ENV
 
 LOG_LINES_KEPT = 200
 # Wall seconds the group waits for the pumps of stopped children to read their last lines

@@ -12,8 +12,8 @@ from typing import Any
 
 import zenoh
 
-from plumbing.world_info import ask
-from wire import auth, names, protocol
+from bestofn_swarm.plumbing.world_info import ask
+from bestofn_swarm.wire import auth, keyspace, names
 
 # Waiting for the recorder after the run: given up once its file has not grown for
 # RECORDER_PATIENCE wall seconds, and after RECORDER_LONGEST_WAIT in any case.
@@ -86,7 +86,7 @@ class RecorderProgress:
 
 def finish_recording(
     session: zenoh.Session,
-    keys: protocol.Keys,
+    keys: keyspace.Keys,
     keyring: auth.Keyring | None,
     waiting: RecorderProgress,
     summary: dict[str, Any],
@@ -96,7 +96,7 @@ def finish_recording(
     None once it confirmed; else why not."""
     answers, refused = ask(
         session,
-        keys.recorder_finish,
+        keys.of(keyspace.RECORDER_FINISH),
         keyring,
         names.LAUNCHER,
         payload=json.dumps(summary).encode(),

@@ -14,9 +14,9 @@ import sys
 import threading
 from collections.abc import Sequence
 
-from plumbing import cliargs
-from plumbing.lifecycle import die_with_launcher
-from plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.plumbing.lifecycle import die_with_launcher
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
 
 log = logging.getLogger("router")
 
@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     cliargs.configure_logging("router", args.log_level)
     import zenoh
 
-    from plumbing.zenoh_session import open_session
+    from bestofn_swarm.plumbing.zenoh_session import open_session
 
     listen = args.listen or ([] if args.zenoh_config else [cliargs.LOCAL_ENDPOINT])
     stop = threading.Event()

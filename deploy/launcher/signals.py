@@ -1,13 +1,13 @@
 """Stop signals as events: SIGINT, SIGTERM and SIGHUP end a run in order, like Ctrl-C
 always did, instead of killing ``swarm run`` where it stands.
 
-The handler only notes the first signal; ``plumbing.stop_signals.StopSignals`` passes it
-on from a thread of its own (to the launcher's event inbox, which takes locks). Nothing is
+The handler only notes the first signal; ``bestofn_swarm.plumbing.stop_signals.StopSignals`` passes
+it on from a thread of its own (to the launcher's event inbox, which takes locks). Nothing is
 raised into the interrupted code: the main loop sees the signal at its next look and ends
 the run in order. Later signals change nothing: the ending is bounded in time (processes
 get a grace period, then SIGKILL), and cutting it short would lose the summary and the
 recording's end. SIGKILL needs no handler: every child dies with the launcher
-(plumbing/lifecycle.py).
+(bestofn_swarm/plumbing/lifecycle.py).
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ import signal
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from plumbing import stop_signals
-from wire.endings import StopSignal
+from bestofn_swarm.plumbing import stop_signals
+from bestofn_swarm.wire.endings import StopSignal
 
 # The handled signals, in the order wire.endings lists them (SIGINT, SIGTERM, SIGHUP).
 STOP_SIGNALS = tuple(signal.Signals(stop) for stop in StopSignal)

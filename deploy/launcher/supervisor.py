@@ -24,6 +24,13 @@ from typing import Any
 
 import zenoh
 
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.plumbing.private_files import make_private_folder
+from bestofn_swarm.plumbing.tcp import wait_for_port
+from bestofn_swarm.plumbing.world_info import ask, fetch_world_info
+from bestofn_swarm.plumbing.zenoh_session import open_session
+from bestofn_swarm.wire import auth, keyspace, names, protocol, settings
+from bestofn_swarm.wire.names import Role
 from deploy.launcher.follower import subscribe
 from deploy.launcher.log_relay import LogRelay
 from deploy.launcher.outside import link_keys_env, write_key_files
@@ -31,13 +38,6 @@ from deploy.launcher.plan import RunPlan
 from deploy.launcher.processes import Child, ProcessGroup, python_module
 from deploy.security import zenoh_acl
 from deploy.security.credentials import RunNetwork
-from plumbing.inbox import BoundedInbox
-from plumbing.private_files import make_private_folder
-from plumbing.tcp import wait_for_port
-from plumbing.world_info import ask, fetch_world_info
-from plumbing.zenoh_session import open_session
-from wire import auth, names, protocol, settings
-from wire.names import Role
 
 log = logging.getLogger("swarm.run")
 
@@ -71,7 +71,7 @@ class Supervisor:
         echo: Callable[[str, str], None] | None = None,
     ) -> None:
         self.plan = plan
-        self.keys = protocol.Keys(plan.run_id)
+        self.keys = keyspace.Keys(plan.run_id)
         self.inbox = inbox  # where the follower's subscriptions queue what they hear
         self.logs = LogRelay(self.keys, echo, hold=plan.record is not None)
         self.group = ProcessGroup(self.logs.line)
@@ -267,7 +267,7 @@ class Supervisor:
                 robot
                 for robot in missing
                 if not list(
-                    self.session.liveliness().get(self.keys.alive(Role.ROBOT, robot), timeout=1.0)
+                    self.session.liveliness().get(self.keys.token(Role.ROBOT, robot), timeout=1.0)
                 )
             ]
             if missing:
@@ -325,7 +325,7 @@ class Supervisor:
         assert self.session is not None
         deadline = time.monotonic() + START_WAIT
         while time.monotonic() < deadline and child.alive() and not stopping():
-            if list(self.session.liveliness().get(self.keys.alive(role, ident), timeout=1.0)):
+            if list(self.session.liveliness().get(self.keys.token(role, ident), timeout=1.0)):
                 return True
             time.sleep(0.05)
         return False
@@ -396,7 +396,11 @@ class Supervisor:
             return None
         try:
             answers, _ = ask(
-                self.session, self.keys.world_stats, self.keyring, names.LAUNCHER, timeout=2.0
+                self.session,
+                self.keys.of(keyspace.STATS),
+                self.keyring,
+                names.LAUNCHER,
+                timeout=2.0,
             )
             for answer in answers:
                 return protocol.decode(answer, protocol.WorldState)
@@ -412,7 +416,7 @@ class Supervisor:
         with contextlib.suppress(zenoh.ZError):  # sealed: the view believes only the launcher
             ask(
                 self.session,
-                self.keys.viewer_finish,
+                self.keys.of(keyspace.VIEWER_FINISH),
                 self.keyring,
                 names.LAUNCHER,
                 payload=payload,

@@ -3,7 +3,7 @@ process), the clock, radio medium and camera (the world server), the nest beacon
 ``--beacon-*``) and the robot faults (the launcher itself).
 
 ``swarm run`` and ``swarm experiment`` both take all of them. Each option is made from its
-setting's one definition on the config dataclass (``wire/settings.py``), and the
+setting's one definition on the config dataclass (``bestofn_swarm/wire/settings.py``), and the
 processes of a run are handed the configs these options make, each as one JSON object.
 """
 
@@ -15,12 +15,12 @@ from typing import Annotated, Any, ClassVar, NamedTuple
 
 from msgspec import Meta
 
+from bestofn_swarm.plumbing.settings_cli import Options
+from bestofn_swarm.wire import settings
+from bestofn_swarm.wire.settings import Flag
 from nest_beacon.core.beacon import BeaconConfig
-from plumbing.settings_cli import Options
-from robot_agent.core import byzantine
+from robot_agent.core import byzantine, faults
 from robot_agent.core.controller_config import ControllerConfig
-from wire import settings
-from wire.settings import Flag
 from world_server.server.options import WorldServerConfig
 
 
@@ -51,24 +51,22 @@ class RobotAtTime(NamedTuple):
 
 @dataclass(frozen=True)
 class RobotFaults:
-    """Faults the launcher applies to robots: kills, restarts, Byzantine robots."""
+    """The faults of robots a run declares, one switch each (each a plug-in of both
+    engines: robot_agent/core/faults.py), and its Byzantine robots."""
 
     FLAG_GROUP: ClassVar[str] = "robot faults"
 
     kill: Annotated[
-        tuple[RobotAtTime, ...],
-        Meta(
-            description="SIGKILL robot ROBOT's process at SIMTIME sim seconds; the swarm "
-            "goes on without it"
-        ),
-        Flag(metavar="ROBOT@SIMTIME"),
+        tuple[RobotAtTime, ...], Meta(description=faults.Kill.HELP), Flag(metavar="ROBOT@SIMTIME")
     ] = ()
     restart: Annotated[
         tuple[RobotAtTime, ...],
-        Meta(
-            description="start a fresh process for robot ROBOT at SIMTIME; it is killed "
-            "first if still running, and rejoins with a new controller and its old body"
-        ),
+        Meta(description=faults.Restart.HELP),
+        Flag(metavar="ROBOT@SIMTIME"),
+    ] = ()
+    motor_failure: Annotated[
+        tuple[RobotAtTime, ...],
+        Meta(description=faults.MotorFailure.HELP),
         Flag(metavar="ROBOT@SIMTIME"),
     ] = ()
     byzantine: Annotated[
@@ -81,6 +79,14 @@ class RobotFaults:
         ),
         Flag(metavar="ROBOT[:MODE]"),
     ] = ()
+
+    def robot_faults(self) -> list[faults.RobotFault]:
+        """Every fault of a robot declared, as the plug-in its switch names."""
+        return [
+            kind(robot, at)
+            for kind in faults.FAULTS
+            for robot, at in getattr(self, kind.SWITCH.replace("-", "_"))
+        ]
 
 
 CONTROLLER = Options(ControllerConfig)

@@ -14,8 +14,9 @@ on every executor). Seeds 0-9 stand for the paper's ten runs per n.
   figures themselves and docs/section5-distribution.png;
 * ``--check`` runs every published run again (all 600 of docs/section5-runs.json, about
   7 minutes on 2 cores; ``make check-published``, which CI runs) and names everything that
-  differs: each run, the Markdown blocks, the figures' data, and runs missing from the file
-  or settings that differ from the code's. The PNGs are not compared (they are drawn from
+  differs: each run, the Markdown blocks, the figures' data, the numbers of the page's
+  text (``section5_tables.claims``), and runs missing from the file or settings that differ
+  from the code's. The PNGs are not compared (they are drawn from
   the checked data). ``--check --sample`` runs seeds 0-9 only (60 runs) and says which
   published runs it did not check.
 
@@ -34,9 +35,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bestofn_swarm.plumbing import checkout, cliargs
+from deploy.analysis import prose
 from deploy.analysis import section5_tables as tables
+from deploy.analysis.wilson import wilson
 from deploy.reports import pages, sweep
-from plumbing import cliargs
 
 RUNS_FILE = "docs/section5-runs.json"
 MARKDOWN = {"docs/section5.md": ("summary", "detail", "runs")}
@@ -47,7 +50,6 @@ FIGURE_DATA = {
     ("linger", 5): "docs/fig5-linger.json",
 }
 DISTRIBUTION_FIGURE = "docs/section5-distribution.png"
-CODE_ROOT = Path(__file__).resolve().parent.parent
 
 
 COMMAND = "swarm section5"
@@ -182,6 +184,8 @@ def write_all(root: Path, records: Sequence[dict[str, Any]], meta: dict[str, Any
             text = replace_block(text, name, rendered[name])
         path.write_text(text)
         written.append(path)
+        for problem in prose.stale(text, tables.claims(records), relative):
+            print(f"the prose is stale: {problem}", file=sys.stderr)  # written by hand
     written += plot_all(root, records)
     return written
 
@@ -249,6 +253,7 @@ def check_all(root: Path, fresh: Sequence[dict[str, Any]]) -> list[str]:
     rendered = tables.blocks(merged, meta)
     for relative, names in MARKDOWN.items():
         text = (root / relative).read_text()
+        problems += prose.stale(text, tables.claims(merged), relative)
         for name in names:
             block = read_block(text, name)
             if block is None:
@@ -335,7 +340,7 @@ def _as_summary(record: dict[str, Any]) -> dict[str, Any]:
 
 
 def plot_all(root: Path, records: Sequence[dict[str, Any]]) -> list[Path]:
-    from deploy.reports.report import plot_boxes
+    from deploy.reports.figures import plot_boxes
 
     written = []
     for (variant, figure), data_path in FIGURE_DATA.items():
@@ -355,7 +360,7 @@ def plot_all(root: Path, records: Sequence[dict[str, Any]]) -> list[Path]:
 
 def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
     """Per n: the share of runs by the swarm's steps, default and --linger, seeds 0-9 marked."""
-    from deploy.reports.report import _pyplot
+    from deploy.reports.figures import _pyplot
 
     plt = _pyplot()
     figure, axes = plt.subplots(1, len(tables.SITES), figsize=(5 * len(tables.SITES), 3.8))
@@ -373,11 +378,19 @@ def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
             if not values:
                 continue
             steps = sorted(set(values))
+            bounds = [wilson(values.count(step), len(values)) for step in steps]
+            shares = [values.count(step) / len(values) for step in steps]
             axis.bar(
                 [step + offset for step in steps],
-                [values.count(step) / len(values) for step in steps],
+                shares,
                 width=0.4,
                 color=colour,
+                yerr=[
+                    [share - low for share, (low, _) in zip(shares, bounds, strict=True)],
+                    [high - share for share, (_, high) in zip(shares, bounds, strict=True)],
+                ],
+                capsize=2,
+                ecolor="dimgrey",
                 label="default" if variant == "default" else f"--linger {tables.LINGER:g}",
             )
         paper = [
@@ -388,11 +401,15 @@ def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
         for step in sorted(set(paper)):
             axis.plot(step - 0.2, paper.count(step) / max(len(paper), 1), "k_", markersize=14)
         axis.axvline(n / 2, linestyle="--", color="tab:red", label=f"n/2 = {n / 2:g}")
-        axis.set_title(f"n = {n}: {seeds} seeds (black: seeds 0-9, default)")
+        axis.set_title(f"n = {n}: {seeds} seeds")
         axis.set_xlabel("the swarm's steps (last robot)")
         axis.set_ylabel("share of runs")
         axis.xaxis.get_major_locator().set_params(integer=True)
         axis.legend(fontsize=8)
+    figure.suptitle(
+        "black: seeds 0-9 alone, default; error bars: 95% Wilson interval of the share of runs",
+        fontsize="small",
+    )
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
@@ -400,7 +417,7 @@ def plot_distribution(records: Sequence[dict[str, Any]], path: Path) -> None:
 
 def _render(root: Path) -> int:
     """Write everything again from the published runs, keeping their provenance."""
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
     try:
         meta, records = read_runs(root)
@@ -457,34 +474,36 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--root",
         type=Path,
-        default=Path.cwd(),
-        help="the repository to write into or check (default: the current directory)",
+        default=None,
+        help="the repository to write into or check (default: the checkout this code runs from)",
     )
 
 
 def run(args: argparse.Namespace) -> int:
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
-    root: Path = args.root
-    if (args.write or args.check or args.render) and not all(
-        (root / path).exists() for path in MARKDOWN
-    ):
-        raise UsageError(f"{root} has no docs/section5.md: use --root")
+    root: Path | None = args.root
+    if args.write or args.check or args.render:
+        if root is None:  # an installed copy has no published pages
+            root = checkout.needed("swarm section5 --write, --render and --check", "give --root")
+        if not all((root / path).exists() for path in MARKDOWN):
+            raise UsageError(f"{root} has no docs/section5.md: give --root a checkout")
     if args.sample and not args.check:
         raise UsageError("--sample goes with --check")
+    code = checkout.found()
 
     def progress(done: int, total: int) -> None:
         if done % 10 == 0 or done == total:
             print(f"\r{done}/{total} runs", end="" if done < total else "\n", file=sys.stderr)
 
-    if args.render:
+    if args.render and root is not None:
         return _render(root)
     executor = sweep.executor_from_args(args)
-    if args.check:
+    if args.check and root is not None:
         return _check(root, args.sample, executor, progress)
     # The code that runs is this package's, wherever --root points: its state, before the
-    # runs (edits made while they run do not count).
-    commit, dirty = pages.git_state(CODE_ROOT, published_paths())
+    # runs (edits made while they run do not count); none for an installed copy.
+    commit, dirty = pages.git_state(code, published_paths()) if code else (None, False)
     records = simulate(tasks_for(args.seeds), executor, progress)
     meta = {
         "command": f"swarm section5 --seeds {args.seeds} --write",
@@ -495,7 +514,7 @@ def run(args: argparse.Namespace) -> int:
         "sites": list(tables.SITES),
         "variants": tables.VARIANTS,
     }
-    if args.write:
+    if args.write and root is not None:
         for path in write_all(root, records, meta):
             print(f"wrote {path}", file=sys.stderr)
         return 0
@@ -509,7 +528,7 @@ def run(args: argparse.Namespace) -> int:
 def _check(root: Path, sample: bool, executor: sweep.ExecutorSpec, progress: Any) -> int:
     """Run the published runs again (seeds 0-9 with ``sample``); print every difference and
     what was not checked; 1 if anything differs."""
-    from plumbing.cliargs import UsageError
+    from bestofn_swarm.plumbing.cliargs import UsageError
 
     try:
         _, published = read_runs(root)

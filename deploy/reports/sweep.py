@@ -38,7 +38,7 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
-from plumbing import cliargs
+from bestofn_swarm.plumbing import cliargs
 
 T = TypeVar("T")
 R = TypeVar("R")

@@ -1,6 +1,6 @@
 """``swarm wellstirred``: the paper's Section 4 model, its Figure 1 table and Figures 1-2;
 with ``--strategy dmvd|dmmd|dc``, a strategy it is compared with in the same model
-(``wellstirred/voting.py``, docs/strategies.md).
+(``robot_agent/wellstirred/voting.py``, docs/strategies.md).
 
 Prints one table per n (rows per pool size k, the n/2 exhaustive-search baseline and
 k*, the smallest k whose mean is at or below n/2) or, with ``--json``, exactly one JSON
@@ -21,10 +21,10 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from plumbing import cliargs
-from plumbing.cliargs import UsageError
+from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.plumbing.cliargs import UsageError
 from robot_agent.core.voting import STRATEGIES
-from wellstirred.model import (
+from robot_agent.wellstirred.model import (
     FIGURE1_OPTIONS,
     FIGURE1_POOLS,
     MAX_EXACT_OPTIONS,
@@ -36,7 +36,7 @@ from wellstirred.model import (
     optimal_pool,
     sweep,
 )
-from wellstirred.voting import vote_sweep
+from robot_agent.wellstirred.voting import vote_sweep
 
 # Figure 2 of the paper: one agent's opinion for these pool sizes.
 FIGURE2_POOLS = (2, 3)

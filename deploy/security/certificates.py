@@ -5,7 +5,7 @@ which identities there are and what each may do).
 Every certificate may authenticate a client (mutual TLS); a router's also names the
 hosts it serves as. Keys are P-256, accepted by rustls (Zenoh's TLS) and zenoh-pico's
 mbedTLS. Everything is written readable by its owner only, in folders made 0700
-(plumbing/private_files.py), and a CA given by path is read with a size limit.
+(bestofn_swarm/plumbing/private_files.py), and a CA given by path is read with a size limit.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from plumbing.bounded_read import CERTIFICATE_BYTES, read_bounded
-from plumbing.private_files import make_private_folder, write_private
+from bestofn_swarm.plumbing.bounded_read import CERTIFICATE_BYTES, read_bounded
+from bestofn_swarm.plumbing.private_files import make_private_folder, write_private
 
 # P-256 keys: small, fast to make, accepted by rustls (Zenoh's TLS) and zenoh-pico's mbedTLS.
 _CURVE = ec.SECP256R1()

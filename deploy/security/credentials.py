@@ -1,7 +1,7 @@
 """What keeps one local run to itself: run keys, a private directory, and in secure mode an
 ephemeral certificate authority with a certificate and an access control for each process.
 
-* Run keys (wire/auth.py): a fresh secret per run. The world server, beacon and
+* Run keys (bestofn_swarm/wire/auth.py): a fresh secret per run. The world server, beacon and
   recorder get it; each robot process gets only the keys of the robots it hosts. Keys go
   through each child's environment or the fork call, never a command line.
 * The private directory (mode 0700, removed by ``close``, and by its janitor however the
@@ -22,11 +22,11 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+from bestofn_swarm.plumbing import run_keys
+from bestofn_swarm.plumbing.tcp import free_port, wait_for_port
+from bestofn_swarm.wire import auth, keyspace, names, protocol
 from deploy.security import certificates, zenoh_acl
 from deploy.security.janitor import PREFIX, PrivateDirectory
-from plumbing import run_keys
-from plumbing.tcp import free_port, wait_for_port
-from wire import auth, names, protocol
 
 DIRECTORY_PREFIX = PREFIX
 SOCKET_NAME = "zenoh.sock"
@@ -99,7 +99,7 @@ class RunNetwork:
                 return cls(run_id, socket_endpoint(directory), True, keyring, private)
             port = free_port()
             plan = zenoh_acl.SwarmPlan(
-                protocol.Keys(run_id, root), tuple(range(robots)), (BEACON,), port=port
+                keyspace.Keys(run_id, root), tuple(range(robots)), (BEACON,), port=port
             )
             cert_dir = directory / "certs"
             ca, ca_key = directory / "ca.pem", directory / "ca.key"

@@ -5,7 +5,7 @@ the certificate's common name is its identity (``robot-3``, ``world``, ``beacon-
 ``observer``, ``launcher``, ``recorder``, ``viewer``, ``foxglove``; routers use their host
 name). The router's
 access control denies by default and allows each identity exactly its part of the
-protocol (wire/protocol.py), so a robot can only publish its own ``act``,
+protocol (bestofn_swarm/wire/protocol.py), so a robot can only publish its own ``act``,
 ``status`` and ``radio/tx/<id>`` and only the world server can publish ``sense``,
 ``camera`` and ``radio/rx``. See deploy/zenoh/README.md.
 
@@ -28,19 +28,19 @@ from dataclasses import dataclass
 from pathlib import Path, PurePath
 from typing import Any
 
+from bestofn_swarm.plumbing import cliargs
+from bestofn_swarm.plumbing.bounded_read import CERTIFICATE_BYTES, read_bounded
+from bestofn_swarm.plumbing.private_files import make_private_folder, write_private
+from bestofn_swarm.wire import keyspace, names, protocol
+from bestofn_swarm.wire.keyspace import Party
+from bestofn_swarm.wire.names import Role
 from deploy.security.certificates import create_ca, is_ip, issue_all
-from plumbing import cliargs
-from plumbing.bounded_read import CERTIFICATE_BYTES, read_bounded
-from plumbing.private_files import make_private_folder, write_private
-from wire import keyspace, names, protocol
-from wire.keyspace import Party
-from wire.names import Role
 
 DEFAULT_PORT = cliargs.ZENOH_PORT
 DEFAULT_ROUTER = "router"
-# Certificate names of the processes that are neither robots nor beacons (wire/names.py):
-# the observers of swarm run --view and --foxglove are readers with a token (and the page a
-# queryable) of their own; OBSERVER is any other reader.
+# Certificate names of the processes that are neither robots nor beacons
+# (bestofn_swarm/wire/names.py): the observers of swarm run --view and --foxglove are readers with a
+# token (and the page a queryable) of their own; OBSERVER is any other reader.
 OBSERVER, LAUNCHER, RECORDER, WORLD = names.OBSERVER, names.LAUNCHER, names.RECORDER, names.WORLD
 VIEWER, FOXGLOVE = names.VIEWER, names.FOXGLOVE
 # The bridge to robots outside the emulator: its own session publishes the links' figures;
@@ -65,7 +65,7 @@ _HOST_NAME = re.compile(r"[A-Za-z0-9]([A-Za-z0-9.-]{0,62}[A-Za-z0-9])?")
 class SwarmPlan:
     """Who takes part in one secured run: the identities the router will know."""
 
-    keys: protocol.Keys
+    keys: keyspace.Keys
     robots: tuple[int, ...]
     beacons: tuple[str, ...] = (names.DEFAULT_BEACON,)
     routers: tuple[str, ...] = (DEFAULT_ROUTER,)
@@ -109,8 +109,8 @@ class SwarmPlan:
 # --- access control ------------------------------------------------------------------
 
 
-# Who may say what, from the key table (wire/keyspace.py): the kinds each party publishes,
-# and the kinds the world sends each robot or beacon alone.
+# Who may say what, from the key table (bestofn_swarm/wire/keyspace.py): the kinds each party
+# publishes, and the kinds the world sends each robot or beacon alone.
 WORLD_SPEAKS = keyspace.published_by(Party.WORLD)
 ROBOT_SPEAKS = keyspace.published_by(Party.ROBOT, Party.HOST, Party.SENDER)
 ROBOT_HEARS = keyspace.inputs_of(Party.ROBOT, Party.HOST, Party.RECEIVER)
@@ -142,8 +142,8 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
     """
     keys = plan.keys
     everything = [keys.all]
-    world_services = [keys.world_info, keys.world_stats]
-    finishes = [keys.recorder_finish, keys.viewer_finish]
+    world_services = [keys.of(keyspace.INFO), keys.of(keyspace.STATS)]
+    finishes = [keys.of(keyspace.RECORDER_FINISH), keys.of(keyspace.VIEWER_FINISH)]
     rules: list[dict[str, Any]] = [
         # Watching: subscribe to anything of the run, see who is alive, read world services.
         _rule(
@@ -159,19 +159,19 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         _rule("read-query", "ingress", ["query"], world_services),
         _rule("read-answer", "egress", ["reply"], world_services),
         # A robot (and the beacon) asks for the map ...
-        _rule("robot-query-info", "ingress", ["query"], [keys.world_info]),
-        _rule("robot-answer-info", "egress", ["reply"], [keys.world_info]),
+        _rule("robot-query-info", "ingress", ["query"], [keys.of(keyspace.INFO)]),
+        _rule("robot-answer-info", "egress", ["reply"], [keys.of(keyspace.INFO)]),
         # ... and follows the world server's liveliness, to notice a restarted world.
         _rule(
             "follow-world",
             "ingress",
             ["declare_liveliness_subscriber", "liveliness_query"],
-            [keys.alive(Role.WORLD, "*")],
+            [keys.token(Role.WORLD, "*")],
         ),
-        _rule("follow-world-token", "egress", ["liveliness_token"], [keys.alive(Role.WORLD, "*")]),
+        _rule("follow-world-token", "egress", ["liveliness_token"], [keys.token(Role.WORLD, "*")]),
         # The world server: the robots' bodies, the radio medium, the clock.
         _rule("world-speak", "ingress", ["put"], keyspace.keys_for(keys, WORLD_SPEAKS)),
-        _rule("world-alive", "ingress", ["liveliness_token"], [keys.alive(Role.WORLD, "*")]),
+        _rule("world-alive", "ingress", ["liveliness_token"], [keys.token(Role.WORLD, "*")]),
         _rule("world-serve", "ingress", ["declare_queryable", "reply"], world_services),
         _rule("world-asked", "egress", ["query"], world_services),
         # The launcher relays process logs and asks the recorder and the page to finish.
@@ -179,18 +179,28 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
         _rule("launcher-finish", "ingress", ["query"], finishes),
         _rule("launcher-finished", "egress", ["reply"], finishes),
         # The recorder answers the finish query once its file is complete.
-        _rule("recorder-serve", "ingress", ["declare_queryable", "reply"], [keys.recorder_finish]),
-        _rule("recorder-alive", "ingress", ["liveliness_token"], [keys.alive(Role.RECORDER, "*")]),
-        _rule("recorder-asked", "egress", ["query"], [keys.recorder_finish]),
+        _rule(
+            "recorder-serve",
+            "ingress",
+            ["declare_queryable", "reply"],
+            [keys.of(keyspace.RECORDER_FINISH)],
+        ),
+        _rule("recorder-alive", "ingress", ["liveliness_token"], [keys.token(Role.RECORDER, "*")]),
+        _rule("recorder-asked", "egress", ["query"], [keys.of(keyspace.RECORDER_FINISH)]),
         # The page answers its finish query once every page was sent how the run ended.
-        _rule("viewer-serve", "ingress", ["declare_queryable", "reply"], [keys.viewer_finish]),
-        _rule("viewer-alive", "ingress", ["liveliness_token"], [keys.alive(Role.VIEWER, 0)]),
-        _rule("viewer-asked", "egress", ["query"], [keys.viewer_finish]),
+        _rule(
+            "viewer-serve",
+            "ingress",
+            ["declare_queryable", "reply"],
+            [keys.of(keyspace.VIEWER_FINISH)],
+        ),
+        _rule("viewer-alive", "ingress", ["liveliness_token"], [keys.token(Role.VIEWER, 0)]),
+        _rule("viewer-asked", "egress", ["query"], [keys.of(keyspace.VIEWER_FINISH)]),
         # Foxglove live only listens, and says it serves.
-        _rule("foxglove-alive", "ingress", ["liveliness_token"], [keys.alive(Role.FOXGLOVE, 0)]),
+        _rule("foxglove-alive", "ingress", ["liveliness_token"], [keys.token(Role.FOXGLOVE, 0)]),
         # The bridge publishes its links' figures and says it serves.
         _rule("bridge-speak", "ingress", ["put"], keyspace.keys_for(keys, BRIDGE_SPEAKS)),
-        _rule("bridge-alive", "ingress", ["liveliness_token"], [keys.alive(Role.BRIDGE, 0)]),
+        _rule("bridge-alive", "ingress", ["liveliness_token"], [keys.token(Role.BRIDGE, 0)]),
         # Routers of the other hosts relay everyone's traffic; each checks its own clients.
         _rule("router-relay-in", "ingress", ALL_MESSAGES, everything),
         _rule("router-relay-out", "egress", ALL_MESSAGES, everything),
@@ -226,7 +236,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 f"{identity}-alive",
                 "ingress",
                 ["liveliness_token"],
-                [keys.alive(Role.ROBOT, robot)],
+                [keys.token(Role.ROBOT, robot)],
             ),
             _rule(f"{identity}-subscribe", "ingress", ["declare_subscriber"], own_inputs),
             _rule(f"{identity}-receive", "egress", ["put"], own_inputs),
@@ -257,7 +267,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 f"{identity}-alive",
                 "ingress",
                 ["liveliness_token"],
-                [keys.alive(Role.BEACON, beacon)],
+                [keys.token(Role.BEACON, beacon)],
             ),
             # Each beacon hears its own clock: the ticks it answers.
             _rule(
@@ -518,7 +528,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--new-ca needs --ca-key")
     try:
         plan = SwarmPlan(
-            keys=protocol.Keys(args.run_id, args.root),
+            keys=keyspace.Keys(args.run_id, args.root),
             robots=tuple(range(args.robots)),
             beacons=tuple(args.beacons or [names.DEFAULT_BEACON]),
             routers=tuple(args.routers or [DEFAULT_ROUTER]),

@@ -8,11 +8,13 @@ into a results file, rendered from that file alone, checked by making a sample a
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 
-def frame(name: str, root: Any = None) -> Any:
-    """The runs of study ``name`` as a pandas DataFrame (``deploy/study/dataframe.py``)."""
+def frame(name: str, root: str | os.PathLike[str] | None = None) -> Any:
+    """The runs of study ``name`` under ``root`` (a path or its string; default: this
+    checkout) as a pandas DataFrame (``deploy/study/dataframe.py``)."""
     from deploy.study.dataframe import frame as load
 
     return load(name, root)

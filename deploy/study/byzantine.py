@@ -13,44 +13,25 @@ include those 2. The runs without Byzantine robots (``mode=none``) count for eve
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from deploy.study import tables
+from bestofn_swarm.wire.rng import Stream
+from deploy.analysis.wilson import share
+from deploy.study import byzantine_prose, tables
+from deploy.study.byzantine_runs import (
+    DEFENCES,
+    LABELS,
+    MAX_BYZANTINE,
+    MODES,
+    ROBOTS,
+    SEEDS,
+    SITES,
+    TIMEOUT,
+    cells,
+)
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
-from deploy.study.wilson import share
-from wire.rng import Stream
-
-MODES = ("liar", "inverted", "silent")
-MAX_BYZANTINE = 3
-ROBOTS = 10
-SITES = 10
-SEEDS = range(40)
-TIMEOUT = 1200.0  # sim seconds
-
-
-@dataclass(frozen=True)
-class Defence:
-    """A controller set-up, as ``swarm run`` options."""
-
-    key: str
-    label: str
-    options: tuple[str, ...]
-
-
-DEFENCES = (
-    Defence("paper", "alpha = 0, MProdOp (paper)", ()),
-    Defence("a005", "alpha = 0.05, MProdOp", ("--alpha", "0.05", "--threshold", "0.99")),
-    Defence("a01", "alpha = 0.1, MProdOp", ("--alpha", "0.1", "--threshold", "0.99")),
-    Defence(
-        "loglinear",
-        "alpha = 0.1, log-linear pool",
-        ("--alpha", "0.1", "--threshold", "0.99", "--pooling", "loglinear"),
-    ),
-)
-LABELS = {defence.key: defence.label for defence in DEFENCES}
 
 
 def byzantine_ids(seed: int, robots: int, count: int) -> list[int]:
@@ -93,53 +74,35 @@ def points() -> list[Point]:
 # --- the page ------------------------------------------------------------------------------
 
 
-def cells(records: Records) -> list[dict[str, Any]]:
-    """Per (mode, count, defence); the runs without Byzantine robots count for every mode
-    at count 0."""
-    grouped: dict[tuple[str, int, str], list[dict[str, Any]]] = {}
-    for record in records.runs:
-        params = record["params"]
-        for mode in MODES if params["mode"] == "none" else [params["mode"]]:
-            grouped.setdefault((mode, params["byzantine"], params["defence"]), []).append(record)
-    order = [defence.key for defence in DEFENCES]
-    rows = []
-    for (mode, count, defence), runs in sorted(
-        grouped.items(),
-        key=lambda item: (MODES.index(item[0][0]), item[0][1], order.index(item[0][2])),
-    ):
-        results = [tables.result(run) for run in runs]
-        rows.append(
-            {
-                "mode": mode,
-                "count": count,
-                "defence": defence,
-                "runs": len(runs),
-                **{verdict: tables.count(runs, verdict) for verdict in tables.VERDICTS},
-                "liar_won": sum(bool(result.get("liar_won")) for result in results),
-                "median_time": tables.median(
-                    result["sim_time_s"]
-                    for result in results
-                    if result["verdict"] in ("correct", "wrong")
-                ),
-            }
-        )
-    return rows
-
-
 def table(records: Records) -> str:
     lines = [
         "| n | mode | Byzantine | defence | correct (95% interval) | wrong consensus | split "
-        "| undecided at timeout | median consensus time (sim s) |",
-        "|---:|---|---:|---|---:|---:|---:|---:|---:|",
+        "| undecided at timeout | median consensus time (sim s) | against the paper's "
+        "controller: ratio of medians (95% interval) |",
+        "|---:|---|---:|---|---:|---:|---:|---:|---:|---:|",
     ]
-    for row in cells(records):
-        wrong = f"{row['wrong']}"
+    rows = cells(records)
+    for row in rows:
+        runs = row["runs"]
+        wrong = tables.counted(row["wrong"], runs)
         if row["mode"] == "liar" and row["count"] > 0:
-            wrong += f" ({row['liar_won']} the liars' site)"
+            wrong += f", {row['liar_won']} the liars' site"
+        paper = next(
+            other
+            for other in rows
+            if other["defence"] == "paper"
+            and (other["mode"], other["count"]) == (row["mode"], row["count"])
+        )
+        against = (
+            "1 (the baseline)"
+            if row["defence"] == "paper"
+            else tables.compare_times(row["times"], paper["times"], tables.CONSENSUS_RUNS)
+        )
         lines.append(
             f"| {SITES} | {row['mode']} | {row['count']} | {LABELS[row['defence']]} "
-            f"| {share(row['correct'], row['runs'])} | {wrong} | {row['split']} "
-            f"| {row['undecided']} | {tables.number(row['median_time'])} |"
+            f"| {share(row['correct'], runs)} | {wrong} | {tables.counted(row['split'], runs)} "
+            f"| {tables.counted(row['undecided'], runs)} "
+            f"| {tables.number(tables.median(row['times'].values()))} | {against} |"
         )
     return "\n".join(lines)
 
@@ -208,6 +171,21 @@ STUDY = Study(
     about="liars, inverted and silent robots against alpha > 0 and the log-linear pool",
     points=points,
     source="deploy/study/byzantine.py",
-    pages=(Page("docs/byzantine.md", lambda records: {"results": results_block(records)}),),
+    pages=(
+        Page(
+            "docs/byzantine.md",
+            lambda records: {"results": results_block(records)},
+            claims=byzantine_prose.claims,
+        ),
+        Page(
+            "docs/security.md",
+            lambda records: {"byzantine": byzantine_prose.security_table(records)},
+            made=False,
+            claims=byzantine_prose.security_claims,
+        ),
+    ),
     outputs=(Output("docs/byzantine.png", plot),),
+    kinds=lambda run: (
+        "no Byzantine robot" if run.param("mode") == "none" else f"{run.param('mode')} robots"
+    ),
 )

@@ -6,8 +6,8 @@ data (``deploy/study/catalogue.py``), each with a results file (``docs/studies/N
     swarm study NAME [--parallel J|--dask]  # make the missing runs (resumable, longest first)
     swarm study NAME --only robots=500      # part of the grid (with any of the above)
     swarm study NAME --render               # the pages, tables and figures, from the results file
-    swarm study NAME --check [--sample K]   # K runs made again and compared with the file
-    swarm study --check [--sample K]        # the same for every study (make check-published)
+    swarm study NAME --check [--sample K]   # K runs of each kind made again and compared
+    swarm study --check [--sample-seed S]   # the same for every study (make check-published)
 
 Rendering never runs a swarm; with runs missing it renders what is there and says how many
 are missing, on the page and here. docs/studies.md says more.
@@ -17,19 +17,20 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 from rich.console import Console
 
+from bestofn_swarm.plumbing import checkout, cliargs
+from bestofn_swarm.plumbing.cliargs import UsageError
 from deploy.reports import sweep
-from deploy.study import check, grid, page, results, runner
+from deploy.study import check, grid, lock, page, results, runner
 from deploy.study.catalogue import studies, study_named
+from deploy.study.declare import Study
 from deploy.study.state import State, state_of
-from plumbing import cliargs
-from plumbing.cliargs import UsageError
 
-DEFAULT_SAMPLE = 3
-REPOSITORY = results.CODE_ROOT
+DEFAULT_SAMPLE = 1  # runs of each kind
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,8 +61,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=cliargs.int_range(1, 100_000),
         default=None,
         metavar="K",
-        help=f"with --check: how many runs (default: {DEFAULT_SAMPLE}; cheap ones first, spread "
-        "over the points)",
+        help=f"with --check: how many runs of each kind of run the study has (default: "
+        f"{DEFAULT_SAMPLE}), drawn at random within the budget",
+    )
+    parser.add_argument(
+        "--sample-seed",
+        type=cliargs.int_range(0, 2**63),
+        default=None,
+        metavar="S",
+        help="with --check: the seed of the sample's draw (default: today's date, 20250314; "
+        "each check prints its seed)",
+    )
+    parser.add_argument(
+        "--sample-budget",
+        type=cliargs.float_range(0.0, low_open=True),
+        default=None,
+        metavar="SECONDS",
+        help=f"with --check: the recorded wall seconds a study's sample may take (default: "
+        f"{check.BUDGET:g} for each run of a kind); a kind with no run within it is named, "
+        "not made",
     )
     parser.add_argument(
         "--only",
@@ -74,9 +92,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--root",
         type=Path,
-        default=REPOSITORY,
-        help="the repository whose results files and pages are read and written (default: this "
-        "one)",
+        default=None,
+        help="the repository whose results files and pages are read and written (default: the "
+        "checkout this code runs from)",
     )
     parser.add_argument(
         "--declared",
@@ -93,23 +111,48 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="DIR",
         help="where recorded runs over Zenoh write their MCAP files (default: ROOT/runs/studies)",
     )
+    parser.add_argument(
+        "--new",
+        action="store_true",
+        help="ROOT may be a new folder (made if need be) without the study's results file or "
+        "pages; without it such a ROOT is refused",
+    )
+    parser.add_argument(
+        "--wait",
+        action="store_true",
+        help="when another runner is making the study's runs into the same results file, wait "
+        "for it to end (without it: exit 2, naming the runner)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress display")
     sweep.add_executor_options(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
+    if args.root is None:  # an installed copy has no results files or pages
+        args.root = checkout.needed("swarm study", "give --root CHECKOUT")
     try:
         if args.list:
+            if args.only:
+                raise UsageError("--list names every study: it takes no --only")
+            check_root(args.root, args.new)
             return list_studies(args)
         if args.name is None and args.check:
+            check_root(args.root, args.new)
             return check_every_study(args, console)
         if args.name is None:
             raise UsageError("give a study's name (swarm study --list names them)")
         study = study_named(args.name, args.declared)
         only = grid.parse_only(args.only)
-        if args.sample is not None and not args.check:
-            raise UsageError("--sample goes with --check")
+        for option in ("sample", "sample_seed", "sample_budget"):
+            if getattr(args, option) is not None and not args.check:
+                raise UsageError(f"--{option.replace('_', '-')} goes with --check")
+        if args.render and only:
+            raise UsageError(
+                "--render writes the whole study's pages: it takes no --only (--status shows "
+                "part of it)"
+            )
+        check_root(args.root, args.new, study)
         state = state_of(study, args.root, only)
     except ValueError as error:
         raise UsageError(str(error)) from None
@@ -123,12 +166,20 @@ def run(args: argparse.Namespace) -> int:
         return render(state, args.root, console)
     executor = sweep.executor_from_args(args)
     if args.check:
-        return check_runs(state, executor, args.sample or DEFAULT_SAMPLE, console)
+        return check_runs(state, executor, Draw.of(args), console)
     recordings = args.recordings or args.root / "runs" / "studies"
+
+    def waiting(holder: str) -> None:
+        console.print(f"{study.results} is being made by {holder}: waiting for it to end")
+
     try:
-        failures = runner.run_missing(
-            state, args.root, executor, recordings, console, quiet=args.quiet
-        )
+        with lock.holding(args.root / study.results, wait=args.wait, waiting=waiting):
+            state = state_of(study, args.root, only)  # what is missing once the lock is ours
+            failures = runner.run_missing(
+                state, args.root, executor, recordings, console, quiet=args.quiet
+            )
+    except lock.BusyError as error:
+        raise UsageError(str(error)) from None
     except OSError as error:  # the results file cannot be written
         raise UsageError(f"{error.filename or study.results}: {error.strerror}") from None
     for line in runner.failures_text(failures):
@@ -136,6 +187,24 @@ def run(args: argparse.Namespace) -> int:
     after = state_of(study, args.root, only)
     print(f"{len(after.done)} done, {len(after.missing)} missing")
     return 1 if failures else 0
+
+
+def check_root(root: Path, new: bool, study: Study | None = None) -> None:
+    """UsageError unless ``root`` is a folder that holds the study's results file or its
+    pages (a repository with the study), or ``new`` says a new one is meant (then made)."""
+    if new:
+        root.mkdir(parents=True, exist_ok=True)
+        return
+    if not root.is_dir():
+        raise UsageError(f"--root {root}: no such folder (--new starts a new one there)")
+    if study is None:
+        return
+    held = [study.results, *(page.path for page in study.pages)]
+    if not any((root / path).exists() for path in held):
+        raise UsageError(
+            f"--root {root} holds none of study {study.name}'s files ({', '.join(held)}): "
+            "not a checkout with this study (--new starts a new one there)"
+        )
 
 
 def list_studies(args: argparse.Namespace) -> int:
@@ -203,6 +272,8 @@ def render(state: State, root: Path, console: Console) -> int:
         raise UsageError(str(error)) from None
     for path in written:
         console.print(f"wrote {path}")
+    for problem in page.stale_prose(study, records, root):  # prose is written by hand
+        console.print(f"[yellow]the prose is stale[/]: {problem}")
     if records.missing:
         console.print(
             f"[yellow]{records.missing} of the {records.declared} runs of {study.name} are "
@@ -222,25 +293,73 @@ def check_every_study(args: argparse.Namespace, console: Console) -> int:
     except ValueError as error:
         raise UsageError(str(error)) from None
     executor = sweep.executor_from_args(args)
+    draw = Draw.of(args)
     worst = 0
     for study in found.values():
         state = state_of(study, args.root)
-        worst = max(worst, check_runs(state, executor, args.sample or DEFAULT_SAMPLE, console))
+        worst = max(worst, check_runs(state, executor, draw, console))
     return worst
 
 
-def check_runs(state: State, executor: sweep.ExecutorSpec, k: int, console: Console) -> int:
-    """Make ``k`` of the study's runs again; print each difference by key and field."""
+@dataclass(frozen=True)
+class Draw:
+    """How a check draws its sample: runs of each kind, the seed, the budget."""
+
+    per_kind: int
+    seed: int
+    budget: float
+
+    @classmethod
+    def of(cls, args: argparse.Namespace) -> Draw:
+        per_kind = args.sample or DEFAULT_SAMPLE
+        seed = check.todays_seed() if args.sample_seed is None else args.sample_seed
+        budget = args.sample_budget or check.BUDGET * per_kind
+        return cls(per_kind, seed, budget)
+
+
+def check_runs(state: State, executor: sweep.ExecutorSpec, draw: Draw, console: Console) -> int:
+    """Make a sample of the study's runs again, ``draw.per_kind`` of each kind; print each
+    difference by key and field, and the seed that draws the same sample again."""
     from deploy.study import make
 
     study = state.study
     if not state.done:
         console.print(f"{study.name}: no runs made yet: nothing to check")
         return 0
-    chosen = check.sample(state.done, state.loaded.runs, k)
+    drawn = check.sample(
+        state.done,
+        state.loaded.runs,
+        seed=draw.seed,
+        kind_of=study.kinds or check.default_kind,
+        per_kind=draw.per_kind,
+        budget=draw.budget,
+    )
+    chosen = drawn.runs
+    again = f"swarm study {study.name} --check --sample-seed {draw.seed}"
+    if draw.per_kind != DEFAULT_SAMPLE:
+        again += f" --sample {draw.per_kind}"
+    if draw.budget != check.BUDGET * draw.per_kind:
+        again += f" --sample-budget {draw.budget:g}"
+    print(f"{study.name}: sample seed {draw.seed} (`{again}` draws it again):")
+    for kind, runs in drawn.kinds.items():
+        print(f"  {kind}: {', '.join(run.key for run in runs)}")
+    for kind, count in drawn.beyond.items():
+        if kind not in drawn.out_of_reach:
+            print(
+                f"{study.name}: {kind}: {count} of its runs took more than the budget of "
+                f"{draw.budget:g} s when published and are not drawn (--sample-budget, "
+                "--only)"
+            )
+    for kind, cheapest in drawn.out_of_reach.items():
+        print(
+            f"{study.name}: not checked: {kind} (its cheapest run took {cheapest:.0f} s, over "
+            f"the budget of {draw.budget:g} s; --sample-budget allows more)"
+        )
+    sys.stdout.flush()  # before the console's lines on stderr
+    recorded = sum(check.wall(state.loaded.runs, run) for run in chosen)
     console.print(
         f"{study.name}: making {len(chosen)} of its {len(state.done)} runs again on "
-        f"{executor.describe()}"
+        f"{executor.describe()} (they took {recorded:.0f} s when published)"
     )
     outcome = sweep.run_sweep(make.make, chosen, executor)
     problems = []
@@ -256,11 +375,8 @@ def check_runs(state: State, executor: sweep.ExecutorSpec, k: int, console: Cons
         )
     for problem in problems:
         print(problem)
-    checked = ", ".join(run.key for run in chosen)
-    console.print(
-        f"{study.name}: {len(chosen) - len(problems)} of {len(chosen)} runs as published "
-        f"({checked})"
-    )
+    sys.stdout.flush()
+    console.print(f"{study.name}: {len(chosen) - len(problems)} of {len(chosen)} runs as published")
     return 1 if problems else 0
 
 

@@ -12,6 +12,7 @@ pandas is an optional extra: ``pip install -e '.[analysis]'``.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -39,9 +40,10 @@ def flatten(record: Mapping[str, Any]) -> dict[str, Any]:
     return row
 
 
-def frame(name: str, root: Path | None = None) -> Any:
+def frame(name: str, root: str | os.PathLike[str] | None = None) -> Any:
     """The runs of study ``name`` (``swarm study --list`` names them) in its results file
-    under ``root`` (default: this checkout) as a pandas DataFrame, one row per run."""
+    under ``root`` (a path or its string; default: this checkout) as a pandas DataFrame,
+    one row per run."""
     try:
         import pandas
     except ImportError:
@@ -49,5 +51,5 @@ def frame(name: str, root: Path | None = None) -> Any:
     from deploy.study.catalogue import study_named
     from deploy.study.state import state_of
 
-    state = state_of(study_named(name), root or CODE_ROOT)
+    state = state_of(study_named(name), CODE_ROOT if root is None else Path(root))
     return pandas.DataFrame([flatten(record) for record in state.records().runs])

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from deploy.analysis.prose import Claim
 from deploy.study.grid import Point, Run, expand
 
 RESULTS_FOLDER = "docs/studies"
@@ -43,17 +44,20 @@ class Records:
 
 
 Blocks = Callable[[Records], dict[str, str]]
+Claims = Callable[[Records], Sequence[Claim]]
 
 
 @dataclass(frozen=True)
 class Page:
     """A Markdown page the study writes blocks into (between markers that name
     ``swarm study NAME --render``); ``made`` says whether it also gets the study's
-    "Made by" block (``made``): every page but README."""
+    "Made by" block (``made``): every page but README. ``claims``: the numbers its prose
+    reads from the runs (``deploy/study/prose.py``), checked, not written."""
 
     path: str
     blocks: Blocks
     made: bool = True
+    claims: Claims | None = None
 
 
 @dataclass(frozen=True)
@@ -77,6 +81,9 @@ class Study:
     outputs: Sequence[Output] = ()
     about: str = ""  # one line on what it measures, for --list
     results_file: str | None = None
+    # The kinds of run it has, by name (``swarm study --check`` makes one of each):
+    # without it, how a run is made and its swarm's size (``check.default_kind``).
+    kinds: Callable[[Run], str] | None = None
 
     @property
     def results(self) -> str:

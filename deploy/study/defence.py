@@ -14,12 +14,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from bestofn_swarm.wire.rng import Stream
+from deploy.analysis import effects
+from deploy.analysis.prose import Claim, fixed
+from deploy.analysis.wilson import percent_bound, share, wilson
 from deploy.study import tables
-from deploy.study.byzantine import MAX_BYZANTINE, byzantine_ids
+from deploy.study.byzantine import byzantine_ids
+from deploy.study.byzantine_runs import MAX_BYZANTINE
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
-from deploy.study.wilson import share
-from wire.rng import Stream
 
 SITES = 10
 TIMEOUT = 2400.0  # sim seconds
@@ -94,6 +97,11 @@ def rows(records: Records) -> list[dict[str, Any]]:
                 "runs": len(runs),
                 **{verdict: tables.count(runs, verdict) for verdict in tables.VERDICTS},
                 "liar_won": sum(bool(result.get("liar_won")) for result in results),
+                "times": {
+                    run["seed"]: result["sim_time_s"]
+                    for run, result in zip(runs, results, strict=True)
+                    if result["verdict"] == "correct"
+                },
                 "median": tables.median(times),
                 "mean": tables.mean(times),
             }
@@ -109,23 +117,116 @@ def label(defence: str) -> str:
 
 def table(records: Records) -> str:
     lines = [
-        "| robots | liars | defence | runs | correct (95% interval) | wrong consensus (the "
-        "liars' site) "
-        "| split | undecided | sim s to consensus, median (mean), correct runs |",
-        "|---:|---:|---|---:|---:|---:|---:|---:|---|",
+        "| robots | liars | defence | runs | correct (95% interval) | wrong consensus "
+        "| split | undecided | sim s to consensus, median (mean), correct runs | against no "
+        "defence: ratio of medians (95% interval) |",
+        "|---:|---:|---|---:|---:|---:|---:|---:|---|---:|",
     ]
-    for row in rows(records):
+    found = rows(records)
+    for row in found:
         timing = (
             "-"
             if row["median"] is None
             else f"{tables.number(row['median'])} ({tables.number(row['mean'])})"
         )
+        bare = next(
+            other
+            for other in found
+            if other["defence"] == "none"
+            and (other["robots"], other["liars"]) == (row["robots"], row["liars"])
+        )
+        against = (
+            "1 (the baseline)"
+            if row["defence"] == "none"
+            else tables.compare_times(row["times"], bare["times"])
+        )
+        runs = row["runs"]
         lines.append(
-            f"| {row['robots']} | {row['liars']} | {label(row['defence'])} | {row['runs']} "
-            f"| {share(row['correct'], row['runs'])} | {row['wrong']} ({row['liar_won']}) "
-            f"| {row['split']} | {row['undecided']} | {timing} |"
+            f"| {row['robots']} | {row['liars']} | {label(row['defence'])} | {runs} "
+            f"| {share(row['correct'], runs)} | {tables.counted(row['wrong'], runs)}, "
+            f"{row['liar_won']} the liars' site | {tables.counted(row['split'], runs)} "
+            f"| {tables.counted(row['undecided'], runs)} | {timing} | {against} |"
         )
     return "\n".join(lines)
+
+
+def defence_claims(records: Records) -> list[Claim]:
+    """The numbers of byzantine.md's findings on trimmed pooling."""
+    found = {(row["robots"], row["liars"], row["defence"]): row for row in rows(records)}
+    wanted = sum(len(LIARS[r]) * len(DEFENCES[r]) for r in LIARS)
+    if len(found) < wanted:
+        return []
+
+    def right(robots: int, liars: int, name: str) -> tuple[str, str]:
+        row = found[robots, liars, name]
+        return str(row["correct"]), str(row["runs"])
+
+    def cost(robots: int, name: str) -> tuple[str, str, str]:
+        row, bare = found[robots, 0, name], found[robots, 0, "none"]
+        ratio = effects.paired_median_ratio(row["times"], bare["times"])
+        assert ratio is not None
+        low, high = effects.outwards(ratio.low, ratio.high, 2).split("-")
+        return fixed(ratio.value, 2), low, high
+
+    small, large = sorted(LIARS)
+    lowest = {
+        runs: percent_bound(wilson(runs, runs)[0], upper=False)
+        for runs in (SEEDS[small].stop, SEEDS[large].stop)
+    }
+    split_one = found[small, 1, "none"]["split"]
+    return [
+        Claim(
+            "{} of {} correct is consistent with a rate as low as {}%, {} of {} with {}%",
+            (
+                str(SEEDS[small].stop),
+                str(SEEDS[small].stop),
+                lowest[SEEDS[small].stop],
+                str(SEEDS[large].stop),
+                str(SEEDS[large].stop),
+                lowest[SEEDS[large].stop],
+            ),
+        ),
+        Claim(
+            "One liar among 10: {} of {} runs correct with trimmed pooling (F = 1), against {} "
+            "of {} with the paper's pooling (the other {} split). 10% liars among 50 (5 "
+            "liars): {} of {} correct with F = 5 and with F = 10, against {} of {} (all split) "
+            "with the paper's pooling.",
+            (
+                *right(small, 1, "trimmed:1"),
+                *right(small, 1, "none"),
+                str(split_one),
+                *right(large, 5, "trimmed:5"),
+                *right(large, 5, "none"),
+            ),
+        ),
+        Claim(
+            "10 robots, {} s with F = 1 against {} s ({} times, 95% interval {}-{}); 50 robots, "
+            "{} s with F = 5 ({} times, {}-{}) and {} s with F = 10 ({} times, {}-{}) against "
+            "{} s.",
+            (
+                fixed(found[small, 0, "trimmed:1"]["median"]),
+                fixed(found[small, 0, "none"]["median"]),
+                *cost(small, "trimmed:1"),
+                fixed(found[large, 0, "trimmed:5"]["median"]),
+                *cost(large, "trimmed:5"),
+                fixed(found[large, 0, "trimmed:10"]["median"]),
+                *cost(large, "trimmed:10"),
+                fixed(found[large, 0, "none"]["median"]),
+            ),
+        ),
+        Claim(
+            "With F = 1 among 10, 2 liars (20%) leave {} of {} runs correct and 3 liars (30%) "
+            "{} of {}, most of the others split; with F = 5 among 50, 10 liars (20%) leave {} "
+            "of {}. Set to F = 10, the 50-robot swarm was correct in {} of {} runs with 10 "
+            "liars",
+            (
+                *right(small, 2, "trimmed:1"),
+                *right(small, 3, "trimmed:1"),
+                *right(large, 10, "trimmed:5"),
+                *right(large, 10, "trimmed:10"),
+            ),
+        ),
+    ]
 
 
 def plot(records: Records, path: Path) -> None:
@@ -169,6 +270,16 @@ STUDY = Study(
     about="trimmed pooling against 0-3 liars of 10 and 10% and 20% liars of 50",
     points=points,
     source="deploy/study/defence.py",
-    pages=(Page("docs/byzantine.md", lambda records: {"defence": "\n" + table(records) + "\n"}),),
+    pages=(
+        Page(
+            "docs/byzantine.md",
+            lambda records: {"defence": "\n" + table(records) + "\n"},
+            claims=defence_claims,
+        ),
+    ),
     outputs=(Output("docs/byzantine-defence.png", plot),),
+    kinds=lambda run: (
+        f"a {run.param('robots')}-robot swarm, "
+        + ("the paper's pooling" if run.param("defence") == "none" else "trimmed pooling")
+    ),
 )

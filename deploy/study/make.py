@@ -270,8 +270,8 @@ WELLSTIRRED_STEPS = 2000
 def make_wellstirred(run: Run, extra: dict[str, Any]) -> dict[str, Any]:
     """One cell of the Section 4 model: 100 runs of 100 agents, groups of 3, for the
     run's ``strategy`` and ``options``; each run's steps and success."""
-    from wellstirred.model import Model, cell_rng, simulate
-    from wellstirred.voting import VoteModel, simulate_votes, vote_cell_rng
+    from robot_agent.wellstirred.model import Model, cell_rng, simulate
+    from robot_agent.wellstirred.voting import VoteModel, simulate_votes, vote_cell_rng
 
     strategy, options = str(run.param("strategy")), int(run.param("options"))
     if strategy == "paper":
@@ -305,9 +305,9 @@ def make_sensing(run: Run, extra: dict[str, Any]) -> dict[str, Any]:
     import math
     import statistics
 
+    from bestofn_swarm.wire.rng import Stream, seed_of
     from robot_agent.core import vision
     from robot_agent.core.controller import ControllerConfig
-    from wire.rng import Stream, seed_of
     from world_server.core.camera import CameraNoise, CameraRenderer
     from world_server.core.layout import make_layout
     from world_server.core.world import DEFAULT_CAMERA
@@ -373,7 +373,7 @@ def zenoh_command(run: Run) -> list[str]:
 
 
 def make_zenoh(run: Run, extra: dict[str, Any]) -> dict[str, Any]:
-    from plumbing.lifecycle import PARENT_ENV
+    from bestofn_swarm.plumbing.lifecycle import PARENT_ENV
 
     command = zenoh_command(run)
     # swarm run dies with this worker (its processes with it), as it does with its launcher.

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from deploy.analysis import effects, prose
 from deploy.reports import pages
 from deploy.study import results
 from deploy.study.declare import Records, Study
@@ -68,7 +69,12 @@ def made_block(study: Study, records: Records) -> str:
         )
     lines.append(
         "A share of runs is shown with its 95% Wilson interval, `7/10 (39-90%)`: the rate "
-        "the runs are consistent with."
+        "the runs are consistent with (bounds rounded outwards, to a decimal where whole "
+        "percent would reach 0% or 100%). A share of robots or poolings, which the runs "
+        "group, has a 95% bootstrap interval with whole runs resampled. Times are compared "
+        "as the ratio of medians and its 95% bootstrap interval, `1.18 (0.95-1.43)` (runs "
+        "of one seed resampled together; `deploy/analysis/effects.py`); with fewer than "
+        f"{effects.MIN_RUNS} runs on a side no time is compared."
     )
     return "\n".join(lines)
 
@@ -116,8 +122,9 @@ def write(study: Study, records: Records, root: Path) -> list[Path]:
 
 
 def stale_blocks(study: Study, records: Records, root: Path) -> list[str]:
-    """The blocks of the study's pages that differ from what its runs give (figures and
-    data files are not compared: they are drawn from the same records)."""
+    """The blocks of the study's pages that differ from what its runs give, and the
+    numbers of their prose that do (figures and data files are not compared: they are
+    drawn from the same records)."""
     problems = []
     for relative, blocks in rendered(study, records).items():
         text = (root / relative).read_text()
@@ -127,4 +134,14 @@ def stale_blocks(study: Study, records: Records, root: Path) -> list[str]:
                 problems.append(f"{relative}: no block {name!r} of `{command(study)}`")
             elif shown != content.strip("\n"):
                 problems.append(f"{relative}: block {name!r} is not what the runs give")
+    return problems + stale_prose(study, records, root)
+
+
+def stale_prose(study: Study, records: Records, root: Path) -> list[str]:
+    """The numbers of the study's pages' prose that are not what its runs give."""
+    problems = []
+    for declared in study.pages:
+        if declared.claims is not None:
+            text = (root / declared.path).read_text()
+            problems += prose.stale(text, declared.claims(records), declared.path)
     return problems

@@ -19,49 +19,41 @@ each site comparison judged against the true qualities):
 from __future__ import annotations
 
 import itertools
-import statistics
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from deploy.study import tables
+from deploy.analysis import effects
+from deploy.analysis.wilson import interval, share
+from deploy.study import robustness_prose, tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point, text
-from deploy.study.wilson import share
-
-ROBOTS, SITES = 10, 10
-TIMEOUT = 1800.0  # sim seconds
-DROPS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)
-CLAIM_DROP = 0.3
-SIGMAS = (0.0, 100.0, 120.0, 140.0, 150.0, 160.0, 170.0, 180.0)
-FAILING = (150.0, 160.0, 170.0, 180.0)  # the levels run with 40 seeds
-SENSING_SIGMAS = (0.0, 60.0, 100.0, 120.0, 140.0, 150.0, 160.0, 170.0, 180.0)
-LIGHTING = 0.3
-LIGHTING_SIGMAS = (0.0, 100.0)
-SEEDS = range(10)
-MORE_SEEDS = range(40)
-
-
-@dataclass(frozen=True)
-class Setup:
-    """A controller set-up of the noise sweep, as ``swarm run`` options."""
-
-    key: str
-    label: str
-    options: tuple[str, ...]
-
-
-SETUPS = (
-    Setup("alpha0", "α = 0, MProdOp (paper)", ()),
-    Setup("alpha01", "α = 0.1, MProdOp", ("--alpha", "0.1", "--threshold", "0.99")),
-    Setup(
-        "loglinear",
-        "α = 0.1, log-linear pool",
-        ("--alpha", "0.1", "--threshold", "0.99", "--pooling", "loglinear"),
-    ),
+from deploy.study.robustness_runs import (
+    CLAIM_DROP,
+    DROPS,
+    FAILING,
+    LABELS,
+    LIGHTING,
+    LIGHTING_SIGMAS,
+    MORE_SEEDS,
+    ROBOTS,
+    SEEDS,
+    SENSING_SIGMAS,
+    SETUPS,
+    SIGMAS,
+    SITES,
+    TIMEOUT,
+    claim_numbers,
+    summarise,
 )
-LABELS = {setup.key: setup.label for setup in SETUPS}
+
 BASE = ("--robots", str(ROBOTS), "--sites", str(SITES))
+# The kinds of run, by sweep (``swarm study robustness --check`` makes one of each).
+KINDS = {
+    "drop": "radio loss, observed",
+    "noise": "camera noise, observed",
+    "sensing": "the camera alone",
+    "processes": "over Zenoh",
+}
 
 
 def points() -> list[Point]:
@@ -110,42 +102,30 @@ def points() -> list[Point]:
 # --- the page ------------------------------------------------------------------------------
 
 
-def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """A point's runs: accuracy, failures, consensus times and comparisons."""
-    results = [tables.result(run) for run in runs]
-    times = [result["sim_time_s"] for result in results if result["consensus"]]
-    comparisons = sum(result["comparisons"] for result in results)
-    return {
-        "runs": len(results),
-        "correct": sum(result["correct"] for result in results),
-        "wrong": sum(result["consensus"] and not result["correct"] for result in results),
-        "split": sum(not result["consensus"] for result in results),
-        "time_mean": tables.mean(times),
-        "time_median": tables.median(times),
-        "time_max": max(times) if times else None,
-        "comparisons": comparisons / len(results),
-        "wrong_share": sum(result["wrong_comparisons"] for result in results) / max(comparisons, 1),
-        "best_eliminated": sum(result["best_eliminated"] for result in results) / len(results),
-    }
-
-
 def _times(row: dict[str, Any]) -> str:
     return " / ".join(tables.number(row[name]) for name in ("time_mean", "time_median", "time_max"))
 
 
 def drop_table(records: Records) -> str:
     lines = [
-        "| drop | correct (95% interval) | consensus time s: mean / median / max | "
-        "comparisons/run |",
-        "|---|---|---|---|",
+        "| drop | correct (95% interval) | consensus time s: mean / median / max | median "
+        "time against drop 0: ratio (95% interval) | comparisons/run |",
+        "|---|---|---|---:|---|",
     ]
+    clean = records.where(sweep="drop", drop=0.0)
+    baseline = summarise(clean)["by_seed"] if clean else {}
     for level in DROPS:
         runs = records.where(sweep="drop", drop=level)
         if runs:
             row = summarise(runs)
+            against = (
+                "1 (the baseline)"
+                if level == 0.0
+                else tables.compare_times(row["by_seed"], baseline, tables.CONSENSUS_RUNS)
+            )
             lines.append(
                 f"| {text(level)} | {share(row['correct'], row['runs'])} | {_times(row)} "
-                f"| {row['comparisons']:.1f} |"
+                f"| {against} | {row['comparisons']:.1f} |"
             )
     return "\n".join(lines)
 
@@ -153,26 +133,19 @@ def drop_table(records: Records) -> str:
 def claim(records: Records) -> str:
     """The 30% claim: drop 0.3 against drop 0, seed by seed, in one process and with real
     processes."""
-    clean = {run["seed"]: tables.result(run) for run in records.where(sweep="drop", drop=0.0)}
-    lossy = {
-        run["seed"]: tables.result(run) for run in records.where(sweep="drop", drop=CLAIM_DROP)
-    }
-    seeds = sorted(set(clean) & set(lossy))
-    if not seeds:
+    found = claim_numbers(records)
+    if found is None:
         return "The runs of drop 0 and 0.3 are not made yet."
-    before = [clean[seed]["sim_time_s"] for seed in seeds]
-    after = [lossy[seed]["sim_time_s"] for seed in seeds]
-    ratios = [b / a for a, b in zip(before, after, strict=True)]
-    mean_before, mean_after = statistics.fmean(before), statistics.fmean(after)
+    seeds = found["seeds"]
+    low, high = found["per_seed"]
     lines = [
         f"**The 30 % claim** ({ROBOTS} robots, {SITES} sites, {tables.seeds(seeds)}, drop "
-        f"0.3 against drop 0): right consensus in "
-        f"{share(sum(clean[s]['correct'] for s in seeds), len(seeds))} "
-        f"runs without loss and {share(sum(lossy[s]['correct'] for s in seeds), len(seeds))} "
-        "with 30 % "
-        f"loss. Mean consensus time {mean_before:.1f} s without loss, {mean_after:.1f} s with: "
-        f"ratio {mean_after / mean_before:.2f}, per seed from {min(ratios):.2f} to "
-        f"{max(ratios):.2f}."
+        f"0.3 against drop 0): right consensus in {share(found['right_clean'], len(seeds))} "
+        f"runs without loss and {share(found['right_lossy'], len(seeds))} with 30 % loss. "
+        f"Median consensus time {found['median_clean']:.1f} s without loss, "
+        f"{found['median_lossy']:.1f} s with: ratio of medians "
+        f"{effects.estimate_text(found['ratio'])} (95% interval), per seed from {low:.2f} to "
+        f"{high:.2f}."
     ]
     processes = records.where(sweep="processes")
     if processes:
@@ -204,8 +177,8 @@ def sensing_table(records: Records) -> str:
         return "The sensing runs are not made yet."
     lines = [
         f"| σ | best (ρ = {first['best_quality']:.3g}): mean (sd) | second (ρ = "
-        f"{first['second_quality']:.3g}): mean (sd) | frames with no site found "
-        "| P(best reads below second) |",
+        f"{first['second_quality']:.3g}): mean (sd) | frames with no site found (95% interval) "
+        "| P(best reads below second) (95% interval) |",
         "|---|---|---|---|---|",
     ]
 
@@ -217,10 +190,16 @@ def sensing_table(records: Records) -> str:
     for sigma in SENSING_SIGMAS:
         if (found := runs.get(sigma)) is None:
             continue
-        swapped = "-" if not found["pairs"] else f"{100 * found['swapped'] / found['pairs']:.1f} %"
+        swapped = (
+            "-"
+            if not found["pairs"]
+            else f"{100 * found['swapped'] / found['pairs']:.1f} % "
+            f"({interval(found['swapped'], found['pairs'])})"
+        )
         lines.append(
             f"| {text(sigma)} | {cell(found['best'])} | {cell(found['second'])} "
-            f"| {100 * found['missed'] / (2 * found['frames']):.0f} % | {swapped} |"
+            f"| {100 * found['missed'] / (2 * found['frames']):.0f} % "
+            f"({interval(found['missed'], 2 * found['frames'])}) | {swapped} |"
         )
     return "\n".join(lines)
 
@@ -243,25 +222,49 @@ def noise_rows(
     return rows
 
 
+def _percent_interval(value: float, found: effects.Estimate | None) -> str:
+    """``2.7 % (1.9-3.6%)``: a share of comparisons and its 95% interval (whole runs
+    resampled: the comparisons of one run are not independent)."""
+    if found is None:
+        return f"{100 * value:.1f} %"
+    low = effects.outwards(100 * found.low, 100 * found.high, 1)
+    return f"{100 * value:.1f} % ({low}%)"
+
+
 def noise_table(rows: list[dict[str, Any]]) -> str:
     lines = [
         "| σ | controller | correct (95% interval) | wrong consensus | split/timeout "
-        "| consensus time s: mean / median / max | comparisons/run | wrong comparisons "
-        "| best eliminated/run |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| consensus time s: mean / median / max | median time against α = 0 at this σ: "
+        "ratio (95% interval) | comparisons/run | wrong comparisons (95% interval) | best "
+        "eliminated/run |",
+        "|---|---|---|---|---|---|---:|---|---|---|",
     ]
     for row in rows:
+        paper = next(
+            other
+            for other in rows
+            if other["sigma"] == row["sigma"] and other["controller"] == SETUPS[0].key
+        )
+        against = (
+            "1 (the baseline)"
+            if row is paper
+            else tables.compare_times(row["by_seed"], paper["by_seed"], tables.CONSENSUS_RUNS)
+        )
+        runs = row["runs"]
         lines.append(
             f"| {text(row['sigma'])} | {LABELS[row['controller']]} | "
-            f"{share(row['correct'], row['runs'])} "
-            f"| {row['wrong']} | {row['split']} | {_times(row)} | {row['comparisons']:.1f} "
-            f"| {100 * row['wrong_share']:.1f} % | {row['best_eliminated']:.2f} |"
+            f"{share(row['correct'], runs)} "
+            f"| {tables.counted(row['wrong'], runs)} | {tables.counted(row['split'], runs)} "
+            f"| {_times(row)} | {against} | {row['comparisons']:.1f} "
+            f"| {_percent_interval(row['wrong_share'], row['wrong_interval'])} "
+            f"| {row['best_eliminated']:.2f} |"
         )
     return "\n".join(lines)
 
 
 def failing_table(records: Records) -> str:
-    """The failing levels with every seed they have: correct runs per controller."""
+    """The failing levels with every seed they have: correct runs per controller, then the
+    consensus times."""
     lines = [
         "| σ | " + " | ".join(setup.label for setup in SETUPS) + " |",
         "|---|" + "---|" * len(SETUPS),
@@ -277,11 +280,38 @@ def failing_table(records: Records) -> str:
             cells.append(share(right, len(runs)))
         lines.append(f"| {text(sigma)} | " + " | ".join(cells) + " |")
     lines.append("| all | " + " | ".join(share(*totals[setup.key]) for setup in SETUPS) + " |")
+    lines += [
+        "",
+        "Consensus times of the same runs (sim s, runs with a consensus): the median, and "
+        "against α = 0 at the same σ the ratio of medians (95% interval):",
+        "",
+        "| σ | " + " | ".join(setup.label for setup in SETUPS) + " |",
+        "|---|" + "---|" * len(SETUPS),
+    ]
+    for sigma in FAILING:
+        times = {
+            setup.key: summarise(
+                records.where(sweep="noise", sigma=sigma, lighting=0.0, controller=setup.key)
+            )["by_seed"]
+            for setup in SETUPS
+            if records.where(sweep="noise", sigma=sigma, lighting=0.0, controller=setup.key)
+        }
+        if len(times) < len(SETUPS):
+            continue
+        baseline = times[SETUPS[0].key]
+        cells = [f"{tables.number(tables.median(baseline.values()))}"]
+        cells += [
+            f"{tables.number(tables.median(times[setup.key].values()))}, "
+            f"{tables.compare_times(times[setup.key], baseline, tables.CONSENSUS_RUNS)}"
+            for setup in SETUPS[1:]
+        ]
+        lines.append(f"| {text(sigma)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
 def page_blocks(records: Records) -> dict[str, str]:
     return {
+        **robustness_prose.blocks(records),
         "drop": drop_table(records),
         "claim": claim(records),
         "sensing": sensing_table(records),
@@ -315,16 +345,12 @@ def plot_drop(records: Records, path: Path) -> None:
                 timing.plot(
                     run["params"]["drop"], result["sim_time_s"], ".", color="tab:grey", alpha=0.5
                 )
-        timing.plot(
-            levels, [row["time_mean"] for _, row in rows], "o-", color="tab:blue", label="mean"
-        )
-        timing.plot(
-            levels,
-            [row["time_median"] for _, row in rows],
-            "s--",
-            color="tab:orange",
-            label="median",
-        )
+        medians = [tables.median_bar(row["times"]) for _, row in rows]
+        timing.errorbar(
+            levels, [bar[0] for bar in medians],
+            yerr=[[bar[1] for bar in medians], [bar[2] for bar in medians]],
+            fmt="o-", color="tab:blue", capsize=3, label="median (95% bootstrap interval)",
+        )  # fmt: skip
         timing.legend()
     else:
         tables.no_runs_yet(accuracy)
@@ -336,8 +362,8 @@ def plot_drop(records: Records, path: Path) -> None:
     timing.set_ylabel("consensus time (sim s, last robot decided)")
     timing.grid(alpha=0.3)
     figure.suptitle(
-        f"Radio loss: α = 0, MProdOp; {len(SEEDS)} seeds per point, dots are runs, bars 95% "
-        "interval"
+        f"Radio loss: α = 0, MProdOp; {len(SEEDS)} seeds per point, dots are runs; bars: 95% "
+        "interval (Wilson for shares, bootstrap for median times)"
     )
     figure.tight_layout()
     figure.savefig(path, dpi=120)
@@ -367,7 +393,12 @@ def plot_noise(records: Records, path: Path) -> None:
             yerr=[[b[1] for b in bars], [b[2] for b in bars]], fmt="-", capsize=2,
             label=setup.label, **style,
         )  # fmt: skip
-        timing.plot(levels, [row["time_mean"] for row in mine], "-", label=setup.label, **style)
+        medians = [tables.median_bar(row["times"]) for row in mine]
+        timing.errorbar(
+            [level + nudge for level in levels], [bar[0] for bar in medians],
+            yerr=[[bar[1] for bar in medians], [bar[2] for bar in medians]], fmt="-",
+            capsize=2, label=setup.label, **style,
+        )  # fmt: skip
         errors.plot(
             levels, [100 * row["wrong_share"] for row in mine], "-", label=setup.label, **style
         )
@@ -384,14 +415,14 @@ def plot_noise(records: Records, path: Path) -> None:
         accuracy.legend(loc="lower left")
     accuracy.set_ylabel("accuracy (share of runs: all robots chose the best)")
     accuracy.set_ylim(-0.05, 1.05)
-    timing.set_ylabel("consensus time (sim s; mean line, dots are runs)")
+    timing.set_ylabel("consensus time (sim s): median; dots are runs")
     errors.set_ylabel("wrong comparisons (% of all comparisons)")
     for axis in (accuracy, timing, errors):
         axis.set_xlabel("camera pixel noise sigma (0..255 scale)")
         axis.grid(alpha=0.3)
     figure.suptitle(
-        f"Camera noise: {len(SEEDS)} seeds per point, {ROBOTS} robots, {SITES} sites; bars 95% "
-        "interval"
+        f"Camera noise: {len(SEEDS)} seeds per point, {ROBOTS} robots, {SITES} sites; bars: "
+        "95% interval (Wilson for shares, bootstrap for median times)"
     )
     figure.tight_layout()
     figure.savefig(path, dpi=120)
@@ -404,9 +435,13 @@ STUDY = Study(
     about="radio loss, camera noise and lighting against alpha > 0 and the log-linear pool",
     points=points,
     source="deploy/study/robustness.py",
-    pages=(Page("docs/robustness.md", page_blocks),),
+    pages=(Page("docs/robustness.md", page_blocks, claims=robustness_prose.claims),),
     outputs=(
         Output("docs/robustness_drop.png", plot_drop),
         Output("docs/robustness_noise.png", plot_noise),
+    ),
+    kinds=lambda run: (
+        KINDS[str(run.param("sweep"))]
+        + (" with lighting" if dict(run.params).get("lighting") else "")
     ),
 )

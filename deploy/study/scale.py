@@ -17,11 +17,17 @@ The page also shows runs of the code before the large-swarm fixes, kept in
 from __future__ import annotations
 
 import json
+import math
 import statistics
 from pathlib import Path
 from typing import Any
 
-from deploy.study import tables
+import numpy as np
+
+from deploy.analysis import effects
+from deploy.analysis.prose import Claim
+from deploy.analysis.wilson import share
+from deploy.study import results, tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point
 
@@ -117,26 +123,65 @@ def row(run: dict[str, Any]) -> str:
 
 
 def per_size(runs: list[dict[str, Any]]) -> str:
-    """One line per swarm size: runs in consensus (with its 95% interval), sim time to
-    consensus, wall time."""
-    from deploy.study.wilson import share
-
+    """One line per swarm size: runs in consensus and right (each with its 95% interval),
+    sim time to consensus (its median's 95% interval), wall time."""
     lines = [
-        "| robots | runs | consensus (95% interval) | correct | sim time to consensus, median "
-        "(max) s | wall time, median (max) s |",
+        "| robots | runs | consensus (95% interval) | correct (95% interval) | sim time to "
+        "consensus, median (95% interval); max, s | wall time, median (max) s |",
         "|---:|---:|---:|---:|---:|---:|",
     ]
     for robots in sorted({run["robots"] for run in runs}):
         group = [run for run in runs if run["robots"] == robots]
         times = [run["sim_time_s"] for run in group if run["consensus"]]
         walls = [run["wall_s"] for run in group]
-        sim = f"{statistics.median(times):.0f} ({max(times):.0f})" if times else "-"
         lines.append(
             f"| {robots} | {len(group)} | {share(sum(r['consensus'] for r in group), len(group))} "
-            f"| {sum(r['correct'] for r in group)} | {sim} "
+            f"| {share(sum(r['correct'] for r in group), len(group))} | {_median_time(times)} "
             f"| {statistics.median(walls):.0f} ({max(walls):.0f}) |"
         )
     return "\n".join(lines)
+
+
+def _median_time(times: list[float]) -> str:
+    if not times:
+        return "-"
+    found = effects.median_interval(times)
+    middle = (
+        f"{statistics.median(times):.0f} ({tables.counting(len(times), 'run', 'runs')}: "
+        "too few for an interval)"
+        if found is None
+        else f"{found.value:.0f} ({found.low:.0f}-{found.high:.0f})"
+    )
+    return f"{middle}; {max(times):.0f}"
+
+
+def fit(runs: list[dict[str, Any]]) -> effects.PowerLaw | None:
+    """Sim time to consensus against swarm size, every run in consensus a point."""
+    finished = [run for run in runs if run["consensus"]]
+    return effects.power_law(
+        [float(run["robots"]) for run in finished], [run["sim_time_s"] for run in finished]
+    )
+
+
+def fit_sentence(runs: list[dict[str, Any]]) -> str:
+    """How consensus time grows with the swarm: the power law fitted to the runs."""
+    found = fit(runs)
+    if found is None:
+        return "No fit of time against size yet: it needs runs of two sizes in consensus."
+    sizes = sorted({run["robots"] for run in runs if run["consensus"]})
+    left_out = sum(not run["consensus"] for run in runs)
+    exponent, doubling = found.exponent, found.doubling
+    return (
+        f"Sim time to consensus grows as a power of the swarm's size: fitted by least squares "
+        f"on log time against log size over the {found.runs} runs in consensus "
+        f"({sizes[0]} to {sizes[-1]} robots"
+        + (f"; {left_out} without consensus left out" if left_out else "")
+        + f"), time ≈ {found.scale.value:.1f} s × N^{exponent.value:.2f}, the exponent "
+        f"{exponent.value:.2f} (95% interval {effects.outwards(exponent.low, exponent.high, 2)}"
+        f", runs of each size resampled; R² = {found.r2:.2f} on log-log axes): doubling the "
+        f"swarm multiplies the time by {doubling.value:.2f} "
+        f"({effects.outwards(doubling.low, doubling.high, 2)})."
+    )
 
 
 def unfinished(runs: list[dict[str, Any]]) -> str:
@@ -211,19 +256,31 @@ def load_before(root: Path) -> list[dict[str, Any]]:
     ]
 
 
-def slowest(group: list[dict[str, Any]]) -> str:
-    worst = max(group, key=lambda run: run["sim_time_s"])
-    return f"{worst['sim_time_s']:.0f}" + (" (gave up)" if not worst["consensus"] else "")
+def _time_or_gave_up(run: dict[str, Any]) -> float:
+    """A run's sim time, ``inf`` for a run given up (slower than any finished run)."""
+    return float(run["sim_time_s"]) if run["consensus"] else math.inf
+
+
+def _median_cell(group: list[dict[str, Any]]) -> str:
+    times = sorted(_time_or_gave_up(run) for run in group)
+    middle = statistics.median(times)
+    if math.isinf(middle):
+        return "gave up"
+    return f"{middle:.0f}"
 
 
 def before_block(records: Records, root: Path) -> str:
-    """The same sizes and seeds before and after: consensus, slowest sim time, wall time."""
+    """The same sizes and seeds before and after: consensus, sim time, wall time, and how
+    likely a run after is faster than one before (the Vargha-Delaney A; a run given up is
+    slower than any that finished)."""
     before = load_before(root)
     after = engine_runs(records, "inprocess")
     lines = [
-        "| robots | seeds | consensus before | consensus after | slowest sim time before (s) | "
-        "slowest sim time after (s) | wall time before, total (s) | wall time after, total (s) |",
-        "|---:|:---|---:|---:|---:|---:|---:|---:|",
+        "| robots | seeds | consensus before (95% interval) | consensus after | sim time "
+        "before, median (s) | after | a run after faster than one before: A (95% interval) | "
+        "wall time before, total (s) | after | wall time after over before: ratio of medians "
+        "(95% interval) |",
+        "|---:|:---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for robots in sorted({run["robots"] for run in after}):
         seeds = sorted({run["seed"] for run in after if run["robots"] == robots})
@@ -231,11 +288,19 @@ def before_block(records: Records, root: Path) -> str:
         new = [run for run in after if run["robots"] == robots]
         if len(old) != len(new):
             continue
+        faster = effects.a_faster(
+            [_time_or_gave_up(run) for run in new], [_time_or_gave_up(run) for run in old]
+        )
+        walls = tables.compare_times(  # unpaired: a seed's run differs before and after
+            [run["wall_s"] for run in new], [run["wall_s"] for run in old], ("run", "runs")
+        )
         lines.append(
             f"| {robots} | {seeds[0]}-{seeds[-1]} | "
-            f"{sum(r['consensus'] for r in old)}/{len(old)} | "
-            f"{sum(r['consensus'] for r in new)}/{len(new)} | {slowest(old)} | {slowest(new)} | "
-            f"{sum(r['wall_s'] for r in old):.0f} | {sum(r['wall_s'] for r in new):.0f} |"
+            f"{share(sum(r['consensus'] for r in old), len(old))} | "
+            f"{share(sum(r['consensus'] for r in new), len(new))} | {_median_cell(old)} "
+            f"| {_median_cell(new)} | {effects.estimate_text(faster)} "
+            f"| {sum(r['wall_s'] for r in old):.0f} | {sum(r['wall_s'] for r in new):.0f} "
+            f"| {walls} |"
         )
     return "\n".join(lines) + "\n\n" + HEADER + "\n" + "\n".join(row(run) for run in before)
 
@@ -244,6 +309,7 @@ def page_blocks(records: Records) -> dict[str, str]:
     in_process = engine_runs(records, "inprocess")
     return {
         "per-size": per_size(in_process),
+        "fit": fit_sentence(in_process),
         "unfinished": unfinished(in_process),
         "runs": HEADER + "\n" + "\n".join(row(run) for run in in_process),
         "zenoh": zenoh_block(records),
@@ -251,33 +317,111 @@ def page_blocks(records: Records) -> dict[str, str]:
     }
 
 
+def claims(records: Records) -> list[Claim]:
+    """The numbers of the page's text that the runs give."""
+    by_key = {record["key"]: record for record in records.runs}
+    recorded = by_key.get("engine=zenoh robots=1000 seed=0")
+    twin = by_key.get("engine=inprocess robots=1000 seed=0")
+    found = []
+    if recorded is not None and twin is not None:
+        digest = tables.result(recorded)["digest"]
+        same = digest == tables.result(twin)["digest"]
+        found.append(
+            Claim(
+                (
+                    "is the in-process run of the same seed, bit for bit (the same digest, "
+                    f"`{digest}`)"
+                    if same
+                    else "is not the in-process run of the same seed"
+                )
+                + ": 20 robot processes of 50 robots, the world, the beacon and the recorder, "
+                "{} times faster than real time on the 2-core machine. Its recording ({} GB)",
+                (
+                    f"{tables.result(recorded)['sim_time_s'] / recorded['wall_s']:.1f}",
+                    f"{recorded['recording']['bytes'] / 1e9:.1f}",
+                ),
+            )
+        )
+    commits = results.made_with(list(records.runs))
+    if len(commits) == 2:
+        (most, _), (fewest, count) = commits.items()
+        odd = [record for record in records.runs if record.get("commit") == fewest]
+        sizes = sorted({record["params"]["robots"] for record in odd})
+        seeds = [record["seed"] for record in odd]
+        words = {1: "One run", 2: "Two runs", 3: "Three runs"}
+        found.append(
+            Claim(
+                f"{words.get(count, f'{count} runs')} ({', '.join(map(str, sizes))} robots, "
+                f"{tables.seeds(seeds)}) were made at commit {fewest}, with the lock of that "
+                f"time; every other run at {most}.",
+                (),
+            )
+        )
+    first = by_key.get("engine=inprocess robots=500 seed=0")
+    if first is not None:
+        found.append(
+            Claim(
+                f"gives the same run (digest `{tables.result(first)['digest']}`, {{}} s).",
+                (f"{tables.result(first)['sim_time_s']:.1f}",),
+            )
+        )
+    return found
+
+
 def plot(records: Records, path: Path) -> None:
+    """Every run's sim time to consensus against the swarm's size (log-log), each size's
+    median with its 95% interval, and the power law fitted to the runs with its band."""
     plt = tables.pyplot()
     runs = engine_runs(records, "inprocess")
-    sizes = sorted({run["robots"] for run in runs}) or sorted(IN_PROCESS)
-    figure, axis = plt.subplots(figsize=(7, 4.2))
-    data = [
-        [r["sim_time_s"] for r in runs if r["robots"] == size and r["consensus"]] for size in sizes
-    ]
-    filled = [index for index, times in enumerate(data, start=1) if times]
-    if filled:
-        axis.boxplot([data[index - 1] for index in filled], positions=filled, whis=(0, 100))
-    else:
-        tables.no_runs_yet(axis)
-    axis.set_xticks(range(1, len(sizes) + 1), [str(size) for size in sizes])
-    for index, (size, times) in enumerate(zip(sizes, data, strict=True), start=1):
-        axis.plot([index] * len(times), times, "o", color="tab:blue", alpha=0.5, ms=4)
+    figure, axis = plt.subplots(figsize=(7, 4.6))
+    sizes = sorted({run["robots"] for run in runs})
+    for size in sizes:
+        times = [r["sim_time_s"] for r in runs if r["robots"] == size and r["consensus"]]
+        axis.plot([size] * len(times), times, "o", color="tab:blue", alpha=0.4, ms=4)
+        found = effects.median_interval(times)
+        if found is not None:
+            axis.errorbar(
+                [size * 1.12], [found.value], yerr=[[found.value - found.low],
+                [found.high - found.value]], fmt="s", color="black", capsize=3, ms=4,
+            )  # fmt: skip
         failed = [run for run in runs if run["robots"] == size and not run["consensus"]]
         if failed:
             axis.annotate(
-                f"{len(failed)} without\nconsensus", (index, 0), ha="center", va="bottom",
-                color="red", fontsize=8,
+                f"{len(failed)} without\nconsensus", (size, axis.get_ylim()[0]), ha="center",
+                va="bottom", color="red", fontsize=8,
             )  # fmt: skip
+    found_fit = fit(runs)
+    if found_fit is not None:
+        line = np.geomspace(min(sizes), max(sizes), 60)
+        central, low, high = found_fit.curve(line.tolist())
+        exponent = found_fit.exponent
+        axis.plot(
+            line, central, "-", color="tab:red",
+            label=f"fit: time ∝ N^{exponent.value:.2f} "
+            f"({effects.outwards(exponent.low, exponent.high, 2)})",
+        )  # fmt: skip
+        axis.fill_between(line, low, high, color="tab:red", alpha=0.2, label="fit's 95% band")
+    if not runs:
+        tables.no_runs_yet(axis)
+    axis.plot([], [], "o", color="tab:blue", alpha=0.4, ms=4, label="a run (seed)")
+    axis.errorbar([], [], yerr=[], fmt="s", color="black", capsize=3, ms=4,
+                  label=f"median, 95% interval (none under {effects.MIN_RUNS} runs)")  # fmt: skip
+    axis.set_xscale("log")
+    axis.set_yscale("log")
+    axis.set_xticks(
+        sizes or sorted(IN_PROCESS), [str(size) for size in sizes or sorted(IN_PROCESS)]
+    )
+    axis.minorticks_off()
+    shown = [r["sim_time_s"] for r in runs if r["consensus"]]
+    if shown:
+        steps = [100, 200, 500, 1000, 2000, 5000, 10000]
+        marks = [mark for mark in steps if min(shown) / 1.5 <= mark <= max(shown) * 1.5]
+        axis.set_yticks(marks, [str(mark) for mark in marks])
     axis.set_xlabel("robots (10 sites; arena and nest grow with the swarm)")
     axis.set_ylabel("sim time to consensus (s)")
-    axis.set_title("When the last robot decided, per seed (box: quartiles, whiskers: range)")
-    axis.set_ylim(bottom=0)
-    axis.grid(axis="y", alpha=0.3)
+    axis.set_title("When the last robot decided, per seed, and how it grows with the swarm")
+    axis.grid(alpha=0.3, which="both")
+    axis.legend(fontsize=8, loc="upper left")
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
@@ -290,7 +434,7 @@ STUDY = Study(
     points=points,
     source="deploy/study/scale.py",
     pages=(
-        Page("docs/scale.md", page_blocks),
+        Page("docs/scale.md", page_blocks, claims=claims),
         Page(
             "README.md",
             lambda records: {"per-size": per_size(engine_runs(records, "inprocess"))},
@@ -298,4 +442,5 @@ STUDY = Study(
         ),
     ),
     outputs=(Output("docs/scale.png", plot),),
+    kinds=lambda run: "in one process" if run.kind == "inprocess" else "over Zenoh",
 )

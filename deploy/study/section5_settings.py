@@ -14,33 +14,25 @@ from __future__ import annotations
 
 import json
 import math
-import statistics
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from deploy.study import lag, tables
+from deploy.analysis import effects
+from deploy.analysis.wilson import percent_bound, share
+from deploy.study import lag, section5_prose, tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point, Scalar
-from deploy.study.wilson import share
-
-ROBOTS = 10
-SITES = (5, 8, 10)
-SEEDS = range(100)
-TIMEOUT = 1800.0  # sim seconds: swarm run's default
-SETTINGS = (
-    "default",
-    "dwell=1.5",
-    "dwell=4",
-    "dwell=4.5",
-    "dwell=6",
-    "dwell=10",
-    "broadcast_period=0.1",
-    "broadcast_period=1",
-    "beacon_period=5",
-    "beacon_range=0.3",
-    "max_wheel_speed=0.065",
+from deploy.study.section5_settings_runs import (
+    ROBOTS,
+    SEEDS,
+    SETTINGS,
+    SITES,
+    TIMEOUT,
+    lag_analyses,
+    lag_summaries,
+    row,
 )
+
 OPTIONS = ("dwell", "broadcast_period", "beacon_period", "beacon_range")  # swarm run's
 SPEC = ("max_wheel_speed",)  # the e-puck's, no option
 COST = 4.0  # wall seconds a run takes, about
@@ -82,44 +74,6 @@ def points() -> list[Point]:
 # --- the settings table --------------------------------------------------------------------
 
 
-def swarm_steps(result: dict[str, Any]) -> int | None:
-    steps = result["robots"]["steps"]
-    if result["ended"] != "consensus" or any(step is None for step in steps):
-        return None
-    return int(max(steps))
-
-
-def row(runs: Sequence[dict[str, Any]], n: int) -> dict[str, Any]:
-    results = [tables.result(run) for run in runs]
-    finished = [value for result in results if (value := swarm_steps(result)) is not None]
-    pools = [size for result in results for robot in result["robots"]["pools"] for size in robot]
-    run_pool_means = [
-        statistics.fmean(sizes)
-        for result in results
-        if (sizes := [size for robot in result["robots"]["pools"] for size in robot])
-    ]
-    times = [result["sim_time_s"] for result in results if swarm_steps(result) is not None]
-    if len(finished) >= 2:
-        q1, median, q3 = statistics.quantiles(finished, n=4, method="inclusive")
-    else:  # one run: its value; none: nothing
-        q1 = median = q3 = float(finished[0]) if finished else math.nan
-    return {
-        "runs": len(results),
-        "consensus": len(finished),
-        "correct": sum(result["correct"] for result in results),
-        "within": sum(value <= n / 2 for value in finished),
-        "below": sum(value < n / 2 for value in finished),
-        "median": median,
-        "q1": q1,
-        "q3": q3,
-        "mean_swarm": tables.mean(finished),
-        "pool_mean": tables.mean(pools),
-        "run_pool_over3": sum(mean > 3 for mean in run_pool_means),
-        "alone": sum(size == 1 for size in pools) / max(len(pools), 1),
-        "time": tables.mean(times),
-    }
-
-
 def _steps(r: dict[str, Any]) -> str:
     """The swarm steps' median and IQR, ``-`` without a run in consensus."""
     if math.isnan(r["median"]):
@@ -133,11 +87,11 @@ def describe(setting: str) -> str:
 
 def settings_table(records: Records) -> str:
     lines = [
-        "| setting | n | runs | right | swarm steps median (IQR) | mean | within n/2 (95% "
-        "interval) "
-        "| strictly below | mean pool | runs with mean pool > 3 | pooled alone | sim s to "
-        "consensus |",
-        "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| setting | n | runs | right (95% interval) | swarm steps median (IQR) | mean | within "
+        "n/2 (95% interval) | strictly below | mean pool | runs with mean pool > 3 | pooled "
+        "alone (95% interval) | sim s to consensus: mean / median | median time against the "
+        "defaults: ratio (95% interval) |",
+        "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for setting in SETTINGS:
         for n in SITES:
@@ -145,33 +99,63 @@ def settings_table(records: Records) -> str:
             if not runs:
                 continue
             r = row(runs, n)
+            defaults = records.where(setting="default", sites=n)
+            against = (
+                "1 (the baseline)"
+                if setting == "default"
+                else tables.compare_times(
+                    r["times"], row(defaults, n)["times"], tables.CONSENSUS_RUNS
+                )
+                if defaults
+                else "-"
+            )
             missing = r["runs"] - r["consensus"]
-            right = f"{r['correct']}" + (f" ({missing} without consensus)" if missing else "")
+            right = share(r["correct"], r["runs"]) + (
+                f" ({missing} without consensus)" if missing else ""
+            )
             lines.append(
                 f"| {describe(setting)} | {n} | {r['runs']} | {right} "
                 f"| {_steps(r)} | "
                 f"{tables.number(r['mean_swarm'], 2)} "
                 f"| {share(r['within'], r['runs'])} | {share(r['below'], r['runs'])} "
-                f"| {tables.number(r['pool_mean'], 2)} | {r['run_pool_over3']} | {r['alone']:.0%} "
-                f"| {tables.number(r['time'])} |"
+                f"| {tables.number(r['pool_mean'], 2)} "
+                f"| {tables.counted(r['run_pool_over3'], r['runs'])} "
+                f"| {_pct(r['alone'])} ({_interval(r['alone_interval'])}) "
+                f"| {tables.number(r['time'])} / "
+                f"{tables.number(tables.median(r['times'].values()))} "
+                f"| {against} |"
             )
     return "\n".join(lines)
+
+
+def _interval(found: effects.Estimate | None) -> str:
+    """``22-28%``: a share's 95% bootstrap interval in whole percent, rounded outwards."""
+    if found is None:
+        return "-"
+    return f"{percent_bound(found.low, upper=False)}-{percent_bound(found.high, upper=True)}%"
 
 
 # --- why the last robot lags ---------------------------------------------------------------
 
 
-def lag_summaries(records: Records) -> list[dict[str, Any]]:
-    summaries = []
-    for n in SITES:
-        analysed = [
-            found
-            for run in records.where(setting="default", sites=n)
-            if (found := tables.result(run).get("lag")) is not None
-        ]
-        if analysed:
-            summaries.append(lag.summarise(analysed, n))
-    return summaries
+def lag_intervals(analysed: list[dict[str, Any]]) -> dict[str, effects.Estimate | None]:
+    """The 95% intervals of the lag table's shares of events (poolings, decisions), each
+    by resampling whole runs: the events of one run are not independent."""
+
+    def alone(key: str) -> effects.Estimate | None:
+        return effects.clustered_share(
+            [sum(size == 1 for _, size in run[key]) for run in analysed],
+            [len(run[key]) for run in analysed],
+        )
+
+    return {
+        "last_alone": alone("last_pools_by_trip"),
+        "other_alone": alone("other_pools_by_trip"),
+        "at_nest": effects.clustered_share(
+            [int(run["last_phases"].get(lag.GROUPS[0], 0)) for run in analysed],
+            [sum(int(count) for count in run["last_phases"].values()) for run in analysed],
+        ),
+    }
 
 
 def lag_tables(records: Records) -> str:
@@ -180,16 +164,21 @@ def lag_tables(records: Records) -> str:
         return "The observed runs of the default settings are not made yet."
     lines = [
         "| n | runs | runs over n/2 (95% interval) | last robot: mean pool, pooled alone "
-        "| the others: mean pool, pooled alone | last robot at the nest when another decided "
-        "| runs the last robot finished alone | its trips after all others decided (mean) |",
+        "(95% interval) | the others: mean pool, pooled alone (95% interval) | last robot at "
+        "the nest when another decided (95% interval) | runs the last robot finished alone "
+        "(95% interval) | its trips after all others decided (mean) |",
         "|---|---:|---:|---|---|---:|---:|---:|",
     ]
     for s in summaries:
+        shares = lag_intervals(lag_analyses(records, s["n"]))
         lines.append(
             f"| {s['n']} | {s['runs']} | {share(s['late_runs'], s['runs'])} "
             f"| {_f(s['last_pool_mean'])}, {_pct(s['last_alone'])} "
+            f"({_interval(shares['last_alone'])}) "
             f"| {_f(s['other_pool_mean'])}, {_pct(s['other_alone'])} "
-            f"| {s['last_phases'].get('at the nest', 0.0):.0%} | {s['runs_with_lone_finish']} "
+            f"({_interval(shares['other_alone'])}) "
+            f"| {s['last_phases'].get('at the nest', 0.0):.0%} ({_interval(shares['at_nest'])}) "
+            f"| {share(s['runs_with_lone_finish'], s['runs'])} "
             f"| {_f(s['trips_after_others_mean'])} |"
         )
     lines += ["", "Mean pool size by trip (pool sizes over time), the last robot (the others):", ""]
@@ -276,10 +265,18 @@ STUDY = Study(
         Page(
             "docs/section5.md",
             lambda records: {"lag": lag_tables(records), "settings": settings_table(records)},
+            claims=section5_prose.claims,
         ),
     ),
     outputs=(
         Output("docs/section5-lag.png", plot_lag),
         Output("docs/section5-lag.json", write_lag_json),
+    ),
+    kinds=lambda run: (
+        "the defaults, observed for the lag"
+        if run.kind == "lag"
+        else "a setting no option has (the e-puck's speed)"
+        if run.configs
+        else "a setting of swarm run"
     ),
 )

@@ -17,18 +17,23 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from deploy.study import tables
+from deploy.analysis import effects
+from deploy.analysis.wilson import share
+from deploy.study import strategies_prose, tables
 from deploy.study.declare import Output, Page, Records, Study
 from deploy.study.grid import Point, product
 from deploy.study.make import WELLSTIRRED_AGENTS
-from deploy.study.wilson import share
+from deploy.study.strategies_runs import (
+    DROPS,
+    SEEDS,
+    SITES,
+    STRATEGIES,
+    TIMEOUT,
+    WELLSTIRRED_OPTIONS,
+    swarm_rows,
+    wellstirred_rows,
+)
 
-STRATEGIES = ("paper", "dmvd", "dmmd", "dc")
-WELLSTIRRED_OPTIONS = (5, 10, 20, 50, 100)
-SITES = (5, 8, 10, 20)
-DROPS = (0.0, 0.2)
-SEEDS = {10: range(20), 50: range(10)}
-TIMEOUT = 2400.0  # sim seconds
 COST = {10: 6.0, 50: 42.0}  # wall seconds a run takes, about (the mean of earlier runs)
 
 
@@ -57,72 +62,35 @@ def points() -> list[Point]:
 # --- the page ------------------------------------------------------------------------------
 
 
-def wellstirred_rows(records: Records) -> list[dict[str, Any]]:
-    rows = []
-    for strategy in STRATEGIES:
-        for n in WELLSTIRRED_OPTIONS:
-            for record in records.where(part="wellstirred", strategy=strategy, options=n):
-                result = tables.result(record)
-                times, success = result["times"], result["success"]
-                good = sorted(t for t, ok in zip(times, success, strict=True) if ok)
-                rows.append(
-                    {
-                        "strategy": strategy,
-                        "n": n,
-                        "runs": len(times),
-                        "correct": sum(success),
-                        "median": tables.median(good),
-                        "q1": _quartile(good, 0),
-                        "q3": _quartile(good, 2),
-                    }
-                )
-    return rows
+def _baseline(rows: list[dict[str, Any]], row: dict[str, Any], *keys: str) -> dict[str, Any]:
+    """The paper's row at the same point as ``row`` (the same ``keys``)."""
+    return next(
+        other
+        for other in rows
+        if other["strategy"] == "paper" and all(other[key] == row[key] for key in keys)
+    )
 
 
-def _quartile(values: list[int], which: int) -> float | None:
-    import statistics
-
-    return float(statistics.quantiles(values, n=4)[which]) if len(values) > 1 else None
-
-
-def swarm_rows(records: Records) -> list[dict[str, Any]]:
-    runs = [record for record in records.runs if record["params"]["part"] == "swarm"]
-    grouped = tables.groups(runs, "robots", "sites", "drop", "strategy")
-    rows = []
-    for (robots, sites, drop, strategy), group in sorted(
-        grouped.items(), key=lambda item: (*item[0][:3], STRATEGIES.index(item[0][3]))
-    ):
-        right = [tables.result(run) for run in group if tables.result(run)["verdict"] == "correct"]
-        rows.append(
-            {
-                "robots": robots,
-                "n": sites,
-                "drop": drop,
-                "strategy": strategy,
-                "runs": len(group),
-                **{verdict: tables.count(group, verdict) for verdict in tables.VERDICTS},
-                "median": tables.median(result["sim_time_s"] for result in right),
-                "steps": tables.median(
-                    result["slowest_steps"]
-                    for result in right
-                    if result["slowest_steps"] is not None
-                ),
-            }
-        )
-    return rows
+def _against_paper(rows: list[dict[str, Any]], row: dict[str, Any], *keys: str) -> str:
+    if row["strategy"] == "paper":
+        return "1 (the baseline)"
+    # The swarm's runs are paired by seed; the well-stirred cells' runs are not.
+    times = "by_seed" if "by_seed" in row else "times"
+    return tables.compare_times(row[times], _baseline(rows, row, *keys)[times])
 
 
 def wellstirred_table(records: Records) -> str:
     lines = [
         "| strategy | n | right consensus (95% interval) | steps to consensus, median (IQR), "
-        "right runs |",
-        "|---|---:|---:|---|",
+        "right runs | steps against the paper's: ratio of medians (95% interval) |",
+        "|---|---:|---:|---|---:|",
     ]
-    for row in wellstirred_rows(records):
+    rows = wellstirred_rows(records)
+    for row in rows:
         lines.append(
             f"| {row['strategy']} | {row['n']} | {share(row['correct'], row['runs'])} "
             f"| {tables.number(row['median'], 1)} ({tables.number(row['q1'], 1)}-"
-            f"{tables.number(row['q3'], 1)}) |"
+            f"{tables.number(row['q3'], 1)}) | {_against_paper(rows, row, 'n')} |"
         )
     return "\n".join(lines)
 
@@ -130,14 +98,19 @@ def wellstirred_table(records: Records) -> str:
 def swarm_table(records: Records) -> str:
     lines = [
         "| robots | n | message loss | strategy | runs | right (95% interval) | wrong | split "
-        "| undecided | sim s to consensus, median (right runs) | trips of the last robot, median |",
-        "|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| undecided | sim s to consensus, median (right runs) | against the paper's: ratio "
+        "of medians (95% interval) | trips of the last robot, median |",
+        "|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
-    for row in swarm_rows(records):
+    rows = swarm_rows(records)
+    for row in rows:
+        runs = row["runs"]
         lines.append(
             f"| {row['robots']} | {row['n']} | {row['drop']:.0%} | {row['strategy']} "
-            f"| {row['runs']} | {share(row['correct'], row['runs'])} | {row['wrong']} "
-            f"| {row['split']} | {row['undecided']} | {tables.number(row['median'])} "
+            f"| {runs} | {share(row['correct'], runs)} | {tables.counted(row['wrong'], runs)} "
+            f"| {tables.counted(row['split'], runs)} "
+            f"| {tables.counted(row['undecided'], runs)} | {tables.number(row['median'])} "
+            f"| {_against_paper(rows, row, 'robots', 'n', 'drop')} "
             f"| {tables.number(row['steps'], 1)} |"
         )
     return "\n".join(lines)
@@ -161,10 +134,7 @@ def plot(records: Records, path: Path) -> None:
     for strategy in STRATEGIES:
         mine = [row for row in well if row["strategy"] == strategy]
         _accuracy(axes[0][0], mine, "o-", COLOURS[strategy])
-        axes[1][0].plot(
-            [row["n"] for row in mine], [row["median"] for row in mine], "o-",
-            color=COLOURS[strategy], label=strategy,
-        )  # fmt: skip
+        _times(axes[1][0], mine, "o-", COLOURS[strategy], strategy)
     if not well:
         tables.no_runs_yet(axes[0][0])
     axes[0][0].set_title(f"well-stirred, N = {WELLSTIRRED_AGENTS}, group 3")
@@ -186,10 +156,9 @@ def plot(records: Records, path: Path) -> None:
                     continue
                 drawn = True
                 _accuracy(axes[0][column], mine, style, COLOURS[strategy])
-                axes[1][column].plot(
-                    [row["n"] for row in mine], [row["median"] for row in mine], style,
-                    color=COLOURS[strategy], label=f"{strategy}, {drop:.0%} loss",
-                )  # fmt: skip
+                _times(
+                    axes[1][column], mine, style, COLOURS[strategy], f"{strategy}, {drop:.0%} loss"
+                )
         if not drawn:
             tables.no_runs_yet(axes[0][column])
         axes[0][column].set_title(f"swarm, {count} robots")
@@ -202,10 +171,28 @@ def plot(records: Records, path: Path) -> None:
     for axis in [*axes[0], *axes[1]]:
         axis.set_xlabel("n (options / sites)")
         axis.grid(alpha=0.3)
-    figure.suptitle("bars: 95% Wilson interval of the share of runs", fontsize="small")
+    figure.suptitle(
+        "bars: 95% Wilson interval of the share of runs (top), 95% bootstrap interval of the "
+        f"median (bottom; none with fewer than {effects.MIN_RUNS} right runs)",
+        fontsize="small",
+    )
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
+
+
+def _times(axis: Any, rows: list[dict[str, Any]], style: str, colour: str, label: str) -> None:
+    """The median time of the right runs of each row and its 95% bootstrap interval."""
+    bars = [tables.median_bar(row["times"]) for row in rows]
+    axis.errorbar(
+        [row["n"] for row in rows],
+        [bar[0] for bar in bars],
+        yerr=[[bar[1] for bar in bars], [bar[2] for bar in bars]],
+        fmt=style,
+        color=colour,
+        capsize=2,
+        label=label,
+    )
 
 
 def _accuracy(axis: Any, rows: list[dict[str, Any]], style: str, colour: str) -> None:
@@ -226,6 +213,11 @@ STUDY = Study(
     about="the paper's strategy against DMVD, DMMD and DC: well-stirred and in the swarm",
     points=points,
     source="deploy/study/strategies.py",
-    pages=(Page("docs/strategies.md", blocks),),
+    pages=(Page("docs/strategies.md", blocks, claims=strategies_prose.claims),),
     outputs=(Output("docs/strategies.png", plot),),
+    kinds=lambda run: (
+        "a well-stirred cell"
+        if run.param("part") == "wellstirred"
+        else f"a {run.param('robots')}-robot swarm"
+    ),
 )

@@ -12,9 +12,9 @@ from typing import Annotated, ClassVar
 
 from msgspec import Meta
 
-from wire import names, protocol, settings
-from wire.rng import Stream
-from wire.settings import Flag
+from bestofn_swarm.wire import names, protocol, settings
+from bestofn_swarm.wire.rng import Stream
+from bestofn_swarm.wire.settings import Flag
 
 SimTime = Annotated[float, Meta(ge=0.0)]
 

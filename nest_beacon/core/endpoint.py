@@ -9,9 +9,9 @@ it no clock and does not wait for it before then, so the beacon follows one tick
 message as (payload, attachment) and returns what to send as data: the tick's radio
 transmissions, then the ack, each sealed with the beacon's key.
 
-It believes a clock only with the world's tag (``wire.auth``), as a ``Clock`` whose sim
-time is its tick's, within the tick window of its last tick (``wire.guard``); a refusal is
-counted (``rejected``, reported in every ack), a tick already answered is stale and
+It believes a clock only with the world's tag (``bestofn_swarm.wire.auth``), as a ``Clock`` whose
+sim time is its tick's, within the tick window of its last tick (``bestofn_swarm.wire.guard``); a
+refusal is counted (``rejected``, reported in every ack), a tick already answered is stale and
 dropped quietly. It follows one world server: a new one counts ticks and sim time from
 zero again (the window is forgotten, and the beacon transmits on its next tick); the same
 one back after an outage is rejoined at whatever tick it has reached.
@@ -19,28 +19,21 @@ one back after an outage is rejoined at whatever tick it has reached.
 
 from __future__ import annotations
 
-import enum
 import logging
 import math
 from typing import NamedTuple
 
+from bestofn_swarm.wire import auth, guard, keyspace, names, protocol
+from bestofn_swarm.wire.keyspace import Party
 from nest_beacon.core.beacon import Beacon
-from wire import auth, guard, names, protocol
 
 log = logging.getLogger(__name__)
-
-
-class OutputKind(enum.StrEnum):
-    """What the beacon sends, by key."""
-
-    RADIO_TX = "radio/tx"
-    ACK = "ack"
 
 
 class Outgoing(NamedTuple):
     """One message to send: on ``key``, ``payload`` with ``attachment`` (sealed)."""
 
-    kind: OutputKind
+    kind: keyspace.KeyKind
     key: str
     payload: bytes
     attachment: bytes | None
@@ -50,7 +43,7 @@ class BeaconEndpoint:
     """The beacon's checks of the clock it follows, and its answers to each tick."""
 
     def __init__(
-        self, beacon: Beacon, keys: protocol.Keys, dt: float, keyring: auth.Keyring | None
+        self, beacon: Beacon, keys: keyspace.Keys, dt: float, keyring: auth.Keyring | None
     ) -> None:
         self.beacon = beacon
         self.name = beacon.config.name
@@ -62,10 +55,12 @@ class BeaconEndpoint:
         self.ticks = guard.TickWindow(self.window)
         self.worlds = guard.WorldFollower()
         self.rejected = 0
-        self.clock_key = keys.beacon_clock(self.name)  # the key of its one input
+        # The key of its one input, and those of what it sends: the key table says which.
+        (heard,) = keyspace.heard_by(Party.BEACON)
+        self.clock_key = keys.of(heard, self.name)
         self.output_keys = {
-            OutputKind.RADIO_TX: keys.radio_tx(self.name),
-            OutputKind.ACK: keys.beacon_ack(self.name),
+            kind: keys.of(kind, self.name)
+            for kind in keyspace.published_by(Party.BEACON, Party.SENDER)
         }
 
     def receive_clock(self, payload: bytes, attachment: bytes | None) -> list[Outgoing]:
@@ -86,14 +81,14 @@ class BeaconEndpoint:
             return []  # a tick already answered
         self.ticks.acted(clock.tick)
         outgoing = []
-        tx_key = self.output_keys[OutputKind.RADIO_TX]
+        tx_key = self.output_keys[keyspace.RADIO_TX]
         for message in self.beacon.on_tick(clock.t):
             sent = protocol.encode(message)
             meta = protocol.encode(
                 protocol.RadioTxMeta(v=protocol.VERSION, tick=clock.tick, seq=message.seq)
             )
             outgoing.append(
-                Outgoing(OutputKind.RADIO_TX, tx_key, sent, self._seal(tx_key, sent, meta))
+                Outgoing(keyspace.RADIO_TX, tx_key, sent, self._seal(tx_key, sent, meta))
             )
         ack = protocol.encode(
             protocol.Ack(
@@ -104,8 +99,8 @@ class BeaconEndpoint:
                 next_tick=self.beacon.next_tick(clock.tick, self.dt),
             )
         )
-        ack_key = self.output_keys[OutputKind.ACK]
-        outgoing.append(Outgoing(OutputKind.ACK, ack_key, ack, self._seal(ack_key, ack)))
+        ack_key = self.output_keys[keyspace.ACK]
+        outgoing.append(Outgoing(keyspace.ACK, ack_key, ack, self._seal(ack_key, ack)))
         return outgoing
 
     def count_dropped(self, count: int) -> None:
@@ -114,8 +109,8 @@ class BeaconEndpoint:
 
     def world_appeared(self, instance: str) -> None:
         """A world server's liveliness token, proved the world's (it answered for it with
-        the run's key: ``plumbing.world_info.world_proved``): the first is followed; when
-        the followed one is gone, another is a new world; the followed one again is the
+        the run's key: ``bestofn_swarm.plumbing.world_info.world_proved``): the first is followed;
+        when the followed one is gone, another is a new world; the followed one again is the
         same world back."""
         seen = self.worlds.appeared(instance)
         if seen == "new":

@@ -12,7 +12,6 @@ token is followed only once its world answers for it (a token is only a hint).
 
 from __future__ import annotations
 
-import enum
 import logging
 import queue
 import threading
@@ -20,32 +19,27 @@ from dataclasses import dataclass
 
 import zenoh
 
+from bestofn_swarm.plumbing.inbox import STOP, BoundedInbox, Stop
+from bestofn_swarm.plumbing.world_info import world_proved
+from bestofn_swarm.plumbing.zenoh_session import reliable_publisher
+from bestofn_swarm.wire import keyspace
+from bestofn_swarm.wire.names import Role
 from nest_beacon.core.endpoint import BeaconEndpoint
-from plumbing.inbox import BoundedInbox
-from plumbing.world_info import world_proved
-from plumbing.zenoh_session import reliable_publisher
-from wire import protocol
-from wire.names import Role
 
 log = logging.getLogger("nest_beacon")
 INBOX_BYTES = 16 * 2**20
 MAX_MESSAGE_BYTES = 1024  # a clock and its tag are under 100 bytes
 
 
-class EventKind(enum.StrEnum):
-    """What reaches the beacon process."""
-
-    CLOCK = "clock"
-    WORLD = "world"  # a world server's liveliness token appeared
-    NO_WORLD = "no-world"  # ... or went
-    STOP = "stop"
-
-
 @dataclass(frozen=True)
 class Event:
-    kind: EventKind
+    """What reaches the beacon process: its clock, a world server's liveliness token that
+    appeared or went (``gone``), or its stop."""
+
+    kind: keyspace.KeyKind | Stop
     payload: bytes = b""
     attachment: bytes | None = None
+    gone: bool = False
 
 
 class BeaconNode:
@@ -56,7 +50,7 @@ class BeaconNode:
         endpoint: BeaconEndpoint,
         *,
         session: zenoh.Session,
-        keys: protocol.Keys,
+        keys: keyspace.Keys,
         inbox: BoundedInbox[Event],
     ) -> None:
         self.endpoint = endpoint
@@ -78,26 +72,27 @@ class BeaconNode:
             extra = sample.attachment.to_bytes() if sample.attachment is not None else None
             size = len(payload) + len(extra or b"")
             if size > MAX_MESSAGE_BYTES:  # never valid: the inbox drops and counts it
-                self.inbox.put(Event(EventKind.CLOCK, payload, extra), size)
+                self.inbox.put(Event(keyspace.BEACON_CLOCK, payload, extra), size)
                 return
             with self.lock:
                 if not self.stopped:
                     self._answer(payload, extra)
 
         def on_world(sample: zenoh.Sample) -> None:
-            present = sample.kind == zenoh.SampleKind.PUT
-            kind = EventKind.WORLD if present else EventKind.NO_WORLD
-            instance = keys.last_chunk(str(sample.key_expr)).encode()
-            self.inbox.put(Event(kind, instance), len(instance), once=True)
+            gone = sample.kind != zenoh.SampleKind.PUT
+            instance = (keys.ident_of(keyspace.ALIVE_WORLD, str(sample.key_expr)) or "").encode()
+            self.inbox.put(
+                Event(keyspace.ALIVE_WORLD, instance, gone=gone), len(instance), once=True
+            )
 
         self._declared = [
             session.liveliness().declare_subscriber(
-                keys.alive(Role.WORLD, "*"), on_world, history=True
+                keys.every(keyspace.ALIVE_WORLD), on_world, history=True
             ),
             session.declare_subscriber(self.endpoint.clock_key, on_clock),
         ]
         self._token = session.liveliness().declare_token(
-            keys.alive(Role.BEACON, self.endpoint.name)
+            keys.token(Role.BEACON, self.endpoint.name)
         )
 
     def close(self) -> None:
@@ -111,11 +106,16 @@ class BeaconNode:
                 event = self.inbox.get(timeout=0.5)
             except queue.Empty:
                 event = None
-            if event is not None and event.kind == EventKind.STOP:
+            if event is not None and event.kind == STOP:
                 with self.lock:
                     self.stopped = True
                 return
-            if event is not None and event.kind == EventKind.WORLD and not self._proved(event):
+            if (
+                event is not None
+                and event.kind is keyspace.ALIVE_WORLD
+                and not event.gone
+                and not self._proved(event)
+            ):
                 with self.lock:
                     self.endpoint.world_unproven(event.payload.decode(errors="replace"))
                 continue
@@ -133,11 +133,13 @@ class BeaconNode:
 
     def handle(self, event: Event) -> None:
         """One event, under the lock."""
-        if event.kind == EventKind.WORLD:
-            self.endpoint.world_appeared(event.payload.decode(errors="replace"))
-        elif event.kind == EventKind.NO_WORLD:
-            self.endpoint.world_vanished(event.payload.decode(errors="replace"))
-        elif event.kind == EventKind.CLOCK:
+        if event.kind is keyspace.ALIVE_WORLD:
+            instance = event.payload.decode(errors="replace")
+            if event.gone:
+                self.endpoint.world_vanished(instance)
+            else:
+                self.endpoint.world_appeared(instance)
+        elif event.kind is keyspace.BEACON_CLOCK:
             self._answer(event.payload, event.attachment)
 
     def _answer(self, payload: bytes, attachment: bytes | None) -> None:

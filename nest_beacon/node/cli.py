@@ -16,6 +16,13 @@ from collections.abc import Sequence
 
 import zenoh
 
+from bestofn_swarm.plumbing import cliargs, process_main, settings_cli
+from bestofn_swarm.plumbing.inbox import STOP, BoundedInbox
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.plumbing.world_info import fetch_world_info
+from bestofn_swarm.plumbing.zenoh_session import open_from_args
+from bestofn_swarm.wire import names
+from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon
 from nest_beacon.core.endpoint import BeaconEndpoint
 from nest_beacon.node.beacon_node import (
@@ -23,17 +30,8 @@ from nest_beacon.node.beacon_node import (
     MAX_MESSAGE_BYTES,
     BeaconNode,
     Event,
-    EventKind,
 )
 from nest_beacon.node.options import NEST_BEACON_OPTIONS, NestBeaconConfig
-from plumbing import cliargs, cores, run_keys, settings_cli
-from plumbing.inbox import BoundedInbox
-from plumbing.lifecycle import die_with_launcher
-from plumbing.stop_signals import on_stop_signals
-from plumbing.world_info import fetch_world_info
-from plumbing.zenoh_session import check_config_files, open_from_args
-from wire import names, protocol
-from wire.rng import Stream
 
 log = logging.getLogger("nest_beacon")
 
@@ -56,25 +54,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def beacon_config(parser: argparse.ArgumentParser, args: argparse.Namespace) -> NestBeaconConfig:
+    config: NestBeaconConfig = settings_cli.config_from(parser, args, NEST_BEACON_OPTIONS)
+    return config
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    cores.check()  # stale compiled cores would run old code
-    die_with_launcher()
     parser = build_parser()
-    args = parser.parse_args(argv)
-    process_config: NestBeaconConfig = settings_cli.config_from(parser, args, NEST_BEACON_OPTIONS)
+    begun = process_main.begin("nest-beacon", parser, argv, beacon_config)
+    args, process_config, keyring, keys = begun.args, begun.settings, begun.keyring, begun.keys
     config = process_config.beacon
     name = config.name
-    cliargs.configure_logging("nest-beacon", args.log_level)
-    check_config_files(parser, args)
-    keyring = run_keys.from_args(parser, args, "nest-beacon")
     identity = names.beacon_identity(name)
     if keyring is not None and not (keyring.holds(identity) and keyring.holds(names.WORLD)):
         parser.exit(2, "nest-beacon: error: the beacon needs its own key and the world's\n")
-    rng = Stream.named(process_config.seed, "beacon", name)
-    beacon = Beacon(config, rng)
-    keys = protocol.Keys(args.run_id, args.root)
     inbox: BoundedInbox[Event] = BoundedInbox(INBOX_BYTES, MAX_MESSAGE_BYTES)
-    on_stop_signals(lambda _: inbox.put(Event(EventKind.STOP), control=True))
+    on_stop_signals(lambda _: inbox.put(Event(STOP), control=True))
     try:
         session = open_from_args(args)
     except zenoh.ZError as error:
@@ -86,6 +81,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         except TimeoutError as error:
             print(f"nest-beacon: {error}", file=sys.stderr)
             return 1
+        if process_config.seed is not None and process_config.seed != info.seed:
+            print(
+                f"nest-beacon: error: --seed {process_config.seed} is not the seed of the world "
+                f"of run {info.run} ({info.seed}); leave --seed out to take the world's",
+                file=sys.stderr,
+            )
+            return 2
+        beacon = Beacon(config, Stream.named(info.seed, "beacon", name))
         endpoint = BeaconEndpoint(beacon, keys, info.dt, keyring)
         node = BeaconNode(endpoint, session=session, keys=keys, inbox=inbox)
         node.start()

@@ -9,17 +9,21 @@ from typing import Annotated
 
 from msgspec import Meta
 
+from bestofn_swarm.plumbing.settings_cli import Options
+from bestofn_swarm.wire import protocol, settings
+from bestofn_swarm.wire.settings import Flag
 from nest_beacon.core.beacon import BeaconConfig
-from plumbing.settings_cli import Options
-from wire import protocol, settings
-from wire.settings import Flag
 
 
 @dataclass(frozen=True)
 class NestBeaconConfig:
     """The beacon and the run seed its flakiness draws from."""
 
-    seed: Annotated[protocol.Seed, Meta(description="run seed"), Flag()] = 0
+    seed: Annotated[
+        protocol.Seed | None,
+        Meta(description="run seed: must be the world's (the beacon's flakiness draws from it)"),
+        Flag(default_text="the world's"),
+    ] = None
     beacon: BeaconConfig = field(default_factory=BeaconConfig)
 
     def __post_init__(self) -> None:

@@ -13,9 +13,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import decision, defence
-from wire import protocol
-from wire.rng import Stream
 
 if TYPE_CHECKING:
     from robot_agent.core.controller_config import ControllerConfig

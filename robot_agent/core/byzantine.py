@@ -29,10 +29,11 @@ from typing import Literal, cast, get_args
 import msgspec
 import numpy as np
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import ports, vision, voting
 from robot_agent.core.controller import Controller, ControllerConfig, QualityEstimator
-from wire import protocol
-from wire.rng import Stream
+from robot_agent.core.wrapped import WrappedController
 
 Mode = Literal["liar", "inverted", "silent"]
 MODES: tuple[str, ...] = get_args(Mode)
@@ -137,13 +138,13 @@ def inverted_estimate(estimate: QualityEstimator = vision.estimate_quality) -> Q
     return inverted
 
 
-class Liar:
+class Liar(WrappedController):
     """An honest controller whose radio claims one site with certainty (see above)."""
 
-    def __init__(self, controller: Controller, site: int, num_sites: int) -> None:
+    def __init__(self, controller: ports.RobotController, site: int, num_sites: int) -> None:
         if not 0 <= site < num_sites:
             raise ValueError(f"a liar's site {site} is outside 0..{num_sites - 1}")
-        self._controller = controller
+        super().__init__(controller)
         self._site = site
         self._claim = protocol.wire_opinion(one_hot(site, num_sites))
 
@@ -159,35 +160,12 @@ class Liar:
             return msgspec.structs.replace(payload, decided=True, site=self._site, quality=1.0)
         return msgspec.structs.replace(payload, decided=True, opinion=self._claim)
 
-    def status(self, tick: int) -> protocol.Status:
-        return self._controller.status(tick)
 
-    def take_status_change(self) -> bool:
-        return self._controller.take_status_change()
-
-    @property
-    def decided_site(self) -> int | None:
-        return self._controller.decided_site
-
-
-class Silent:
+class Silent(WrappedController):
     """An honest controller whose broadcasts never leave the robot."""
-
-    def __init__(self, controller: Controller) -> None:
-        self._controller = controller
 
     def step(self, reading: ports.BodyReading, received: Sequence[ports.Received]) -> ports.Command:
         return self._controller.step(reading, received).with_broadcasts(())
-
-    def status(self, tick: int) -> protocol.Status:
-        return self._controller.status(tick)
-
-    def take_status_change(self) -> bool:
-        return self._controller.take_status_change()
-
-    @property
-    def decided_site(self) -> int | None:
-        return self._controller.decided_site
 
 
 def build_controller(
@@ -196,14 +174,18 @@ def build_controller(
     config: ControllerConfig,
     rng: Stream,
     behaviour: Behaviour | None = None,
+    *,
+    factory: type[Controller] = Controller,
 ) -> ports.RobotController:
-    """Robot ``robot_id``'s controller: honest when ``behaviour`` is None, else Byzantine."""
+    """Robot ``robot_id``'s controller (a ``factory``: the Controller or a class watching it):
+    honest when ``behaviour`` is None, else Byzantine. Robots are built with
+    ``robot_agent.core.builder``, which seeds ``rng`` from the world."""
     if behaviour is None:
-        return Controller(robot_id, world, config, rng)
+        return factory(robot_id, world, config, rng)
     if behaviour.mode == "inverted":
-        return Controller(robot_id, world, config, rng, estimate_quality=inverted_estimate())
+        return factory(robot_id, world, config, rng, estimate_quality=inverted_estimate())
     if behaviour.mode == "silent":
-        return Silent(Controller(robot_id, world, config, rng))
+        return Silent(factory(robot_id, world, config, rng))
     if behaviour.site is None:
         raise ValueError("a liar needs the site it claims (liar=SITE)")
     if config.strategy in voting.VOTING:
@@ -212,7 +194,7 @@ def build_controller(
         liar_config = dataclasses.replace(
             config, alpha=_LIAR_ALPHA, threshold=_LIAR_THRESHOLD, defence="none"
         )
-    return Liar(Controller(robot_id, world, liar_config, rng), behaviour.site, len(world.sites))
+    return Liar(factory(robot_id, world, liar_config, rng), behaviour.site, len(world.sites))
 
 
 __all__ = [

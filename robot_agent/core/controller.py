@@ -3,8 +3,9 @@
 Each control period the transport calls ``step(reading, received)`` with what the body
 sensed and the radio messages that arrived, and applies the returned ``Command`` (wheel
 speeds, a camera request, opinion broadcasts). The controller reads no clock (time is
-``reading.t``), draws randomness only from the ``wire.rng.Stream`` it is given, and does no
-I/O, so the same code runs over Zenoh, in tests, or on a real robot (``ports.control_step``).
+``reading.t``), draws randomness only from the ``bestofn_swarm.wire.rng.Stream`` it is given, and
+does no I/O, so the same code runs over Zenoh, in tests, or on a real robot
+(``ports.control_step``).
 
 One cycle ("trip"):
 
@@ -45,15 +46,19 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
+from bestofn_swarm.wire import names, numeric, protocol
+from bestofn_swarm.wire.compiled import mypyc_attr
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import phases, ports, strategies, vision
 from robot_agent.core.controller_config import ControllerConfig
 from robot_agent.core.motion import STOP, TIME_EPSILON, Motion, along_radius, distance
 from robot_agent.core.navigation import Navigator, NavParams
 from robot_agent.core.parking import Parking, parking_rings, parking_slot
 from robot_agent.core.sensing import QualityEstimator, Sensing
-from wire import names, numeric, protocol
-from wire.compiled import mypyc_attr
-from wire.rng import Stream
+
+# A deaf robot waiting at the nest's centre drives back only once pushed farther than this
+# many nest tolerances from it.
+WAIT_SLACK = 2
 
 
 # Studies and diagnoses watch a run through interpreted subclasses (deploy/study/observe.py,
@@ -340,7 +345,7 @@ class Controller:
         if self._hears_beacon(self._motion.leg_start):
             self._fire("heard_beacon", reading)
             return ports.Command(0.0, 0.0, broadcasts=self._broadcasts())
-        if distance(reading, self._nest) <= 2 * self.config.nest_tolerance:
+        if distance(reading, self._nest) <= WAIT_SLACK * self.config.nest_tolerance:
             return STOP  # pushed a little: not worth driving back yet
         left, right, _ = self._motion.drive_to(reading, self._nest, self.config.nest_tolerance)
         return ports.Command(left, right)
@@ -428,6 +433,7 @@ def _nothing(reading: ports.BodyReading) -> None:
 # parking_slot and parking_rings live in robot_agent/core/parking.py; they are exported here
 # too, where tests and benchmarks have always imported them from.
 __all__ = [
+    "WAIT_SLACK",
     "Controller",
     "ControllerConfig",
     "QualityEstimator",

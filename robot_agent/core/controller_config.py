@@ -1,5 +1,5 @@
 """The controller's settings (the Section 5 behaviour), each defined once: type, range,
-default and help (``wire/settings.py``). ``robot-agent`` and ``swarm run`` make
+default and help (``bestofn_swarm/wire/settings.py``). ``robot-agent`` and ``swarm run`` make
 their decision options from the flagged ones. Pure."""
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ from typing import Annotated, Any, ClassVar, Literal
 
 from msgspec import Meta
 
+from bestofn_swarm.wire import settings
+from bestofn_swarm.wire.settings import Flag
 from robot_agent.core import decision, defence
-from wire import settings
-from wire.settings import Flag
 
 # The decision strategies: the paper's, and the ones it is compared with, which vote.
 StrategyName = Literal["paper", "dmvd", "dmmd", "dc"]

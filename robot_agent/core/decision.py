@@ -21,8 +21,8 @@ import operator
 from collections.abc import Callable, Sequence
 from typing import Literal, SupportsIndex
 
-from wire import numeric
-from wire.rng import Stream
+from bestofn_swarm.wire import numeric
+from bestofn_swarm.wire.rng import Stream
 
 __all__ = [
     "LOGLINEAR_NEIGHBOUR_WEIGHT",

@@ -4,13 +4,14 @@ A transport hands ``RobotEndpoint`` each message it receives for the robot as (i
 kind, payload, attachment) and sends what comes back: Zenoh in ``robot_agent/node``, and
 any link that carries the same (key, payload, attachment) triples. The endpoint
 
-* checks every input in one place: the tag of the robot's own run key (``wire.auth``),
-  the decoding (``wire.protocol``), sim time against the tick (``wire.guard``), the tick
-  window and the budget of pending inputs (``tick_assembly``); a refusal is counted in
-  ``rejects`` and reported in the robot's status, never raised;
+* checks every input in one place: the tag of the robot's own run key (``bestofn_swarm.wire.auth``),
+  the decoding (``bestofn_swarm.wire.protocol``), sim time against the tick
+  (``bestofn_swarm.wire.guard``), the tick window and the budget of pending inputs
+  (``tick_assembly``); a refusal is counted in ``rejects`` and reported in the robot's status, never
+  raised;
 * gathers inputs into ticks (``tick_assembly``) and steps the controller once a tick is
   complete, through ``SimulatedPorts`` (the port contract's control step);
-* follows one world server (``wire.guard.WorldFollower``): a new one counts ticks from
+* follows one world server (``bestofn_swarm.wire.guard.WorldFollower``): a new one counts ticks from
   zero, so the pending ticks are forgotten and its sim time is shifted by the last time
   seen (the controller's clock never runs backwards); the same one back after an outage
   is rejoined at whatever tick it has reached;
@@ -26,46 +27,29 @@ attach to an input (its clock's reading); it comes back in the ``Step`` untouche
 
 from __future__ import annotations
 
-import enum
 import logging
 from typing import Any, Final, TypeVar
 
 import msgspec
 
+from bestofn_swarm.wire import auth, guard, keyspace, names, protocol
+from bestofn_swarm.wire.keyspace import Party
+from bestofn_swarm.wire.parcel import Encoder, Parcel
 from robot_agent.core.ports import RejectCounter, RobotController
 from robot_agent.core.simulated import SimulatedPorts
 from robot_agent.core.tick_assembly import ReadyTick, TickAssembly
-from wire import auth, guard, names, protocol
-from wire.parcel import Encoder, Parcel
 
 log = logging.getLogger(__name__)
 Meta = TypeVar("Meta", protocol.RadioRxMeta, protocol.CameraMeta)
 
 
-class InputKind(enum.StrEnum):
-    """What the world sends a robot, by key (``robot/<id>/sense`` ...)."""
-
-    SENSE = "sense"
-    RADIO_RX = "radio/rx"
-    CAMERA = "camera"
-
-
-class OutputKind(enum.StrEnum):
-    """What a robot (or a process hosting robots) sends, by key."""
-
-    RADIO_TX = "radio/tx"
-    ACT = "act"
-    STATUS = "status"
-    HOST_ACT = "host/act"  # a batch of the acts of the robots one process hosts
-
-
 class Outgoing(Parcel):
     """One message to send, of ``kind``: ``message`` for a core in the same process,
-    ``payload`` with ``attachment`` (sealed) for a transport (``wire.parcel``)."""
+    ``payload`` with ``attachment`` (sealed) for a transport (``bestofn_swarm.wire.parcel``)."""
 
     def __init__(
         self,
-        kind: OutputKind,
+        kind: keyspace.KeyKind,
         key: str,
         message: Any,
         encode: Encoder,
@@ -133,7 +117,7 @@ class RobotEndpoint:
         self,
         robot_id: int,
         *,
-        keys: protocol.Keys,
+        keys: keyspace.Keys,
         controller: RobotController,
         world: protocol.WorldInfo,
         keyring: auth.Keyring | None = None,
@@ -152,21 +136,15 @@ class RobotEndpoint:
         self.last_t = 0.0
         self.batched = False  # its process answers for it in batches (hosting.py)
         name = names.robot_name(robot_id)
-        # The key each input comes on: its tag covers it.
-        self.input_keys = {
-            InputKind.SENSE: keys.sense(robot_id),
-            InputKind.RADIO_RX: keys.radio_rx(name),
-            InputKind.CAMERA: keys.camera(robot_id),
-        }
-        # The key each of its own messages goes out on.
+        # The key each input comes on (its tag covers it), and the key each of its own
+        # messages goes out on: the key table says which.
+        self.input_keys = {kind: keys.of(kind, name) for kind in keyspace.heard_by(Party.ROBOT)}
         self.output_keys = {
-            OutputKind.RADIO_TX: keys.radio_tx(name),
-            OutputKind.ACT: keys.act(robot_id),
-            OutputKind.STATUS: keys.status(robot_id),
+            kind: keys.of(kind, name) for kind in keyspace.published_by(Party.ROBOT, Party.SENDER)
         }
-        self._tx_key = self.output_keys[OutputKind.RADIO_TX]
-        self._act_key = self.output_keys[OutputKind.ACT]
-        self._status_key = self.output_keys[OutputKind.STATUS]
+        self._tx_key = self.output_keys[keyspace.RADIO_TX]
+        self._act_key = self.output_keys[keyspace.ACT]
+        self._status_key = self.output_keys[keyspace.STATUS]
 
     @property
     def last_tick(self) -> int:
@@ -176,7 +154,7 @@ class RobotEndpoint:
 
     def receive(
         self,
-        kind: InputKind,
+        kind: keyspace.KeyKind,
         payload: bytes,
         attachment: bytes | None,
         arrived: float = 0.0,
@@ -203,13 +181,13 @@ class RobotEndpoint:
                 return self._step(alone)
             held = assembly.add_sense(sense, arrived)
         except protocol.ProtocolError as error:
-            self.reject(InputKind.SENSE, error)
+            self.reject(keyspace.SENSE.name, error)
             return None
         ready = assembly.take_ready(sense.tick) if held else None
         return None if ready is None else self._step(ready)
 
     def receive_message(
-        self, kind: InputKind, message: Any, meta: Any = None, arrived: float = 0.0
+        self, kind: keyspace.KeyKind, message: Any, meta: Any = None, arrived: float = 0.0
     ) -> Step | None:
         """Take one message the world sent this robot, handed over typed by a core in the
         same process (the in-process engine): a ``Sense``, or a radio payload or camera
@@ -219,7 +197,7 @@ class RobotEndpoint:
         try:
             tick, held = self._hold_message(kind, message, meta, arrived)
         except protocol.ProtocolError as error:
-            self.reject(kind, error)
+            self.reject(kind.name, error)
             return None
         if not held:
             return None
@@ -227,7 +205,7 @@ class RobotEndpoint:
         return None if ready is None else self._step(ready)
 
     def _hold(
-        self, kind: InputKind, payload: bytes, attachment: bytes | None, arrived: float
+        self, kind: keyspace.KeyKind, payload: bytes, attachment: bytes | None, arrived: float
     ) -> int | None:
         """Check an input and hold it for its tick: the tick, or None if it was refused
         (counted) or is stale (a tick already stepped)."""
@@ -235,31 +213,31 @@ class RobotEndpoint:
             metadata = auth.unseal(
                 self.keyring, self.identity, self.input_keys[kind], payload, attachment
             )
-            if kind is InputKind.SENSE:
+            if kind is keyspace.SENSE:
                 message: Any = protocol.decode(payload, protocol.Sense)
                 meta: Any = None
-            elif kind is InputKind.RADIO_RX:
+            elif kind is keyspace.RADIO_RX:
                 message, meta = payload, _metadata(metadata, protocol.RadioRxMeta)
             else:
                 message, meta = payload, _metadata(metadata, protocol.CameraMeta)
             tick, held = self._hold_message(kind, message, meta, arrived)
         except (auth.AuthError, protocol.ProtocolError) as error:
-            self.reject(kind, error)
+            self.reject(kind.name, error)
             return None
         return tick if held else None
 
     def _hold_message(
-        self, kind: InputKind, message: Any, meta: Any, arrived: float
+        self, kind: keyspace.KeyKind, message: Any, meta: Any, arrived: float
     ) -> tuple[int, bool]:
         """Hold a decoded input for its tick: its tick, and whether it was held (False:
         stale). ProtocolError if it is refused."""
-        if kind is InputKind.SENSE:
+        if kind is keyspace.SENSE:
             sense: protocol.Sense = message
             refused = guard.time_refused(sense.tick, sense.t, self.dt)
             if refused:
                 raise protocol.ProtocolError(refused)
             return sense.tick, self.assembly.add_sense(sense, arrived)
-        if kind is InputKind.RADIO_RX:
+        if kind is keyspace.RADIO_RX:
             radio: protocol.RadioRxMeta = meta
             return radio.tick, self.assembly.add_rx(radio.tick, radio.sender, message, arrived)
         camera: protocol.CameraMeta = meta
@@ -278,9 +256,10 @@ class RobotEndpoint:
 
     def world_appeared(self, instance: str) -> None:
         """A world server's liveliness token, proved the world's (it answered for it with
-        the run's key: ``plumbing.world_info.world_proved``): the first is followed; when
-        the followed one is gone, another is a new world; the followed one again is the
-        same world back. A token alone is a hint anyone can give: see world_unproven."""
+        the run's key: ``bestofn_swarm.plumbing.world_info.world_proved``): the first is
+        followed; when the followed one is gone, another is a new world; the followed one
+        again is the same world back. A token alone is a hint anyone can give: see
+        world_unproven."""
         seen = self.worlds.appeared(instance)
         if seen == "new":
             log.warning("robot %d: a new world server appeared; resuming", self.robot_id)
@@ -317,7 +296,7 @@ class RobotEndpoint:
         answer = self.ports.answer(self.controller, sense, ready.rx, ready.frame)
         transmissions = tuple(
             Outgoing(
-                OutputKind.RADIO_TX,
+                keyspace.RADIO_TX,
                 self._tx_key,
                 sent.payload,
                 None,
@@ -331,7 +310,7 @@ class RobotEndpoint:
         act_message = None
         if not self.batched:
             act_message = Outgoing(
-                OutputKind.ACT,
+                keyspace.ACT,
                 self._act_key,
                 answer.act,
                 protocol.encode,
@@ -355,7 +334,7 @@ class RobotEndpoint:
         if self.rejects.count:
             status = msgspec.structs.replace(status, rejected=status.rejected + self.rejects.count)
         return Outgoing(
-            OutputKind.STATUS,
+            keyspace.STATUS,
             self._status_key,
             status,
             protocol.encode,

@@ -3,18 +3,18 @@
 The process hosting the robots ``first`` to ``last`` is one trust boundary: its robots share
 its memory, and so its keys. So the world sends their senses as one batch on
 ``host/<first>/sense`` and takes their acts as one batch on ``host/<first>/act``
-(``wire/batch.py``), each sealed once with the process's own key, that of the host identity
-``host/<first>-<last>`` (``wire/names.py``), which the world takes only for those robots.
-Everything else a robot sends or receives (radio, camera, status, and its senses until the
-world has learnt the batched path) stays on its own keys, sealed with its own key.
+(``bestofn_swarm/wire/batch.py``), each sealed once with the process's own key, that of the host
+identity ``host/<first>-<last>`` (``bestofn_swarm/wire/names.py``), which the world takes only for
+those robots. Everything else a robot sends or receives (radio, camera, status, and its senses until
+the world has learnt the batched path) stays on its own keys, sealed with its own key.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 
-from robot_agent.core.endpoint import Outgoing, OutputKind, RobotEndpoint, Step
-from wire import auth, batch, names, protocol
+from bestofn_swarm.wire import auth, batch, keyspace, names, protocol
+from robot_agent.core.endpoint import Outgoing, RobotEndpoint, Step
 
 
 class HostedRobots:
@@ -37,8 +37,8 @@ class HostedRobots:
         for endpoint in endpoints:
             endpoint.batched = True
         keys = self.lead.keys
-        self.sense_key = keys.host_sense(self.first)
-        self.act_key = keys.host_act(self.first)
+        self.sense_key = keys.of(keyspace.HOST_SENSE, self.first)
+        self.act_key = keys.of(keyspace.HOST_ACT, self.first)
         self._acts: list[tuple[int, protocol.Act]] = []
 
     def senses(
@@ -83,7 +83,7 @@ class HostedRobots:
         acts = batch.ActBatch(self.last, self._acts)
         self._acts = []
         return Outgoing(
-            OutputKind.HOST_ACT,
+            keyspace.HOST_ACT,
             self.act_key,
             acts,
             batch.encode_act_batch,

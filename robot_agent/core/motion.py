@@ -13,14 +13,15 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from bestofn_swarm.wire import numeric
 from robot_agent.core import ports
 from robot_agent.core.navigation import Navigator
-from wire import numeric
 
 if TYPE_CHECKING:
     from robot_agent.core.controller_config import ControllerConfig
 
 TIME_EPSILON = 1e-9  # seconds: sums of control periods are not exact in binary
+PROGRESS_STEP = 0.01  # metres a leg must gain on its best distance to count as progress
 STOP = ports.Command(0.0, 0.0)  # stand still
 
 
@@ -79,7 +80,7 @@ class Motion:
     ) -> bool:
         """Within ``near`` of ``goal`` but no closer for ``stall_timeout``: someone is there."""
         gap = distance(reading, goal)
-        if gap < self._best_distance - 0.01:
+        if gap < self._best_distance - PROGRESS_STEP:
             self._best_distance = gap
             self._last_progress = reading.t
             return False
@@ -99,4 +100,4 @@ def distance(reading: ports.BodyReading, point: tuple[float, float]) -> float:
     return numeric.hypot(reading.x - point[0], reading.y - point[1])
 
 
-__all__ = ["STOP", "TIME_EPSILON", "Motion", "along_radius", "distance"]
+__all__ = ["PROGRESS_STEP", "STOP", "TIME_EPSILON", "Motion", "along_radius", "distance"]

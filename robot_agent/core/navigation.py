@@ -31,14 +31,21 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from wire import numeric
-from wire.numeric import wrap_angle
-from wire.rng import Stream
+from bestofn_swarm.wire import numeric
+from bestofn_swarm.wire.numeric import wrap_angle
+from bestofn_swarm.wire.rng import Stream
 
 # e-puck sensors ps0..ps7 in the robot's frame (radians, 0 = ahead, counter-clockwise
 # positive). Mirrors world_server.core.physics.EPUCK_PROX_ANGLES, which robot_agent must not
 # import; a test checks that the two agree.
 EPUCK_PROX_ANGLES: tuple[float, ...] = (-0.30, -0.80, -1.57, -2.64, 2.64, 1.57, 0.80, 0.30)
+# Radians: a goal this close to the obstacle's direction lies behind it, and the side to go
+# round is drawn; farther off, the goal's side is taken.
+TOSS_UP_ANGLE = 0.15
+# Radians: the extra turn away from (or, negative, towards) a boundary being followed is
+# clamped to this range.
+MIN_CLEARANCE_TURN = -math.pi / 4
+MAX_CLEARANCE_TURN = math.pi / 2
 
 
 @dataclass(frozen=True)
@@ -267,12 +274,12 @@ class Navigator:
             return bearing  # the goal lies away from the obstacle: nothing in the way
         if self._avoid_side == 0:
             # Go round on the goal's side; a goal straight behind the obstacle is a toss-up.
-            if abs(goal_vs_obstacle) > 0.15:
+            if abs(goal_vs_obstacle) > TOSS_UP_ANGLE:
                 self._avoid_side = 1 if goal_vs_obstacle > 0 else -1
             else:
                 self._avoid_side = self._rng.choice((-1, 1))
         push = self.params.clearance_gain * (nearest - self.params.clearance_level)
-        push = min(max(push, -math.pi / 4), math.pi / 2)
+        push = min(max(push, MIN_CLEARANCE_TURN), MAX_CLEARANCE_TURN)
         return wrap_angle(obstacle + self._avoid_side * (math.pi / 2 + push))
 
     def _front_reading(self, proximity: Sequence[float]) -> float:

@@ -26,12 +26,18 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+from bestofn_swarm.wire import numeric, protocol
 from robot_agent.core import ports
 from robot_agent.core.motion import STOP, TIME_EPSILON, Motion, along_radius, distance
-from wire import numeric, protocol
 
 if TYPE_CHECKING:
     from robot_agent.core.controller_config import ControllerConfig
+
+# Parking slots stop this many robot radii short of the nest (and backing off goes no
+# further in).
+INNER_BODIES = 3
+# A parked robot farther than this many robot radii from its slot has been pushed out.
+DISPLACED_BODIES = 2
 
 
 class Parking:
@@ -110,7 +116,7 @@ class Parking:
         from it (it parks within a body radius, so a robot that settles there stays)."""
         if self.slot is None:
             raise RuntimeError("Parking.displaced before begin: no slot chosen yet")
-        return distance(reading, self.slot) > 2 * self._world.robot_radius
+        return distance(reading, self.slot) > DISPLACED_BODIES * self._world.robot_radius
 
     def _back_off(self, reading: ports.BodyReading) -> ports.Command:
         """Give up this parking attempt: head towards the nest, clear of the parking rows,
@@ -129,7 +135,7 @@ class Parking:
 
 def inner_radius(nest_radius: float, robot_radius: float) -> float:
     """How far in parking slots go: short of the nest by a little more than a body."""
-    return nest_radius + 3 * robot_radius
+    return nest_radius + INNER_BODIES * robot_radius
 
 
 class ParkingSlots:
@@ -271,4 +277,12 @@ def parking_rings(
     return rings
 
 
-__all__ = ["Parking", "ParkingSlots", "inner_radius", "parking_rings", "parking_slot"]
+__all__ = [
+    "DISPLACED_BODIES",
+    "INNER_BODIES",
+    "Parking",
+    "ParkingSlots",
+    "inner_radius",
+    "parking_rings",
+    "parking_slot",
+]

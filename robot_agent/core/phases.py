@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Final, Literal
 
-from wire.protocol import Phase
+from bestofn_swarm.wire.protocol import Phase
 
 Event = Literal[
     "start",

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final, Protocol
 
-from wire import protocol
+from bestofn_swarm.wire import protocol
 
 if TYPE_CHECKING:
     import numpy as np
@@ -24,8 +24,8 @@ log = logging.getLogger(__name__)
 
 
 # The values a control step is made of are plain classes with read-only attributes, not
-# frozen dataclasses: the compiled cores (plumbing/cores.py) make several per robot per
-# tick, and a dataclass's generated __init__ runs interpreted, an order slower.
+# frozen dataclasses: the compiled cores (bestofn_swarm/plumbing/cores.py) make several per robot
+# per tick, and a dataclass's generated __init__ runs interpreted, an order slower.
 
 
 class BodyReading:

@@ -16,10 +16,10 @@ from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
+from bestofn_swarm.wire import numeric
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import ports
 from robot_agent.core.motion import STOP, TIME_EPSILON, Motion
-from wire import numeric
-from wire.rng import Stream
 
 if TYPE_CHECKING:
     from robot_agent.core.controller_config import ControllerConfig

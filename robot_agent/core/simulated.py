@@ -17,10 +17,10 @@ from typing import Final
 
 import numpy as np
 
+from bestofn_swarm.wire import protocol
 from robot_agent.core import ports, vision
 from robot_agent.core.ports import BodyReading, RejectCounter, RobotController
 from robot_agent.core.tick_assembly import Frame
-from wire import protocol
 
 # Plain classes with read-only attributes, not frozen dataclasses: a tick makes one per
 # robot, and a dataclass's generated __init__ runs interpreted in the compiled cores.

@@ -19,10 +19,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Protocol
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core.beliefs import Beliefs
 from robot_agent.core.voting import VoteBeliefs
-from wire import protocol
-from wire.rng import Stream
 
 if TYPE_CHECKING:
     from robot_agent.core.controller_config import ControllerConfig

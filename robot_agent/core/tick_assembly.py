@@ -12,8 +12,8 @@ is at. ``TickAssembly`` holds them per tick until the tick can be stepped:
   completed merged in front of its own, and the latest of their camera frames if its own
   tick has none (a robot that fell behind skips to its newest sense: robot_node.py).
 
-It believes a tick only within the window of ``wire.guard.TickWindow`` and holds at most
-``PENDING_BYTES`` / ``PENDING_MESSAGES`` for ticks not reached; an input for a tick already
+It believes a tick only within the window of ``bestofn_swarm.wire.guard.TickWindow`` and holds at
+most ``PENDING_BYTES`` / ``PENDING_MESSAGES`` for ticks not reached; an input for a tick already
 stepped is stale and dropped quietly (late, not wrong).
 """
 
@@ -24,7 +24,7 @@ from typing import Final
 
 import numpy as np
 
-from wire import guard, protocol
+from bestofn_swarm.wire import guard, protocol
 
 # A camera frame: its encoding (PNG, as a transport carries it), or the image itself when
 # the world runs in the same process.
@@ -50,7 +50,7 @@ class TickInputs:
     size: int = 0  # bytes held for this tick
     messages: int = 0
     # The latest mark its inputs came with: the transport's arrival time when it traces
-    # (plumbing/trace.py), carried through untouched; 0 otherwise.
+    # (bestofn_swarm/plumbing/trace.py), carried through untouched; 0 otherwise.
     arrived: float = 0.0
 
 

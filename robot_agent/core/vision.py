@@ -24,7 +24,7 @@ import struct
 import cv2
 import numpy as np
 
-from wire import protocol
+from bestofn_swarm.wire import protocol
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 JPEG_SOI = b"\xff\xd8"

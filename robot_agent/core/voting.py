@@ -46,6 +46,8 @@ import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.rng import Stream
 from robot_agent.core.controller_config import (
     NEVER_SETTLE,
     STRATEGIES,
@@ -53,8 +55,6 @@ from robot_agent.core.controller_config import (
     ControllerConfig,
     StrategyName,
 )
-from wire import protocol
-from wire.rng import Stream
 
 
 @dataclass(frozen=True)

@@ -5,8 +5,8 @@ need (an id for ``--id auto``, the world's map), builds each robot's controller 
 endpoint, and runs them as ``RobotNode`` s (``robot_node.py``) until it is stopped.
 
 Trust: in a keyed run a robot holds only its own run key; it believes an input only with
-that key's tag (wire/auth.py), only for a tick within reach of its last one, and holds at
-most PENDING_BYTES of inputs for ticks it has not reached (robot_agent/core/endpoint.py).
+that key's tag (bestofn_swarm/wire/auth.py), only for a tick within reach of its last one, and holds
+at most PENDING_BYTES of inputs for ticks it has not reached (robot_agent/core/endpoint.py).
 """
 
 from __future__ import annotations
@@ -17,32 +17,29 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import zenoh
 
-from plumbing import cliargs, cores, run_keys, settings_cli
-from plumbing.inbox import BoundedInbox
-from plumbing.lifecycle import die_with_launcher
-from plumbing.stop_signals import on_stop_signals
-from plumbing.trace import open_trace
-from plumbing.world_info import ask, fetch_world_info
-from plumbing.zenoh_session import certificate_name, check_config_files, open_from_args
-from robot_agent.core import byzantine
-from robot_agent.core.endpoint import RobotEndpoint
+from bestofn_swarm.plumbing import cliargs, process_main, settings_cli
+from bestofn_swarm.plumbing.inbox import STOP, BoundedInbox
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.plumbing.trace import open_trace
+from bestofn_swarm.plumbing.world_info import ask, fetch_world_info
+from bestofn_swarm.plumbing.zenoh_session import certificate_name, open_from_args
+from bestofn_swarm.wire import auth, keyspace, names, protocol
+from robot_agent.core import builder, byzantine
 from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig, hosted_byzantine
 from robot_agent.node.robot_node import (
     INBOX_BYTES,
     INBOX_BYTES_PER_ROBOT,
     MAX_MESSAGE_BYTES,
     Event,
-    EventKind,
     HostBatch,
     LatestSenses,
     RobotNode,
     serve,
 )
-from wire import auth, names, protocol
-from wire.rng import Stream
 
 log = logging.getLogger("robot_agent")
 
@@ -60,7 +57,7 @@ class NoKeyError(Exception):
 
 def ask_for_id(
     session: zenoh.Session,
-    keys: protocol.Keys,
+    keys: keyspace.Keys,
     timeout: float,
     keyring: auth.Keyring | None = None,
 ) -> int:
@@ -75,19 +72,19 @@ def ask_for_id(
         asker = robots[0] if robots else names.robot_identity(0)
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        answers, refused = ask(session, keys.world_join, keyring, asker)
+        answers, refused = ask(session, keys.of(keyspace.JOIN), keyring, asker)
         for answer in answers:
             try:
                 robot = protocol.decode(answer, protocol.JoinReply).id
             except protocol.ProtocolError as error:
-                raise TimeoutError(f"invalid answer on {keys.world_join}: {error}") from None
+                raise TimeoutError(f"invalid answer on {keys.of(keyspace.JOIN)}: {error}") from None
             if keyring is not None and not keyring.holds(names.robot_identity(robot)):
                 raise NoKeyError(f"the world server gave id {robot}, whose key this process lacks")
             return robot
         if refused and not answers:
             raise TimeoutError(f"the world server gave no id: {refused[-1]}")
         time.sleep(0.2)
-    raise TimeoutError(f"no world server answered on {keys.world_join}")
+    raise TimeoutError(f"no world server answered on {keys.of(keyspace.JOIN)}")
 
 
 def certificate_robot(config_file: str | None) -> int | None:
@@ -162,34 +159,45 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    cores.check()  # stale compiled cores would run old code
-    die_with_launcher()
-    parser = build_parser()
-    args = parser.parse_args(argv)
+@dataclass(frozen=True)
+class AgentSettings:
+    """What robot-agent's command line asks for, checked."""
+
+    agent: RobotAgentConfig
+    fixed: list[int]  # the robots given by id (not ``--id auto``)
+    misbehaving: dict[int, byzantine.Behaviour]
+
+
+def agent_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> AgentSettings:
     fixed = [robot for robot in args.ids if robot is not None]
     if len(set(fixed)) != len(fixed):
         parser.exit(2, "robot-agent: error: the same --id is given twice\n")
     if None in args.ids and "{id}" in (args.zenoh_config or ""):
         parser.exit(2, "robot-agent: error: --id auto cannot fill '{id}' in --zenoh-config\n")
     agent: RobotAgentConfig = settings_cli.config_from(parser, args, AGENT_OPTIONS)
-    config = agent.controller
     try:
         misbehaving = hosted_byzantine(agent.byzantine, fixed)
     except ValueError as error:
         parser.exit(2, f"robot-agent: error: {error}\n")
-    cliargs.configure_logging("robot-agent", args.log_level)
-    check_config_files(parser, args, fixed)
-    keyring = run_keys.from_args(parser, args, "robot-agent")
-    for robot in fixed:
-        if keyring is not None and not keyring.holds(names.robot_identity(robot)):
-            parser.exit(2, f"robot-agent: error: the run keys hold no key for robot {robot}\n")
-    keys = protocol.Keys(args.run_id, args.root)
+    return AgentSettings(agent, fixed, misbehaving)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    begun = process_main.begin(
+        "robot-agent", parser, argv, agent_settings, config_robots=lambda found: found.fixed
+    )
+    args, keyring, keys = begun.args, begun.keyring, begun.keys
+    agent, misbehaving = begun.settings.agent, begun.settings.misbehaving
+    config = agent.controller
+    for given in begun.settings.fixed:
+        if keyring is not None and not keyring.holds(names.robot_identity(given)):
+            parser.exit(2, f"robot-agent: error: the run keys hold no key for robot {given}\n")
     inbox: BoundedInbox[Event] = BoundedInbox(
         INBOX_BYTES + INBOX_BYTES_PER_ROBOT * len(args.ids), MAX_MESSAGE_BYTES
     )
     lock = threading.Lock()  # the robots of this process: one thread at a time
-    on_stop_signals(lambda _: inbox.put(Event(-1, EventKind.STOP), control=True))
+    on_stop_signals(lambda _: inbox.put(Event(-1, STOP), control=True))
     sessions: list[zenoh.Session] = []
     nodes: list[RobotNode] = []
     host: HostBatch | None = None
@@ -206,21 +214,20 @@ def main(argv: Sequence[str] | None = None) -> int:
                 robot = ask_for_id(session, keys, args.info_timeout, keyring)
             identity = names.robot_identity(robot)
             info = fetch_world_info(session, keys, args.info_timeout, keyring, identity)
-            rng = Stream.named(agent.seed, "robot", robot)
             try:
-                controller = byzantine.build_controller(
-                    robot, info, config, rng, misbehaving.get(robot)
+                builder.run_seed(info, agent.seed)
+                endpoint = builder.build_robot(
+                    robot,
+                    info,
+                    config,
+                    keys=keys,
+                    keyring=keyring.only([identity]) if keyring is not None else None,
+                    behaviour=misbehaving.get(robot),
+                    robot_faults=[spec.fault() for spec in agent.faults],
                 )
-            except ValueError as error:  # e.g. a liar's site the world does not have
+            except ValueError as error:  # another run's seed; a liar's site; a fault unknown
                 print(f"robot-agent: error: {error}", file=sys.stderr)
                 return 2
-            endpoint = RobotEndpoint(
-                robot,
-                keys=keys,
-                controller=controller,
-                world=info,
-                keyring=keyring.only([identity]) if keyring is not None else None,
-            )
             if info.clock == "realtime" and latest is None:
                 latest = LatestSenses()
                 latest.start()

@@ -11,11 +11,12 @@ from typing import Annotated
 
 from msgspec import Meta
 
-from plumbing.settings_cli import Options
+from bestofn_swarm.plumbing.settings_cli import Options
+from bestofn_swarm.wire import protocol, settings
+from bestofn_swarm.wire.settings import Flag
 from robot_agent.core import byzantine
 from robot_agent.core.controller_config import ControllerConfig
-from wire import protocol, settings
-from wire.settings import Flag
+from robot_agent.core.faults import FaultSpec
 
 
 @dataclass(frozen=True)
@@ -24,10 +25,13 @@ class RobotAgentConfig:
     and which of its robots misbehave (a fault experiment)."""
 
     seed: Annotated[
-        protocol.Seed,
-        Meta(description="run seed; each robot's RNG derives from it and its id"),
-        Flag(),
-    ] = 0
+        protocol.Seed | None,
+        Meta(
+            description="run seed: must be the world's (each robot's generator derives from "
+            "the world's seed and its id)"
+        ),
+        Flag(default_text="the world's"),
+    ] = None
     controller: ControllerConfig = field(default_factory=ControllerConfig)
     byzantine: Annotated[
         tuple[byzantine.ByzantineRobot, ...],
@@ -36,6 +40,14 @@ class RobotAgentConfig:
             "fault experiment; swarm run --byzantine chooses a liar's site itself)"
         ),
         Flag(metavar="ROBOT:MODE"),
+    ] = ()
+
+    faults: Annotated[
+        tuple[FaultSpec, ...],
+        Meta(
+            description="the faults of its robots that change what their controllers do (a "
+            "motor failure), as swarm run declared them (robot_agent/core/faults.py)"
+        ),
     ] = ()
 
     def __post_init__(self) -> None:

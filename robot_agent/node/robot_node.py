@@ -5,7 +5,7 @@ one robot or many. What a robot does with what it receives (checks, tick assembl
 control step, sealing what it sends) is ``robot_agent.core.endpoint.RobotEndpoint``;
 ``RobotNode`` subscribes to its inputs, hands them over and publishes what comes back.
 A process hosting several robots answers for all of them in one batch of acts per input
-that stepped them, on its first robot's session (``host/<first>/act``, wire/batch.py;
+that stepped them, on its first robot's session (``host/<first>/act``, bestofn_swarm/wire/batch.py;
 ``HostBatch`` around ``robot_agent.core.hosting.HostedRobots``); the world then sends
 their senses in one batch too. A batch is sealed once, with the process's own key (the
 host identity's); every robot keeps its own keys for radio, status, camera and liveliness.
@@ -31,7 +31,6 @@ docs/performance.md, "Real time").
 
 from __future__ import annotations
 
-import enum
 import logging
 import threading
 from collections.abc import Callable, Sequence
@@ -39,14 +38,15 @@ from dataclasses import dataclass
 
 import zenoh
 
-from plumbing.inbox import BoundedInbox
-from plumbing.trace import TraceWriter, now
-from plumbing.world_info import world_proved
-from plumbing.zenoh_session import reliable_publisher
-from robot_agent.core.endpoint import InputKind, Outgoing, OutputKind, RobotEndpoint, Step
+from bestofn_swarm.plumbing.inbox import STOP, BoundedInbox, Stop
+from bestofn_swarm.plumbing.trace import TraceWriter, now
+from bestofn_swarm.plumbing.world_info import world_proved
+from bestofn_swarm.plumbing.zenoh_session import reliable_publisher
+from bestofn_swarm.wire import auth, keyspace, protocol
+from bestofn_swarm.wire.keyspace import Party
+from bestofn_swarm.wire.names import Role
+from robot_agent.core.endpoint import Outgoing, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
-from wire import auth, protocol
-from wire.names import Role
 
 log = logging.getLogger("robot_agent")
 
@@ -57,33 +57,23 @@ INBOX_BYTES, INBOX_BYTES_PER_ROBOT = 16 * 2**20, 2**20
 MAX_MESSAGE_BYTES = protocol.MAX_CAMERA_FRAME_BYTES + 1024  # a frame and its attachment
 
 
-class EventKind(enum.StrEnum):
-    """What reaches a robot process: an input on one of its keys, or a rare event."""
-
-    SENSE = "sense"
-    BATCH = "batch"  # the senses of the robots it hosts, in one batch
-    CAMERA = "camera"
-    RX = "rx"
-    WORLD = "world"  # a world server's liveliness token appeared
-    NO_WORLD = "no-world"  # ... or went
-    STOP = "stop"
-
-
-# The events that are one robot's inputs, as its endpoint knows them.
-INPUT_OF_EVENT = {
-    EventKind.SENSE: InputKind.SENSE,
-    EventKind.RX: InputKind.RADIO_RX,
-    EventKind.CAMERA: InputKind.CAMERA,
-}
+# What a robot process hears on its own keys, the key table says: its inputs, and the
+# batches of senses of the robots it hosts.
+INPUTS = keyspace.heard_by(Party.ROBOT)
+BATCHES = keyspace.heard_by(Party.HOST)
 
 
 @dataclass(frozen=True)
 class Event:
+    """What reaches a robot process: a sample of one of the kinds it hears, a world
+    server's liveliness token that appeared or went (``gone``), or its stop."""
+
     robot: int
-    kind: EventKind
+    kind: keyspace.KeyKind | Stop
     payload: bytes = b""
     attachment: bytes | None = None
     arrived: float = 0.0  # monotonic time the callback took it (only when tracing)
+    gone: bool = False
 
 
 class LatestSenses:
@@ -159,7 +149,7 @@ class RobotNode:
         # nothing, so none publishes on a session being closed.
         self.closed = False
         self._declared: list[object] = []
-        self.trace = trace  # --trace: one line per step (plumbing/trace.py)
+        self.trace = trace  # --trace: one line per step (bestofn_swarm/plumbing/trace.py)
         self.host: HostBatch | None = None  # set when its acts go out in its process's batch
         # Real time: where its senses wait to be stepped, newest only (None: in the callback).
         self.latest = latest
@@ -170,13 +160,11 @@ class RobotNode:
         keys, robot, session = self.keys, self.robot_id, self.session
         input_keys = self.endpoint.input_keys
         output_keys = self.endpoint.output_keys
-        self._act = reliable_publisher(session, output_keys[OutputKind.ACT])
-        self._status = reliable_publisher(session, output_keys[OutputKind.STATUS])
-        self._tx = reliable_publisher(session, output_keys[OutputKind.RADIO_TX])
+        self._act = reliable_publisher(session, output_keys[keyspace.ACT])
+        self._status = reliable_publisher(session, output_keys[keyspace.STATUS])
+        self._tx = reliable_publisher(session, output_keys[keyspace.RADIO_TX])
 
-        def forward(kind: EventKind) -> Callable[[zenoh.Sample], None]:
-            input_kind = INPUT_OF_EVENT[kind]
-
+        def forward(kind: keyspace.KeyKind) -> Callable[[zenoh.Sample], None]:
             def callback(sample: zenoh.Sample) -> None:
                 attachment = sample.attachment
                 payload = sample.payload.to_bytes()
@@ -191,11 +179,11 @@ class RobotNode:
                     with self.lock:
                         if self.closed:
                             return
-                        self.take(input_kind, payload, extra, arrived)
+                        self.take(kind, payload, extra, arrived)
                         if self.host is not None:
                             self.host.flush()
 
-                if kind == EventKind.SENSE and self.latest is not None:
+                if kind is keyspace.SENSE and self.latest is not None:
                     self.latest.offer(robot, deliver)
                 else:
                     deliver()
@@ -203,24 +191,21 @@ class RobotNode:
             return callback
 
         self._declared = [
-            session.declare_subscriber(input_keys[InputKind.SENSE], forward(EventKind.SENSE)),
-            session.declare_subscriber(input_keys[InputKind.CAMERA], forward(EventKind.CAMERA)),
-            session.declare_subscriber(input_keys[InputKind.RADIO_RX], forward(EventKind.RX)),
+            *(session.declare_subscriber(input_keys[kind], forward(kind)) for kind in INPUTS),
             session.liveliness().declare_subscriber(
-                keys.alive(Role.WORLD, "*"), self._on_world, history=True
+                keys.every(keyspace.ALIVE_WORLD), self._on_world, history=True
             ),
         ]
         self._fold_dropped()
         self._publish(self.endpoint.status(0))
-        self._token = session.liveliness().declare_token(keys.alive(Role.ROBOT, robot))
+        self._token = session.liveliness().declare_token(keys.token(Role.ROBOT, robot))
 
     def _on_world(self, sample: zenoh.Sample) -> None:
         """A world server's token came or went: for the process's thread, charged."""
-        kind = EventKind.WORLD if sample.kind == zenoh.SampleKind.PUT else EventKind.NO_WORLD
-        instance = self.keys.last_chunk(str(sample.key_expr)).encode()
-        self.inbox.put(
-            Event(self.robot_id, kind, instance), len(instance), self.robot_id, once=True
-        )
+        gone = sample.kind != zenoh.SampleKind.PUT
+        instance = (self.keys.ident_of(keyspace.ALIVE_WORLD, str(sample.key_expr)) or "").encode()
+        event = Event(self.robot_id, keyspace.ALIVE_WORLD, instance, gone=gone)
+        self.inbox.put(event, len(instance), self.robot_id, once=True)
 
     def world_proved(self, instance: bytes) -> bool:
         """Whether the world token ``instance`` is a world's: it answers for it, asked as
@@ -243,15 +228,19 @@ class RobotNode:
 
     def handle(self, event: Event) -> None:
         """One event of this robot from the process's thread (or a test)."""
-        if event.kind == EventKind.WORLD:
-            self.endpoint.world_appeared(event.payload.decode(errors="replace"))
-        elif event.kind == EventKind.NO_WORLD:
-            self.endpoint.world_vanished(event.payload.decode(errors="replace"))
-        elif (kind := INPUT_OF_EVENT.get(event.kind)) is not None:
+        kind = event.kind
+        if kind is keyspace.ALIVE_WORLD:
+            instance = event.payload.decode(errors="replace")
+            if event.gone:
+                self.endpoint.world_vanished(instance)
+            else:
+                self.endpoint.world_appeared(instance)
+        elif kind in INPUTS:
+            assert isinstance(kind, keyspace.KeyKind)
             self.take(kind, event.payload, event.attachment, event.arrived)
 
     def take(
-        self, kind: InputKind, payload: bytes, attachment: bytes | None, arrived: float
+        self, kind: keyspace.KeyKind, payload: bytes, attachment: bytes | None, arrived: float
     ) -> None:
         """Hand one input to the endpoint, and send what the step it completes answers."""
         self._fold_dropped()
@@ -343,7 +332,7 @@ class HostBatch:
             extra = attachment.to_bytes() if attachment is not None else None
             arrived = now() if lead.trace is not None else 0.0
             if len(payload) > MAX_MESSAGE_BYTES:  # never valid: the inbox drops and counts it
-                event = Event(lead.robot_id, EventKind.BATCH, payload, extra, arrived)
+                event = Event(lead.robot_id, keyspace.HOST_SENSE, payload, extra, arrived)
                 self.inbox.put(event, len(payload), lead.robot_id)
                 return
 
@@ -396,10 +385,14 @@ def serve(nodes: Sequence[RobotNode], inbox: BoundedInbox[Event]) -> None:
     by_id = {node.robot_id: node for node in nodes}
     while True:
         event = inbox.get()
-        if event.kind == EventKind.STOP:
+        if event.kind == STOP:
             return
         node = by_id[event.robot]
-        if event.kind == EventKind.WORLD and not node.world_proved(event.payload):
+        if (
+            event.kind is keyspace.ALIVE_WORLD
+            and not event.gone
+            and not node.world_proved(event.payload)
+        ):
             with node.lock:
                 node.endpoint.world_unproven(event.payload.decode(errors="replace"))
             continue

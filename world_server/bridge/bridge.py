@@ -17,14 +17,14 @@ may say) and a link (``LinkPeer`` over UDP or a serial line):
   the robot process does; the robot's own token is presence (``presence.py``).
 
 On top, every link frame carries its own tag under the robot's link key with a session
-nonce and a sequence number (link/core/codec.py), checked by the peer before anything is
-forwarded. The bridge pings each program, and publishes each link's figures (round trip,
+nonce and a sequence number (bestofn_swarm/link/core/codec.py), checked by the peer before anything
+is forwarded. The bridge pings each program, and publishes each link's figures (round trip,
 loss, frames, refusals: ``LinkStats`` on ``link/<id>/stats``, sealed as the bridge) every
 second and whenever a link opens or closes. A link can be made worse on purpose
 (``impairment.py``).
 
 Threads: Zenoh's callbacks only queue what they bring (a bounded inbox) and wake the loop;
-one thread owns the peers and the link transports (a ``link.io.hub.Hub``, the loop
+one thread owns the peers and the link transports (a ``bestofn_swarm.link.io.hub.Hub``, the loop
 ``robot-agent --link`` runs on too), and publishes.
 """
 
@@ -45,15 +45,16 @@ from typing import Any
 import msgspec
 import zenoh
 
-from link.core import codec
-from link.core.impairment import ImpairedDirection, LinkImpairment
-from link.core.peer import LinkPeer, Message, PeerEvent, SessionClosed, SessionOpened
-from link.io.hub import Hub
-from link.io.transport import SerialLine, UdpServer
-from plumbing.inbox import BoundedInbox
-from plumbing.zenoh_session import reliable_publisher
-from wire import auth, names, protocol
-from wire.names import Role
+from bestofn_swarm.link.core import codec
+from bestofn_swarm.link.io.hub import Hub
+from bestofn_swarm.link.io.transport import SerialLine, UdpServer
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.plumbing.zenoh_session import reliable_publisher
+from bestofn_swarm.wire import auth, keyspace, names, protocol
+from bestofn_swarm.wire.keyspace import Part
+from bestofn_swarm.wire.names import Role
+from world_server.bridge.core.impairment import ImpairedDirection, LinkImpairment
+from world_server.bridge.core.peer import LinkPeer, Message, PeerEvent, SessionClosed, SessionOpened
 from world_server.bridge.presence import Presence
 
 log = logging.getLogger("bridge")
@@ -66,7 +67,11 @@ UDP = "udp"  # the hub's name for the one UDP server; serial lines go by their r
 WAKE = "wake"
 
 # What the world sends a robot, by its key, and what the robot sends, to its key.
-FROM_WORLD = (codec.DataKind.SENSE, codec.DataKind.CAMERA, codec.DataKind.RADIO_RX)
+FROM_WORLD = (
+    keyspace.link(keyspace.SENSE),
+    keyspace.link(keyspace.CAMERA),
+    keyspace.link(keyspace.RADIO_RX),
+)
 
 
 @dataclass(frozen=True)
@@ -102,7 +107,7 @@ class BridgeConfig:
 @dataclass(frozen=True)
 class FromWorld:
     robot: int
-    kind: codec.DataKind
+    kind: keyspace.LinkCode
     payload: bytes
     attachment: bytes | None
 
@@ -134,7 +139,7 @@ class Bridge:
         keyring: auth.Keyring | None,
     ) -> None:
         self.config = config
-        self.keys = protocol.Keys(config.run_id, config.root)
+        self.keys = keyspace.Keys(config.run_id, config.root)
         self.session = session
         self.robot_sessions = robot_sessions
         self.keyring = keyring  # the bridge's own key: what it publishes as itself
@@ -163,7 +168,7 @@ class Bridge:
         self.presence = Presence(robot_sessions, self.keys)
         self.worlds: set[str] = set()
         self.unattributed: Counter[str] = Counter()  # UDP frames of no robot served here
-        self._publishers: dict[tuple[int, codec.DataKind], zenoh.Publisher] = {}
+        self._publishers: dict[tuple[int, keyspace.LinkCode], zenoh.Publisher] = {}
         self._stats_publishers: dict[int, zenoh.Publisher] = {}
         self._declared: list[Any] = []
         self._token: Any = None
@@ -193,27 +198,29 @@ class Bridge:
         for robot, session in self.robot_sessions.items():
             name = names.robot_name(robot)
             inputs = {
-                codec.DataKind.SENSE: keys.sense(robot),
-                codec.DataKind.CAMERA: keys.camera(robot),
-                codec.DataKind.RADIO_RX: keys.radio_rx(name),
+                keyspace.link(keyspace.SENSE): keys.of(keyspace.SENSE, robot),
+                keyspace.link(keyspace.CAMERA): keys.of(keyspace.CAMERA, robot),
+                keyspace.link(keyspace.RADIO_RX): keys.of(keyspace.RADIO_RX, name),
             }
             for kind, key in inputs.items():
                 self._declared.append(session.declare_subscriber(key, self._on_input(robot, kind)))
             outputs = {
-                codec.DataKind.ACT: keys.act(robot),
-                codec.DataKind.RADIO_TX: keys.radio_tx(name),
-                codec.DataKind.STATUS: keys.status(robot),
+                keyspace.link(keyspace.ACT): keys.of(keyspace.ACT, robot),
+                keyspace.link(keyspace.RADIO_TX): keys.of(keyspace.RADIO_TX, name),
+                keyspace.link(keyspace.STATUS): keys.of(keyspace.STATUS, robot),
             }
             for kind, key in outputs.items():
                 self._publishers[robot, kind] = reliable_publisher(session, key)
         for robot in self.peers:
-            self._stats_publishers[robot] = reliable_publisher(self.session, keys.link_stats(robot))
+            self._stats_publishers[robot] = reliable_publisher(
+                self.session, keys.of(keyspace.LINK, robot)
+            )
         self._declared.append(
             self.session.liveliness().declare_subscriber(
-                keys.alive(Role.WORLD, "*"), self._on_world, history=True
+                keys.token(Role.WORLD, "*"), self._on_world, history=True
             )
         )
-        self._token = self.session.liveliness().declare_token(keys.alive(Role.BRIDGE, 0))
+        self._token = self.session.liveliness().declare_token(keys.token(Role.BRIDGE, 0))
 
     def close(self) -> None:
         self.presence.close()
@@ -235,7 +242,7 @@ class Bridge:
     def stop(self, reason: codec.ByeReason = codec.ByeReason.RUN_ENDED) -> None:
         self.put(StopBridge(reason))
 
-    def _on_input(self, robot: int, kind: codec.DataKind) -> Callable[[zenoh.Sample], None]:
+    def _on_input(self, robot: int, kind: keyspace.LinkCode) -> Callable[[zenoh.Sample], None]:
         def callback(sample: zenoh.Sample) -> None:
             payload = sample.payload.to_bytes()
             extra = sample.attachment.to_bytes() if sample.attachment is not None else None
@@ -244,7 +251,7 @@ class Bridge:
         return callback
 
     def _on_world(self, sample: zenoh.Sample) -> None:
-        instance = self.keys.last_chunk(str(sample.key_expr))
+        instance = self.keys.ident_of(keyspace.ALIVE_WORLD, str(sample.key_expr)) or ""
         self.put(WorldToken(instance, sample.kind == zenoh.SampleKind.PUT))
 
     def _ask_world(self, robot: int, payload: bytes, attachment: bytes | None) -> None:
@@ -256,17 +263,19 @@ class Bridge:
                 extra = reply.ok.attachment
                 answer = FromWorld(
                     robot,
-                    codec.DataKind.INFO_REPLY,
+                    keyspace.link(keyspace.INFO, Part.REPLY),
                     data,
                     extra.to_bytes() if extra is not None else None,
                 )
             else:
                 said = reply.err.payload.to_bytes() if reply.err is not None else b"no answer"
-                answer = FromWorld(robot, codec.DataKind.INFO_ERROR, said[:1024], None)
+                answer = FromWorld(
+                    robot, keyspace.link(keyspace.INFO, Part.ERROR), said[:1024], None
+                )
             self.put(answer, len(answer.payload))
 
         self.robot_sessions[robot].get(
-            self.keys.world_info,
+            self.keys.of(keyspace.INFO),
             on_reply,
             payload=payload or None,
             attachment=attachment,
@@ -350,7 +359,11 @@ class Bridge:
             self.worlds.add(token.instance)
         else:
             self.worlds.discard(token.instance)
-        kind = codec.DataKind.WORLD_UP if token.up else codec.DataKind.WORLD_DOWN
+        kind = (
+            keyspace.link(keyspace.ALIVE_WORLD)
+            if token.up
+            else keyspace.link(keyspace.ALIVE_WORLD, Part.GONE)
+        )
         for peer in self.peers.values():
             peer.send(kind, token.instance.encode(), None)
 
@@ -420,7 +433,7 @@ class Bridge:
             elif isinstance(event, SessionOpened):
                 peer = self.peers[event.robot]
                 for instance in sorted(self.worlds):
-                    peer.send(codec.DataKind.WORLD_UP, instance.encode(), None)
+                    peer.send(keyspace.link(keyspace.ALIVE_WORLD), instance.encode(), None)
                 self._publish_stats(now, force=True)
             elif isinstance(event, SessionClosed):
                 self.presence.gone(event.robot)
@@ -431,7 +444,7 @@ class Bridge:
 
     def _relay(self, message: Message) -> None:
         """Publish what the program sent, as it sent it, on its robot's key."""
-        if message.kind is codec.DataKind.INFO_QUERY:
+        if message.kind is keyspace.link(keyspace.INFO):
             self._ask_world(message.robot, message.payload, message.attachment)
             return
         publisher = self._publishers[message.robot, message.kind]
@@ -458,7 +471,7 @@ class Bridge:
             return
         self._next_stats = now + STATS_EVERY
         for robot, peer in self.peers.items():
-            key = self.keys.link_stats(robot)
+            key = self.keys.of(keyspace.LINK, robot)
             payload = protocol.encode(peer.stats())
             attachment = auth.seal(self.keyring, names.BRIDGE, key, payload)
             self._stats_publishers[robot].put(payload, attachment=attachment)

@@ -21,15 +21,14 @@ from pathlib import Path
 
 import zenoh
 
-from link.core import codec
-from link.core.impairment import LinkImpairment
-from plumbing import cliargs, cores, run_keys
-from plumbing.lifecycle import die_with_launcher
-from plumbing.stop_signals import on_stop_signals
-from plumbing.zenoh_session import open_from_args, open_session, session_mode
-from wire import names
+from bestofn_swarm.link.core import codec
+from bestofn_swarm.plumbing import cliargs, process_main
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.plumbing.zenoh_session import open_from_args, open_session, session_mode
+from bestofn_swarm.wire import names
 from world_server.bridge import keys as link_keys
 from world_server.bridge.bridge import Bridge, BridgeConfig, LinkedRobot
+from world_server.bridge.core.impairment import LinkImpairment
 
 log = logging.getLogger("bridge")
 
@@ -138,16 +137,18 @@ def impairment_of(args: argparse.Namespace) -> LinkImpairment:
     return LinkImpairment(args.link_delay / 1000, args.link_jitter / 1000, args.link_loss)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    cores.check()  # stale compiled cores would run old code
-    die_with_launcher()
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def robots_of(parser: argparse.ArgumentParser, args: argparse.Namespace) -> tuple[LinkedRobot, ...]:
+    """The robots outside and their links, each robot once."""
     robots = tuple(args.robots)
     if len({linked.robot for linked in robots}) != len(robots):
         parser.exit(2, "bridge: error: a robot is given twice\n")
-    cliargs.configure_logging("bridge", args.log_level)
-    keyring = run_keys.from_args(parser, args, "bridge")
+    return robots
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    begun = process_main.begin("bridge", parser, argv, robots_of)
+    args, robots, keyring = begun.args, begun.settings, begun.keyring
     if keyring is not None and not keyring.holds(names.BRIDGE):
         parser.exit(2, "bridge: error: the run keys hold no key for the bridge\n")
     try:

@@ -6,7 +6,7 @@ hand reads them from a file (``--link-keys``), mode 0600. Either is one JSON obj
 
     {"v": 1, "run": "<run id>", "links": {"8": "<64 hex digits>", "9": "..."}}
 
-with each key ``link.link_key`` of the robot's run key.
+with each key ``bestofn_swarm.link.core.codec.link_key`` of the robot's run key.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import os
 from collections.abc import Mapping
 from pathlib import Path
 
-from wire import names
+from bestofn_swarm.wire import names
 
 LINK_KEYS_ENV = "BESTOFN_LINK_KEYS"
 KEY_BYTES = 32

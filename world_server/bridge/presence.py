@@ -21,19 +21,18 @@ from typing import Any
 
 import zenoh
 
-from link.core import codec
-from wire import protocol
-from wire.names import Role
+from bestofn_swarm.wire import keyspace
+from bestofn_swarm.wire.names import Role
 
 log = logging.getLogger("bridge")
 
 # The first message of a session that makes the robot present: the node publishes its
 # first status just before it declares its token (robot_agent/node/robot_node.py).
-ANNOUNCES = codec.DataKind.STATUS
+ANNOUNCES = keyspace.link(keyspace.STATUS)
 
 
 class Presence:
-    def __init__(self, sessions: Mapping[int, zenoh.Session], keys: protocol.Keys) -> None:
+    def __init__(self, sessions: Mapping[int, zenoh.Session], keys: keyspace.Keys) -> None:
         self.sessions = sessions  # each outside robot's own session
         self.keys = keys
         self.tokens: dict[int, Any] = {}
@@ -41,11 +40,11 @@ class Presence:
     def present(self, robot: int) -> bool:
         return robot in self.tokens
 
-    def spoke(self, robot: int, kind: codec.DataKind) -> None:
+    def spoke(self, robot: int, kind: keyspace.LinkCode) -> None:
         """The robot sent ``kind`` (relayed already): present from its first status."""
         if kind is ANNOUNCES and robot not in self.tokens:
             token = (
-                self.sessions[robot].liveliness().declare_token(self.keys.alive(Role.ROBOT, robot))
+                self.sessions[robot].liveliness().declare_token(self.keys.token(Role.ROBOT, robot))
             )
             self.tokens[robot] = token
             log.info("robot %d is present", robot)

@@ -16,8 +16,8 @@ Rendering casts one ray per image column (a 2-D ray cast is exact here because e
 object is a vertical extrusion), then fills each column's rows from the hit's depth with
 perspective. The image is built as a small label map and coloured with one palette lookup.
 All geometry is plain arithmetic on the heading's sine and cosine from the portable kernel
-(``wire.numeric``), and the noise comes from the run's generator (``wire.rng``), so a frame
-is the same on every CPU.
+(``bestofn_swarm.wire.numeric``), and the noise comes from the run's generator
+(``bestofn_swarm.wire.rng``), so a frame is the same on every CPU.
 """
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ import cv2
 import numpy as np
 from msgspec import Meta
 
-from wire import numeric, protocol, settings
-from wire.rng import Stream
-from wire.settings import Flag
+from bestofn_swarm.wire import numeric, protocol, settings
+from bestofn_swarm.wire.rng import Stream
+from bestofn_swarm.wire.settings import Flag
 from world_server.core.body import EPUCK
 from world_server.core.layout import Layout
 

@@ -27,14 +27,15 @@ from enum import StrEnum
 import msgspec
 import numpy as np
 
-from wire import auth, batch, names, protocol
-from wire.names import Role
+from bestofn_swarm.wire import auth, batch, keyspace, names, protocol
+from bestofn_swarm.wire.keyspace import How, Party
+from bestofn_swarm.wire.names import Role
 from world_server.core.clock import Pacer
 from world_server.core.counters import Counters
 from world_server.core.events import (
     Answered,
     Event,
-    EventKind,
+    Happening,
     Mark,
     Moment,
     Opened,
@@ -65,7 +66,7 @@ class Coordinator:
     def __init__(
         self,
         world: World,
-        keys: protocol.Keys,
+        keys: keyspace.Keys,
         outbox: Outbox,
         *,
         stall_timeout: float,
@@ -99,21 +100,22 @@ class Coordinator:
         self.start_deadline = 0.0
         self.stall_deadline = 0.0  # lockstep: when the tick under way closes without all
         self.now = 0.0  # the time of the last event or wake-up
-        self._handlers: dict[EventKind, Callable[[Event], None]] = {
-            EventKind.ACT: self._act,
-            EventKind.ACTS: self._acts,
-            EventKind.ACK: self._ack,
-            EventKind.TX: self.intake.take_tx,
-            EventKind.ALIVE: lambda event: self.roster.appeared(event.key),
-            EventKind.GONE: self._gone,
-            EventKind.STATS: self._stats,
-            EventKind.JOIN: self._join,
-            EventKind.INFO: self._info,
-            EventKind.REFUSED: lambda event: self.counters.reject(
+        # What the world takes in, by the kind of the key table it came on, or happening.
+        self._handlers: dict[keyspace.KeyKind | Happening, Callable[[Event], None]] = {
+            keyspace.ACT: self._act,
+            keyspace.HOST_ACT: self._acts,
+            keyspace.ACK: self._ack,
+            keyspace.RADIO_TX: self.intake.take_tx,
+            keyspace.STATS: self._stats,
+            keyspace.JOIN: self._join,
+            keyspace.INFO: self._info,
+            Happening.REFUSED: lambda event: self.counters.reject(
                 event.key, event.payload.decode(errors="replace")
             ),
-            EventKind.STOP: lambda event: self.stop(),
+            Happening.STOP: lambda event: self.stop(),
         }
+        for kind in keyspace.heard_by(Party.WORLD, how=How.TOKEN):
+            self._handlers[kind] = self._token
 
     # --- fed from outside --------------------------------------------------------------
 
@@ -134,8 +136,9 @@ class Coordinator:
     def take(self, event: Event, now: float) -> None:
         """Take one event handled at ``now``, without closing a tick."""
         self.now = now
-        if self.phase != Phase.STOPPED:
-            self._handlers[event.kind](event)
+        handler = self._handlers.get(event.kind)
+        if handler is not None and self.phase != Phase.STOPPED:
+            handler(event)
 
     def wake(self, now: float) -> None:
         """Time is ``now``: start, close and open ticks as due."""
@@ -271,7 +274,11 @@ class Coordinator:
     def _answered(self, event: Event, who: str) -> None:
         self.outbox(Answered(who, event.arrived, self.now))
 
-    def _gone(self, event: Event) -> None:
+    def _token(self, event: Event) -> None:
+        """A robot's or a beacon's liveliness token appeared, or went."""
+        if not event.gone:
+            self.roster.appeared(event.key)
+            return
         token = self.roster.went(event.key)
         if token is None:
             return
@@ -335,7 +342,7 @@ class Coordinator:
         self.roster.apply_joins()
         rx_counts = {name: len(items) for name, items in result.deliveries.items()}
         for name, deliveries in result.deliveries.items():
-            key = self.keys.radio_rx(name)
+            key = self.keys.of(keyspace.RADIO_RX, name)
             receiver = names.robot_identity(int(name))  # only robots receive
             for delivery in deliveries:
                 meta = protocol.RadioRxMeta(
@@ -369,9 +376,9 @@ class Coordinator:
         # Each beacon is sent it only for the ticks it answers; world/clock is for observers.
         clock = protocol.Clock(v=protocol.VERSION, tick=tick, t=self.world.t)
         for beacon in self.roster.beacons_answering(tick):
-            key = self.keys.beacon_clock(beacon)
+            key = self.keys.of(keyspace.BEACON_CLOCK, beacon)
             self.outbox(self._world_message(key, clock))
-        self.outbox(self._world_message(self.keys.world_clock, clock, if_heard=True))
+        self.outbox(self._world_message(self.keys.of(keyspace.CLOCK), clock, if_heard=True))
         spec = self.world.config.camera
         for robot, frame in frames.items():
             meta = protocol.CameraMeta(
@@ -383,7 +390,7 @@ class Coordinator:
             )
             self.outbox(
                 Publish(
-                    self.keys.camera(robot),
+                    self.keys.of(keyspace.CAMERA, robot),
                     frame,
                     self.world.camera.encode,  # PNG, lossless: the robot sees what was rendered
                     identity=names.robot_identity(robot),
@@ -431,7 +438,7 @@ class Coordinator:
             )
             self.outbox(
                 Publish(
-                    self.keys.host_sense(host.first),
+                    self.keys.of(keyspace.HOST_SENSE, host.first),
                     message,
                     batch.encode_sense_rows,
                     identity=host.identity,
@@ -445,7 +452,7 @@ class Coordinator:
                 robot = robots[index]
                 self.outbox(
                     Publish(
-                        self.keys.sense(robot),
+                        self.keys.of(keyspace.SENSE, robot),
                         messages[index],
                         protocol.encode,
                         identity=names.robot_identity(robot),
@@ -456,7 +463,7 @@ class Coordinator:
         return len(robots) - len(alone)
 
     def _publish_state(self) -> None:
-        self.outbox(self._world_message(self.keys.world_state, self.state()))
+        self.outbox(self._world_message(self.keys.of(keyspace.STATE), self.state()))
 
     def _world_message(
         self, key: str, message: msgspec.Struct, *, if_heard: bool = False

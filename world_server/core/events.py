@@ -13,29 +13,25 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
-from wire import auth
-from wire.parcel import Encoder, Parcel
+from bestofn_swarm.wire import auth, keyspace
+from bestofn_swarm.wire.parcel import Encoder, Parcel
 
 
-class EventKind(StrEnum):
-    """What arrived, by where it came from."""
+class Happening(StrEnum):
+    """What reaches the coordinator that is no sample of the key table."""
 
-    ACT = "act"  # robot/<id>/act: one robot's answer to a tick
-    ACTS = "acts"  # host/<lead>/act: a batch of the acts of a process's robots
-    ACK = "ack"  # beacon/<name>/ack: a beacon's answer to a tick (the ticks it answers)
-    TX = "tx"  # radio/tx/<sender>: a radio message for the medium
-    ALIVE = "alive"  # a liveliness token appeared
-    GONE = "gone"  # a liveliness token went
-    STATS = "stats"  # a query of world/stats
-    JOIN = "join"  # a query of world/join: an id for a robot started with --id auto
-    INFO = "info"  # a query of world/info (answered by the transport): its asker is present
     REFUSED = "refused"  # something the transport refused on its own side: counted here
     STOP = "stop"  # the process is told to stop
 
 
 @dataclass(frozen=True, slots=True)
 class Event:
-    kind: EventKind
+    """What arrived: a sample of a kind the world hears (``keyspace.heard_by(Party.WORLD)``:
+    an act, a host's batch of acts, a beacon's ack, a radio message), a query it answers
+    (world/info, answered by the transport: its asker is present; world/stats; world/join),
+    a liveliness token that appeared or went (``gone``), or a happening."""
+
+    kind: keyspace.KeyKind | Happening
     key: str = ""  # the key expression it came on (or was asked on)
     payload: bytes = b""  # REFUSED: why, in UTF-8
     attachment: bytes | None = None
@@ -47,6 +43,7 @@ class Event:
     # every other check still applies. A transport never sets it: what arrives as bytes
     # is decoded and its tag checked.
     message: object = None
+    gone: bool = False  # a liveliness token that went (else it appeared)
 
 
 # --- outputs ----------------------------------------------------------------------------
@@ -55,7 +52,7 @@ class Event:
 class Publish(Parcel):
     """A message to publish, reliably (blocking rather than dropping under congestion):
     ``message`` for a core in the same process, ``payload`` and ``attachment`` (encoded
-    and sealed on demand) for a transport (``wire.parcel``)."""
+    and sealed on demand) for a transport (``bestofn_swarm.wire.parcel``)."""
 
     def __init__(
         self,
@@ -105,7 +102,7 @@ class ReplyError:
 
 
 class Moment(StrEnum):
-    """Points in the work of a tick that ``--trace`` times (plumbing/trace.py)."""
+    """Points in the work of a tick that ``--trace`` times (bestofn_swarm/plumbing/trace.py)."""
 
     OPEN_START = "open_start"  # the tick's inputs start going out
     OPENED = "opened"  # they are all out

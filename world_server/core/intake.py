@@ -3,7 +3,7 @@
 Trust: a message is taken only with its sender's run-key tag (in a keyed run), from a
 robot of the swarm or a beacon, for the tick under way (lockstep), or (real time) for a
 tick the world has reached, not too far behind it and after the sender's last message
-taken (``wire.guard.realtime_refused``: an authentic message replayed is refused); a
+taken (``bestofn_swarm.wire.guard.realtime_refused``: an authentic message replayed is refused); a
 radio sender sends at most MAX_TX_PER_TICK messages in a tick, each sequence number once.
 An input that fails a check is rejected and counted (``Counters``; a radio message also
 by the radio); a sender's own message that comes after its tick, or after it left (or
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import msgspec
 
-from wire import auth, batch, guard, names, protocol
+from bestofn_swarm.wire import auth, batch, guard, keyspace, names, protocol
 from world_server.core.clock import Barrier
 from world_server.core.counters import Counters
 from world_server.core.events import Event
@@ -30,7 +30,7 @@ class TickIntake:
     def __init__(
         self,
         world: World,
-        keys: protocol.Keys,
+        keys: keyspace.Keys,
         counters: Counters,
         keyring: auth.Keyring | None = None,
     ) -> None:
@@ -54,7 +54,7 @@ class TickIntake:
     def take_act(self, event: Event) -> int | None:
         """Take one robot's act; the robot, if its act was taken as its answer to the tick
         under way."""
-        robot = self.keys.robot_of(event.key)
+        robot = self.keys.robot_of(keyspace.ACT, event.key)
         if robot is None or not self.world.is_member(robot):
             self.counters.reject(event.key, "not a robot of the swarm")
             return None
@@ -71,12 +71,12 @@ class TickIntake:
 
     def take_acts(self, event: Event) -> dict[int, Host]:
         """Take a batch of acts from a process hosting the robots ``first`` to ``last``
-        (``host/<first>/act``, its identity's tag over it; wire/batch.py), each entry as
-        that robot's act; an entry of any other robot is refused and counted. The batch
+        (``host/<first>/act``, its identity's tag over it; bestofn_swarm/wire/batch.py), each entry
+        as that robot's act; an entry of any other robot is refused and counted. The batch
         routes it teaches: robot -> the process, for each robot whose act was taken as its
         answer to the tick under way. Only such an act teaches a route: an old batch,
         replayed, must not divert the senses of robots that answer elsewhere now."""
-        first = self.keys.robot_of(event.key, "host")
+        first = self.keys.robot_of(keyspace.HOST_ACT, event.key)
         if first is None or not self.world.is_member(first):
             self.counters.reject(event.key, "not a robot of the swarm")
             return {}
@@ -125,7 +125,7 @@ class TickIntake:
     def take_ack(self, event: Event) -> tuple[str, protocol.Ack] | None:
         """Take a beacon's answer: its identity and its ack if the tick under way took it
         (lockstep) or it came from a beacon taking part (real time)."""
-        name = self.keys.last_chunk(event.key.rsplit("/", 1)[0])
+        name = self.keys.ident_of(keyspace.ACK, event.key) or ""
         if not names.is_beacon_name(name):
             self.counters.reject(event.key, f"no beacon of this run is called {name!r}")
             return None
@@ -158,7 +158,7 @@ class TickIntake:
 
     def take_tx(self, event: Event) -> None:
         """Take a radio message for the medium, to transmit when the tick closes."""
-        sender = self.keys.last_chunk(event.key)
+        sender = self.keys.ident_of(keyspace.RADIO_TX, event.key) or ""
         robot = names.robot_of_name(sender)
         if robot is not None and not self.world.is_member(robot):
             robot = None

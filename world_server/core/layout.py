@@ -10,8 +10,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from wire import numeric, protocol
-from wire.rng import Stream
+from bestofn_swarm.wire import numeric, protocol
+from bestofn_swarm.wire.rng import Stream
 from world_server.core.body import EPUCK
 
 BASE_ARENA_RADIUS = 0.75  # the paper's 1.5 m disc

@@ -12,7 +12,7 @@ compare against.
 Determinism: bodies are added in call order and pymunk iterates them in that order; every
 public result is keyed or sorted by robot id. The same calls in the same order give
 bit-identical poses on any x86-64 CPU with the same pymunk build: every sine and cosine
-here comes from the portable kernel (``wire.numeric``), every sum is written out in a
+here comes from the portable kernel (``bestofn_swarm.wire.numeric``), every sum is written out in a
 fixed order, and inside Chipmunk a body's angle reaches nothing but the rotation of its
 shapes' offsets, which are zero for these centred discs (so libm's CPU-dependent cos and
 sin, which Chipmunk calls, cannot move a robot). No clock and no randomness here.
@@ -29,7 +29,7 @@ import numpy as np
 import pymunk
 from pymunk import batch
 
-from wire import numeric
+from bestofn_swarm.wire import numeric
 from world_server.core.body import EPUCK, EpuckSpec
 
 ROBOT_MASS = 0.15  # kg, about an e-puck

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from wire import names, protocol
+from bestofn_swarm.wire import names, protocol
 
 LINK_SECONDS = 3.0  # sim seconds a pooling stays drawn: about a dwell at the nest
 ARRIVAL_SLACK = 1e-6  # sim seconds: an opinion delivered in the tick of arrival counts

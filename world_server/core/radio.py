@@ -36,9 +36,9 @@ from typing import Annotated, ClassVar, Literal
 import numpy as np
 from msgspec import Meta
 
-from wire import names, numeric, protocol, settings
-from wire.rng import Stream
-from wire.settings import Flag
+from bestofn_swarm.wire import names, numeric, protocol, settings
+from bestofn_swarm.wire.rng import Stream
+from bestofn_swarm.wire.settings import Flag
 
 SenderKind = Literal["robot", "beacon"]
 Metres = Annotated[float, Meta(gt=0.0)]

@@ -9,7 +9,7 @@ router can declare one. It joins once its identity has proved itself present wit
 authenticated query of ``world/info`` (each robot and beacon asks it as it starts and
 whenever a world server appears), so tokens without keys never take part, never fill
 MAX_BEACONS and never hold a tick up. A robot whose process answers in batches gets its
-senses in its process's batch (wire/batch.py) until its process's first robot goes. A
+senses in its process's batch (bestofn_swarm/wire/batch.py) until its process's first robot goes. A
 beacon takes part in the ticks it answers: every tick until its first answer, then the
 tick each answer names (``Ack.next_tick``).
 """
@@ -19,8 +19,8 @@ from __future__ import annotations
 import logging
 from typing import NamedTuple
 
-from wire import names, protocol
-from wire.names import Role
+from bestofn_swarm.wire import keyspace, names
+from bestofn_swarm.wire.names import Role
 from world_server.core.counters import Counters
 from world_server.core.world import World
 
@@ -39,7 +39,7 @@ class Host(NamedTuple):
 
     @property
     def identity(self) -> str:
-        """Whose key seals its batches (wire/names.py)."""
+        """Whose key seals its batches (bestofn_swarm/wire/names.py)."""
         return names.host_identity(self.first, self.last)
 
     def hosts(self, robot: int) -> bool:
@@ -54,7 +54,7 @@ class Token(NamedTuple):
 
     @property
     def identity(self) -> str:
-        """Whose key proves it (wire/names.py)."""
+        """Whose key proves it (bestofn_swarm/wire/names.py)."""
         if self.role == Role.ROBOT:
             return names.robot_identity(int(self.ident))
         return names.beacon_identity(self.ident)
@@ -62,7 +62,7 @@ class Token(NamedTuple):
 
 class Roster:
     def __init__(
-        self, world: World, keys: protocol.Keys, counters: Counters, proof: bool = False
+        self, world: World, keys: keyspace.Keys, counters: Counters, proof: bool = False
     ) -> None:
         """``proof``: a token joins only once its identity proved itself present (a keyed
         run); otherwise (no keys to prove anything with) a token joins on its own."""
@@ -87,10 +87,14 @@ class Roster:
         """The robot's or beacon's token ``key`` is; None for other roles (the world, the
         recorder), which the barrier does not involve, and for a robot outside the swarm
         or a beacon name no beacon can have (rejected if ``count``)."""
-        parts = key[len(self.keys.prefix) + 1 :].split("/")
-        if len(parts) != 3 or parts[0] != "alive" or parts[1] not in (Role.ROBOT, Role.BEACON):
+        role = ident = None
+        for candidate in (Role.ROBOT, Role.BEACON):
+            ident = self.keys.ident_of(keyspace.TOKEN_OF[candidate], key)
+            if ident is not None:
+                role = candidate
+                break
+        if role is None or ident is None:
             return None
-        role, ident = Role(parts[1]), parts[2]
         if role == Role.ROBOT:
             robot = names.robot_of_name(ident)
             valid = robot is not None and self.world.is_member(robot)
@@ -170,7 +174,7 @@ class Roster:
                 self.world.join_robot(robot)
             elif ident not in self.world.beacons() and len(self.world.beacons()) >= MAX_BEACONS:
                 self.counters.reject(
-                    self.keys.alive(Role.BEACON, ident), f"more than {MAX_BEACONS} beacons"
+                    self.keys.token(Role.BEACON, ident), f"more than {MAX_BEACONS} beacons"
                 )
             else:
                 self.world.join_beacon(ident)

@@ -15,9 +15,9 @@ from typing import Annotated, ClassVar, Literal
 import numpy as np
 from msgspec import Meta
 
-from wire import batch, names, numeric, protocol, settings, shape
-from wire.rng import Stream, seed_of
-from wire.settings import Flag
+from bestofn_swarm.wire import batch, names, numeric, protocol, settings, shape
+from bestofn_swarm.wire.rng import Stream, seed_of
+from bestofn_swarm.wire.settings import Flag
 from world_server.core.body import EpuckSpec
 from world_server.core.camera import CameraNoise, CameraRenderer
 from world_server.core.layout import Layout, make_layout

@@ -8,7 +8,7 @@ import logging
 import time
 from typing import Any
 
-from wire import auth, names, protocol
+from bestofn_swarm.wire import auth, keyspace, names
 from world_server.recording.writer import McapRecorder, Sample
 
 log = logging.getLogger("recorder")
@@ -20,18 +20,20 @@ def query_parts(query: Any) -> tuple[bytes, bytes | None]:
     return payload, attachment
 
 
-def refused(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> bool:
+def refused(recorder: McapRecorder, query: Any, keys: keyspace.Keys) -> bool:
     """Whether a finish query is someone's but the launcher's (then counted and refused).
 
     In a keyed run only the launcher that started the recorder holds the key to finish it.
     """
     payload, attachment = query_parts(query)
     try:
-        asker, _ = auth.query_open(recorder.keyring, keys.recorder_finish, payload, attachment)
+        asker, _ = auth.query_open(
+            recorder.keyring, keys.of(keyspace.RECORDER_FINISH), payload, attachment
+        )
         if recorder.keyring is not None and asker != names.LAUNCHER:
             raise auth.AuthError(f"{asker} may not finish the recording")
     except auth.AuthError as error:
-        sample = Sample(keys.recorder_finish, payload, attachment, time.time_ns())
+        sample = Sample(keys.of(keyspace.RECORDER_FINISH), payload, attachment, time.time_ns())
         recorder.reject(sample, f"finish query refused: {error}")
         query.reply_err(b"unauthenticated query")
         query.drop()
@@ -39,10 +41,12 @@ def refused(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> bool:
     return False
 
 
-def finish_on_query(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> None:
+def finish_on_query(recorder: McapRecorder, query: Any, keys: keyspace.Keys) -> None:
     """Close the recording with the query's summary, then answer the query."""
     payload, attachment = query_parts(query)
-    asker, nonce = auth.query_open(recorder.keyring, keys.recorder_finish, payload, attachment)
+    asker, nonce = auth.query_open(
+        recorder.keyring, keys.of(keyspace.RECORDER_FINISH), payload, attachment
+    )
     summary: Any = None
     if payload:
         try:
@@ -51,7 +55,9 @@ def finish_on_query(recorder: McapRecorder, query: Any, keys: protocol.Keys) -> 
             summary = payload.decode("utf-8", "replace")
     recorder.finish(summary, finished_by="finish query")
     answer = b"ok"
-    sealed = auth.reply_seal(recorder.keyring, asker, keys.recorder_finish, answer, nonce)
-    query.reply(keys.recorder_finish, answer, attachment=sealed)
+    sealed = auth.reply_seal(
+        recorder.keyring, asker, keys.of(keyspace.RECORDER_FINISH), answer, nonce
+    )
+    query.reply(keys.of(keyspace.RECORDER_FINISH), answer, attachment=sealed)
     query.drop()  # sends the final reply now, not when the object is collected
     log.info("recording complete: %s", dict(sorted(recorder.counts.items())))

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import argparse
 
-from plumbing import cliargs, settings_cli
-from plumbing.settings_cli import Options
+from bestofn_swarm.plumbing import cliargs, settings_cli
+from bestofn_swarm.plumbing.settings_cli import Options
 from world_server.recording.description import RunDescription
 
 # Nothing waits for the recorder, so it yields the CPU to the swarm: at nice 10 recording

@@ -9,9 +9,9 @@ query (``finish.py``) or a stop signal.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import logging
-import os
 import sys
 import threading
 import time
@@ -19,13 +19,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from plumbing import cliargs, run_keys, settings_cli
-from plumbing.inbox import BoundedInbox, message_bytes
-from plumbing.lifecycle import die_with_launcher
-from plumbing.private_files import open_private
-from plumbing.stop_signals import on_stop_signals
-from wire import auth, names, protocol
-from wire.names import Role
+from bestofn_swarm.plumbing import process_main, settings_cli
+from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
+from bestofn_swarm.plumbing.private_files import open_private
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.wire import auth, keyspace, names, protocol
+from bestofn_swarm.wire.names import Role
 from world_server.recorder.finish import query_parts
 from world_server.recorder.options import RECORDER_OPTIONS, build_parser
 from world_server.recorder.write_loop import STOP, Finish, write_loop
@@ -38,19 +37,11 @@ INBOX_BYTES = 256 * 2**20  # what may wait for the writer thread, at most
 MAX_SAMPLE_BYTES = protocol.MAX_CAMERA_FRAME_BYTES + 1024  # a frame and its attachment
 
 
-def _lower_priority(niceness: int) -> None:
-    """Yield the CPU to the swarm; a platform without nice() just records at full priority."""
-    try:
-        os.nice(niceness)
-    except (AttributeError, OSError) as error:
-        log.info("could not lower the recorder's priority: %s", error)
-
-
 def _world_info(
-    session: Any, keys: protocol.Keys, timeout: float, keyring: auth.Keyring | None
+    session: Any, keys: keyspace.Keys, timeout: float, keyring: auth.Keyring | None
 ) -> protocol.WorldInfo | None:
     """The world's info if a world server answers in time (it gives dt and robot size)."""
-    from plumbing.world_info import fetch_world_info
+    from bestofn_swarm.plumbing.world_info import fetch_world_info
 
     try:
         return fetch_world_info(session, keys, timeout, keyring, names.RECORDER)
@@ -59,10 +50,8 @@ def _world_info(
         return None
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    die_with_launcher()
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def recorded_run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> RunDescription:
+    """The run being recorded (``--config`` or the options), checked against ``--run-id``."""
     run: RunDescription = settings_cli.config_from(
         parser, args, RECORDER_OPTIONS, {"run_id": args.run_id}
     )
@@ -70,18 +59,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.exit(
             2, f"recorder: error: --config is of run {run.run_id!r}, not --run-id {args.run_id!r}\n"
         )
-    cliargs.configure_logging("recorder", args.log_level)
-    from plumbing.zenoh_session import check_config_files, open_from_args
+    return run
 
-    check_config_files(parser, args)  # before the keys' warning: one line if it fails
-    keyring = run_keys.from_args(parser, args, "recorder")
-    if keyring is not None and keyring.secret is None:
-        parser.exit(2, "recorder: error: the recorder needs the run secret\n")
-    if args.niceness:  # before Zenoh starts its threads, so that they inherit it
-        _lower_priority(args.niceness)
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    begun = process_main.begin(
+        "recorder",
+        parser,
+        argv,
+        recorded_run,
+        runs_cores=False,
+        needs_secret="the recorder",
+        lower_priority=True,
+    )
+    args, run, keyring, keys = begun.args, begun.settings, begun.keyring, begun.keys
     import zenoh
 
-    keys = protocol.Keys(args.run_id, args.root)
+    from bestofn_swarm.plumbing.zenoh_session import open_from_args
+
     out = Path(args.out)
     try:
         stream = open_private(out, "wb")  # a recording holds the whole run: its owner's
@@ -102,7 +98,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     def on_finish(query: zenoh.Query) -> None:
         """The finish query, after what came before it; refused at once if no room."""
         payload, attachment = query_parts(query)
-        size = message_bytes(payload, attachment, keys.recorder_finish)
+        size = message_bytes(payload, attachment, keys.of(keyspace.RECORDER_FINISH))
         if not inbox.put(Finish(query), size, once=True):
             query.reply_err(b"the recorder has no room for the query")
             query.drop()
@@ -115,7 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     with session, stream:
         subscriber = session.declare_subscriber(keys.all, on_sample)
-        queryable = session.declare_queryable(keys.recorder_finish, on_finish)
+        queryable = session.declare_queryable(keys.of(keyspace.RECORDER_FINISH), on_finish)
         info = _world_info(session, keys, args.info_timeout, keyring)
         recorder = McapRecorder(stream, keys, run, info, keyring=keyring)
         done = threading.Event()
@@ -126,7 +122,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             daemon=True,
         )
         writer.start()
-        token = session.liveliness().declare_token(keys.alive(Role.RECORDER, 0))
+        token = session.liveliness().declare_token(keys.token(Role.RECORDER, 0))
         log.info("recording %s to %s", keys.all, out)
         while not done.wait(0.2):  # wake up for signals
             pass

@@ -9,8 +9,8 @@ import threading
 import time
 from typing import Any
 
-from plumbing.inbox import BoundedInbox
-from wire import protocol
+from bestofn_swarm.plumbing.inbox import BoundedInbox
+from bestofn_swarm.wire import keyspace
 from world_server.recorder.finish import finish_on_query, refused
 from world_server.recording.writer import McapRecorder, Sample
 
@@ -35,7 +35,7 @@ STOP = object()  # a stop signal in the queue
 def write_loop(
     recorder: McapRecorder,
     inbox: BoundedInbox[Any],
-    keys: protocol.Keys,
+    keys: keyspace.Keys,
     done: threading.Event,
 ) -> None:
     """The writer thread: record samples in arrival order until a finish query or a stop."""

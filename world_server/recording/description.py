@@ -14,8 +14,8 @@ from typing import Annotated, Any, ClassVar
 
 from msgspec import Meta
 
-from wire import names, protocol, settings, shape
-from wire.settings import Flag
+from bestofn_swarm.wire import names, protocol, settings, shape
+from bestofn_swarm.wire.settings import Flag
 from world_server.core.layout import Layout
 
 

@@ -2,8 +2,8 @@
 types of the samples it records and their JSON Schemas, and which key is which kind.
 
 One channel per key, topic = the key, schema encoding ``jsonschema`` with the schema
-generated from the message's one definition in ``wire/protocol.py`` (refs inlined), message
-encoding ``json``. Radio samples are recorded as ``{"meta": <attachment>, "payload":
+generated from the message's one definition in ``bestofn_swarm/wire/protocol.py`` (refs inlined),
+message encoding ``json``. Radio samples are recorded as ``{"meta": <attachment>, "payload":
 <payload>}`` (``RadioTxRecord``, ``RadioRxRecord``); camera frames as
 ``foxglove.CompressedImage``; samples refused as ``RejectedSample``. The writer
 (``writer.py``) and the reader (``reader.py``) both go by these names.
@@ -16,26 +16,12 @@ from typing import Any
 
 import msgspec
 
-from wire import keyspace, protocol
+from bestofn_swarm.wire import keyspace, protocol
 from world_server.recording import foxglove
 
 START_METADATA = "bestofn.start"  # written when recording begins
 RUN_METADATA = "bestofn.run"  # written at the end, with the recorder's counts and the summary
 SCHEMA_PREFIX = "bestofn."
-
-
-class RadioTxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
-    """A ``radio/tx/<sender>`` sample as recorded: its attachment and its payload."""
-
-    meta: protocol.RadioTxMeta
-    payload: protocol.RadioPayload
-
-
-class RadioRxRecord(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
-    """A ``radio/rx/<receiver>`` sample as recorded: its attachment and its payload."""
-
-    meta: protocol.RadioRxMeta
-    payload: protocol.RadioPayload
 
 
 class RejectedSample(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
@@ -49,29 +35,16 @@ class RejectedSample(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     payload_bytes: int  # the whole payload's size
 
 
-# Key leaf -> message type. ``camera`` is recorded as foxglove.CompressedImage.
-MESSAGE_TYPES: dict[str, Any] = {
-    "clock": protocol.Clock,
-    "state": protocol.WorldState,
-    "sense": protocol.Sense,
-    "act": protocol.Act,
-    "status": protocol.Status,
-    "ack": protocol.Ack,
-    "log": protocol.LogLine,
-    "link": protocol.LinkStats,
-    "radio_tx": RadioTxRecord,
-    "radio_rx": RadioRxRecord,
-    "rejected": RejectedSample,
-}
-CAMERA = "camera"
-BEACON_CLOCK = "beacon_clock"  # checked, not recorded: world/clock's message again
+REJECTED = "rejected"  # the recorder's own channel of the samples it refused
 
 
-def schema_name(kind: str) -> str:
-    """The MCAP schema name of a kind of sample: ``bestofn.Sense``, ``foxglove.Log`` ..."""
-    if kind == CAMERA:
-        return foxglove.COMPRESSED_IMAGE
-    return SCHEMA_PREFIX + MESSAGE_TYPES[kind].__name__
+def schema_name(kind: keyspace.KeyKind | str) -> str:
+    """The MCAP schema name of a kind of sample (``bestofn.Sense``, ``foxglove.CompressedImage``,
+    from the key table), or of the rejected samples' channel."""
+    if isinstance(kind, str):
+        return SCHEMA_PREFIX + RejectedSample.__name__
+    assert kind.schema is not None, f"a recording keeps no {kind.name} samples"
+    return kind.schema
 
 
 def inline_refs(schema: dict[str, Any]) -> dict[str, Any]:
@@ -96,18 +69,23 @@ def inline_refs(schema: dict[str, Any]) -> dict[str, Any]:
 
 
 @functools.cache
-def message_schema(kind: str) -> dict[str, Any]:
-    """The JSON Schema of a recorded kind, from its definition in the protocol."""
-    if kind == CAMERA:
+def message_schema(kind: keyspace.KeyKind | str) -> dict[str, Any]:
+    """The JSON Schema of a recorded kind, from its definition in the protocol (the key
+    table says which type that is), or of the rejected samples."""
+    if isinstance(kind, str):
+        return inline_refs(protocol.json_schema(RejectedSample))
+    if kind.recorded is keyspace.Recorded.IMAGE:
         return foxglove.schema(foxglove.COMPRESSED_IMAGE)
-    return inline_refs(protocol.json_schema(MESSAGE_TYPES[kind]))
+    return inline_refs(protocol.json_schema(kind.record_type))
 
 
-def classify(keys: protocol.Keys, key: str) -> str | None:
-    """The kind of sample a key carries (its name in the key table, ``wire/keyspace.py``),
-    or None for a key outside the protocol, or whose name no robot, beacon or process of a
-    run can have. A host's batch is recorded as its robots' own messages (``writer.py``)."""
+def classify(keys: keyspace.Keys, key: str) -> keyspace.Classified | None:
+    """The kind of sample a key carries and the name it gives (the key table's,
+    ``bestofn_swarm/wire/keyspace.py``), or None for a key outside the protocol, or whose name
+    no robot, beacon or process of a run can have, or a kind a recording does not keep as
+    samples of their own (a host's batch is recorded as its robots' own messages:
+    ``writer.py``)."""
     found = keyspace.classify(keys, key)
-    if found is None or found.kind.name in ("host_sense", "host_act"):
+    if found is None or found.kind.recorded in (None, keyspace.Recorded.BATCH):
         return None
-    return found.kind.name
+    return found

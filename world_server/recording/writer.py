@@ -6,7 +6,7 @@ forwards.
 What a recording holds (see docs/recording.md; the record types in ``records.py``):
 
 * one channel per key, topic = the key, schema encoding ``jsonschema`` with the schema
-  generated from the message's one definition in ``wire/protocol.py`` (refs
+  generated from the message's one definition in ``bestofn_swarm/wire/protocol.py`` (refs
   inlined), message encoding ``json``, the payload bytes as they were on the wire. Radio
   samples are recorded as ``{"meta": <attachment>, "payload": <payload>}``; camera frames
   as ``foxglove.CompressedImage``;
@@ -27,6 +27,7 @@ What a recording holds (see docs/recording.md; the record types in ``records.py`
 from __future__ import annotations
 
 import base64
+import contextlib
 import functools
 import importlib.metadata
 import json
@@ -39,14 +40,15 @@ from typing import IO, Any, NamedTuple
 import msgspec
 from mcap.writer import CompressionType, Writer
 
-from wire import auth, batch, keyspace, names, protocol
+from bestofn_swarm.wire import auth, batch, keyspace, names, protocol
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
-from world_server.core.pooling import LINK_SECONDS, Pooling, PoolingTracker
+from world_server.core.pooling import LINK_SECONDS, Pooling
+from world_server.observer.observer import RunObserver
 from world_server.recording import foxglove
 from world_server.recording.description import RunDescription, layout_description, versions
 from world_server.recording.records import (
-    BEACON_CLOCK,
+    REJECTED,
     RUN_METADATA,
     START_METADATA,
     RejectedSample,
@@ -80,10 +82,15 @@ def chunk_bytes(robots: int) -> int:
 @dataclass
 class _Channel:
     id: int | None  # None until its first message: a key that only carries junk gets none
-    kind: str
+    kind: keyspace.KeyKind | str  # a kind of the key table, or a derived topic's schema
     robot: int | None = None
     sequence: int = 0
     topic: str = ""
+    ident: str | None = None  # the name the key gives
+
+    @property
+    def counted_as(self) -> str:
+        return self.kind if isinstance(self.kind, str) else self.kind.name
 
 
 class Sample(NamedTuple):
@@ -101,7 +108,7 @@ class McapRecorder:
     def __init__(
         self,
         stream: IO[bytes] | None,
-        keys: protocol.Keys,
+        keys: keyspace.Keys,
         run: RunDescription,
         info: protocol.WorldInfo | None = None,
         *,
@@ -110,7 +117,8 @@ class McapRecorder:
         keyring: auth.Keyring | None = None,
     ) -> None:
         """``writer``: where records go instead of an MCAP file in ``stream``; any object
-        with ``mcap.writer.Writer``'s methods (Foxglove live passes one; viewer/foxglove_live.py).
+        with ``mcap.writer.Writer``'s methods (Foxglove live passes one;
+        deploy/viewer/foxglove_live.py).
         """
         self.keys = keys
         self.keyring = keyring  # None: an unauthenticated run, every tag-less sample taken
@@ -139,30 +147,12 @@ class McapRecorder:
         self._routes: dict[str, tuple[Callable[[Sample], None], str | None]] = {}
         self._max_routes = KEYS_PER_ROBOT * run.robots + KEYS_OF_A_RUN
         self._host_prefix = f"{keys.prefix}/host/"
-        self._decoders: dict[str, msgspec.json.Decoder[Any]] = {
-            name: msgspec.json.Decoder(kind_type)
-            for name, kind_type in (
-                ("clock", protocol.Clock),
-                ("state", protocol.WorldState),
-                ("sense", protocol.Sense),
-                ("act", protocol.Act),
-                ("ack", protocol.Ack),
-                ("status", protocol.Status),
-                ("log", protocol.LogLine),
-                ("link", protocol.LinkStats),
-                ("camera meta", protocol.CameraMeta),
-                ("radio_tx meta", protocol.RadioTxMeta),
-                ("radio_rx meta", protocol.RadioRxMeta),
-                ("radio payload", protocol.RadioPayload),
-            )
-        }
         self._encoder = msgspec.json.Encoder()
-        # Scene state: the latest pose and status of each robot, and pooling links.
-        self.poses: dict[int, tuple[float, float, float]] = {}
-        self.views: dict[int, foxglove.SceneRobot] = {}
+        # Scene state: the run's observer (the latest pose and status of each robot, whom each
+        # pooling joined, as the live page sees it) and the pooling links drawn.
+        self.observer = RunObserver(range(run.robots), poolings=True, open_roster=True)
         self._pose_batch: list[tuple[int, float, float, float]] = []
         self._pose_batch_ns = 0
-        self.poolings = PoolingTracker()  # who each pooling joined, as the live page sees it
         self._links: dict[int, tuple[int, list[foxglove.Segment]]] = {}  # robot -> (when, links)
         self._writer.add_metadata(START_METADATA, self._description())
 
@@ -198,16 +188,16 @@ class McapRecorder:
             self._schemas[name] = schema_id
         return schema_id
 
-    def _channel(self, topic: str, kind: str, robot: int | None = None) -> _Channel:
+    def _channel(self, topic: str, kind: str) -> _Channel:
         channel = self._channels.get(topic)
         if channel is None:
-            channel = _Channel(None, kind, robot, topic=topic)
+            channel = _Channel(None, kind, topic=topic)
             self._register(channel)
         return channel
 
     def _register(self, channel: _Channel) -> int:
         kind = channel.kind
-        if kind in foxglove.SCHEMA_NAMES:
+        if isinstance(kind, str) and kind in foxglove.SCHEMA_NAMES:
             schema_id = self._schema_id(kind, foxglove.schema(kind))
         else:
             schema_id = self._schema_id(schema_name(kind), message_schema(kind))
@@ -219,7 +209,8 @@ class McapRecorder:
         channel_id = self._register(channel) if channel.id is None else channel.id
         self._writer.add_message(channel_id, log_ns, data, wall_ns, channel.sequence)
         channel.sequence += 1
-        self.counts[channel.kind] = self.counts.get(channel.kind, 0) + 1
+        counted = channel.counted_as
+        self.counts[counted] = self.counts.get(counted, 0) + 1
 
     def _write_derived(
         self, leaf: str, schema: str, log_ns: int, message: Any, wall_ns: int
@@ -231,7 +222,7 @@ class McapRecorder:
 
     def record(self, sample: Sample) -> None:
         """Record one sample, in the order samples arrived; a batch (``host/<first>/sense``
-        or ``act``, wire/batch.py) as the robots' own messages it carries."""
+        or ``act``, bestofn_swarm/wire/batch.py) as the robots' own messages it carries."""
         if sample.key.startswith(self._host_prefix):
             self._record_batch(sample)
         else:
@@ -266,14 +257,15 @@ class McapRecorder:
     def _record_batch(self, sample: Sample) -> None:
         """A batch, checked against its host's tag, as the JSON messages of its robots (the
         same bytes as each robot's own message on its key)."""
-        leaf = sample.key.rsplit("/", 1)[-1]
-        first = self.keys.robot_of(sample.key, "host")
-        if first is None or leaf not in ("sense", "act"):
+        found = keyspace.classify(self.keys, sample.key)
+        first = None if found is None else found.robot
+        if found is None or first is None or found.kind.recorded is not keyspace.Recorded.BATCH:
             self.reject(sample, "not a key of the protocol")
             return
+        of_senses = found.kind is keyspace.HOST_SENSE
         try:
             entries: list[tuple[int, msgspec.Struct]]
-            if leaf == "sense":
+            if of_senses:
                 senses = batch.decode_senses(sample.payload)
                 last, entries = senses.last, list(zip(senses.robots, senses.senses, strict=True))
             else:
@@ -289,29 +281,27 @@ class McapRecorder:
             except auth.AuthError as error:
                 self.reject(sample, f"{identity}: {error}")
                 return
-        per_robot = self.keys.sense if leaf == "sense" else self.keys.act
+        per_robot = keyspace.SENSE if of_senses else keyspace.ACT
         for robot, message in entries:
             if not first <= robot <= last:
                 self.reject(sample, f"batch: robot {robot} is not one {identity} hosts")
                 continue
-            entry = Sample(per_robot(robot), protocol.encode(message), None, sample.wall_ns)
+            entry = Sample(
+                self.keys.of(per_robot, robot), protocol.encode(message), None, sample.wall_ns
+            )
             self._record_one(entry, checked=True)
 
     def _route(self, key: str) -> tuple[Callable[[Sample], None], str | None]:
         """How to record a sample on ``key``, and whose tag it must carry (None: the key
         is none of the protocol's, and every sample on it is rejected)."""
-        kind = classify(self.keys, key)
-        found = keyspace.classify(self.keys, key)
-        if kind is None or found is None:
+        found = classify(self.keys, key)
+        if found is None:
             return functools.partial(self.reject, reason="not a key of the protocol"), None
         speaker = found.speaker  # whose key tags the key: the key table says
         if speaker is None or not names.is_identity(speaker):
             return functools.partial(self.reject, reason="no identity of the run"), None
-        if kind == BEACON_CLOCK:
-            return self._check_beacon_clock, speaker
-        channel = _Channel(None, kind, found.robot, topic=key)  # the robot the key names
-        handler = getattr(self, f"_on_{kind}")
-        return functools.partial(handler, channel), speaker
+        channel = _Channel(None, found.kind, found.robot, topic=key, ident=found.ident)
+        return functools.partial(self._record_kind, channel), speaker
 
     def _tick_ns(self, tick: int) -> int:
         return tick * self.dt_ns if self.dt_ns else self.sim_ns
@@ -335,52 +325,104 @@ class McapRecorder:
             attachment=head(sample.attachment) if sample.attachment is not None else None,
             payload_bytes=len(sample.payload),
         )
-        channel = self._channel(f"{self.keys.prefix}/recorder/rejected", "rejected")
+        channel = self._channel(f"{self.keys.prefix}/recorder/rejected", REJECTED)
         self._write(channel, self.sim_ns, self._encoder.encode(record), sample.wall_ns)
 
-    def _decoded(self, what: str, data: bytes | None, sample: Sample) -> Any:
-        """``data`` decoded and validated as the protocol does, or None once rejected."""
-        if data is None:
-            reason = f"{what}: missing"
-        elif len(data) > protocol.MAX_PAYLOAD_BYTES:
-            reason = f"{what}: {len(data)} bytes exceeds {protocol.MAX_PAYLOAD_BYTES}"
+    def _record_kind(self, channel: _Channel, sample: Sample) -> None:
+        """Record one sample of a kind of the key table as the table says a recording keeps
+        it, once it passed the table's gate; and what the scene derives from it."""
+        kind = channel.kind
+        assert isinstance(kind, keyspace.KeyKind)
+        try:
+            opened = keyspace.open_message(kind, channel.ident, sample.payload, sample.attachment)
+        except keyspace.SampleError as error:
+            self.reject(sample, str(error))
+            return
+        if kind.recorded is keyspace.Recorded.CHECKED:
+            return  # a beacon's clock: world/clock's message of that tick, recorded there
+        if kind is keyspace.CAMERA and len(sample.payload) > protocol.MAX_CAMERA_FRAME_BYTES:
+            self.reject(sample, f"camera frame of {len(sample.payload)} bytes")
+            return
+        timed = opened.meta if opened.meta is not None else opened.message
+        tick = getattr(timed, "tick", None)
+        if kind is keyspace.CLOCK and not self.dt_ns and tick:
+            self.dt_ns = round(opened.message.t * 1e9 / tick)
+        if tick is None:
+            ns = self.sim_ns
+        elif kind is keyspace.CLOCK and not self.dt_ns:
+            ns = round(opened.message.t * 1e9)
         else:
+            ns = self._tick_ns(tick)
+        if kind.recorded is keyspace.Recorded.RADIO:
+            assert sample.attachment is not None  # the gate refused a missing one
+            data = b'{"meta":' + sample.attachment + b',"payload":' + sample.payload + b"}"
+        elif kind.recorded is keyspace.Recorded.IMAGE:
+            frame_id = f"{foxglove.robot_frame(channel.robot or 0)}/camera"
+            image = foxglove.compressed_image(ns, frame_id, sample.payload, opened.meta.encoding)
+            data = self._encoder.encode(image)
+        else:
+            data = sample.payload
+        if kind is keyspace.CLOCK:
+            self.sim_ns = max(self.sim_ns, ns)
+        self._write(channel, ns, data, sample.wall_ns)
+        self._derive(opened, ns, sample.wall_ns)
+
+    def _derive(self, opened: keyspace.Opened, ns: int, wall_ns: int) -> None:
+        """What the Foxglove scene and log derive from a recorded sample, fed to the run's
+        observer first."""
+        kind, message, robot = opened.kind, opened.message, opened.robot
+        run = self.observer
+        if kind is keyspace.RADIO_RX:
+            if robot is not None:
+                run.delivery(robot, opened.meta.sender, self._tick_ns(opened.meta.tick) / 1e9)
+            return
+        if kind is keyspace.STATUS:
+            assert robot is not None
+            previous = self._view(robot)
             try:
-                return self._decoders[what].decode(data)
-            except (msgspec.DecodeError, msgspec.ValidationError) as error:
-                reason = f"{what}: {error}"
-        self.reject(sample, reason)
-        return None
+                noted = run.status(message)
+            except keyspace.SampleError:
+                return  # recorded as it came; the scene keeps the robot's latest
+            if noted.pooling is not None:
+                self._note_links(noted.pooling, ns)
+            view = self._view(robot)
+            if (view.phase, view.decided_site) != (previous.phase, previous.decided_site):
+                update = self.scene.robot_update(ns, robot, view)
+                self._write_derived("scene", foxglove.SCENE_UPDATE, ns, update, wall_ns)
+        elif kind is keyspace.CLOCK:
+            run.clock(message)
+            self._flush_poses(wall_ns)
+        elif kind is keyspace.SENSE:
+            assert robot is not None
+            if ns != self._pose_batch_ns:
+                self._flush_poses(wall_ns)
+                self._pose_batch_ns = ns
+            self._pose_batch.append((robot, message.x, message.y, message.theta))
+            run.poses[robot] = (message.x, message.y, message.theta)
+        elif kind is keyspace.STATE:
+            with contextlib.suppress(keyspace.SampleError):
+                run.state(message)
+            recent = ns - round(LINK_SECONDS * 1e9)  # as long as the live page draws one
+            segments = [
+                segment
+                for pooled_ns, robot_segments in self._links.values()
+                if pooled_ns >= recent
+                for segment in robot_segments
+            ]
+            views = {robot: self._view(robot) for robot in run.poses}
+            update = self.scene.update(ns, views, segments)
+            self._write_derived("scene", foxglove.SCENE_UPDATE, ns, update, wall_ns)
+        elif kind is keyspace.LOG:
+            log_line = foxglove.log_message(self.sim_ns, message.process, message.line)
+            self._write_derived("log", foxglove.LOG, self.sim_ns, log_line, wall_ns)
 
-    def _on_clock(self, channel: _Channel, sample: Sample) -> None:
-        clock = self._decoded("clock", sample.payload, sample)
-        if clock is None:
-            return
-        if not self.dt_ns and clock.tick > 0:
-            self.dt_ns = round(clock.t * 1e9 / clock.tick)
-        ns = self._tick_ns(clock.tick) if self.dt_ns else round(clock.t * 1e9)
-        self.sim_ns = max(self.sim_ns, ns)
-        self._write(channel, ns, sample.payload, sample.wall_ns)
-        self._flush_poses(sample.wall_ns)
-
-    def _check_beacon_clock(self, sample: Sample) -> None:
-        """A beacon's clock is world/clock's message of that tick, recorded there: it is
-        only checked (a forged one counts as rejected), not recorded twice."""
-        self._decoded("clock", sample.payload, sample)
-
-    def _on_sense(self, channel: _Channel, sample: Sample) -> None:
-        sense = self._decoded("sense", sample.payload, sample)
-        if sense is None:
-            return
-        ns = self._tick_ns(sense.tick)
-        self._write(channel, ns, sample.payload, sample.wall_ns)
-        if ns != self._pose_batch_ns:
-            self._flush_poses(sample.wall_ns)
-            self._pose_batch_ns = ns
-        robot = channel.robot
-        assert robot is not None  # classify() only routes robot/<id>/sense here
-        self._pose_batch.append((robot, sense.x, sense.y, sense.theta))
-        self.poses[robot] = (sense.x, sense.y, sense.theta)
+    def _view(self, robot: int) -> foxglove.SceneRobot:
+        """What the scene shows of a robot: its latest status, as the observer has it."""
+        record = self.observer.records.get(robot)
+        status = None if record is None else record.status
+        if status is None:
+            return foxglove.SceneRobot()
+        return foxglove.SceneRobot(status.phase, status.decided_site, status.trips, status.poolings)
 
     def _flush_poses(self, wall_ns: int) -> None:
         """All robots' poses of one tick as one ``foxglove.FrameTransforms``."""
@@ -391,112 +433,18 @@ class McapRecorder:
             )
             self._pose_batch = []
 
-    def _on_act(self, channel: _Channel, sample: Sample) -> None:
-        act = self._decoded("act", sample.payload, sample)
-        if act is not None:
-            self._write(channel, self._tick_ns(act.tick), sample.payload, sample.wall_ns)
-
-    def _on_ack(self, channel: _Channel, sample: Sample) -> None:
-        ack = self._decoded("ack", sample.payload, sample)
-        if ack is not None:
-            self._write(channel, self._tick_ns(ack.tick), sample.payload, sample.wall_ns)
-
-    def _on_status(self, channel: _Channel, sample: Sample) -> None:
-        status = self._decoded("status", sample.payload, sample)
-        if status is None:
-            return
-        ns = self._tick_ns(status.tick)
-        self._write(channel, ns, sample.payload, sample.wall_ns)
-        robot = channel.robot
-        assert robot is not None
-        previous = self.views.get(robot, foxglove.SceneRobot())
-        view = foxglove.SceneRobot(status.phase, status.decided_site, status.trips, status.poolings)
-        self.views[robot] = view
-        pooling, _ = self.poolings.on_status(status)
-        if pooling is not None:
-            self._note_links(pooling, ns)
-        if (view.phase, view.decided_site) != (previous.phase, previous.decided_site):
-            update = self.scene.robot_update(ns, robot, view)
-            self._write_derived("scene", foxglove.SCENE_UPDATE, ns, update, sample.wall_ns)
-
     def _note_links(self, pooling: Pooling, ns: int) -> None:
         """The radio links of a pooling: to every robot whose opinion it joined."""
-        here = self.poses.get(pooling.robot)
+        poses = self.observer.poses
+        here = poses.get(pooling.robot)
         if here is None:
             return
         segments = [
-            ((here[0], here[1]), (self.poses[other][0], self.poses[other][1]))
+            ((here[0], here[1]), (poses[other][0], poses[other][1]))
             for other in pooling.members
-            if other in self.poses
+            if other in poses
         ]
         self._links[pooling.robot] = (ns, segments)
-
-    def _on_state(self, channel: _Channel, sample: Sample) -> None:
-        state = self._decoded("state", sample.payload, sample)
-        if state is None:
-            return
-        ns = self._tick_ns(state.tick)
-        self._write(channel, ns, sample.payload, sample.wall_ns)
-        for pose in state.robots:
-            self.poses[pose.id] = (pose.x, pose.y, pose.theta)
-        recent = ns - round(LINK_SECONDS * 1e9)  # as long as the live page draws one
-        segments = [
-            segment
-            for pooled_ns, robot_segments in self._links.values()
-            if pooled_ns >= recent
-            for segment in robot_segments
-        ]
-        views = {robot: self.views.get(robot, foxglove.SceneRobot()) for robot in self.poses}
-        update = self.scene.update(ns, views, segments)
-        self._write_derived("scene", foxglove.SCENE_UPDATE, ns, update, sample.wall_ns)
-
-    def _on_camera(self, channel: _Channel, sample: Sample) -> None:
-        meta = self._decoded("camera meta", sample.attachment, sample)
-        if meta is None:
-            return
-        if len(sample.payload) > protocol.MAX_CAMERA_FRAME_BYTES:
-            self.reject(sample, f"camera frame of {len(sample.payload)} bytes")
-            return
-        ns = self._tick_ns(meta.tick)
-        frame_id = f"{foxglove.robot_frame(channel.robot or 0)}/camera"
-        image = foxglove.compressed_image(ns, frame_id, sample.payload, meta.encoding)
-        self._write(channel, ns, self._encoder.encode(image), sample.wall_ns)
-
-    def _on_radio_tx(self, channel: _Channel, sample: Sample) -> None:
-        self._radio("radio_tx meta", channel, sample)
-
-    def _on_radio_rx(self, channel: _Channel, sample: Sample) -> None:
-        meta = self._radio("radio_rx meta", channel, sample)
-        robot = channel.robot
-        if isinstance(meta, protocol.RadioRxMeta) and robot is not None:
-            self.poolings.on_delivery(robot, meta.sender, self._tick_ns(meta.tick) / 1e9)
-
-    def _radio(self, meta_kind: str, channel: _Channel, sample: Sample) -> Any:
-        """Record a radio sample as ``{"meta": <attachment>, "payload": <payload>}``; its
-        metadata, or None if it was rejected."""
-        meta = self._decoded(meta_kind, sample.attachment, sample)
-        if meta is None:
-            return None
-        message = self._decoded("radio payload", sample.payload, sample)
-        if message is None:
-            return None
-        assert sample.attachment is not None  # _decoded refused a missing one
-        data = b'{"meta":' + sample.attachment + b',"payload":' + sample.payload + b"}"
-        self._write(channel, self._tick_ns(meta.tick), data, sample.wall_ns)
-        return meta
-
-    def _on_log(self, channel: _Channel, sample: Sample) -> None:
-        line = self._decoded("log", sample.payload, sample)
-        if line is None:
-            return
-        self._write(channel, self.sim_ns, sample.payload, sample.wall_ns)
-        message = foxglove.log_message(self.sim_ns, line.process, line.line)
-        self._write_derived("log", foxglove.LOG, self.sim_ns, message, sample.wall_ns)
-
-    def _on_link(self, channel: _Channel, sample: Sample) -> None:
-        """A robot outside the emulator: its link's figures, at the sim time they came."""
-        if self._decoded("link", sample.payload, sample) is not None:
-            self._write(channel, self.sim_ns, sample.payload, sample.wall_ns)
 
     # --- the end -------------------------------------------------------------------
 

@@ -16,12 +16,10 @@ from collections.abc import Sequence
 
 import zenoh
 
-from plumbing import cliargs, cores, run_keys, settings_cli
-from plumbing.lifecycle import die_with_launcher
-from plumbing.stop_signals import on_stop_signals
-from plumbing.trace import open_trace
-from plumbing.zenoh_session import check_config_files, open_from_args, session_mode
-from wire import protocol
+from bestofn_swarm.plumbing import cliargs, process_main, settings_cli
+from bestofn_swarm.plumbing.stop_signals import on_stop_signals
+from bestofn_swarm.plumbing.trace import open_trace
+from bestofn_swarm.plumbing.zenoh_session import open_from_args, session_mode
 from world_server.core.world import World, WorldConfig
 from world_server.server.options import WORLD_SERVER_OPTIONS, WorldServerConfig, world_server_config
 from world_server.server.zenoh_adapter import WorldServer
@@ -54,11 +52,9 @@ def config_from_args(args: argparse.Namespace) -> WorldConfig:
     return world_server_config(args).world
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    cores.check()  # stale compiled cores would run old code
-    die_with_launcher()
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def checked_config(parser: argparse.ArgumentParser, args: argparse.Namespace) -> WorldServerConfig:
+    """The server's settings (``--config`` or its options), checked against ``--run-id``;
+    by default a router listens on loopback."""
     config: WorldServerConfig = settings_cli.config_from(
         parser, args, WORLD_SERVER_OPTIONS, {"world.run": args.run_id}
     )
@@ -70,13 +66,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     if session_mode(args) == "router" and not args.listen and not args.zenoh_config:
         args.listen = [cliargs.LOCAL_ENDPOINT]
-    cliargs.configure_logging("world-server", args.log_level)
-    check_config_files(parser, args)
-    keyring = run_keys.from_args(parser, args, "world-server")
-    if keyring is not None and keyring.secret is None:
-        parser.exit(2, "world-server: error: the world server needs the run secret\n")
+    return config
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    begun = process_main.begin(
+        "world-server", parser, argv, checked_config, needs_secret="the world server"
+    )
+    args, config, keyring, keys = begun.args, begun.settings, begun.keyring, begun.keys
     world = World(config.world)
-    keys = protocol.Keys(args.run_id, args.root)
     try:
         session = open_from_args(args)
     except zenoh.ZError as error:

@@ -11,9 +11,9 @@ from typing import Annotated, ClassVar
 
 from msgspec import Meta
 
-from plumbing.settings_cli import Options
-from wire import settings
-from wire.settings import Flag
+from bestofn_swarm.plumbing.settings_cli import Options
+from bestofn_swarm.wire import settings
+from bestofn_swarm.wire.settings import Flag
 from world_server.core.world import WorldConfig
 
 

@@ -1,5 +1,5 @@
-"""``--trace``: one JSON line per tick of the world (plumbing/trace.py), assembled from the
-coordinator's timeline outputs, each stamped with the clock when it comes out.
+"""``--trace``: one JSON line per tick of the world (bestofn_swarm/plumbing/trace.py), assembled
+from the coordinator's timeline outputs, each stamped with the clock when it comes out.
 
 A line holds what the tick opened with (tick, robots, frames, rx, batched), when its
 inputs started going out and were all out (open_start, opened), each answer it took
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from plumbing.trace import TraceWriter, now
+from bestofn_swarm.plumbing.trace import TraceWriter, now
 from world_server.core.events import Answered, Mark, Moment, Opened
 
 

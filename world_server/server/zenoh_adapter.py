@@ -21,15 +21,16 @@ from typing import Any, cast
 
 import zenoh
 
-from plumbing.trace import TraceWriter, now
-from plumbing.world_info import NOT_THIS_INSTANCE
-from plumbing.zenoh_session import reliable_publisher, reliable_put
-from wire import auth, batch, protocol
-from wire.names import Role
+from bestofn_swarm.plumbing.trace import TraceWriter, now
+from bestofn_swarm.plumbing.world_info import NOT_THIS_INSTANCE
+from bestofn_swarm.plumbing.zenoh_session import reliable_publisher, reliable_put
+from bestofn_swarm.wire import auth, batch, keyspace, protocol
+from bestofn_swarm.wire.keyspace import How, Party
+from bestofn_swarm.wire.names import Role
 from world_server.core.coordinator import UNAUTHENTICATED, Coordinator
 from world_server.core.events import (
     Event,
-    EventKind,
+    Happening,
     Output,
     Publish,
     Reply,
@@ -51,7 +52,7 @@ class WorldServer:
         self,
         session: zenoh.Session,
         world: World,
-        keys: protocol.Keys,
+        keys: keyspace.Keys,
         *,
         config: WorldServerConfig | None = None,
         expect_robots: int = 0,
@@ -97,7 +98,7 @@ class WorldServer:
         with self.lock:
             self.coordinator.handle(event, time.monotonic())
 
-    def _on_sample(self, kind: EventKind) -> Any:
+    def _on_sample(self, kind: keyspace.KeyKind) -> Any:
         def callback(sample: zenoh.Sample) -> None:
             attachment = sample.attachment
             payload = sample.payload.to_bytes()
@@ -111,11 +112,14 @@ class WorldServer:
 
         return callback
 
-    def _on_alive(self, sample: zenoh.Sample) -> None:
-        kind = EventKind.ALIVE if sample.kind == zenoh.SampleKind.PUT else EventKind.GONE
-        self._feed(Event(kind, str(sample.key_expr)))
+    def _on_token(self, kind: keyspace.KeyKind) -> Any:
+        def callback(sample: zenoh.Sample) -> None:
+            gone = sample.kind != zenoh.SampleKind.PUT
+            self._feed(Event(kind, str(sample.key_expr), gone=gone))
 
-    def _on_query(self, kind: EventKind, key: str) -> Any:
+        return callback
+
+    def _on_query(self, kind: keyspace.KeyKind, key: str) -> Any:
         def callback(query: zenoh.Query) -> None:
             payload, attachment = _query_bytes(query)
             self._feed(Event(kind, key, payload, attachment, query=query))
@@ -127,12 +131,12 @@ class WorldServer:
         then tell the coordinator its asker is present. A query that names a world
         instance (its payload) is answered only by that instance: a robot or beacon asks
         so to prove that a world token it saw is this world's (docs/security.md)."""
-        key = self.keys.world_info
+        key = self.keys.of(keyspace.INFO)
         payload, attachment = _query_bytes(query)
         try:
             identity, nonce = auth.query_open(self.keyring, key, payload, attachment)
         except auth.AuthError as error:
-            self._feed(Event(EventKind.REFUSED, key, str(error).encode()))
+            self._feed(Event(Happening.REFUSED, key, str(error).encode()))
             query.reply_err(UNAUTHENTICATED)
             return
         if payload and payload != self.instance.encode():
@@ -140,34 +144,36 @@ class WorldServer:
         else:
             sealed = auth.reply_seal(self.keyring, identity, key, self._info_bytes, nonce)
             query.reply(key, self._info_bytes, attachment=sealed)
-        self._feed(Event(EventKind.INFO, key, payload, attachment))
+        self._feed(Event(keyspace.INFO, key, payload, attachment))
 
     def declare(self) -> None:
         keys, session = self.keys, self.session
-        for key in (keys.world_clock, keys.world_state):
+        for key in (keys.of(keyspace.CLOCK), keys.of(keyspace.STATE)):
             self._publishers[key] = reliable_publisher(session, key)
+        # What the world hears, asks and watches: the key table says.
         self._declared = [
-            session.declare_subscriber(keys.act("*"), self._on_sample(EventKind.ACT)),
-            session.declare_subscriber(keys.host_act("*"), self._on_sample(EventKind.ACTS)),
-            session.declare_subscriber(keys.beacon_ack("*"), self._on_sample(EventKind.ACK)),
-            session.declare_subscriber(keys.radio_tx("*"), self._on_sample(EventKind.TX)),
-            session.liveliness().declare_subscriber(
-                f"{keys.prefix}/alive/**", self._on_alive, history=True
+            *(
+                session.declare_subscriber(keys.every(kind), self._on_sample(kind))
+                for kind in keyspace.heard_by(Party.WORLD)
             ),
-            session.declare_queryable(keys.world_info, self._on_info),
-            session.declare_queryable(
-                keys.world_stats, self._on_query(EventKind.STATS, keys.world_stats)
+            *(
+                session.liveliness().declare_subscriber(
+                    keys.every(kind), self._on_token(kind), history=True
+                )
+                for kind in keyspace.heard_by(Party.WORLD, how=How.TOKEN)
             ),
-            session.declare_queryable(
-                keys.world_join, self._on_query(EventKind.JOIN, keys.world_join)
+            session.declare_queryable(keys.of(keyspace.INFO), self._on_info),
+            *(
+                session.declare_queryable(keys.of(kind), self._on_query(kind, keys.of(kind)))
+                for kind in (keyspace.STATS, keyspace.JOIN)
             ),
             # The token names this world instance, so robots can tell a restarted world.
-            session.liveliness().declare_token(keys.alive(Role.WORLD, self.instance)),
+            session.liveliness().declare_token(keys.token(Role.WORLD, self.instance)),
         ]
 
     def stop(self) -> None:
         """Stop the loop (from any thread; not from a signal handler: ``Event.set`` takes a
-        lock, plumbing/stop_signals.py)."""
+        lock, bestofn_swarm/plumbing/stop_signals.py)."""
         self._stopping.set()
 
     # --- the loop ----------------------------------------------------------------------
