@@ -79,3 +79,22 @@ def test_a_motor_failure_is_the_same_run_in_one_process_and_over_zenoh() -> None
     # Robot 1 cannot reach a site after its wheels stopped; the others go on.
     assert inprocess["per_robot"][1]["decided_site"] is None
     assert inprocess["ended"] != "consensus"
+
+
+def test_a_radio_failure_is_one_plug_in_and_one_switch_the_same_in_both_engines() -> None:
+    """A fault added as architecture.md says (robot_agent/core/faults.py, its switch in
+    deploy/launcher/switches.py): both engines apply it, the same run."""
+    summaries = []
+    for engine in ("inprocess", "zenoh"):
+        _, summary, stderr = run_swarm(
+            [*MOTOR, "--engine", engine, "--radio-failure", "2@5"], unique_run_id("radio")
+        )
+        assert summary is not None, stderr
+        summaries.append(summary)
+    inprocess, zenoh = summaries
+    assert inprocess["digest"] == zenoh["digest"]
+    assert [fault["action"] for fault in inprocess["faults"]] == ["radio-failure"]
+    # It changed the run: without it the same seed makes another one.
+    _, clean, stderr = run_swarm([*MOTOR, "--engine", "inprocess"], unique_run_id("clean"))
+    assert clean is not None, stderr
+    assert clean["digest"] != inprocess["digest"]

@@ -69,6 +69,11 @@ class RobotFaults:
         Meta(description=faults.MotorFailure.HELP),
         Flag(metavar="ROBOT@SIMTIME"),
     ] = ()
+    radio_failure: Annotated[
+        tuple[RobotAtTime, ...],
+        Meta(description=faults.RadioFailure.HELP),
+        Flag(metavar="ROBOT@SIMTIME"),
+    ] = ()
     byzantine: Annotated[
         tuple[byzantine.ByzantineRobot, ...],
         Meta(

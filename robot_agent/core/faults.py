@@ -139,8 +139,34 @@ class MotorFailure(RobotFault):
         return StoppedMotors(controller, self.at)
 
 
+class SilentRadio(WrappedController):
+    """A controller whose broadcasts no longer leave the robot from sim time ``at``."""
+
+    def __init__(self, inner: ports.RobotController, at: float) -> None:
+        super().__init__(inner)
+        self._at = at
+
+    def step(self, reading: ports.BodyReading, received: Sequence[ports.Received]) -> ports.Command:
+        command = self._controller.step(reading, received)
+        if reading.t < self._at or not command.broadcasts:
+            return command
+        return command.with_broadcasts(())
+
+
+class RadioFailure(RobotFault):
+    SWITCH = "radio-failure"
+    HELP = (
+        "robot ROBOT's radio stops sending from SIMTIME sim seconds: it still hears the others "
+        "and the beacon"
+    )
+    BY_ENGINE = False
+
+    def wrap(self, controller: ports.RobotController) -> ports.RobotController:
+        return SilentRadio(controller, self.at)
+
+
 # Every fault of a robot, by its switch.
-FAULTS: tuple[type[RobotFault], ...] = (Kill, Restart, MotorFailure)
+FAULTS: tuple[type[RobotFault], ...] = (Kill, Restart, MotorFailure, RadioFailure)
 BY_SWITCH: dict[str, type[RobotFault]] = {fault.SWITCH: fault for fault in FAULTS}
 
 
@@ -215,9 +241,11 @@ __all__ = [
     "FaultSpec",
     "Kill",
     "MotorFailure",
+    "RadioFailure",
     "Restart",
     "RobotFault",
     "Schedule",
+    "SilentRadio",
     "StoppedMotors",
     "wrapped",
     "wrapping",
