@@ -42,6 +42,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     ),
     "router": ("deploy.launcher.router", "a Zenoh router (a Python session; no zenohd needed)"),
     "view": ("deploy.viewer.replay", "replay a recording in the browser, on the live view's page"),
+    "frame": (
+        "deploy.reports.frame",
+        "a recorded run's time series as a CSV or Parquet table (one row per robot per sample)",
+    ),
 }
 
 
