@@ -193,7 +193,7 @@ def test_the_live_screenshot_shows_the_arena_not_a_blank_page(live_run: LiveRun)
     assert stats["colours"] > 40
     assert 0.05 < stats["non_background"] < 0.95
     best = make_layout(SITES, ROBOTS, SEED).site(live_run.summary["best_site"])
-    assert share_of_colour(live_run.screenshot, model.site_hex(best.quality)) > 0.0005
+    assert share_of_colour(live_run.screenshot, model.site_hex(best.id, SITES)) > 0.0005
 
 
 # --- the replay page in a browser -----------------------------------------------------------

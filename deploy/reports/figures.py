@@ -95,12 +95,12 @@ def plot_boxes(
 
 
 def _site_colours(layout: dict[str, Any] | None, sites: int) -> dict[int, tuple[float, ...]]:
-    """Each site's rendered colour (red share = quality), for legends and the arena."""
-    from world_server.recording.foxglove import site_colour
+    """Each site's colour (the run's categorical palette: world_server/core/palette.py),
+    for legends and the arena; its quality goes in the label."""
+    from world_server.core.palette import site_palette
 
-    if layout is None:
-        return {site: (0.5, 0.5, 0.5, 1.0) for site in range(sites)}
-    return {site["id"]: site_colour(site["quality"]) for site in layout["sites"]}
+    count = len(layout["sites"]) if layout else sites
+    return dict(enumerate(site_palette(count)))
 
 
 def plot_opinion(recording: Recording, robot: int, path: Path) -> None:

@@ -59,7 +59,7 @@ def stream(
         if kind is None:
             continue
         if observer is None or collector is None:
-            collector = _collector(reader.description, message.data, every, robot_rows, keep)
+            collector = collector_for(reader.description, message.data, every, robot_rows, keep)
             frames.collector = collector
             frames.run_id = reader.description.get("run_id") or Path(path).stem
             observer = RunObserver((), open_roster=True, series=collector)
@@ -77,14 +77,14 @@ def stream(
                 yield frames, robots, swarm
     frames.complete, frames.problem = reader.complete, reader.problem
     if frames.collector is None:  # no status nor state: a recording of nothing
-        frames.collector = _collector(reader.description, b"", every, robot_rows, keep)
+        frames.collector = collector_for(reader.description, b"", every, robot_rows, keep)
     frames.collector.finish()
     robots, swarm = ([], []) if keep else frames.collector.take()
     frames.run_id = frames.run_id or reader.description.get("run_id") or Path(path).stem
     yield frames, robots, swarm
 
 
-def _collector(
+def collector_for(
     description: dict[str, str], first: bytes, every: int, robot_rows: bool, keep: bool
 ) -> FrameCollector:
     """The collector of the run a recording describes: its sites and best site from the
@@ -133,4 +133,4 @@ def frame_of_recording(path: Path | str, *, swarm: bool = False, every: int = 1)
     return frames.collector.dataframe(swarm=swarm, run_id=frames.run_id)
 
 
-__all__ = ["RecordingFrames", "frame_of_recording", "stream"]
+__all__ = ["RecordingFrames", "collector_for", "frame_of_recording", "stream"]
