@@ -37,7 +37,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from bestofn_swarm.plumbing import cliargs, run_keys
@@ -71,8 +71,6 @@ PACE_AGAIN_AFTER = 2.0
 # swarm answers).
 SPEEDS: tuple[float | None, ...] = (None, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
 
-Pacer = Any  # a callable that publishes a protocol.Pace
-
 
 class LiveSource:
     """The run as the page sees it: the run's observer, fed what Zenoh brings. Zenoh
@@ -85,7 +83,7 @@ class LiveSource:
         keys: keyspace.Keys,
         keyring: auth.Keyring | None,
         *,
-        pace: Any = None,
+        pace: Callable[[protocol.Pace], None] | None = None,
         held: bool = False,
         lockstep: bool = True,
     ) -> None:

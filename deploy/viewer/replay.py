@@ -122,7 +122,7 @@ class _Loader:
                 self.run.state(value)
             except keyspace.SampleError:
                 return
-            self._chart()
+            self.chart()
         elif kind is keyspace.STATUS:
             timeline.statuses.setdefault(value.id, []).append(value)
             timeline.status_times.setdefault(value.id, []).append(value.t)
@@ -151,7 +151,8 @@ class _Loader:
             poses = timeline.sense_poses.setdefault(opened.robot, [])
             poses.append((value.t, value.x, value.y, value.theta))
 
-    def _chart(self, finish: bool = False) -> None:
+    def chart(self, finish: bool = False) -> None:
+        """Take the swarm rows finished (all, once the recording is read) into the timeline."""
         if self.collector is not None:
             if finish:
                 self.collector.finish()
@@ -173,7 +174,7 @@ def _read(path: Path, with_sense: bool) -> Timeline:
     loader = _Loader(timeline, reader, with_sense)
     for message in reader:
         loader.message(message)
-    loader._chart(finish=True)
+    loader.chart(finish=True)
     timeline.complete = reader.complete
     # The page names only the kind of error that cut the file short.
     stopped = reader.stopped_by
