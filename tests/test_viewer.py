@@ -603,7 +603,7 @@ class FoxgloveSeen:
         return sorted(channel["topic"] for channel in self.channels.values())
 
 
-FOXGLOVE_WANTED = ("foxglove/scene", "foxglove/transforms", "radio/rx/0")
+FOXGLOVE_WANTED = ("foxglove/scene", "foxglove/transforms", "foxglove/swarm", "radio/rx/0")
 REJECTED = "recorder/rejected"
 
 
@@ -726,6 +726,11 @@ def test_foxglove_live_serves_the_recording_channels(observed_pair: ObservedPair
         entity["id"] in ("arena", "robot-0") or entity["id"].startswith("robot-")
         for entity in scene["entities"]
     )
+    # The swarm's curves, plottable fields (a Plot panel draws .decided, .shares[0] ...).
+    assert by_topic[f"{prefix}/foxglove/swarm"]["schemaName"] == "bestofn.SwarmSample"
+    curves = seen.messages["foxglove/swarm"]
+    assert len(curves["shares"]) == SITES and 0 <= curves["decided"] <= ROBOTS
+    assert sum(curves["shares"]) == pytest.approx(1.0)
     transforms = seen.messages["foxglove/transforms"]["transforms"]
     assert transforms and all(t["parent_frame_id"] == "arena" for t in transforms)
     assert {t["child_frame_id"] for t in transforms} <= {f"robot-{i}" for i in range(ROBOTS)}
