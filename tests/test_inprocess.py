@@ -128,7 +128,9 @@ def test_its_recording_reads_like_a_swarm_run_recording(
     assert set(messages) == {kind.name for kind in recorded} | {
         "foxglove.FrameTransforms",
         "foxglove.SceneUpdate",
+        "bestofn.SwarmSample",  # the swarm's curves, one per world state
     }
+    assert messages["bestofn.SwarmSample"] == messages[keyspace.STATE.name]
 
 
 def test_a_stop_signal_ends_it_interrupted_with_its_summary_and_recording(

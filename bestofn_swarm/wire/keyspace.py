@@ -211,6 +211,10 @@ VIEWER_FINISH: Final = _kind(
     "viewer_finish", "viewer/finish", How.QUERY, None, metadata=None, publisher=_V,
     speaker=None, hearers=frozenset({_L}),
     about="asked with the run summary (JSON); answered once every page was told the ending")
+PACE: Final = _kind(
+    "pace", "viewer/pace", How.PUT, protocol.Pace, metadata=None, publisher=_V, speaker=_V,
+    hearers=frozenset({_W, _L, _REC}), recorded=Recorded.MESSAGE,
+    about="the live page's pause, play and speed; a run held for the page waits for play")
 ALIVE_WORLD: Final = _kind(
     "alive_world", "alive/world/{instance}", How.TOKEN, None, metadata=None, publisher=_W,
     speaker=None, hearers=frozenset({_R, _B, _BR, _L}), link=6, link_gone=7, link_name="WORLD",
@@ -255,6 +259,7 @@ KINDS: tuple[KeyKind, ...] = (
     LOG,
     RECORDER_FINISH,
     VIEWER_FINISH,
+    PACE,
     ALIVE_WORLD,
     ALIVE_ROBOT,
     ALIVE_BEACON,
@@ -434,6 +439,8 @@ def speaker_of(kind: KeyKind, ident: str | None) -> str | None:
         return names.BRIDGE
     if party is Party.LAUNCHER:
         return names.LAUNCHER
+    if party is Party.VIEWER:
+        return names.VIEWER
     if party is None or ident is None:
         return None
     if party in (Party.ROBOT, Party.RECEIVER):

@@ -43,6 +43,7 @@ from robot_agent.core.parking import ParkingSlots
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event, Output, Publish
 from world_server.core.world import World, WorldConfig
+from world_server.observer.frame import FrameCollector
 from world_server.observer.observer import RunObserver
 from world_server.observer.watchdog import Watchdog, default_stall_window
 
@@ -76,6 +77,9 @@ class EngineHooks:
     wall_clock: Callable[[], float] | None = None  # measures wall_time_s when given
     config: dict[str, Any] = field(default_factory=dict)  # the summary's "config"
     poses_every: int = POSES_EVERY  # swarm run's --state-every: how often the watchdog looks
+    # The run's time series: fed every status and world state, as a recording of the run
+    # would feed it (finished when the run ends).
+    frame: FrameCollector | None = None
 
 
 class _Bus:
@@ -270,7 +274,8 @@ def run_in_process(
     (``swarm run --kill``, ``--restart``, ``--motor-failure``: robot_agent/core/faults.py),
     applied at tick boundaries as the launcher applies them, or built into the robots'
     controllers; the summary's ``faults`` lists those applied. ``hooks``: progress, an
-    outside stop, a tap of every message (a recording), wall time.
+    outside stop, a tap of every message (a recording), wall time, the run's time series
+    (``hooks.frame``).
     """
     hooks = hooks or EngineHooks()
     started = hooks.wall_clock() if hooks.wall_clock is not None else 0.0
@@ -313,6 +318,7 @@ def run_in_process(
             slot_of=ParkingSlots.of_world(world.info, controller_config).slot,
         ),
         byzantine=behaviours,
+        series=hooks.frame,
     )
     bus = _Bus(
         world,
@@ -344,6 +350,8 @@ def run_in_process(
     state = bus.last_state
     if state is not None:
         run.state(state)
+    if hooks.frame is not None:
+        hooks.frame.finish()
     wall = hooks.wall_clock() - started if hooks.wall_clock is not None else 0.0
     summary = run.summary(
         run_id=world_config.run,

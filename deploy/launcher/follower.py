@@ -1,7 +1,7 @@
 """Following a run from what its processes publish: the robots' status, the world's state
-(every ``--state-every`` ticks: its sim time and poses), the beacons' acks, and the world's
-clock only when faults are to fall due at a sim time: the launcher need not follow every
-tick, and costs the run nothing on the ticks in between.
+(every ``--state-every`` ticks: its sim time and poses), the beacons' acks, the live page's
+pause and play, and the world's clock only when faults are to fall due at a sim time: the
+launcher need not follow every tick, and costs the run nothing on the ticks in between.
 
 The subscription is thin (``subscribe``): Zenoh's callbacks only copy each sample, as it
 came, into the launcher's inbox. The launcher's main thread hands them to
@@ -22,7 +22,7 @@ from typing import Any
 import zenoh
 
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
-from bestofn_swarm.wire import auth, keyspace
+from bestofn_swarm.wire import auth, keyspace, protocol
 from bestofn_swarm.wire.keyspace import Party
 from deploy.launcher.plan import RunPlan
 from robot_agent.core.parking import ParkingSlots
@@ -77,6 +77,11 @@ class Follower:
     def __init__(self, plan: RunPlan, clock: Callable[[], float]) -> None:
         self.keys = keyspace.Keys(plan.run_id)
         self.clock = clock  # wall seconds: when the run started ticking
+        # Held for the live page, or paused from it: the world's clock stands still on
+        # purpose. ``paused_since``: the wall time it was; ``paused_s``: paused before that.
+        self.held = plan.hold  # waiting for the first play
+        self.paused_since: float | None = clock() if plan.hold else None
+        self.paused_s = 0.0
         layout = make_layout(plan.sites, plan.robots, plan.seed)
         slots = ParkingSlots(
             [(site.x, site.y) for site in sorted(layout.sites, key=lambda site: site.id)],
@@ -122,7 +127,10 @@ class Follower:
                 raise keyspace.SampleError(
                     f"{heard.key} is not a key of this run's {heard.kind.name}"
                 )
-            run.take(opened)
+            if heard.kind is keyspace.PACE:
+                self._paced(opened.message)
+            else:
+                run.take(opened)
         except keyspace.SampleError as error:
             run.rejected += 1
             if heard.kind not in self._logged_rejections:  # once per kind of message
@@ -138,8 +146,31 @@ class Follower:
         now = self.clock()
         if self.started_at is None:
             self.started_at = now
+            if self.paused_since is not None:  # held: the run's time starts here
+                self.paused_since = now
         if self.ticked_at is None or sim_time > before:
             self.ticked_at = now
+
+    def _paced(self, pace: protocol.Pace) -> None:
+        """The live page paused or played the run."""
+        now = self.clock()
+        if pace.playing and self.paused_since is not None:
+            self.paused_s += now - self.paused_since
+            self.paused_since = None
+            self.held = False
+            self.ticked_at = now if self.ticked_at is not None else None
+        elif not pace.playing and self.paused_since is None:
+            self.paused_since = now
+
+    @property
+    def paused(self) -> bool:
+        """Held or paused by the live page: the world's clock stands still on purpose."""
+        return self.paused_since is not None
+
+    def paused_for(self) -> float:
+        """Wall seconds the run has been held or paused so far."""
+        since = self.paused_since
+        return self.paused_s + (self.clock() - since if since is not None else 0.0)
 
     @property
     def started(self) -> bool:
@@ -147,5 +178,10 @@ class Follower:
         return self.started_at is not None
 
     def world_stopped(self, window: float) -> bool:
-        """The world ticked, then its clock did not advance for ``window`` wall seconds."""
-        return self.ticked_at is not None and self.clock() - self.ticked_at >= window
+        """The world ticked, then its clock did not advance for ``window`` wall seconds
+        (not while the live page holds or pauses it)."""
+        return (
+            not self.paused
+            and self.ticked_at is not None
+            and self.clock() - self.ticked_at >= window
+        )

@@ -90,9 +90,11 @@ class Swarm:
 
     @property
     def wall_deadline(self) -> float:
-        if self.plan.wall_timeout is None:
+        """When ``--wall-timeout`` falls due (the time the live page held or paused the run
+        is not counted)."""
+        if self.plan.wall_timeout is None or self.follower.paused:
             return math.inf
-        return self.launched_at + self.plan.wall_timeout
+        return self.launched_at + self.follower.paused_for() + self.plan.wall_timeout
 
     def take_events(self, until: float) -> bool:
         """Take in what came, waiting for it until the wall time ``until``; whether a stop
@@ -141,6 +143,8 @@ class Swarm:
         for robot in supervisor.crashed_robots():
             run.crashed(robot)
         self.crash = supervisor.infrastructure_crash()
+        if self.crash is None and follower.paused:  # held for a page that is gone for good
+            self.crash = supervisor.crashed_observer("viewer")
         live = supervisor.live_robots() + run.outside_present()
         # Robots join once the world ticks; a restart to come will make progress.
         waiting = not follower.started or self.faults.restart_pending()
@@ -152,7 +156,7 @@ class Swarm:
                 all_decided=all_decided,
                 last_decision=run.last_decision(live) if all_decided else 0.0,
                 stalled=not waiting and run.stalled(run.sim_time),
-                wall_time=self.clock() - self.launched_at,
+                wall_time=self.clock() - self.launched_at - follower.paused_for(),
                 wall_limit=self.plan.wall_timeout,
                 crashed=self.crash is not None,
                 signalled=signalled,
@@ -207,6 +211,14 @@ def _run_swarm(
 ) -> int:
     try:
         started = swarm.supervisor.start(stopping=lambda: signals.received is not None)
+        page = swarm.plan.page
+        if started and page is not None and swarm.plan.hold and not args.quiet:
+            print(
+                f"swarm run: the swarm waits at tick 0 until a browser opens {page.url} "
+                "(--no-wait starts it at once)",
+                file=sys.stderr,
+                flush=True,
+            )
         halt = _watch(swarm, signals, console, args.quiet) if started else None
     except StartError as error:
         print(f"swarm run: could not start: {error}", file=sys.stderr)
@@ -216,7 +228,26 @@ def _run_swarm(
     if halt is None:  # a stop signal came while the processes were starting
         halt = Halt(Stop.INTERRUPTED)
     signum = signals.received if halt.stop is Stop.INTERRUPTED else None
-    return _finish(swarm, args, halt, signum)
+    code = _finish(swarm, args, halt, signum)
+    if signum is None:
+        _linger(swarm, signals, args.quiet)
+    return code
+
+
+def _linger(swarm: Swarm, signals: StopSignals, quiet: bool) -> None:
+    """Keep the live page up with the run's result, until a stop signal or the end of
+    ``--view-linger`` (the robots are stopped; the world, the recorder and the page stay)."""
+    page, linger = swarm.plan.page, swarm.plan.view_linger
+    if page is None or linger == 0 or not swarm.supervisor.observer_alive("viewer"):
+        return
+    if not quiet:
+        until = "Ctrl-C ends it" if linger is None else f"for {linger:g} s (--view-linger)"
+        print(f"swarm run: the page stays up at {page.url}: {until}", file=sys.stderr, flush=True)
+    deadline = math.inf if linger is None else swarm.clock() + linger
+    while signals.received is None and swarm.clock() < deadline:
+        if not swarm.supervisor.observer_alive("viewer"):
+            return
+        time.sleep(min(LOOK_EVERY, max(0.0, deadline - swarm.clock())))
 
 
 def _watch(swarm: Swarm, signals: StopSignals, console: Console, quiet: bool) -> Halt:
@@ -235,16 +266,23 @@ def _watch(swarm: Swarm, signals: StopSignals, console: Console, quiet: bool) ->
                 continue
             next_look = now + LOOK_EVERY
             started_at = follower.started_at
-            elapsed = now - started_at if started_at is not None else 0.0
+            elapsed = now - started_at - follower.paused_for() if started_at is not None else 0.0
             factor = run.sim_time / elapsed if elapsed > 0 else 0.0
-            progress.update(
-                task,
-                completed=run.decided(),
-                info=f"{run.decided()}/{plan.robots} decided, {run.trips()} trips, "
-                f"sim {run.sim_time:.0f}s, {factor:.0f}x real time"
-                if started_at is not None
-                else "waiting for the robots to join",
-            )
+            if follower.held:
+                info = "waiting at tick 0 for a browser on the live page"
+            elif started_at is None:
+                info = "waiting for the robots to join"
+            else:
+                info = (
+                    f"{run.decided()}/{plan.robots} decided, {run.trips()} trips, "
+                    f"sim {run.sim_time:.0f}s, "
+                    + (
+                        "paused from the live page"
+                        if follower.paused
+                        else f"{factor:.0f}x real time"
+                    )
+                )
+            progress.update(task, completed=run.decided(), info=info)
             halt = swarm.look(signals.received is not None)
             if halt is not None:
                 return halt
@@ -272,7 +310,11 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
     if robot_crashes and stop is not Stop.INTERRUPTED:
         stop = Stop.CRASHED
     started_at = follower.started_at
-    wall = (swarm.ended_at or 0.0) - started_at if started_at is not None else 0.0
+    wall = (
+        (swarm.ended_at or 0.0) - started_at - follower.paused_for()
+        if started_at is not None
+        else 0.0
+    )
     summary = run.summary(
         run_id=plan.run_id,
         num_robots=plan.robots,

@@ -23,7 +23,7 @@ from bestofn_swarm.plumbing.tcp import free_port
 from bestofn_swarm.wire import settings
 from deploy.launcher.outside import OutsidePlan, outside_plan
 from deploy.launcher.switches import SWITCHES, RunSwitches, run_switches
-from deploy.viewer.options import VIEW_OPTIONS, Observer, observers
+from deploy.viewer.options import VIEW_OPTIONS, Observer, holds, observers, view_linger
 from nest_beacon.node.options import NestBeaconConfig
 from robot_agent.core import byzantine
 from robot_agent.core.faults import RobotFault
@@ -76,6 +76,13 @@ class RunPlan:
     secure: bool = False  # TLS and access control
     trace: Path | None = None  # --trace DIR: the world's and robot hosts' tick timelines
     outside: OutsidePlan | None = None  # --external: robots served to programs outside
+    hold: bool = False  # --view: the world waits at tick 0 until the page says play
+    view_linger: float | None = 0.0  # wall seconds the page stays up after (None: until stopped)
+
+    @property
+    def page(self) -> Observer | None:
+        """The live page, if the run serves one."""
+        return next((o for o in self.observers if o.name == "viewer"), None)
 
     @property
     def external(self) -> list[int]:
@@ -98,6 +105,8 @@ class RunPlan:
         if self.outside is not None:  # it waits for the outside robots as long as we do
             start = max(world.start_timeout, self.outside.wait + OUTSIDE_START_MARGIN)
             world = dataclasses.replace(world, start_timeout=start)
+        if self.hold:
+            world = dataclasses.replace(world, hold=True)
         return ["--run-id", self.run_id, "--config", settings.encode(world)]
 
     def beacon_argv(self) -> list[str]:
@@ -174,6 +183,8 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
             f"--{on_processes[0].SWITCH} acts on one robot's process: use it with "
             "--robots-per-process 1"
         )
+    if args.view is None and (args.no_wait or args.view_linger is not None):
+        raise ValueError("--no-wait and --view-linger go with --view")
     if args.secure and args.connect:
         raise ValueError("--secure makes the run's own TLS router: it cannot use --connect")
     if args.secure and args.no_keys:
@@ -249,6 +260,8 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         secure=args.secure,
         trace=args.trace,
         outside=outside,
+        hold=holds(args),
+        view_linger=view_linger(args),
     )
 
 

@@ -342,6 +342,13 @@ class Supervisor:
                 return child
         return None
 
+    def crashed_observer(self, name: str) -> Child | None:
+        """The observer ``name`` if its process died on its own."""
+        return next((child for child in self.group.crashed() if child.name == name), None)
+
+    def observer_alive(self, name: str) -> bool:
+        return any(child.name == name and child.alive() for child in self.group.children)
+
     def crashed_robots(self) -> list[int]:
         return [
             robot
