@@ -41,6 +41,7 @@ PURE = [
 ADAPTERS = [
     "bestofn_swarm/plumbing",
     "bestofn_swarm/link/io",
+    "robot_agent/plugins",
     "robot_agent/node",
     "robot_agent/link",
     "world_server/server",
@@ -103,11 +104,19 @@ ALLOWED: dict[str, set[str]] = {
     "nest_beacon/core": {"bestofn_swarm/wire"},
     "deploy/viewer/core": {"bestofn_swarm/wire", "world_server/core", "world_server/observer"},
     "robot_agent/wellstirred": {"robot_agent/core", "bestofn_swarm/wire"},
-    "robot_agent/node": {"bestofn_swarm/wire", "robot_agent/core", "bestofn_swarm/plumbing"},
+    # Finding plug-ins by name: importing them, the installed entry points, their sources.
+    "robot_agent/plugins": {"bestofn_swarm/wire", "robot_agent/core"},
+    "robot_agent/node": {
+        "bestofn_swarm/wire",
+        "robot_agent/core",
+        "robot_agent/plugins",
+        "bestofn_swarm/plumbing",
+    },
     # The robot's end of the link: its program, on the link's loop and transports.
     "robot_agent/link": {
         "bestofn_swarm/wire",
         "robot_agent/core",
+        "robot_agent/plugins",
         "bestofn_swarm/link/core",
         "bestofn_swarm/link/io",
         "bestofn_swarm/plumbing",

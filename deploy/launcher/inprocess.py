@@ -112,6 +112,7 @@ def run_plan(plan: RunPlan, hooks: engine.EngineHooks | None = None) -> dict[str
         stall_window=plan.stall_window,
         byzantine_robots=plan.byzantine_robots,
         hooks=hooks or bare,
+        plugins=plan.plugins,
     )
 
 

@@ -38,6 +38,7 @@ from deploy.launcher.plan import RunPlan
 from deploy.launcher.processes import Child, ProcessGroup, python_module
 from deploy.security import zenoh_acl
 from deploy.security.credentials import RunNetwork
+from robot_agent.core.plugin import PLUGIN_FAILED
 
 log = logging.getLogger("swarm.run")
 
@@ -45,6 +46,7 @@ RUN_ID_ENV = "BESTOFN_RUN_ID"
 CONNECT_WAIT = 5.0  # wall seconds to wait for the router given by --connect
 START_WAIT = 30.0  # wall seconds a process of the run may take to show up
 BRIDGE_RESTARTS = 5  # a bridge that dies on its own is started again this many times
+PUMP_WAIT = 2.0  # wall seconds to wait for the last lines of a robot process that failed
 STATS_ATTEMPTS, STATS_RETRY_PAUSE = 5, 0.2
 # Processes that only watch: they stay to the end, and their crash does not end the run.
 OBSERVERS = ("viewer", "foxglove")
@@ -340,6 +342,19 @@ class Supervisor:
                 continue
             if not child.name.startswith("robot-") and child.name not in OBSERVERS:
                 return child
+        return None
+
+    def plugin_failure(self) -> str | None:
+        """What a robot process whose plug-in failed said (its last line, which names the
+        plug-in, the robot and the tick), if one did: it exits with PLUGIN_FAILED."""
+        for child in self.robot_children.values():
+            if child.alive() or child.expected_exit or child.process.returncode != PLUGIN_FAILED:
+                continue
+            if child.pump is not None:
+                child.pump.join(PUMP_WAIT)  # its last line may still be in the pipe
+            said = [line for line in child.log if line.strip()]
+            line = said[-1] if said else f"{child.name}: a plug-in failed"
+            return line.removeprefix("robot-agent: error: ")
         return None
 
     def crashed_robots(self) -> list[int]:

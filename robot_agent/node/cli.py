@@ -33,6 +33,7 @@ from bestofn_swarm.plumbing.zenoh_session import (
 )
 from bestofn_swarm.wire import auth, keyspace, names, protocol
 from robot_agent.core import builder
+from robot_agent.core.plugin import PLUGIN_FAILED, PluginError
 from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig, hosted_byzantine
 from robot_agent.node.robot_node import (
     INBOX_BYTES,
@@ -44,6 +45,7 @@ from robot_agent.node.robot_node import (
     RobotNode,
     serve,
 )
+from robot_agent.plugins import registry
 
 log = logging.getLogger("robot_agent")
 
@@ -177,6 +179,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     config = agent.controller
     try:
         misbehaving = hosted_byzantine(agent.byzantine, fixed)
+        # Its plug-ins, found here, before anything is opened: the run's sources if given
+        plugins = registry.resolve_plugins(config, agent.plugins.controller)
+        registry.check_sources(plugins, agent.plugins.sources)
     except ValueError as error:
         parser.exit(2, f"robot-agent: error: {error}\n")
     cliargs.configure_logging("robot-agent", args.log_level)
@@ -216,7 +221,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                     keys=keys,
                     keyring=keyring.only([identity]) if keyring is not None else None,
                     behaviour=misbehaving.get(robot),
+                    plugins=plugins,
                 )
+            except PluginError as error:  # a plug-in that cannot make this robot
+                print(f"robot-agent: error: {error}", file=sys.stderr)
+                return PLUGIN_FAILED
             except ValueError as error:  # another run's seed; a liar's site the world lacks
                 print(f"robot-agent: error: {error}", file=sys.stderr)
                 return 2
@@ -236,7 +245,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         for node in nodes:
             node.start()
         log.info("robot(s) %s running", ", ".join(str(node.robot_id) for node in nodes))
-        serve(nodes, inbox)
+        failure = serve(nodes, inbox)
+        if failure is not None:  # a plug-in failed in a robot's step: the run ends
+            print(f"robot-agent: error: {failure}", file=sys.stderr)
+            return PLUGIN_FAILED
     except (zenoh.ZError, TimeoutError, NoKeyError) as error:
         print(f"robot-agent: {error}", file=sys.stderr)
         return 1
