@@ -20,7 +20,7 @@ N_ROBOTS = 10
 
 @pytest.mark.parametrize("pooling", ["", None, 1, ["mprodop"], "two words", "a:b:c"])
 def test_config_rejects_what_is_no_plugin_name(pooling: Any) -> None:
-    with pytest.raises(ValueError, match="^pooling "):
+    with pytest.raises(ValueError, match=r"^pooling "):
         ControllerConfig(pooling=pooling)
 
 

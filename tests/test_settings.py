@@ -22,8 +22,8 @@ from nest_beacon.node import cli as beacon_main
 from nest_beacon.node.options import NEST_BEACON_OPTIONS, NestBeaconConfig
 from robot_agent.core.byzantine import Behaviour, ByzantineRobot
 from robot_agent.core.controller_config import ControllerConfig
-from robot_agent.node import cli as node
 from robot_agent.core.plugin import ControllerChoice
+from robot_agent.node import cli as node
 from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig
 from world_server.core.camera import CameraNoise
 from world_server.core.radio import RadioConfig

@@ -55,6 +55,7 @@ FAST = frozenset(
         "test_phases",
         "test_physics",
         "test_pooling",
+        "test_plugins",
         "test_pooling_controller",
         "test_portable_check",
         "test_ports_contract",

@@ -225,7 +225,7 @@ def run_in_process(
     timeout: float = shape.DEFAULT_TIMEOUT,
     stall_window: float | None = None,
     on_tick: Callable[[World], None] | None = None,
-    controller_factory: type[Controller] = Controller,
+    controller_factory: type[Controller] | None = None,
     byzantine_robots: Mapping[int, byzantine.Behaviour] | None = None,
     hooks: EngineHooks | None = None,
     plugins: Plugins | None = None,
