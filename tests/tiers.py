@@ -107,6 +107,8 @@ FULL_ONLY = {
     "test_faults": "starts swarms with faults",
     "test_inprocess": "starts swarms to compare with the in-process engine",
     "test_multihost": "network namespaces and processes",
+    "test_notebook": "runs the example notebook in a Jupyter kernel, with a sweep on processes",
+    "test_plugin_runs": "plug-ins in swarms over Zenoh, robot-agent --link and studies",
     "test_outside": "starts swarms with robots outside the emulator over UDP and serial links",
     "test_portable_runs": "swarms in fresh interpreters, with SIMD dispatch and without",
     "test_compiled_cores": "swarms in fresh interpreters, compiled and from the source",

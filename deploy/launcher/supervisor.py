@@ -16,6 +16,7 @@ import contextlib
 import json
 import logging
 import os
+import re
 import sys
 import time
 from collections.abc import Callable
@@ -346,16 +347,19 @@ class Supervisor:
 
     def plugin_failure(self) -> str | None:
         """What a robot process whose plug-in failed said (its last line, which names the
-        plug-in, the robot and the tick), if one did: it exits with PLUGIN_FAILED."""
-        for child in self.robot_children.values():
+        plug-in, the robot and the tick), if one did: it exits with PLUGIN_FAILED. Of
+        several, the first in the run (the earliest tick, then the lowest robot), as the
+        in-process engine, which stops at the first, reports it."""
+        failures = []
+        for child in {id(child): child for child in self.robot_children.values()}.values():
             if child.alive() or child.expected_exit or child.process.returncode != PLUGIN_FAILED:
                 continue
             if child.pump is not None:
                 child.pump.join(PUMP_WAIT)  # its last line may still be in the pipe
             said = [line for line in child.log if line.strip()]
             line = said[-1] if said else f"{child.name}: a plug-in failed"
-            return line.removeprefix("robot-agent: error: ")
-        return None
+            failures.append(line.removeprefix("robot-agent: error: "))
+        return min(failures, key=_when_failed) if failures else None
 
     def crashed_robots(self) -> list[int]:
         return [
@@ -451,6 +455,16 @@ class Supervisor:
         self.group.stop_all()
         if self.network is not None:
             self.network.close()  # its socket, certificates and keys
+
+
+def _when_failed(line: str) -> tuple[int, int]:
+    """The tick and robot a plug-in's failure names (``(robot 3, tick 120)``; one that could
+    not make robot 3 failed before tick 0)."""
+    step = re.search(r"\(robot (\d+), tick (\d+)\)$", line)
+    if step is not None:
+        return int(step.group(2)), int(step.group(1))
+    making = re.search(r"making robot (\d+)", line)
+    return -1, int(making.group(1)) if making is not None else names.MAX_ROBOTS
 
 
 def _unless(stopping: Stopping, error: StartError) -> None:
