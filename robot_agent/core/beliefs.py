@@ -15,6 +15,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.compiled import mypyc_attr
 from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import decision, defence
 
@@ -22,6 +23,9 @@ if TYPE_CHECKING:
     from robot_agent.core.controller_config import ControllerConfig
 
 
+# A strategy plug-in may be a subclass (docs/extending.md); compiled, a class refuses
+# interpreted subclasses unless it allows them.
+@mypyc_attr(allow_interpreted_subclasses=True)
 class Beliefs:
     """One robot's opinion, what it heard from neighbours, and its decision."""
 

@@ -47,6 +47,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.compiled import mypyc_attr
 from bestofn_swarm.wire.rng import Stream
 from robot_agent.core.controller_config import (
     NEVER_SETTLE,
@@ -109,6 +110,7 @@ def majority(site: int, neighbours: Sequence[int], rng: Stream) -> int:
     return tied[0] if len(tied) == 1 else tied[rng.randrange(len(tied))]
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)  # a strategy plug-in may be a subclass
 class VoteBeliefs:
     """One voting robot's site, quality estimate, the votes it heard, and its decision;
     the controller's strategy for ``dmvd``, ``dmmd`` and ``dc`` (``strategies.Strategy``)."""
