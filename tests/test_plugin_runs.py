@@ -154,3 +154,16 @@ def test_a_whole_controller_on_a_link_is_checked_by_swarm_conformance() -> None:
     )
     assert wrong.returncode == 1, wrong.stdout[-3000:]
     assert wrong.stdout.splitlines()[-1].startswith("FAIL: track ")
+
+
+def test_swarm_experiment_runs_the_plugin_in_each_of_its_runs(tmp_path: Path) -> None:
+    done = swarm(
+        "experiment", "--engine", "inprocess", "--robots", "6", "--sites", "4", "--runs", "2",
+        "--pooling", "plugin_samples:product", "--out", str(tmp_path), timeout=600,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-2000:]
+    recordings = sorted(tmp_path.glob("*.mcap"))
+    assert len(recordings) == 2
+    for path in recordings:
+        made = read_recording(path).config["plugins"]["pooling"]
+        assert made["name"] == "plugin_samples:product" and made["source"] is not None

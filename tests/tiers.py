@@ -96,6 +96,7 @@ SLOW = {
 }
 
 FULL_ONLY = {
+    "test_api": "the public API's runs over Zenoh and sweeps on worker processes",
     "test_attacks": "attacks live runs over Zenoh",
     "test_robot_builder": "starts a world, a beacon and robots by hand over Zenoh, and a swarm",
     "test_c_robot": "builds the C robot and runs swarms with it over UDP and serial links",
