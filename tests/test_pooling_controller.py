@@ -24,7 +24,7 @@ def test_config_rejects_what_is_no_plugin_name(pooling: Any) -> None:
         ControllerConfig(pooling=pooling)
 
 
-@pytest.mark.parametrize("pooling", ["linear", "MProdOp"])
+@pytest.mark.parametrize("pooling", ["lineer", "MProdOp"])
 def test_a_pooling_operator_nobody_provides_is_refused_by_name(pooling: str) -> None:
     """A name is a plug-in's (docs/extending.md): one no installed package registers does
     not resolve, and the error names it and what there is."""
