@@ -31,7 +31,8 @@
 #   `make check-portable`, installing Debian's packages for it as root.
 # All of them create .venv and install the project on first use (and again when the
 # lock changes): the exact versions and hashes of requirements/run.lock (make run) or
-# requirements/test.lock (the rest), then the project itself without dependencies.
+# requirements/test.lock (the rest), then the project itself without dependencies (and for
+# the tests the example plug-in, examples/linear_pool, which the suite runs too).
 # `make lock` writes both locks again from pyproject.toml's ranges (docs/testing.md says
 # when, and that published numbers are made again after).
 PYTHON ?= python3
@@ -57,9 +58,10 @@ $(VENV)/.installed: $(RUN_LOCK) pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet --no-deps -e .
 	touch $@
 
-$(VENV)/.installed-test: $(TEST_LOCK) pyproject.toml | $(BIN)/python
+$(VENV)/.installed-test: $(TEST_LOCK) pyproject.toml examples/linear_pool/pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet --require-hashes -r $(TEST_LOCK)
 	$(BIN)/python -m pip install --quiet --no-deps -e .
+	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e examples/linear_pool
 	touch $@ $(VENV)/.installed
 
 run: $(VENV)/.installed

@@ -41,6 +41,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "deploy.conformance.cli",
         "check a program that speaks the link against the controller, tick by tick",
     ),
+    "plugins": (
+        "deploy.plugin_list",
+        "the plug-ins installed: strategies, pooling operators, controllers (docs/extending.md)",
+    ),
     "router": ("deploy.launcher.router", "a Zenoh router (a Python session; no zenohd needed)"),
     "view": ("deploy.viewer.replay", "replay a recording in the browser, on the live view's page"),
     "frame": (

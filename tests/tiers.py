@@ -56,6 +56,7 @@ FAST = frozenset(
         "test_phases",
         "test_physics",
         "test_pooling",
+        "test_plugins",
         "test_pooling_controller",
         "test_process_main",
         "test_portable_check",
@@ -97,6 +98,7 @@ SLOW = {
 }
 
 FULL_ONLY = {
+    "test_api": "the public API's runs over Zenoh and sweeps on worker processes",
     "test_attacks": "attacks live runs over Zenoh",
     "test_fault_plugins": "runs swarms with faults in one process and over Zenoh",
     "test_robot_builder": "starts a world, a beacon and robots by hand over Zenoh, and a swarm",
@@ -112,6 +114,8 @@ FULL_ONLY = {
     "test_frame": "in-process runs and a swarm over Zenoh, recorded; swarm frame in a process",
     "test_run_output": "runs swarm in processes and a swarm with faults",
     "test_multihost": "network namespaces and processes",
+    "test_notebook": "runs the example notebook in a Jupyter kernel, with a sweep on processes",
+    "test_plugin_runs": "plug-ins in swarms over Zenoh, robot-agent --link and studies",
     "test_outside": "starts swarms with robots outside the emulator over UDP and serial links",
     "test_portable_runs": "swarms in fresh interpreters, with SIMD dispatch and without",
     "test_compiled_cores": "swarms in fresh interpreters, compiled and from the source",

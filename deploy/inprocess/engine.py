@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bestofn_swarm.wire import batch, keyspace, protocol, shape
-from bestofn_swarm.wire.endings import Halt, Look, stop_reason
+from bestofn_swarm.wire.endings import Halt, Look, Stop, stop_reason
 from bestofn_swarm.wire.names import Role
 from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon, BeaconConfig
@@ -40,6 +40,8 @@ from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import Outgoing, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
 from robot_agent.core.parking import ParkingSlots
+from robot_agent.core.plugin import PluginError
+from robot_agent.core.plugins import Plugins
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event, Output, Publish
 from world_server.core.world import World, WorldConfig
@@ -256,10 +258,11 @@ def run_in_process(
     timeout: float = shape.DEFAULT_TIMEOUT,
     stall_window: float | None = None,
     on_tick: Callable[[World], None] | None = None,
-    controller_factory: type[Controller] = Controller,
+    controller_factory: type[Controller] | None = None,
     byzantine_robots: Mapping[int, byzantine.Behaviour] | None = None,
     robot_faults: Sequence[faults.RobotFault] = (),
     hooks: EngineHooks | None = None,
+    plugins: Plugins | None = None,
 ) -> dict[str, Any]:
     """Run until every robot decided, the watchdog finds the run stalled (no undecided
     robot made progress for ``stall_window`` sim seconds; default: ``default_stall_window``
@@ -275,7 +278,9 @@ def run_in_process(
     applied at tick boundaries as the launcher applies them, or built into the robots'
     controllers; the summary's ``faults`` lists those applied. ``hooks``: progress, an
     outside stop, a tap of every message (a recording), wall time, the run's time series
-    (``hooks.frame``).
+    (``hooks.frame``). ``plugins``: the run's plug-ins, resolved
+    (``robot_agent.plugins.registry``; None: the built-ins ``controller_config`` names); one
+    that fails ends the run crashed, its one line the summary's ``error``.
     """
     hooks = hooks or EngineHooks()
     started = hooks.wall_clock() if hooks.wall_clock is not None else 0.0
@@ -295,10 +300,17 @@ def run_in_process(
             keys=keys,
             behaviour=behaviours.get(robot_id),
             factory=controller_factory,
+            plugins=plugins,
             robot_faults=robot_faults,
         )
 
-    endpoints = [build(robot_id) for robot_id in range(world_config.num_robots)]
+    endpoints: list[RobotEndpoint] = []
+    failure: PluginError | None = None
+    try:
+        for robot_id in range(world_config.num_robots):
+            endpoints.append(build(robot_id))
+    except PluginError as error:  # a plug-in that cannot make a robot: no tick is run
+        failure = error
     if stall_window is None:
         stall_window = default_stall_window(
             world.layout.arena_radius,
@@ -320,6 +332,16 @@ def run_in_process(
         byzantine=behaviours,
         series=hooks.frame,
     )
+    if failure is not None:
+        return _failed_summary(
+            failure,
+            world=world,
+            world_config=world_config,
+            run=run,
+            hooks=hooks,
+            behaviours=behaviours,
+            started=started,
+        )
     bus = _Bus(
         world,
         endpoints,
@@ -339,13 +361,23 @@ def run_in_process(
     gc.set_threshold(RUN_COLLECT_THRESHOLD, *thresholds[1:])
     try:
         halt = _run_ticks(bus, schedule, timeout=timeout, hooks=hooks, on_tick=on_tick)
+    except PluginError as error:  # a robot's plug-in failed in a step (or a restart): the run ends
+        failure = error
+        halt = Halt(Stop.CRASHED)
+        bus.queue.clear()  # the rest of the tick is not delivered
+        if error.robot is not None:
+            run.crashed(error.robot)  # as its process would have, over Zenoh
     finally:
         gc.set_threshold(*thresholds)
         gc.unfreeze()
     # Every robot's state at the end (not published: its status changes are), as the
-    # robot runs now (a robot started afresh: its new controller's).
+    # robot runs now (a robot started afresh: its new controller's); a robot whose plug-in
+    # fails to say it keeps the last it published.
     for endpoint in bus.host.by_id.values():
-        bus._status(endpoint.status(world.tick), published=False)
+        try:
+            bus._status(endpoint.status(world.tick), published=False)
+        except PluginError:
+            continue
     bus.stop()
     state = bus.last_state
     if state is not None:
@@ -370,6 +402,42 @@ def run_in_process(
         byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
     )
     summary["faults"] = [applied.record() for applied in schedule.applied]
+    if failure is not None:
+        summary["error"] = str(failure)
+    return summary
+
+
+def _failed_summary(
+    failure: PluginError,
+    *,
+    world: World,
+    world_config: WorldConfig,
+    run: RunObserver,
+    hooks: EngineHooks,
+    behaviours: Mapping[int, byzantine.Behaviour],
+    started: float,
+) -> dict[str, Any]:
+    """The summary of a run that ended before its first tick: a plug-in could not make a
+    robot."""
+    wall = hooks.wall_clock() - started if hooks.wall_clock is not None else 0.0
+    summary = run.summary(
+        run_id=world_config.run,
+        num_robots=world_config.num_robots,
+        num_sites=world_config.num_sites,
+        seed=world_config.seed,
+        best_site=world.layout.best_site,
+        sim_time_s=0.0,
+        wall_time_s=wall,
+        world=None,
+        departures=0,
+        observer_rejected=0,
+        config=hooks.config,
+        stop=Stop.CRASHED,
+        timeout_kind=None,
+        byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
+    )
+    summary["faults"] = []
+    summary["error"] = str(failure)
     return summary
 
 

@@ -66,6 +66,9 @@ def describe_ending(summary: dict[str, Any]) -> str:
         return f"ended {at}: the world's clock did not advance{quiet}{undecided}"
     if ended is Ending.INTERRUPTED:
         return f"interrupted by {summary.get('signal', 'a signal')} {at}{undecided}"
+    error = summary.get("error")
+    if error:  # a plug-in failed: its one line says which, where and when
+        return f"ended crashed {at}: {error}{undecided}"
     return f"ended crashed {at}: a process of the run died{undecided}"
 
 

@@ -112,6 +112,7 @@ def run_plan(plan: RunPlan, hooks: engine.EngineHooks | None = None) -> dict[str
         byzantine_robots=plan.byzantine_robots,
         robot_faults=plan.faults,
         hooks=hooks or bare,
+        plugins=plan.plugins,
     )
 
 

@@ -81,6 +81,7 @@ class Swarm:
         self.follower = Follower(plan, clock)
         self.faults = faults.Schedule(plan.faults)
         self.crash: Child | None = None  # the process whose death ended the run
+        self.plugin_failure: str | None = None  # a robot's plug-in failed: its one line
         self.ended_at: float | None = None
         self.departures = 0  # the world's count before the swarm was stopped (stopping adds)
 
@@ -145,6 +146,8 @@ class Swarm:
         self.crash = supervisor.infrastructure_crash()
         if self.crash is None and follower.paused:  # held for a page that is gone for good
             self.crash = supervisor.crashed_observer("viewer")
+        if self.plugin_failure is None:
+            self.plugin_failure = supervisor.plugin_failure()
         live = supervisor.live_robots() + run.outside_present()
         # Robots join once the world ticks; a restart to come will make progress.
         waiting = not follower.started or self.faults.restart_pending()
@@ -158,7 +161,7 @@ class Swarm:
                 stalled=not waiting and run.stalled(run.sim_time),
                 wall_time=self.clock() - self.launched_at - follower.paused_for(),
                 wall_limit=self.plan.wall_timeout,
-                crashed=self.crash is not None,
+                crashed=self.crash is not None or self.plugin_failure is not None,
                 signalled=signalled,
                 world_stopped=follower.world_stopped(self.plan.world_stop_window),
             )
@@ -332,6 +335,8 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
     )
     if signum is not None:
         summary["signal"] = signal.Signals(signum).name
+    if swarm.plugin_failure is not None:
+        summary["error"] = swarm.plugin_failure
     summary["faults"] = [applied.record() for applied in swarm.faults.applied]
     summary["recording"] = str(plan.record) if plan.record else None
     supervisor.finish_observers(summary)
@@ -345,7 +350,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
         print(json.dumps(summary))
     else:
         print_summary(summary, Console())
-    if robot_crashes:
+    if robot_crashes and swarm.plugin_failure is None:
         print(f"swarm run: robot process(es) {robot_crashes} crashed", file=sys.stderr)
     return Ending(summary["ended"]).exit_code(signum)
 

@@ -27,7 +27,10 @@ from deploy.viewer.options import VIEW_OPTIONS, Observer, holds, observers, view
 from nest_beacon.node.options import NestBeaconConfig
 from robot_agent.core import byzantine
 from robot_agent.core.faults import RobotFault
+from robot_agent.core.plugin import ControllerChoice
+from robot_agent.core.plugins import Plugins, builtin_plugins
 from robot_agent.node.options import RobotAgentConfig
+from robot_agent.plugins import registry
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
 from world_server.observer.watchdog import default_stall_window, default_world_stop_window
@@ -79,6 +82,11 @@ class RunPlan:
     hold: bool = False  # --view: the world waits at tick 0 until the page says play
     view_linger: float | None = 0.0  # wall seconds the page stays up after (None: until stopped)
 
+    # The run's plug-ins, resolved here (the built-ins unless --strategy, --pooling or
+    # --controller name others): the in-process engine runs them, the robot processes find
+    # them again and check their sources against these.
+    plugins: Plugins | None = None
+
     @property
     def page(self) -> Observer | None:
         """The live page, if the run serves one."""
@@ -124,7 +132,11 @@ class RunPlan:
         own = tuple(
             fault.spec for fault in self.faults if fault.robot in robots and not fault.BY_ENGINE
         )
-        agent = RobotAgentConfig(self.seed, self.switches.controller, hosted, own)
+        plugins = self.plugins or builtin_plugins(self.switches.controller)
+        choice = ControllerChoice(self.switches.plugins.controller, plugins.sources())
+        agent = RobotAgentConfig(
+            self.seed, self.switches.controller, hosted, plugins=choice, faults=own
+        )
         ids = [arg for robot in robots for arg in ("--id", str(robot))]
         batching = [] if self.batch else ["--no-batch"]
         return [*ids, *batching, "--run-id", self.run_id, "--config", settings.encode(agent)]
@@ -165,6 +177,9 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
                 f"{fault.robot} in a swarm of {args.robots}"
             )
     byzantine_robots = byzantine_plan(robot_faults.byzantine, args.robots, args.sites, args.seed)
+    # The plug-ins, found now: one that does not resolve, or is of another kind, is a usage
+    # error before anything starts (PluginError is a ValueError).
+    plugins = registry.resolve_plugins(switches.controller, switches.plugins.controller)
     outside = outside_plan(args, args.robots)
     for robot in outside.ids if outside is not None else []:
         for fault in faults:
@@ -224,6 +239,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     config["links"] = (
         [f"{linked.robot}={linked.address}" for linked in outside.robots] if outside else []
     )
+    config["plugins"] = plugins.record()  # what made the run: names, versions, sources
     recorded = RunDescription(run_id, args.seed, args.robots, args.sites, config)
     recorder_args = [
         "--run-id",
@@ -262,6 +278,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         outside=outside,
         hold=holds(args),
         view_linger=view_linger(args),
+        plugins=plugins,
     )
 
 

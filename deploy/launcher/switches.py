@@ -1,6 +1,7 @@
 """The options that shape a run, by what they configure: the decision (every robot
-process), the clock, radio medium and camera (the world server), the nest beacon (as
-``--beacon-*``) and the robot faults (the launcher itself).
+process), the controller it runs (``--controller``, a plug-in point), the clock, radio
+medium and camera (the world server), the nest beacon (as ``--beacon-*``) and the robot
+faults (the launcher itself).
 
 ``swarm run`` and ``swarm experiment`` both take all of them. Each option is made from its
 setting's one definition on the config dataclass (``bestofn_swarm/wire/settings.py``), and the
@@ -21,6 +22,7 @@ from bestofn_swarm.wire.settings import Flag
 from nest_beacon.core.beacon import BeaconConfig
 from robot_agent.core import byzantine, faults
 from robot_agent.core.controller_config import ControllerConfig
+from robot_agent.core.plugin import ControllerChoice
 from world_server.server.options import WorldServerConfig
 
 
@@ -95,13 +97,14 @@ class RobotFaults:
 
 
 CONTROLLER = Options(ControllerConfig)
+PLUGINS = Options(ControllerChoice)
 # The world's size, seed and run id are swarm run's own options; it starts one beacon.
 WORLD = Options(
     WorldServerConfig, exclude={"--seed", "--sites", "--robots", "--start-timeout", "--beacons"}
 )
 BEACON = Options(BeaconConfig, prefix="beacon-", exclude={"--name"})
 FAULTS = Options(RobotFaults)
-SWITCHES = (CONTROLLER, WORLD, BEACON, FAULTS)
+SWITCHES = (CONTROLLER, PLUGINS, WORLD, BEACON, FAULTS)
 
 
 def add_swarm_switches(parser: argparse.ArgumentParser) -> None:
@@ -120,6 +123,7 @@ class RunSwitches:
     """The configs a run's options make."""
 
     controller: ControllerConfig = field(default_factory=ControllerConfig)
+    plugins: ControllerChoice = field(default_factory=ControllerChoice)
     world: WorldServerConfig = field(default_factory=WorldServerConfig)
     beacon: BeaconConfig = field(default_factory=BeaconConfig)
     faults: RobotFaults = field(default_factory=RobotFaults)
@@ -128,6 +132,7 @@ class RunSwitches:
         """Every option's value, keyed like the option (``radio_range``), for the summary."""
         return {
             **CONTROLLER.record(self.controller),
+            **PLUGINS.record(self.plugins),
             **WORLD.record(self.world),
             **BEACON.record(self.beacon),
             **FAULTS.record(self.faults),
@@ -146,6 +151,7 @@ def run_switches(
     }
     return RunSwitches(
         controller=CONTROLLER.build(args),
+        plugins=PLUGINS.build(args),
         world=WORLD.build(args, world),
         beacon=BEACON.build(args),
         faults=FAULTS.build(args),

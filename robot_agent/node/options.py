@@ -17,12 +17,14 @@ from bestofn_swarm.wire.settings import Flag
 from robot_agent.core import byzantine
 from robot_agent.core.controller_config import ControllerConfig
 from robot_agent.core.faults import FaultSpec
+from robot_agent.core.plugin import ControllerChoice
 
 
 @dataclass(frozen=True)
 class RobotAgentConfig:
     """The configuration of one robot process: the run's seed, the controller's settings,
-    and which of its robots misbehave (a fault experiment)."""
+    which of its robots misbehave (a fault experiment), and which controller they run
+    (with the run's plug-ins' sources)."""
 
     seed: Annotated[
         protocol.Seed | None,
@@ -41,7 +43,7 @@ class RobotAgentConfig:
         ),
         Flag(metavar="ROBOT:MODE"),
     ] = ()
-
+    plugins: ControllerChoice = field(default_factory=ControllerChoice)
     faults: Annotated[
         tuple[FaultSpec, ...],
         Meta(
