@@ -332,16 +332,9 @@ def run_in_process(
         byzantine=behaviours,
         series=hooks.frame,
     )
-    if failure is not None:
-        return _failed_summary(
-            failure,
-            world=world,
-            world_config=world_config,
-            run=run,
-            hooks=hooks,
-            behaviours=behaviours,
-            started=started,
-        )
+    if failure is not None:  # no tick is run
+        ending = _Ending(Halt(Stop.CRASHED), None, (), failure)
+        return _summary(ending, world, run=run, hooks=hooks, behaviours=behaviours, started=started)
     bus = _Bus(
         world,
         endpoints,
@@ -384,60 +377,52 @@ def run_in_process(
         run.state(state)
     if hooks.frame is not None:
         hooks.frame.finish()
-    wall = hooks.wall_clock() - started if hooks.wall_clock is not None else 0.0
-    summary = run.summary(
-        run_id=world_config.run,
-        num_robots=world_config.num_robots,
-        num_sites=world_config.num_sites,
-        seed=world_config.seed,
-        best_site=world.layout.best_site,
-        sim_time_s=world.t,
-        wall_time_s=wall,
-        world=bus.coordinator.state(),
-        departures=bus.coordinator.counters.departures,
-        observer_rejected=0,
-        config=hooks.config,
-        stop=halt.stop,
-        timeout_kind=halt.limit,
-        byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
-    )
-    summary["faults"] = [applied.record() for applied in schedule.applied]
-    if failure is not None:
-        summary["error"] = str(failure)
-    return summary
+    ending = _Ending(halt, bus.coordinator, schedule.applied, failure)
+    return _summary(ending, world, run=run, hooks=hooks, behaviours=behaviours, started=started)
 
 
-def _failed_summary(
-    failure: PluginError,
-    *,
+@dataclass(frozen=True)
+class _Ending:
+    """How a run in process ended: why, its world's coordinator (None: no tick was run),
+    the faults applied, and the plug-in that failed, if one did."""
+
+    halt: Halt
+    coordinator: Coordinator | None
+    applied: Sequence[faults.Applied]
+    failure: PluginError | None
+
+
+def _summary(
+    ending: _Ending,
     world: World,
-    world_config: WorldConfig,
+    *,
     run: RunObserver,
     hooks: EngineHooks,
     behaviours: Mapping[int, byzantine.Behaviour],
     started: float,
 ) -> dict[str, Any]:
-    """The summary of a run that ended before its first tick: a plug-in could not make a
-    robot."""
+    """The run's summary: the ``swarm run --json`` object."""
+    config, coordinator = world.config, ending.coordinator
     wall = hooks.wall_clock() - started if hooks.wall_clock is not None else 0.0
     summary = run.summary(
-        run_id=world_config.run,
-        num_robots=world_config.num_robots,
-        num_sites=world_config.num_sites,
-        seed=world_config.seed,
+        run_id=config.run,
+        num_robots=config.num_robots,
+        num_sites=config.num_sites,
+        seed=config.seed,
         best_site=world.layout.best_site,
-        sim_time_s=0.0,
+        sim_time_s=world.t,
         wall_time_s=wall,
-        world=None,
-        departures=0,
+        world=coordinator.state() if coordinator is not None else None,
+        departures=coordinator.counters.departures if coordinator is not None else 0,
         observer_rejected=0,
         config=hooks.config,
-        stop=Stop.CRASHED,
-        timeout_kind=None,
+        stop=ending.halt.stop,
+        timeout_kind=ending.halt.limit,
         byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
     )
-    summary["faults"] = []
-    summary["error"] = str(failure)
+    summary["faults"] = [applied.record() for applied in ending.applied]
+    if ending.failure is not None:
+        summary["error"] = str(ending.failure)
     return summary
 
 
