@@ -211,7 +211,8 @@ def _swarm_part(
     if result.same:
         print(
             f"  the all-emulated run (digest {reference['digest']}), and robot {robot} "
-            f"answered as the emulated robot at each of its {result.compared} ticks"
+            f"answered as the emulated robot did at each of the {result.compared} ticks that "
+            "robot ran (where it ends depends on when the launcher notices the ending)"
         )
         return None
     summary = result.summary
