@@ -74,6 +74,7 @@ class Event:
     attachment: bytes | None = None
     arrived: float = 0.0  # monotonic time the callback took it (only when tracing)
     gone: bool = False
+    code: int = 0  # a stop: the process's exit code (the run's, when it ended)
 
 
 class LatestSenses:
@@ -379,14 +380,15 @@ class HostBatch:
             self.steps.clear()
 
 
-def serve(nodes: Sequence[RobotNode], inbox: BoundedInbox[Event]) -> None:
+def serve(nodes: Sequence[RobotNode], inbox: BoundedInbox[Event]) -> int:
     """Feed the nodes the events of their inbox (the world's liveliness) until a stop event
-    arrives; their inputs they handle in Zenoh's callbacks."""
+    arrives (a stop signal, or the run's ending); their inputs they handle in Zenoh's
+    callbacks. The process's exit code: the run's, when it ended."""
     by_id = {node.robot_id: node for node in nodes}
     while True:
         event = inbox.get()
         if event.kind == STOP:
-            return
+            return event.code
         node = by_id[event.robot]
         if (
             event.kind is keyspace.ALIVE_WORLD
