@@ -40,6 +40,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "deploy.conformance.cli",
         "check a program that speaks the link against the controller, tick by tick",
     ),
+    "follow": (
+        "deploy.launcher.follow",
+        "follow a running swarm from any host: its progress, then its summary and exit code",
+    ),
     "router": ("deploy.launcher.router", "a Zenoh router (a Python session; no zenohd needed)"),
     "view": ("deploy.viewer.replay", "replay a recording in the browser, on the live view's page"),
 }

@@ -84,6 +84,7 @@ class Supervisor:
         self.network: RunNetwork | None = None  # made when the run starts
         self.session: zenoh.Session | None = None
         self._declared: list[Any] = []
+        self.placement: Any = None  # --dask: the robots on the cluster (dask_placement.py)
 
     @property
     def keyring(self) -> auth.Keyring | None:
@@ -112,6 +113,9 @@ class Supervisor:
             if stopping():
                 return False
             step(stopping)
+        if plan.dask is not None:
+            self._place_robots()
+            return not stopping()
         emulated = plan.emulated
         for first in range(0, len(emulated), plan.robots_per_process):
             if stopping():
@@ -135,6 +139,8 @@ class Supervisor:
             python_module(
                 "world_server.server",
                 *plan.world_argv(),
+                # It ends the run, and stays: the run's router until the recording is done.
+                "--until-stopped",
                 *network.world_args(),
                 *plan.trace_args("world"),
             ),
@@ -179,6 +185,7 @@ class Supervisor:
             python_module(
                 "world_server.recorder",
                 *plan.recorder_args,
+                "--await-finish",  # the launcher closes it with its summary (finish_recording)
                 *network.client_args(zenoh_acl.RECORDER),
             ),
             env=network.env(),
@@ -299,6 +306,33 @@ class Supervisor:
         self.bridge = self._launch_bridge()
         return True
 
+    def _place_robots(self) -> None:
+        """--dask: the robot processes on the cluster's workers (Dask is needed only now)."""
+        try:
+            from deploy.launcher.dask_placement import DaskError, DaskPlacement
+        except ImportError as error:
+            raise StartError(f"--dask needs Dask: pip install '.[dask]' ({error})") from None
+        self.placement = DaskPlacement(self.plan)
+        try:
+            placed = self.placement.start(self.keyring)
+        except DaskError as error:
+            raise StartError(str(error)) from None
+        for share in placed:
+            robots = ", ".join(str(robot) for robot in share.robots)
+            print(
+                f"swarm run: robots {robots} on worker {share.worker.address} "
+                f"(host {share.worker.host}), {len(share.processes)} process(es)",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    @property
+    def robot_processes(self) -> int:
+        """How many processes host the robots."""
+        if self.placement is not None:
+            return sum(len(share.processes) for share in self.placement.placed)
+        return self.plan.robot_processes
+
     def start_robots(self, robots: list[int]) -> Child:
         """One process for ``robots`` (each with its own Zenoh session inside it)."""
         name = f"robot-{robots[0]}" + (f"-{robots[-1]}" if len(robots) > 1 else "")
@@ -369,7 +403,10 @@ class Supervisor:
         return self.session is not None and self.world is not None and self.world.alive()
 
     def stop_swarm(self) -> None:
-        """Stop the robots and the beacon; the world, the recorder and the observers stay."""
+        """Stop the robots and the beacon (--dask: the tasks stop what the run's ending
+        did not); the world, the recorder and the observers stay."""
+        if self.placement is not None:
+            self.placement.stop()
         swarm = [
             child
             for child in self.group.children
@@ -434,6 +471,9 @@ class Supervisor:
             self.session.close()
             self.session = None
         self.group.stop_all()
+        if self.placement is not None:
+            self.placement.stop()  # (at once if it stopped already)
+            self.placement.close()
         if self.network is not None:
             self.network.close()  # its socket, certificates and keys
 
