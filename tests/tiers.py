@@ -77,6 +77,7 @@ FAST = frozenset(
         "test_wellstirred_voting",
         "test_wilson",
         "test_world",
+        "test_world_ending",
     }
 )
 
@@ -106,6 +107,7 @@ FULL_ONLY = {
     "test_experiment": "runs `swarm experiment` in a process",
     "test_faults": "starts swarms with faults",
     "test_inprocess": "starts swarms to compare with the in-process engine",
+    "test_hosts": "a hand-started run and a Dask cluster of processes on loopback",
     "test_multihost": "network namespaces and processes",
     "test_outside": "starts swarms with robots outside the emulator over UDP and serial links",
     "test_portable_runs": "swarms in fresh interpreters, with SIMD dispatch and without",
