@@ -220,13 +220,13 @@ class DaskPlacement:
         return self._lost
 
     def whose(self, robots: Sequence[int]) -> list[LostWorker]:
-        """The workers that hosted ``robots`` (robots lost mid-run), each with its own."""
-        found = []
-        for placed in self.placed:
-            mine = [robot for robot in robots if robot in placed.robots]
-            if mine:
-                found.append(LostWorker(placed.worker, mine))
-        return found
+        """The workers that hosted any of ``robots`` (robots lost mid-run), each with all
+        the robots it hosted: the world ends the run at the first of them it loses."""
+        return [
+            LostWorker(placed.worker, placed.robots)
+            for placed in self.placed
+            if any(robot in placed.robots for robot in robots)
+        ]
 
     # --- the end ---------------------------------------------------------------------
 
