@@ -96,7 +96,9 @@ def scheduler(host: str, port: int) -> list[str]:
     ]
 
 
-def worker(scheduler_at: str, host: str, threads: int, router_at: str | None = None) -> list[str]:
+def worker(
+    scheduler_at: str, host: str, threads: int, router_at: str | None = None, name: str = ""
+) -> list[str]:
     """A Dask worker (no nanny: killing it kills the worker itself), given its host's
     router with ``--router`` (else it reads $BESTOFN_ROUTER)."""
     command = [
@@ -113,7 +115,11 @@ def worker(scheduler_at: str, host: str, threads: int, router_at: str | None = N
         "--preload",
         "deploy.launcher.dask_worker",
     ]
-    return command + (["--router", router_at] if router_at else [])
+    return (
+        command
+        + (["--router", router_at] if router_at else [])
+        + (["--name", name] if name else [])
+    )
 
 
 def wait_for_workers(scheduler_at: str, count: int, timeout: float = 60.0) -> None:

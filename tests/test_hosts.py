@@ -108,10 +108,10 @@ class Cluster:
         port = int(self.scheduler.rsplit(":", 1)[1])
         self.start(hosts.router(self.router))
         self.start(hosts.scheduler("127.0.0.1", port))
-        self.start(hosts.worker(self.scheduler, "127.0.0.1", 1, self.router))
+        self.start(hosts.worker(self.scheduler, "127.0.0.1", 1, self.router, name="w1"))
         # The other worker reads its host's router from the environment.
         self.start(
-            hosts.worker(self.scheduler, "127.0.0.1", 1),
+            hosts.worker(self.scheduler, "127.0.0.1", 1, name="w2"),
             env={**os.environ, "BESTOFN_ROUTER": self.router},
         )
         hosts.wait_for_workers(self.scheduler, 2)
@@ -146,9 +146,10 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
 
 def test_swarm_run_on_dask_reaches_the_digest_of_swarm_run_twice(cluster: Cluster) -> None:
     expected = reference_run(SHAPE)["digest"]
-    for attempt in range(2):  # a second run on the same cluster works as the first
+    # A second run on the same cluster works as the first, with the world on a worker.
+    for attempt, world in enumerate([[], ["--dask-world", "w2"]]):
         run_id = unique_run_id(f"dask{attempt}")
-        launcher = cluster.run(run_id, *SHAPE)
+        launcher = cluster.run(run_id, *SHAPE, *world)
         try:
             stdout, stderr = launcher.communicate(timeout=150)
         finally:
@@ -161,6 +162,9 @@ def test_swarm_run_on_dask_reaches_the_digest_of_swarm_run_twice(cluster: Cluste
         assert summary["digest"] == expected and summary["ended"] == "consensus"
         assert summary["robot_processes"] == 2 and summary["config"]["dask"] == cluster.scheduler
         assert "on worker tcp://127.0.0.1:" in stderr.decode()
+        if world:
+            assert "the world server and the beacon on worker" in stderr.decode()
+            assert summary["config"]["dask_world"] == "w2"
         assert left == [], f"left behind: {left}"
 
 

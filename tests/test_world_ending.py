@@ -22,6 +22,7 @@ from nest_beacon.core.beacon import BeaconConfig
 from robot_agent.core.controller import ControllerConfig
 from world_server.core.world import World, WorldConfig
 from world_server.observer.referee import (
+    LOST_AFTER,
     EndingRules,
     LostRobot,
     OutsideRobot,
@@ -104,34 +105,104 @@ def test_the_world_ends_a_run_as_the_engine_does_with_the_same_summary(
 
 
 def _started(referee: Referee, robots: range, beacons: list[str] | None = None) -> None:
-    referee.now(0, 0.0, robots, beacons if beacons is not None else ["nest"])
+    referee.now(0, 0.0, robots, beacons if beacons is not None else ["nest"], wall=0.0)
 
 
-def test_a_lost_beacon_ends_the_run_crashed_at_once() -> None:
+def test_a_beacon_away_for_longer_than_the_grace_ends_the_run_crashed() -> None:
     referee = _referee(_world())
     _started(referee, range(4))
-    assert referee.look() is None
-    referee.now(10, 1.0, range(4), [])
+    referee.now(10, 1.0, range(4), [], wall=1.0)
+    assert referee.look() is None  # away: maybe its host is only suspended
+    referee.now(20, 2.0, range(4), [], wall=1.0 + LOST_AFTER)
     assert referee.look() == Halt(Stop.CRASHED)
     assert referee.ending(Halt(Stop.CRASHED), None, 1.0).lost == ["nest"]
+
+
+def test_a_spare_beacon_that_goes_is_not_missed() -> None:
+    referee = _referee(_world())
+    _started(referee, range(4), ["nest", "spare"])
+    referee.now(10, 1.0, range(4), ["nest"], wall=1.0)
+    referee.now(20, 2.0, range(4), ["nest"], wall=1.0 + LOST_AFTER)
+    assert referee.look() is None and referee.lost == []
+
+
+def test_what_comes_back_within_the_grace_never_went() -> None:
+    """A world or robots suspended for longer than Zenoh's lease: every token goes, and
+    comes back once they wake."""
+    referee = _referee(_world())
+    _started(referee, range(4))
+    referee.now(10, 1.0, [], [], wall=1.0)
+    assert referee.running() == [0, 1, 2, 3] and referee.look() is None
+    referee.now(11, 1.1, range(4), ["nest"], wall=14.0)
+    assert referee.lost == [] and not referee.beacon_lost
+    referee.now(12, 1.2, [0, 1, 2], ["nest"], wall=15.0)  # robot 3 goes, and the run ends
+    ending = referee.ending(Halt(Stop.STALLED), None, 15.0)
+    assert ending.lost == ["3"] and ending.ended is Ending.CRASHED  # still away: lost
+
+
+def test_with_every_robot_gone_the_world_waits_rather_than_decide() -> None:
+    referee = _referee(_world(), EndingRules(lost_robot=LostRobot.CONTINUE))
+    _started(referee, range(4))
+    referee.now(10, 1.0, [], ["nest"], wall=1.0)
+    referee.now(11, 1.1, [], ["nest"], wall=1.0 + LOST_AFTER)
+    assert referee.running() == [] and referee.lost == ["0", "1", "2", "3"]
+    assert referee.look() is None
 
 
 @pytest.mark.parametrize("lost_robot", list(LostRobot))
 def test_a_lost_robot_holds_nothing_up_and_the_run_ends_crashed(lost_robot: LostRobot) -> None:
     referee = _referee(_world(), EndingRules(lost_robot=lost_robot))
     _started(referee, range(4))
-    referee.now(10, 1.0, [0, 1, 3], ["nest"])
+    referee.now(10, 1.0, [0, 1, 3], ["nest"], wall=1.0)
     halt = referee.look()
     if lost_robot is LostRobot.END:
-        assert halt == Halt(Stop.CRASHED)
+        assert halt == Halt(Stop.CRASHED)  # at once: a lost host takes its robots along
     else:
-        assert halt is None  # the rest go on
-        assert referee.running() == [0, 1, 3]
+        assert halt is None and referee.running() == [0, 1, 2, 3]  # away, held up for now
+        referee.now(20, 2.0, [0, 1, 3], ["nest"], wall=1.0 + LOST_AFTER)
+        assert referee.look() is None and referee.running() == [0, 1, 3]  # the rest go on
         halt = Halt(Stop.TIMEOUT, TimeLimit.SIM)
     ending = referee.ending(halt, None, 1.0)
     assert ending.ended is Ending.CRASHED and ending.code == 1 and ending.lost == ["2"]
     robot = ending.summary["per_robot"][2]
     assert robot["crashed"] and not robot["killed"]
+
+
+def test_a_lost_robot_back_runs_again_and_a_fresh_process_is_a_restart() -> None:
+    referee = _referee(_world(), EndingRules(lost_robot=LostRobot.END))
+    _started(referee, range(4))
+    keys = keyspace.Keys(RUN)
+    referee.take(_status(keys, 1, tick=50))
+    referee.now(60, 6.0, [0, 2, 3], ["nest"], wall=1.0)
+    assert referee.lost == ["1"]
+    referee.now(70, 7.0, range(4), ["nest"], wall=2.0)
+    assert referee.lost == [] and referee.running() == [0, 1, 2, 3]
+    referee.take(_status(keys, 1, tick=3))  # its first status: tick 3 of a fresh process
+    record = referee.observer.records[1]
+    assert record.restarts == 1 and not record.crashed
+
+
+def _status(keys: keyspace.Keys, robot: int, tick: int) -> keyspace.Opened:
+    status = protocol.Status(
+        v=1,
+        id=robot,
+        tick=tick,
+        t=tick * 0.1,
+        phase="to_site",
+        trips=0,
+        opinion=[0.2] * 5,
+        pool_size=0,
+        poolings=0,
+        decided_site=None,
+        decision_time=None,
+        decision_trips=None,
+        comparison=None,
+    )
+    opened = keyspace.open_sample(
+        keys, keys.of(keyspace.STATUS, robot), protocol.encode(status), None, keyring=None
+    )
+    assert opened is not None
+    return opened
 
 
 def test_the_plan_s_faults_are_a_kill_and_a_restart_not_a_loss() -> None:
@@ -140,10 +211,10 @@ def test_the_plan_s_faults_are_a_kill_and_a_restart_not_a_loss() -> None:
     )
     referee = _referee(_world(), rules)
     _started(referee, range(4))
-    referee.now(5, 10.5, [0, 2, 3], ["nest"])  # killed as planned
-    referee.now(6, 20.5, [0, 3], ["nest"])  # restarting: waited for
+    referee.now(5, 10.5, [0, 2, 3], ["nest"], wall=1.0)  # killed as planned
+    referee.now(6, 20.5, [0, 3], ["nest"], wall=2.0 + LOST_AFTER)  # restarting: waited for
     assert referee.running() == [0, 2, 3] and referee.look() is None
-    referee.now(7, 21.0, [0, 2, 3], ["nest"])  # back
+    referee.now(7, 21.0, [0, 2, 3], ["nest"], wall=3.0 + LOST_AFTER)  # back
     assert referee.lost == []
     ending = referee.ending(Halt(Stop.TIMEOUT, TimeLimit.SIM), None, 1.0)
     assert ending.ended is Ending.TIMEOUT and ending.lost == []
@@ -154,22 +225,20 @@ def test_the_plan_s_faults_are_a_kill_and_a_restart_not_a_loss() -> None:
 def test_a_robot_that_leaves_before_its_planned_kill_is_lost() -> None:
     referee = _referee(_world(), EndingRules(departures=(PlannedDeparture(1, 10.0),)))
     _started(referee, range(4))
-    referee.now(5, 9.0, [0, 2, 3], ["nest"])
+    referee.now(5, 9.0, [0, 2, 3], ["nest"], wall=1.0)
+    referee.now(6, 9.1, [0, 2, 3], ["nest"], wall=1.0 + LOST_AFTER)
     assert referee.lost == ["1"]
 
 
-def test_an_outside_robot_whose_link_went_departed_and_a_robot_back_by_hand_runs_again() -> None:
+def test_an_outside_robot_whose_link_went_departed() -> None:
     rules = EndingRules(outside=(OutsideRobot(3, "udp"),))
     referee = _referee(_world(), rules)
     _started(referee, range(4))
-    referee.now(5, 1.0, [0, 1, 2], ["nest"])
+    referee.now(5, 1.0, [0, 1, 2], ["nest"], wall=1.0 + LOST_AFTER)
     assert referee.lost == [] and referee.running() == [0, 1, 2]
-    referee.now(6, 2.0, [0, 2], ["nest"])  # robot 1 lost ...
-    referee.now(7, 3.0, [0, 1, 2], ["nest"])  # ... and started again by hand
-    assert referee.lost == []
     ending = referee.ending(Halt(Stop.STALLED), None, 1.0)
     rows = ending.summary["per_robot"]
-    assert rows[3]["departed"] and rows[3]["outside"] == "udp" and rows[1]["restarts"] == 1
+    assert rows[3]["departed"] and rows[3]["outside"] == "udp" and not rows[3]["crashed"]
 
 
 def test_a_signal_before_the_start_or_after_ends_the_run_interrupted() -> None:

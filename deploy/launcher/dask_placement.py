@@ -76,7 +76,8 @@ class LostWorker:
 
     def describe(self) -> str:
         robots = ", ".join(map(str, self.robots))
-        return f"worker {self.worker.address} on host {self.worker.host} (robots {robots})"
+        hosted = f"robots {robots}" if self.robots else "the world server"
+        return f"worker {self.worker.address} on host {self.worker.host} ({hosted})"
 
     def as_dict(self) -> dict[str, Any]:
         return {"worker": self.worker.address, "host": self.worker.host, "robots": self.robots}
@@ -125,14 +126,19 @@ class DaskPlacement:
         self.futures: dict[str, Any] = {}  # worker address -> its task
         self.results: dict[str, Hosted] = {}
         self.stop_event = f"bestofn-stop-{plan.run_id}"
+        self.workers: list[WorkerSlot] = []
+        self.world: WorkerSlot | None = None  # --dask-world: where the world and beacon run
         self._lost: list[LostWorker] = []
         self._checked_at = -math.inf
         self._stopped = False
 
     def connect(self) -> list[WorkerSlot]:
-        """Reach the scheduler; its workers, in address order. DaskError if it cannot."""
-        from distributed import Client
+        """Reach the scheduler (once); its workers, in address order. DaskError if it
+        cannot, or has none."""
+        from distributed import Client, Event
 
+        if self.client is not None:
+            return self.workers
         try:
             self.client = Client(self.address, timeout=CONNECT_TIMEOUT, set_as_default=False)
         except (OSError, TimeoutError) as error:
@@ -149,15 +155,52 @@ class DaskPlacement:
         ]
         if not workers:
             raise DaskError(f"the Dask scheduler at {self.address} has no worker")
+        Event(self.stop_event, client=self.client).clear()
+        self.workers = workers
         return workers
+
+    def start_world(self, keyring: auth.Keyring | None) -> WorkerSlot:
+        """--dask-world: the world server and the beacon on the named worker (its name,
+        address or host), clients of its host's router; only that worker is handed the run
+        secret (the world's) and the beacon's keys."""
+        plan = self.plan
+        named = plan.dask_world
+        found = [w for w in self.connect() if named in (w.name, w.address, w.host)]
+        if not found:
+            raise DaskError(f"--dask-world {named}: no worker of {self.address} has that name")
+        worker = self.world = found[0]
+        beacon = names.beacon_identity(names.DEFAULT_BEACON)
+        world_keys = beacon_keys = None
+        if keyring is not None:
+            world_keys = run_keys.to_text(keyring, plan.run_id)
+            beacon_keys = run_keys.to_text(keyring.only([beacon, names.WORLD]), plan.run_id)
+        share = Share(
+            run_id=plan.run_id,
+            launches=[
+                Launch("world", "world_server.server", plan.world_argv(), world_keys),
+                Launch("beacon", "nest_beacon", plan.beacon_argv(), beacon_keys),
+            ],
+            stop_event=self.stop_event,
+        )
+        self._submit(worker, share, "world")
+        log.info("the world and the beacon on worker %s (host %s)", worker.address, worker.host)
+        return worker
+
+    def _submit(self, worker: WorkerSlot, share: Share, part: str) -> None:
+        self.futures[f"{part}@{worker.address}"] = self.client.submit(
+            host_processes,
+            share,
+            workers=[worker.address],
+            allow_other_workers=False,
+            pure=False,
+            retries=0,
+            key=f"bestofn-{self.plan.run_id}-{part}-{worker.address}",
+        )
 
     def start(self, keyring: auth.Keyring | None) -> list[Placed]:
         """Place the run's robots and start their tasks; where each went."""
-        from distributed import Event
-
         plan = self.plan
         workers = self.connect()
-        Event(self.stop_event, client=self.client).clear()
         self.placed = split_robots(plan.emulated, workers)
         for placed in self.placed:
             share = Share(
@@ -166,15 +209,7 @@ class DaskPlacement:
                 stop_event=self.stop_event,
                 robots=placed.robots,
             )
-            self.futures[placed.worker.address] = self.client.submit(
-                host_processes,
-                share,
-                workers=[placed.worker.address],
-                allow_other_workers=False,
-                pure=False,
-                retries=0,
-                key=f"bestofn-{plan.run_id}-{placed.worker.address}",
-            )
+            self._submit(placed.worker, share, "robots")
             log.info(
                 "robots %s on worker %s (host %s) in %d process(es)",
                 _ranges(placed.robots),
@@ -210,12 +245,17 @@ class DaskPlacement:
         except Exception:  # the scheduler is gone: every worker is lost to the run
             present = set()
         known = {lost.worker.address for lost in self._lost}
-        for placed in self.placed:
-            address = placed.worker.address
-            future = self.futures.get(address)
-            failed = future is not None and future.status in ("error", "cancelled")
-            if address not in known and (address not in present or failed):
-                self._lost.append(LostWorker(placed.worker, placed.robots))
+        shares = [(placed.worker, placed.robots, "robots") for placed in self.placed]
+        if self.world is not None:
+            shares.append((self.world, [], "world"))
+        for worker, robots, part in shares:
+            future = self.futures.get(f"{part}@{worker.address}")
+            # The world's task ends only when the world did: before the run's ending, lost.
+            ended = ("error", "cancelled", "finished") if part == "world" else ("error",)
+            failed = future is not None and future.status in (*ended, "cancelled")
+            if worker.address not in known and (worker.address not in present or failed):
+                self._lost.append(LostWorker(worker, robots))
+                known.add(worker.address)
                 log.warning("lost %s", self._lost[-1].describe())
         return self._lost
 
@@ -237,16 +277,21 @@ class DaskPlacement:
             return
         self._stopped = True
         from distributed import Event
-        from distributed import wait as wait_for
 
         try:
             Event(self.stop_event, client=self.client).set()
-            wait_for(list(self.futures.values()), timeout=wait)
-        except Exception as error:  # a lost worker's task never finishes
-            log.info("not every task of the run finished: %s", error)
-        for address, future in self.futures.items():
+        except Exception as error:  # the scheduler is gone: each task stops on its own
+            log.info("could not ask the tasks to stop: %s", error)
+        # A lost worker's task never finishes: it is not waited for.
+        self._checked_at = -math.inf
+        gone = {lost.worker.address for lost in self.lost()}
+        waited = [f for part, f in self.futures.items() if part.partition("@")[2] not in gone]
+        deadline = time.monotonic() + wait
+        while time.monotonic() < deadline and not all(future.done() for future in waited):
+            time.sleep(0.1)
+        for part, future in self.futures.items():
             if future.status == "finished":
-                self.results[address] = future.result()
+                self.results[part] = future.result()
 
     def close(self) -> None:
         """Forget the run's tasks and leave the cluster as it was."""

@@ -115,6 +115,7 @@ class Hosted:
 def host_processes(share: Share) -> Hosted:
     """The task: run the share's processes until they exit (see the module's docstring)."""
     worker = _worker_address()
+    _leave_the_pool()
     router = router_of_host()
     processes: dict[str, subprocess.Popen[bytes]] = {}
     with tempfile.TemporaryDirectory(prefix="bestofn-") as folder:
@@ -203,6 +204,17 @@ def _stop(processes: dict[str, subprocess.Popen[bytes]]) -> None:
             with contextlib.suppress(ProcessLookupError):
                 process.kill()
             process.wait()
+
+
+def _leave_the_pool() -> None:
+    """The task only waits on processes: it gives its thread slot back to the worker, so
+    that the worker's other share of the run (the world's, beside its robots) starts too."""
+    try:
+        from distributed import secede
+
+        secede()
+    except (ImportError, ValueError):  # not on a Dask worker (a test calls it directly)
+        pass
 
 
 def _worker_address() -> str:

@@ -86,6 +86,7 @@ def follow(args: argparse.Namespace, keyring: Any) -> int:
         return 1
     inbox: BoundedInbox[Heard | Signalled] = BoundedInbox(EVENTS_BYTES, MAX_ENDING_SAMPLE_BYTES)
     follower = Follower.of_run(keys, time.monotonic)
+
     def signalled(signum: int) -> None:
         inbox.put(Signalled(signum), control=True)
 

@@ -2,20 +2,24 @@
 
 Starts the world server (the Zenoh router of the run, on a Unix socket in a private
 directory; TLS on loopback with ``--secure``; a client of the router ``--connect`` names),
-the recorder, the nest beacon and the robot processes (``supervisor.py``); follows what
+the recorder, the nest beacon and the robot processes (``supervisor.py``; with ``--dask``
+the robot processes on a Dask cluster's workers, ``dask_placement.py``); follows what
 they publish (``follower.py``) and shows progress (``console.py``); kills and restarts
 robots when their ``--kill`` and ``--restart`` sim time comes (``faults.py``); stops when
-``bestofn_swarm.wire.endings.stop_reason`` says so; stops every process it started, by pid, however
-the run ends; prints a summary that says how it ended, hands it to the recorder
-(``recording.py``) and exits with that ending's code (``swarm run --help``).
-``--engine inprocess`` runs the same computation in this process instead
-(``inprocess.py``).
+the world ends the run (``world/ending``: world_server/observer/referee.py decides) or
+when what only the launcher sees ends it first, in the order of
+``bestofn_swarm.wire.endings.stop_reason``; stops every process it started, by pid,
+however the run ends; prints a summary that says how it ended (the world's, with what the
+launcher adds), hands it to the recorder (``recording.py``) and exits with that ending's
+code (``swarm run --help``). ``--engine inprocess`` runs the same computation in this
+process instead (``inprocess.py``).
 
 The main thread owns the run. It waits on one inbox, into which Zenoh's callbacks queue
 what the processes publish and the stop signals' relay queues the signals
 (``signals.py``), until the next look is due; it takes what came, applies the faults
-that fell due, and every ``LOOK_EVERY`` (at once on a signal) it looks: marks the
-robots whose process died, updates the display, and asks the ending rule.
+that fell due, and every ``LOOK_EVERY`` (at once on a signal) it looks: takes the world's
+ending if it came, else marks the robots whose process died, updates the display, and
+asks the ending rule.
 """
 
 from __future__ import annotations
@@ -89,6 +93,7 @@ class Swarm:
         self.departures = 0  # the world's count before the swarm was stopped (stopping adds)
         self.world_ended = False  # the run ended by the world's ending (world/ending)
         self.lost_workers: list[Any] = []  # --dask: workers that left before any ending
+        self._exits_seen: set[int] = set()  # processes seen to exit on their own
 
     def signalled(self, signum: int) -> None:
         """A stop signal, from the signals' relay: an event like any other."""
@@ -141,7 +146,7 @@ class Swarm:
         supervisor, follower, run = self.supervisor, self.follower, self.follower.run
         placement = supervisor.placement
         lost = placement.lost() if placement is not None else []
-        if follower.ending is None and (self._exited() or lost):
+        if follower.ending is None and (self._exited() or len(lost) > len(self.lost_workers)):
             signalled = self._await_ending() or signalled
         ending = follower.ending
         if ending is None:  # a process that exits after the ending did so because of it
@@ -169,8 +174,13 @@ class Swarm:
         return halt
 
     def _exited(self) -> bool:
-        """A process of the run (not an observer) exited on its own."""
-        return any(child.name not in OBSERVERS for child in self.supervisor.group.crashed())
+        """A process of the run (not an observer) exited on its own since the last look."""
+        exited = {
+            child.pid for child in self.supervisor.group.crashed() if child.name not in OBSERVERS
+        }
+        new = bool(exited - self._exits_seen)
+        self._exits_seen |= exited
+        return new
 
     def _await_ending(self) -> bool:
         """Take in what comes for ENDING_GRACE, or until the world's ending came; whether a

@@ -112,6 +112,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--connect (default: this host's router, the same way). Needs Dask: pip install "
         "'.[dask]' (deploy/README.md)",
     )
+    processes.add_argument(
+        "--dask-world",
+        default=None,
+        metavar="WORKER",
+        help="with --dask: run the world server and the beacon on this worker of the cluster "
+        "(its name, address or host) instead of here; only it is handed the run secret",
+    )
     network = parser.add_argument_group("network")
     network.add_argument(
         "--connect",

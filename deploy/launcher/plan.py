@@ -100,6 +100,7 @@ class RunPlan:
     outside: OutsidePlan | None = None  # --external: robots served to programs outside
     lost_robot: LostRobot = LostRobot.CONTINUE  # what a robot lost mid-run does to the run
     dask: str | None = None  # --dask: the scheduler whose workers host the robots
+    dask_world: str | None = None  # --dask-world: the worker of the world and the beacon
 
     @property
     def external(self) -> list[int]:
@@ -177,6 +178,7 @@ NOT_CONFIG = {
     "no_batch",
     "link_keys",  # where the outside robots' keys go
     "dask",  # recorded only when given (where the robots ran)
+    "dask_world",
     *VIEW_OPTIONS,
 }
 
@@ -217,6 +219,8 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
             "--kill and --restart act on one robot's process: use them with --robots-per-process 1"
         )
     connect = args.connect
+    if args.dask_world is not None and args.dask is None:
+        raise ValueError("--dask-world names a worker of the cluster --dask gives: give --dask")
     if args.dask is not None:
         refuse_on_dask(args)
         # The world, beacon and recorder are clients of this host's router, as the robots
@@ -263,6 +267,8 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     )
     if args.dask is not None:
         config["dask"] = args.dask
+    if args.dask_world is not None:
+        config["dask_world"] = args.dask_world
     recorded = RunDescription(run_id, args.seed, args.robots, args.sites, config)
     recorder_args = [
         "--run-id",
@@ -302,6 +308,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         # A lost host takes its robots with it: the run has no result left to wait for.
         lost_robot=LostRobot.END if args.dask is not None else LostRobot.CONTINUE,
         dask=args.dask,
+        dask_world=args.dask_world,
     )
 
 

@@ -114,7 +114,7 @@ class Supervisor:
                 return False
             step(stopping)
         if plan.dask is not None:
-            self._place_robots()
+            self._place("robots")
             return not stopping()
         emulated = plan.emulated
         for first in range(0, len(emulated), plan.robots_per_process):
@@ -129,11 +129,15 @@ class Supervisor:
         return not stopping()
 
     def _start_world(self, stopping: Stopping) -> None:
-        """The run's network (keys, private socket, certificates), then the world server."""
+        """The run's network (keys, private socket, certificates), then the world server
+        (--dask-world: with the beacon, on that worker of the cluster)."""
         plan = self.plan
         self.network = network = RunNetwork.create(
             plan.run_id, plan.robots, connect=plan.connect, keyed=plan.keyed, secure=plan.secure
         )
+        if plan.dask_world is not None:
+            self._place("world")
+            return
         world = self.group.start(
             "world",
             python_module(
@@ -154,7 +158,7 @@ class Supervisor:
         """The launcher's session, once the world answers: the follower's subscriptions,
         the children's lines. (Each wait here is bounded, and short once the world runs.)"""
         network, world = self.network, self.world
-        assert network is not None and world is not None
+        assert network is not None
         config = network.config_of(zenoh_acl.LAUNCHER)
         opening = time.monotonic()
         try:
@@ -215,6 +219,8 @@ class Supervisor:
     def _start_beacon(self, stopping: Stopping) -> None:
         network = self.network
         assert network is not None
+        if self.plan.dask_world is not None:
+            return  # with the world, on its worker
         beacon = names.beacon_certificate(names.DEFAULT_BEACON)
         self.group.start(
             "beacon",
@@ -306,14 +312,25 @@ class Supervisor:
         self.bridge = self._launch_bridge()
         return True
 
-    def _place_robots(self) -> None:
-        """--dask: the robot processes on the cluster's workers (Dask is needed only now)."""
+    def _place(self, part: str) -> None:
+        """--dask: the robot processes (or with --dask-world the world server and the
+        beacon) on the cluster's workers (Dask is needed only now)."""
         try:
             from deploy.launcher.dask_placement import DaskError, DaskPlacement
         except ImportError as error:
             raise StartError(f"--dask needs Dask: pip install '.[dask]' ({error})") from None
-        self.placement = DaskPlacement(self.plan)
+        if self.placement is None:
+            self.placement = DaskPlacement(self.plan)
         try:
+            if part == "world":
+                worker = self.placement.start_world(self.keyring)
+                print(
+                    f"swarm run: the world server and the beacon on worker {worker.address} "
+                    f"(host {worker.host})",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                return
             placed = self.placement.start(self.keyring)
         except DaskError as error:
             raise StartError(str(error)) from None

@@ -13,12 +13,17 @@ What the world knows, and decides:
 
 * every running robot decided (consensus or split), the sim time limit, the stall
   watchdog;
-* a beacon lost (its liveliness went while the run went on): the run crashed, at once;
-* a robot lost (its liveliness went, not as a fault of the run's plan, ``departures``):
-  it holds nothing up and is not among those whose decisions count; the run goes on and
-  ends ``crashed`` (``lost_robot`` ``continue``, what ``swarm run`` does on one machine),
-  or ends ``crashed`` at once (``end``, what ``swarm run --dask`` asks: a lost host takes
-  its robots with it);
+* a robot or beacon whose liveliness went, not as a fault of the run's plan
+  (``departures``), is *away*: its process died, or its link was cut (a machine suspended
+  for longer than Zenoh's lease loses every token and gets them back once it wakes). For
+  ``LOST_AFTER`` wall seconds it counts as if it were there (an undecided robot away holds
+  the run up, as a frozen process does); back by then, nothing happened. After that it is
+  lost: a lost beacon ends the run ``crashed`` at once; a lost robot holds nothing up and is
+  not among those whose decisions count, and the run goes on and ends ``crashed``
+  (``lost_robot`` ``continue``, what ``swarm run`` does on one machine), or ends ``crashed``
+  at once without waiting (``end``, what ``swarm run --dask`` asks: a lost host takes its
+  robots with it). What is still away when the run ends is lost. A lost robot that comes
+  back runs again;
 * a robot killed or restarted by the run's plan (``--kill``, ``--restart``: the launcher
   applies them, the world is told them): killed, or restarting until it rejoins, as the
   launcher counts it; a robot outside the emulator whose link went: departed;
@@ -45,6 +50,10 @@ from robot_agent.core.controller_config import ControllerConfig
 from robot_agent.core.parking import ParkingSlots
 from world_server.observer.observer import RunObserver
 from world_server.observer.watchdog import Watchdog, default_stall_window
+
+# Wall seconds a robot or beacon whose liveliness went may take to come back before it is
+# lost: Zenoh's 10 s lease, the seconds a thawed process takes to reconnect, and room.
+LOST_AFTER = 30.0
 
 
 class LostRobot(StrEnum):
@@ -194,38 +203,65 @@ class Referee:
         self._beacons: set[str] = set()
         self._planned = sorted(rules.departures, key=lambda planned: planned.at)
         self._restarting: set[int] = set()  # restarted by the plan, not yet back
+        self._away: dict[int | str, float] = {}  # robot or beacon -> wall time it went
+        self._returned: set[int] = set()  # back after it went: its next status tells how
         self.lost: list[str] = []  # robots (ids) and beacons (names) lost, in order
         self.beacon_lost = False
 
     # --- fed -------------------------------------------------------------------------
 
     def take(self, opened: Any) -> None:
-        """A robot's status or a link's figures, through the key table's gate (raises
-        ``keyspace.SampleError`` for one that makes no sense: the adapter counts it)."""
+        """A robot's status, a beacon's ack or a link's figures, through the key table's
+        gate (raises ``keyspace.SampleError`` for one that makes no sense: the adapter
+        counts it). A robot back after it went that reports from an older tick than it
+        did is a fresh process: restarted."""
+        message = opened.message
+        if isinstance(message, protocol.Status) and message.id in self._returned:
+            self._returned.discard(message.id)
+            last = self.observer.records[message.id].status
+            if last is not None and message.tick < last.tick:
+                self.observer.killed(message.id, restarting=True)
         self.observer.take(opened)
 
     def state(self, state: protocol.WorldState) -> None:
         """The world's state, as it publishes it (every ``--state-every`` ticks)."""
         self.observer.state(state)
 
-    def now(self, tick: int, t: float, live: Iterable[int], beacons: Iterable[str]) -> None:
-        """The world at a look: its tick and sim time, the robots and beacons live now."""
+    def now(
+        self,
+        tick: int,
+        t: float,
+        live: Iterable[int],
+        beacons: Iterable[str],
+        wall: float = 0.0,
+    ) -> None:
+        """The world at a look: its tick and sim time, the robots and beacons live now, and
+        the wall time (for how long those that went have been away)."""
+        now_live, now_beacons = set(live), set(beacons)
         if not self.started:
             self.started = True
-            self._live, self._beacons = set(live), set(beacons)
+            self._live, self._beacons = now_live, now_beacons
         self.tick, self.t = tick, t
         self.observer.clock(protocol.Clock(v=protocol.VERSION, tick=tick, t=t))
-        now_live, now_beacons = set(live), set(beacons)
         for robot in sorted(self._live - now_live):
-            self._left(robot)
+            self._left(robot, wall)
         for robot in sorted(now_live - self._live):
             self._came_back(robot)
         for beacon in sorted(self._beacons - now_beacons):
-            self.lost.append(beacon)
-            self.beacon_lost = True
-        self._live, self._beacons = now_live, now_beacons
+            self._away.setdefault(beacon, wall)
+        for beacon in now_beacons:
+            self._away.pop(beacon, None)
+        self._live = now_live
+        self._beacons = now_beacons | {gone for gone in self._away if isinstance(gone, str)}
+        for gone, since in list(self._away.items()):
+            at_once = isinstance(gone, int) and self.rules.lost_robot is LostRobot.END
+            if at_once or wall - since >= LOST_AFTER:
+                del self._away[gone]
+                # A beacon beyond those the run waits for (a spare) is not missed.
+                if isinstance(gone, int) or len(now_beacons) < self.shape.beacons:
+                    self._lose(gone)
 
-    def _left(self, robot: int) -> None:
+    def _left(self, robot: int, wall: float) -> None:
         if robot in self.outside:
             return  # its link went: it counts again when its program is back
         planned = next((p for p in self._planned if p.robot == robot and p.at <= self.t), None)
@@ -235,17 +271,28 @@ class Referee:
             if planned.returns:
                 self._restarting.add(robot)
             return
-        self.observer.crashed(robot)
-        self.lost.append(names.robot_name(robot))
+        self._away.setdefault(robot, wall)
+
+    def _lose(self, gone: int | str) -> None:
+        if isinstance(gone, str):
+            self.lost.append(gone)
+            self.beacon_lost = True
+            return
+        self.observer.crashed(gone)
+        self.lost.append(names.robot_name(gone))
 
     def _came_back(self, robot: int) -> None:
         if robot in self._restarting:
             self._restarting.discard(robot)
             return
+        if self._away.pop(robot, None) is not None:
+            self._returned.add(robot)  # back in time: as if it never went
+            return
         name = names.robot_name(robot)
-        if name in self.lost:  # lost, and back (restarted by hand): it runs afresh
+        if name in self.lost:  # lost, and back: it runs again
             self.lost.remove(name)
-            self.observer.killed(robot, restarting=True)
+            self.observer.returned(robot)
+            self._returned.add(robot)
 
     # --- asked -----------------------------------------------------------------------
 
@@ -254,9 +301,10 @@ class Referee:
         return [robot for name in self.lost if (robot := names.robot_of_name(name)) is not None]
 
     def running(self) -> list[int]:
-        """The robots whose decisions count now: live (an outside one: its link up), or
-        restarting by the plan."""
-        return sorted(self._live | self._restarting)
+        """The robots whose decisions count now: live (an outside one: its link up),
+        restarting by the plan, or away and not yet lost."""
+        away = {gone for gone in self._away if isinstance(gone, int)}
+        return sorted(self._live | self._restarting | away)
 
     def look(self, signalled: bool = False) -> Halt | None:
         """Whether the run ends at this look, and why (``stop_reason``, in its order)."""
@@ -266,7 +314,8 @@ class Referee:
         # A restart still to come will make progress: wait for it, as swarm run does.
         waiting = any(planned.returns for planned in self._planned)
         running = self.running()
-        all_decided = not waiting and observer.all_decided(running)
+        # With no robot running (every one gone), the world waits for them: nobody decided.
+        all_decided = not waiting and bool(running) and observer.all_decided(running)
         lost_ends = self.rules.lost_robot is LostRobot.END and bool(self.lost_robots)
         return stop_reason(
             Look(
@@ -290,6 +339,9 @@ class Referee:
     ) -> protocol.RunEnding:
         """The run's ending once ``look`` said ``halt``: ``state``, the world's last state
         and counters; ``wall_time``, wall seconds since its first tick."""
+        for gone in list(self._away):  # still away at the end: lost
+            del self._away[gone]
+            self._lose(gone)
         stop = halt.stop
         if self.lost_robots and stop is not Stop.INTERRUPTED:
             stop = Stop.CRASHED  # a robot lost: as swarm run, the run has no result

@@ -159,6 +159,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 server.stop()
                 lingering = False
             worker.join(0.0 if lingering else 0.2)
+        server.undeclare()
         server.close_trace()
         return thread_result[0] if thread_result else 1
 

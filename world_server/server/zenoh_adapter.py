@@ -53,8 +53,10 @@ from world_server.server.timeline import TickTimeline
 # The largest valid message: a batch of acts (a radio payload and its attachment, alone).
 MAX_MESSAGE_BYTES = max(batch.MAX_BATCH_BYTES, protocol.MAX_PAYLOAD_BYTES + 1024)
 MAX_WAIT = 0.5  # seconds the thread sleeps at most, whatever the deadline
-# What the world hears for its referee rather than its coordinator.
+# What the world hears for its referee rather than its coordinator; and what for both
+# (a beacon's ack: the coordinator's barrier, the referee's count of what beacons refused).
 JUDGED = frozenset({keyspace.STATUS, keyspace.LINK})
+BOTH = frozenset({keyspace.ACK})
 
 
 class WorldServer:
@@ -134,6 +136,8 @@ class WorldServer:
                 return
             arrived = now() if self.timeline is not None else 0.0
             self._feed(Event(kind, str(sample.key_expr), payload, extra, arrived=arrived))
+            if kind in BOTH:
+                self._judged_sample(str(sample.key_expr), payload, extra)
 
         return callback
 
@@ -157,7 +161,7 @@ class WorldServer:
                 return
             try:
                 opened = keyspace.open_sample(
-                    self.keys, key, payload, attachment, keyring=self.keyring, kinds=JUDGED
+                    self.keys, key, payload, attachment, keyring=self.keyring, kinds=JUDGED | BOTH
                 )
                 if opened is not None:
                     referee.take(opened)
@@ -239,7 +243,7 @@ class WorldServer:
         self._looked = looked
         if self._first_tick_at is None:
             self._first_tick_at = time.monotonic()
-        referee.now(world.tick, world.t, world.live_robots(), world.beacons())
+        referee.now(world.tick, world.t, world.live_robots(), world.beacons(), time.monotonic())
         halt = referee.look()
         if halt is not None:
             self._end(halt)
@@ -254,7 +258,7 @@ class WorldServer:
         coordinator.stop()
         if running:  # what the world did up to now: its last state and counters
             world = coordinator.world
-            referee.now(world.tick, world.t, world.live_robots(), world.beacons())
+            referee.now(world.tick, world.t, world.live_robots(), world.beacons(), time.monotonic())
         wall = time.monotonic() - self._first_tick_at if self._first_tick_at else 0.0
         name = signal.Signals(signum).name if signum is not None else None
         ending = referee.ending(halt, coordinator.state(), wall, signum, name)
@@ -314,6 +318,13 @@ class WorldServer:
             cast(zenoh.Query, output.query).reply_err(output.reason)
         elif self.timeline is not None:
             self.timeline.note(output)
+
+    def undeclare(self) -> None:
+        """Undeclare what it hears and serves, and its token: no callback comes after, so
+        none is under way as the session closes and the interpreter exits."""
+        declared, self._declared = self._declared, []
+        for entity in declared:
+            entity.undeclare()
 
     def close_trace(self) -> None:
         if self.timeline is not None:
