@@ -137,7 +137,7 @@ def test_what_comes_back_within_the_grace_never_went() -> None:
     assert referee.lost == [] and not referee.beacon_lost
     referee.now(12, 1.2, [0, 1, 2], ["nest"], wall=15.0)  # robot 3 goes, and the run ends
     ending = referee.ending(Halt(Stop.STALLED), None, 15.0)
-    assert ending.lost == ["3"] and ending.ended is Ending.CRASHED  # still away: lost
+    assert ending.lost == [] and ending.ended is Ending.STALLED  # away, maybe only frozen
 
 
 def test_with_every_robot_gone_the_world_waits_rather_than_decide() -> None:

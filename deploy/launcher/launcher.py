@@ -300,10 +300,11 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
             f"{swarm.crash.process.returncode}):\n{swarm.crash.tail()}",
             file=sys.stderr,
         )
-    if swarm.world_ended and follower.ending is not None:
+    ending = follower.ending
+    if swarm.world_ended and ending is not None and not _crashes_unseen(swarm, ending):
         swarm.stop()
-        summary = launcher_summary(swarm, follower.ending.summary)
-        code = follower.ending.code
+        summary = launcher_summary(swarm, ending.summary)
+        code = ending.code
     else:
         summary = _own_summary(swarm, halt, signum)
         code = Ending(summary["ended"]).exit_code(signum)
@@ -323,6 +324,30 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
     if robot_crashes:
         print(f"swarm run: robot process(es) {robot_crashes} crashed", file=sys.stderr)
     return code
+
+
+def _counters_of(ending: protocol.RunEnding) -> protocol.WorldState:
+    """The world's counters as its ending's summary gives them."""
+    summary = ending.summary
+    return protocol.WorldState(
+        v=protocol.VERSION,
+        tick=ending.tick,
+        t=ending.t,
+        robots=[],
+        radio=protocol.RadioCounters(**summary["radio"]),
+        rejected=summary["world"]["rejected"],
+        stalls=summary["world"]["stalls"],
+        departures=summary["world"]["departures"],
+    )
+
+
+def _crashes_unseen(swarm: Swarm, ending: protocol.RunEnding) -> bool:
+    """Whether a robot process died that the world's ending does not count as lost: the
+    world saw only its token go (maybe a frozen process), the launcher saw it die. The
+    launcher's own summary then says so, as before the world ended runs."""
+    lost = {robot["id"] for robot in ending.summary.get("per_robot", []) if robot["crashed"]}
+    died = {record.id for record in swarm.follower.run.records.values() if record.crashed}
+    return bool(died - lost)
 
 
 def _name_lost_hosts(swarm: Swarm, summary: dict[str, Any]) -> None:
@@ -361,6 +386,10 @@ def _own_summary(swarm: Swarm, halt: Halt, signum: int | None) -> dict[str, Any]
     plan, follower, run = swarm.plan, swarm.follower, swarm.follower.run
     run.departed(run.outside_present())  # before the bridge stops and every link goes
     stats = swarm.stop()
+    ending = follower.ending
+    if swarm.world_ended and ending is not None:  # the world's counters at its ending
+        stats = _counters_of(ending)
+        swarm.departures = stats.departures
     robot_crashes = [record.id for record in run.records.values() if record.crashed]
     stop = halt.stop
     if robot_crashes and stop is not Stop.INTERRUPTED:

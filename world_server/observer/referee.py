@@ -22,7 +22,8 @@ What the world knows, and decides:
   not among those whose decisions count, and the run goes on and ends ``crashed``
   (``lost_robot`` ``continue``, what ``swarm run`` does on one machine), or ends ``crashed``
   at once without waiting (``end``, what ``swarm run --dask`` asks: a lost host takes its
-  robots with it). What is still away when the run ends is lost. A lost robot that comes
+  robots with it). What is still away when the run ends is not lost: it may be frozen
+  (a launcher that saw its process die says so: docs/running.md). A lost robot that comes
   back runs again;
 * a robot killed or restarted by the run's plan (``--kill``, ``--restart``: the launcher
   applies them, the world is told them): killed, or restarting until it rejoins, as the
@@ -339,9 +340,6 @@ class Referee:
     ) -> protocol.RunEnding:
         """The run's ending once ``look`` said ``halt``: ``state``, the world's last state
         and counters; ``wall_time``, wall seconds since its first tick."""
-        for gone in list(self._away):  # still away at the end: lost
-            del self._away[gone]
-            self._lose(gone)
         stop = halt.stop
         if self.lost_robots and stop is not Stop.INTERRUPTED:
             stop = Stop.CRASHED  # a robot lost: as swarm run, the run has no result
