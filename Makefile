@@ -22,9 +22,17 @@
 #   --help` for a larger sample). As root it installs qemu-user and the aarch64 cross
 #   compiler when they are missing; what it downloads is kept in .portable/. CI runs it
 #   after `make check-published`.
+# `make check-mcu`: the robot in C as Cortex-M4F firmware under qemu-system-arm
+#   (portable/mcu.py): its RAM and flash against their budgets, its unit tests on
+#   mps2-an386, a build without entropy refusing to start, and lockstep runs with it as
+#   robot 9 on netduinoplus2 over a serial line (seeds 0 and 3, and 7 and 8 with camera
+#   noise) against the all-emulated runs. Without arm-none-eabi-gcc and newlib,
+#   qemu-system-arm or socat it says what is missing and skips (exit 0). CI runs it after
+#   `make check-portable`, installing Debian's packages for it as root.
 # All of them create .venv and install the project on first use (and again when the
 # lock changes): the exact versions and hashes of requirements/run.lock (make run) or
-# requirements/test.lock (the rest), then the project itself without dependencies.
+# requirements/test.lock (the rest), then the project itself without dependencies (and for
+# the tests the example plug-in, examples/linear_pool, which the suite runs too).
 # `make lock` writes both locks again from pyproject.toml's ranges (docs/testing.md says
 # when, and that published numbers are made again after).
 PYTHON ?= python3
@@ -39,7 +47,7 @@ TEST_WORKERS ?= 2
 # check makes other runs (make check-published CHECK_SEED=20250314 draws that day's again).
 CHECK_SEED ?= $(shell date -u +%Y%m%d)
 
-.PHONY: run test test-fast check-published check-portable explore lint bench lock c-robot clean cores clean-cores
+.PHONY: run test test-fast check-published check-portable check-mcu explore lint bench lock c-robot clean cores clean-cores
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -50,9 +58,10 @@ $(VENV)/.installed: $(RUN_LOCK) pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet --no-deps -e .
 	touch $@
 
-$(VENV)/.installed-test: $(TEST_LOCK) pyproject.toml | $(BIN)/python
+$(VENV)/.installed-test: $(TEST_LOCK) pyproject.toml examples/linear_pool/pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet --require-hashes -r $(TEST_LOCK)
 	$(BIN)/python -m pip install --quiet --no-deps -e .
+	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e examples/linear_pool
 	touch $@ $(VENV)/.installed
 
 run: $(VENV)/.installed
@@ -93,6 +102,10 @@ check-published: $(VENV)/.installed-test
 check-portable: $(VENV)/.installed-test
 	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/python -m portable
+
+check-mcu: $(VENV)/.installed-test
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build
+	$(BIN)/python -m portable.mcu
 
 # The property tests with fresh random examples (make test repeats the same ones).
 explore: $(VENV)/.installed-test

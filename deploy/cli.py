@@ -10,6 +10,7 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from bestofn_swarm.plumbing import cores
 from bestofn_swarm.plumbing.cliargs import UsageError
@@ -44,8 +45,16 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "deploy.launcher.follow",
         "follow a running swarm from any host: its progress, then its summary and exit code",
     ),
+    "plugins": (
+        "deploy.plugin_list",
+        "the plug-ins installed: strategies, pooling operators, controllers (docs/extending.md)",
+    ),
     "router": ("deploy.launcher.router", "a Zenoh router (a Python session; no zenohd needed)"),
     "view": ("deploy.viewer.replay", "replay a recording in the browser, on the live view's page"),
+    "frame": (
+        "deploy.reports.frame",
+        "a recorded run's time series as a CSV or Parquet table (one row per robot per sample)",
+    ),
 }
 
 
@@ -64,9 +73,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
 
+class ShortUsageParser(argparse.ArgumentParser):
+    """An argument parser whose error is a short usage line and one line of error: the
+    whole usage of ``swarm run`` is 27 lines, and ``--help`` prints it."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{short_usage(self)}\n{self.prog}: error: {message}\n")
+
+
+def short_usage(parser: argparse.ArgumentParser) -> str:
+    """``usage: swarm report [options] RUN.mcap [RUN.mcap ...] (--help: all of them)``."""
+    formatter = parser._get_formatter()
+    positionals = [
+        formatter._format_args(action, action.dest.upper())
+        for action in parser._actions
+        if not action.option_strings and action.help is not argparse.SUPPRESS
+    ]
+    words = [parser.prog, "[options]", *positionals]
+    return f"usage: {' '.join(words)} ({parser.prog} --help lists the options)"
+
+
 def build_parser(arguments: Sequence[str]) -> argparse.ArgumentParser:
     """The parser, with full options only for the subcommand being run."""
-    parser = argparse.ArgumentParser(
+    parser = ShortUsageParser(
         prog="swarm",
         description="Best-of-n decisions by negative updating and opinion pooling.",
     )

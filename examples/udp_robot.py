@@ -207,7 +207,7 @@ def run(args: argparse.Namespace) -> dict[str, object]:
     config = ControllerConfig(dwell=args.dwell)
     # The determinism rule: every random draw comes from the world's seed's stream for this
     # robot, as every robot of the project is built (robot_agent/core/builder.py).
-    controller = builder.build_controller(args.id, world, config)
+    controller = builder.build_controller(args.id, world, config, factory=Controller)
     assert isinstance(controller, Controller)
     rejects = ports.RejectCounter()
     with UdpRadio(

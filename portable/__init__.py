@@ -9,5 +9,7 @@ docs/kernel.md what it shows.
   an emulator) and prints one JSON line per job;
 * ``machines``: the emulated machines, and what each needs installed and cached;
 * ``c_robot``: the C robot cross-built for aarch64, under qemu-aarch64;
-* ``check``: the command (``python -m portable``).
+* ``check``: the command (``python -m portable``);
+* ``mcu``: ``make check-mcu`` (``python -m portable.mcu``), the C robot as Cortex-M4F
+  firmware under qemu-system-arm.
 """

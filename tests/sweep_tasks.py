@@ -15,7 +15,7 @@ def small_run(task: tuple[str, int]) -> dict[str, Any]:
 
     strategy, seed = task
     world = WorldConfig(run="sweep-test", seed=seed, num_sites=3, num_robots=3)
-    summary = run_in_process(world, ControllerConfig(strategy=strategy), timeout=1200.0)  # type: ignore[arg-type]
+    summary = run_in_process(world, ControllerConfig(strategy=strategy), timeout=1200.0)
     return {
         "ended": summary["ended"],
         "sim_time_s": summary["sim_time_s"],

@@ -20,7 +20,7 @@ from typing import Any
 import portable_probe
 import pytest
 
-from bestofn_swarm.plumbing import cores
+from bestofn_swarm.plumbing import cores, cores_state
 
 REPO = Path(__file__).resolve().parent.parent
 PACKAGES = ("bestofn_swarm", "robot_agent", "world_server", "nest_beacon", "deploy", "examples",
@@ -84,7 +84,7 @@ def test_another_machines_build_in_the_tree_is_not_stale(
 ) -> None:
     """A tree shared by two machines (the portability check runs an emulated aarch64 Python
     on the tree this one built) keeps both builds; each sees only its own."""
-    monkeypatch.setattr(cores, "REPO", tmp_path)
+    monkeypatch.setattr(cores_state, "REPO", tmp_path)
     for module in cores.MODULES:
         (tmp_path / module).parent.mkdir(parents=True, exist_ok=True)
     folder = tmp_path / Path(cores.MODULES[0]).parent
@@ -123,3 +123,48 @@ def test_studies_watch_a_compiled_controller_as_they_watch_its_source(tmp_path: 
     assert compiled["comparisons"]["comparisons"] > 0
     assert compiled["lag"]["lag"] is not None
     assert compiled == observed(source_only(tmp_path))
+
+
+STALE_PROBE = """
+import json
+from deploy.launcher.inprocess import run_plan
+from deploy.launcher.plan import plan_from_args
+from deploy.cli import build_parser
+import robot_agent.core.controller as controller
+argv = ["run", "--engine", "inprocess", "--no-record", "--robots", "6", "--sites", "4",
+        "--seed", "3"]
+summary = run_plan(plan_from_args(build_parser(["run"]).parse_args(argv)))
+print(json.dumps({"file": controller.__file__, "digest": summary["digest"]}))
+"""
+
+
+def test_a_stale_core_runs_from_its_source_with_one_warning(tmp_path: Path) -> None:
+    """Editing a compiled core module never traps: every core then loads from its source
+    (the run is the same), one line says so and how to build them again, and a process
+    started meanwhile says nothing more."""
+    if cores.status().state != "compiled":
+        pytest.skip("the compiled cores are not built")
+    root = tmp_path / "tree"
+    for package in PACKAGES:
+        skip = shutil.ignore_patterns("__pycache__", ".hypothesis")
+        shutil.copytree(REPO / package, root / package, ignore=skip)
+    shutil.copytree(REPO / "build", root / "build", ignore=shutil.ignore_patterns("cores-temp"))
+    fresh = portable_probe.python_from(root, ["-c", STALE_PROBE], dict(os.environ))
+    assert fresh.returncode == 0, fresh.stderr[-2000:]
+    compiled = json.loads(fresh.stdout)
+    assert compiled["file"].endswith(importlib.machinery.EXTENSION_SUFFIXES[0])
+    assert "warning" not in fresh.stderr
+    edited = root / "robot_agent" / "core" / "motion.py"
+    edited.write_text(edited.read_text() + "# an edit after the build\n")
+    stale = portable_probe.python_from(root, ["-c", STALE_PROBE], dict(os.environ))
+    assert stale.returncode == 0, stale.stderr[-2000:]
+    source = json.loads(stale.stdout)
+    assert source["file"] == str(root / "robot_agent" / "core" / "controller.py")
+    assert source["digest"] == compiled["digest"]
+    assert stale.stderr.splitlines() == [
+        "warning: the compiled cores are stale (robot_agent/core/motion.py changed since the "
+        "build): running their source (slower); `make cores` builds them again"
+    ]
+    said = dict(os.environ, **{cores_state.STALE_ENV: "1"})
+    quiet = portable_probe.python_from(root, ["-c", STALE_PROBE], said)
+    assert quiet.returncode == 0 and quiet.stderr == ""

@@ -70,8 +70,6 @@ def test_a_wall_time_limit_ends_the_run_as_a_wall_timeout(
     "options",
     [
         ["--clock", "realtime"],
-        ["--kill", "1@10"],
-        ["--restart", "1@10"],
         ["--robots-per-process", "2"],
         ["--spawn", "exec"],
         ["--connect", "tcp/127.0.0.1:7447"],
@@ -130,7 +128,9 @@ def test_its_recording_reads_like_a_swarm_run_recording(
     assert set(messages) == {kind.name for kind in recorded} | {
         "foxglove.FrameTransforms",
         "foxglove.SceneUpdate",
+        "bestofn.SwarmSample",  # the swarm's curves, one per world state
     }
+    assert messages["bestofn.SwarmSample"] == messages[keyspace.STATE.name]
 
 
 def test_a_stop_signal_ends_it_interrupted_with_its_summary_and_recording(

@@ -41,6 +41,7 @@ PURE = [
 ADAPTERS = [
     "bestofn_swarm/plumbing",
     "bestofn_swarm/link/io",
+    "robot_agent/plugins",
     "robot_agent/node",
     "robot_agent/link",
     "world_server/server",
@@ -61,6 +62,7 @@ OUTER = [
     "deploy/study",
     "deploy/conformance",
     "deploy/viewer",
+    "bestofn_swarm/api",
 ]
 # The package roots that hold only layers and a ``__main__`` that starts one.
 ROOTS = ["bestofn_swarm", "bestofn_swarm/link", "robot_agent", "world_server", "nest_beacon"]
@@ -103,11 +105,19 @@ ALLOWED: dict[str, set[str]] = {
     "nest_beacon/core": {"bestofn_swarm/wire"},
     "deploy/viewer/core": {"bestofn_swarm/wire", "world_server/core", "world_server/observer"},
     "robot_agent/wellstirred": {"robot_agent/core", "bestofn_swarm/wire"},
-    "robot_agent/node": {"bestofn_swarm/wire", "robot_agent/core", "bestofn_swarm/plumbing"},
+    # Finding plug-ins by name: importing them, the installed entry points, their sources.
+    "robot_agent/plugins": {"bestofn_swarm/wire", "robot_agent/core"},
+    "robot_agent/node": {
+        "bestofn_swarm/wire",
+        "robot_agent/core",
+        "robot_agent/plugins",
+        "bestofn_swarm/plumbing",
+    },
     # The robot's end of the link: its program, on the link's loop and transports.
     "robot_agent/link": {
         "bestofn_swarm/wire",
         "robot_agent/core",
+        "robot_agent/plugins",
         "bestofn_swarm/link/core",
         "bestofn_swarm/link/io",
         "bestofn_swarm/plumbing",
@@ -135,10 +145,17 @@ ALLOWED: dict[str, set[str]] = {
         "world_server/bridge/core",
     },
     "nest_beacon/node": {"bestofn_swarm/wire", "nest_beacon/core", "bestofn_swarm/plumbing"},
-    "bestofn_swarm": set(),
+    # The package roots that hold compiled cores first see that no stale one runs
+    # (bestofn_swarm/plumbing/cores_state.py); the shared root gives the public API lazily.
+    "bestofn_swarm": {"bestofn_swarm/plumbing", "bestofn_swarm/api"},
     "bestofn_swarm/link": set(),
-    "robot_agent": {"robot_agent/node"},
-    "world_server": {"world_server/server", "world_server/recorder", "world_server/bridge"},
+    "robot_agent": {"robot_agent/node", "bestofn_swarm/plumbing"},
+    "world_server": {
+        "world_server/server",
+        "world_server/recorder",
+        "world_server/bridge",
+        "bestofn_swarm/plumbing",
+    },
     "nest_beacon": {"nest_beacon/node"},
     "deploy/viewer": {
         "bestofn_swarm/wire",
@@ -167,6 +184,9 @@ ALLOWED: dict[str, set[str]] = {
     "deploy/conformance": set(FOLDERS)
     - {"deploy", "deploy/conformance", "deploy/study", "bestofn_swarm"},
     "deploy": set(FOLDERS) - {"deploy", "bestofn_swarm"},
+    # The public Python API (``from bestofn_swarm import run, sweep``): runs and sweeps as
+    # swarm run and the study runner make them; nothing imports it but the shared root.
+    "bestofn_swarm/api": set(FOLDERS) - {"bestofn_swarm", "bestofn_swarm/api", "deploy"},
 }
 # What ``robot-agent --link`` may not import, directly or through any module of this
 # repository it imports: it runs where there is no Zenoh.
@@ -276,6 +296,32 @@ def module_file(module: str) -> Path | None:
     return None
 
 
+def lazy_imports(path: Path) -> set[str]:
+    """What a module imports only in its module-level ``__getattr__`` (PEP 562): made when a
+    name it does not hold is asked of it (``from bestofn_swarm import run`` imports the
+    public API, bestofn_swarm/api/), never by importing it or a module inside it."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    names: set[str] = set()
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef) and node.name == "__getattr__":
+            for inner in ast.walk(node):
+                if isinstance(inner, ast.ImportFrom) and inner.module and inner.level == 0:
+                    names.add(inner.module)
+                    names.update(f"{inner.module}.{alias.name}" for alias in inner.names)
+                elif isinstance(inner, ast.Import):
+                    names.update(alias.name for alias in inner.names)
+    return names
+
+
+def test_the_public_api_is_imported_only_when_asked_for() -> None:
+    """The shared root gives ``run`` and ``sweep`` lazily: importing the shared layers (as
+    every process does) imports no part of the API, and so nothing of ``deploy``."""
+    root = REPO / "bestofn_swarm" / "__init__.py"
+    assert lazy_imports(root) == {"bestofn_swarm", "bestofn_swarm.api"}
+    reached = reached_imports("bestofn_swarm.wire.protocol")
+    assert not [module for module in reached if module.startswith(("deploy", "bestofn_swarm.api"))]
+
+
 def reached_imports(module: str) -> dict[str, str]:
     """Every module ``module`` imports, directly or through modules of this repository,
     each with the repository module that imports it first."""
@@ -287,7 +333,7 @@ def reached_imports(module: str) -> dict[str, str]:
         path = module_file(current)
         if path is None:
             continue
-        imports = set(imported_modules(path))
+        imports = set(imported_modules(path)) - lazy_imports(path)
         parts = current.split(".")  # a module's packages run their __init__ first
         imports.update(".".join(parts[:n]) for n in range(1, len(parts)))
         for imported in sorted(imports):

@@ -220,6 +220,67 @@ def test_a_paced_line_hands_a_frame_on_when_its_last_byte_would_arrive() -> None
     assert pacer.done_at(10, 1.0) == pytest.approx(1.0 + 100 / 115200)
 
 
+def test_a_paced_line_hands_bytes_on_as_the_line_carries_them_each_frame_in_time() -> None:
+    """11520 bytes at 115200 baud take 1 s: a slice of 230 bytes every 20 ms on the way, the
+    last byte at 1 s exactly (LinePacer's time); the next frame follows the first."""
+    line = pacing.PacedLine(115200)
+    first, second = bytes(range(256)) * 45, b"next"
+    assert line.put(first, 0.0) == pytest.approx(1.0)
+    assert line.put(second, 0.5) == pytest.approx(1.0 + 40 / 115200)
+    assert line.busy_until == pytest.approx(1.0 + 40 / 115200)
+    assert line.take(0.0) == (b"", 0) and line.deadline == pytest.approx(230 * 10 / 115200)
+    carried = b""
+    times = []
+    while line.deadline is not None and line.deadline < 1.0:
+        times.append(line.deadline)
+        due, completed = line.take(line.deadline)
+        assert 0 < len(due) <= 230 and completed == 0
+        carried += due
+    assert len(times) == 11520 // 230 and times == sorted(times)
+    due, completed = line.take(0.999)  # by then all but the last few bytes
+    assert 0 < len(carried + due) < len(first) and completed == 0
+    carried += due
+    due, completed = line.take(1.0)
+    assert carried + due == first and completed == 1
+    assert line.take(1.0 + 40 / 115200) == (second, 1)
+    assert line.deadline is None and line.held_bytes == 0
+
+
+def test_a_paced_line_drops_the_frames_not_begun_and_finishes_the_one_under_way() -> None:
+    """When a session ends, what waits for it on the line is dropped (the next session's
+    welcome would wait behind it), but the frame whose bytes are going finishes whole."""
+    line = pacing.PacedLine(115200)
+    done = line.put(b"x" * 11520, 0.0)  # 1 s of line
+    line.put(b"y" * 11520, 0.0)
+    line.put(b"z" * 100, 0.0)
+    line.take(0.5)
+    assert line.discard_waiting(0.5) == 2
+    assert line.busy_until == pytest.approx(done) and line.held_bytes == 11520
+    rest, completed = line.take(1.0)
+    assert completed == 1 and line.held_bytes == 0 and set(rest) == {ord("x")}
+    assert line.put(b"next", 1.0) == pytest.approx(1.0 + 40 / 115200)  # free again
+
+
+def test_a_frame_under_way_on_a_serial_line_keeps_the_session_at_both_ends() -> None:
+    """Bytes of a frame arriving (hearing) restart the silence at either end; and the bridge
+    does not count as the robot's silence the time its own frames take to reach the robot,
+    which cannot answer a ping queued behind them. Before a session, hearing opens nothing."""
+    pair = Pair()
+    pair.client.hearing(1.0)
+    assert not pair.client.open and pair.client.last_heard == 0.0
+    pair.connect()
+    for pair.now in (2.0, 4.0, 5.5):  # a long frame to the robot, seen arriving
+        pair.client.hearing(pair.now)
+        assert pair.client.wake(pair.now) == [] and pair.client.open
+    pair.peer.sending(until=5.5)  # the bridge's frames reach the robot at 5.5
+    assert pair.peer.wake(5.0) == [] and pair.peer.connected
+    assert pair.peer.deadline is not None and pair.peer.deadline <= 8.5
+    pair.peer.hearing(7.0)  # then a frame of the robot's, arriving
+    assert pair.peer.wake(9.9) == [] and pair.peer.connected
+    assert pair.peer.wake(10.0) == [SessionClosed(ROBOT, "silent for 3 s")]
+    assert [type(event) for event in pair.client.wake(8.5)] == [Lost]
+
+
 @pytest.mark.parametrize(
     ("text", "expected"),
     [
@@ -594,6 +655,26 @@ def test_an_answer_slower_than_the_repeats_still_brings_the_map_and_the_proof() 
     bench.answer(bench.held[0])
     bench.exchange(now)
     assert endpoint.worlds.followed == "w-1" and bench.robot.proving == {}
+
+
+def test_no_question_is_asked_again_while_a_frame_is_arriving_on_a_serial_line() -> None:
+    """A map of 1000 sites takes 5 s at 115200 baud: while it comes (bytes heard, its end
+    not yet) the program does not ask again, which would only queue more maps behind it; it
+    asks again ASK_EVERY after the line falls quiet without the answer."""
+    from robot_agent.core.link_robot import ASK_EVERY
+
+    bench = ProgramOnABridge(instance="w-1")
+    bench.slow = True
+    bench.exchange(0.0)
+    for now in (0.5, 1.5, 2.5, 3.5, 4.5):  # bytes of a frame arriving all along
+        bench.robot.hearing(now)
+        bench.exchange(now)
+    assert bench.questions("") == 1 and bench.robot.client.open
+    bench.exchange(4.5 + ASK_EVERY)
+    assert bench.questions("") == 2
+    bench.answer(bench.held[0])  # the first answer, at last
+    bench.exchange(4.5 + ASK_EVERY)
+    assert bench.robot.endpoint is not None
 
 
 def test_a_welcome_of_another_run_gets_one_bye_and_ends_the_program_as_failed() -> None:

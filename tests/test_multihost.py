@@ -11,10 +11,13 @@ process a client of its own host's router, as on real machines.
   worker killed mid-run ends the run crashed, naming its host, and leaves no process of the
   run on any host; a second run on the same cluster gives the digest of ``swarm run`` on one
   machine.
+* Robots that run a plug-in (the example plug-in, examples/linear_pool, installed) on two
+  hosts make the run the in-process engine makes with it.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import signal
@@ -31,11 +34,14 @@ from swarm_helpers import (
     REPO,
     kill_leftovers,
     processes_of,
+    reference_run,
     run_swarm,
     stop_processes,
     swarm_command,
     unique_run_id,
 )
+
+from world_server.observer.summary import DIGEST_FIELDS
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -136,6 +142,38 @@ class Cluster:
         lan.on(0, *hosts.scheduler(lan.lan.address(0), SCHEDULER_PORT)[1:])
         self.workers = {host: _worker(lan, self.scheduler, host) for host in (1, 2)}
         _wait_for_workers(lan, self.scheduler, 2)
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("bestofn_linear_pool") is None,
+    reason="the example plug-in is not installed: pip install -e examples/linear_pool",
+)
+def test_a_plugin_on_two_hosts_makes_the_run_it_makes_in_one_process(
+    lan: Hosts, tmp_path: Path
+) -> None:
+    run = hosts.HandRun(unique_run_id("plugin"), SEED, ROBOTS, SITES, tmp_path / "keys")
+    run.write_keys(per_process=2)
+    plugin = ["--pooling", "linear"]
+    following = lan.on(2, *run.follow(lan.endpoint(2))[1:], stdout=subprocess.PIPE)
+    swarm = [
+        lan.on(0, *run.world(lan.endpoint(0))[1:]),
+        lan.on(0, *run.beacon(lan.endpoint(0))[1:]),
+        lan.on(1, *run.robot_host(0, 1, lan.endpoint(1))[1:], *plugin),
+        lan.on(2, *run.robot_host(2, 3, lan.endpoint(2))[1:], *plugin),
+    ]
+    codes = hosts.wait_all([*swarm, following], timeout=150)
+    output = following.communicate(timeout=10)[0].decode()
+    kill_leftovers(run.run_id)
+    assert codes == [0] * 5, f"{codes}\n{_tail(lan)}"
+    found = json.loads(output)
+    alone = reference_run([*run.shape, *plugin])
+    assert alone["ended"] == "consensus"
+
+    def results(per_robot: list[dict[str, object]]) -> list[dict[str, object]]:
+        return [{name: robot[name] for name in DIGEST_FIELDS} for robot in per_robot]
+
+    assert results(found["per_robot"]) == results(alone["per_robot"]), _tail(lan)
+    assert found["digest"] == alone["digest"]
 
 
 @pytest.fixture(scope="module")

@@ -1,9 +1,9 @@
 """Robots outside the emulator against live runs (``swarm run --external``), as the Python
 program (``robot-agent --link``) and as the C robot (c_robot/): the same run bit for bit
-over UDP and over serial lines, a robot that never connects, one whose program
-is killed and restarted, a bridge that dies and is found again, a link made worse on
-purpose in real time, an encrypted link (``--secure``), and forged, replayed and oversized
-frames sent at a live link."""
+over UDP and over serial lines, a map of 1000 sites on lines of 115200 baud, a robot that
+never connects, one whose program is killed and restarted, a bridge that dies and is found
+again, a link made worse on purpose in real time, an encrypted link (``--secure``), and
+forged, replayed and oversized frames sent at a live link."""
 
 from __future__ import annotations
 
@@ -101,6 +101,39 @@ def test_a_python_and_a_c_robot_over_serial_lines_decide_exactly_as_all_emulated
     for robot in ("2", "3"):
         assert summary["links"][robot]["transport"] == "serial"
         assert summary["links"][robot]["refused"] == 0
+
+
+def test_a_map_of_1000_sites_reaches_robots_on_serial_lines_at_115200_baud(
+    tmp_path: Path, c_binary: Path | None
+) -> None:
+    """A map of 1000 sites is 57 KB: 5 s on a line of 115200 baud, longer than the 3 s of
+    silence after which a session is gone. Robot 1 (the C program) and robot 2 (the Python
+    one), each on its own line at 115200, get it in their first session (a frame under way
+    is not silence, and the question is not asked again while it comes), and the run is the
+    all-emulated run's. 3 s of sim time: the map, the proof of the world, 30 steps."""
+    options = ["--robots", "3", "--sites", "1000", "--seed", "0", "--timeout", "3"]
+    options += ["--no-record", *PATIENT]
+    reference = in_process(options)
+    lines = [tmp_path / "c", tmp_path / "python"]
+    for folder in lines:
+        folder.mkdir()
+    with pty_pair(lines[0]) as (c_bridge, c_robot), pty_pair(lines[1]) as (py_bridge, py_robot):
+        served = ["--link", f"1=serial:{c_bridge}@115200", "--link", f"2=serial:{py_bridge}@115200"]
+        with outside_run(tmp_path, *options, "--external", "1,2", *served) as run:
+            run.start_c(c_binary, f"serial:{c_robot}@115200", 1)
+            run.start(f"serial:{py_robot}@115200", 2)
+            code, summary, stderr = run.finish(timeout=300)
+            programs = run.program_summaries()
+    assert summary is not None, stderr
+    assert (code, summary["ended"]) == (5, "timeout") == (5, reference["ended"]), stderr
+    assert decisions(summary) == decisions(reference)
+    assert summary["digest"] == reference["digest"]
+    assert summary["world"]["departures"] == 0
+    for robot in ("1", "2"):
+        assert summary["links"][robot]["sessions"] == 1, summary["links"]
+        assert summary["links"][robot]["refused"] == 0
+    assert [each["sessions"] for each in programs] == [1, 1]
+    assert all(each["last_tick"] >= 29 and each["refused"] == {} for each in programs)
 
 
 def test_an_outside_robot_that_never_connects_ends_the_run_naming_it(tmp_path: Path) -> None:

@@ -29,6 +29,7 @@ from bestofn_swarm.wire import keyspace, protocol
 from bestofn_swarm.wire.names import Role
 from deploy.reports import audit, collect, report
 from world_server.core.layout import make_layout
+from world_server.core.palette import site_colour
 from world_server.recorder import options as recorder_options
 from world_server.recording import foxglove, records, writer
 from world_server.recording.description import RunDescription
@@ -171,7 +172,7 @@ def test_foxglove_messages_carry_the_required_fields_and_the_run(run: Run) -> No
     assert {"arena", "radio-links", *(f"robot-{robot}" for robot in range(ROBOTS))} <= set(entities)
     panels = entities["arena"]["cubes"]
     assert [panel["color"] for panel in panels] == [
-        foxglove.colour(foxglove.site_colour(site.quality)) for site in layout.sites
+        foxglove.colour(site_colour(site.id, SITES)) for site in layout.sites
     ]
     labels = [text["text"] for text in entities["arena"]["texts"]]
     assert f"site {layout.best_site}\nrho = 1.00" in labels

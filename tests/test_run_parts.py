@@ -17,13 +17,13 @@ from bestofn_swarm.plumbing import stop_signals
 from bestofn_swarm.wire import keyspace, protocol
 from bestofn_swarm.wire.endings import Ending, Halt, Stop, TimeLimit
 from deploy.cli import build_parser
-from deploy.launcher.faults import FaultSchedule
 from deploy.launcher.follower import Heard
 from deploy.launcher.launcher import Swarm
 from deploy.launcher.log_relay import LogRelay
-from deploy.launcher.plan import Fault, FaultAction, RunPlan, plan_from_args
+from deploy.launcher.plan import RunPlan, plan_from_args
 from deploy.launcher.processes import ProcessGroup
 from deploy.launcher.signals import StopSignals
+from robot_agent.core import faults
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -113,18 +113,44 @@ def test_the_log_relay_holds_lines_for_the_recorder_and_publishes_none_once_deta
     assert echoed[-1] == "while closing"  # still shown with --verbose
 
 
+class _Engine:
+    """What the faults did to a run, in order."""
+
+    def __init__(self) -> None:
+        self.done: list[tuple[str, int]] = []
+
+    def kill(self, robot: int) -> bool:
+        self.done.append(("kill", robot))
+        return robot != 1
+
+    def restart(self, robot: int) -> None:
+        self.done.append(("restart", robot))
+
+
 def test_faults_fall_due_in_sim_time_order_and_are_noted_as_the_summary_lists_them() -> None:
-    schedule = FaultSchedule(
-        [Fault(1, FaultAction.RESTART, 20.0), Fault(0, FaultAction.KILL, 10.0)]
+    engine = _Engine()
+    schedule = faults.Schedule(
+        [faults.Restart(1, 20.0), faults.Kill(0, 10.0), faults.MotorFailure(2, 5.0)]
     )
-    assert schedule.due(9.9) == [] and schedule.restart_pending()
-    (kill,) = schedule.due(15.0)
-    assert kill == Fault(0, FaultAction.KILL, 10.0)
-    schedule.note(kill, 15.04, was_running=True)
-    assert schedule.due(30.0) == [Fault(1, FaultAction.RESTART, 20.0)]
+    # A motor failure lives in the robot's controller: the engine has nothing to do.
+    assert [fault.SWITCH for fault in schedule.pending] == ["kill", "restart"]
+    assert schedule.apply_due(engine, 9.9) == [] and schedule.restart_pending()
+    (kill,) = schedule.apply_due(engine, 15.04)
+    assert (kill.robot, kill.action) == (0, "kill")
+    assert engine.done == [("kill", 0)]
+    assert schedule.apply_due(engine, 30.0)[0].action == "restart"
+    assert engine.done == [("kill", 0), ("kill", 1), ("restart", 1)]
     assert not schedule.restart_pending() and schedule.pending == []
-    assert schedule.applied == [
-        {"robot": 0, "action": "kill", "at_s": 10.0, "applied_at_s": 15.04, "was_running": True}
+    assert [applied.record() for applied in schedule.applied] == [
+        {
+            "robot": 2,
+            "action": "motor-failure",
+            "at_s": 5.0,
+            "applied_at_s": 5.0,
+            "was_running": True,
+        },
+        {"robot": 0, "action": "kill", "at_s": 10.0, "applied_at_s": 15.04, "was_running": True},
+        {"robot": 1, "action": "restart", "at_s": 20.0, "applied_at_s": 30.0, "was_running": False},
     ]
 
 

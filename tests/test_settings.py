@@ -22,6 +22,7 @@ from nest_beacon.node import cli as beacon_main
 from nest_beacon.node.options import NEST_BEACON_OPTIONS, NestBeaconConfig
 from robot_agent.core.byzantine import Behaviour, ByzantineRobot
 from robot_agent.core.controller_config import ControllerConfig
+from robot_agent.core.plugin import ControllerChoice
 from robot_agent.node import cli as node
 from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig
 from world_server.core.camera import CameraNoise
@@ -179,7 +180,7 @@ def test_a_config_goes_to_a_child_and_back_unchanged(config_type: type) -> None:
         ('{"controller": {"alpha": 0.2}}', "threshold below 1"),
         ('{"controller": {"dwel": 3}}', "unknown setting 'controller.dwel'"),
         ('{"seed": -1}', ">= 0"),
-        ('{"seed": "1"}', "Expected `int`"),
+        ('{"seed": "1"}', "Expected `int | null`"),
         ('{"byzantine": [{"robot": 1, "behaviour": {"mode": "lie"}}]}', "Invalid enum"),
         ("[1]", "Expected `object`"),
         ("{", "truncated"),
@@ -278,8 +279,9 @@ def test_swarm_run_hands_each_process_the_configs_its_options_make() -> None:
         switches.world.world, run=plan.run_id, seed=3, num_sites=6, num_robots=8
     )
     assert handed(plan.beacon_argv(), NestBeaconConfig) == NestBeaconConfig(3, switches.beacon)
+    assert plan.plugins is not None
     assert handed(plan.robot_argv([0, 1]), RobotAgentConfig) == RobotAgentConfig(
-        3, switches.controller, ()
+        3, switches.controller, (), ControllerChoice("paper", plan.plugins.sources())
     )
     assert handed(plan.recorder_args, RunDescription) == RunDescription(
         plan.run_id, 3, 8, 6, plan.config

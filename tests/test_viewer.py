@@ -11,6 +11,7 @@ import contextlib
 import json
 import os
 import re
+import signal
 import struct
 import subprocess
 import threading
@@ -52,6 +53,9 @@ pytestmark = pytest.mark.timeout(180)
 ROBOTS, SITES, SEED = 10, 5, 2
 RUN = ["--robots", str(ROBOTS), "--sites", str(SITES), "--seed", str(SEED)]
 SCREENSHOTS = os.environ.get("VIEWER_SCREENSHOTS")
+# Every screenshot is also kept here, to be looked at after a run of these tests.
+SHOTS = REPO / ".test-screenshots"
+LINGER = 4.0  # wall seconds the live run's page stays up after its end
 
 
 def _listening(port: int) -> bool:
@@ -111,9 +115,12 @@ class LiveRun:
     summary: dict[str, Any]
     recording: Path
     seen: list[dict[str, str]] = field(default_factory=list)  # the canvas's data, polled
-    final: dict[str, str] = field(default_factory=dict)
+    final: dict[str, str] = field(default_factory=dict)  # once ended, while the page is up
     header: str = ""
-    screenshot: bytes = b""
+    screenshot: bytes = b""  # of the page once the run ended
+    midrun: bytes = b""  # of the page at 25 s of sim time
+    charted: int = 0  # chart points the page held then
+    lingered: bool = False  # the command was still running when the page showed the end
 
 
 @pytest.fixture(scope="module")
@@ -128,9 +135,12 @@ def live_run(chromium: Browser, tmp_path_factory: pytest.TempPathFactory) -> Liv
     run_id = unique_run_id("view")
     port = free_port()
     recording = tmp_path_factory.mktemp("view") / "run.mcap"
-    process = _start(run_id, "--view", str(port), "--record", str(recording))
+    process = _start(
+        run_id, "--view", str(port), "--record", str(recording), "--view-linger", str(LINGER)
+    )
     seen: list[dict[str, str]] = []
     midrun: list[bytes] = []
+    run = LiveRun({}, recording, seen)
     try:
         _wait_for_port(port, process)
         chromium.navigate(f"http://127.0.0.1:{port}/")
@@ -139,18 +149,30 @@ def live_run(chromium: Browser, tmp_path_factory: pytest.TempPathFactory) -> Liv
             data = chromium.canvas_data()
             if data:
                 seen.append(data)
-                if SCREENSHOTS and float(data.get("simTime", 0)) > 25 and not midrun:
-                    midrun.append(chromium.screenshot())  # for docs/viewer.md
+                if float(data.get("simTime", 0)) > 25 and not midrun:
+                    midrun.append(chromium.screenshot())
+                    run.charted = int(
+                        chromium.evaluate(
+                            "Number(document.getElementById('charts').dataset.points)"
+                        )
+                    )
+                if data.get("ended") and not run.final:
+                    # The run is over and the page stays up with the result (--view-linger).
+                    time.sleep(0.5)
+                    run.final = chromium.canvas_data()
+                    run.header = str(
+                        chromium.evaluate("document.getElementById('header').innerText")
+                    )
+                    run.screenshot = chromium.screenshot()
+                    run.lingered = process.poll() is None
             time.sleep(0.1)
     finally:
-        summary = _finish(process, run_id)
-    time.sleep(0.3)  # the page notices the closed connection
-    run = LiveRun(summary, recording, seen)
-    run.final = chromium.canvas_data()
-    run.header = str(chromium.evaluate("document.getElementById('header').innerText"))
-    run.screenshot = chromium.screenshot()
+        run.summary = _finish(process, run_id)
+    run.midrun = midrun[0] if midrun else b""
+    save(run.midrun, SHOTS / "viewer-live.png")
+    save(run.screenshot, SHOTS / "viewer-live-ended.png")
     if SCREENSHOTS:
-        save(midrun[0] if midrun else run.screenshot, Path(SCREENSHOTS) / "viewer-live.png")
+        save(run.midrun, Path(SCREENSHOTS) / "viewer-live.png")
         save(run.screenshot, Path(SCREENSHOTS) / "viewer-live-ended.png")
     return run
 
@@ -176,6 +198,27 @@ def test_the_live_page_shows_how_the_run_ended(live_run: LiveRun) -> None:
     assert f"consensus on site {live_run.summary['chosen_site']}, the best" in header
 
 
+def test_the_page_stays_up_with_the_result_after_the_run(live_run: LiveRun) -> None:
+    assert live_run.lingered, "the command had ended when the page showed the result"
+    assert live_run.final["ended"] == "consensus"
+
+
+def test_the_live_page_charts_the_swarm_while_it_runs(live_run: LiveRun) -> None:
+    """At 25 s of sim time the page holds the swarm's curves and draws them below the
+    arena: robots decided, each site's share, entropy and pool sizes."""
+    assert live_run.charted >= 20  # a point per world state: one a sim second
+    import cv2
+    import numpy as np
+
+    image = cv2.imdecode(np.frombuffer(live_run.midrun, np.uint8), cv2.IMREAD_COLOR)
+    assert image is not None, "no screenshot at 25 s of sim time"
+    charts = image[-150:, :, :]  # the strip of charts at the bottom of the page
+    assert float(charts.std()) > 10
+    layout = make_layout(SITES, ROBOTS, SEED)
+    best = model.site_hex(layout.best_site, SITES)
+    assert share_of_colour(cv2.imencode(".png", charts)[1].tobytes(), best) > 0.0002
+
+
 def test_the_live_page_draws_radio_deliveries_and_refuses_nothing_of_a_keyed_run(
     live_run: LiveRun,
 ) -> None:
@@ -193,7 +236,7 @@ def test_the_live_screenshot_shows_the_arena_not_a_blank_page(live_run: LiveRun)
     assert stats["colours"] > 40
     assert 0.05 < stats["non_background"] < 0.95
     best = make_layout(SITES, ROBOTS, SEED).site(live_run.summary["best_site"])
-    assert share_of_colour(live_run.screenshot, model.site_hex(best.quality)) > 0.0005
+    assert share_of_colour(live_run.screenshot, model.site_hex(best.id, SITES)) > 0.0005
 
 
 # --- the replay page in a browser -----------------------------------------------------------
@@ -256,6 +299,10 @@ def test_the_replay_page_plays_seeks_and_jumps(chromium: Browser, live_run: Live
         time.sleep(0.5)
         png = chromium.screenshot()
         assert pixel_statistics(png)["std"] > 20
+        # The replay charts the whole run's curves, drawn up to the sim time shown.
+        points = chromium.evaluate("Number(document.getElementById('charts').dataset.points)")
+        assert int(points) >= float(end["simTime"]) - 2  # a point a sim second
+        save(png, SHOTS / "viewer-replay.png")
         if SCREENSHOTS:
             save(png, Path(SCREENSHOTS) / "viewer-replay.png")
     finally:
@@ -556,7 +603,7 @@ class FoxgloveSeen:
         return sorted(channel["topic"] for channel in self.channels.values())
 
 
-FOXGLOVE_WANTED = ("foxglove/scene", "foxglove/transforms", "radio/rx/0")
+FOXGLOVE_WANTED = ("foxglove/scene", "foxglove/transforms", "foxglove/swarm", "radio/rx/0")
 REJECTED = "recorder/rejected"
 
 
@@ -643,7 +690,8 @@ def observed_pair() -> ObservedPair:
     view_port, foxglove_port = free_port(), free_port()
     seen, stop = FoxgloveSeen(), threading.Event()
     process = _start(
-        watched_id, "--no-record", "--view", str(view_port), "--foxglove", str(foxglove_port)
+        watched_id,
+        *["--no-record", "--view", str(view_port), "--no-wait", "--foxglove", str(foxglove_port)],
     )
     client = threading.Thread(target=_watch_foxglove, args=(foxglove_port, seen, stop))
     client.start()
@@ -678,6 +726,11 @@ def test_foxglove_live_serves_the_recording_channels(observed_pair: ObservedPair
         entity["id"] in ("arena", "robot-0") or entity["id"].startswith("robot-")
         for entity in scene["entities"]
     )
+    # The swarm's curves, plottable fields (a Plot panel draws .decided, .shares[0] ...).
+    assert by_topic[f"{prefix}/foxglove/swarm"]["schemaName"] == "bestofn.SwarmSample"
+    curves = seen.messages["foxglove/swarm"]
+    assert len(curves["shares"]) == SITES and 0 <= curves["decided"] <= ROBOTS
+    assert sum(curves["shares"]) == pytest.approx(1.0)
     transforms = seen.messages["foxglove/transforms"]["transforms"]
     assert transforms and all(t["parent_frame_id"] == "arena" for t in transforms)
     assert {t["child_frame_id"] for t in transforms} <= {f"robot-{i}" for i in range(ROBOTS)}
@@ -747,7 +800,7 @@ def test_a_forged_status_and_finish_are_neither_drawn_nor_believed_but_counted(
             run_id,
             *["--connect", endpoint, "--no-record", "--clock", "realtime", "--speed", "10"],
             *["--timeout", "300"],
-            *["--view", str(view_port), "--foxglove", str(foxglove_port)],
+            *["--view", str(view_port), "--view-linger", "0", "--foxglove", str(foxglove_port)],
             *["--robots-per-process", str(ROBOTS)],
         )
         client = threading.Thread(
@@ -838,7 +891,7 @@ def test_a_secure_run_with_both_observers_reaches_consensus_on_the_page(
     run_id = unique_run_id("secure-view")
     command = swarm_command(
         *["run", "--run-id", run_id, "--json", "--quiet", *RUN, "--no-record", "--secure"],
-        *["--view", "0", "--foxglove", "0"],
+        *["--view", "0", "--view-linger", "0", "--foxglove", "0"],
     )
     process = subprocess.Popen(
         command,
@@ -900,7 +953,7 @@ def test_an_unkeyed_run_is_still_watched(chromium: Browser) -> None:
     """``--no-keys``: no tags to check, the attachments are the bare metadata as before."""
     run_id = unique_run_id("no-keys-view")
     port = free_port()
-    process = _start(run_id, "--no-keys", "--no-record", "--view", str(port))
+    process = _start(run_id, "--no-keys", "--no-record", "--view", str(port), "--view-linger", "0")
     try:
         _wait_for_port(port, process)
         _watch_to_the_end(chromium, f"http://127.0.0.1:{port}/", process)
@@ -914,3 +967,96 @@ def test_an_unkeyed_run_is_still_watched(chromium: Browser) -> None:
     assert summary["config"]["no_keys"] is True and summary["consensus"]
     assert final["ended"] == "consensus"
     assert int(final["deliveries"]) > 0 and final["rejected"] == "0"
+
+
+# --- a live view that waits, and is paced from the page ------------------------------------
+
+
+def _sim_time(chromium: Browser) -> float:
+    return float(chromium.canvas_data().get("simTime", "0"))
+
+
+def test_swarm_run_view_waits_at_tick_0_for_a_browser_and_is_paced_from_the_page(
+    chromium: Browser,
+) -> None:
+    """``swarm run --view`` holds the swarm at tick 0 (and says so) until the first page
+    connects: still at tick 0 ten seconds on; then the page pauses it (sim time stands
+    still), plays it at 2x real time and as fast as it goes, and it runs to its end, the
+    same run as without a view; the page stays up with the result until Ctrl-C."""
+    run_id = unique_run_id("held-view")
+    keys = keyspace.Keys(run_id)
+    port = free_port()
+    ticks: list[int] = []
+    lines: list[str] = []
+
+    def on_state(sample: zenoh.Sample) -> None:
+        with contextlib.suppress(protocol.ProtocolError):
+            ticks.append(protocol.decode(sample.payload.to_bytes(), protocol.WorldState).tick)
+
+    with loopback_router() as (session, endpoint):
+        subscriber = session.declare_subscriber(keys.of(keyspace.STATE), on_state)
+        command = swarm_command(
+            *["run", "--run-id", run_id, "--json", *RUN, "--no-record", "--connect", endpoint],
+            *["--view", str(port)],
+        )
+        process = subprocess.Popen(
+            command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO
+        )
+
+        def read_stderr() -> None:
+            assert process.stderr is not None
+            for raw in process.stderr:
+                lines.append(raw.decode(errors="replace"))
+
+        reader = threading.Thread(target=read_stderr, daemon=True)
+        reader.start()
+        try:
+            _wait_for_port(port, process)
+            assert _wait_until(lambda: bool(ticks), 60), "".join(lines)[-2000:]
+            time.sleep(10.0)
+            held = (process.poll(), max(ticks))
+            chromium.navigate(f"http://127.0.0.1:{port}/")
+            _poll(chromium, lambda d: float(d.get("simTime", 0)) > 3, timeout=60)
+            chromium.evaluate("send({op: 'pause'})")
+            _poll(chromium, lambda d: d.get("paused") == "yes")
+            time.sleep(0.5)
+            paused_at = _sim_time(chromium)
+            time.sleep(2.0)
+            paused_after = _sim_time(chromium)
+            controls = str(chromium.evaluate("document.getElementById('live-controls').innerText"))
+            chromium.evaluate("send({op: 'speed', speed: 2}); send({op: 'play'})")
+            _poll(chromium, lambda d: d.get("paused") == "")
+            start, started = _sim_time(chromium), time.monotonic()
+            time.sleep(3.0)
+            rate = (_sim_time(chromium) - start) / (time.monotonic() - started)
+            chromium.evaluate("send({op: 'speed', speed: null})")
+            ended = _poll(chromium, lambda d: d.get("ended") != "", timeout=90)
+            time.sleep(1.0)
+            lingering = process.poll() is None
+            png = chromium.screenshot()
+            process.send_signal(signal.SIGINT)  # Ctrl-C ends the page's linger
+            stdout, _ = process.communicate(timeout=30)
+            reader.join(timeout=10)
+        finally:
+            subscriber.undeclare()
+            if process.poll() is None:
+                process.kill()
+                process.communicate()
+            kill_leftovers(run_id)
+    said = "".join(lines)
+    assert held == (None, 0), said[-2000:]
+    assert f"waits at tick 0 until a browser opens http://127.0.0.1:{port}/" in said
+    assert paused_after == paused_at and "play" in controls and "paused" in controls
+    assert 0.5 < rate < 2.6, rate  # at most 2 sim seconds a wall second, and going
+    assert ended["ended"] == "consensus" and lingering
+    assert "the page stays up" in said and "Ctrl-C ends it" in said
+    assert process.returncode == 0, said[-2000:]
+    summary = json.loads(stdout)
+    plain = subprocess.run(
+        swarm_command("run", "--engine", "inprocess", *RUN, "--no-record", "--json", "--quiet"),
+        capture_output=True,
+        cwd=REPO,
+        timeout=120,
+    )
+    assert summary["digest"] == json.loads(plain.stdout)["digest"]  # the same run, paced
+    save(png, SHOTS / "viewer-held-ended.png")

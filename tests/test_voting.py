@@ -204,7 +204,7 @@ def test_a_voting_robot_senses_its_site_for_the_exploration_time_then_disseminat
 
 @pytest.mark.parametrize("strategy", voting.VOTING)
 def test_a_voting_swarm_decides_and_parks(strategy: str) -> None:
-    config = ControllerConfig(strategy=strategy)  # type: ignore[arg-type]
+    config = ControllerConfig(strategy=strategy)
     swarm = make_swarm(6, 3, seed=4, config=config)
     swarm.run(3000)
     decided = [robot.decided_site for robot in swarm.controllers]

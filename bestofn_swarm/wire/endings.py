@@ -103,7 +103,11 @@ _CODES_AND_MEANINGS: Mapping[Ending, tuple[int, str]] = {
         SIGNAL_EXIT_BASE + StopSignal.SIGINT,
         "by a stop signal: SIGINT, SIGTERM or SIGHUP",
     ),
-    Ending.CRASHED: (1, "a process of the run died on its own (or the run could not start)"),
+    Ending.CRASHED: (
+        1,
+        "a process of the run died on its own, a plug-in failed (the\n"
+        'summary\'s "error" says which, where and when), or the run could not start',
+    ),
 }
 # Every ending's name, in the order the report lists them.
 ENDINGS: tuple[str, ...] = tuple(ending.value for ending in Ending)

@@ -220,6 +220,10 @@ ENDING: Final = _kind(
     publisher=_W, speaker=_W, hearers=frozenset({_ANY}), recorded=Recorded.MESSAGE,
     for_everyone=True,
     about="how the run ended, once, with its summary: every process of the run exits on it")
+PACE: Final = _kind(
+    "pace", "viewer/pace", How.PUT, protocol.Pace, metadata=None, publisher=_V, speaker=_V,
+    hearers=frozenset({_W, _L, _REC}), recorded=Recorded.MESSAGE,
+    about="the live page's pause, play and speed; a run held for the page waits for play")
 ALIVE_WORLD: Final = _kind(
     "alive_world", "alive/world/{instance}", How.TOKEN, None, metadata=None, publisher=_W,
     speaker=None, hearers=frozenset({_R, _B, _BR, _L}), link=6, link_gone=7, link_name="WORLD",
@@ -265,6 +269,7 @@ KINDS: tuple[KeyKind, ...] = (
     RECORDER_FINISH,
     VIEWER_FINISH,
     ENDING,
+    PACE,
     ALIVE_WORLD,
     ALIVE_ROBOT,
     ALIVE_BEACON,
@@ -444,6 +449,8 @@ def speaker_of(kind: KeyKind, ident: str | None) -> str | None:
         return names.BRIDGE
     if party is Party.LAUNCHER:
         return names.LAUNCHER
+    if party is Party.VIEWER:
+        return names.VIEWER
     if party is None or ident is None:
         return None
     if party in (Party.ROBOT, Party.RECEIVER):
@@ -725,12 +732,66 @@ def c_header() -> str:
     )
 
 
+# --- docs/protocol.md's table of keys ------------------------------------------------
+
+_PARTY_TEXT = {
+    Party.WORLD: "world",
+    Party.ROBOT: "robot",
+    Party.HOST: "robot host",
+    Party.BEACON: "beacon",
+    Party.SENDER: "robot or beacon",
+    Party.RECEIVER: "robot",
+    Party.BRIDGE: "bridge",
+    Party.LAUNCHER: "launcher",
+    Party.RECORDER: "recorder",
+    Party.VIEWER: "views",
+    Party.ANY: "every process of the run",
+}
+_HOW_TEXT = {How.PUT: "put", How.QUERY: "query", How.TOKEN: "liveliness token"}
+
+
+def _type_text(kind: KeyKind) -> str:
+    message = kind.message
+    if message is None:
+        if kind is CAMERA:
+            return "PNG image"
+        return "run summary (JSON)" if kind.how is How.QUERY else ""
+    if message is protocol.RadioPayload:
+        return "radio payload"
+    if message in (batch.SenseBatch, batch.ActBatch):
+        return "batch (binary)"
+    return f"`{message.__name__}`"
+
+
+def markdown_table() -> str:
+    """The table of keys of docs/protocol.md, from this table."""
+    rows = [
+        "| key | kind | from → to (a query: who answers → who asks) | payload (a query: its "
+        "answer) | attachment | what |",
+        "|---|---|---|---|---|---|",
+    ]
+    for kind in KINDS:
+        key = "/".join(
+            f"<{chunk[1:-1]}>" if chunk.startswith("{") else chunk for chunk in kind.pattern
+        )
+        hearers = ", ".join(sorted(_PARTY_TEXT[party] for party in kind.hearers))
+        meta = f"`{kind.metadata.__name__}`" if kind.metadata is not None else ""
+        rows.append(
+            f"| `<root>/<run>/{key}` | {_HOW_TEXT[kind.how]} | {_PARTY_TEXT[kind.publisher]} → "
+            f"{hearers} | {_type_text(kind)} | {meta} | {kind.about} |"
+        )
+    return "\n".join(rows) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     if args == ["--c-header"]:
         sys.stdout.write(c_header())
         return 0
-    print("usage: python -m bestofn_swarm.wire.keyspace --c-header", file=sys.stderr)
+    if args == ["--markdown"]:
+        sys.stdout.write(markdown_table())
+        return 0
+    print("usage: python -m bestofn_swarm.wire.keyspace --c-header | --markdown", file=sys.stderr)
     return 2
 
 

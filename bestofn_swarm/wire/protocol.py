@@ -329,6 +329,19 @@ class Status(Message, frozen=True):
     rejected: _Count = 0  # invalid messages this robot dropped so far
 
 
+MAX_PACE_SPEED = 1000.0  # sim seconds per wall second
+
+
+class Pace(Message, frozen=True):
+    """The live page's pause, play and speed, for the world: whether ticks go on, and at
+    most how many sim seconds a wall second (None: as fast as the swarm answers, in
+    lockstep; the world's own ``--speed`` in real time). A lockstep run is the same run
+    however it is paced: only when its ticks close changes."""
+
+    playing: bool
+    speed: Annotated[float, msgspec.Meta(gt=0.0, le=MAX_PACE_SPEED)] | None = None
+
+
 class LogLine(Message, frozen=True):
     """One line a process of the run wrote to its log (published by the launcher)."""
 

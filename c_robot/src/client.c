@@ -1,48 +1,36 @@
 #include "client.h"
 
-#include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
-#include <unistd.h>
 
 #include "auth.h"
+#include "entropy.h"
 #include "json.h"
 #include "log.h"
 
-void random_bytes(uint8_t *out, size_t size) {
-    static int fd = -1;
-    if (fd < 0) fd = open("/dev/urandom", O_RDONLY);
-    size_t got = 0;
-    while (fd >= 0 && got < size) {
-        ssize_t n = read(fd, out + got, size - got);
-        if (n <= 0) break;
-        got += (size_t)n;
-    }
-    if (got < size) { /* no /dev/urandom: a weak fallback, never expected on Linux */
-        static uint64_t state = 0x9E3779B97F4A7C15ULL;
-        for (size_t i = got; i < size; i++) {
-            state ^= (uint64_t)getpid() + i;
-            state *= 0xBF58476D1CE4E5B9ULL;
-            out[i] = (uint8_t)(state >> 56);
-        }
-    }
-}
-
 /* --- LinkClient ---------------------------------------------------------------------- */
 
+/* the place of the body of a frame of body_size bytes at the end of the queue, or NULL
+   when it does not fit */
+static uint8_t *frame_room(LinkClient *c, size_t body_size) {
+    size_t total = LINK_HEADER_BYTES + body_size + LINK_TAG_BYTES;
+    if (c->frame_count >= OUT_QUEUE_FRAMES || c->queue_used + total > OUT_QUEUE_BYTES) return NULL;
+    return c->queue + c->queue_used + LINK_HEADER_BYTES;
+}
+
+/* seal f at the end of the queue (its body may be there already: frame_room) */
 static void queue_frame(LinkClient *c, const Frame *f) {
-    static uint8_t sealed[LINK_MAX_FRAME_BYTES];
-    long n = link_seal(f, c->key, c->has_cipher ? c->cipher_key : NULL, sealed, sizeof sealed);
-    if (n < 0) {
+    if (f->body_size > LINK_MAX_BODY_BYTES) {
         c->refused[R_OVERSIZE]++;
         return;
     }
-    if (c->frame_count >= OUT_QUEUE_FRAMES || c->queue_used + (size_t)n > OUT_QUEUE_BYTES) {
+    if (frame_room(c, f->body_size) == NULL) {
         c->queue_dropped++;
         return;
     }
-    memcpy(c->queue + c->queue_used, sealed, (size_t)n);
+    long n = link_seal(f, c->key, c->has_cipher ? c->cipher_key : NULL, c->queue + c->queue_used,
+                       OUT_QUEUE_BYTES - c->queue_used);
     c->queue_used += (size_t)n;
     c->frame_size[c->frame_count++] = (size_t)n;
 }
@@ -60,13 +48,14 @@ void client_clear(LinkClient *c) {
     c->queue_used = 0;
 }
 
-static void client_init(LinkClient *c, uint32_t robot, const uint8_t link_key_bytes[32]) {
+/* 0, or -1: no random bytes for the first nonce */
+static int client_init(LinkClient *c, uint32_t robot, const uint8_t link_key_bytes[32]) {
     memset(c, 0, sizeof *c);
     c->robot = robot;
     memcpy(c->key, link_key_bytes, 32);
-    random_bytes(c->robot_nonce, 8);
     c->silence = SILENCE_BEFORE_WELCOME;
     c->next_hello = 0.0;
+    return entropy_bytes(c->robot_nonce, 8);
 }
 
 static double client_deadline(const LinkClient *c) {
@@ -101,18 +90,23 @@ static void session_send(LinkClient *c, int type, const uint8_t *body, size_t si
     queue_frame(c, &f);
 }
 
-/* 0 or the refusal (counted) */
+/* 0 or the refusal (counted); the DATA body is written straight into the queue */
 static int client_send(LinkClient *c, int kind, const uint8_t *payload, size_t payload_size,
                        const uint8_t *attachment, size_t attachment_size) {
-    static uint8_t body[LINK_MAX_BODY_BYTES];
     if (!c->open) return -1;
-    long n = link_encode_data(kind, payload, payload_size, attachment, attachment_size, body,
-                              sizeof body);
-    if (n < 0) {
-        c->refused[-n]++;
-        return (int)-n;
+    size_t size = 3 + attachment_size + payload_size;
+    if (attachment_size > LINK_MAX_ATTACHMENT_BYTES || size > LINK_MAX_BODY_BYTES) {
+        c->refused[R_OVERSIZE]++;
+        return R_OVERSIZE;
     }
-    session_send(c, F_DATA, body, (size_t)n);
+    uint8_t *body = frame_room(c, size);
+    if (body == NULL) { /* its sequence number is spent, as for a frame the line lost */
+        c->sent_seq += 1;
+        c->queue_dropped++;
+        return 0;
+    }
+    link_encode_data(kind, payload, payload_size, attachment, attachment_size, body, size);
+    session_send(c, F_DATA, body, size);
     return 0;
 }
 
@@ -124,17 +118,25 @@ static void client_bye(LinkClient *c, int reason) {
     c->open = 0;
 }
 
-static void lose(LinkClient *c, const char *why, double now) {
-    log_warning("robot %u: link session lost: %s", c->robot, why);
+/* 0, or -1: no random bytes for the next session's nonce */
+static int lose(LinkClient *c, const char *why, double now) {
+    log_warning("robot %u: link session lost: %s", (unsigned)c->robot, why);
     c->open = 0;
     c->has_cipher = 0;
-    random_bytes(c->robot_nonce, 8); /* a new session, a new nonce */
     c->next_hello = now;
+    return entropy_bytes(c->robot_nonce, 8); /* a new session, a new nonce */
+}
+
+/* no random bytes for a nonce: the robot cannot go on (never an old or made-up nonce) */
+static void no_entropy(LinkRobot *p) {
+    log_error("robot %d: the platform gives no random bytes for a nonce: stopping", p->robot);
+    p->fatal = 1;
+    p->ended = 1;
 }
 
 /* --- LinkRobot ----------------------------------------------------------------------- */
 
-void link_robot_init(LinkRobot *p, int robot, const char *run, const uint8_t robot_key[32]) {
+int link_robot_init(LinkRobot *p, int robot, const char *run, const uint8_t robot_key[32]) {
     memset(p, 0, sizeof *p);
     p->robot = robot;
     snprintf(p->run, sizeof p->run, "%s", run);
@@ -142,9 +144,9 @@ void link_robot_init(LinkRobot *p, int robot, const char *run, const uint8_t rob
     snprintf(p->identity, sizeof p->identity, "robot/%d", robot);
     uint8_t lk[32];
     link_key(robot_key, lk);
-    client_init(&p->client, (uint32_t)robot, lk);
     static Endpoint endpoint;
     p->endpoint = &endpoint;
+    return client_init(&p->client, (uint32_t)robot, lk);
 }
 
 double link_robot_deadline(const LinkRobot *p) {
@@ -197,9 +199,13 @@ static int questions_hold(const Questions *q, const uint8_t *nonce) {
    sent: its payload names the world instance that must answer ("": any) */
 static void question(LinkRobot *p, const char *instance, Questions *asked) {
     char key[200];
-    uint8_t metadata[16 + 32], attachment[16 + 16 + 32];
+    uint8_t metadata[16 + 32], attachment[16 + 16 + 32], fresh[16];
+    if (entropy_bytes(fresh, sizeof fresh) != 0) {
+        no_entropy(p);
+        return;
+    }
     uint8_t *nonce = questions_add(asked);
-    random_bytes(nonce, 16);
+    memcpy(nonce, fresh, sizeof fresh);
     world_key(p, key, sizeof key);
     size_t id = strlen(p->identity), size = strlen(instance);
     memcpy(metadata, nonce, 16);
@@ -373,8 +379,10 @@ static void answered(LinkRobot *p, const uint8_t *payload, size_t size,
         return;
     }
     p->has_endpoint = 1;
-    log_info("robot %d: %d sites, clock %s, seed %lld: running", p->robot, info.n_sites,
-             info.lockstep ? "lockstep" : "realtime", (long long)info.seed);
+    char seed[21];
+    format_int(info.seed, seed);
+    log_info("robot %d: %d sites, clock %s, seed %s: running", p->robot, info.n_sites,
+             info.lockstep ? "lockstep" : "realtime", seed);
     send_status(p, endpoint_status(p->endpoint, 0), now);
     prove_sorted_worlds(p, now);
 }
@@ -434,15 +442,16 @@ static void received(LinkRobot *p, int kind, const uint8_t *payload, size_t size
     }
 }
 
-/* LinkClient._receive: the checks in their order; the refusal, or R_NONE */
-static int client_receive(LinkRobot *p, const uint8_t *data, size_t size, double now) {
-    static uint8_t plain[LINK_MAX_FRAME_BYTES];
+/* LinkClient._receive: the checks in their order; the refusal, or R_NONE. An encrypted
+   body is decrypted in place. */
+static int client_receive(LinkRobot *p, uint8_t *data, size_t size, double now) {
     LinkClient *c = &p->client;
     Frame f;
     int refusal = link_read_header(data, size, &f);
     if (refusal) return refusal;
     if (f.robot != c->robot || !f.from_bridge) return R_UNEXPECTED; /* not for this robot */
-    refusal = link_open(data, size, c->key, c->has_cipher ? c->cipher_key : NULL, plain, &f);
+    refusal = link_open(data, size, c->key, c->has_cipher ? c->cipher_key : NULL,
+                        data + LINK_HEADER_BYTES, &f);
     if (refusal) return refusal;
     refusal = link_check_body(&f);
     if (refusal) return refusal;
@@ -494,8 +503,9 @@ static int client_receive(LinkRobot *p, const uint8_t *data, size_t size, double
         static const char *const names[] = {"", "run_ended", "going_away", "replaced"};
         char why[80];
         snprintf(why, sizeof why, "the bridge said bye (%s)", names[reason]);
-        lose(c, why, now);
+        int fresh = lose(c, why, now);
         lost(p, reason == BYE_RUN_ENDED);
+        if (fresh != 0 && !p->ended) no_entropy(p);
         return R_NONE;
     }
     if (f.type == F_DATA) {
@@ -512,7 +522,7 @@ static int client_receive(LinkRobot *p, const uint8_t *data, size_t size, double
     return R_NONE; /* a pong: the bridge measures round trips, not this end */
 }
 
-void link_robot_receive(LinkRobot *p, const uint8_t *data, size_t size, double now) {
+void link_robot_receive(LinkRobot *p, uint8_t *data, size_t size, double now) {
     int refusal = client_receive(p, data, size, now);
     if (refusal == R_NONE) return;
     p->client.refused[refusal]++;
@@ -528,8 +538,12 @@ void link_robot_wake(LinkRobot *p, double now) {
         if (now - c->last_heard >= c->silence) {
             char why[80];
             snprintf(why, sizeof why, "the bridge was silent for %g s", c->silence);
-            lose(c, why, now);
+            int fresh = lose(c, why, now);
             lost(p, 0);
+            if (fresh != 0) {
+                no_entropy(p);
+                return;
+            }
         }
     } else if (now >= c->next_hello) {
         send_hello(c, now);
@@ -544,6 +558,14 @@ void link_robot_wake(LinkRobot *p, double now) {
         if (p->proving_count < before) i--; /* given up: the next moved into its place */
     }
     if (p->has_last_status && now >= p->status_again_at && c->open) resend_status(p, now);
+}
+
+void link_robot_hearing(LinkRobot *p, double now) {
+    LinkClient *c = &p->client;
+    if (c->open && now > c->last_heard) c->last_heard = now;
+    if (p->asking && p->ask_again_at < now + ASK_EVERY) p->ask_again_at = now + ASK_EVERY;
+    for (int i = 0; i < p->proving_count; i++)
+        if (p->proving[i].again_at < now + PROVE_EVERY) p->proving[i].again_at = now + PROVE_EVERY;
 }
 
 void link_robot_stop(LinkRobot *p) { client_bye(&p->client, BYE_GOING_AWAY); }

@@ -191,8 +191,6 @@ static int sensing_step(Controller *c, const Reading *r, Command *out, double *q
 
 /* --- parking (parking.py) ------------------------------------------------------------ */
 
-#define MAX_RING_SLOTS 16384
-
 static long ring_slot_count(const Controller *c, double radius, double step, double keep_clear) {
     long total = (long)(NK_TWO_PI / step), count = 0;
     for (long index = 0; index < total; index++) {
@@ -211,12 +209,12 @@ static void parking_slot(Controller *c, int site, double *sx, double *sy) {
     double pitch = 2 * c->robot_radius + k->park_lane;
     double home = c->site_angle[site];
     /* the rings, from the wall inwards: their radii, steps and slot counts */
-    static double radii[4096], steps[4096], clear[4096];
-    static long counts[4096];
+    static double radii[MAX_RINGS], steps[MAX_RINGS], clear[MAX_RINGS];
+    static long counts[MAX_RINGS];
     int rings = 0;
     long total = 0;
     double radius = c->arena_radius - k->park_clearance;
-    while ((radius >= c->inner_radius || rings == 0) && rings < 4096) {
+    while ((radius >= c->inner_radius || rings == 0) && rings < MAX_RINGS) {
         double step, keep_clear;
         if (rings == 0) {
             step = k->park_spacing / radius;
@@ -268,6 +266,20 @@ static void parking_slot(Controller *c, int site, double *sx, double *sy) {
     nk_sincos(home, &sine, &cosine);
     *sx = radii[0] * cosine;
     *sy = radii[0] * sine;
+}
+
+/* whether parking_slot's rings and slots fit this build's room (MAX_RINGS, MAX_RING_SLOTS):
+   the run's parking settings in this arena, checked once at start */
+static int parking_fits(const Controller *c) {
+    const ControllerConfig *k = &c->config;
+    double pitch = 2 * c->robot_radius + k->park_lane;
+    double radius = c->arena_radius - k->park_clearance;
+    for (int rings = 0; radius >= c->inner_radius || rings == 0; rings++) {
+        double step = rings == 0 ? k->park_spacing / radius : pitch / radius;
+        if (rings == MAX_RINGS || NK_TWO_PI / step >= (double)MAX_RING_SLOTS + 1) return 0;
+        radius = c->arena_radius - k->park_clearance - (rings + 1) * pitch;
+    }
+    return 1;
 }
 
 static void parking_begin(Controller *c, int site, double t) {
@@ -458,6 +470,10 @@ int controller_init(Controller *c, int robot_id, const WorldInfo *world,
         return -1;
     }
     int n = world->n_sites;
+    if (n > MAX_OPTIONS) {
+        *why = "the map has more sites than this build holds (MAX_OPTIONS)";
+        return -1;
+    }
     static int seen[MAX_OPTIONS];
     memset(seen, 0, sizeof seen);
     for (int i = 0; i < n; i++) {
@@ -522,6 +538,10 @@ int controller_init(Controller *c, int robot_id, const WorldInfo *world,
     c->phase = P_TO_SITE;
     c->changed = 1;
     c->best_distance = INFINITY;
+    if (!parking_fits(c)) {
+        *why = "the parking settings need more rings or slots than this build holds";
+        return -1;
+    }
     return 0;
 }
 
@@ -644,8 +664,8 @@ static void listen(Controller *c, NextHeard next, void *ctx) {
         }
         const char *sender = heard.sender;
         if (!strcmp(sender, c->name) && p->id == c->robot_id) continue; /* our own echo */
-        char claimed[24];
-        snprintf(claimed, sizeof claimed, "%lld", (long long)p->id);
+        char claimed[21];
+        format_int(p->id, claimed);
         if (strcmp(sender, claimed) != 0) {
             c->rejected += 1; /* a robot claiming someone else's id */
             continue;

@@ -37,11 +37,6 @@ typedef struct {
     double opinion[MAX_OPTIONS]; /* at the wire's precision */
 } Command;
 
-/* the room for what a robot hears between two poolings (doubles) */
-#ifndef HEARD_DOUBLES
-#define HEARD_DOUBLES (1 << 16)
-#endif
-#define MAX_HEARD 4096
 
 typedef struct {
     int64_t robot;

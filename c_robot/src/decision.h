@@ -1,9 +1,9 @@
 /* The decision math of the paper (robot_agent/core/decision.py, defence.py). */
 #ifndef CR_DECISION_H
 #define CR_DECISION_H
+#include "limits.h"
 #include "rng.h"
 
-#define MAX_POOL 4097 /* the robot and the neighbours heard at one visit, at most */
 
 /* values / fsum(values), as decision.normalised; out may be values */
 void normalised(const double *values, int n, double *out);

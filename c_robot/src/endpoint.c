@@ -11,12 +11,12 @@
 static uint8_t arena[PENDING_BYTES + PENDING_MESSAGES * (sizeof(Sense) + 16)];
 
 void endpoint_reject(Endpoint *e, const char *source, const char *why) {
-    static char logged[32][80];
+    static char logged[LOGGED_SOURCES][80];
     static int logged_count;
     e->rejects += 1;
     for (int i = 0; i < logged_count; i++)
         if (!strcmp(logged[i], source)) return;
-    if (logged_count < 32) snprintf(logged[logged_count++], sizeof logged[0], "%s", source);
+    if (logged_count < LOGGED_SOURCES) snprintf(logged[logged_count++], sizeof logged[0], "%s", source);
     log_warning("dropped an invalid message from robot %d %s: %s (further ones not logged)",
                 e->robot_id, source, why);
 }
@@ -172,8 +172,8 @@ static void drop_where(Endpoint *e, int64_t below, int64_t also) {
 
 /* --- the step (SimulatedPorts.answer, ports.control_step, RobotEndpoint._step) ------- */
 
-static uint8_t tx_payload[32 * 1024], tx_attachment[256], act_payload[256], act_attachment[32];
-static uint8_t status_payload[32 * 1024], status_attachment[32];
+static uint8_t tx_payload[RADIO_TX_BYTES], tx_attachment[256], act_payload[256], act_attachment[32];
+static uint8_t status_payload[STATUS_BYTES], status_attachment[32];
 
 typedef struct {
     Endpoint *e;
@@ -234,7 +234,16 @@ static int step(Endpoint *e, const Sense *sense_in, const PendingItem **rx, int 
     /* Radio.poll, then decode_received as the controller listens */
     RxCursor cursor = {e, rx, rx_count, 0};
     static Command command;
+#ifdef STEP_PROBE
+    step_probe(1);
+#endif
     controller_step(e->controller, &reading, next_heard, &cursor, &command);
+#ifdef STEP_PROBE
+    step_probe(0);
+#endif
+    e->steps += 1;
+    e->left = command.left;
+    e->right = command.right;
     int count = 0;
     int64_t radio_tx = 0;
     if (command.broadcast) {

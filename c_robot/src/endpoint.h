@@ -9,10 +9,6 @@
 #include "controller.h"
 #include "messages.h"
 
-#ifndef PENDING_BYTES
-#define PENDING_BYTES (1024 * 1024)
-#endif
-#define PENDING_MESSAGES 4000
 #define TICK_WINDOW 100
 #define MAX_WORLDS 16
 
@@ -58,6 +54,9 @@ typedef struct {
     double time_offset, last_t;
     int64_t radio_seq; /* SimulatedRadio.seq */
     Controller *controller;
+    /* the steps taken, and the wheel speeds the last one commanded (a firmware's motors) */
+    int64_t steps;
+    double left, right;
 } Endpoint;
 
 /* 0, or -1 and why */
@@ -76,4 +75,8 @@ void endpoint_world_appeared(Endpoint *e, const char *instance);
 void endpoint_world_vanished(Endpoint *e, const char *instance);
 void endpoint_world_unproven(Endpoint *e, const char *instance);
 void endpoint_reject(Endpoint *e, const char *source, const char *why);
+#ifdef STEP_PROBE
+/* a firmware times the controller's step: called just before (1) and after (0) it */
+void step_probe(int begin);
+#endif
 #endif

@@ -2,21 +2,34 @@
 
 #include <string.h>
 
+/* The compressed bytes, span after span (a PNG's IDAT chunks, read where they are). */
 typedef struct {
     const uint8_t *in;
-    size_t size, pos;
+    size_t size, pos; /* the span being read */
+    NextSpan next;
+    void *ctx;
     uint32_t bits;
     int count;
     int error;
 } Bits;
 
-static int need(Bits *b, int n) {
-    while (b->count < n) {
-        if (b->pos >= b->size) {
+/* the next byte, or 0 and error set at the end */
+static uint8_t byte(Bits *b) {
+    while (b->pos >= b->size) {
+        if (b->next == NULL || !b->next(b->ctx, &b->in, &b->size)) {
             b->error = 1;
             return 0;
         }
-        b->bits |= (uint32_t)b->in[b->pos++] << b->count;
+        b->pos = 0;
+    }
+    return b->in[b->pos++];
+}
+
+static int need(Bits *b, int n) {
+    while (b->count < n) {
+        uint8_t next = byte(b);
+        if (b->error) return 0;
+        b->bits |= (uint32_t)next << b->count;
         b->count += 8;
     }
     return 1;
@@ -166,58 +179,89 @@ static int dynamic(Bits *b, uint8_t *out, size_t cap, size_t *o) {
     return codes(b, &lencode, &distcode, out, cap, o);
 }
 
-long inflate_raw(const uint8_t *in, size_t in_size, uint8_t *out, size_t out_cap,
-                 size_t *consumed) {
-    Bits b = {in, in_size, 0, 0, 0, 0};
+/* the DEFLATE blocks: the bytes written, or -1; then b is at a byte boundary (the rest of
+   the last byte is padding) */
+static long blocks(Bits *b, uint8_t *out, size_t out_cap) {
     size_t o = 0;
     int last;
     do {
-        last = (int)take(&b, 1);
-        int type = (int)take(&b, 2);
-        if (b.error) return -1;
+        last = (int)take(b, 1);
+        int type = (int)take(b, 2);
+        if (b->error) return -1;
         int err;
         if (type == 0) {
-            b.bits = 0; /* to a byte boundary */
-            b.count = 0;
-            if (b.pos + 4 > b.size) return -1;
-            unsigned len = b.in[b.pos] | (unsigned)b.in[b.pos + 1] << 8;
-            unsigned nlen = b.in[b.pos + 2] | (unsigned)b.in[b.pos + 3] << 8;
-            b.pos += 4;
+            b->bits = 0; /* to a byte boundary */
+            b->count = 0;
+            uint8_t head[4];
+            for (int i = 0; i < 4; i++) head[i] = byte(b);
+            if (b->error) return -1;
+            unsigned len = head[0] | (unsigned)head[1] << 8;
+            unsigned nlen = head[2] | (unsigned)head[3] << 8;
             if (len != (~nlen & 0xFFFF)) return -1;
-            if (b.pos + len > b.size || o + len > out_cap) return -1;
-            memcpy(out + o, b.in + b.pos, len);
-            b.pos += len;
-            o += len;
+            if (o + len > out_cap) return -1;
+            for (unsigned i = 0; i < len; i++) out[o++] = byte(b);
+            if (b->error) return -1;
             err = 0;
         } else if (type == 1) {
-            err = fixed(&b, out, out_cap, &o);
+            err = fixed(b, out, out_cap, &o);
         } else if (type == 2) {
-            err = dynamic(&b, out, out_cap, &o);
+            err = dynamic(b, out, out_cap, &o);
         } else {
             return -1;
         }
         if (err) return -1;
     } while (!last);
-    if (consumed) *consumed = b.pos; /* the rest of the last byte is padding */
+    b->bits = 0;
+    b->count = 0;
     return (long)o;
 }
 
-long inflate_zlib(const uint8_t *in, size_t in_size, uint8_t *out, size_t out_cap) {
-    if (in_size < 6) return -1;
-    if ((in[0] & 0x0F) != 8 || (in[0] >> 4) > 7) return -1;
-    if (((unsigned)in[0] << 8 | in[1]) % 31 != 0) return -1;
-    if (in[1] & 0x20) return -1; /* a preset dictionary */
-    size_t used;
-    long n = inflate_raw(in + 2, in_size - 2, out, out_cap, &used);
+long inflate_raw(const uint8_t *in, size_t in_size, uint8_t *out, size_t out_cap,
+                 size_t *consumed) {
+    Bits b = {in, in_size, 0, NULL, NULL, 0, 0, 0};
+    long n = blocks(&b, out, out_cap);
+    if (n >= 0 && consumed) *consumed = b.pos;
+    return n;
+}
+
+long inflate_zlib_spans(NextSpan next, void *ctx, uint8_t *out, size_t out_cap) {
+    Bits b = {NULL, 0, 0, next, ctx, 0, 0, 0};
+    uint8_t cmf = byte(&b), flg = byte(&b);
+    if (b.error) return -1;
+    if ((cmf & 0x0F) != 8 || (cmf >> 4) > 7) return -1;
+    if (((unsigned)cmf << 8 | flg) % 31 != 0) return -1;
+    if (flg & 0x20) return -1; /* a preset dictionary */
+    long n = blocks(&b, out, out_cap);
     if (n < 0) return -1;
-    size_t at = 2 + used;
-    if (at + 4 > in_size) return -1;
+    uint32_t want = 0;
+    for (int i = 0; i < 4; i++) want = want << 8 | byte(&b);
+    if (b.error) return -1;
     uint32_t a = 1, b2 = 0;
     for (long i = 0; i < n; i++) {
         a = (a + out[i]) % 65521;
         b2 = (b2 + a) % 65521;
     }
-    uint32_t want = (uint32_t)in[at] << 24 | (uint32_t)in[at + 1] << 16 | (uint32_t)in[at + 2] << 8 | in[at + 3];
     if ((b2 << 16 | a) != want) return -1;
     return n;
+}
+
+typedef struct {
+    const uint8_t *in;
+    size_t size;
+    int given;
+} OneSpan;
+
+static int one_span(void *ctx, const uint8_t **data, size_t *size) {
+    OneSpan *span = ctx;
+    if (span->given) return 0;
+    span->given = 1;
+    *data = span->in;
+    *size = span->size;
+    return 1;
+}
+
+long inflate_zlib(const uint8_t *in, size_t in_size, uint8_t *out, size_t out_cap) {
+    if (in_size < 6) return -1;
+    OneSpan span = {in, in_size, 0};
+    return inflate_zlib_spans(one_span, &span, out, out_cap);
 }

@@ -417,10 +417,24 @@ void jw_bytes(JW *w, const void *data, size_t size) {
 
 void jw_raw(JW *w, const char *text) { jw_bytes(w, text, strlen(text)); }
 
+int format_int(int64_t value, char out[21]) {
+    /* by hand: newlib-nano's printf has no %lld */
+    char digits[20];
+    uint64_t magnitude = value < 0 ? 0 - (uint64_t)value : (uint64_t)value;
+    int n = 0, o = 0;
+    do {
+        digits[n++] = (char)('0' + magnitude % 10);
+        magnitude /= 10;
+    } while (magnitude);
+    if (value < 0) out[o++] = '-';
+    while (n) out[o++] = digits[--n];
+    out[o] = 0;
+    return o;
+}
+
 void jw_int(JW *w, int64_t value) {
-    char text[32];
-    int n = snprintf(text, sizeof text, "%lld", (long long)value);
-    jw_bytes(w, text, (size_t)n);
+    char text[21];
+    jw_bytes(w, text, (size_t)format_int(value, text));
 }
 
 void jw_bool(JW *w, int value) { jw_raw(w, value ? "true" : "false"); }

@@ -44,6 +44,8 @@ void jw_init(JW *w, void *buf, size_t cap);
 void jw_raw(JW *w, const char *text);
 void jw_bytes(JW *w, const void *data, size_t size);
 void jw_int(JW *w, int64_t value);
+/* value in decimal, as %lld writes it; returns the length */
+int format_int(int64_t value, char out[21]);
 void jw_float(JW *w, double value); /* msgspec's spelling: shortest, 1.0, 1e16, 1.5e-7 */
 void jw_bool(JW *w, int value);
 void jw_str(JW *w, const char *text, size_t size);

@@ -231,10 +231,36 @@ long serial_encode(const uint8_t *frame, size_t size, uint8_t *out, size_t cap) 
     return (long)o;
 }
 
+/* the COBS blocks of frame ‖ CRC: each run of up to 254 bytes without a zero, after its
+   code (the run's length + 1); the same bytes as serial_encode */
+void serial_encode_each(const uint8_t *frame, size_t size, EmitFn emit, void *ctx) {
+    uint32_t crc = crc32_of(frame, size);
+    uint8_t tail[4] = {(uint8_t)(crc >> 24), (uint8_t)(crc >> 16), (uint8_t)(crc >> 8), (uint8_t)crc};
+    size_t total = size + 4, i = 0;
+    uint8_t block[255];
+    for (;;) {
+        uint8_t run = 0;
+        while (i < total && run < 254) {
+            uint8_t b = i < size ? frame[i] : tail[i - size];
+            if (b == 0) break;
+            block[1 + run++] = b;
+            i++;
+        }
+        block[0] = (uint8_t)(run + 1);
+        emit(ctx, block, (size_t)run + 1);
+        if (run == 254) continue; /* a full run: a new code follows, even at the end */
+        if (i == total) break;
+        i++; /* the zero the code stands for */
+    }
+    static const uint8_t zero = 0;
+    emit(ctx, &zero, 1);
+}
+
 long serial_decode(const uint8_t *chunk, size_t size, uint8_t *out, size_t cap) {
     if (size > LINK_MAX_ENCODED_BYTES) return -R_OVERSIZE;
     /* COBS decoding as the cobs package does it (a zero in the input, or a code that
-       runs past the end, is an error) */
+       runs past the end, is an error). In place, out never passes chunk: each code
+       byte read before its run leaves one byte to spare. */
     size_t o = 0, i = 0;
     while (i < size) {
         uint8_t code = chunk[i];
@@ -260,15 +286,16 @@ long serial_decode(const uint8_t *chunk, size_t size, uint8_t *out, size_t cap) 
     return (long)n;
 }
 
+int deframer_receiving(const Deframer *d) { return d->used > 0 || d->overflowed; }
+
 void deframer_feed(Deframer *d, const uint8_t *data, size_t size, DeframeFn fn, void *ctx) {
-    static uint8_t frame[LINK_MAX_ENCODED_BYTES];
     size_t start = 0;
     while (1) {
         const uint8_t *zero = start < size ? memchr(data + start, 0, size - start) : NULL;
         size_t end = zero ? (size_t)(zero - data) : size;
         size_t piece = end - start;
         if (!d->overflowed) {
-            if (d->used + piece > LINK_MAX_ENCODED_BYTES) {
+            if (d->used + piece > LINK_ENCODED_CAP) {
                 d->overflowed = 1;
                 d->used = 0;
             } else {
@@ -280,9 +307,9 @@ void deframer_feed(Deframer *d, const uint8_t *data, size_t size, DeframeFn fn, 
         if (d->overflowed) {
             fn(ctx, NULL, 0, R_OVERSIZE);
         } else if (d->used) {
-            long n = serial_decode(d->buffer, d->used, frame, sizeof frame);
+            long n = serial_decode(d->buffer, d->used, d->buffer, sizeof d->buffer);
             if (n < 0) fn(ctx, NULL, 0, (int)-n);
-            else fn(ctx, frame, (size_t)n, R_NONE);
+            else fn(ctx, d->buffer, (size_t)n, R_NONE);
         }
         d->used = 0;
         d->overflowed = 0;

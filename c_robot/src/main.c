@@ -27,6 +27,7 @@ bridge says the run has ended it prints one JSON line and exits 0. */
 #include "auth.h"
 #include "client.h"
 #include "json.h"
+#include "keyfile.h"
 #include "link.h"
 #include "log.h"
 
@@ -38,6 +39,9 @@ bridge says the run has ended it prints one JSON line and exits 0. */
 #define MAX_PENDING_BYTES (256 * 1024)
 #define MAX_DATAGRAMS_PER_RECEIVE 256
 #define READ_BYTES 65536
+/* the serial line's bytes are written as the line would carry them, in slices of this much
+   line time (bestofn_swarm/link/core/pacing.py SLICE_SECONDS) */
+#define SLICE_SECONDS 0.02
 
 static const char USAGE[] =
     "usage: " PROGRAM " [-h] --link ADDRESS --id ID --key-file FILE [--give-up SECONDS]\n"
@@ -118,30 +122,6 @@ static int parse_address(const char *text, Address *a) {
 
 /* --- the key file (bestofn_swarm/wire/auth.py keyring_from_text; program.py read_key_file) ---------- */
 
-static int hex_key(const char *text, uint8_t out[32]) {
-    /* bytes.fromhex: pairs of hex digits, whitespace allowed between them */
-    size_t n = 0;
-    const char *p = text;
-    while (*p) {
-        if (*p == ' ' || *p == '\t' || *p == '\n' || *p == '\r' || *p == '\f' || *p == '\v') {
-            p++;
-            continue;
-        }
-        unsigned v = 0;
-        for (int k = 0; k < 2; k++, p++) {
-            char c = *p;
-            v <<= 4;
-            if (c >= '0' && c <= '9') v |= (unsigned)(c - '0');
-            else if (c >= 'a' && c <= 'f') v |= (unsigned)(c - 'a' + 10);
-            else if (c >= 'A' && c <= 'F') v |= (unsigned)(c - 'A' + 10);
-            else return -1;
-        }
-        if (n >= 32) return -1;
-        out[n++] = (uint8_t)v;
-    }
-    return n == 32 ? 0 : -1;
-}
-
 static void key_file_error(const char *format, const char *a, const char *b) {
     fprintf(stderr, "robot-agent: error: ");
     fprintf(stderr, format, a, b);
@@ -150,7 +130,7 @@ static void key_file_error(const char *format, const char *a, const char *b) {
 }
 
 static void read_key_file(const char *path, int robot, char *run, uint8_t key[32]) {
-    static uint8_t text[65536];
+    static uint8_t text[KEY_FILE_BYTES];
     int fd = open(path, O_RDONLY);
     if (fd < 0) key_file_error("cannot read key file %s: %s", path, strerror(errno));
     struct stat st;
@@ -160,85 +140,14 @@ static void read_key_file(const char *path, int robot, char *run, uint8_t key[32
     close(fd);
     if (size < 0) key_file_error("cannot read key file %s: %s", path, strerror(errno));
     if ((size_t)size == sizeof text) key_file_error("%s: %s", path, "not JSON");
-    char identity[32];
-    snprintf(identity, sizeof identity, "robot/%d", robot);
-    JR jr, *r = &jr;
-    jr_init(r, text, (size_t)size);
-    int first = 1, have_v = 0, have_run = 0, have_secret = 0, have_keys = 0, found = 0;
-    char name[128];
-    static char value[8192];
-    uint8_t secret[32];
-    if (jr_peek(r) != '{') key_file_error("%s: %s", path, "not a run key object ({\"v\": 1, ...})");
-    jr_obj_begin(r);
-    while (jr_obj_next(r, &first, name, sizeof name)) {
-        size_t len, chars;
-        if (!strcmp(name, "v")) {
-            double v;
-            int b;
-            if (jr_peek(r) == 't' || jr_peek(r) == 'f') have_v = jr_bool(r, &b) && b;
-            else if (jr_peek(r) == '-' || (jr_peek(r) >= '0' && jr_peek(r) <= '9')) have_v = jr_float(r, &v) && v == 1.0;
-            else { const uint8_t *x, *y; jr_skip(r, &x, &y); have_v = 0; }
-        } else if (!strcmp(name, "run")) {
-            if (jr_peek(r) == '"') {
-                have_run = jr_string(r, value, 256, &len, &chars);
-                if (have_run) {
-                    size_t keep = len < MAX_NAME ? len : MAX_NAME;
-                    memcpy(run, value, keep); /* a longer run id: no bridge can serve it */
-                    run[keep] = 0;
-                }
-            } else {
-                const uint8_t *x, *y;
-                jr_skip(r, &x, &y);
-                have_run = 0;
-            }
-        } else if (!strcmp(name, "secret")) {
-            have_secret = 1;
-            if (jr_peek(r) != '"' || !jr_string(r, value, sizeof value, &len, &chars) ||
-                hex_key(value, secret) != 0)
-                have_secret = -1;
-        } else if (!strcmp(name, "keys")) {
-            have_keys = -1;
-            if (jr_peek(r) == '{') {
-                int inner = 1, count = 0, bad = 0;
-                jr_obj_begin(r);
-                while (jr_obj_next(r, &inner, name, sizeof name)) {
-                    count++;
-                    uint8_t k[32];
-                    if (jr_peek(r) != '"' || !jr_string(r, value, sizeof value, &len, &chars) ||
-                        hex_key(value, k) != 0 || !is_identity(name, strlen(name))) {
-                        bad = 1;
-                        if (r->err) break;
-                        continue;
-                    }
-                    if (!strcmp(name, identity)) {
-                        memcpy(key, k, 32);
-                        found = 1;
-                    }
-                }
-                have_keys = !r->err && count > 0 && !bad ? 1 : -1;
-            } else {
-                const uint8_t *x, *y;
-                jr_skip(r, &x, &y);
-            }
-        } else {
-            const uint8_t *x, *y;
-            jr_skip(r, &x, &y);
-        }
-    }
-    if (r->err || !jr_end(r)) key_file_error("%s: %s", path, "not JSON");
-    if (!have_v) key_file_error("%s: %s", path, "not a run key object ({\"v\": 1, ...})");
-    if (!have_run) key_file_error("%s: %s", path, "the keys name no run");
-    if (have_secret) {
-        if (have_secret < 0) key_file_error("%s: %s", path, "the secret is not 32 bytes of hex");
-        auth_derive_key(secret, identity, key);
-        return;
-    }
-    if (have_keys <= 0) key_file_error("%s: %s", path, "neither \"secret\" nor \"keys\"");
-    if (!found) {
+    const char *why;
+    int found = key_file_read(text, (size_t)size, robot, run, key, &why);
+    if (found == KEY_FILE_NO_KEY) {
         char robot_text[16];
         snprintf(robot_text, sizeof robot_text, "%d", robot);
         key_file_error("%s holds no key for robot %s", path, robot_text);
     }
+    if (found != KEY_FILE_OK) key_file_error("%s: %s", path, why);
 }
 
 /* --- transports (bestofn_swarm/link/io/transport.py) -------------------------------------- */
@@ -246,14 +155,17 @@ static void read_key_file(const char *path, int robot, char *run, uint8_t key[32
 typedef struct {
     int fd;
     int udp;
-    /* serial: the pacer and what waits to be written */
+    /* serial: the pacer (bestofn_swarm/link/core/pacing.py PacedLine) and what waits to be written */
     double baud, free_at;
+    size_t slice; /* bytes handed on at a time */
     uint8_t pending[MAX_PENDING_BYTES];
     size_t pending_used;
-    double due[OUT_QUEUE_FRAMES * 4];
+    /* the frames not yet handed on whole, in order: when their first and last bytes arrive */
+    double start[OUT_QUEUE_FRAMES * 4], done[OUT_QUEUE_FRAMES * 4];
     size_t size[OUT_QUEUE_FRAMES * 4];
     int queued;
-    size_t unwritten; /* bytes at the front of pending already due, not yet written */
+    size_t handed;    /* bytes of the first of them handed on */
+    size_t unwritten; /* bytes at the front of pending handed on, not yet written */
     Deframer deframer;
     long refused[R_COUNT];
     long sent, send_failures;
@@ -291,6 +203,7 @@ static int open_transport(const Address *a, Transport *t) {
     memset(t, 0, offsetof(Transport, pending));
     t->queued = 0;
     t->pending_used = 0;
+    t->handed = 0;
     t->unwritten = 0;
     t->deframer.used = 0;
     t->deframer.overflowed = 0;
@@ -353,6 +266,8 @@ static int open_transport(const Address *a, Transport *t) {
     t->udp = 0;
     t->baud = (double)a->baud;
     t->free_at = 0.0;
+    double slice = t->baud / 10 * SLICE_SECONDS + 0.5;
+    t->slice = slice < 1.0 ? 1 : (size_t)slice;
     return 0;
 }
 
@@ -367,15 +282,17 @@ static void transport_send(Transport *t, const uint8_t *frame, size_t size, doub
     static uint8_t encoded[LINK_MAX_ENCODED_BYTES + 16];
     long n = serial_encode(frame, size, encoded, sizeof encoded);
     if (n < 0 || t->pending_used + (size_t)n > MAX_PENDING_BYTES ||
-        t->queued >= (int)(sizeof t->due / sizeof t->due[0])) {
+        t->queued >= (int)(sizeof t->done / sizeof t->done[0])) {
         t->send_failures++; /* the line is that far behind: the frame is lost */
         return;
     }
-    /* LinePacer: a frame is handed on once its last byte would have arrived (8N1) */
-    t->free_at = (now > t->free_at ? now : t->free_at) + (double)n * 10 / t->baud;
+    /* PacedLine: its bytes arrive one after another from when the line is free, 8N1 */
+    double start = now > t->free_at ? now : t->free_at;
+    t->free_at = start + (double)n * 10 / t->baud;
     memcpy(t->pending + t->pending_used, encoded, (size_t)n);
     t->pending_used += (size_t)n;
-    t->due[t->queued] = t->free_at;
+    t->start[t->queued] = start;
+    t->done[t->queued] = t->free_at;
     t->size[t->queued] = (size_t)n;
     t->queued++;
     serial_flush(t, now);
@@ -384,20 +301,30 @@ static void transport_send(Transport *t, const uint8_t *frame, size_t size, doub
 /* -1: the line is gone */
 static int serial_flush(Transport *t, double now) {
     if (t->udp) return 0;
-    size_t due_bytes = t->unwritten; /* the front of pending, due already */
     int taken = 0;
-    /* frames whose time has come join what is due */
-    while (taken < t->queued && t->due[taken] <= now) {
-        due_bytes += t->size[taken];
+    /* the bytes the line has carried by now join what is due, frame after frame */
+    while (taken < t->queued) {
+        size_t size = t->size[taken], upto = size;
+        if (now < t->done[taken]) {
+            double carried = (now - t->start[taken]) * t->baud / 10 + 1e-6;
+            upto = carried <= 0.0 ? 0 : carried >= (double)size ? size : (size_t)carried;
+        }
+        if (upto > t->handed) {
+            t->unwritten += upto - t->handed;
+            t->handed = upto;
+        }
+        if (t->handed < size) break;
+        t->handed = 0;
         taken++;
     }
     if (taken) {
-        memmove(t->due, t->due + taken, sizeof(double) * (size_t)(t->queued - taken));
+        size_t rest = sizeof(double) * (size_t)(t->queued - taken);
+        memmove(t->start, t->start + taken, rest);
+        memmove(t->done, t->done + taken, rest);
         memmove(t->size, t->size + taken, sizeof(size_t) * (size_t)(t->queued - taken));
         t->queued -= taken;
         t->sent += taken;
     }
-    t->unwritten = due_bytes;
     size_t written = 0;
     while (written < t->unwritten) {
         ssize_t n = write(t->fd, t->pending + written, t->unwritten - written);
@@ -416,9 +343,12 @@ static int serial_flush(Transport *t, double now) {
     return 0;
 }
 
+/* when the next slice of bytes is due */
 static double transport_deadline(const Transport *t) {
     if (t->udp || t->queued == 0) return INFINITY;
-    return t->due[0];
+    size_t upto = t->handed + t->slice;
+    if (upto >= t->size[0]) return t->done[0];
+    return t->start[0] + (double)upto * 10 / t->baud;
 }
 
 typedef struct {
@@ -426,7 +356,7 @@ typedef struct {
     double now;
 } FeedContext;
 
-static void on_frame(void *ctx, const uint8_t *frame, size_t size, int refusal) {
+static void on_frame(void *ctx, uint8_t *frame, size_t size, int refusal) {
     FeedContext *fc = ctx;
     if (frame == NULL) {
         transport.refused[refusal]++;
@@ -532,6 +462,8 @@ static int serve(LinkRobot *program, const Address *address, double give_up) {
         if (ready > 0) {
             now = now_monotonic();
             if (transport_receive(&transport, program, now) < 0) gone = 1;
+            else if (!transport.udp && deframer_receiving(&transport.deframer))
+                link_robot_hearing(program, now); /* a long frame under way is not silence */
             send_outgoing(program, &transport, now); /* answer at once */
             if (serial_flush(&transport, now) < 0) gone = 1;
         }
@@ -674,7 +606,11 @@ int main(int argc, char **argv) {
     signal(SIGPIPE, SIG_IGN);
 
     static LinkRobot program;
-    link_robot_init(&program, robot, run, key);
+    if (link_robot_init(&program, robot, run, key) != 0) {
+        log_error("robot %d: no source of random bytes for the link's nonces: cannot run",
+                  robot);
+        return 1;
+    }
     log_info("robot %d of run %s: saying hello on %s", robot, run, link_text);
     int code = serve(&program, &address, give_up);
     static char summary[4096];

@@ -228,11 +228,11 @@ int decode_radio(const void *data, size_t size, RadioPayload *p) {
         else if (KEY("trip")) { if (!GET_COUNT(r, &p->trip)) return 0; seen |= 4; }
         else if (KEY("decided")) { if (!get_bool(r, &p->decided)) return 0; seen |= 8; }
         else if (kind == RADIO_OPINION && KEY("opinion")) {
-            if (!get_unit_list(r, p->opinion, &p->n, 2, MAX_OPTIONS)) return 0;
+            if (!get_unit_list(r, p->opinion, &p->n, 2, MAX_OPTIONS)) return 0; /* held */
             seen |= 16;
         }
         else if (kind == RADIO_VOTE && KEY("site")) {
-            if (!get_int(r, &p->site, 0, MAX_OPTIONS - 1)) return 0;
+            if (!get_int(r, &p->site, 0, PROTOCOL_MAX_OPTIONS - 1)) return 0;
             seen |= 16;
         }
         else if (kind == RADIO_VOTE && KEY("quality")) {
@@ -267,7 +267,7 @@ static int nest_body(JR *r, WorldInfo *w) {
 static int site_body(JR *r, Site *s) {
     unsigned seen = 0;
     OBJECT_LOOP(r) {
-        if (KEY("id")) { if (!get_int(r, &s->id, 0, MAX_OPTIONS - 1)) return 0; seen |= 1; }
+        if (KEY("id")) { if (!get_int(r, &s->id, 0, PROTOCOL_MAX_OPTIONS - 1)) return 0; seen |= 1; }
         else if (KEY("x")) { if (!GET_COORD(r, &s->x)) return 0; seen |= 2; }
         else if (KEY("y")) { if (!GET_COORD(r, &s->y)) return 0; seen |= 4; }
         else return jr_fail(r);
@@ -302,8 +302,10 @@ int decode_world_info(const void *data, size_t size, WorldInfo *w) {
             if (!jr_arr_begin(r)) return 0;
             int first = 1, n = 0;
             while (jr_arr_next(r, &first)) {
-                if (n >= MAX_OPTIONS) return jr_fail(r);
-                if (!site_body(r, &w->sites[n])) return 0;
+                Site site; /* held up to MAX_OPTIONS; a longer map is refused at start */
+                if (n >= PROTOCOL_MAX_OPTIONS) return jr_fail(r);
+                if (!site_body(r, &site)) return 0;
+                if (n < MAX_OPTIONS) w->sites[n] = site;
                 n++;
             }
             if (r->err || n < 2) return jr_fail(r);
@@ -530,11 +532,11 @@ static int check_comparison(JR *r) {
     double d;
     if (jr_null(r)) return 1;
     OBJECT_LOOP(r) {
-        if (KEY("site_a")) { if (!get_int(r, &i, 0, MAX_OPTIONS - 1)) return 0; seen |= 1; }
+        if (KEY("site_a")) { if (!get_int(r, &i, 0, PROTOCOL_MAX_OPTIONS - 1)) return 0; seen |= 1; }
         else if (KEY("quality_a")) { if (!GET_UNIT(r, &d)) return 0; seen |= 2; }
-        else if (KEY("site_b")) { if (!get_int(r, &i, 0, MAX_OPTIONS - 1)) return 0; seen |= 4; }
+        else if (KEY("site_b")) { if (!get_int(r, &i, 0, PROTOCOL_MAX_OPTIONS - 1)) return 0; seen |= 4; }
         else if (KEY("quality_b")) { if (!GET_UNIT(r, &d)) return 0; seen |= 8; }
-        else if (KEY("eliminated")) { if (!get_int(r, &i, 0, MAX_OPTIONS - 1)) return 0; seen |= 16; }
+        else if (KEY("eliminated")) { if (!get_int(r, &i, 0, PROTOCOL_MAX_OPTIONS - 1)) return 0; seen |= 16; }
         else return jr_fail(r);
     }
     return DONE(r, seen, 31u);
@@ -554,11 +556,11 @@ static int check_status(JR *r) {
         else if (KEY("t")) { if (!GET_SIMTIME(r, &d)) return 0; seen |= 8; }
         else if (KEY("phase")) { if (!get_enum(r, phases, &index)) return 0; seen |= 16; }
         else if (KEY("trips")) { if (!GET_COUNT(r, &i)) return 0; seen |= 32; }
-        else if (KEY("opinion")) { if (!get_unit_list(r, NULL, &n, 2, MAX_OPTIONS)) return 0; seen |= 64; }
+        else if (KEY("opinion")) { if (!get_unit_list(r, NULL, &n, 2, PROTOCOL_MAX_OPTIONS)) return 0; seen |= 64; }
         else if (KEY("pool_size")) { if (!GET_COUNT(r, &i)) return 0; seen |= 128; }
         else if (KEY("poolings")) { if (!GET_COUNT(r, &i)) return 0; seen |= 256; }
         else if (KEY("decided_site")) {
-            if (!jr_null(r) && !get_int(r, &i, 0, MAX_OPTIONS - 1)) return 0;
+            if (!jr_null(r) && !get_int(r, &i, 0, PROTOCOL_MAX_OPTIONS - 1)) return 0;
             seen |= 512;
         }
         else if (KEY("decision_time")) {

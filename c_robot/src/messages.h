@@ -5,7 +5,11 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define MAX_OPTIONS 1000
+#include "limits.h"
+
+/* The protocol's bound on sites (bestofn_swarm/wire/protocol.py MAX_OPTIONS): what is valid. What the
+   robot holds is MAX_OPTIONS (limits.h), the same on the host. */
+#define PROTOCOL_MAX_OPTIONS 1000
 #define MAX_ROBOTS 100000
 #define MAX_PAYLOAD_BYTES (64 * 1024)
 #define MAX_NAME 64

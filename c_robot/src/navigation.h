@@ -1,10 +1,10 @@
 /* Go-to-goal with obstacle avoidance (robot_agent/core/navigation.py). */
 #ifndef CR_NAVIGATION_H
 #define CR_NAVIGATION_H
+#include "limits.h"
 #include "rng.h"
 
 #define NAV_SENSORS 8
-#define NAV_MAX_TRAIL 8192
 
 typedef struct {
     double max_speed, wheel_base, robot_radius, control_period;

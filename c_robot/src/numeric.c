@@ -2,6 +2,8 @@
    docs/kernel.md and bestofn_swarm/wire/numeric.py write them (compile with -ffp-contract=off). */
 #include "numeric.h"
 
+#include "limits.h"
+
 #include <math.h>
 #include <string.h>
 
@@ -229,7 +231,6 @@ double nk_round_half_even(double x) {
 }
 
 /* math.fsum as CPython implements it (Modules/mathmodule.c, math_fsum_impl). */
-#define FSUM_PARTIALS 1100
 int nk_fsum(const double *values, int count, double *out) {
     double p[FSUM_PARTIALS];
     int n = 0;

@@ -5,9 +5,9 @@
 #include "inflate.h"
 #include "link.h" /* crc32_of */
 
-static uint8_t compressed[MAX_FRAME_BYTES];
-static uint8_t raw[MAX_FRAME_PIXELS * 4 + 4096];
-static uint8_t pixels[MAX_FRAME_PIXELS * 3];
+/* the frame inflated (its rows, each after its filter byte), unfiltered in place, then
+   turned into BGR pixels in place: the image is this buffer */
+static uint8_t raw[PNG_RAW_BYTES];
 
 static uint32_t be32(const uint8_t *p) {
     return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
@@ -19,6 +19,28 @@ static int paeth(int a, int b, int c) {
     if (pa <= pb && pa <= pc) return a;
     if (pb <= pc) return b;
     return c;
+}
+
+/* the IDAT chunks' bodies, one after another where they are in the PNG (inflate reads them
+   so: never copied together) */
+typedef struct {
+    const uint8_t *data;
+    size_t pos; /* the next chunk, the chunks checked already */
+} Chunks;
+
+static int next_idat(void *ctx, const uint8_t **body, size_t *size) {
+    Chunks *chunks = ctx;
+    for (;;) {
+        const uint8_t *chunk = chunks->data + chunks->pos;
+        uint32_t length = be32(chunk);
+        chunks->pos += 12 + length;
+        if (!memcmp(chunk + 4, "IEND", 4)) return 0;
+        if (!memcmp(chunk + 4, "IDAT", 4)) {
+            *body = chunk + 8;
+            *size = length;
+            return 1;
+        }
+    }
 }
 
 int png_decode(const uint8_t *data, size_t size, Image *image, const char **why) {
@@ -40,7 +62,7 @@ int png_decode(const uint8_t *data, size_t size, Image *image, const char **why)
         *why = "camera frame has more pixels than the limit";
         return -1;
     }
-    size_t pos = 8, idat = 0;
+    size_t pos = 8;
     int depth = 0, colour = 0, seen_ihdr = 0, seen_iend = 0;
     while (!seen_iend) {
         if (pos + 12 > size) return -1;
@@ -63,10 +85,6 @@ int png_decode(const uint8_t *data, size_t size, Image *image, const char **why)
                 return -1;
             }
             seen_ihdr = 1;
-        } else if (!memcmp(type, "IDAT", 4)) {
-            if (idat + length > sizeof compressed) return -1;
-            memcpy(compressed + idat, body, length);
-            idat += length;
         } else if (!memcmp(type, "IEND", 4)) {
             seen_iend = 1;
         } else if (!memcmp(type, "IHDR", 4)) {
@@ -77,7 +95,8 @@ int png_decode(const uint8_t *data, size_t size, Image *image, const char **why)
     int channels = colour == 0 ? 1 : colour == 2 ? 3 : 4;
     size_t stride = (size_t)width * (size_t)channels;
     size_t expected = (stride + 1) * height;
-    long n = inflate_zlib(compressed, idat, raw, sizeof raw);
+    Chunks chunks = {data, 8};
+    long n = inflate_zlib_spans(next_idat, &chunks, raw, sizeof raw);
     if (n < 0 || (size_t)n < expected) {
         *why = "PNG data is corrupt or truncated";
         return -1;
@@ -104,22 +123,26 @@ int png_decode(const uint8_t *data, size_t size, Image *image, const char **why)
             cur[i] = (uint8_t)x;
         }
     }
-    for (uint32_t r = 0; r < height; r++) {
-        const uint8_t *row = raw + (size_t)r * (stride + 1) + 1;
-        uint8_t *out = pixels + (size_t)r * width * 3;
-        for (uint32_t c = 0; c < width; c++) {
-            const uint8_t *px = row + (size_t)c * (size_t)channels;
-            if (channels == 1) {
-                out[3 * c] = out[3 * c + 1] = out[3 * c + 2] = px[0];
-            } else { /* RGB(A) -> BGR; alpha dropped, as OpenCV's IMREAD_COLOR */
-                out[3 * c] = px[2];
-                out[3 * c + 1] = px[1];
-                out[3 * c + 2] = px[0];
-            }
+    /* to BGR in place: pixel k's 3 bytes at 3k, its PNG bytes at row r's 1 + c * channels,
+       at or after 3k + 1 for 3 or 4 channels (forwards, each pixel read before it is
+       written), and before 3k for grey (backwards) */
+    size_t pixels = (size_t)width * height;
+    if (channels == 1) {
+        for (size_t k = pixels; k-- > 0;) {
+            uint8_t grey = raw[(k / width) * (stride + 1) + 1 + k % width];
+            raw[3 * k] = raw[3 * k + 1] = raw[3 * k + 2] = grey;
+        }
+    } else { /* RGB(A) -> BGR; alpha dropped, as OpenCV's IMREAD_COLOR */
+        for (size_t k = 0; k < pixels; k++) {
+            const uint8_t *px = raw + (k / width) * (stride + 1) + 1 + (k % width) * (size_t)channels;
+            uint8_t red = px[0], green = px[1], blue = px[2];
+            raw[3 * k] = blue;
+            raw[3 * k + 1] = green;
+            raw[3 * k + 2] = red;
         }
     }
     image->width = (int)width;
     image->height = (int)height;
-    image->bgr = pixels;
+    image->bgr = raw;
     return 0;
 }

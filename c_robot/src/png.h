@@ -5,10 +5,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#ifndef MAX_FRAME_PIXELS
-#define MAX_FRAME_PIXELS (320 * 240)
-#endif
-#define MAX_FRAME_BYTES (1024 * 1024)
+#include "limits.h"
+
 
 typedef struct {
     int width, height;

@@ -71,8 +71,22 @@ uint64_t seed_of_text(const char *text) {
     return seed;
 }
 
+/* n in decimal at out; the end (by hand: newlib-nano's printf has no %llu) */
+static char *decimal(uint64_t n, char *out) {
+    char digits[20];
+    int count = 0;
+    do {
+        digits[count++] = (char)('0' + n % 10);
+        n /= 10;
+    } while (n);
+    while (count) *out++ = digits[--count];
+    return out;
+}
+
 uint64_t seed_of_robot(uint64_t run_seed, unsigned robot) {
     char text[64];
-    snprintf(text, sizeof text, "%llu:robot:%u", (unsigned long long)run_seed, robot);
+    char *end = decimal(run_seed, text);
+    memcpy(end, ":robot:", 7);
+    *decimal(robot, end + 7) = 0;
     return seed_of_text(text);
 }

@@ -6,10 +6,19 @@
 #define MIN_REGION_PIXELS 12
 #define MIN_HEIGHT_FRACTION 0.3
 
-static uint8_t mask[MAX_FRAME_PIXELS];
-static uint8_t kept[MAX_FRAME_PIXELS];
-static int32_t labels[MAX_FRAME_PIXELS];
-static int32_t stack[MAX_FRAME_PIXELS];
+/* a pixel's flags: in the chroma mask, and kept by the erosion */
+#define MASKED 1
+#define KEPT 2
+static uint8_t flags[MAX_FRAME_PIXELS];
+/* component labels and the flood's stack of pixel indices: 16 bits for frames of up to
+   65535 pixels (a microcontroller's), 32 for larger */
+#if MAX_FRAME_PIXELS <= 65535
+typedef uint16_t Label;
+#else
+typedef int32_t Label;
+#endif
+static Label labels[MAX_FRAME_PIXELS];
+static Label stack[MAX_FRAME_PIXELS];
 
 /* BORDER_REFLECT_101: -1 -> 1, n -> n - 2 */
 static int reflect(int i, int n) {
@@ -34,7 +43,7 @@ int estimate_quality(const Image *image, double *quality) {
                     sum[2] += p[2];
                 }
             }
-            mask[y * w + x] = (sum[2] + sum[0] - 2 * sum[1]) > CHROMA_LIMIT;
+            flags[y * w + x] = (sum[2] + sum[0] - 2 * sum[1]) > CHROMA_LIMIT ? MASKED : 0;
         }
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
@@ -42,30 +51,30 @@ int estimate_quality(const Image *image, double *quality) {
             for (int dy = -1; dy <= 1 && keep; dy++)
                 for (int dx = -1; dx <= 1; dx++) {
                     int yy = y + dy, xx = x + dx;
-                    if (yy < 0 || yy >= h || xx < 0 || xx >= w || !mask[yy * w + xx]) {
+                    if (yy < 0 || yy >= h || xx < 0 || xx >= w || !(flags[yy * w + xx] & MASKED)) {
                         keep = 0;
                         break;
                     }
                 }
-            kept[y * w + x] = (uint8_t)keep;
+            if (keep) flags[y * w + x] |= KEPT;
         }
     /* 4-connected components, found in row-major order: each one's first pixel is where
        its flood starts. The facing one: inside the central band, tall and large enough,
        nearest the centre (dx, then dy, then first pixel). */
-    memset(labels, 0, sizeof(int32_t) * (size_t)w * (size_t)h);
+    memset(labels, 0, sizeof(Label) * (size_t)w * (size_t)h);
     double centre_x = w / 2.0, centre_y = h / 2.0;
     double band_left = w / 4.0, band_right = 3.0 * w / 4.0;
     int best = 0, label = 0;
     double best_dx = 0, best_dy = 0;
     long best_first = 0;
     for (int start = 0; start < w * h; start++) {
-        if (!kept[start] || labels[start]) continue;
-        label++;
+        if (!(flags[start] & KEPT) || labels[start]) continue;
+        label++; /* at most one a kept pixel: it fits a Label */
         int top = h, left = w, bottom = -1, right = -1;
         long area = 0;
         int sp = 0;
-        stack[sp++] = start;
-        labels[start] = label;
+        stack[sp++] = (Label)start;
+        labels[start] = (Label)label;
         while (sp) {
             int p = stack[--sp];
             int y = p / w, x = p % w;
@@ -78,9 +87,9 @@ int estimate_quality(const Image *image, double *quality) {
                            x < w - 1 ? p + 1 : -1};
             for (int k = 0; k < 4; k++) {
                 int q = next[k];
-                if (q >= 0 && kept[q] && !labels[q]) {
-                    labels[q] = label;
-                    stack[sp++] = q;
+                if (q >= 0 && (flags[q] & KEPT) && !labels[q]) {
+                    labels[q] = (Label)label;
+                    stack[sp++] = (Label)q;
                 }
             }
         }

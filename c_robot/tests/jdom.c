@@ -12,18 +12,70 @@ static void ws(P *p) {
     while (p->p < p->e && (*p->p == ' ' || *p->p == '\n' || *p->p == '\t' || *p->p == '\r')) p->p++;
 }
 
+/* What the DOM holds comes from blocks of ARENA_BLOCK bytes, never freed (each file is read
+   once): no allocation overhead, so that the vectors fit a board's RAM (make test-m4). */
+#define ARENA_BLOCK (256 * 1024)
+static char *arena_at, *arena_end;
+
+static void *arena(size_t size) {
+    size = (size + 7) & ~(size_t)7;
+    if (size > (size_t)(arena_end - arena_at)) {
+        size_t block = size > ARENA_BLOCK ? size : ARENA_BLOCK;
+        arena_at = malloc(block);
+        if (arena_at == NULL) {
+            printf("FAIL the vectors do not fit in memory\n");
+            exit(1);
+        }
+        arena_end = arena_at + block;
+    }
+    void *p = arena_at;
+    arena_at += size;
+    return p;
+}
+
+static char *kept(const char *text, size_t size) {
+    char *copy = arena(size + 1);
+    memcpy(copy, text, size);
+    copy[size] = 0;
+    return copy;
+}
+
 static JNode *node(int type) {
-    JNode *n = calloc(1, sizeof *n);
+    JNode *n = arena(sizeof *n);
+    memset(n, 0, sizeof *n);
     n->type = type;
     return n;
 }
 
-static void push(JNode *n, JNode *item, char *key) {
-    n->items = realloc(n->items, (n->count + 1) * sizeof *n->items);
-    n->keys = realloc(n->keys, (n->count + 1) * sizeof *n->keys);
-    n->items[n->count] = item;
-    n->keys[n->count] = key;
-    n->count++;
+/* an array's or an object's members, gathered in a growing list, kept at their end */
+typedef struct {
+    JNode **items;
+    char **keys;
+    size_t count, cap;
+} Members;
+
+static void push(Members *m, JNode *item, char *key) {
+    if (m->count == m->cap) {
+        m->cap = m->cap ? 2 * m->cap : 8;
+        m->items = realloc(m->items, m->cap * sizeof *m->items);
+        m->keys = realloc(m->keys, m->cap * sizeof *m->keys);
+    }
+    m->items[m->count] = item;
+    m->keys[m->count] = key;
+    m->count++;
+}
+
+static JNode *keep(JNode *n, Members *m) {
+    n->count = m->count;
+    n->items = arena(m->count * sizeof *n->items);
+    memcpy(n->items, m->items, m->count * sizeof *n->items);
+    if (n->type == J_OBJ) {
+        n->keys = arena(m->count * sizeof *n->keys);
+        memcpy(n->keys, m->keys, m->count * sizeof *n->keys);
+    }
+    free(m->items);
+    free(m->keys);
+    return n;
 }
 
 static char *string(P *p, size_t *len) {
@@ -63,9 +115,10 @@ static char *string(P *p, size_t *len) {
         s[n++] = *p->p++;
     }
     p->p++;
-    s[n] = 0;
     *len = n;
-    return s;
+    char *copy = kept(s, n);
+    free(s);
+    return copy;
 }
 
 static JNode *value(P *p) {
@@ -73,29 +126,31 @@ static JNode *value(P *p) {
     char c = *p->p;
     if (c == '{') {
         JNode *n = node(J_OBJ);
+        Members m = {NULL, NULL, 0, 0};
         p->p++;
         ws(p);
-        if (*p->p == '}') { p->p++; return n; }
+        if (*p->p == '}') { p->p++; return keep(n, &m); }
         while (1) {
             ws(p);
             size_t len;
             char *key = string(p, &len);
             ws(p);
             p->p++; /* : */
-            push(n, value(p), key);
+            push(&m, value(p), key);
             ws(p);
-            if (*p->p++ == '}') return n;
+            if (*p->p++ == '}') return keep(n, &m);
         }
     }
     if (c == '[') {
         JNode *n = node(J_ARR);
+        Members m = {NULL, NULL, 0, 0};
         p->p++;
         ws(p);
-        if (*p->p == ']') { p->p++; return n; }
+        if (*p->p == ']') { p->p++; return keep(n, &m); }
         while (1) {
-            push(n, value(p), NULL);
+            push(&m, value(p), NULL);
             ws(p);
-            if (*p->p++ == ']') return n;
+            if (*p->p++ == ']') return keep(n, &m);
         }
     }
     if (c == '"') {
@@ -114,9 +169,7 @@ static JNode *value(P *p) {
         p->p++;
     }
     n->str_len = (size_t)(p->p - start);
-    n->str = malloc(n->str_len + 1);
-    memcpy(n->str, start, n->str_len);
-    n->str[n->str_len] = 0;
+    n->str = kept(start, n->str_len);
     n->num = strtod(n->str, NULL);
     n->integer = strtoll(n->str, NULL, 10);
     return n;
@@ -133,7 +186,9 @@ JNode *jdom_parse_file(const char *path) {
     fclose(f);
     text[size] = 0;
     P p = {text, text + size};
-    return value(&p);
+    JNode *root = value(&p);
+    free(text);
+    return root;
 }
 
 JNode *jdom_get(const JNode *obj, const char *key) {

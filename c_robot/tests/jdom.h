@@ -7,16 +7,16 @@
 enum { J_NULL, J_BOOL, J_NUM, J_STR, J_ARR, J_OBJ };
 
 typedef struct JNode {
-    int type;
-    int boolean;
     double num;
-    int is_int;
     long long integer;
     char *str; /* strings: UTF-8; numbers: their text */
     size_t str_len;
     struct JNode **items; /* arrays and objects' values */
     char **keys;          /* objects */
     size_t count;
+    int type;
+    int boolean;
+    int is_int;
 } JNode;
 
 JNode *jdom_parse_file(const char *path);

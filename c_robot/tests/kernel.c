@@ -121,7 +121,7 @@ void test_rng(void) {
     for (size_t i = 0; i < seeds->count; i++) {
         JNode *s = seeds->items[i];
         char text[256];
-        int n = snprintf(text, sizeof text, "%lld", jdom_get(s, "run_seed")->integer);
+        int n = format_int(jdom_get(s, "run_seed")->integer, text); /* nano has no %lld */
         JNode *parts = jdom_get(s, "parts");
         for (size_t k = 0; k < parts->count; k++) {
             JNode *p = parts->items[k];
@@ -136,9 +136,7 @@ void test_rng(void) {
 
 /* cases.json (made by c_robot/tests/make_cases.py from CPython and msgspec) */
 void test_fsum(void) {
-    char path[1024];
-    snprintf(path, sizeof path, "%s", "tests/cases.json");
-    JNode *root = jdom_parse_file(path);
+    JNode *root = cases_json();
     if (!root) {
         check(0, "cases.json", "missing (run from c_robot/)");
         return;
@@ -160,7 +158,7 @@ void test_fsum(void) {
 }
 
 void test_format(void) {
-    JNode *root = jdom_parse_file("tests/cases.json");
+    JNode *root = cases_json();
     if (!root) return;
     JNode *cases = jdom_get(root, "format");
     for (size_t i = 0; i < cases->count; i++) {

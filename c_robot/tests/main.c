@@ -35,6 +35,12 @@ JNode *load(const char *file) {
     return n;
 }
 
+JNode *cases_json(void) {
+    static JNode *root;
+    if (root == NULL) root = jdom_parse_file("tests/cases.json");
+    return root;
+}
+
 int main(int argc, char **argv) {
     vector_dir = argc > 1 ? argv[1] : "../tests/vectors";
     const char *slash = strrchr(argv[0], '/');
@@ -56,6 +62,7 @@ int main(int argc, char **argv) {
         {"key files", test_key_files},
         {"messages", test_messages}, {"png+vision", test_png},
         {"decision", test_decision}, {"client", test_client},
+        {"platform", test_platform},
         {"controller", test_controller_vectors},
     };
     for (size_t i = 0; i < sizeof groups / sizeof groups[0]; i++) {

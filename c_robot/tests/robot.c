@@ -12,7 +12,7 @@
 #include "tests.h"
 #include "vision.h"
 
-static unsigned char data[2 * 1024 * 1024];
+static unsigned char data[64 * 1024]; /* a PNG of png_cases.json (at most 9.4 KB) */
 
 void test_png(void) {
     JNode *root = jdom_parse_file("tests/png_cases.json");
@@ -76,7 +76,7 @@ static void list_of(JNode *list, double *out) {
 }
 
 void test_decision(void) {
-    JNode *root = jdom_parse_file("tests/cases.json");
+    JNode *root = cases_json();
     if (!root) return;
     JNode *cases = jdom_get(root, "decision");
     static double opinion[MAX_OPTIONS], out[MAX_OPTIONS], pool_values[64][MAX_OPTIONS];
@@ -154,8 +154,8 @@ void test_decision(void) {
             if (ok) controller_parking_slot(c, site, &x, &y);
             double wx = hexd(s->items[2]->str), wy = hexd(s->items[3]->str);
             char name[96];
-            snprintf(name, sizeof name, "%lld robots: robot %d, site %d",
-                     jdom_get(p, "robots")->integer, robot, site);
+            snprintf(name, sizeof name, "%d robots: robot %d, site %d",
+                     (int)jdom_get(p, "robots")->integer, robot, site);
             check(ok && !memcmp(&x, &wx, 8) && !memcmp(&y, &wy, 8), "parking slot", name);
         }
     }
@@ -188,11 +188,15 @@ static void from_bridge(int type, const uint8_t *body, size_t size, uint64_t seq
 
 /* the robot's queued frames, opened; their types in order */
 static int sent_types(int *types, Frame *frames, int cap) {
-    static uint8_t copies[16][70000];
+    static uint8_t copies[16][16384];
     int n = 0;
     size_t size;
     const uint8_t *frame;
     for (int i = 0; n < cap && (frame = client_frame(&robot.client, i, &size)) != NULL; i++) {
+        if (size > sizeof copies[0]) {
+            check(0, "client", "a frame longer than the test keeps");
+            break;
+        }
         memcpy(copies[n], frame, size);
         static uint8_t plain[70000];
         check(link_open(copies[n], size, lk, NULL, plain, &frames[n]) == R_NONE, "client", "its frames are tagged under the link key");
@@ -339,4 +343,95 @@ void test_client(void) {
     link_robot_summary(&robot, summary, sizeof summary);
     check(strstr(summary, "\"sessions\": 1") && strstr(summary, "\"refused\": {\"replayed\": 1}"),
           "client", summary);
+}
+
+/* --- a serial line's long frames, and the firmware's platform pieces ------------------ */
+
+#include "key_record.h"
+#include "motor_guard.h"
+
+static void test_hearing(void) {
+    link_robot_init(&robot, 8, "demo", robot_key);
+    link_robot_wake(&robot, 0.0);
+    client_clear(&robot.client);
+    const char *welcome = "{\"v\":1,\"run\":\"demo\",\"root\":\"bestofn\",\"cipher\":\"none\","
+                          "\"ping_every\":0.5,\"silence\":3.0,\"controller\":{\"dwell\":3.0}}";
+    from_bridge(F_WELCOME, (const uint8_t *)welcome, strlen(welcome), 0, 0.0);
+    client_clear(&robot.client); /* the ping and the question for the map */
+    int types[16];
+    Frame frames[16];
+    int asked = 0;
+    for (double t = 0.5; t <= 5.51; t += 0.5) { /* a long frame arriving all along */
+        link_robot_hearing(&robot, t);
+        link_robot_wake(&robot, t);
+        asked += sent_types(types, frames, 16);
+    }
+    check(robot.client.open && asked == 0, "serial line",
+          "a frame under way: the session holds, and nothing is asked again");
+    link_robot_wake(&robot, 6.5);
+    check(sent_types(types, frames, 16) == 1 && types[0] == F_DATA, "serial line",
+          "the question again 1 s after the last bytes");
+    link_robot_wake(&robot, 8.5);
+    check(!robot.client.open, "serial line", "silence 3 s after the last bytes heard");
+}
+
+static void test_motor_guard(void) {
+    MotorGuard guard;
+    double left, right;
+    motor_guard_init(&guard, 0.3);
+    motor_guard_wheels(&guard, 0.0, &left, &right);
+    int ok = left == 0.0 && right == 0.0;
+    motor_guard_command(&guard, 1.0, 0.1, -0.05);
+    motor_guard_wheels(&guard, 1.29, &left, &right);
+    ok &= left == 0.1 && right == -0.05 && guard.stops == 0;
+    motor_guard_wheels(&guard, 1.3, &left, &right);
+    ok &= left == 0.0 && right == 0.0 && guard.stops == 1;
+    motor_guard_wheels(&guard, 1.4, &left, &right);
+    ok &= guard.stops == 1; /* stopped once, not again */
+    motor_guard_command(&guard, 1.5, 0.0, 0.0);
+    motor_guard_wheels(&guard, 2.0, &left, &right);
+    ok &= guard.stops == 1; /* wheels already still: nothing stopped */
+    check(ok, "motor guard", "a command holds for the timeout, then the wheels stop");
+}
+
+static size_t make_record(uint8_t *record, uint32_t robot_id, const char *text) {
+    uint32_t n = (uint32_t)strlen(text);
+    memcpy(record, "BOKR", 4);
+    for (int i = 0; i < 4; i++) {
+        record[4 + i] = (uint8_t)(robot_id >> (8 * i));
+        record[8 + i] = (uint8_t)(n >> (8 * i));
+    }
+    memcpy(record + 12, text, n);
+    uint32_t crc = crc32_of(record, 12 + n);
+    for (int i = 0; i < 4; i++) record[12 + n + i] = (uint8_t)(crc >> (8 * i));
+    return 16 + n;
+}
+
+static void test_key_record(void) {
+    static uint8_t record[512];
+    const char *text = "{\"v\":1,\"run\":\"demo\",\"keys\":{\"robot/9\":\"" /* 32 bytes of 0xab */
+                       "abababababababababababababababababababababababababababababababab\"}}";
+    size_t size = make_record(record, 9, text);
+    int robot_id;
+    const uint8_t *found;
+    size_t found_size;
+    const char *why;
+    int ok = key_record_read(record, sizeof record, &robot_id, &found, &found_size, &why) == 0 &&
+             robot_id == 9 && found_size == strlen(text) && !memcmp(found, text, found_size);
+    check(ok, "key record", "read back: the robot and its key file");
+    record[20] ^= 1;
+    check(key_record_read(record, sizeof record, &robot_id, &found, &found_size, &why) != 0,
+          "key record", "a changed byte: its CRC does not check out");
+    record[20] ^= 1;
+    check(key_record_read(record, size - 1, &robot_id, &found, &found_size, &why) != 0,
+          "key record", "longer than the flash that holds it");
+    memset(record, 0xFF, sizeof record);
+    check(key_record_read(record, sizeof record, &robot_id, &found, &found_size, &why) != 0,
+          "key record", "erased flash is no record");
+}
+
+void test_platform(void) {
+    test_hearing();
+    test_motor_guard();
+    test_key_record();
 }

@@ -6,6 +6,8 @@ extern int passed, failed;
 extern char program_dir[];
 void check(int ok, const char *what, const char *name);
 JNode *load(const char *file);
+/* tests/cases.json, read once for every group that uses it */
+JNode *cases_json(void);
 void test_numeric(void);
 void test_rng(void);
 void test_fsum(void);
@@ -17,5 +19,6 @@ void test_messages(void);
 void test_png(void);
 void test_decision(void);
 void test_client(void);
+void test_platform(void);
 void test_controller_vectors(void);
 #endif

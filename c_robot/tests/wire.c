@@ -60,7 +60,7 @@ static int frame_count;
 static unsigned char deframed[70000];
 static size_t deframed_size;
 static int deframed_refusal;
-static void collect(void *ctx, const unsigned char *frame, size_t size, int refusal) {
+static void collect(void *ctx, unsigned char *frame, size_t size, int refusal) {
     (void)ctx;
     frame_count++;
     deframed_refusal = refusal;
@@ -68,6 +68,15 @@ static void collect(void *ctx, const unsigned char *frame, size_t size, int refu
         memcpy(deframed, frame, size);
         deframed_size = size;
     }
+}
+
+static unsigned char emitted[80000];
+static size_t emitted_size;
+
+static void emit(void *ctx, const unsigned char *bytes, size_t size) {
+    (void)ctx;
+    if (emitted_size + size <= sizeof emitted) memcpy(emitted + emitted_size, bytes, size);
+    emitted_size += size;
 }
 
 static const char *type_names[] = {"", "HELLO", "WELCOME", "DATA", "PING", "PONG", "BYE"};
@@ -101,9 +110,11 @@ static void robot_in(JNode *root, const char *session, const unsigned char robot
 
 /* the counter one frame adds one to (R_NONE: taken; -1: more than one) */
 static int refusal_of(const unsigned char *data, size_t size) {
+    static unsigned char copy[70000]; /* the robot decrypts in place */
     long before[R_COUNT];
     memcpy(before, receiver.client.refused, sizeof before);
-    link_robot_receive(&receiver, data, size, 0.0);
+    memcpy(copy, data, size);
+    link_robot_receive(&receiver, copy, size, 0.0);
     client_clear(&receiver.client);
     int found = R_NONE;
     long added = 0;
@@ -157,6 +168,10 @@ void test_link(void) {
         long sn = serial_encode(buf, n, serial, sizeof serial);
         size_t wn = jdom_hex(jdom_str(v, "serial_hex"), want_serial, sizeof want_serial);
         check(sn == (long)wn && !memcmp(serial, want_serial, wn), "link_frame.json serial", name);
+        emitted_size = 0; /* the same bytes made one block at a time, as firmware sends them */
+        serial_encode_each(buf, n, emit, NULL);
+        check(emitted_size == wn && !memcmp(emitted, want_serial, wn),
+              "link_frame.json serial, block by block", name);
         frame_count = 0;
         deframer.used = 0;
         deframer.overflowed = 0;
@@ -275,6 +290,21 @@ void test_link(void) {
                   !strcmp(refusal_names[deframed_refusal], jdom_str(v, "category")),
               "link_frame.json serial_invalid", jdom_str(v, "name"));
     }
+    /* COBS block by block around the 254-byte runs: every length from 1 to 800, without a
+       zero, and with one zero at each of a few places, the same bytes as serial_encode */
+    int same = 1;
+    static unsigned char frame[800], whole[1000];
+    for (size_t size = 1; size <= sizeof frame; size++) {
+        for (size_t zero_at = 0; zero_at <= size; zero_at += zero_at < 4 ? 1 : 127) {
+            memset(frame, 0x5A, size);
+            if (zero_at < size) frame[zero_at] = 0;
+            long wn = serial_encode(frame, size, whole, sizeof whole);
+            emitted_size = 0;
+            serial_encode_each(frame, size, emit, NULL);
+            same &= wn == (long)emitted_size && !memcmp(whole, emitted, (size_t)wn);
+        }
+    }
+    check(same, "serial", "COBS block by block is serial_encode, 254-byte runs included");
     /* the replay window: 63 behind the highest is taken, 64 behind refused */
     ReplayWindow w = {0, 0};
     replay_take(&w, 100);
@@ -497,8 +527,43 @@ void test_messages(void) {
     check(check_message("Clock", huge, 24 + 100), "messages", "whitespace after the object");
 }
 
-/* --- key files (key_file.json), read by the program itself --------------------------- */
+/* --- key files (key_file.json) ------------------------------------------------------ */
 
+#include "keyfile.h"
+
+/* each file read from its bytes, as the firmware reads its key record's: the key of robot 8
+   and the run, or refused */
+static void key_files_read(JNode *root) {
+    unsigned char want[32];
+    jdom_hex(jdom_str(root, "key_hex"), want, 32);
+    JNode *valid = jdom_get(root, "valid");
+    for (size_t i = 0; i < valid->count; i++) {
+        const char *text = jdom_str(valid->items[i], "utf8");
+        char run[MAX_NAME + 1];
+        unsigned char key[32];
+        const char *why;
+        int ok = key_file_read((const uint8_t *)text, strlen(text), 8, run, key, &why) ==
+                     KEY_FILE_OK &&
+                 !memcmp(key, want, 32) && !strcmp(run, jdom_str(root, "run"));
+        check(ok, "key_file.json valid: its key and run", jdom_str(valid->items[i], "name"));
+    }
+    JNode *invalid = jdom_get(root, "invalid");
+    for (size_t i = 0; i < invalid->count; i++) {
+        const char *text = jdom_str(invalid->items[i], "utf8");
+        char run[MAX_NAME + 1];
+        unsigned char key[32];
+        const char *why;
+        check(key_file_read((const uint8_t *)text, strlen(text), 8, run, key, &why) != KEY_FILE_OK,
+              "key_file.json invalid: refused", jdom_str(invalid->items[i], "name"));
+    }
+}
+
+#ifdef C_ROBOT_BARE_METAL
+void test_key_files(void) {
+    JNode *root = load("key_file.json");
+    if (root) key_files_read(root);
+}
+#else
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
@@ -528,9 +593,11 @@ static int write_key_file(const char *key_file, const char *text) {
     return chmod(key_file, 0600);
 }
 
+/* ... and by the program itself, from a file (on Linux) */
 void test_key_files(void) {
     JNode *root = load("key_file.json");
     if (!root) return;
+    key_files_read(root);
     char program[1100], key_file[1100];
     snprintf(program, sizeof program, "%s/c-robot", program_dir);
     snprintf(key_file, sizeof key_file, "%s/key-file-vector.key", program_dir);
@@ -580,3 +647,4 @@ void test_key_files(void) {
     unlink(key_file);
     close(fd);
 }
+#endif

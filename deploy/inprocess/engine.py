@@ -24,25 +24,28 @@ from __future__ import annotations
 import gc
 import math
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from bestofn_swarm.wire import batch, keyspace, protocol, shape
-from bestofn_swarm.wire.endings import Halt, Look, stop_reason
+from bestofn_swarm.wire.endings import Halt, Look, Stop, stop_reason
 from bestofn_swarm.wire.names import Role
 from bestofn_swarm.wire.rng import Stream
 from nest_beacon.core.beacon import Beacon, BeaconConfig
 from nest_beacon.core.endpoint import BeaconEndpoint
 from nest_beacon.core.endpoint import Outgoing as BeaconOutgoing
-from robot_agent.core import builder, byzantine
+from robot_agent.core import builder, byzantine, faults
 from robot_agent.core.controller import Controller, ControllerConfig
 from robot_agent.core.endpoint import Outgoing, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
 from robot_agent.core.parking import ParkingSlots
+from robot_agent.core.plugin import PluginError
+from robot_agent.core.plugins import Plugins
 from world_server.core.coordinator import Coordinator
 from world_server.core.events import Event, Output, Publish
 from world_server.core.world import World, WorldConfig
+from world_server.observer.frame import FrameCollector
 from world_server.observer.observer import RunObserver
 from world_server.observer.watchdog import Watchdog, default_stall_window
 
@@ -76,6 +79,9 @@ class EngineHooks:
     wall_clock: Callable[[], float] | None = None  # measures wall_time_s when given
     config: dict[str, Any] = field(default_factory=dict)  # the summary's "config"
     poses_every: int = POSES_EVERY  # swarm run's --state-every: how often the watchdog looks
+    # The run's time series: fed every status and world state, as a recording of the run
+    # would feed it (finished when the run ends).
+    frame: FrameCollector | None = None
 
 
 class _Bus:
@@ -94,11 +100,13 @@ class _Bus:
         *,
         run: RunObserver,
         hooks: EngineHooks,
+        rebuild: Callable[[int], RobotEndpoint] | None = None,
     ) -> None:
         keys = robots[0].keys
         self.keys = keys
         self.world = world
         self.run = run
+        self.rebuild = rebuild  # a robot started afresh (a fault)
         self.tap = hooks.tap
         self.queue: deque[Output] = deque()
         self.coordinator = Coordinator(
@@ -122,6 +130,33 @@ class _Bus:
                 self.inputs[key] = (endpoint, kind)
         self.state_key = keys.of(keyspace.STATE)
         self.last_state: protocol.WorldState | None = None
+
+    # --- faults.Engine: what a fault may do to this run, at a tick boundary ----------
+
+    def kill(self, robot: int) -> bool:
+        """The robot stops for good, as when its process dies over Zenoh: the world sees its
+        token go (its body stays, a stopped obstacle), and nothing reaches it any more.
+        Whether it was running."""
+        was_running = self.world.is_live(robot)
+        if was_running:
+            token = self.keys.token(Role.ROBOT, robot)
+            self._event(Event(keyspace.ALIVE_ROBOT, token, gone=True))
+        self.run.killed(robot)
+        return was_running
+
+    def restart(self, robot: int) -> None:
+        """The robot afresh: a new controller (as the robot builder makes it) in its old
+        body, which joins at the next tick as a restarted process's token does."""
+        if self.rebuild is None:
+            raise ValueError("this run cannot start a robot afresh")
+        endpoint = self.rebuild(robot)
+        endpoint.batched = True  # its acts go in the batch, as its predecessor's did
+        self.host.by_id[robot] = endpoint
+        for kind, key in endpoint.input_keys.items():
+            self.inputs[key] = (endpoint, kind)
+        endpoint.world_appeared("in-process")
+        self.run.restarted(robot)
+        self._event(Event(keyspace.ALIVE_ROBOT, self.keys.token(Role.ROBOT, robot)))
 
     def start(self) -> None:
         """The processes' liveliness, as the coordinator would see their tokens; tick 0."""
@@ -223,9 +258,11 @@ def run_in_process(
     timeout: float = shape.DEFAULT_TIMEOUT,
     stall_window: float | None = None,
     on_tick: Callable[[World], None] | None = None,
-    controller_factory: type[Controller] = Controller,
+    controller_factory: type[Controller] | None = None,
     byzantine_robots: Mapping[int, byzantine.Behaviour] | None = None,
+    robot_faults: Sequence[faults.RobotFault] = (),
     hooks: EngineHooks | None = None,
+    plugins: Plugins | None = None,
 ) -> dict[str, Any]:
     """Run until every robot decided, the watchdog finds the run stalled (no undecided
     robot made progress for ``stall_window`` sim seconds; default: ``default_stall_window``
@@ -236,8 +273,14 @@ def run_in_process(
     Controller); ``on_tick`` sees the world once every answer of a tick is in, before it
     closes. ``byzantine_robots`` makes those robots misbehave as ``swarm run --byzantine``
     does (a liar without a site claims ``byzantine.default_liar_site``); the run ends when
-    every honest robot has decided. ``hooks``: progress, an outside stop, a tap of every
-    message (a recording), wall time.
+    every honest robot has decided. ``robot_faults``: the faults of robots the run declares
+    (``swarm run --kill``, ``--restart``, ``--motor-failure``: robot_agent/core/faults.py),
+    applied at tick boundaries as the launcher applies them, or built into the robots'
+    controllers; the summary's ``faults`` lists those applied. ``hooks``: progress, an
+    outside stop, a tap of every message (a recording), wall time, the run's time series
+    (``hooks.frame``). ``plugins``: the run's plug-ins, resolved
+    (``robot_agent.plugins.registry``; None: the built-ins ``controller_config`` names); one
+    that fails ends the run crashed, its one line the summary's ``error``.
     """
     hooks = hooks or EngineHooks()
     started = hooks.wall_clock() if hooks.wall_clock is not None else 0.0
@@ -248,18 +291,26 @@ def run_in_process(
     behaviours = byzantine.resolve_liar_sites(
         byzantine_robots or {}, world_config.num_sites, world.layout.best_site, world_config.seed
     )
-    endpoints: list[RobotEndpoint] = []
-    for robot_id in range(world_config.num_robots):
-        endpoints.append(
-            builder.build_robot(
-                robot_id,
-                world.info,
-                controller_config,
-                keys=keys,
-                behaviour=behaviours.get(robot_id),
-                factory=controller_factory,
-            )
+
+    def build(robot_id: int) -> RobotEndpoint:
+        return builder.build_robot(
+            robot_id,
+            world.info,
+            controller_config,
+            keys=keys,
+            behaviour=behaviours.get(robot_id),
+            factory=controller_factory,
+            plugins=plugins,
+            robot_faults=robot_faults,
         )
+
+    endpoints: list[RobotEndpoint] = []
+    failure: PluginError | None = None
+    try:
+        for robot_id in range(world_config.num_robots):
+            endpoints.append(build(robot_id))
+    except PluginError as error:  # a plug-in that cannot make a robot: no tick is run
+        failure = error
     if stall_window is None:
         stall_window = default_stall_window(
             world.layout.arena_radius,
@@ -279,14 +330,20 @@ def run_in_process(
             slot_of=ParkingSlots.of_world(world.info, controller_config).slot,
         ),
         byzantine=behaviours,
+        series=hooks.frame,
     )
+    if failure is not None:  # no tick is run
+        ending = _Ending(Halt(Stop.CRASHED), None, (), failure)
+        return _summary(ending, world, run=run, hooks=hooks, behaviours=behaviours, started=started)
     bus = _Bus(
         world,
         endpoints,
         BeaconEndpoint(beacon, keys, world_config.dt, keyring=None),
         run=run,
         hooks=hooks,
+        rebuild=build,
     )
+    schedule = faults.Schedule(robot_faults)
     bus.start()
     # Everything made so far lives for the whole run: the collector need not look at it
     # again until the run ends, and what a tick makes is freed by reference counting, so
@@ -296,38 +353,82 @@ def run_in_process(
     gc.freeze()
     gc.set_threshold(RUN_COLLECT_THRESHOLD, *thresholds[1:])
     try:
-        halt = _run_ticks(bus, timeout=timeout, hooks=hooks, on_tick=on_tick)
+        halt = _run_ticks(bus, schedule, timeout=timeout, hooks=hooks, on_tick=on_tick)
+    except PluginError as error:  # a robot's plug-in failed in a step (or a restart): the run ends
+        failure = error
+        halt = Halt(Stop.CRASHED)
+        bus.queue.clear()  # the rest of the tick is not delivered
+        if error.robot is not None:
+            run.crashed(error.robot)  # as its process would have, over Zenoh
     finally:
         gc.set_threshold(*thresholds)
         gc.unfreeze()
-    # Every robot's state at the end (not published: its status changes are).
-    for endpoint in endpoints:
-        bus._status(endpoint.status(world.tick), published=False)
+    # Every robot's state at the end (not published: its status changes are), as the
+    # robot runs now (a robot started afresh: its new controller's); a robot whose plug-in
+    # fails to say it keeps the last it published.
+    for endpoint in bus.host.by_id.values():
+        try:
+            bus._status(endpoint.status(world.tick), published=False)
+        except PluginError:
+            continue
     bus.stop()
     state = bus.last_state
     if state is not None:
         run.state(state)
+    if hooks.frame is not None:
+        hooks.frame.finish()
+    ending = _Ending(halt, bus.coordinator, schedule.applied, failure)
+    return _summary(ending, world, run=run, hooks=hooks, behaviours=behaviours, started=started)
+
+
+@dataclass(frozen=True)
+class _Ending:
+    """How a run in process ended: why, its world's coordinator (None: no tick was run),
+    the faults applied, and the plug-in that failed, if one did."""
+
+    halt: Halt
+    coordinator: Coordinator | None
+    applied: Sequence[faults.Applied]
+    failure: PluginError | None
+
+
+def _summary(
+    ending: _Ending,
+    world: World,
+    *,
+    run: RunObserver,
+    hooks: EngineHooks,
+    behaviours: Mapping[int, byzantine.Behaviour],
+    started: float,
+) -> dict[str, Any]:
+    """The run's summary: the ``swarm run --json`` object."""
+    config, coordinator = world.config, ending.coordinator
     wall = hooks.wall_clock() - started if hooks.wall_clock is not None else 0.0
-    return run.summary(
-        run_id=world_config.run,
-        num_robots=world_config.num_robots,
-        num_sites=world_config.num_sites,
-        seed=world_config.seed,
+    summary = run.summary(
+        run_id=config.run,
+        num_robots=config.num_robots,
+        num_sites=config.num_sites,
+        seed=config.seed,
         best_site=world.layout.best_site,
         sim_time_s=world.t,
         wall_time_s=wall,
-        world=bus.coordinator.state(),
-        departures=0,
+        world=coordinator.state() if coordinator is not None else None,
+        departures=coordinator.counters.departures if coordinator is not None else 0,
         observer_rejected=0,
         config=hooks.config,
-        stop=halt.stop,
-        timeout_kind=halt.limit,
+        stop=ending.halt.stop,
+        timeout_kind=ending.halt.limit,
         byzantine={robot: str(behaviour) for robot, behaviour in behaviours.items()},
     )
+    summary["faults"] = [applied.record() for applied in ending.applied]
+    if ending.failure is not None:
+        summary["error"] = str(ending.failure)
+    return summary
 
 
 def _run_ticks(
     bus: _Bus,
+    schedule: faults.Schedule,
     *,
     timeout: float,
     hooks: EngineHooks,
@@ -338,6 +439,8 @@ def _run_ticks(
     honest = run.honest()
     while True:
         bus.run_tick()
+        if schedule.pending and schedule.apply_due(bus, world.t):
+            honest = [robot for robot in run.honest() if not run.records[robot].killed]
         if on_tick is not None:
             on_tick(world)
         if world.tick % hooks.poses_every == 0:
@@ -348,7 +451,8 @@ def _run_ticks(
                 run.state(state)
             if hooks.progress is not None:
                 hooks.progress(Progress(world.t, run.decided(), run.trips()))
-        halt = stop_reason(_look(world.t, timeout, run, honest, hooks))
+        look = _look(world.t, timeout, run=run, honest=honest, hooks=hooks, schedule=schedule)
+        halt = stop_reason(look)
         if halt is not None:
             return halt
         bus.close_tick()
@@ -357,13 +461,16 @@ def _run_ticks(
 def _look(
     sim_time: float,
     timeout: float,
+    *,
     run: RunObserver,
     honest: list[int],
     hooks: EngineHooks,
+    schedule: faults.Schedule,
 ) -> Look:
     """What this engine sees at the end of a tick (``bestofn_swarm.wire.endings.stop_reason``
-    decides)."""
-    decided = run.all_decided(honest)
+    decides): ``honest``, the honest robots still running."""
+    # A restart to come will make progress: the run waits for it, as the launcher does.
+    decided = run.all_decided(honest) and not schedule.restart_pending()
     return Look(
         sim_time=sim_time,
         sim_limit=timeout,

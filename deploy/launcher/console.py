@@ -11,19 +11,21 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from bestofn_swarm.plumbing.progress import PlainProgress, progress
 from bestofn_swarm.wire.endings import Ending, TimeLimit
 from world_server.observer.summary import describe
 
 
-def decided_progress(console: Console, quiet: bool) -> Progress:
+def decided_progress(console: Console, quiet: bool) -> Progress | PlainProgress:
     """A bar of robots decided, with a free-text ``info`` field and the elapsed time;
-    it disappears when the run ends (the summary follows)."""
-    return Progress(
+    it disappears when the run ends (the summary follows). Plain lines when stderr is not
+    a terminal (``bestofn_swarm/plumbing/progress.py``)."""
+    return progress(
+        console,
         TextColumn("[bold]{task.description}"),
         BarColumn(),
         TextColumn("{task.fields[info]}"),
         TimeElapsedColumn(),
-        console=console,
         transient=True,
         disable=quiet,
     )
@@ -64,6 +66,9 @@ def describe_ending(summary: dict[str, Any]) -> str:
         return f"ended {at}: the world's clock did not advance{quiet}{undecided}"
     if ended is Ending.INTERRUPTED:
         return f"interrupted by {summary.get('signal', 'a signal')} {at}{undecided}"
+    error = summary.get("error")
+    if error:  # a plug-in failed: its one line says which, where and when
+        return f"ended crashed {at}: {error}{undecided}"
     return f"ended crashed {at}: a process of the run died{undecided}"
 
 
@@ -73,17 +78,23 @@ def print_summary(summary: dict[str, Any], console: Console) -> None:
         title=f"run {summary['run_id']}: {summary['num_robots']} robots, "
         f"{summary['num_sites']} sites, seed {summary['seed']}"
     )
+    happened = process_events(summary)
     for column in ("robot", "decided site", "steps", "decision time (s)", "pool sizes"):
         table.add_column(column, justify="right")
+    if happened:
+        table.add_column("process", justify="left")
     for robot in robots:
         outside = robot.get("outside")
-        table.add_row(
+        row = [
             str(robot["id"]) + (f" (outside, {outside})" if outside else ""),
             "-" if robot["decided_site"] is None else str(robot["decided_site"]),
             "-" if robot["steps"] is None else str(robot["steps"]),
             "-" if robot["decision_time_s"] is None else f"{robot['decision_time_s']:.1f}",
             " ".join(map(str, robot["pool_sizes"])) or "-",
-        )
+        ]
+        if happened:
+            row.append(happened.get(robot["id"], ""))
+        table.add_row(*row)
     console.print(table)
     print_stuck(summary.get("stuck") or [], console)
     steps = [robot["steps"] for robot in robots if robot["steps"] is not None]
@@ -120,6 +131,33 @@ def print_summary(summary: dict[str, Any], console: Console) -> None:
         )
     if summary.get("recording"):
         console.print(f"recording: {summary['recording']} (swarm report, or open in Foxglove)")
+
+
+def process_events(summary: dict[str, Any]) -> dict[int, str]:
+    """What happened to each robot's process, in words, for the robots something happened
+    to: its kills and restarts at their sim times (``--kill``, ``--restart``), a crash, a
+    link that was down at the end (outside robots)."""
+    said: dict[int, list[str]] = {}
+    for fault in summary.get("faults") or []:
+        at = fault.get("applied_at_s", fault.get("at_s"))
+        when = f" at {at:.0f} s" if isinstance(at, int | float) else ""
+        word = "restarted" if fault.get("action") == "restart" else "killed"
+        if word == "killed" or fault.get("was_running", True):
+            said.setdefault(int(fault["robot"]), []).append(f"{word}{when}")
+        else:
+            said.setdefault(int(fault["robot"]), []).append(f"started again{when}")
+    for robot in summary["per_robot"]:
+        notes = said.setdefault(robot["id"], [])
+        if robot.get("killed") and not any(note.startswith("killed") for note in notes):
+            notes.append("killed")
+        restarts = robot.get("restarts") or 0
+        if restarts > sum(1 for note in notes if not note.startswith("killed")):
+            notes.append(f"restarted {restarts}x")
+        if robot.get("crashed"):
+            notes.append("crashed")
+        if robot.get("departed"):
+            notes.append("link down at the end")
+    return {robot: ", ".join(notes) for robot, notes in said.items() if notes}
 
 
 STUCK_ROWS_SHOWN = 20

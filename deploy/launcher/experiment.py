@@ -371,15 +371,17 @@ def run_all_inprocess(
     """Every ``--engine inprocess`` run on ``executor``; each run's log, summary and
     recording written here as it comes, a progress bar on stderr."""
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+    from rich.progress import BarColumn, MofNCompleteColumn, TextColumn
+
+    from bestofn_swarm.plumbing.progress import progress as plain_or_live
 
     results: list[RunResult] = [RunResult(spec) for spec in specs]
-    progress = Progress(
+    progress = plain_or_live(
+        Console(stderr=True),
         TextColumn("[bold]runs"),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("{task.fields[info]}"),
-        console=Console(stderr=True),
         disable=quiet,
     )
 
@@ -425,16 +427,18 @@ def run_all(
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
-        Progress,
         TextColumn,
         TimeElapsedColumn,
         TimeRemainingColumn,
     )
 
+    from bestofn_swarm.plumbing.progress import progress as plain_or_live
+
     pending = list(specs)
     running: list[_Running] = []
     results: list[RunResult] = []
-    progress = Progress(
+    progress = plain_or_live(
+        Console(stderr=True),
         TextColumn("[bold]runs"),
         BarColumn(),
         MofNCompleteColumn(),
@@ -442,7 +446,6 @@ def run_all(
         TextColumn("eta"),
         TimeRemainingColumn(),
         TextColumn("{task.fields[info]}"),
-        console=Console(stderr=True),
         disable=quiet,
     )
     try:

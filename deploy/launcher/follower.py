@@ -1,8 +1,8 @@
 """Following a run from what its processes publish: the robots' status, the world's state
-(every ``--state-every`` ticks: its sim time and poses), the beacons' acks, the world's
-clock only when faults are to fall due at a sim time (the launcher need not follow every
-tick, and costs the run nothing on the ticks in between), and the run's ending, which the
-world decides (``world/ending``).
+(every ``--state-every`` ticks: its sim time and poses), the beacons' acks, the live page's
+pause and play, the world's clock only when faults are to fall due at a sim time (the
+launcher need not follow every tick, and costs the run nothing on the ticks in between),
+and the run's ending, which the world decides (``world/ending``).
 
 The subscription is thin (``subscribe``): Zenoh's callbacks only copy each sample, as it
 came, into the launcher's inbox. The launcher's main thread hands them to
@@ -102,7 +102,7 @@ class Follower:
             byzantine=plan.byzantine_robots,
             outside=outside,
         )
-        self._begin(keyspace.Keys(plan.run_id), run, clock)
+        self._begin(keyspace.Keys(plan.run_id), run, clock, hold=plan.hold)
 
     @classmethod
     def of_run(cls, keys: keyspace.Keys, clock: Callable[[], float]) -> Follower:
@@ -112,10 +112,21 @@ class Follower:
         follower._begin(keys, RunObserver((), open_roster=True), clock)
         return follower
 
-    def _begin(self, keys: keyspace.Keys, run: RunObserver, clock: Callable[[], float]) -> None:
+    def _begin(
+        self,
+        keys: keyspace.Keys,
+        run: RunObserver,
+        clock: Callable[[], float],
+        hold: bool = False,
+    ) -> None:
         self.keys = keys
         self.clock = clock  # wall seconds: when the run started ticking
         self.run = run
+        # Held for the live page, or paused from it: the world's clock stands still on
+        # purpose. ``paused_since``: the wall time it was; ``paused_s``: paused before that.
+        self.held = hold  # waiting for the first play
+        self.paused_since: float | None = clock() if hold else None
+        self.paused_s = 0.0
         self.started_at: float | None = None  # the wall time of the first clock or state
         self.ticked_at: float | None = None  # the wall time the sim clock last advanced
         self.ending: protocol.RunEnding | None = None  # the world's, once heard
@@ -142,7 +153,10 @@ class Follower:
                 raise keyspace.SampleError(
                     f"{heard.key} is not a key of this run's {heard.kind.name}"
                 )
-            run.take(opened)
+            if heard.kind is keyspace.PACE:
+                self._paced(opened.message)
+            else:
+                run.take(opened)
         except keyspace.SampleError as error:
             run.rejected += 1
             if heard.kind not in self._logged_rejections:  # once per kind of message
@@ -158,8 +172,31 @@ class Follower:
         now = self.clock()
         if self.started_at is None:
             self.started_at = now
+            if self.paused_since is not None:  # held: the run's time starts here
+                self.paused_since = now
         if self.ticked_at is None or sim_time > before:
             self.ticked_at = now
+
+    def _paced(self, pace: protocol.Pace) -> None:
+        """The live page paused or played the run."""
+        now = self.clock()
+        if pace.playing and self.paused_since is not None:
+            self.paused_s += now - self.paused_since
+            self.paused_since = None
+            self.held = False
+            self.ticked_at = now if self.ticked_at is not None else None
+        elif not pace.playing and self.paused_since is None:
+            self.paused_since = now
+
+    @property
+    def paused(self) -> bool:
+        """Held or paused by the live page: the world's clock stands still on purpose."""
+        return self.paused_since is not None
+
+    def paused_for(self) -> float:
+        """Wall seconds the run has been held or paused so far."""
+        since = self.paused_since
+        return self.paused_s + (self.clock() - since if since is not None else 0.0)
 
     @property
     def started(self) -> bool:
@@ -167,5 +204,10 @@ class Follower:
         return self.started_at is not None
 
     def world_stopped(self, window: float) -> bool:
-        """The world ticked, then its clock did not advance for ``window`` wall seconds."""
-        return self.ticked_at is not None and self.clock() - self.ticked_at >= window
+        """The world ticked, then its clock did not advance for ``window`` wall seconds
+        (not while the live page holds or pauses it)."""
+        return (
+            not self.paused
+            and self.ticked_at is not None
+            and self.clock() - self.ticked_at >= window
+        )

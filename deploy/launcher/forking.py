@@ -22,10 +22,14 @@ from __future__ import annotations
 import contextlib
 import importlib
 import multiprocessing
+import multiprocessing.process
+import multiprocessing.util
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 from multiprocessing import forkserver, resource_tracker
 from multiprocessing.connection import Connection
 from typing import IO, Any
@@ -115,10 +119,32 @@ class ForkedProcess:
         return int(self._process.exitcode or 0)
 
 
+# A Unix socket's path has at most 107 bytes. The fork server listens on one in a folder
+# multiprocessing makes in the temp folder; below a temp folder longer than this, that
+# socket's path would not fit ("AF_UNIX path too long"), so its folder goes under /tmp.
+MAX_TEMP_FOLDER = 60
+
+
+def _short_socket_folder() -> None:
+    """Give multiprocessing a private folder of a path short enough for a socket, where the
+    temp folder (TMPDIR) is too long for one."""
+    if len(tempfile.gettempdir()) <= MAX_TEMP_FOLDER:
+        return
+    process: Any = multiprocessing.process.current_process()  # its config is private: Any
+    config = process._config
+    if config.get("tempdir") is None:
+        folder = tempfile.mkdtemp(prefix="pymp-", dir="/tmp")  # mode 0700
+        multiprocessing.util.Finalize(
+            None, shutil.rmtree, args=(folder,), kwargs={"ignore_errors": True}, exitpriority=-100
+        )
+        config["tempdir"] = folder
+
+
 class ForkServer:
     """Forks robot (and beacon) processes from one preloaded server process."""
 
     def __init__(self, preload: list[str] | None = None) -> None:
+        _short_socket_folder()
         os.environ.update(QUIET_THREADS)  # inherited by the server when it starts
         os.environ[FORK_SERVER_OF] = str(os.getpid())
         self._context = multiprocessing.get_context("forkserver")

@@ -85,7 +85,6 @@ def run_inprocess(args: argparse.Namespace) -> int:
     signum = signals.received if ended is Ending.INTERRUPTED else None
     if signum is not None:
         summary["signal"] = signal.Signals(signum).name
-    summary["faults"] = []
     summary["recording"] = str(plan.record) if plan.record is not None else None
     if not args.quiet:
         print(f"swarm run: {describe_ending(summary)}", file=sys.stderr)
@@ -111,7 +110,9 @@ def run_plan(plan: RunPlan, hooks: engine.EngineHooks | None = None) -> dict[str
         timeout=plan.timeout,
         stall_window=plan.stall_window,
         byzantine_robots=plan.byzantine_robots,
+        robot_faults=plan.faults,
         hooks=hooks or bare,
+        plugins=plan.plugins,
     )
 
 

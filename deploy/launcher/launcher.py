@@ -5,9 +5,10 @@ directory; TLS on loopback with ``--secure``; a client of the router ``--connect
 the recorder, the nest beacon and the robot processes (``supervisor.py``; with ``--dask``
 the robot processes on a Dask cluster's workers, ``dask_placement.py``); follows what
 they publish (``follower.py``) and shows progress (``console.py``); kills and restarts
-robots when their ``--kill`` and ``--restart`` sim time comes (``faults.py``); stops when
-the world ends the run (``world/ending``: world_server/observer/referee.py decides) or
-when what only the launcher sees ends it first, in the order of
+robots when their ``--kill`` and ``--restart`` sim time comes (the faults' plug-ins,
+robot_agent/core/faults.py, given the launcher as their ``Engine``); stops when the world
+ends the run (``world/ending``: world_server/observer/referee.py decides) or when what
+only the launcher sees ends it first, in the order of
 ``bestofn_swarm.wire.endings.stop_reason``; stops every process it started, by pid,
 however the run ends; prints a summary that says how it ended (the world's, with what the
 launcher adds), hands it to the recorder (``recording.py``) and exits with that ending's
@@ -44,15 +45,15 @@ from bestofn_swarm.plumbing.lifecycle import die_with_launcher
 from bestofn_swarm.wire import protocol
 from bestofn_swarm.wire.endings import Ending, Halt, Look, Stop, stop_reason
 from deploy.launcher.console import decided_progress, describe_ending, print_summary, say
-from deploy.launcher.faults import FaultSchedule
 from deploy.launcher.follower import Follower, Heard
 from deploy.launcher.inprocess import run_inprocess
 from deploy.launcher.options import add_arguments
-from deploy.launcher.plan import FaultAction, RunPlan, plan_from_args
+from deploy.launcher.plan import RunPlan, plan_from_args
 from deploy.launcher.processes import Child
 from deploy.launcher.recording import RecorderProgress, finish_recording
 from deploy.launcher.signals import Signalled, StopSignals
 from deploy.launcher.supervisor import OBSERVERS, StartError, Supervisor
+from robot_agent.core import faults
 from world_server.core.layout import make_layout
 
 __all__ = ["add_arguments", "run"]
@@ -87,8 +88,9 @@ class Swarm:
         self.inbox: BoundedInbox[Heard | Signalled] = BoundedInbox(EVENTS_BYTES, MAX_EVENT_BYTES)
         self.supervisor = Supervisor(plan, self.inbox, echo)
         self.follower = Follower(plan, clock)
-        self.faults = FaultSchedule(plan.faults)
+        self.faults = faults.Schedule(plan.faults)
         self.crash: Child | None = None  # the process whose death ended the run
+        self.plugin_failure: str | None = None  # a robot's plug-in failed: its one line
         self.ended_at: float | None = None
         self.departures = 0  # the world's count before the swarm was stopped (stopping adds)
         self.world_ended = False  # the run ended by the world's ending (world/ending)
@@ -101,9 +103,11 @@ class Swarm:
 
     @property
     def wall_deadline(self) -> float:
-        if self.plan.wall_timeout is None:
+        """When ``--wall-timeout`` falls due (the time the live page held or paused the run
+        is not counted)."""
+        if self.plan.wall_timeout is None or self.follower.paused:
             return math.inf
-        return self.launched_at + self.plan.wall_timeout
+        return self.launched_at + self.follower.paused_for() + self.plan.wall_timeout
 
     def take_events(self, until: float) -> bool:
         """Take in what came, waiting for it until the wall time ``until``; whether a stop
@@ -126,16 +130,25 @@ class Swarm:
         return signalled
 
     def inject_due_faults(self) -> None:
-        """Kill and restart the robots whose fault's sim time has come."""
-        sim_time = self.follower.run.sim_time
-        for fault in self.faults.due(sim_time):
-            was_running = self.supervisor.kill_robot(fault.robot)
-            restarting = fault.action is FaultAction.RESTART
-            self.follower.run.killed(fault.robot, restarting=restarting)
-            if restarting:
-                self.supervisor.restart_robot(fault.robot)
-            self.faults.note(fault, sim_time, was_running)
-            log.info("%s robot %d at sim time %.1f", fault.action, fault.robot, sim_time)
+        """Apply the faults whose sim time has come (this is a tick boundary: the world
+        said its new sim time)."""
+        for applied in self.faults.apply_due(self, self.follower.run.sim_time):
+            log.info(
+                "%s robot %d at sim time %.1f", applied.action, applied.robot, applied.applied_at_s
+            )
+
+    # --- faults.Engine: what a fault may do to this run -------------------------------
+
+    def kill(self, robot: int) -> bool:
+        """SIGKILL the robot's process; whether it was running."""
+        was_running = self.supervisor.kill_robot(robot)
+        self.follower.run.killed(robot)
+        return was_running
+
+    def restart(self, robot: int) -> None:
+        """A fresh process for the robot (killed first)."""
+        self.follower.run.restarted(robot)
+        self.supervisor.restart_robot(robot)
 
     def look(self, signalled: bool) -> Halt | None:
         """Whether the run stops now, and why (``bestofn_swarm.wire.endings.stop_reason``):
@@ -153,6 +166,10 @@ class Swarm:
             for robot in supervisor.crashed_robots():
                 run.crashed(robot)
             self.crash = supervisor.infrastructure_crash()
+            if self.crash is None and follower.paused:  # held for a page gone for good
+                self.crash = supervisor.crashed_observer("viewer")
+            if self.plugin_failure is None:
+                self.plugin_failure = supervisor.plugin_failure()
             self.lost_workers = list(lost)
         world = Halt(ending.stop, ending.timeout_kind) if ending is not None else None
         halt = stop_reason(
@@ -162,9 +179,11 @@ class Swarm:
                 all_decided=False,
                 last_decision=0.0,
                 stalled=False,
-                wall_time=self.clock() - self.launched_at,
+                wall_time=self.clock() - self.launched_at - follower.paused_for(),
                 wall_limit=self.plan.wall_timeout,
-                crashed=self.crash is not None or bool(self.lost_workers),
+                crashed=self.crash is not None
+                or self.plugin_failure is not None
+                or bool(self.lost_workers),
                 signalled=signalled,
                 world_stopped=follower.world_stopped(self.plan.world_stop_window),
                 ended=world,
@@ -243,6 +262,14 @@ def _run_swarm(
 ) -> int:
     try:
         started = swarm.supervisor.start(stopping=lambda: signals.received is not None)
+        page = swarm.plan.page
+        if started and page is not None and swarm.plan.hold and not args.quiet:
+            print(
+                f"swarm run: the swarm waits at tick 0 until a browser opens {page.url} "
+                "(--no-wait starts it at once)",
+                file=sys.stderr,
+                flush=True,
+            )
         halt = _watch(swarm, signals, console, args.quiet) if started else None
     except StartError as error:
         print(f"swarm run: could not start: {error}", file=sys.stderr)
@@ -252,7 +279,26 @@ def _run_swarm(
     if halt is None:  # a stop signal came while the processes were starting
         halt = Halt(Stop.INTERRUPTED)
     signum = signals.received if halt.stop is Stop.INTERRUPTED else None
-    return _finish(swarm, args, halt, signum)
+    code = _finish(swarm, args, halt, signum)
+    if signum is None:
+        _linger(swarm, signals, args.quiet)
+    return code
+
+
+def _linger(swarm: Swarm, signals: StopSignals, quiet: bool) -> None:
+    """Keep the live page up with the run's result, until a stop signal or the end of
+    ``--view-linger`` (the robots are stopped; the world, the recorder and the page stay)."""
+    page, linger = swarm.plan.page, swarm.plan.view_linger
+    if page is None or linger == 0 or not swarm.supervisor.observer_alive("viewer"):
+        return
+    if not quiet:
+        until = "Ctrl-C ends it" if linger is None else f"for {linger:g} s (--view-linger)"
+        print(f"swarm run: the page stays up at {page.url}: {until}", file=sys.stderr, flush=True)
+    deadline = math.inf if linger is None else swarm.clock() + linger
+    while signals.received is None and swarm.clock() < deadline:
+        if not swarm.supervisor.observer_alive("viewer"):
+            return
+        time.sleep(min(LOOK_EVERY, max(0.0, deadline - swarm.clock())))
 
 
 def _watch(swarm: Swarm, signals: StopSignals, console: Console, quiet: bool) -> Halt:
@@ -271,16 +317,23 @@ def _watch(swarm: Swarm, signals: StopSignals, console: Console, quiet: bool) ->
                 continue
             next_look = now + LOOK_EVERY
             started_at = follower.started_at
-            elapsed = now - started_at if started_at is not None else 0.0
+            elapsed = now - started_at - follower.paused_for() if started_at is not None else 0.0
             factor = run.sim_time / elapsed if elapsed > 0 else 0.0
-            progress.update(
-                task,
-                completed=run.decided(),
-                info=f"{run.decided()}/{plan.robots} decided, {run.trips()} trips, "
-                f"sim {run.sim_time:.0f}s, {factor:.0f}x real time"
-                if started_at is not None
-                else "waiting for the robots to join",
-            )
+            if follower.held:
+                info = "waiting at tick 0 for a browser on the live page"
+            elif started_at is None:
+                info = "waiting for the robots to join"
+            else:
+                info = (
+                    f"{run.decided()}/{plan.robots} decided, {run.trips()} trips, "
+                    f"sim {run.sim_time:.0f}s, "
+                    + (
+                        "paused from the live page"
+                        if follower.paused
+                        else f"{factor:.0f}x real time"
+                    )
+                )
+            progress.update(task, completed=run.decided(), info=info)
             halt = swarm.look(signals.received is not None)
             if halt is not None:
                 return halt
@@ -303,7 +356,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
     ending = follower.ending
     if swarm.world_ended and ending is not None and not _crashes_unseen(swarm, ending):
         swarm.stop()
-        summary = launcher_summary(swarm, ending.summary)
+        summary = launcher_summary(swarm, ending)
         code = ending.code
     else:
         summary = _own_summary(swarm, halt, signum)
@@ -321,7 +374,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
         print(json.dumps(summary))
     else:
         print_summary(summary, Console())
-    if robot_crashes:
+    if robot_crashes and swarm.plugin_failure is None:
         print(f"swarm run: robot process(es) {robot_crashes} crashed", file=sys.stderr)
     return code
 
@@ -366,16 +419,20 @@ def _name_lost_hosts(swarm: Swarm, summary: dict[str, Any]) -> None:
         print(f"swarm run: lost {worker.describe()}", file=sys.stderr)
 
 
-def launcher_summary(swarm: Swarm, world: dict[str, Any]) -> dict[str, Any]:
+def launcher_summary(swarm: Swarm, ending: protocol.RunEnding) -> dict[str, Any]:
     """The run's summary from the world's (``world/ending``), with what only the launcher
     knows: the run's configuration, its processes, the faults it applied, the recording,
-    and what it refused itself."""
-    plan = swarm.plan
-    summary = dict(world)
+    what it refused itself, and its wall time without what the live page held or paused."""
+    plan, follower = swarm.plan, swarm.follower
+    summary = dict(ending.summary)
+    if follower.started_at is not None and swarm.ended_at is not None:
+        wall = max(swarm.ended_at - follower.started_at - follower.paused_for(), 1e-9)
+        summary["wall_time_s"] = round(wall, 3)
+        summary["real_time_factor"] = round(ending.t / wall, 2)
     summary["config"] = plan.config
     summary["robot_processes"] = swarm.supervisor.robot_processes
     summary["rejected"] = {**summary.get("rejected", {}), "observer": swarm.follower.run.rejected}
-    summary["faults"] = swarm.faults.applied
+    summary["faults"] = [applied.record() for applied in swarm.faults.applied]
     summary["recording"] = str(plan.record) if plan.record else None
     return summary
 
@@ -395,7 +452,11 @@ def _own_summary(swarm: Swarm, halt: Halt, signum: int | None) -> dict[str, Any]
     if robot_crashes and stop is not Stop.INTERRUPTED:
         stop = Stop.CRASHED
     started_at = follower.started_at
-    wall = (swarm.ended_at or 0.0) - started_at if started_at is not None else 0.0
+    wall = (
+        (swarm.ended_at or 0.0) - started_at - follower.paused_for()
+        if started_at is not None
+        else 0.0
+    )
     summary = run.summary(
         run_id=plan.run_id,
         num_robots=plan.robots,
@@ -413,7 +474,9 @@ def _own_summary(swarm: Swarm, halt: Halt, signum: int | None) -> dict[str, Any]
     )
     if signum is not None:
         summary["signal"] = signal.Signals(signum).name
-    summary["faults"] = swarm.faults.applied
+    if swarm.plugin_failure is not None:
+        summary["error"] = swarm.plugin_failure
+    summary["faults"] = [applied.record() for applied in swarm.faults.applied]
     summary["recording"] = str(plan.record) if plan.record else None
     return summary
 

@@ -15,7 +15,6 @@ import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -26,10 +25,14 @@ from bestofn_swarm.wire import settings
 from deploy.launcher.dask_worker import ROUTER_ENV
 from deploy.launcher.outside import OutsidePlan, outside_plan
 from deploy.launcher.switches import SWITCHES, RunSwitches, run_switches
-from deploy.viewer.options import VIEW_OPTIONS, Observer, observers
+from deploy.viewer.options import VIEW_OPTIONS, Observer, holds, observers, view_linger
 from nest_beacon.node.options import NestBeaconConfig
 from robot_agent.core import byzantine
+from robot_agent.core.faults import RobotFault
+from robot_agent.core.plugin import ControllerChoice
+from robot_agent.core.plugins import Plugins, builtin_plugins
 from robot_agent.node.options import RobotAgentConfig
+from robot_agent.plugins import registry
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
 from world_server.observer.referee import (
@@ -57,20 +60,6 @@ NICE_RECORDER_UP_TO = 25
 OUTSIDE_START_MARGIN = 30.0
 
 
-class FaultAction(StrEnum):
-    """What ``--kill`` and ``--restart`` do to a robot's process at their sim time."""
-
-    KILL = "kill"  # SIGKILL, for good
-    RESTART = "restart"  # SIGKILL, then a fresh process for the robot
-
-
-@dataclass(frozen=True)
-class Fault:
-    robot: int
-    action: FaultAction
-    at: float  # sim seconds
-
-
 @dataclass
 class RunPlan:
     """Everything needed to start one run, derived from the command line."""
@@ -86,7 +75,7 @@ class RunPlan:
     record: Path | None
     switches: RunSwitches  # the world's, the robots' and the beacon's configs
     recorder_args: list[str] = field(default_factory=list)
-    faults: list[Fault] = field(default_factory=list)
+    faults: list[RobotFault] = field(default_factory=list)  # robot_agent/core/faults.py
     robots_per_process: int = 1
     batch: bool = True  # a process hosting several robots exchanges batches with the world
     byzantine_robots: dict[int, byzantine.Behaviour] = field(default_factory=dict)
@@ -101,6 +90,18 @@ class RunPlan:
     lost_robot: LostRobot = LostRobot.CONTINUE  # what a robot lost mid-run does to the run
     dask: str | None = None  # --dask: the scheduler whose workers host the robots
     dask_world: str | None = None  # --dask-world: the worker of the world and the beacon
+    hold: bool = False  # --view: the world waits at tick 0 until the page says play
+    view_linger: float | None = 0.0  # wall seconds the page stays up after (None: until stopped)
+
+    # The run's plug-ins, resolved here (the built-ins unless --strategy, --pooling or
+    # --controller name others): the in-process engine runs them, the robot processes find
+    # them again and check their sources against these.
+    plugins: Plugins | None = None
+
+    @property
+    def page(self) -> Observer | None:
+        """The live page, if the run serves one."""
+        return next((o for o in self.observers if o.name == "viewer"), None)
 
     @property
     def external(self) -> list[int]:
@@ -123,6 +124,8 @@ class RunPlan:
         if self.outside is not None:  # it waits for the outside robots as long as we do
             start = max(world.start_timeout, self.outside.wait + OUTSIDE_START_MARGIN)
             world = dataclasses.replace(world, start_timeout=start)
+        if self.hold:
+            world = dataclasses.replace(world, hold=True)
         return ["--run-id", self.run_id, "--config", settings.encode(world)]
 
     def ending_rules(self) -> EndingRules:
@@ -135,9 +138,12 @@ class RunPlan:
             byzantine=tuple(
                 byzantine.ByzantineRobot(robot, how) for robot, how in self.byzantine_robots.items()
             ),
+            # The faults the engine applies stop a robot's process (and a restart starts
+            # another): departures the world expects, not losses.
             departures=tuple(
-                PlannedDeparture(fault.robot, fault.at, fault.action is FaultAction.RESTART)
+                PlannedDeparture(fault.robot, fault.at, fault.RESTARTS)
                 for fault in self.faults
+                if fault.BY_ENGINE
             ),
             outside=tuple(
                 OutsideRobot(linked.robot, linked.address.transport)
@@ -157,7 +163,14 @@ class RunPlan:
             for robot in robots
             if robot in self.byzantine_robots
         )
-        agent = RobotAgentConfig(self.seed, self.switches.controller, hosted)
+        own = tuple(
+            fault.spec for fault in self.faults if fault.robot in robots and not fault.BY_ENGINE
+        )
+        plugins = self.plugins or builtin_plugins(self.switches.controller)
+        choice = ControllerChoice(self.switches.plugins.controller, plugins.sources())
+        agent = RobotAgentConfig(
+            self.seed, self.switches.controller, hosted, plugins=choice, faults=own
+        )
         ids = [arg for robot in robots for arg in ("--id", str(robot))]
         batching = [] if self.batch else ["--no-batch"]
         return [*ids, *batching, "--run-id", self.run_id, "--config", settings.encode(agent)]
@@ -192,37 +205,42 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         args, run_id=run_id, seed=args.seed, sites=args.sites, robots=args.robots
     )
     robot_faults = switches.faults
-    faults = sorted(
-        [Fault(robot, FaultAction.KILL, at) for robot, at in robot_faults.kill]
-        + [Fault(robot, FaultAction.RESTART, at) for robot, at in robot_faults.restart],
-        key=lambda fault: fault.at,
-    )
+    faults = sorted(robot_faults.robot_faults(), key=lambda fault: fault.at)
     for fault in faults:
         if fault.robot >= args.robots:
             raise ValueError(
-                f"--{fault.action} {fault.robot}@...: there is no robot "
+                f"--{fault.SWITCH} {fault.robot}@...: there is no robot "
                 f"{fault.robot} in a swarm of {args.robots}"
             )
     byzantine_robots = byzantine_plan(robot_faults.byzantine, args.robots, args.sites, args.seed)
+    # The plug-ins, found now: one that does not resolve, or is of another kind, is a usage
+    # error before anything starts (PluginError is a ValueError).
+    plugins = registry.resolve_plugins(switches.controller, switches.plugins.controller)
     outside = outside_plan(args, args.robots)
     for robot in outside.ids if outside is not None else []:
-        if any(fault.robot == robot for fault in faults):
-            raise ValueError(f"--kill and --restart act on a process: robot {robot} is outside")
+        for fault in faults:
+            if fault.robot == robot:
+                raise ValueError(f"--{fault.SWITCH} {robot}@...: the robot is outside")
         if robot in byzantine_robots:
             raise ValueError(f"--byzantine {robot}: the robot is outside; its program decides")
-    # A fault acts on one robot's process: one robot per process unless told otherwise.
+    # Over Zenoh, a fault the engine applies acts on one robot's process: one robot per
+    # process unless told otherwise.
+    on_processes = [fault for fault in faults if fault.BY_ENGINE]
     per_process = args.robots_per_process or (
-        1 if faults else default_robots_per_process(args.robots)
+        1 if on_processes else default_robots_per_process(args.robots)
     )
-    if faults and per_process > 1:
+    if on_processes and per_process > 1 and args.engine != "inprocess":
         raise ValueError(
-            "--kill and --restart act on one robot's process: use them with --robots-per-process 1"
+            f"--{on_processes[0].SWITCH} acts on one robot's process: use it with "
+            "--robots-per-process 1"
         )
+    if args.view is None and (args.no_wait or args.view_linger is not None):
+        raise ValueError("--no-wait and --view-linger go with --view")
     connect = args.connect
     if args.dask_world is not None and args.dask is None:
         raise ValueError("--dask-world names a worker of the cluster --dask gives: give --dask")
     if args.dask is not None:
-        refuse_on_dask(args)
+        refuse_on_dask(args, on_processes)
         # The world, beacon and recorder are clients of this host's router, as the robots
         # are of their hosts' (deploy/launcher/dask_worker.py).
         connect = connect or os.environ.get(ROUTER_ENV) or LOCAL_ENDPOINT
@@ -265,6 +283,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
     config["links"] = (
         [f"{linked.robot}={linked.address}" for linked in outside.robots] if outside else []
     )
+    config["plugins"] = plugins.record()  # what made the run: names, versions, sources
     if args.dask is not None:
         config["dask"] = args.dask
     if args.dask_world is not None:
@@ -309,16 +328,22 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         lost_robot=LostRobot.END if args.dask is not None else LostRobot.CONTINUE,
         dask=args.dask,
         dask_world=args.dask_world,
+        hold=holds(args),
+        view_linger=view_linger(args),
+        plugins=plugins,
     )
 
 
-def refuse_on_dask(args: argparse.Namespace) -> None:
-    """ValueError naming the first option that cannot go with ``--dask``."""
+def refuse_on_dask(args: argparse.Namespace, on_processes: Sequence[RobotFault]) -> None:
+    """ValueError naming the first option that cannot go with ``--dask`` (``on_processes``:
+    the faults the launcher applies to a robot's process)."""
     if not args.dask.startswith(("tcp://", "tls://", "ws://", "wss://")):
         raise ValueError(f"--dask {args.dask}: give a scheduler address, tcp://HOST:PORT")
     refused = [
-        (bool(args.kill), "--kill", "it acts on a robot's process on this machine"),
-        (bool(args.restart), "--restart", "it acts on a robot's process on this machine"),
+        *(
+            (True, f"--{fault.SWITCH}", "it acts on a robot's process on this machine")
+            for fault in on_processes[:1]
+        ),
         (args.external is not None, "--external", "the bridge serves robots on this machine"),
         (args.trace is not None, "--trace", "the robots' timelines would stay on the workers"),
         (args.robots_per_process is not None, "--robots-per-process", "the workers' cores say"),
@@ -393,8 +418,6 @@ def refuse_unsupported(args: argparse.Namespace) -> None:
     """ValueError naming the first option of ``args`` the in-process engine cannot honour."""
     refused = [
         (args.clock == "realtime", "--clock realtime", "it runs in lockstep only"),
-        (bool(args.kill), "--kill", "it acts on a robot's process, and there is none"),
-        (bool(args.restart), "--restart", "it acts on a robot's process, and there is none"),
         (args.robots_per_process is not None, "--robots-per-process", "there are no processes"),
         (args.no_batch, "--no-batch", "there are no processes"),
         (args.spawn != "fork", "--spawn", "there are no processes to start"),

@@ -16,6 +16,7 @@ import contextlib
 import json
 import logging
 import os
+import re
 import sys
 import time
 from collections.abc import Callable
@@ -38,6 +39,7 @@ from deploy.launcher.plan import RunPlan
 from deploy.launcher.processes import Child, ProcessGroup, python_module
 from deploy.security import zenoh_acl
 from deploy.security.credentials import RunNetwork
+from robot_agent.core.plugin import PLUGIN_FAILED
 
 log = logging.getLogger("swarm.run")
 
@@ -45,6 +47,7 @@ RUN_ID_ENV = "BESTOFN_RUN_ID"
 CONNECT_WAIT = 5.0  # wall seconds to wait for the router given by --connect
 START_WAIT = 30.0  # wall seconds a process of the run may take to show up
 BRIDGE_RESTARTS = 5  # a bridge that dies on its own is started again this many times
+PUMP_WAIT = 2.0  # wall seconds to wait for the last lines of a robot process that failed
 STATS_ATTEMPTS, STATS_RETRY_PAUSE = 5, 0.2
 # Processes that only watch: they stay to the end, and their crash does not end the run.
 OBSERVERS = ("viewer", "foxglove")
@@ -393,6 +396,29 @@ class Supervisor:
                 return child
         return None
 
+    def crashed_observer(self, name: str) -> Child | None:
+        """The observer ``name`` if its process died on its own."""
+        return next((child for child in self.group.crashed() if child.name == name), None)
+
+    def observer_alive(self, name: str) -> bool:
+        return any(child.name == name and child.alive() for child in self.group.children)
+
+    def plugin_failure(self) -> str | None:
+        """What a robot process whose plug-in failed said (its last line, which names the
+        plug-in, the robot and the tick), if one did: it exits with PLUGIN_FAILED. Of
+        several, the first in the run (the earliest tick, then the lowest robot), as the
+        in-process engine, which stops at the first, reports it."""
+        failures = []
+        for child in {id(child): child for child in self.robot_children.values()}.values():
+            if child.alive() or child.expected_exit or child.process.returncode != PLUGIN_FAILED:
+                continue
+            if child.pump is not None:
+                child.pump.join(PUMP_WAIT)  # its last line may still be in the pipe
+            said = [line for line in child.log if line.strip()]
+            line = said[-1] if said else f"{child.name}: a plug-in failed"
+            failures.append(line.removeprefix("robot-agent: error: "))
+        return min(failures, key=_when_failed) if failures else None
+
     def crashed_robots(self) -> list[int]:
         return [
             robot
@@ -493,6 +519,16 @@ class Supervisor:
             self.placement.close()
         if self.network is not None:
             self.network.close()  # its socket, certificates and keys
+
+
+def _when_failed(line: str) -> tuple[int, int]:
+    """The tick and robot a plug-in's failure names (``(robot 3, tick 120)``; one that could
+    not make robot 3 failed before tick 0)."""
+    step = re.search(r"\(robot (\d+), tick (\d+)\)$", line)
+    if step is not None:
+        return int(step.group(2)), int(step.group(1))
+    making = re.search(r"making robot (\d+)", line)
+    return -1, int(making.group(1)) if making is not None else names.MAX_ROBOTS
 
 
 def _unless(stopping: Stopping, error: StartError) -> None:

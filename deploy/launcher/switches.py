@@ -1,6 +1,7 @@
 """The options that shape a run, by what they configure: the decision (every robot
-process), the clock, radio medium and camera (the world server), the nest beacon (as
-``--beacon-*``) and the robot faults (the launcher itself).
+process), the controller it runs (``--controller``, a plug-in point), the clock, radio
+medium and camera (the world server), the nest beacon (as ``--beacon-*``) and the robot
+faults (the launcher itself).
 
 ``swarm run`` and ``swarm experiment`` both take all of them. Each option is made from its
 setting's one definition on the config dataclass (``bestofn_swarm/wire/settings.py``), and the
@@ -19,8 +20,9 @@ from bestofn_swarm.plumbing.settings_cli import Options
 from bestofn_swarm.wire import settings
 from bestofn_swarm.wire.settings import Flag
 from nest_beacon.core.beacon import BeaconConfig
-from robot_agent.core import byzantine
+from robot_agent.core import byzantine, faults
 from robot_agent.core.controller_config import ControllerConfig
+from robot_agent.core.plugin import ControllerChoice
 from world_server.server.options import WorldServerConfig
 
 
@@ -51,24 +53,27 @@ class RobotAtTime(NamedTuple):
 
 @dataclass(frozen=True)
 class RobotFaults:
-    """Faults the launcher applies to robots: kills, restarts, Byzantine robots."""
+    """The faults of robots a run declares, one switch each (each a plug-in of both
+    engines: robot_agent/core/faults.py), and its Byzantine robots."""
 
     FLAG_GROUP: ClassVar[str] = "robot faults"
 
     kill: Annotated[
-        tuple[RobotAtTime, ...],
-        Meta(
-            description="SIGKILL robot ROBOT's process at SIMTIME sim seconds; the swarm "
-            "goes on without it"
-        ),
-        Flag(metavar="ROBOT@SIMTIME"),
+        tuple[RobotAtTime, ...], Meta(description=faults.Kill.HELP), Flag(metavar="ROBOT@SIMTIME")
     ] = ()
     restart: Annotated[
         tuple[RobotAtTime, ...],
-        Meta(
-            description="start a fresh process for robot ROBOT at SIMTIME; it is killed "
-            "first if still running, and rejoins with a new controller and its old body"
-        ),
+        Meta(description=faults.Restart.HELP),
+        Flag(metavar="ROBOT@SIMTIME"),
+    ] = ()
+    motor_failure: Annotated[
+        tuple[RobotAtTime, ...],
+        Meta(description=faults.MotorFailure.HELP),
+        Flag(metavar="ROBOT@SIMTIME"),
+    ] = ()
+    radio_failure: Annotated[
+        tuple[RobotAtTime, ...],
+        Meta(description=faults.RadioFailure.HELP),
         Flag(metavar="ROBOT@SIMTIME"),
     ] = ()
     byzantine: Annotated[
@@ -82,8 +87,17 @@ class RobotFaults:
         Flag(metavar="ROBOT[:MODE]"),
     ] = ()
 
+    def robot_faults(self) -> list[faults.RobotFault]:
+        """Every fault of a robot declared, as the plug-in its switch names."""
+        return [
+            kind(robot, at)
+            for kind in faults.FAULTS
+            for robot, at in getattr(self, kind.SWITCH.replace("-", "_"))
+        ]
+
 
 CONTROLLER = Options(ControllerConfig)
+PLUGINS = Options(ControllerChoice)
 # The world's size, seed and run id are swarm run's own options; it starts one beacon. How
 # the world ends the run, swarm run tells it from its own options and plan (plan.py).
 WORLD = Options(
@@ -97,13 +111,13 @@ WORLD = Options(
         "--timeout",
         "--stall-window",
         "--lost-robot",
-        "--controller",
+        "--controller-settings",
         "--byzantine",
     },
 )
 BEACON = Options(BeaconConfig, prefix="beacon-", exclude={"--name"})
 FAULTS = Options(RobotFaults)
-SWITCHES = (CONTROLLER, WORLD, BEACON, FAULTS)
+SWITCHES = (CONTROLLER, PLUGINS, WORLD, BEACON, FAULTS)
 
 
 def add_swarm_switches(parser: argparse.ArgumentParser) -> None:
@@ -122,6 +136,7 @@ class RunSwitches:
     """The configs a run's options make."""
 
     controller: ControllerConfig = field(default_factory=ControllerConfig)
+    plugins: ControllerChoice = field(default_factory=ControllerChoice)
     world: WorldServerConfig = field(default_factory=WorldServerConfig)
     beacon: BeaconConfig = field(default_factory=BeaconConfig)
     faults: RobotFaults = field(default_factory=RobotFaults)
@@ -130,6 +145,7 @@ class RunSwitches:
         """Every option's value, keyed like the option (``radio_range``), for the summary."""
         return {
             **CONTROLLER.record(self.controller),
+            **PLUGINS.record(self.plugins),
             **WORLD.record(self.world),
             **BEACON.record(self.beacon),
             **FAULTS.record(self.faults),
@@ -148,6 +164,7 @@ def run_switches(
     }
     return RunSwitches(
         controller=CONTROLLER.build(args),
+        plugins=PLUGINS.build(args),
         world=WORLD.build(args, world),
         beacon=BEACON.build(args),
         faults=FAULTS.build(args),

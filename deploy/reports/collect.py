@@ -1,6 +1,7 @@
 """Reading a recording for a report (``swarm report``): one message at a time, with
 ``world_server/recording/reader.py``, so a file cut short by a crash is read up to its last
-complete record, keeping per robot only what a report needs; and the run's summary rebuilt
+complete record, keeping per robot only what a report needs and the swarm's curves (one
+row per world state: ``world_server/observer/frame.py``); and the run's summary rebuilt
 from its messages when the recording holds none."""
 
 from __future__ import annotations
@@ -17,9 +18,11 @@ from typing import Any
 from bestofn_swarm.wire import keyspace, protocol
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
+from world_server.observer.frame import FrameCollector
 from world_server.observer.observer import RunObserver
 from world_server.observer.summary import byzantine_in_config
 from world_server.observer.watchdog import Watchdog
+from world_server.recording.frame import collector_for
 from world_server.recording.reader import RecordedMessage, RecordingReader, run_description
 from world_server.recording.records import RUN_METADATA
 
@@ -157,6 +160,9 @@ class Recording:
     declared: Declared = field(default_factory=Declared)
     first_clock_wall_ns: int | None = None
     last_clock_wall_ns: int | None = None
+    # The swarm's curves (robots decided, each site's share of the opinions), one row per
+    # world state; None until the first status or state.
+    curves: FrameCollector | None = None
 
     @property
     def last_clock(self) -> protocol.Clock | None:
@@ -250,8 +256,9 @@ class _Collector:
         keyspace.LINK,
     )
 
-    def __init__(self, recording: Recording) -> None:
+    def __init__(self, recording: Recording, reader: RecordingReader) -> None:
         self.recording = recording
+        self.reader = reader
         # --robot: keep that robot's statuses for the opinion figure, and only its.
         self.opinion_robot_fixed = recording.opinion_robot is not None
         self.kinds = keyspace.by_schema()
@@ -264,6 +271,10 @@ class _Collector:
         if kind is None or kind not in self.reads:
             return
         ident = keyspace.ident_in(kind, message.topic)
+        if recording.curves is None and kind in (keyspace.STATUS, keyspace.STATE):
+            recording.curves = collector_for(
+                self.reader.description, message.data, every=1, robot_rows=False, keep=True
+            )
         try:
             if ident is None:
                 raise keyspace.SampleError(f"{message.topic} is no key of {kind.name}")
@@ -298,6 +309,8 @@ class _Collector:
         elif kind is keyspace.STATE:
             recording.state_ticks.append(value.tick)
             observer.last_state = value  # its poses are not the report's: senses are
+            if recording.curves is not None:
+                recording.curves.state(value)
         elif kind is keyspace.LINK:
             observer.link(value)
 
@@ -320,6 +333,8 @@ class _Collector:
             recording.declared.status_gaps += skipped
         trace.last = status
         recording.observer.status(status)
+        if recording.curves is not None:
+            recording.curves.status(status)
         # The opinion figure's robot: the one asked for, else the lowest id heard (a lower
         # one heard later starts its history at its first status, so that is whole too).
         if recording.opinion_robot is None or (
@@ -339,10 +354,12 @@ def read_recording(path: Path, opinion_robot: int | None = None) -> Recording:
     Raises ValueError if the file is not an MCAP file at all.
     """
     recording = Recording(Path(path), opinion_robot=opinion_robot)
-    collector = _Collector(recording)
     reader = RecordingReader(path)
+    collector = _Collector(recording, reader)
     for message in reader:
         collector.message(message)
+    if recording.curves is not None:
+        recording.curves.finish()
     recording.metadata = reader.metadata
     recording.complete = reader.complete
     recording.problem = reader.problem

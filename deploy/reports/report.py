@@ -13,11 +13,18 @@ take only the runs that ended in consensus; the others are counted by ending.
 Writes, into ``--out``:
 
 * ``fig4.png``: per run, a box plot of the robots' steps (trips) to decision, one panel
-  per (robots, sites), with the n/2 line (the paper's Figure 4);
+  per group, with the n/2 line (the paper's Figure 4); a group is the runs of one swarm
+  size and sites and the same values of every setting that differs between the report's
+  runs (``conditions.py``: a ``--drop 0.3`` run is never in a panel of default runs), and
+  is labelled by them; each run is named by its id;
 * ``fig5.png``: per run, a box plot of pool sizes (the paper's Figure 5);
+* ``decided.png``: robots decided over sim time, and ``shares.png``: each site's share of
+  the swarm's opinion over sim time; per group, the mean over its runs with a band from the
+  lowest to the highest;
 * ``fig2.png``: one robot's opinion of every site over sim time (cf. the paper's Fig. 2);
 * ``trajectories.png``: the robots' paths in the arena of one run;
-* ``summary.csv`` and ``summary.json``: one row per run, and aggregates per (robots, sites).
+* ``summary.csv`` and ``summary.json``: one row per run, with a column for each setting
+  that differs between the runs, and aggregates per group.
 
 Its parts, one job each: ``collect.py`` reads a recording, ``rows.py`` makes the run's
 summary and its table row and the aggregates, ``audit.py`` counts what a recording misses,
@@ -31,14 +38,23 @@ import csv
 import json
 import sys
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from bestofn_swarm.plumbing.private_files import make_private_folder, open_private, write_private
+from deploy.reports import conditions
 from deploy.reports.collect import Recording, read_recording
-from deploy.reports.figures import FIGURES, _natural, plot_boxes, plot_opinion, plot_trajectories
-from deploy.reports.rows import CSV_COLUMNS, group_rows, report_row, run_summary
+from deploy.reports.figures import (
+    FIGURES,
+    _natural,
+    plot_boxes,
+    plot_decided,
+    plot_opinion,
+    plot_shares,
+    plot_trajectories,
+)
+from deploy.reports.rows import csv_columns, group_rows, groups_of, report_row, run_summary
 
 # --- the report ----------------------------------------------------------------------------
 
@@ -49,11 +65,13 @@ class Report:
     groups: list[dict[str, Any]]
     unreadable: list[str]
     files: list[str]
+    settings: list[str] = field(default_factory=list)  # those that differ between the runs
 
     def as_json(self) -> dict[str, Any]:
         return {
             "runs": self.runs,
             "groups": self.groups,
+            "settings": self.settings,
             "unreadable": self.unreadable,
             "files": self.files,
         }
@@ -96,24 +114,34 @@ def write_report(
                 "publishers sent are not in it (a recorder that fell behind drops what it "
                 "cannot hold); what is drawn from them has gaps"
             )
-    order = sorted(
-        range(len(recordings)),
-        key=lambda i: (
-            summaries[i]["num_robots"],
-            summaries[i]["num_sites"],
-            _natural(summaries[i]["run_id"]),
-        ),
-    )
+    settings = conditions.differing(summaries)
+    by_id = sorted(range(len(recordings)), key=lambda i: _natural(summaries[i]["run_id"]))
+    # Grouped by size and differing settings, each group's runs by run id.
+    order = [
+        by_id[i] for members in groups_of([summaries[i] for i in by_id], settings) for i in members
+    ]
     recordings = [recordings[i] for i in order]
     summaries = [summaries[i] for i in order]
     runs = [
-        report_row(summary, recording.path)
+        report_row(summary, recording.path, settings)
         for summary, recording in zip(summaries, recordings, strict=True)
     ]
+    groups = group_rows(runs, summaries, settings)
+    members = groups_of(summaries, settings)
     files: list[str] = []
     if recordings:
-        plot_boxes(summaries, out / "fig4.png", pools=False)
-        plot_boxes(summaries, out / "fig5.png", pools=True)
+        labelled = [
+            (group["label"], [summaries[i] for i in indices])
+            for group, indices in zip(groups, members, strict=True)
+        ]
+        plot_boxes(labelled, out / "fig4.png", pools=False)
+        plot_boxes(labelled, out / "fig5.png", pools=True)
+        curves = [
+            (group["label"], [recordings[i] for i in indices])
+            for group, indices in zip(groups, members, strict=True)
+        ]
+        plot_decided(curves, out / "decided.png")
+        plot_shares(curves, out / "shares.png")
         chosen = _example(recordings, example)
         plot_opinion(chosen, _robot(chosen, robot), out / "fig2.png")
         plot_trajectories(chosen, out / "trajectories.png")
@@ -126,10 +154,10 @@ def write_report(
                 plot_trajectories(recording, folder / "trajectories.png")
                 files += [str(folder / "opinion.png"), str(folder / "trajectories.png")]
     files += [str(out / "summary.csv"), str(out / "summary.json")]
-    report = Report(runs, group_rows(runs, summaries), unreadable, files)
+    report = Report(runs, groups, unreadable, files, settings)
     with open_private(out / "summary.csv", "w", newline="") as stream:
         # A run's links (a mapping per outside robot) are for summary.json, not a CSV cell.
-        writer = csv.DictWriter(stream, fieldnames=CSV_COLUMNS, extrasaction="ignore")
+        writer = csv.DictWriter(stream, fieldnames=csv_columns(settings), extrasaction="ignore")
         writer.writeheader()
         writer.writerows(runs)
     write_private(out / "summary.json", json.dumps(report.as_json(), indent=2) + "\n")
@@ -290,7 +318,7 @@ def print_report(report: Report, console: Any) -> None:
                 f"mean pool size {group['pool_size']['mean']}"
             )
         console.print(
-            f"N = {group['robots']}, n = {group['sites']}: {group['runs']} runs ({endings}); "
+            f"{group['label']}: {group['runs']} runs ({endings}); "
             f"{group['correct_runs']}/{group['runs']} correct; {times}",
             highlight=False,
         )

@@ -1,6 +1,7 @@
 """A run's summary as a report takes it (the launcher's, recorded, or rebuilt from the
-recording), its line in the summary table (``summary.csv``) and the aggregates per (robots,
-sites)."""
+recording), its line in the summary table (``summary.csv``) and the aggregates per group:
+runs of one size and the same values of every setting that differs between the report's
+runs (``conditions.py``)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from bestofn_swarm.wire.endings import ENDINGS
+from deploy.reports import conditions
 from deploy.reports.audit import missing_messages
 from deploy.reports.collect import Recording, rebuild_summary
 from world_server.observer.summary import (
@@ -177,8 +179,17 @@ def pools_of(summary: dict[str, Any]) -> list[int]:
     return [size for robot in summary["per_robot"] for size in robot["pool_sizes"]]
 
 
-def report_row(summary: dict[str, Any], recording: Path | str) -> dict[str, Any]:
-    """One run's line of the summary table."""
+def csv_columns(settings: Sequence[str]) -> tuple[str, ...]:
+    """The summary table's columns: one per setting that differs after the run's size."""
+    at = CSV_COLUMNS.index("sites") + 1
+    return (*CSV_COLUMNS[:at], *settings, *CSV_COLUMNS[at:])
+
+
+def report_row(
+    summary: dict[str, Any], recording: Path | str, settings: Sequence[str] = ()
+) -> dict[str, Any]:
+    """One run's line of the summary table; ``settings``: those that differ between the
+    report's runs, each a column (its value as the run's configuration has it)."""
     steps, pools = steps_of(summary), pools_of(summary)
     half = summary["num_sites"] / 2
     step_stats, pool_stats = _stats(steps), _stats(pools)
@@ -187,6 +198,10 @@ def report_row(summary: dict[str, Any], recording: Path | str) -> dict[str, Any]
         "run_id": summary["run_id"],
         "robots": summary["num_robots"],
         "sites": summary["num_sites"],
+        **{
+            name: conditions.value_text(value) if isinstance(value, list | dict) else value
+            for name, value in conditions.conditions_of(summary, settings).items()
+        },
         "seed": summary["seed"],
         "consensus": summary["consensus"],
         "chosen_site": summary["chosen_site"],
@@ -220,21 +235,36 @@ def report_row(summary: dict[str, Any], recording: Path | str) -> dict[str, Any]
     }
 
 
+def groups_of(summaries: Sequence[dict[str, Any]], settings: Sequence[str]) -> list[list[int]]:
+    """The runs of each group (indices into ``summaries``), groups in order of size and
+    settings, each group's runs in the order given."""
+    groups: dict[tuple[Any, ...], list[int]] = {}
+    for index, summary in enumerate(summaries):
+        groups.setdefault(conditions.group_key(summary, settings), []).append(index)
+    return [members for _, members in sorted(groups.items(), key=lambda item: _sortable(item[0]))]
+
+
+def _sortable(key: tuple[Any, ...]) -> tuple[Any, ...]:
+    return tuple((0, value, "") if isinstance(value, int) else (1, 0, str(value)) for value in key)
+
+
 def group_rows(
-    runs: Sequence[dict[str, Any]], summaries: Sequence[dict[str, Any]]
+    runs: Sequence[dict[str, Any]],
+    summaries: Sequence[dict[str, Any]],
+    settings: Sequence[str] = (),
 ) -> list[dict[str, Any]]:
-    """Aggregates per (robots, sites): what the paper's Section 5 text reports.
+    """Aggregates per group (robots, sites, and the values of ``settings``): what the
+    paper's Section 5 text reports, per condition.
 
     Every run is counted by its ending; steps and pool sizes are aggregated over the runs
     that ended in consensus only (``aggregated_runs``), so that a stalled, timed-out or
     aborted run neither shortens nor lengthens the times to consensus.
     """
-    groups: dict[tuple[int, int], list[int]] = {}
-    for index, row in enumerate(runs):
-        groups.setdefault((row["robots"], row["sites"]), []).append(index)
     result = []
-    for (robots, sites), all_members in sorted(groups.items()):
+    for all_members in groups_of(summaries, settings):
         every_row = [runs[i] for i in all_members]
+        robots, sites = every_row[0]["robots"], every_row[0]["sites"]
+        settled = conditions.conditions_of(summaries[all_members[0]], settings)
         members = [i for i in all_members if runs[i]["ended"] == "consensus"]
         rows = [runs[i] for i in members]
         swarm = [row["swarm_steps"] for row in rows if row["swarm_steps"] is not None]
@@ -246,6 +276,9 @@ def group_rows(
             {
                 "robots": robots,
                 "sites": sites,
+                "settings": settled,
+                "label": conditions.label(robots, sites, settled),
+                "run_ids": [row["run_id"] for row in every_row],
                 "half_n": sites / 2,
                 "runs": len(every_row),
                 "endings": {name: endings[name] for name in (*ENDINGS, ABORTED) if endings[name]},

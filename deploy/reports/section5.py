@@ -340,7 +340,7 @@ def _as_summary(record: dict[str, Any]) -> dict[str, Any]:
 
 
 def plot_all(root: Path, records: Sequence[dict[str, Any]]) -> list[Path]:
-    from deploy.reports.figures import plot_boxes
+    from deploy.reports.figures import plot_boxes, size_groups
 
     written = []
     for (variant, figure), data_path in FIGURE_DATA.items():
@@ -350,7 +350,8 @@ def plot_all(root: Path, records: Sequence[dict[str, Any]]) -> list[Path]:
             for record in tables.select(records, variant, n, tables.PAPER_SEEDS)
         ]
         path = root / data_path.replace(".json", ".png")
-        plot_boxes(chosen, path, pools=figure == 5, private=False)  # published
+        # published
+        plot_boxes(size_groups(chosen), path, pools=figure == 5, private=False, numbered=True)
         written.append(path)
     path = root / DISTRIBUTION_FIGURE
     plot_distribution(records, path)

@@ -118,6 +118,7 @@ BEACON_SPEAKS = keyspace.published_by(Party.BEACON, Party.SENDER)
 BEACON_HEARS = keyspace.inputs_of(Party.BEACON)
 LAUNCHER_SPEAKS = keyspace.published_by(Party.LAUNCHER)
 BRIDGE_SPEAKS = keyspace.published_by(Party.BRIDGE)
+VIEWER_SPEAKS = keyspace.published_by(Party.VIEWER)
 
 
 def _rule(
@@ -198,6 +199,8 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
             [keys.of(keyspace.VIEWER_FINISH)],
         ),
         _rule("viewer-alive", "ingress", ["liveliness_token"], [keys.token(Role.VIEWER, 0)]),
+        # ... and says the page's pause, play and speed to the world.
+        _rule("viewer-speak", "ingress", ["put"], keyspace.keys_for(keys, VIEWER_SPEAKS)),
         _rule("viewer-asked", "egress", ["query"], [keys.of(keyspace.VIEWER_FINISH)]),
         # Foxglove live only listens, and says it serves.
         _rule("foxglove-alive", "ingress", ["liveliness_token"], [keys.token(Role.FOXGLOVE, 0)]),
@@ -306,7 +309,7 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
     grant_client(OBSERVER, reading)
     grant_client(LAUNCHER, [*reading, "launcher-log", "launcher-finish", "launcher-finished"])
     grant_client(RECORDER, [*reading, "recorder-serve", "recorder-asked", "recorder-alive"])
-    grant_client(VIEWER, [*reading, "viewer-serve", "viewer-asked", "viewer-alive"])
+    grant_client(VIEWER, [*reading, "viewer-serve", "viewer-asked", "viewer-alive", "viewer-speak"])
     grant_client(FOXGLOVE, [*reading, "foxglove-alive"])
     grant_client(
         BRIDGE,

@@ -4,8 +4,10 @@ One row per run of the results file that the study declares, in the declaration'
 order: its key and seed, one column per parameter (``robots``, ``sites``, ...), one per
 field of what it gave (``verdict``, ``sim_time_s``, ...; nested fields dotted:
 ``robots.steps``, whose values are lists, one item per robot), its wall
-time (``wall_s``) and what it was made with (``commit``, ``dirty``, ``lock``). A result
-field with the name of a parameter is called ``result.NAME``.
+time (``wall_s``) and what it was made with (``commit``, ``dirty``, ``lock``, and for a
+swarm each plug-in's record: ``plugins.pooling.name``, ``plugins.pooling.version``,
+``plugins.pooling.source``...). A result field with the name of a parameter is called
+``result.NAME``.
 
 pandas is an optional extra: ``pip install -e '.[analysis]'``.
 """
@@ -37,6 +39,9 @@ def flatten(record: Mapping[str, Any]) -> dict[str, Any]:
     add("", record.get("result") or {})
     for name in ("kind", "command", "wall_s", "commit", "dirty", "lock"):
         row[name] = record.get(name)
+    for kind, plugin in (record.get("plugins") or {}).items():
+        for name, value in plugin.items():  # plugins.pooling.name, .version, .source...
+            row[f"plugins.{kind}.{name}"] = value
     return row
 
 

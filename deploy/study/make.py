@@ -15,7 +15,8 @@ By kind (``grid.KINDS``):
   ``--record`` when its point asks for a recording).
 
 A swarm run's ``result`` is what its summary says about the decision (``digest``); what
-depends on the machine (wall time, the recording's place) is kept beside it.
+depends on the machine (wall time, the recording's place) and what made it (``plugins``:
+each plug-in's name, distribution, version and source hash) are kept beside it.
 """
 
 from __future__ import annotations
@@ -205,6 +206,7 @@ def _engine_run(run: Run, **observe: Any) -> dict[str, Any]:
         stall_window=None if run.configs else plan.stall_window,
         byzantine_robots=plan.byzantine_robots,
         hooks=hooks,
+        plugins=plan.plugins,
         **observe,
     )
     _refuse_wall_timeout(run, summary)
@@ -222,8 +224,17 @@ def _since(start: float) -> Callable[[], float]:
     return lambda: time.monotonic() - start
 
 
+def keep_plugins(summary: dict[str, Any], extra: dict[str, Any]) -> None:
+    """What made the run (its plug-ins' names, versions and sources), for its row."""
+    plugins = summary.get("config", {}).get("plugins")
+    if plugins is not None:
+        extra["plugins"] = plugins
+
+
 def make_inprocess(run: Run, extra: dict[str, Any]) -> dict[str, Any]:
-    return digest(_engine_run(run))
+    summary = _engine_run(run)
+    keep_plugins(summary, extra)
+    return digest(summary)
 
 
 def make_comparisons(run: Run, extra: dict[str, Any]) -> dict[str, Any]:
@@ -239,6 +250,7 @@ def make_comparisons(run: Run, extra: dict[str, Any]) -> dict[str, Any]:
     summary = _engine_run(
         run, on_tick=learn_qualities, controller_factory=comparing_controller(log)
     )
+    keep_plugins(summary, extra)
     return digest(summary) | judge_comparisons(log, qualities, summary["best_site"])
 
 
@@ -248,6 +260,7 @@ def make_lag(run: Run, extra: dict[str, Any]) -> dict[str, Any]:
 
     registry: dict[str, Any] = {"controllers": [], "poolings": [], "decisions": []}
     summary = _engine_run(run, controller_factory=pooling_controller(registry))
+    keep_plugins(summary, extra)
     result = digest(summary)
     result["lag"] = (
         lag.analyse(
@@ -393,6 +406,7 @@ def make_zenoh(run: Run, extra: dict[str, Any]) -> dict[str, Any]:
     if summary["ended"] not in RESULT_ENDINGS:
         raise RunError(f"swarm run ended {summary['ended']} (exit {done.returncode})")
     _refuse_wall_timeout(run, summary)
+    keep_plugins(summary, extra)
     if run.record_to is not None and Path(run.record_to).is_file():
         extra["recording"] = {"path": run.record_to, "bytes": Path(run.record_to).stat().st_size}
     return digest(summary)

@@ -2,7 +2,8 @@
 
 Each line is one run: its key, parameters and seed, the ``swarm run`` command that makes
 it again (swarm runs), what it gave (``result``, everything a check compares), its wall
-time, and what it was made with: the commit (``deploy/reports/pages.py`` ``git_state``,
+time, and what it was made with: its plug-ins (``plugins``: each one's name, distribution,
+version and source hash; swarm runs), the commit (``deploy/reports/pages.py`` ``git_state``,
 and whether the code that runs had uncommitted changes) and a hash of the run lock
 (``requirements/run.lock``, the exact versions of numpy, pymunk, OpenCV...).
 

@@ -11,7 +11,12 @@ refused and counted. Started by hand, the run's ending (``world/ending``) does t
 with the summary it carries, and the page exits with the run's exit code. Stopped by a
 signal instead, it tells the pages that the run stopped.
 
-It only listens: it publishes nothing the swarm reads, so it cannot change a decision.
+It listens, and says one thing the world hears: the page's pause, play and speed
+(``viewer/pace``, tagged with the view's key). A run started with ``--hold`` (``swarm run
+--view``, unless ``--no-wait``) waits at tick 0 until the first page connects, then plays.
+In lockstep pacing changes only when ticks close, so the view cannot change a decision.
+The swarm's curves for the page's charts come from a ``FrameCollector`` the observer
+feeds (swarm rows only), kept as a bounded ``Series``.
 Zenoh callbacks pass every sample through ``deploy.viewer.core.decode.decode_sample``, the
 key table's gate, which checks its tag against the run's keys (``swarm run`` hands the view
 the run secret, like the recorder) before it decodes anything, and feed the run's observer
@@ -33,7 +38,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from bestofn_swarm.plumbing import cliargs, process_main
@@ -43,11 +48,13 @@ from bestofn_swarm.wire import auth, keyspace, names, protocol
 from bestofn_swarm.wire.names import Role
 from deploy.viewer.core import model
 from deploy.viewer.core.decode import InvalidSampleError, decode_sample
+from deploy.viewer.core.series import Series
 from deploy.viewer.options import VIEW_PORT
 from deploy.viewer.server import ViewServer
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
 from world_server.core.pooling import Pooling
+from world_server.observer.frame import FrameCollector
 from world_server.observer.observer import RunObserver
 
 log = logging.getLogger("viewer")
@@ -58,6 +65,12 @@ DEFAULT_NICENESS = 10  # like the recorder: nothing waits for the view
 # Finish queries waiting for the page's loop, at most (only the launcher's counts; the
 # rest are refused, and those beyond this at once).
 FINISH_QUERY_BYTES = 2**20
+# Wall seconds after which a play that the world's clock has not followed is said again
+# (a put the world missed, before its subscription reached the router).
+PACE_AGAIN_AFTER = 2.0
+# The speeds a page offers in lockstep (sim seconds per wall second; None: as fast as the
+# swarm answers).
+SPEEDS: tuple[float | None, ...] = (None, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
 
 
 class LiveSource:
@@ -66,12 +79,34 @@ class LiveSource:
     and what else they share."""
 
     def __init__(
-        self, scene: model.Scene, keys: keyspace.Keys, keyring: auth.Keyring | None
+        self,
+        scene: model.Scene,
+        keys: keyspace.Keys,
+        keyring: auth.Keyring | None,
+        *,
+        pace: Callable[[protocol.Pace], None] | None = None,
+        held: bool = False,
+        lockstep: bool = True,
     ) -> None:
+        """``pace``: publishes a ``protocol.Pace`` to the world (None: the page cannot
+        pace the run); ``held``: the world waits at tick 0 for the first page."""
         self.scene = scene
         self.keys = keys
         self.keyring = keyring  # None: an unauthenticated run (no tags to check)
-        self.run = RunObserver(range(scene.robots), poolings=True, open_roster=True)
+        layout = scene.layout
+        self.collector = FrameCollector(
+            len(layout.sites), layout.best_site, robot_rows=False, keep=False
+        )
+        self.series = Series()
+        self.run = RunObserver(
+            range(scene.robots), poolings=True, open_roster=True, series=self.collector
+        )
+        self._pace = pace
+        self.held = held  # until the first page connects
+        self.lockstep = lockstep
+        self.playing = not held
+        self.speed: float | None = None  # None: as fast as the swarm answers (lockstep)
+        self._paced_at: tuple[float, int] | None = None  # (wall time, tick) of the last play
         self.poolings: collections.deque[Pooling] = collections.deque(maxlen=1000)
         self.rejected = 0
         self.ended: dict[str, Any] | None = None
@@ -116,6 +151,8 @@ class LiveSource:
         noted = run.take(opened)
         if noted.pooling is not None:
             self.poolings.append(noted.pooling)
+        if opened.kind is keyspace.STATE:
+            self.series.extend(self.collector.take()[1])
 
     def _dt(self) -> float:
         clock = self.run.last_clock
@@ -125,6 +162,36 @@ class LiveSource:
         with self._lock:
             if self.ended is None:
                 self.ended = model.ending(summary, fallback)
+            self.collector.finish()  # the run's last samples, for the charts
+            self.series.extend(self.collector.take()[1])
+
+    # --- pacing ------------------------------------------------------------------------
+
+    def _send_pace(self) -> None:
+        """Tell the world the page's pause, play and speed."""
+        if self._pace is None:
+            return
+        clock = self.run.last_clock
+        self._paced_at = (time.monotonic(), clock.tick if clock is not None else 0)
+        self._pace(protocol.Pace(v=protocol.VERSION, playing=self.playing, speed=self.speed))
+
+    def page_connected(self) -> None:
+        """The first page to connect starts a held run."""
+        with self._lock:
+            if self.held and self.ended is None:
+                self.held = False
+                self.playing = True
+                log.info("a page connected: the run goes on")
+                self._send_pace()
+
+    def _tend_pace(self) -> None:
+        """Say play again if the world's clock did not follow it (under the lock)."""
+        if not self.playing or self._paced_at is None or self.ended is not None:
+            return
+        when, tick = self._paced_at
+        clock = self.run.last_clock
+        if (clock is None or clock.tick <= tick) and time.monotonic() - when > PACE_AGAIN_AFTER:
+            self._send_pace()
 
     # --- FrameSource -----------------------------------------------------------------
 
@@ -139,6 +206,7 @@ class LiveSource:
             elapsed = time.monotonic() - self._first_clock_wall if self._first_clock_wall else 0.0
             deliveries = list(self._deliveries)
             self._deliveries.clear()
+            self._tend_pace()
             return model.frame(
                 self.scene,
                 t=t,
@@ -151,7 +219,16 @@ class LiveSource:
                 real_time_factor=t / elapsed if elapsed > 0.5 else None,
                 ended=self.ended,
                 links=dict(run.links),
-                extra={"rejected": self.rejected},
+                extra={
+                    "rejected": self.rejected,
+                    "pace": {
+                        "held": self.held,
+                        "playing": self.playing,
+                        "speed": self.speed,
+                        "can_pace": self._pace is not None,
+                        "speeds": list(SPEEDS) if self.lockstep else [],
+                    },
+                },
             )
 
     def opinion(self, robot: int) -> dict[str, Any]:
@@ -159,8 +236,25 @@ class LiveSource:
             record = self.run.records.get(robot)
             return model.opinion_message(robot, None if record is None else record.status)
 
+    def series_since(self, epoch: int, count: int) -> dict[str, Any] | None:
+        with self._lock:
+            return self.series.since(epoch, count)
+
     def command(self, message: dict[str, Any]) -> None:
-        """A live run takes no commands from a page."""
+        """A page's pause, play or speed (a lockstep run's speed: one of ``SPEEDS``)."""
+        op = message.get("op")
+        with self._lock:
+            if self.ended is not None or self._pace is None:
+                return
+            if op in ("play", "pause"):
+                self.playing = op == "play"
+                self.held = False
+            elif op == "speed" and self.lockstep and message.get("speed") in SPEEDS:
+                speed = message["speed"]
+                self.speed = None if speed is None else float(speed)
+            else:
+                return
+            self._send_pace()
 
 
 # --- the process ---------------------------------------------------------------------
@@ -186,6 +280,11 @@ def build_parser() -> argparse.ArgumentParser:
         type=cliargs.float_range(0.5, 60.0),
         default=10.0,
         help="frames a second sent to each page (default: 10)",
+    )
+    parser.add_argument(
+        "--hold",
+        action="store_true",
+        help="the run waits at tick 0 for the page: say play when the first page connects",
     )
     parser.add_argument(
         "--niceness",
@@ -253,14 +352,26 @@ async def _serve(
         loop.call_soon_threadsafe(ending_came.set)
 
     with session:
+        lockstep = True
         try:
             info = fetch_world_info(session, keys, 10.0, keyring, names.VIEWER)
             robot_radius = info.robot_radius
+            lockstep = info.clock == "lockstep"
         except TimeoutError as error:
             log.warning("%s; drawing robots at the e-puck's size", error)
             robot_radius = EPUCK.radius
         scene = model.Scene(args.run_id, args.seed, args.robots, layout, robot_radius)
-        source = LiveSource(scene, keys, keyring)
+        pace_key = keys.of(keyspace.PACE)
+
+        def pace(message: protocol.Pace) -> None:
+            from bestofn_swarm.plumbing.zenoh_session import reliable_put
+
+            payload = protocol.encode(message)
+            attachment = auth.seal(keyring, names.VIEWER, pace_key, payload)
+            with contextlib.suppress(zenoh.ZError):
+                reliable_put(session, pace_key, payload, attachment)
+
+        source = LiveSource(scene, keys, keyring, pace=pace, held=args.hold, lockstep=lockstep)
 
         def on_sample(sample: Any) -> None:
             attachment = sample.attachment

@@ -1,5 +1,6 @@
-"""``swarm run --view [PORT] --view-host HOST --foxglove [PORT]``: the options, and the
-observer processes they ask the launcher to start (no server code is imported here)."""
+"""``swarm run --view [PORT] --view-host HOST --no-wait --view-linger S --foxglove [PORT]``:
+the options, and the observer processes they ask the launcher to start (no server code is
+imported here)."""
 
 from __future__ import annotations
 
@@ -36,7 +37,22 @@ def add_view_options(group: argparse._ArgumentGroup) -> None:
         type=cliargs.int_range(0, 65535),
         metavar="PORT",
         help=f"serve a live page of the run in the browser (default port {VIEW_PORT}; "
-        "0: any free port)",
+        "0: any free port); the swarm waits at tick 0 until a browser opens it, and the "
+        "page stays up with the result after the run (Ctrl-C ends it)",
+    )
+    group.add_argument(
+        "--no-wait",
+        action="store_true",
+        help="with --view: start the run at once, without waiting for a browser, and stop "
+        "the page when the run ends (unless --view-linger)",
+    )
+    group.add_argument(
+        "--view-linger",
+        type=cliargs.float_range(0.0, 1e9),
+        default=None,
+        metavar="S",
+        help="with --view: keep the page up S wall seconds after the run ends (default: "
+        "until Ctrl-C; with --no-wait, 0)",
     )
     group.add_argument(
         "--view-host",
@@ -57,7 +73,23 @@ def add_view_options(group: argparse._ArgumentGroup) -> None:
     )
 
 
-VIEW_OPTIONS = {"view", "view_host", "foxglove"}  # they shape no run: kept out of its config
+# They shape no run: kept out of its config.
+VIEW_OPTIONS = {"view", "view_host", "no_wait", "view_linger", "foxglove"}
+
+
+def holds(args: argparse.Namespace) -> bool:
+    """Whether the run waits at tick 0 for the first browser on its live page."""
+    return args.view is not None and not args.no_wait
+
+
+def view_linger(args: argparse.Namespace) -> float | None:
+    """Wall seconds the page stays up after the run ends (None: until stopped; 0: it ends
+    with the run)."""
+    if args.view is None:
+        return 0.0
+    if args.view_linger is not None:
+        return float(args.view_linger)
+    return 0.0 if args.no_wait else None
 
 
 def observers(
@@ -79,7 +111,8 @@ def observers(
                 "viewer",
                 "deploy.viewer.live",
                 # The launcher finishes the page with its summary (viewer/finish).
-                [*common, *sizes, "--host", host, "--port", str(port), "--await-finish"],
+                [*common, *sizes, "--host", host, "--port", str(port), "--await-finish"]
+                + (["--hold"] if holds(args) else []),
                 f"http://{shown}:{port}/",
             )
         )

@@ -28,11 +28,14 @@ from typing import Any
 from bestofn_swarm.wire import keyspace, protocol
 from bestofn_swarm.wire.keyspace import Party
 from deploy.viewer.core import model
+from deploy.viewer.core.series import Series
 from deploy.viewer.options import VIEW_PORT
 from deploy.viewer.server import ViewServer
 from world_server.core.layout import make_layout
 from world_server.core.pooling import LINK_SECONDS, Pooling
+from world_server.observer.frame import FrameCollector
 from world_server.observer.observer import RunObserver
+from world_server.recording.frame import collector_for
 from world_server.recording.reader import RecordedMessage, RecordingReader
 from world_server.recording.records import RUN_METADATA
 
@@ -69,6 +72,8 @@ class Timeline:
     # Robots outside the emulator: their links' figures as the bridge reported them.
     link_times: dict[int, list[float]] = field(default_factory=dict)
     links: dict[int, list[protocol.LinkStats]] = field(default_factory=dict)
+    # The swarm's curves, one point per world state (world_server/observer/frame.py).
+    series: Series = field(default_factory=Series)
 
     @property
     def start(self) -> float:
@@ -87,9 +92,11 @@ class _Loader:
     table's gate (``keyspace.open_recorded``), to the timeline's indexes and to the run's
     observer, which finds the poolings and decisions and counts the robots decided."""
 
-    def __init__(self, timeline: Timeline, with_sense: bool) -> None:
+    def __init__(self, timeline: Timeline, reader: RecordingReader, with_sense: bool) -> None:
         self.timeline = timeline
+        self.reader = reader
         self.run = RunObserver((), poolings=True, open_roster=True)
+        self.collector: FrameCollector | None = None  # made once the description is read
         shown = {*keyspace.heard_by(Party.VIEWER), *([keyspace.SENSE] if with_sense else [])}
         self.kinds = {kind.schema: kind for kind in shown if kind.schema is not None}
 
@@ -103,9 +110,19 @@ class _Loader:
         except keyspace.SampleError:
             return  # the report counts these; the page just does not draw them
         timeline, value = self.timeline, opened.message
+        if kind in (keyspace.STATE, keyspace.STATUS) and self.collector is None:
+            self.collector = collector_for(
+                self.reader.description, message.data, every=1, robot_rows=False, keep=False
+            )
+            self.run.series = self.collector
         if kind is keyspace.STATE:
             timeline.state_times.append(value.t)
             timeline.states.append(value)
+            try:
+                self.run.state(value)
+            except keyspace.SampleError:
+                return
+            self.chart()
         elif kind is keyspace.STATUS:
             timeline.statuses.setdefault(value.id, []).append(value)
             timeline.status_times.setdefault(value.id, []).append(value.t)
@@ -134,6 +151,13 @@ class _Loader:
             poses = timeline.sense_poses.setdefault(opened.robot, [])
             poses.append((value.t, value.x, value.y, value.theta))
 
+    def chart(self, finish: bool = False) -> None:
+        """Take the swarm rows finished (all, once the recording is read) into the timeline."""
+        if self.collector is not None:
+            if finish:
+                self.collector.finish()
+            self.timeline.series.extend(self.collector.take()[1])
+
 
 def load(path: Path) -> Timeline:
     """Read a recording into a timeline. Raises ValueError if it is not a recording."""
@@ -146,10 +170,11 @@ def load(path: Path) -> Timeline:
 
 def _read(path: Path, with_sense: bool) -> Timeline:
     timeline = Timeline(Path(path))
-    loader = _Loader(timeline, with_sense)
     reader = RecordingReader(path)
+    loader = _Loader(timeline, reader, with_sense)
     for message in reader:
         loader.message(message)
+    loader.chart(finish=True)
     timeline.complete = reader.complete
     # The page names only the kind of error that cut the file short.
     stopped = reader.stopped_by
@@ -356,6 +381,13 @@ class ReplaySource:
             "reason": "cut short",
             "text": f"recording {self.timeline.problem or 'ends here'}, no run summary",
         }
+
+    def series_since(self, epoch: int, count: int) -> dict[str, Any] | None:
+        """The whole run's curves (the page draws them up to the sim time shown)."""
+        return self.timeline.series.since(epoch, count)
+
+    def page_connected(self) -> None:
+        """A replay is held by no one."""
 
     def opinion(self, robot: int) -> dict[str, Any]:
         view = self.robots_at(self.t).get(robot)

@@ -7,7 +7,9 @@ and encodes it once; every page is sent the newest frame when it is ready for on
 slow page skips frames and nothing queues without bound (a frame replaces the last).
 
 The page sends small commands as JSON: ``{"op": "select", "robot": 3}`` asks for that
-robot's whole opinion with every frame; replay controls go to the source's ``command``.
+robot's whole opinion with every frame; pause, play and speed (live and replay) and the
+replay's seeking go to the source's ``command``. After each frame a page is sent the
+points of the swarm's curves it has not got yet (``series``), for its charts.
 """
 
 from __future__ import annotations
@@ -51,6 +53,14 @@ class FrameSource(Protocol):
 
     def command(self, message: dict[str, Any]) -> None: ...
 
+    def series_since(self, epoch: int, count: int) -> dict[str, Any] | None:
+        """The chart points a page holding ``count`` of ``epoch`` lacks (None: none)."""
+        ...
+
+    def page_connected(self) -> None:
+        """A page connected (a live run held for the first one goes on)."""
+        ...
+
 
 def static_file(name: str) -> bytes:
     return resources.files("deploy.viewer").joinpath("static", name).read_bytes()
@@ -72,6 +82,8 @@ class _Page:
         self.connection = connection
         self.selected: int | None = None
         self.sent = 0  # sequence number of the last frame sent
+        self.series_epoch = -1  # the chart points it holds: of this epoch ...
+        self.series_count = 0  # ... this many
 
 
 class ViewServer:
@@ -161,6 +173,7 @@ class ViewServer:
         listener = asyncio.create_task(self._listen(page))
         try:
             await connection.send(self._encoder.encode(self.source.hello()).decode())
+            self.source.page_connected()
             while True:
                 if page.sent == self.sequence:
                     await self._new_frame.wait()
@@ -170,6 +183,12 @@ class ViewServer:
                 if page.selected is not None:
                     opinion = self.source.opinion(page.selected)
                     await connection.send(self._encoder.encode(opinion).decode())
+                update = self.source.series_since(page.series_epoch, page.series_count)
+                if update is not None:
+                    await connection.send(self._encoder.encode(update).decode())
+                    page.series_epoch = update["epoch"]
+                    count = len(update["points"])
+                    page.series_count = count if update["reset"] else page.series_count + count
         except ConnectionClosed:
             pass
         finally:

@@ -6,7 +6,8 @@ updating); at the nest it is pooled (MProdOp, Definition 2, or ``config.pooling`
 ``config.defence``, that defence's pool, ``defence.py``) with the latest opinion of every
 neighbour heard since the robot arrived, and then tested for a decision. The arithmetic
 is ``robot_agent/core/decision.py``'s; this is the state it acts on. It is the
-controller's ``strategies.Strategy`` for ``--strategy paper``.
+controller's ``strategies.Strategy`` for ``--strategy paper`` (``paper`` makes it, the
+strategy plug-in the project registers under that name).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.compiled import mypyc_attr
 from bestofn_swarm.wire.rng import Stream
 from robot_agent.core import decision, defence
 
@@ -21,10 +23,20 @@ if TYPE_CHECKING:
     from robot_agent.core.controller_config import ControllerConfig
 
 
+# A strategy plug-in may be a subclass (docs/extending.md); compiled, a class refuses
+# interpreted subclasses unless it allows them.
+@mypyc_attr(allow_interpreted_subclasses=True)
 class Beliefs:
     """One robot's opinion, what it heard from neighbours, and its decision."""
 
-    def __init__(self, num_sites: int, config: ControllerConfig) -> None:
+    def __init__(
+        self,
+        num_sites: int,
+        config: ControllerConfig,
+        pooling: decision.PoolingOperator | None = None,
+    ) -> None:
+        """``pooling``: the operator (a plug-in's, resolved); None: the built-in that
+        ``config.pooling`` names."""
         self._config = config
         self.opinion = decision.uniform_opinion(num_sites)
         self.trips = 0  # poolings so far: one per trip
@@ -36,7 +48,8 @@ class Beliefs:
         # The latest opinion of each robot, with when it was heard; pooling takes those
         # heard since arriving at the nest.
         self.heard: dict[int, tuple[float, list[float]]] = {}
-        self._pooler = defence.make_pooler(config.defence, config.pooling, config.trim)
+        operator = pooling if pooling is not None else config.pooling
+        self._pooler = defence.make_pooler(config.defence, operator, config.trim)
 
     def hear(self, robot_id: int, t: float, opinion: list[float]) -> None:
         """Robot ``robot_id``'s opinion (validated over our sites), heard at sim time ``t``."""
@@ -111,4 +124,12 @@ class Beliefs:
             self.decision_trips = self.trips
 
 
-__all__ = ["Beliefs"]
+def paper(
+    num_sites: int, config: ControllerConfig, robot_id: int, pooling: decision.PoolingOperator
+) -> Beliefs:
+    """The paper's strategy for one robot: the strategy plug-in ``paper``
+    (``strategies.StrategyFactory``)."""
+    return Beliefs(num_sites, config, pooling)
+
+
+__all__ = ["Beliefs", "paper"]

@@ -22,7 +22,7 @@ Pure: no Zenoh, no clock, no randomness beyond the controller's own RNG.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal, cast, get_args
 
@@ -175,9 +175,10 @@ def build_controller(
     rng: Stream,
     behaviour: Behaviour | None = None,
     *,
-    factory: type[Controller] = Controller,
+    factory: Callable[..., ports.RobotController] = Controller,
 ) -> ports.RobotController:
-    """Robot ``robot_id``'s controller (a ``factory``: the Controller or a class watching it):
+    """Robot ``robot_id``'s controller (``factory`` makes it: the Controller, a class
+    watching it, or what makes the run's plug-ins' controller, ``plugins.controller_maker``):
     honest when ``behaviour`` is None, else Byzantine. Robots are built with
     ``robot_agent.core.builder``, which seeds ``rng`` from the world."""
     if behaviour is None:

@@ -28,8 +28,9 @@ the controller uses:
 
 * ``strategies.Strategy``: what the robot believes and decides, by ``config.strategy``:
   ``beliefs.Beliefs`` (the paper's opinion, its negative updates and pooling, the
-  decision) or ``voting.VoteBeliefs`` (the strategies it is compared with: one site a
-  trip, sensed for ``exploration`` seconds, a dissemination of random length at the nest);
+  decision), ``voting.VoteBeliefs`` (the strategies it is compared with: one site a
+  trip, sensed for ``exploration`` seconds, a dissemination of random length at the nest)
+  or a plug-in's (``plugins.py``);
 * ``motion.Motion``: legs of travel on the navigator, with the guards a crowded arena
   needs (a viewpoint taken by another robot counts as reached once the robot has been
   stalled close to it; a leg that takes longer than ``leg_allowance`` is given up);
@@ -76,7 +77,10 @@ class Controller:
         *,
         estimate_quality: QualityEstimator = vision.estimate_quality,
         nav_params: NavParams | None = None,
+        strategy: strategies.Strategy | None = None,
     ) -> None:
+        """``strategy``: the robot's strategy, made by the run's strategy plug-in (the
+        robot's builder makes it); None: the built-in ``config.strategy`` names."""
         if isinstance(robot_id, bool) or not isinstance(robot_id, int):
             raise ValueError(f"robot id must be an int, got {robot_id!r}")
         if not 0 <= robot_id < names.MAX_ROBOTS:
@@ -125,7 +129,11 @@ class Controller:
             robot_id,
             [numeric.atan2(site.y, site.x) for site in sites],
         )
-        self._beliefs = strategies.make_strategy(self._n, config, robot_id)
+        self._beliefs = (
+            strategy
+            if strategy is not None
+            else strategies.make_strategy(self._n, config, robot_id)
+        )
         self._rejected = 0
 
         # Trip state.

@@ -15,12 +15,18 @@ from bestofn_swarm.wire import settings
 from bestofn_swarm.wire.settings import Flag
 from robot_agent.core import decision, defence
 
-# The decision strategies: the paper's, and the ones it is compared with, which vote.
+# The built-in decision strategies: the paper's, and the ones it is compared with, which
+# vote. A strategy or pooling operator may also be a plug-in (robot_agent/core/plugins.py).
 StrategyName = Literal["paper", "dmvd", "dmmd", "dc"]
 STRATEGIES: tuple[StrategyName, ...] = ("paper", "dmvd", "dmmd", "dc")
 VOTING: tuple[StrategyName, ...] = ("dmvd", "dmmd", "dc")
 # A liar's settle count: it never decides, so it keeps coming back to lie.
 NEVER_SETTLE = 1_000_000
+
+# A plug-in's name: a built-in's or an installed entry point's (``linear``), or where it is
+# (``package.module:attribute``).
+PLUGIN_NAME_PATTERN = r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*(:[A-Za-z_][A-Za-z0-9_.]*)?$"
+PluginName = Annotated[str, Meta(pattern=PLUGIN_NAME_PATTERN, min_length=1, max_length=200)]
 
 Seconds = Annotated[float, Meta(gt=0.0)]
 Metres = Annotated[float, Meta(gt=0.0)]
@@ -53,13 +59,15 @@ class ControllerConfig:
         Flag(default_text="1, or 0.99 when alpha > 0", default_from=default_threshold),
     ] = 1.0
     pooling: Annotated[
-        decision.PoolingName,
+        PluginName,
         Meta(
             description="opinion pooling at the nest: mprodop (Definition 2, evidence "
-            "preserving) or loglinear (diluting: neighbours' opinions count with weight "
-            f"{decision.LOGLINEAR_NEIGHBOUR_WEIGHT:g}; use with --alpha > 0)"
+            "preserving), loglinear (diluting: neighbours' opinions count with weight "
+            f"{decision.LOGLINEAR_NEIGHBOUR_WEIGHT:g}; use with --alpha > 0), or a plug-in: "
+            "an installed one's name or package.module:attribute (swarm plugins lists them; "
+            "docs/extending.md)"
         ),
-        Flag(),
+        Flag(metavar="NAME"),
     ] = "mprodop"
     dwell: Annotated[
         Seconds,
@@ -81,13 +89,14 @@ class ControllerConfig:
         Flag(),
     ] = 0.0
     strategy: Annotated[
-        StrategyName,
+        PluginName,
         Meta(
-            description="the decision strategy: paper (negative updating and pooling), or "
-            "one the paper is compared with (docs/strategies.md): dmvd (voter), dmmd "
-            "(majority), dc (direct comparison)"
+            description="the decision strategy: paper (negative updating and pooling), one "
+            "the paper is compared with (docs/strategies.md): dmvd (voter), dmmd (majority), "
+            "dc (direct comparison), or a plug-in: an installed one's name or "
+            "package.module:attribute (swarm plugins lists them; docs/extending.md)"
         ),
-        Flag(),
+        Flag(metavar="NAME"),
     ] = "paper"
     exploration: Annotated[
         Seconds,

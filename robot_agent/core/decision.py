@@ -28,6 +28,7 @@ __all__ = [
     "LOGLINEAR_NEIGHBOUR_WEIGHT",
     "POOLING_OPERATORS",
     "PoolingName",
+    "PoolingOperator",
     "as_count",
     "choose_pair",
     "decided_option",
@@ -209,12 +210,17 @@ def loglinear_pool(
 
 
 PoolingName = Literal["mprodop", "loglinear"]
-POOLING_OPERATORS: dict[str, Callable[[Sequence[Sequence[float]]], list[float] | None]] = {
+PoolingOperator = Callable[[Sequence[Sequence[float]]], list[float] | None]
+"""A pooling operator: the pool's opinions (the pooling robot's own first, then its
+neighbours', each as long as the first) to the pooled opinion, or None when they contradict
+each other (the robot then keeps its own). A plug-in of the group ``bestofn_swarm.pooling``
+(docs/extending.md)."""
+POOLING_OPERATORS: dict[str, PoolingOperator] = {
     "mprodop": mprodop,
     "loglinear": loglinear_pool,
 }
-"""The pooling operators a controller can use, by name; the first element of a pool is the
-pooling agent's own opinion."""
+"""The built-in pooling operators, by name (their plug-in names); the first element of a
+pool is the pooling agent's own opinion."""
 
 
 def choose_pair(opinion: Sequence[float], rng: Stream) -> tuple[int, int]:

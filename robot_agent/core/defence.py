@@ -50,10 +50,13 @@ class Pooler(Protocol):
 
 
 class PaperPooling:
-    """The paper's pooling (no defence): ``decision.POOLING_OPERATORS[name]`` of the pool."""
+    """The paper's pooling (no defence): the pooling operator (``--pooling``: a built-in of
+    ``decision.POOLING_OPERATORS`` by name, or a plug-in's) of the pool."""
 
-    def __init__(self, name: str) -> None:
-        self._operator = decision.POOLING_OPERATORS[name]
+    def __init__(self, operator: str | decision.PoolingOperator) -> None:
+        self._operator = (
+            decision.POOLING_OPERATORS[operator] if isinstance(operator, str) else operator
+        )
 
     def hear(self, robot_id: int, opinion: list[float]) -> None:
         """Nothing to remember: the pool is what was heard at this visit."""
@@ -92,8 +95,9 @@ def trimmed_support(
     return [1.0 / len(alive) if index in alive else 0.0 for index in range(len(own))]
 
 
-def make_pooler(defence: DefenceName, pooling: str, trim: int) -> Pooler:
-    """The pooler of a robot's settings (``--defence``, ``--pooling``, ``--trim``)."""
+def make_pooler(defence: DefenceName, pooling: str | decision.PoolingOperator, trim: int) -> Pooler:
+    """The pooler of a robot's settings (``--defence``, ``--pooling``: a built-in's name or
+    the operator itself, ``--trim``)."""
     if defence == "trimmed":
         return TrimmedPooling(trim)
     return PaperPooling(pooling)

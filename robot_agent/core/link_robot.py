@@ -17,6 +17,7 @@ import logging
 import math
 import secrets
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from bestofn_swarm.link.core import codec
@@ -26,6 +27,8 @@ from bestofn_swarm.wire.keyspace import Part, Party
 from robot_agent.core import builder
 from robot_agent.core.controller_config import ControllerConfig
 from robot_agent.core.endpoint import Outgoing, RobotEndpoint
+from robot_agent.core.plugin import PluginError
+from robot_agent.core.plugins import Plugins
 
 log = logging.getLogger("link.robot")
 
@@ -85,12 +88,23 @@ class LinkRobot:
     last_status: Outgoing | None = None
     status_again_at: float = 0.0
     dropped: Counter[str] = field(default_factory=Counter)  # inputs it could not use
+    # The run's controller settings as this program runs them, with their plug-ins
+    # resolved (robot_agent/link/program.py: its own --controller, --strategy, --pooling);
+    # None: the run's settings and the built-ins they name.
+    prepare: Callable[[ControllerConfig], tuple[ControllerConfig, Plugins]] | None = None
+    failure: str | None = None  # a plug-in failed or could not make the robot: its one line
 
     @classmethod
-    def create(cls, robot: int, run: str, keyring: auth.Keyring) -> LinkRobot:
+    def create(
+        cls,
+        robot: int,
+        run: str,
+        keyring: auth.Keyring,
+        prepare: Callable[[ControllerConfig], tuple[ControllerConfig, Plugins]] | None = None,
+    ) -> LinkRobot:
         key = keyring.key(names.robot_identity(robot))
         assert key is not None  # read_key_file checked it
-        return cls(robot, run, keyring, LinkClient(robot, codec.link_key(key)))
+        return cls(robot, run, keyring, LinkClient(robot, codec.link_key(key)), prepare=prepare)
 
     @property
     def identity(self) -> str:
@@ -119,6 +133,16 @@ class LinkRobot:
     def receive(self, data: bytes, now: float) -> None:
         for event in self.client.receive(data, now):
             self._take(event, now)
+
+    def hearing(self, now: float) -> None:
+        """A frame is arriving on a serial line: the session is alive, and no question is
+        asked again while it comes (it may be the answer: a map of 1000 sites takes 5 s at
+        115200 baud, and each question asked again would bring one more)."""
+        self.client.hearing(now)
+        if self.asking is not None:
+            self.asking.again_at = max(self.asking.again_at, now + ASK_EVERY)
+        for ask in self.proving.values():
+            ask.again_at = max(ask.again_at, now + PROVE_EVERY)
 
     def stop(self) -> None:
         self.client.bye(codec.ByeReason.GOING_AWAY)
@@ -173,7 +197,11 @@ class LinkRobot:
             if self.endpoint is None:
                 self.dropped[kind.name.lower()] += 1
                 return
-            step = self.endpoint.receive(kind.kind, event.payload, event.attachment)
+            try:
+                step = self.endpoint.receive(kind.kind, event.payload, event.attachment)
+            except PluginError as error:  # the robot's plug-in failed: it stops here
+                self._fail(str(error))
+                return
             if step is None:
                 return
             for message in step.outgoing:  # its transmissions, its act, its status if new
@@ -258,6 +286,9 @@ class LinkRobot:
             self.asking = None
             try:
                 self.endpoint = self._build(self._keys(), info)
+            except PluginError as error:  # a plug-in that cannot make the robot
+                self._fail(str(error))
+                return
             except ValueError as error:  # the run's settings or map, refused
                 log.error("robot %d cannot run: %s", self.robot, error)
                 self.client.bye(codec.ByeReason.GOING_AWAY)
@@ -281,7 +312,12 @@ class LinkRobot:
         welcome = self.client.welcome
         assert welcome is not None
         config = settings.decode(bytes(welcome.controller), ControllerConfig)
-        robot = builder.build_robot(self.robot, info, config, keys=keys, keyring=self.keyring)
+        plugins = None
+        if self.prepare is not None:
+            config, plugins = self.prepare(config)
+        robot = builder.build_robot(
+            self.robot, info, config, keys=keys, keyring=self.keyring, plugins=plugins
+        )
         log.info(
             "robot %d: %d sites, clock %s, seed %d: running",
             self.robot,
@@ -290,6 +326,12 @@ class LinkRobot:
             info.seed,
         )
         return robot
+
+    def _fail(self, failure: str) -> None:
+        """A plug-in failed: say goodbye and end (the program prints ``failure``)."""
+        self.failure = failure
+        self.client.bye(codec.ByeReason.GOING_AWAY)
+        self.ended = self.failed = True
 
     def _send_status(self, status: Outgoing, now: float) -> None:
         """Send the robot's status, and again every STATUS_EVERY until it changes."""

@@ -47,6 +47,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from bestofn_swarm.wire import protocol
+from bestofn_swarm.wire.compiled import mypyc_attr
 from bestofn_swarm.wire.rng import Stream
 from robot_agent.core.controller_config import (
     NEVER_SETTLE,
@@ -109,15 +110,24 @@ def majority(site: int, neighbours: Sequence[int], rng: Stream) -> int:
     return tied[0] if len(tied) == 1 else tied[rng.randrange(len(tied))]
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)  # a strategy plug-in may be a subclass
 class VoteBeliefs:
     """One voting robot's site, quality estimate, the votes it heard, and its decision;
     the controller's strategy for ``dmvd``, ``dmmd`` and ``dc`` (``strategies.Strategy``)."""
 
-    def __init__(self, num_sites: int, config: ControllerConfig, robot_id: int) -> None:
-        if config.strategy not in VOTING:
-            raise ValueError(f"{config.strategy!r} is not a voting strategy")
+    def __init__(
+        self,
+        num_sites: int,
+        config: ControllerConfig,
+        robot_id: int,
+        rule: str | None = None,
+    ) -> None:
+        """``rule``: dmvd, dmmd or dc (None: ``config.strategy``'s)."""
+        strategy = config.strategy if rule is None else rule
+        if strategy not in VOTING:
+            raise ValueError(f"{strategy!r} is not a voting strategy")
         self._config = config
-        self._strategy: StrategyName = config.strategy
+        self._strategy: StrategyName = VOTING[VOTING.index(strategy)]
         self._num_sites = num_sites
         self.site = initial_site(robot_id, num_sites)
         self.quality: float | None = None  # the estimate of ``site``, once explored
@@ -205,6 +215,26 @@ class VoteBeliefs:
             self.decision_trips = self.trips
 
 
+# The voting strategies as strategy plug-ins (``strategies.StrategyFactory``): the
+# project registers them under their names. A voting robot pools no opinions: ``pooling``
+# is not used.
+
+
+def dmvd(num_sites: int, config: ControllerConfig, robot_id: int, pooling: object) -> VoteBeliefs:
+    """The voter model (DMVD) for one robot: the strategy plug-in ``dmvd``."""
+    return VoteBeliefs(num_sites, config, robot_id, "dmvd")
+
+
+def dmmd(num_sites: int, config: ControllerConfig, robot_id: int, pooling: object) -> VoteBeliefs:
+    """The majority rule (DMMD) for one robot: the strategy plug-in ``dmmd``."""
+    return VoteBeliefs(num_sites, config, robot_id, "dmmd")
+
+
+def dc(num_sites: int, config: ControllerConfig, robot_id: int, pooling: object) -> VoteBeliefs:
+    """Direct comparison (DC) for one robot: the strategy plug-in ``dc``."""
+    return VoteBeliefs(num_sites, config, robot_id, "dc")
+
+
 def never_settles(config: ControllerConfig) -> ControllerConfig:
     """``config`` for a voting robot that must never decide (a liar)."""
     return dataclasses.replace(config, settle=NEVER_SETTLE)
@@ -217,6 +247,9 @@ __all__ = [
     "StrategyName",
     "Vote",
     "VoteBeliefs",
+    "dc",
+    "dmmd",
+    "dmvd",
     "initial_site",
     "majority",
     "never_settles",

@@ -17,12 +17,14 @@ ended it prints one JSON line (its decision, trips, link counts) and exits 0.
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import functools
 import json
 import logging
 import signal
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from bestofn_swarm.link.core import codec
@@ -31,7 +33,11 @@ from bestofn_swarm.link.io.transport import open_transport
 from bestofn_swarm.plumbing import cliargs, cores
 from bestofn_swarm.plumbing.run_keys import read_key_file
 from bestofn_swarm.wire import names
+from robot_agent.core.controller_config import ControllerConfig
 from robot_agent.core.link_robot import LinkRobot
+from robot_agent.core.plugin import KINDS, OPTIONS, PLUGIN_FAILED, PluginError
+from robot_agent.core.plugins import Plugins
+from robot_agent.plugins import registry
 
 log = logging.getLogger("link.program")
 
@@ -71,6 +77,8 @@ def serve(
                 now = time.monotonic()
                 for data, _ in hub.receive(name, now):
                     program.receive(data, now)
+                if hub.receiving(name):
+                    program.hearing(now)  # a long frame under way is not silence
                 _send(program, hub, now)  # answer at once
             hub.take_closed()  # the session notices by the bridge's silence, and says hello
         if hub.is_open("link"):
@@ -128,6 +136,20 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="SECONDS",
         help="exit with code 1 when no bridge has answered for this long (default: keep trying)",
     )
+    plugins = parser.add_argument_group(
+        "plug-ins",
+        "what this robot runs in place of the run's (the bridge gives the run's settings): a "
+        "whole controller of one's own is how a port written in Python is checked by swarm "
+        "conformance (docs/extending.md)",
+    )
+    for kind in KINDS:
+        plugins.add_argument(
+            OPTIONS[kind],
+            metavar="NAME",
+            default=None,
+            help=f"the {kind}: an installed plug-in's name or package.module:attribute "
+            f"(default: the run's; swarm plugins lists them)",
+        )
     parser.add_argument(
         "--log-level",
         default="info",
@@ -154,14 +176,40 @@ def main(argv: Sequence[str] | None = None) -> int:
         run, keyring = read_key_file(args.key_file, names.robot_identity(args.id))
     except ValueError as error:
         parser.exit(2, f"robot-agent: error: {error}\n")
+    chosen: dict[str, str] = {
+        kind: getattr(args, kind) for kind in KINDS if getattr(args, kind) is not None
+    }
+    try:  # what the options name is found now, before the link: a bad name is one line
+        for kind in KINDS:
+            if kind in chosen:
+                registry.resolve(kind, chosen[kind])
+    except PluginError as error:
+        parser.exit(2, f"robot-agent: error: {error}\n")
     stop = StopRequest()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, stop)
-    program = LinkRobot.create(args.id, run, keyring)
+    prepare = functools.partial(run_settings, chosen) if chosen else None
+    program = LinkRobot.create(args.id, run, keyring, prepare)
     log.info("robot %d of run %s: saying hello on %s", args.id, run, address)
     code = serve(program, address, stop, args.give_up)
     print(json.dumps(program.summary()), flush=True)
+    if program.failure is not None:
+        print(f"robot-agent: error: {program.failure}", file=sys.stderr, flush=True)
+        return PLUGIN_FAILED
     return code
+
+
+def run_settings(
+    chosen: Mapping[str, str], config: ControllerConfig
+) -> tuple[ControllerConfig, Plugins]:
+    """The run's controller settings with this program's own strategy and pooling
+    operator, and the plug-ins they and its controller name, resolved."""
+    settings = dataclasses.replace(
+        config,
+        strategy=chosen.get("strategy", config.strategy),
+        pooling=chosen.get("pooling", config.pooling),
+    )
+    return settings, registry.resolve_plugins(settings, chosen.get("controller", "paper"))
 
 
 if __name__ == "__main__":

@@ -30,6 +30,8 @@ from bestofn_swarm.plumbing.world_info import ask, fetch_world_info
 from bestofn_swarm.plumbing.zenoh_session import certificate_name, open_from_args
 from bestofn_swarm.wire import auth, keyspace, names, protocol
 from robot_agent.core import builder, byzantine
+from robot_agent.core.plugin import PLUGIN_FAILED, PluginError
+from robot_agent.core.plugins import Plugins
 from robot_agent.node.options import AGENT_OPTIONS, RobotAgentConfig, hosted_byzantine
 from robot_agent.node.robot_node import (
     INBOX_BYTES,
@@ -41,6 +43,7 @@ from robot_agent.node.robot_node import (
     RobotNode,
     serve,
 )
+from robot_agent.plugins import registry
 
 log = logging.getLogger("robot_agent")
 
@@ -167,6 +170,7 @@ class AgentSettings:
     agent: RobotAgentConfig
     fixed: list[int]  # the robots given by id (not ``--id auto``)
     misbehaving: dict[int, byzantine.Behaviour]
+    plugins: Plugins  # found before anything is opened: the run's sources if given
 
 
 def agent_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> AgentSettings:
@@ -178,9 +182,11 @@ def agent_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) ->
     agent: RobotAgentConfig = settings_cli.config_from(parser, args, AGENT_OPTIONS)
     try:
         misbehaving = hosted_byzantine(agent.byzantine, fixed)
+        plugins = registry.resolve_plugins(agent.controller, agent.plugins.controller)
+        registry.check_sources(plugins, agent.plugins.sources)
     except ValueError as error:
         parser.exit(2, f"robot-agent: error: {error}\n")
-    return AgentSettings(agent, fixed, misbehaving)
+    return AgentSettings(agent, fixed, misbehaving, plugins)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -190,6 +196,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     args, keyring, keys = begun.args, begun.keyring, begun.keys
     agent, misbehaving = begun.settings.agent, begun.settings.misbehaving
+    plugins = begun.settings.plugins
     config = agent.controller
     for given in begun.settings.fixed:
         if keyring is not None and not keyring.holds(names.robot_identity(given)):
@@ -225,8 +232,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                     keys=keys,
                     keyring=keyring.only([identity]) if keyring is not None else None,
                     behaviour=misbehaving.get(robot),
+                    plugins=plugins,
+                    robot_faults=[spec.fault() for spec in agent.faults],
                 )
-            except ValueError as error:  # another run's seed; a liar's site the world lacks
+            except PluginError as error:  # a plug-in that cannot make this robot
+                print(f"robot-agent: error: {error}", file=sys.stderr)
+                return PLUGIN_FAILED
+            except ValueError as error:  # another run's seed; a liar's site; a fault unknown
                 print(f"robot-agent: error: {error}", file=sys.stderr)
                 return 2
             if info.clock == "realtime" and latest is None:
@@ -246,8 +258,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             node.start()
         ending = _hear_ending(nodes[0], inbox)
         log.info("robot(s) %s running", ", ".join(str(node.robot_id) for node in nodes))
-        code = serve(nodes, inbox)
+        stopped = serve(nodes, inbox)
         ending.undeclare()
+        code = stopped.code
+        if stopped.failure is not None:  # a plug-in failed in a robot's step: the run ends
+            print(f"robot-agent: error: {stopped.failure}", file=sys.stderr)
+            return PLUGIN_FAILED
     except (zenoh.ZError, TimeoutError, NoKeyError) as error:
         print(f"robot-agent: {error}", file=sys.stderr)
         return 1

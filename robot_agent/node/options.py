@@ -16,12 +16,15 @@ from bestofn_swarm.wire import protocol, settings
 from bestofn_swarm.wire.settings import Flag
 from robot_agent.core import byzantine
 from robot_agent.core.controller_config import ControllerConfig
+from robot_agent.core.faults import FaultSpec
+from robot_agent.core.plugin import ControllerChoice
 
 
 @dataclass(frozen=True)
 class RobotAgentConfig:
     """The configuration of one robot process: the run's seed, the controller's settings,
-    and which of its robots misbehave (a fault experiment)."""
+    which of its robots misbehave (a fault experiment), and which controller they run
+    (with the run's plug-ins' sources)."""
 
     seed: Annotated[
         protocol.Seed | None,
@@ -39,6 +42,14 @@ class RobotAgentConfig:
             "fault experiment; swarm run --byzantine chooses a liar's site itself)"
         ),
         Flag(metavar="ROBOT:MODE"),
+    ] = ()
+    plugins: ControllerChoice = field(default_factory=ControllerChoice)
+    faults: Annotated[
+        tuple[FaultSpec, ...],
+        Meta(
+            description="the faults of its robots that change what their controllers do (a "
+            "motor failure), as swarm run declared them (robot_agent/core/faults.py)"
+        ),
     ] = ()
 
     def __post_init__(self) -> None:

@@ -47,6 +47,7 @@ from bestofn_swarm.wire.keyspace import Party
 from bestofn_swarm.wire.names import Role
 from robot_agent.core.endpoint import Outgoing, RobotEndpoint, Step
 from robot_agent.core.hosting import HostedRobots
+from robot_agent.core.plugin import PluginError
 
 log = logging.getLogger("robot_agent")
 
@@ -66,7 +67,8 @@ BATCHES = keyspace.heard_by(Party.HOST)
 @dataclass(frozen=True)
 class Event:
     """What reaches a robot process: a sample of one of the kinds it hears, a world
-    server's liveliness token that appeared or went (``gone``), or its stop."""
+    server's liveliness token that appeared or went (``gone``), or its stop (``failure``:
+    a plug-in failed in a robot's step, the one line that says so)."""
 
     robot: int
     kind: keyspace.KeyKind | Stop
@@ -75,6 +77,7 @@ class Event:
     arrived: float = 0.0  # monotonic time the callback took it (only when tracing)
     gone: bool = False
     code: int = 0  # a stop: the process's exit code (the run's, when it ended)
+    failure: str | None = None
 
 
 class LatestSenses:
@@ -180,7 +183,11 @@ class RobotNode:
                     with self.lock:
                         if self.closed:
                             return
-                        self.take(kind, payload, extra, arrived)
+                        try:
+                            self.take(kind, payload, extra, arrived)
+                        except PluginError as error:
+                            self.fail(error)
+                            return
                         if self.host is not None:
                             self.host.flush()
 
@@ -200,6 +207,15 @@ class RobotNode:
         self._fold_dropped()
         self._publish(self.endpoint.status(0))
         self._token = session.liveliness().declare_token(keys.token(Role.ROBOT, robot))
+
+    def fail(self, error: PluginError) -> None:
+        """A plug-in failed in this robot's step (under the process's lock): the process
+        answers no more and its thread ends it, saying why (robot_agent/node/cli.py)."""
+        self.closed = True
+        if self.host is not None:
+            for node in self.host.by_id.values():
+                node.closed = True
+        self.inbox.put(Event(self.robot_id, STOP, failure=str(error)), control=True)
 
     def _on_world(self, sample: zenoh.Sample) -> None:
         """A world server's token came or went: for the process's thread, charged."""
@@ -341,7 +357,11 @@ class HostBatch:
                 with self.lock:
                     if self.lead.closed:
                         return
-                    self.deliver(payload, extra, arrived)
+                    try:
+                        self.deliver(payload, extra, arrived)
+                    except PluginError as error:
+                        self.lead.fail(error)
+                        return
                     self.flush()
 
             if lead.latest is not None:
@@ -380,15 +400,16 @@ class HostBatch:
             self.steps.clear()
 
 
-def serve(nodes: Sequence[RobotNode], inbox: BoundedInbox[Event]) -> int:
+def serve(nodes: Sequence[RobotNode], inbox: BoundedInbox[Event]) -> Event:
     """Feed the nodes the events of their inbox (the world's liveliness) until a stop event
-    arrives (a stop signal, or the run's ending); their inputs they handle in Zenoh's
-    callbacks. The process's exit code: the run's, when it ended."""
+    arrives (a stop signal, the run's ending, or a plug-in's failure); their inputs they
+    handle in Zenoh's callbacks. The stop event: its exit code (the run's, when it ended)
+    and what a plug-in's failure said, if one stopped them."""
     by_id = {node.robot_id: node for node in nodes}
     while True:
         event = inbox.get()
         if event.kind == STOP:
-            return event.code
+            return event
         node = by_id[event.robot]
         if (
             event.kind is keyspace.ALIVE_WORLD

@@ -319,6 +319,10 @@ class Bridge:
                 self._flush_peer(peer, now)
             self.hub.flush(now)
             self._take_closed(now)
+            for robot, peer in self.peers.items():
+                busy_until = self.hub.busy_until(robot)
+                if busy_until is not None:  # a serial line: the robot hears it all then
+                    peer.sending(busy_until)
             self._publish_stats(now)
 
     def _deadline(self) -> float:
@@ -389,6 +393,8 @@ class Bridge:
             line.refused.clear()
         for frame, _ in frames:
             self._arrive(peer, frame, robot, now)
+        if self.hub.receiving(robot):
+            peer.hearing(now)  # a long frame from the robot under way is not silence
 
     def _take_closed(self, now: float) -> None:
         """End the session of each serial line that closed (the hub opens it again)."""
@@ -431,6 +437,9 @@ class Bridge:
                 self._publish_stats(now, force=True)
             elif isinstance(event, SessionClosed):
                 self.presence.gone(event.robot)
+                # What waits on a serial line for the session that ended would hold up the
+                # next one's welcome behind it (a map of 1000 sites is 5 s at 115200 baud).
+                self.hub.discard_waiting(event.robot, now)
                 self._publish_stats(now, force=True)
 
     def _relay(self, message: Message) -> None:

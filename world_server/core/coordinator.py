@@ -16,6 +16,11 @@ each beacon that answers the tick, and on ``world/clock`` for observers), the ca
 frames, every robot's senses, made for all of them at once (in its process's batch, sealed
 with that process's key, if it answers in batches), and every ``state_every`` ticks the
 world's state.
+
+The live page paces it (``viewer/pace``, the page's tag): while paused no tick closes, and
+a speed closes a tick no sooner than its share of wall time; a run started with ``hold``
+opens tick 0 and waits there until the page says play. In lockstep this changes only when
+ticks close, never what they hold: the run is the seed's, paced or not.
 """
 
 from __future__ import annotations
@@ -77,16 +82,23 @@ class Coordinator:
         expect_beacons: int = 0,
         keyring: auth.Keyring | None = None,
         traced: bool = False,
+        hold: bool = False,
     ) -> None:
         """The run starts once ``expect_robots`` robots and ``expect_beacons`` beacons are
         live (0: as soon as one robot is), or ``start_timeout`` after ``begin`` with at
-        least one robot; ``traced`` adds the timeline outputs (Mark, Opened, Answered)."""
+        least one robot; ``traced`` adds the timeline outputs (Mark, Opened, Answered);
+        ``hold``: tick 0 closes only once the live page says play."""
         self.world = world
         self.keys = keys
         self.outbox = outbox
         self.keyring = keyring  # None: an unauthenticated run
         self.lockstep = world.config.clock == "lockstep"
+        self.speed = speed
         self.pacer = Pacer(world.config.dt, speed)
+        self.playing = not hold  # the live page's pause (a held run starts paused)
+        # Lockstep at the page's speed: a tick closes no sooner than its pacer says (None:
+        # as soon as every answer is in).
+        self.lockstep_pacer: Pacer | None = None
         self.stall_timeout = stall_timeout
         self.start_timeout = start_timeout
         self.state_every = state_every
@@ -109,6 +121,7 @@ class Coordinator:
             keyspace.STATS: self._stats,
             keyspace.JOIN: self._join,
             keyspace.INFO: self._info,
+            keyspace.PACE: self._pace,
             Happening.REFUSED: lambda event: self.counters.reject(
                 event.key, event.payload.decode(errors="replace")
             ),
@@ -147,7 +160,10 @@ class Coordinator:
         if self.phase == Phase.WAITING:
             self._wait(now)
         elif self.phase == Phase.RUNNING:
-            if self.lockstep:
+            if not self.playing:
+                # Paused: nothing closes, and no one is late for a tick that waits.
+                self.stall_deadline = now + self.stall_timeout
+            elif self.lockstep:
                 self._lockstep(now)
             elif now >= self.pacer.deadline(self.world.tick, now):
                 self.close_tick()
@@ -171,9 +187,12 @@ class Coordinator:
         """When to wake the coordinator if no event comes first; None: only an event."""
         if self.phase == Phase.WAITING:
             return self.start_deadline if self.now < self.start_deadline else None
-        if self.phase == Phase.STOPPED:
+        if self.phase == Phase.STOPPED or not self.playing:
             return None
         if self.lockstep:
+            paced = self.lockstep_pacer
+            if paced is not None and self.intake.barrier.complete:
+                return min(self.stall_deadline, paced.deadline(self.world.tick, self.now))
             return self.stall_deadline
         return self.pacer.deadline(self.world.tick, self.now)
 
@@ -219,6 +238,9 @@ class Coordinator:
             self.stall_deadline = now + self.stall_timeout
             return
         complete = self.intake.barrier.complete
+        paced = self.lockstep_pacer
+        if complete and paced is not None and now < paced.deadline(self.world.tick, now):
+            return  # in before its time at the page's speed: it closes at its deadline
         if complete or now >= self.stall_deadline:
             if not complete:
                 self._log_stall()
@@ -323,6 +345,44 @@ class Coordinator:
         asker = self._asker(event)
         if asker is not None:
             self._reply(event, asker, protocol.encode(self.state()))
+
+    def _pace(self, event: Event) -> None:
+        """The live page's pause, play or speed (its tag checked; refused and counted
+        otherwise). Going on after a pause or at a new speed, the pacing starts again from
+        the tick under way."""
+        try:
+            metadata = auth.unseal(
+                self.keyring, names.VIEWER, event.key, event.payload, event.attachment
+            )
+            if metadata:
+                raise auth.AuthError("a pace carries no metadata")
+            pace = protocol.decode(event.payload, protocol.Pace)
+        except (auth.AuthError, protocol.ProtocolError) as error:
+            self.counters.reject(event.key, error)
+            return
+        resumed = pace.playing and not self.playing
+        if resumed or pace.speed != self._paced_speed():
+            self.stall_deadline = self.now + self.stall_timeout
+            if self.lockstep:
+                self.lockstep_pacer = (
+                    None if pace.speed is None else Pacer(self.world.config.dt, pace.speed)
+                )
+            else:
+                self.pacer = Pacer(
+                    self.world.config.dt, self.speed if pace.speed is None else pace.speed
+                )
+        if pace.playing != self.playing:
+            log.info(
+                "%s by the live page at tick %d",
+                "playing" if pace.playing else "paused",
+                self.world.tick,
+            )
+        self.playing = pace.playing
+
+    def _paced_speed(self) -> float | None:
+        if self.lockstep:
+            return None if self.lockstep_pacer is None else self.lockstep_pacer.speed
+        return None if self.pacer.speed == self.speed else self.pacer.speed
 
     def _reply(self, event: Event, asker: tuple[str, bytes], payload: bytes) -> None:
         identity, nonce = asker

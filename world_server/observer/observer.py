@@ -16,7 +16,9 @@ message), the live page (``deploy/viewer/live.py``) and the recorder's scene
 * the stall watchdog (``Watchdog``), when the observer is to say whether the run stalled;
 * the world's latest clock and state (sim time, counters), the beacons' reject counts and
   the links of the robots outside the emulator;
-* the progress (robots decided, trips) and the run's outcome and summary.
+* the progress (robots decided, trips) and the run's outcome and summary;
+* the run's time series (``frame.FrameCollector``), when it is given one: every status
+  and world state it believes is handed on.
 
 A sample that is authentic but makes no sense against what the observer knows (a status
 older than the robot's last, a world state older than the last, a status of a robot not
@@ -32,6 +34,7 @@ from typing import Any
 from bestofn_swarm.wire import keyspace, protocol
 from bestofn_swarm.wire.endings import Stop, TimeLimit
 from world_server.core.pooling import Pooling, PoolingTracker
+from world_server.observer.frame import FrameCollector
 from world_server.observer.summary import RobotRecord, RunOutcome, build_summary
 from world_server.observer.watchdog import Watchdog
 
@@ -62,13 +65,15 @@ class RunObserver:
         outside: Mapping[int, str] | None = None,
         poolings: bool = False,
         open_roster: bool = False,
+        series: FrameCollector | None = None,
     ) -> None:
         """``robots``: the run's robots. ``watchdog``: whether the run stalled is asked of
         it. ``byzantine``: the robots that lie (their decisions are not the swarm's).
         ``outside``: robots outside the emulator, with their link's transport.
         ``poolings``: track whom each pooling joined (views draw it). ``open_roster``: a
         robot heard that is not among ``robots`` joins (a recording read without its
-        description), rather than being refused."""
+        description), rather than being refused. ``series``: the run's time series, fed
+        what is believed here."""
         self.records: dict[int, RobotRecord] = {robot: RobotRecord(robot) for robot in robots}
         self.poses: dict[int, Pose] = {}
         self.watchdog = watchdog
@@ -78,6 +83,7 @@ class RunObserver:
             self.records.setdefault(robot, RobotRecord(robot)).outside = transport
         self.tracker = PoolingTracker() if poolings else None
         self.open_roster = open_roster
+        self.series = series
         self.sim_time = 0.0  # the latest sim time the world's clock or state said
         self.last_clock: protocol.Clock | None = None
         self.last_state: protocol.WorldState | None = None
@@ -131,6 +137,8 @@ class RunObserver:
         record.update(status)
         if self.watchdog is not None:
             self.watchdog.status(status)
+        if self.series is not None:
+            self.series.status(status)
         if self.tracker is None:
             return NOTHING
         pooling, decided = self.tracker.on_status(status)
@@ -147,6 +155,8 @@ class RunObserver:
             )
         self.last_state = state
         self.sim_time = max(self.sim_time, state.t)
+        if self.series is not None:
+            self.series.state(state)
         for pose in state.robots:
             self.poses[pose.id] = (pose.x, pose.y, pose.theta)
         if self.watchdog is not None:
@@ -185,17 +195,19 @@ class RunObserver:
         if self.watchdog is not None:
             self.watchdog.retired(robot)
 
-    def killed(self, robot: int, *, restarting: bool) -> None:
-        """The robot was stopped on purpose (a fault); a restarted robot starts afresh,
-        undecided, from now."""
-        record = self.records[robot]
-        record.killed = not restarting
+    def killed(self, robot: int) -> None:
+        """The robot was stopped on purpose (a fault): it holds nothing up."""
+        self.records[robot].killed = True
         if self.watchdog is not None:
             self.watchdog.retired(robot)
-        if restarting:
-            record.restarted()
-            if self.watchdog is not None:
-                self.watchdog.restarted(robot, self.sim_time)
+
+    def restarted(self, robot: int) -> None:
+        """The robot was started afresh (a fault): it starts undecided, from now."""
+        record = self.records[robot]
+        record.killed = False
+        record.restarted()
+        if self.watchdog is not None:
+            self.watchdog.restarted(robot, self.sim_time)
 
     def returned(self, robot: int) -> None:
         """A robot given up as crashed runs again (its process was only cut off)."""

@@ -130,7 +130,12 @@ class EndingRules:
             description="the robots' controller settings (a ControllerConfig), for where "
             "decided robots park and the default stall window"
         ),
-        Flag(metavar="JSON", parse=_controller, default_text="the controller's defaults"),
+        Flag(
+            name="controller-settings",
+            metavar="JSON",
+            parse=_controller,
+            default_text="the controller's defaults",
+        ),
     ] = field(default_factory=ControllerConfig)
     byzantine: Annotated[
         tuple[byzantine.ByzantineRobot, ...],
@@ -221,7 +226,7 @@ class Referee:
             self._returned.discard(message.id)
             last = self.observer.records[message.id].status
             if last is not None and message.tick < last.tick:
-                self.observer.killed(message.id, restarting=True)
+                self.observer.restarted(message.id)
         self.observer.take(opened)
 
     def state(self, state: protocol.WorldState) -> None:
@@ -268,8 +273,9 @@ class Referee:
         planned = next((p for p in self._planned if p.robot == robot and p.at <= self.t), None)
         if planned is not None:
             self._planned.remove(planned)
-            self.observer.killed(robot, restarting=planned.returns)
+            self.observer.killed(robot)
             if planned.returns:
+                self.observer.restarted(robot)
                 self._restarting.add(robot)
             return
         self._away.setdefault(robot, wall)

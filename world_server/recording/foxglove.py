@@ -21,9 +21,9 @@ from pathlib import Path
 from typing import Any
 
 from world_server.core.body import EPUCK
-from world_server.core.camera import WALL_HEIGHT, site_colour_bgr
+from world_server.core.camera import WALL_HEIGHT
 from world_server.core.layout import Layout
-from world_server.core.palette import PHASE_COLOURS, UNKNOWN_PHASE_COLOUR, Rgba
+from world_server.core.palette import PHASE_COLOURS, UNKNOWN_PHASE_COLOUR, Rgba, site_colour
 
 SCHEMA_DIR = Path(__file__).with_name("foxglove_schemas")
 SCHEMA_SOURCE = (
@@ -85,12 +85,6 @@ def duration(ns: int) -> dict[str, int]:
 def colour(rgba: Rgba) -> dict[str, float]:
     r, g, b, a = rgba
     return {"r": r, "g": g, "b": b, "a": a}
-
-
-def site_colour(quality: float, alpha: float = 1.0) -> Rgba:
-    """The colour a site is rendered in (``world_server.core.camera.site_colour_bgr``), as RGBA."""
-    blue, green, red = site_colour_bgr(quality)
-    return (red / 255.0, green / 255.0, blue / 255.0, alpha)
 
 
 def vector(x: float, y: float, z: float = 0.0) -> dict[str, float]:
@@ -258,7 +252,8 @@ class ArenaScene:
         self.robot_radius = robot_radius
 
     def arena(self, ns: int) -> dict[str, Any]:
-        """The wall, the floor, the nest, and each site in its rendered colour with a label."""
+        """The wall, the floor, the nest, and each site in its colour (the run's palette,
+        ``world_server.core.palette``) with a label naming its quality."""
         layout = self.layout
         radius = layout.arena_radius
         wall = [
@@ -272,7 +267,7 @@ class ArenaScene:
                 {
                     "pose": pose(site.x, site.y, WALL_HEIGHT / 2, site.angle),
                     "size": vector(0.01, width, WALL_HEIGHT),
-                    "color": colour(site_colour(site.quality)),
+                    "color": colour(site_colour(site.id, len(layout.sites))),
                 }
             )
             inside = radius - 0.12
@@ -300,7 +295,7 @@ class ArenaScene:
 
     def robot_colour(self, view: SceneRobot) -> Rgba:
         if view.decided_site is not None and 0 <= view.decided_site < len(self.layout.sites):
-            return site_colour(self.layout.site(view.decided_site).quality)
+            return site_colour(view.decided_site, len(self.layout.sites))
         if view.phase is None:
             return UNKNOWN_PHASE_COLOUR
         return PHASE_COLOURS.get(view.phase, UNKNOWN_PHASE_COLOUR)

@@ -17,6 +17,7 @@ from typing import Any
 import msgspec
 
 from bestofn_swarm.wire import keyspace, protocol
+from world_server.observer.frame import SwarmSample
 from world_server.recording import foxglove
 
 START_METADATA = "bestofn.start"  # written when recording begins
@@ -36,13 +37,16 @@ class RejectedSample(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
 
 
 REJECTED = "rejected"  # the recorder's own channel of the samples it refused
+SWARM = "swarm"  # the swarm's curves, one message per world state (<prefix>/foxglove/swarm)
+# The recorder's own channels beside the key table's, by name: the type of their messages.
+DERIVED: dict[str, type[msgspec.Struct]] = {REJECTED: RejectedSample, SWARM: SwarmSample}
 
 
 def schema_name(kind: keyspace.KeyKind | str) -> str:
     """The MCAP schema name of a kind of sample (``bestofn.Sense``, ``foxglove.CompressedImage``,
-    from the key table), or of the rejected samples' channel."""
+    from the key table), or of one of the recorder's own channels (``DERIVED``)."""
     if isinstance(kind, str):
-        return SCHEMA_PREFIX + RejectedSample.__name__
+        return SCHEMA_PREFIX + DERIVED[kind].__name__
     assert kind.schema is not None, f"a recording keeps no {kind.name} samples"
     return kind.schema
 
@@ -71,9 +75,9 @@ def inline_refs(schema: dict[str, Any]) -> dict[str, Any]:
 @functools.cache
 def message_schema(kind: keyspace.KeyKind | str) -> dict[str, Any]:
     """The JSON Schema of a recorded kind, from its definition in the protocol (the key
-    table says which type that is), or of the rejected samples."""
+    table says which type that is), or of one of the recorder's own channels."""
     if isinstance(kind, str):
-        return inline_refs(protocol.json_schema(RejectedSample))
+        return inline_refs(protocol.json_schema(DERIVED[kind]))
     if kind.recorded is keyspace.Recorded.IMAGE:
         return foxglove.schema(foxglove.COMPRESSED_IMAGE)
     return inline_refs(protocol.json_schema(kind.record_type))

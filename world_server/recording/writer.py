@@ -14,7 +14,10 @@ What a recording holds (see docs/recording.md; the record types in ``records.py`
   ``world/clock`` for the rest (process logs); publish time = the wall time of arrival;
 * derived Foxglove topics ``<prefix>/foxglove/{scene,transforms,log}``: the arena as a
   ``foxglove.SceneUpdate`` at every ``world/state``, robot poses as
-  ``foxglove.FrameTransforms`` every tick, process logs as ``foxglove.Log``;
+  ``foxglove.FrameTransforms`` every tick, process logs as ``foxglove.Log``; and the
+  swarm's curves as ``<prefix>/foxglove/swarm`` (``bestofn.SwarmSample``: robots decided,
+  each site's share of the swarm's opinion, mean entropy, poolings), one message per world
+  state at its sim time, fields a Plot panel draws (``.decided``, ``.shares[0]``);
 * a sample that fails its tag (in a keyed run), or to decode or validate, is counted;
   the first ``REJECTED_KEPT`` of them go, base64-encoded with their key, the reason and
   their first ``REJECTED_SAMPLE_BYTES`` bytes, to the ``<prefix>/recorder/rejected``
@@ -44,6 +47,7 @@ from bestofn_swarm.wire import auth, batch, keyspace, names, protocol
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
 from world_server.core.pooling import LINK_SECONDS, Pooling
+from world_server.observer.frame import FrameCollector, swarm_sample
 from world_server.observer.observer import RunObserver
 from world_server.recording import foxglove
 from world_server.recording.description import RunDescription, layout_description, versions
@@ -51,6 +55,7 @@ from world_server.recording.records import (
     REJECTED,
     RUN_METADATA,
     START_METADATA,
+    SWARM,
     RejectedSample,
     classify,
     message_schema,
@@ -150,7 +155,13 @@ class McapRecorder:
         self._encoder = msgspec.json.Encoder()
         # Scene state: the run's observer (the latest pose and status of each robot, whom each
         # pooling joined, as the live page sees it) and the pooling links drawn.
-        self.observer = RunObserver(range(run.robots), poolings=True, open_roster=True)
+        # The swarm's curves: a collector the observer feeds, swarm rows only.
+        self.curves = FrameCollector(
+            len(self.layout.sites), self.layout.best_site, robot_rows=False, keep=False
+        )
+        self.observer = RunObserver(
+            range(run.robots), poolings=True, open_roster=True, series=self.curves
+        )
         self._pose_batch: list[tuple[int, float, float, float]] = []
         self._pose_batch_ns = 0
         self._links: dict[int, tuple[int, list[foxglove.Segment]]] = {}  # robot -> (when, links)
@@ -412,9 +423,17 @@ class McapRecorder:
             views = {robot: self._view(robot) for robot in run.poses}
             update = self.scene.update(ns, views, segments)
             self._write_derived("scene", foxglove.SCENE_UPDATE, ns, update, wall_ns)
+            self._write_curves(wall_ns)
         elif kind is keyspace.LOG:
             log_line = foxglove.log_message(self.sim_ns, message.process, message.line)
             self._write_derived("log", foxglove.LOG, self.sim_ns, log_line, wall_ns)
+
+    def _write_curves(self, wall_ns: int) -> None:
+        """The swarm rows finished, each at its sample's sim time."""
+        for row in self.curves.take()[1]:
+            sample = swarm_sample(row)
+            ns = self._tick_ns(sample.tick) if self.dt_ns else round(sample.t * 1e9)
+            self._write_derived(SWARM, SWARM, ns, sample, wall_ns)
 
     def _view(self, robot: int) -> foxglove.SceneRobot:
         """What the scene shows of a robot: its latest status, as the observer has it."""
@@ -453,6 +472,8 @@ class McapRecorder:
         if self.closed:
             return
         self._flush_poses(time.time_ns())
+        self.curves.finish()
+        self._write_curves(time.time_ns())
         record = self._description()
         record["finished_by"] = finished_by
         record["recorder"] = json.dumps(

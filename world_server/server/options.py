@@ -62,6 +62,12 @@ class WorldServerConfig:
         Meta(ge=0, description="nest beacons to wait for before starting"),
         Flag(group="world"),
     ] = 1
+    # swarm run --view holds a run for the first browser. It shapes no run, so it has no
+    # option of its own (the launcher sets it in the configuration it hands over).
+    hold: Annotated[
+        bool,
+        Meta(description="open tick 0 and wait there until the live page says play (viewer/pace)"),
+    ] = False
 
     def __post_init__(self) -> None:
         settings.check(self)

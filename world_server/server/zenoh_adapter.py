@@ -105,6 +105,7 @@ class WorldServer:
             expect_beacons=expect_beacons,
             keyring=keyring,
             traced=trace is not None,
+            hold=config.hold,
         )
         self._info_bytes = protocol.encode(world.info)
         # Publishers kept per key, for what goes out tick after tick (Publish.steady).

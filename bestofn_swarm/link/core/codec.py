@@ -444,6 +444,11 @@ class Deframer:
     buffer: bytearray = field(default_factory=bytearray)
     overflowed: bool = False
 
+    @property
+    def receiving(self) -> bool:
+        """Whether a frame is under way: bytes since the last zero."""
+        return bool(self.buffer) or self.overflowed
+
     def feed(self, data: bytes) -> list[bytes | LinkError]:
         """The frames (and the refusals) that ``data`` completes, in order."""
         found: list[bytes | LinkError] = []

@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable, Hashable
 from typing import Any
 
-from bestofn_swarm.link.io.transport import LinkClosedError, Transport
+from bestofn_swarm.link.io.transport import LinkClosedError, SerialLine, Transport
 
 log = logging.getLogger("link.hub")
 
@@ -116,6 +116,23 @@ class Hub:
         except (LinkClosedError, OSError) as error:
             self._close(name, str(error), now)
             return []
+
+    def receiving(self, name: Hashable) -> bool:
+        """Whether a frame is under way on serial line ``name`` (bytes of it read, its end
+        not yet)."""
+        transport = self.transports.get(name)
+        return isinstance(transport, SerialLine) and transport.receiving
+
+    def busy_until(self, name: Hashable) -> float | None:
+        """When what was written to serial line ``name`` has all arrived (None: no serial
+        line of that name is open)."""
+        transport = self.transports.get(name)
+        return transport.busy_until if isinstance(transport, SerialLine) else None
+
+    def discard_waiting(self, name: Hashable, now: float) -> int:
+        """On serial line ``name``, drop the frames not begun yet; how many."""
+        transport = self.transports.get(name)
+        return transport.discard_waiting(now) if isinstance(transport, SerialLine) else 0
 
     def send(self, name: Hashable, frame: bytes, target: Hashable, now: float) -> None:
         """Send ``frame`` (to ``target``, for a UDP server) on transport ``name``; dropped

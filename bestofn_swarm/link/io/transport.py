@@ -8,9 +8,12 @@ or a serial line, never blocking the loop that drives them (``hub.py``).
   id in a frame's header says whose link it is, and that robot's link key whether it is.
 * ``SerialLine``: either end on a serial port (pyserial: a UART, a USB or Bluetooth serial
   adapter, a pseudo-terminal), 115200 baud by default, raw 8N1: frames as
-  ``COBS(frame + CRC-32) 0x00``. Writes are paced at the baud rate, 10 bits a byte: a
-  pseudo-terminal moves bytes at memory speed, and a frame must not arrive before its last
-  byte could have. Up to ``MAX_PENDING_BYTES`` wait; past that a frame is dropped (counted).
+  ``COBS(frame + CRC-32) 0x00``. Writes are paced at the baud rate, 10 bits a byte
+  (``pacing.PacedLine``): a pseudo-terminal moves bytes at memory speed, and a byte must not
+  arrive before the line could have carried it. Up to ``MAX_PENDING_BYTES`` wait; past that
+  a frame is dropped (counted). ``receiving`` says a frame is under way (bytes of it read,
+  its zero not yet), which the ends take as a sign of life; ``busy_until`` when what was
+  written so far has all arrived.
 
 Each has ``fileno()`` for ``select``, ``send(frame, target, now)`` (``target``: where a
 UDP server sends it; the others have one peer), ``receive(now)`` (the frames that arrived,
@@ -25,7 +28,7 @@ import abc
 import errno
 import logging
 import socket
-from collections import Counter, deque
+from collections import Counter
 from collections.abc import Hashable
 from types import TracebackType
 from typing import Any, Self, cast
@@ -33,7 +36,7 @@ from typing import Any, Self, cast
 import serial
 
 from bestofn_swarm.link.core import codec
-from bestofn_swarm.link.core.pacing import LinePacer
+from bestofn_swarm.link.core.pacing import PacedLine
 
 log = logging.getLogger("link.transport")
 
@@ -130,10 +133,8 @@ class SerialLine(Closing):
             raise OSError(f"cannot open serial port {path}: {error}") from None
         self.path = path
         self.baud = baud
-        self.pacer = LinePacer(baud)
+        self.line = PacedLine(baud)
         self.deframer = codec.Deframer()
-        self.queued: deque[tuple[float, bytes]] = deque()  # (when it may go, its bytes)
-        self.queued_bytes = 0
         self.unwritten = b""  # what the OS did not take last time
         self.refused: Counter[str] = Counter()
         self.sent = self.send_failures = 0
@@ -143,24 +144,36 @@ class SerialLine(Closing):
 
     @property
     def deadline(self) -> float | None:
-        return self.queued[0][0] if self.queued else None
+        return self.line.deadline
+
+    @property
+    def busy_until(self) -> float:
+        """When the bytes written so far have all arrived at the far end."""
+        return self.line.busy_until
+
+    @property
+    def receiving(self) -> bool:
+        """Whether a frame is under way: bytes of it read, its closing zero not yet."""
+        return self.deframer.receiving
+
+    def discard_waiting(self, now: float) -> int:
+        """Drop the frames whose first byte has not gone yet (a session that ended); how
+        many."""
+        return self.line.discard_waiting(now)
 
     def send(self, frame: bytes, target: Hashable, now: float) -> None:
         encoded = codec.serial_encode(frame)
-        if self.queued_bytes + len(encoded) > MAX_PENDING_BYTES:
+        if self.line.held_bytes + len(encoded) > MAX_PENDING_BYTES:
             self.send_failures += 1  # the line is that far behind: the frame is lost
             return
-        self.queued.append((self.pacer.done_at(len(encoded), now), encoded))
-        self.queued_bytes += len(encoded)
+        self.line.put(encoded, now)
         self.flush(now)
 
     def flush(self, now: float) -> None:
         """Write what is due (and what the OS did not take before)."""
-        while self.queued and self.queued[0][0] <= now:
-            _, encoded = self.queued.popleft()
-            self.queued_bytes -= len(encoded)
-            self.unwritten += encoded
-            self.sent += 1
+        due, completed = self.line.take(now)
+        self.unwritten += due
+        self.sent += completed
         while self.unwritten:
             try:
                 written = self.port.write(self.unwritten)

@@ -20,9 +20,13 @@ from typing import Any
 from bestofn_swarm.wire import protocol
 from bestofn_swarm.wire.endings import Ending
 from world_server.core.body import EPUCK
-from world_server.core.camera import site_colour_bgr
 from world_server.core.layout import Layout
-from world_server.core.palette import PHASE_COLOURS, UNKNOWN_PHASE_COLOUR, Rgba
+from world_server.core.palette import (
+    PHASE_COLOURS,
+    UNKNOWN_PHASE_COLOUR,
+    hex_colour,
+    site_colour,
+)
 from world_server.core.pooling import LINK_SECONDS, Pooling
 from world_server.observer.observer import RunObserver
 
@@ -47,15 +51,10 @@ TARGET_NONE, TARGET_SITE, TARGET_SITE_INFERRED, TARGET_NEST = 0, 1, 2, 3
 HOMEWARD = frozenset({"to_nest", "waiting", "at_nest", "lingering"})
 
 
-def hex_colour(rgba: Rgba) -> str:
-    r, g, b, _ = rgba
-    return f"#{round(255 * r):02x}{round(255 * g):02x}{round(255 * b):02x}"
-
-
-def site_hex(quality: float) -> str:
-    """A site's panel colour as the camera renders it (red share = quality)."""
-    blue, green, red = site_colour_bgr(quality)
-    return f"#{red:02x}{green:02x}{blue:02x}"
+def site_hex(site: int, sites: int) -> str:
+    """A site's colour on the page (``world_server.core.palette``: categorical, not its
+    quality, which the page writes beside it)."""
+    return hex_colour(site_colour(site, sites))
 
 
 @dataclass(frozen=True)
@@ -91,7 +90,7 @@ class Scene:
                         "angle": site.angle,
                         "half_width": site.half_width,
                         "quality": site.quality,
-                        "colour": site_hex(site.quality),
+                        "colour": site_hex(site.id, len(layout.sites)),
                     }
                     for site in layout.sites
                 ],

@@ -1,8 +1,8 @@
 // The swarm's page: draws the frames the server sends over one WebSocket (/ws).
 // Plain JavaScript and a canvas; no build step, nothing fetched from the internet.
 // The canvas exposes what it drew, read-only, as data- attributes (robot count, sim time,
-// how the run ended, frames and radio deliveries received, samples the live view refused)
-// so that tests can check what a person sees.
+// how the run ended, frames and radio deliveries received, samples the live view refused,
+// chart points held, whether the run is paused) so that tests can check what a person sees.
 "use strict";
 
 const ROW = { id: 0, x: 1, y: 2, theta: 3, phase: 4, targetKind: 5, target: 6, lead: 7,
@@ -21,6 +21,9 @@ let socket = null;
 let framesReceived = 0;
 let deliveriesReceived = 0;
 let rxTrail = [];     // recent radio deliveries, to draw for a moment: [sender, receiver, time]
+// The swarm's curves, one point per world state: [t, decided, entropy, pool size, shares...].
+let series = [];
+const POINT = { t: 0, decided: 1, entropy: 2, pool: 3, shares: 4 };
 
 function $(id) { return document.getElementById(id); }
 
@@ -53,6 +56,7 @@ function receive(message) {
     $("mode").textContent = message.mode === "replay" ? "(replay)" : "(live)";
     canvas.dataset.mode = message.mode;
     $("replay-controls").hidden = message.mode !== "replay";
+    series = [];
   } else if (message.type === "frame") {
     frame = message;
     framesReceived += 1;
@@ -65,6 +69,10 @@ function receive(message) {
   } else if (message.type === "opinion") {
     opinion = message;
     drawDetail();
+  } else if (message.type === "series") {
+    series = message.reset ? message.points : series.concat(message.points);
+    $("charts").dataset.points = series.length;
+    drawCharts();
   }
 }
 
@@ -90,6 +98,8 @@ function updateHeader() {
   canvas.dataset.rejected = refused;
   canvas.dataset.outside = Object.keys(frame.links || {}).length;
   if (frame.replay) updateReplayControls(frame.replay);
+  updateLiveControls(frame.pace);
+  canvas.dataset.paused = frame.pace && !frame.pace.playing ? "yes" : "";
 }
 
 // Robots outside the emulator: each link's transport, round trip and loss, as the bridge
@@ -152,6 +162,7 @@ function siteColour(id) {
 }
 
 function draw() {
+  drawCharts();
   resize();
   context.clearRect(0, 0, canvas.clientWidth, canvas.clientHeight);
   if (!hello) return;
@@ -378,6 +389,129 @@ function drawDetail() {
     }
   });
 }
+
+// --- charts ---------------------------------------------------------------------------
+// Small line charts of the swarm's curves, drawn up to the sim time shown.
+
+function chartContext(id) {
+  const chart = $(id);
+  const ratio = window.devicePixelRatio || 1;
+  const width = chart.clientWidth, height = chart.clientHeight;
+  if (chart.width !== Math.round(width * ratio) || chart.height !== Math.round(height * ratio)) {
+    chart.width = Math.round(width * ratio);
+    chart.height = Math.round(height * ratio);
+  }
+  const ctx = chart.getContext("2d");
+  ctx.setTransform(ratio, 0, 0, ratio, 0, 0);
+  ctx.clearRect(0, 0, width, height);
+  return { ctx, width, height };
+}
+
+// Axes and scales of one chart: x is sim time from 0 to ``tMax``, y from 0 to ``yMax``.
+function axes(id, tMax, yMax, yLabel) {
+  const c = chartContext(id);
+  const left = 30, bottom = 14, top = 4, right = 6;
+  const plot = { left, top, width: Math.max(10, c.width - left - right),
+                 height: Math.max(10, c.height - top - bottom) };
+  const x = (t) => plot.left + plot.width * Math.min(1, t / tMax);
+  const y = (v) => plot.top + plot.height * (1 - Math.min(1, Math.max(0, v / yMax)));
+  const ctx = c.ctx;
+  ctx.strokeStyle = "#999"; ctx.lineWidth = 1;
+  ctx.beginPath();
+  ctx.moveTo(plot.left, plot.top); ctx.lineTo(plot.left, plot.top + plot.height);
+  ctx.lineTo(plot.left + plot.width, plot.top + plot.height); ctx.stroke();
+  ctx.fillStyle = "#555"; ctx.font = "10px system-ui";
+  ctx.textAlign = "right";
+  ctx.fillText(yLabel, plot.left - 3, plot.top + 8);
+  ctx.fillText("0", plot.left - 3, plot.top + plot.height);
+  ctx.textAlign = "center";
+  ctx.fillText(`${tMax.toFixed(0)} s`, plot.left + plot.width - 12, plot.top + plot.height + 12);
+  return { ctx, x, y, plot };
+}
+
+function line(chart, points, value, colour, width) {
+  const { ctx, x, y } = chart;
+  ctx.strokeStyle = colour; ctx.lineWidth = width;
+  ctx.beginPath();
+  let started = false;
+  for (const point of points) {
+    const v = value(point);
+    if (v === null || v === undefined) continue;
+    if (started) ctx.lineTo(x(point[POINT.t]), y(v));
+    else { ctx.moveTo(x(point[POINT.t]), y(v)); started = true; }
+  }
+  ctx.stroke();
+}
+
+function cursor(chart, t) {
+  const { ctx, x, plot } = chart;
+  ctx.strokeStyle = "rgba(233, 30, 99, 0.6)"; ctx.lineWidth = 1;
+  ctx.beginPath(); ctx.moveTo(x(t), plot.top); ctx.lineTo(x(t), plot.top + plot.height);
+  ctx.stroke();
+}
+
+function drawCharts() {
+  if (!hello || !frame) return;
+  const replay = frame.replay;
+  const now = frame.t;
+  const shown = series.filter((point) => point[POINT.t] <= now + 1e-6);
+  const last = series.length ? series[series.length - 1][POINT.t] : 0;
+  const tMax = Math.max(10, replay ? replay.end : Math.max(now, last));
+  const decided = axes("chart-decided", tMax, hello.robots, String(hello.robots));
+  line(decided, shown, (p) => p[POINT.decided], "#263238", 2);
+  const shares = axes("chart-shares", tMax, 1, "1");
+  hello.arena.sites.forEach((site) => {
+    const best = site.id === hello.arena.best_site;
+    line(shares, shown, (p) => p[POINT.shares + site.id], site.colour, best ? 3 : 1.5);
+  });
+  const bits = Math.log2(Math.max(2, hello.sites));
+  const entropy = axes("chart-entropy", tMax, bits, bits.toFixed(1));
+  line(entropy, shown, (p) => p[POINT.entropy], "#6a1b9a", 2);
+  const sizes = shown.map((p) => p[POINT.pool]).filter((v) => v !== null);
+  const poolMax = Math.max(2, ...sizes);
+  const pools = axes("chart-pools", tMax, poolMax, String(Math.ceil(poolMax)));
+  pools.ctx.fillStyle = "#2e7d32";
+  for (const point of shown) {
+    if (point[POINT.pool] === null) continue;
+    pools.ctx.beginPath();
+    pools.ctx.arc(pools.x(point[POINT.t]), pools.y(point[POINT.pool]), 2, 0, 2 * Math.PI);
+    pools.ctx.fill();
+  }
+  if (replay) for (const chart of [decided, shares, entropy, pools]) cursor(chart, now);
+}
+
+// --- live controls ----------------------------------------------------------------------
+// Pause, play and speed of a lockstep run, for the world (a held run waits at tick 0 for
+// the first page).
+
+function updateLiveControls(pace) {
+  const live = hello && hello.mode === "live" && pace && pace.can_pace && !frame.ended;
+  $("live-controls").hidden = !live;
+  if (!live) return;
+  $("live-play").textContent = pace.playing ? "pause" : "play";
+  const select = $("live-speed");
+  if (select.options.length !== pace.speeds.length) {
+    select.replaceChildren(...pace.speeds.map((speed) => {
+      const option = document.createElement("option");
+      option.value = speed === null ? "" : String(speed);
+      option.textContent = speed === null ? "as fast as it goes" : `${speed}× real time`;
+      return option;
+    }));
+  }
+  select.disabled = pace.speeds.length === 0;
+  if (document.activeElement !== select) {
+    select.value = pace.speed === null ? "" : String(pace.speed);
+  }
+  $("live-state").textContent = pace.held ? "held at tick 0" : pace.playing ? "" : "paused";
+}
+
+$("live-play").addEventListener("click", () => {
+  send({ op: frame && frame.pace && frame.pace.playing ? "pause" : "play" });
+});
+$("live-speed").addEventListener("change", (event) => {
+  const value = event.target.value;
+  send({ op: "speed", speed: value === "" ? null : Number(value) });
+});
 
 // --- replay controls --------------------------------------------------------------------
 

@@ -6,7 +6,10 @@ nothing: they cannot make that frame), relays its messages, pings it to measure 
 link's round trip and loss, and closes the session when the program says bye or goes
 quiet. Every frame is checked before anything is done with it: size, form, the tag under
 the robot's link key, the session, the sequence number (each taken once), the direction,
-and a rate bound; a refusal is counted by reason and never raised.
+and a rate bound; a refusal is counted by reason and never raised. On a serial line the
+robot is not silent while a frame of it is arriving (``hearing``), nor while a long frame
+of the bridge's is still on its way to it (``sending``): it cannot answer a ping queued
+behind a map of 1000 sites, which takes 5 s at 115200 baud.
 
 A newer session of the same robot (the program restarted, or its link came back) replaces
 the old one: ``SessionClosed`` then ``SessionOpened``, so that the run sees the robot leave
@@ -98,6 +101,7 @@ class LinkPeer:
         self.hellos = codec.RecentNonces()
         self.bucket = TokenBucket(FRAME_RATE, FRAME_BURST)
         self.last_heard = 0.0
+        self.line_busy_until = 0.0  # when what the bridge wrote has reached the robot
         self.next_ping = 0.0
         self.ping_id = 0
         self.outstanding: dict[int, float] = {}  # ping id -> when it was sent
@@ -126,7 +130,7 @@ class LinkPeer:
         if self.session is None:
             return None
         oldest = min(self.outstanding.values(), default=None)
-        times = [self.next_ping, self.last_heard + self.welcome.silence]
+        times = [self.next_ping, self._quiet_since + self.welcome.silence]
         if oldest is not None:
             times.append(oldest + PING_TIMEOUT)
         return min(times)
@@ -141,7 +145,7 @@ class LinkPeer:
                 self.lost += 1
         if self.session is None:
             return []
-        if now - self.last_heard >= self.welcome.silence:
+        if now - self._quiet_since >= self.welcome.silence:
             return self._close(f"silent for {self.welcome.silence:g} s")
         if now >= self.next_ping:
             self.ping_id += 1
@@ -149,6 +153,22 @@ class LinkPeer:
             self._send(codec.FrameType.PING, self.ping_id.to_bytes(codec.PING_BODY_BYTES, "big"))
             self.next_ping = now + self.welcome.ping_every
         return []
+
+    @property
+    def _quiet_since(self) -> float:
+        """Silence counts from the robot's last sign of life, or from when the bridge's own
+        frames have reached it (it cannot answer before), whichever is later."""
+        return max(self.last_heard, self.line_busy_until)
+
+    def hearing(self, now: float) -> None:
+        """Bytes of a frame from the robot are arriving on a serial line (its end not yet):
+        the robot is there. On UDP only an authentic frame counts."""
+        if self.session is not None:
+            self.last_heard = max(self.last_heard, now)
+
+    def sending(self, until: float) -> None:
+        """What the bridge has written to a serial line reaches the robot at ``until``."""
+        self.line_busy_until = until
 
     # --- sending -----------------------------------------------------------------------
 
