@@ -41,6 +41,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "deploy.conformance.cli",
         "check a program that speaks the link against the controller, tick by tick",
     ),
+    "follow": (
+        "deploy.launcher.follow",
+        "follow a running swarm from any host: its progress, then its summary and exit code",
+    ),
     "plugins": (
         "deploy.plugin_list",
         "the plug-ins installed: strategies, pooling operators, controllers (docs/extending.md)",

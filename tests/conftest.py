@@ -72,6 +72,8 @@ LONGEST_FIRST = (
     "test_viewer",
     "test_swarm",
     "test_experiment",
+    "test_multihost",
+    "test_hosts",
     "test_portable_runs",
     "test_private_runs",
     "test_flood_memory",

@@ -122,7 +122,12 @@ ALLOWED: dict[str, set[str]] = {
         "bestofn_swarm/link/io",
         "bestofn_swarm/plumbing",
     },
-    "world_server/server": {"bestofn_swarm/wire", "world_server/core", "bestofn_swarm/plumbing"},
+    "world_server/server": {
+        "bestofn_swarm/wire",
+        "world_server/core",
+        "world_server/observer",
+        "bestofn_swarm/plumbing",
+    },
     "world_server/recording": {"bestofn_swarm/wire", "world_server/core", "world_server/observer"},
     "world_server/recorder": {
         "bestofn_swarm/wire",

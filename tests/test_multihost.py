@@ -1,159 +1,147 @@
-"""A swarm across three hosts: network namespaces joined by veth pairs on a bridge.
+"""A swarm across three hosts: network namespaces joined by veth pairs on a bridge, each
+host with its own Zenoh router (the routers of hosts 1 and 2 connected to host 0's), every
+process a client of its own host's router, as on real machines.
 
-Host 0 runs a Zenoh router, the world server and the nest beacon; hosts 1 and 2 each
-run a router (connected to host 0's) and a robot host process with two robots. Every
-process is a client of its own host's router, as on real machines. Robots that run a
-plug-in (the example plug-in, examples/linear_pool, installed) on both hosts make the run
-the in-process engine makes with it.
+* By hand, as deploy/README.md says: the world server and the beacon on host 0, a robot
+  host process of two robots on each of hosts 1 and 2, a recorder on host 2. The run ends
+  by itself: every process exits with the run's exit code, and the recording is complete
+  (``swarm report`` reads it to the end).
+* ``swarm run --dask`` from host 0, with the Dask scheduler on host 0 and a worker on each
+  of hosts 1 (given its router with ``--router``) and 2 (reading ``$BESTOFN_ROUTER``): a
+  worker killed mid-run ends the run crashed, naming its host, and leaves no process of the
+  run on any host; a second run on the same cluster gives the digest of ``swarm run`` on one
+  machine.
+* Robots that run a plug-in (the example plug-in, examples/linear_pool, installed) on two
+  hosts make the run the in-process engine makes with it.
 """
 
 from __future__ import annotations
 
 import importlib.util
 import json
+import os
+import signal
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import hosts_helpers as hosts
 import pytest
 from netns import Lan, namespaces
-from swarm_helpers import REPO, reference_run, stop_processes
+from swarm_helpers import (
+    REPO,
+    kill_leftovers,
+    processes_of,
+    reference_run,
+    run_swarm,
+    stop_processes,
+    swarm_command,
+    unique_run_id,
+)
 
-from world_server.core.layout import make_layout
 from world_server.observer.summary import DIGEST_FIELDS
 
-pytestmark = pytest.mark.timeout(180)
+pytestmark = pytest.mark.timeout(240)
 
 SUBNET = "10.78.0"  # only ever inside the namespaces this test creates
-PORT = 7447
-RUN, SEED, SITES, ROBOTS = "multihost", 3, 5, 4
+PORT, SCHEDULER_PORT = 7447, 8786
+SEED, SITES, ROBOTS = 3, 5, 4
+SHAPE = ["--seed", str(SEED), "--robots", str(ROBOTS), "--sites", str(SITES)]
 
-OBSERVER = """
-import json, sys, time
-from bestofn_swarm.wire import keyspace, protocol
-from bestofn_swarm.plumbing.zenoh_session import open_session
-keys = keyspace.Keys(sys.argv[2])
-statuses = {}
-session = open_session("client", [sys.argv[1]])
-session.declare_subscriber(
-    keys.of(keyspace.STATUS, "*"),
-    lambda s: statuses.__setitem__(
-        keys.robot_of(keyspace.STATUS, str(s.key_expr)),
-        protocol.decode(s.payload.to_bytes(), protocol.Status),
-    ),
-)
-deadline = time.monotonic() + float(sys.argv[4])
-while time.monotonic() < deadline:
-    if len(statuses) == int(sys.argv[3]) and all(
-        status.decided_site is not None for status in statuses.values()
-    ):
-        break
-    time.sleep(0.1)
-print(json.dumps({robot: status.decided_site for robot, status in statuses.items()}), flush=True)
-session.close()  # an open session can hold up the interpreter's exit
-"""
+
+class Hosts:
+    """Three hosts, each with its own router; what runs on them, and its log."""
+
+    def __init__(self, lan: Lan, log: Path) -> None:
+        self.lan = lan
+        self.log = log.open("wb")
+        self.started: list[subprocess.Popen[bytes]] = []
+        self.on(0, *hosts.router(self.endpoint(0))[1:])
+        for host in (1, 2):
+            self.on(host, *hosts.router(self.endpoint(host), self.endpoint(0))[1:])
+
+    def endpoint(self, host: int) -> str:
+        return f"tcp/{self.lan.address(host)}:{PORT}"
+
+    def on(
+        self, host: int, *command: str, stdout: int | None = None, env: dict[str, str] | None = None
+    ) -> subprocess.Popen[bytes]:
+        """``python COMMAND`` on ``host`` (logs to a file: a pipe nobody reads would block)."""
+        process = subprocess.Popen(
+            self.lan.run(host, sys.executable, *command),
+            cwd=REPO,
+            stdout=stdout or self.log,
+            stderr=self.log,
+            env=env,
+        )
+        self.started.append(process)
+        return process
+
+    def close(self) -> None:
+        stop_processes(self.started)
+        self.log.close()
 
 
 @pytest.fixture(scope="module")
-def hosts() -> Iterator[Lan]:
+def lan(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Hosts]:
     with namespaces("bmh", 3, SUBNET) as network:
-        yield network
+        made = Hosts(network, tmp_path_factory.mktemp("hosts") / "processes.log")
+        try:
+            yield made
+        finally:
+            made.close()
 
 
-def test_routers_per_host_carry_a_swarm_to_the_right_consensus(hosts: Lan, tmp_path: Path) -> None:
-    started: list[subprocess.Popen[bytes]] = []
-    logs = (tmp_path / "processes.log").open("wb")
-
-    def on(host: int, *command: str) -> subprocess.Popen[bytes]:
-        # Logs go to a file: a pipe nobody reads would block a chatty process.
-        process = subprocess.Popen(
-            hosts.run(host, sys.executable, *command), cwd=REPO, stdout=logs, stderr=logs
-        )
-        started.append(process)
-        return process
-
-    def endpoint(host: int) -> str:
-        return f"tcp/{hosts.address(host)}:{PORT}"
-
-    common = ["--run-id", RUN, "--seed", str(SEED), "--mode", "client"]
-    try:
-        on(0, "-m", "deploy.launcher.router", "--listen", endpoint(0))
-        for host in (1, 2):
-            on(
-                host,
-                "-m",
-                "deploy.launcher.router",
-                "--listen",
-                endpoint(host),
-                "--connect",
-                endpoint(0),
-            )
-        on(
-            0,
-            "-m",
-            "world_server.server",
-            *common,
-            "--connect",
-            endpoint(0),
-            "--robots",
-            str(ROBOTS),
-            "--sites",
-            str(SITES),
-        )
-        on(0, "-m", "nest_beacon", *common, "--connect", endpoint(0))
-        for host, robots in ((1, (0, 1)), (2, (2, 3))):
-            ids = [arg for robot in robots for arg in ("--id", str(robot))]
-            on(host, "-m", "robot_agent.node", *ids, *common, "--connect", endpoint(host))
-        observer = subprocess.Popen(
-            hosts.run(2, sys.executable, "-c", OBSERVER, endpoint(2), RUN, str(ROBOTS), "120"),
-            cwd=REPO,
-            stdout=subprocess.PIPE,
-            stderr=logs,
-        )
-        started.append(observer)
-        output, _ = observer.communicate(timeout=170)
-        crashed = [p.args for p in started if p is not observer and p.poll() is not None]
-    finally:
-        stop_processes(started)
-        logs.close()
-    log_text = (tmp_path / "processes.log").read_text(errors="replace")[-3000:]
-    assert not crashed, f"processes exited early: {crashed}\n{log_text}"
-    decisions = json.loads(output.decode().strip().splitlines()[-1])
-    best = make_layout(SITES, ROBOTS, SEED).best_site
-    assert decisions == {str(robot): best for robot in range(ROBOTS)}, log_text
+def _tail(lan: Hosts) -> str:
+    lan.log.flush()
+    return Path(lan.log.name).read_text(errors="replace")[-3000:]
 
 
-# Each robot's results as swarm run's summary has them (its statuses, in order, since before
-# the world's first tick), and their digest; printed once every robot has decided.
-RESULTS = """
-import json, sys, threading, time
-from bestofn_swarm.wire import keyspace, protocol
-from bestofn_swarm.plumbing.zenoh_session import open_session
-from world_server.observer.summary import RobotRecord, robot_summary, run_digest
-keys = keyspace.Keys(sys.argv[2])
-robots = int(sys.argv[3])
-records = {robot: RobotRecord(robot) for robot in range(robots)}
-lock = threading.Lock()
-def heard(sample):
-    robot = keys.robot_of(keyspace.STATUS, str(sample.key_expr))
-    with lock:
-        records[robot].update(protocol.decode(sample.payload.to_bytes(), protocol.Status))
-session = open_session("client", [sys.argv[1]])
-session.declare_subscriber(keys.of(keyspace.STATUS, "*"), heard)
-print("listening", flush=True)
-deadline = time.monotonic() + float(sys.argv[4])
-while time.monotonic() < deadline:
-    with lock:
-        if all(record.decided_site is not None for record in records.values()):
-            break
-    time.sleep(0.1)
-time.sleep(0.5)
-with lock:
-    per_robot = [robot_summary(records[robot]) for robot in range(robots)]
-print(json.dumps({"digest": run_digest(per_robot), "per_robot": per_robot}), flush=True)
-session.close()
-"""
+def test_the_hand_started_layout_ends_by_itself_with_a_complete_recording(
+    lan: Hosts, tmp_path: Path
+) -> None:
+    run = hosts.HandRun(unique_run_id("hand"), SEED, ROBOTS, SITES, tmp_path / "keys")
+    run.write_keys(per_process=2)
+    recording = tmp_path / "run.mcap"
+
+    def program(host: int, command: list[str]) -> subprocess.Popen[bytes]:
+        return lan.on(host, *command[1:])  # command[0] is the interpreter
+
+    recorder = program(2, run.recorder(lan.endpoint(2), recording))
+    time.sleep(1.0)  # it subscribes before the robots can start the run
+    swarm = [
+        program(0, run.world(lan.endpoint(0))),
+        program(0, run.beacon(lan.endpoint(0))),
+        program(1, run.robot_host(0, 1, lan.endpoint(1))),
+        program(2, run.robot_host(2, 3, lan.endpoint(2))),
+        recorder,
+    ]
+    codes = hosts.wait_all(swarm, timeout=150)
+    left = kill_leftovers(run.run_id)
+    assert codes == [0] * len(swarm), f"{codes}\n{_tail(lan)}"
+    assert left == []
+    report = subprocess.run(
+        swarm_command("report", str(recording), "--out", str(tmp_path / "report")),
+        cwd=REPO,
+        capture_output=True,
+        timeout=120,
+    )
+    assert report.returncode == 0, report.stderr.decode()[-2000:]
+    (row,) = json.loads((tmp_path / "report" / "summary.json").read_text())["runs"]
+    assert row["ended"] == "consensus" and row["correct"]
+
+
+class Cluster:
+    """A Dask scheduler on host 0 and a worker on each of hosts 1 and 2."""
+
+    def __init__(self, lan: Hosts) -> None:
+        self.lan = lan
+        self.scheduler = f"tcp://{lan.lan.address(0)}:{SCHEDULER_PORT}"
+        lan.on(0, *hosts.scheduler(lan.lan.address(0), SCHEDULER_PORT)[1:])
+        self.workers = {host: _worker(lan, self.scheduler, host) for host in (1, 2)}
+        _wait_for_workers(lan, self.scheduler, 2)
 
 
 @pytest.mark.skipif(
@@ -161,59 +149,118 @@ session.close()
     reason="the example plug-in is not installed: pip install -e examples/linear_pool",
 )
 def test_a_plugin_on_two_hosts_makes_the_run_it_makes_in_one_process(
-    hosts: Lan, tmp_path: Path
+    lan: Hosts, tmp_path: Path
 ) -> None:
-    started: list[subprocess.Popen[bytes]] = []
-    logs = (tmp_path / "processes.log").open("wb")
-    run = "multihost-plugin"
-
-    def on(host: int, *command: str) -> subprocess.Popen[bytes]:
-        process = subprocess.Popen(
-            hosts.run(host, sys.executable, *command), cwd=REPO, stdout=logs, stderr=logs
-        )
-        started.append(process)
-        return process
-
-    def endpoint(host: int) -> str:
-        return f"tcp/{hosts.address(host)}:{PORT}"
-
-    common = ["--run-id", run, "--seed", str(SEED), "--mode", "client"]
-    try:
-        on(0, "-m", "deploy.launcher.router", "--listen", endpoint(0))
-        for host in (1, 2):
-            on(host, "-m", "deploy.launcher.router", "--listen", endpoint(host),
-               "--connect", endpoint(0))  # fmt: skip
-        observer = subprocess.Popen(
-            hosts.run(2, sys.executable, "-c", RESULTS, endpoint(2), run, str(ROBOTS), "150"),
-            cwd=REPO,
-            stdout=subprocess.PIPE,
-            stderr=logs,
-        )
-        started.append(observer)
-        assert observer.stdout is not None
-        assert observer.stdout.readline().decode().strip() == "listening"
-        on(0, "-m", "world_server.server", *common, "--connect", endpoint(0),
-           "--robots", str(ROBOTS), "--sites", str(SITES))  # fmt: skip
-        on(0, "-m", "nest_beacon", *common, "--connect", endpoint(0))
-        for host, robots in ((1, (0, 1)), (2, (2, 3))):
-            ids = [arg for robot in robots for arg in ("--id", str(robot))]
-            on(host, "-m", "robot_agent.node", *ids, *common, "--connect", endpoint(host),
-               "--pooling", "linear")  # fmt: skip
-        output, _ = observer.communicate(timeout=170)
-        crashed = [p.args for p in started if p is not observer and p.poll() is not None]
-    finally:
-        stop_processes(started)
-        logs.close()
-    log_text = (tmp_path / "processes.log").read_text(errors="replace")[-3000:]
-    assert not crashed, f"processes exited early: {crashed}\n{log_text}"
-    found = json.loads(output.decode().strip().splitlines()[-1])
-    alone = reference_run(
-        ["--robots", str(ROBOTS), "--sites", str(SITES), "--seed", str(SEED), "--pooling", "linear"]
-    )
+    run = hosts.HandRun(unique_run_id("plugin"), SEED, ROBOTS, SITES, tmp_path / "keys")
+    run.write_keys(per_process=2)
+    plugin = ["--pooling", "linear"]
+    following = lan.on(2, *run.follow(lan.endpoint(2))[1:], stdout=subprocess.PIPE)
+    swarm = [
+        lan.on(0, *run.world(lan.endpoint(0))[1:]),
+        lan.on(0, *run.beacon(lan.endpoint(0))[1:]),
+        lan.on(1, *run.robot_host(0, 1, lan.endpoint(1))[1:], *plugin),
+        lan.on(2, *run.robot_host(2, 3, lan.endpoint(2))[1:], *plugin),
+    ]
+    codes = hosts.wait_all([*swarm, following], timeout=150)
+    output = following.communicate(timeout=10)[0].decode()
+    kill_leftovers(run.run_id)
+    assert codes == [0] * 5, f"{codes}\n{_tail(lan)}"
+    found = json.loads(output)
+    alone = reference_run([*run.shape, *plugin])
     assert alone["ended"] == "consensus"
 
     def results(per_robot: list[dict[str, object]]) -> list[dict[str, object]]:
         return [{name: robot[name] for name in DIGEST_FIELDS} for robot in per_robot]
 
-    assert results(found["per_robot"]) == results(alone["per_robot"]), log_text
+    assert results(found["per_robot"]) == results(alone["per_robot"]), _tail(lan)
     assert found["digest"] == alone["digest"]
+
+
+@pytest.fixture(scope="module")
+def cluster(lan: Hosts) -> Cluster:
+    pytest.importorskip("distributed", reason="Dask is an optional extra: '.[dask]'")
+    return Cluster(lan)
+
+
+def _worker(lan: Hosts, scheduler: str, host: int) -> subprocess.Popen[bytes]:
+    """Host 1's worker is told its router; host 2's reads it from its host's environment."""
+    address = lan.lan.address(host)
+    if host == 1:
+        return lan.on(host, *hosts.worker(scheduler, address, 2, lan.endpoint(host))[1:])
+    env = {**os.environ, "BESTOFN_ROUTER": lan.endpoint(host)}
+    return lan.on(host, *hosts.worker(scheduler, address, 2)[1:], env=env)
+
+
+def _wait_for_workers(lan: Hosts, scheduler: str, count: int) -> None:
+    probe = (
+        "import sys\n"
+        "from distributed import Client\n"
+        "with Client(sys.argv[1], timeout=30) as client:\n"
+        "    client.wait_for_workers(int(sys.argv[2]), timeout=60)\n"
+    )
+    assert lan.on(0, "-c", probe, scheduler, str(count)).wait(timeout=90) == 0, _tail(lan)
+
+
+def _swarm_run_on(
+    lan: Hosts, scheduler: str, run_id: str, *options: str
+) -> subprocess.Popen[bytes]:
+    """``swarm run --dask`` on host 0, the world a client of host 0's router."""
+    return lan.on(
+        0,
+        *swarm_command("run", "--run-id", run_id, "--json", "--quiet", "--no-record")[1:],
+        "--dask",
+        scheduler,
+        "--connect",
+        lan.endpoint(0),
+        *options,
+        stdout=subprocess.PIPE,
+    )
+
+
+def test_a_killed_worker_ends_the_run_naming_its_host_then_the_cluster_runs_again(
+    lan: Hosts, cluster: Cluster
+) -> None:
+    # The run on the real-time clock, slow enough to lose a worker while it goes.
+    run_id = unique_run_id("lost")
+    scheduler = cluster.scheduler
+    launcher = _swarm_run_on(lan, scheduler, run_id, *SHAPE, "--clock", "realtime", "--speed", "2")
+    host_2 = lan.lan.address(2)
+    try:
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline and len(processes_of(run_id)) < 7:
+            time.sleep(0.2)  # the launcher, the world, the beacon, four robot processes
+        time.sleep(2.0)
+        # Host 2's worker dies (``ip netns exec`` became the worker's interpreter).
+        cluster.workers[2].send_signal(signal.SIGKILL)
+        stdout, _ = launcher.communicate(timeout=150)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+        time.sleep(1.0)
+        left = kill_leftovers(run_id)
+    assert launcher.returncode == 1, _tail(lan)
+    summary = json.loads(stdout)
+    (lost,) = summary["lost_hosts"]
+    assert summary["ended"] == "crashed" and lost["host"] == host_2
+    assert f"on host {host_2}" in _tail(lan)
+    assert left == [], f"processes of the run left behind: {left}"
+
+    # The same cluster, with host 2's worker back, runs the swarm run of one machine.
+    cluster.workers[2] = _worker(lan, scheduler, 2)
+    _wait_for_workers(lan, scheduler, 2)
+    run_id = unique_run_id("again")
+    launcher = _swarm_run_on(lan, scheduler, run_id, *SHAPE)
+    try:
+        stdout, _ = launcher.communicate(timeout=150)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+        time.sleep(0.5)
+        left = kill_leftovers(run_id)
+    assert launcher.returncode == 0, _tail(lan)
+    summary = json.loads(stdout)
+    assert summary["robot_processes"] == 4 and "lost_hosts" not in summary
+    code, here, stderr = run_swarm([*SHAPE, "--no-record"], unique_run_id("here"))
+    assert code == 0, stderr
+    assert summary["digest"] == here["digest"] and summary["ended"] == "consensus"
+    assert left == [], f"processes of the run left behind: {left}"

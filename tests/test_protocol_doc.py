@@ -95,6 +95,8 @@ BOUNDED: tuple[Any, ...] = (
     protocol.LogLine,
     protocol.LinkStats,
     protocol.LinkRefusals,
+    protocol.RunEnding,
+    protocol.EndingSeals,
     codec.LinkWelcome,
 )
 
@@ -130,7 +132,14 @@ def _value(info: mi.Type) -> tuple[str, str]:
     if isinstance(info, mi.LiteralType):
         values = [f'`"{v}"`' if isinstance(v, str) else f"`{v}`" for v in info.values]
         return ("`1`" if values == ["`1`"] else "one of " + ", ".join(values)), ""
+    if isinstance(info, mi.EnumType):
+        values = [f'`"{member.value}"`' for member in info.cls]
+        return "one of " + ", ".join(values), ""
+    if isinstance(info, mi.DictType):
+        return "a JSON object (the run's summary)", ""
     if isinstance(info, mi.StrType):
+        if info.pattern == "^[0-9a-f]{32}$":
+            return "hex tag", "32 of `0-9 a-f` (16 bytes)"
         if info.pattern is not None:
             return "name", f"{info.min_length} to {info.max_length} of `A-Z a-z 0-9 _ . -`"
         return "string", f"at most {info.max_length} characters"

@@ -15,7 +15,7 @@ import zenoh
 
 from bestofn_swarm.plumbing import stop_signals
 from bestofn_swarm.wire import keyspace, protocol
-from bestofn_swarm.wire.endings import Halt, Stop, TimeLimit
+from bestofn_swarm.wire.endings import Ending, Halt, Stop, TimeLimit
 from deploy.cli import build_parser
 from deploy.launcher.follower import Heard
 from deploy.launcher.launcher import Swarm
@@ -185,9 +185,38 @@ def test_the_launcher_looks_with_its_clock_given_and_takes_a_signal_as_an_event(
     assert swarm.look(signalled=True) == Halt(Stop.INTERRUPTED)
     now[0] = 1030.0
     assert swarm.look(signalled=False) == Halt(Stop.TIMEOUT, TimeLimit.WALL)
+    # The sim time limit is the world's to see: the launcher takes its ending, which comes
+    # before a stop signal in the rule's order.
     swarm.inbox.put(_clock_message(50.0, plan))
     swarm.take_events(until=now[0])
+    assert swarm.look(signalled=True) == Halt(Stop.INTERRUPTED)
+    swarm.inbox.put(_ending_message(plan, Stop.TIMEOUT, TimeLimit.SIM))
+    swarm.take_events(until=now[0])
     assert swarm.look(signalled=True) == Halt(Stop.TIMEOUT, TimeLimit.SIM)
+    assert swarm.world_ended
+
+
+def _ending_message(plan: RunPlan, stop: Stop, limit: TimeLimit | None = None) -> Heard:
+    """The world's ending, as it would publish it (an unkeyed run: the launcher here holds
+    no keys, no network having been made)."""
+    ended = Ending.TIMEOUT if stop is Stop.TIMEOUT else Ending(stop.value)
+    ending = protocol.RunEnding(
+        v=protocol.VERSION,
+        run=plan.run_id,
+        ended=ended,
+        code=ended.code,
+        stop=stop,
+        timeout_kind=limit,
+        tick=500,
+        t=50.0,
+        signal=None,
+        lost=[],
+        summary={"ended": ended.value},
+    )
+    keys = keyspace.Keys(plan.run_id)
+    payload = protocol.encode(ending)
+    attachment = keyspace.seal_for_everyone(None, keys.of(keyspace.ENDING), payload, 2, "world")
+    return Heard(keyspace.ENDING, keys.of(keyspace.ENDING), payload, attachment)
 
 
 def test_the_inbox_takes_a_signal_whatever_else_filled_it() -> None:

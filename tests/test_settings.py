@@ -270,7 +270,11 @@ def test_swarm_run_hands_each_process_the_configs_its_options_make() -> None:
         assert argv[argv.index("--run-id") + 1] == plan.run_id
         return settings.decode(argv[argv.index("--config") + 1], config_type)
 
-    assert handed(plan.world_argv(), WorldServerConfig) == switches.world
+    # The world is also told how to end the run: this run's limits and robots.
+    world = handed(plan.world_argv(), WorldServerConfig)
+    assert world == dataclasses.replace(switches.world, rules=plan.ending_rules())
+    assert world.rules.timeout == plan.timeout and world.rules.stall_window == plan.stall_window
+    assert world.rules.controller == switches.controller
     assert switches.world.world == dataclasses.replace(
         switches.world.world, run=plan.run_id, seed=3, num_sites=6, num_robots=8
     )

@@ -79,6 +79,7 @@ FAST = frozenset(
         "test_wellstirred_voting",
         "test_wilson",
         "test_world",
+        "test_world_ending",
     }
 )
 
@@ -110,6 +111,7 @@ FULL_ONLY = {
     "test_experiment": "runs `swarm experiment` in a process",
     "test_faults": "starts swarms with faults",
     "test_inprocess": "starts swarms to compare with the in-process engine",
+    "test_hosts": "a hand-started run and a Dask cluster of processes on loopback",
     "test_mcu": "builds the robot as firmware and runs it under qemu; a C robot without entropy",
     "test_frame": "in-process runs and a swarm over Zenoh, recorded; swarm frame in a process",
     "test_run_output": "runs swarm in processes and a swarm with faults",

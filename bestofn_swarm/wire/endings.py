@@ -155,6 +155,7 @@ class Look:
     crashed: bool = False  # a process of the run other than a robot died on its own
     signalled: bool = False  # a stop signal came
     world_stopped: bool = False  # the world's clock did not advance for its wall window
+    ended: Halt | None = None  # the world's ending, heard (it judged 2 to 4 itself)
 
 
 def stop_reason(look: Look) -> Halt | None:
@@ -176,9 +177,15 @@ def stop_reason(look: Look) -> Halt | None:
     before what happened outside it on the wall clock (5 to 7), whose coinciding with a
     look is chance: a run that decided as the signal came ended in its decision. A stop
     signal is someone's intent, and comes before what the wall clock alone says.
+
+    The world server asks this rule with 1 (a beacon lost), 2 to 4 and 5 (a stop signal
+    to it); a launcher that heard the world's ending (``ended``) takes it for 2 to 4, after
+    its own 1 (a process it started died) and before its own 5 to 7.
     """
     if look.crashed:
         return Halt(Stop.CRASHED)
+    if look.ended is not None:
+        return look.ended
     if look.all_decided:
         if look.last_decision <= look.sim_limit:
             return Halt(Stop.DECIDED)

@@ -88,6 +88,10 @@ class KeyKind:
     record: Any = None  # Recorded.RADIO: the record type
     names_field: str | None = None  # the message's field that must equal the key's robot
     link_name: str = ""  # its name on the link (LinkCode.name), in upper case
+    # Tagged for everyone: besides its speaker's tag, its metadata (protocol.EndingSeals)
+    # holds a tag with each robot's key and with the bridge's, for the processes that hold
+    # neither the speaker's key nor the run secret (``seal_for_everyone``).
+    for_everyone: bool = False
 
     @property
     def placeholder(self) -> str | None:
@@ -167,8 +171,8 @@ ACT: Final = _kind(
     about="one robot's answer to a tick")
 STATUS: Final = _kind(
     "status", "robot/{robot}/status", How.PUT, protocol.Status, metadata=None, publisher=_R,
-    speaker=_R, hearers=_FOLLOWERS, link=18, recorded=Recorded.MESSAGE, names_field="id",
-    about="one robot's state, when it changes")
+    speaker=_R, hearers=_FOLLOWERS | {_W}, link=18, recorded=Recorded.MESSAGE,
+    names_field="id", about="one robot's state, when it changes (the world ends the run by it)")
 HOST_SENSE: Final = _kind(
     "host_sense", "host/{lead}/sense", How.PUT, batch.SenseBatch, metadata=None, publisher=_W,
     speaker=_H, hearers=frozenset({_H, _REC}), recorded=Recorded.BATCH,
@@ -197,7 +201,7 @@ RADIO_RX: Final = _kind(
     record=protocol.RadioRxRecord, about="a radio message the medium delivers to one robot")
 LINK: Final = _kind(
     "link", "link/{robot}/stats", How.PUT, protocol.LinkStats, metadata=None, publisher=_BR,
-    speaker=_BR, hearers=_FOLLOWERS, recorded=Recorded.MESSAGE, names_field="robot",
+    speaker=_BR, hearers=_FOLLOWERS | {_W}, recorded=Recorded.MESSAGE, names_field="robot",
     about="the link of a robot outside the emulator, each second and on change")
 LOG: Final = _kind(
     "log", "log/{process}", How.PUT, protocol.LogLine, metadata=None, publisher=_L,
@@ -211,6 +215,11 @@ VIEWER_FINISH: Final = _kind(
     "viewer_finish", "viewer/finish", How.QUERY, None, metadata=None, publisher=_V,
     speaker=None, hearers=frozenset({_L}),
     about="asked with the run summary (JSON); answered once every page was told the ending")
+ENDING: Final = _kind(
+    "ending", "world/ending", How.PUT, protocol.RunEnding, metadata=protocol.EndingSeals,
+    publisher=_W, speaker=_W, hearers=frozenset({_ANY}), recorded=Recorded.MESSAGE,
+    for_everyone=True,
+    about="how the run ended, once, with its summary: every process of the run exits on it")
 PACE: Final = _kind(
     "pace", "viewer/pace", How.PUT, protocol.Pace, metadata=None, publisher=_V, speaker=_V,
     hearers=frozenset({_W, _L, _REC}), recorded=Recorded.MESSAGE,
@@ -259,6 +268,7 @@ KINDS: tuple[KeyKind, ...] = (
     LOG,
     RECORDER_FINISH,
     VIEWER_FINISH,
+    ENDING,
     PACE,
     ALIVE_WORLD,
     ALIVE_ROBOT,
@@ -614,10 +624,60 @@ def open_sample(
     if identity is None:
         raise SampleError(f"{key}: not a key a single speaker tags")
     try:
-        metadata = auth.unseal(keyring, identity, key, payload, attachment)
+        if found.kind.for_everyone and keyring is not None and not keyring.holds(identity):
+            metadata: bytes | None = _open_own_tag(keyring, key, payload, attachment)
+        else:
+            metadata = auth.unseal(keyring, identity, key, payload, attachment)
     except auth.AuthError as error:
         raise SampleError(f"{key}: {identity}: {error}") from None
     return open_message(found.kind, found.ident, payload, metadata)
+
+
+def seal_for_everyone(
+    keyring: auth.Keyring | None, key: str, payload: bytes, robots: int, identity: str
+) -> bytes:
+    """The attachment of a sample of a kind tagged for everyone (``KeyKind.for_everyone``),
+    sent as ``identity``: its tag, then its metadata (``protocol.EndingSeals``), which holds
+    its tag with the key of each robot ``0`` to ``robots - 1`` and with the bridge's. In an
+    unkeyed run, the metadata alone, with no tags."""
+    if keyring is None:
+        return protocol.encode(protocol.EndingSeals(v=protocol.VERSION, robots=[], bridge=None))
+    seals = protocol.EndingSeals(
+        v=protocol.VERSION,
+        robots=[
+            keyring.seal(names.robot_identity(robot), key, payload).hex() for robot in range(robots)
+        ],
+        bridge=keyring.seal(names.BRIDGE, key, payload).hex(),
+    )
+    return keyring.seal(identity, key, payload, protocol.encode(seals))
+
+
+def _open_own_tag(
+    keyring: auth.Keyring, key: str, payload: bytes, attachment: bytes | None
+) -> bytes:
+    """The metadata of a sample tagged for everyone, checked by a process without its
+    speaker's key: with the tag of one of its own keys (a robot's, or the bridge's).
+    Raises AuthError."""
+    if attachment is None or len(attachment) < auth.TAG_BYTES:
+        raise auth.AuthError("no authentication tag")
+    metadata = attachment[auth.TAG_BYTES :]
+    try:
+        seals = protocol.decode(metadata, protocol.EndingSeals)
+    except protocol.ProtocolError as error:
+        raise auth.AuthError(f"no tags for everyone: {error}") from None
+    for identity in keyring.identities:
+        role, _, ident = identity.partition("/")
+        robot = names.robot_of_name(ident) if role == names.Role.ROBOT else None
+        if identity == names.BRIDGE:
+            tag = seals.bridge
+        elif robot is not None and robot < len(seals.robots):
+            tag = seals.robots[robot]
+        else:
+            continue
+        if tag is not None:
+            keyring.open(identity, key, payload, bytes.fromhex(tag))
+            return metadata
+    raise auth.AuthError("no tag for any key this process holds")
 
 
 def open_recorded(kind: KeyKind, ident: str | None, data: bytes) -> Opened:
@@ -685,7 +745,7 @@ _PARTY_TEXT = {
     Party.LAUNCHER: "launcher",
     Party.RECORDER: "recorder",
     Party.VIEWER: "views",
-    Party.ANY: "any",
+    Party.ANY: "every process of the run",
 }
 _HOW_TEXT = {How.PUT: "put", How.QUERY: "query", How.TOKEN: "liveliness token"}
 

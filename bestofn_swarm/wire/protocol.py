@@ -17,6 +17,7 @@ from typing import Annotated, Any, Literal, TypeVar
 import msgspec
 
 from bestofn_swarm.wire import names
+from bestofn_swarm.wire.endings import Ending, Stop, TimeLimit
 
 VERSION: Literal[1] = 1
 DEFAULT_ROOT = "bestofn"
@@ -27,6 +28,9 @@ DEFAULT_ROOT = "bestofn"
 MAX_OPTIONS = 1000
 MAX_PAYLOAD_BYTES = 64 * 1024
 MAX_CAMERA_FRAME_BYTES = 1024 * 1024
+# A run's ending carries its summary, a few hundred bytes per robot (docs/running.md): room
+# for the largest swarm a run may have (bestofn_swarm/wire/shape.py), many times over.
+MAX_ENDING_BYTES = 4 * 1024 * 1024
 OPINION_DIGITS = 9
 
 # The bounds, by name where the binary batches (bestofn_swarm/wire/batch.py) check them too.
@@ -384,6 +388,43 @@ class LinkStats(Message, frozen=True):
     refused: LinkRefusals
 
 
+# --- world -> every process of the run --------------------------------------------------
+
+_Tag = Annotated[str, msgspec.Meta(pattern="^[0-9a-f]{32}$")]
+
+
+class RunEnding(Message, frozen=True):
+    """``world/ending``: how the run ended, as its world decided it, once; every process of
+    the run exits on it with ``code``, the run's exit code (bestofn_swarm/wire/endings.py).
+
+    ``stop`` is why the world stopped the run (``timeout_kind``: which limit, for a
+    timeout), ``tick`` and ``t`` when; ``signal`` names the stop signal that ended it, if
+    one did; ``lost`` the robots (by id) and beacons (by name) whose liveliness went while
+    the run went on, not as a fault of its plan; ``summary`` is the run's summary as the
+    world knows it (the ``swarm run --json`` object, docs/running.md).
+    """
+
+    run: _Name
+    ended: Ending
+    code: Annotated[int, msgspec.Meta(ge=0, le=255)]
+    stop: Stop
+    timeout_kind: TimeLimit | None
+    tick: _Tick
+    t: _SimTime
+    signal: Annotated[str, msgspec.Meta(max_length=16)] | None
+    lost: Annotated[list[_Name], msgspec.Meta(max_length=names.MAX_ROBOTS)]
+    summary: dict[str, Any]
+
+
+class EndingSeals(Message, frozen=True):
+    """The metadata of ``world/ending``: the ending's tag (hex) with each robot's key, robot
+    by robot from 0, and with the bridge's, for processes that hold neither the world's key
+    nor the run secret (empty, and null, in an unkeyed run)."""
+
+    robots: Annotated[list[_Tag], msgspec.Meta(max_length=names.MAX_ROBOTS)]
+    bridge: _Tag | None
+
+
 # --- codec ---------------------------------------------------------------------------
 
 M = TypeVar("M")
@@ -399,17 +440,25 @@ def encode(message: msgspec.Struct) -> bytes:
     return _encoder.encode(message)
 
 
+# The messages that may be larger than MAX_PAYLOAD_BYTES, and how large.
+_LARGER: dict[Any, int] = {RunEnding: MAX_ENDING_BYTES, EndingSeals: MAX_ENDING_BYTES}
+
+
 def decode(payload: bytes | bytearray | memoryview, kind: type[M]) -> M:
     """Decode and validate ``payload`` as ``kind``; raise ProtocolError if it is not one."""
     decoder: msgspec.json.Decoder[M] | None = _decoders.get(kind)
     if decoder is None:
         decoder = _decoders[kind] = msgspec.json.Decoder(kind)
-    return _decode(decoder, payload)
+    return _decode(decoder, payload, _LARGER.get(kind, MAX_PAYLOAD_BYTES))
 
 
-def _decode(decoder: msgspec.json.Decoder[M], payload: bytes | bytearray | memoryview) -> M:
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise ProtocolError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}")
+def _decode(
+    decoder: msgspec.json.Decoder[M],
+    payload: bytes | bytearray | memoryview,
+    limit: int = MAX_PAYLOAD_BYTES,
+) -> M:
+    if len(payload) > limit:
+        raise ProtocolError(f"payload of {len(payload)} bytes exceeds {limit}")
     try:
         return decoder.decode(payload)
     except (msgspec.DecodeError, msgspec.ValidationError, UnicodeDecodeError) as error:

@@ -1,7 +1,8 @@
 """Following a run from what its processes publish: the robots' status, the world's state
 (every ``--state-every`` ticks: its sim time and poses), the beacons' acks, the live page's
-pause and play, and the world's clock only when faults are to fall due at a sim time: the
-launcher need not follow every tick, and costs the run nothing on the ticks in between.
+pause and play, the world's clock only when faults are to fall due at a sim time (the
+launcher need not follow every tick, and costs the run nothing on the ticks in between),
+and the run's ending, which the world decides (``world/ending``).
 
 The subscription is thin (``subscribe``): Zenoh's callbacks only copy each sample, as it
 came, into the launcher's inbox. The launcher's main thread hands them to
@@ -21,6 +22,7 @@ from typing import Any
 
 import zenoh
 
+from bestofn_swarm.plumbing.ending import open_ending
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
 from bestofn_swarm.wire import auth, keyspace, protocol
 from bestofn_swarm.wire.keyspace import Party
@@ -62,10 +64,11 @@ def subscribe(
 
         return callback
 
-    # What the launcher hears, the key table says; the clock only when it is needed.
+    # What the launcher hears, the key table says; the clock only when it is needed; and
+    # the run's ending, which every process hears.
     watched = [
         kind for kind in keyspace.heard_by(Party.LAUNCHER) if clock or kind is not keyspace.CLOCK
-    ]
+    ] + [keyspace.ENDING]
     return [session.declare_subscriber(keys.every(kind), queue_as(kind)) for kind in watched]
 
 
@@ -75,13 +78,6 @@ class Follower:
     wall time of the world's ticks."""
 
     def __init__(self, plan: RunPlan, clock: Callable[[], float]) -> None:
-        self.keys = keyspace.Keys(plan.run_id)
-        self.clock = clock  # wall seconds: when the run started ticking
-        # Held for the live page, or paused from it: the world's clock stands still on
-        # purpose. ``paused_since``: the wall time it was; ``paused_s``: paused before that.
-        self.held = plan.hold  # waiting for the first play
-        self.paused_since: float | None = clock() if plan.hold else None
-        self.paused_s = 0.0
         layout = make_layout(plan.sites, plan.robots, plan.seed)
         slots = ParkingSlots(
             [(site.x, site.y) for site in sorted(layout.sites, key=lambda site: site.id)],
@@ -95,7 +91,7 @@ class Follower:
             if (plan.outside)
             else {}
         )
-        self.run = RunObserver(
+        run = RunObserver(
             range(plan.robots),
             watchdog=Watchdog(
                 range(plan.robots),
@@ -106,8 +102,34 @@ class Follower:
             byzantine=plan.byzantine_robots,
             outside=outside,
         )
+        self._begin(keyspace.Keys(plan.run_id), run, clock, hold=plan.hold)
+
+    @classmethod
+    def of_run(cls, keys: keyspace.Keys, clock: Callable[[], float]) -> Follower:
+        """A follower of a run it knows only by its keys (``swarm follow``): its robots
+        join as they are heard."""
+        follower = cls.__new__(cls)
+        follower._begin(keys, RunObserver((), open_roster=True), clock)
+        return follower
+
+    def _begin(
+        self,
+        keys: keyspace.Keys,
+        run: RunObserver,
+        clock: Callable[[], float],
+        hold: bool = False,
+    ) -> None:
+        self.keys = keys
+        self.clock = clock  # wall seconds: when the run started ticking
+        self.run = run
+        # Held for the live page, or paused from it: the world's clock stands still on
+        # purpose. ``paused_since``: the wall time it was; ``paused_s``: paused before that.
+        self.held = hold  # waiting for the first play
+        self.paused_since: float | None = clock() if hold else None
+        self.paused_s = 0.0
         self.started_at: float | None = None  # the wall time of the first clock or state
         self.ticked_at: float | None = None  # the wall time the sim clock last advanced
+        self.ending: protocol.RunEnding | None = None  # the world's, once heard
         self._logged_rejections: set[keyspace.KeyKind] = set()
 
     def take(self, heard: Heard, keyring: auth.Keyring | None) -> bool:
@@ -115,6 +137,10 @@ class Follower:
         run = self.run
         before = run.sim_time
         try:
+            if heard.kind is keyspace.ENDING:
+                ending = open_ending(self.keys, heard.key, heard.payload, heard.attachment, keyring)
+                self.ending = self.ending or ending
+                return True
             opened = keyspace.open_sample(
                 self.keys,
                 heard.key,

@@ -19,6 +19,7 @@ so that a terminal's or timeout(1)'s signal to that group reaches only the launc
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import multiprocessing
 import multiprocessing.process
@@ -103,8 +104,10 @@ class ForkedProcess:
         return None if self._process.is_alive() else self._process.exitcode
 
     def send_signal(self, signum: int) -> None:
+        # It may exit between the two calls (on the run's ending, robots exit by themselves).
         if self._process.is_alive():
-            os.kill(self.pid, signum)
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.pid, signum)
 
     def kill(self) -> None:
         self.send_signal(signal.SIGKILL)

@@ -2,21 +2,25 @@
 
 Starts the world server (the Zenoh router of the run, on a Unix socket in a private
 directory; TLS on loopback with ``--secure``; a client of the router ``--connect`` names),
-the recorder, the nest beacon and the robot processes (``supervisor.py``); follows what
+the recorder, the nest beacon and the robot processes (``supervisor.py``; with ``--dask``
+the robot processes on a Dask cluster's workers, ``dask_placement.py``); follows what
 they publish (``follower.py``) and shows progress (``console.py``); kills and restarts
 robots when their ``--kill`` and ``--restart`` sim time comes (the faults' plug-ins,
-robot_agent/core/faults.py, given the launcher as their ``Engine``); stops when
-``bestofn_swarm.wire.endings.stop_reason`` says so; stops every process it started, by pid, however
-the run ends; prints a summary that says how it ended, hands it to the recorder
-(``recording.py``) and exits with that ending's code (``swarm run --help``).
-``--engine inprocess`` runs the same computation in this process instead
-(``inprocess.py``).
+robot_agent/core/faults.py, given the launcher as their ``Engine``); stops when the world
+ends the run (``world/ending``: world_server/observer/referee.py decides) or when what
+only the launcher sees ends it first, in the order of
+``bestofn_swarm.wire.endings.stop_reason``; stops every process it started, by pid,
+however the run ends; prints a summary that says how it ended (the world's, with what the
+launcher adds), hands it to the recorder (``recording.py``) and exits with that ending's
+code (``swarm run --help``). ``--engine inprocess`` runs the same computation in this
+process instead (``inprocess.py``).
 
 The main thread owns the run. It waits on one inbox, into which Zenoh's callbacks queue
 what the processes publish and the stop signals' relay queues the signals
 (``signals.py``), until the next look is due; it takes what came, applies the faults
-that fell due, and every ``LOOK_EVERY`` (at once on a signal) it looks: marks the
-robots whose process died, updates the display, and asks the ending rule.
+that fell due, and every ``LOOK_EVERY`` (at once on a signal) it looks: takes the world's
+ending if it came, else marks the robots whose process died, updates the display, and
+asks the ending rule.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from typing import Any
 from rich.console import Console
 
 from bestofn_swarm.plumbing.cliargs import UsageError
+from bestofn_swarm.plumbing.ending import MAX_ENDING_SAMPLE_BYTES
 from bestofn_swarm.plumbing.inbox import BoundedInbox
 from bestofn_swarm.plumbing.lifecycle import die_with_launcher
 from bestofn_swarm.wire import protocol
@@ -47,7 +52,7 @@ from deploy.launcher.plan import RunPlan, plan_from_args
 from deploy.launcher.processes import Child
 from deploy.launcher.recording import RecorderProgress, finish_recording
 from deploy.launcher.signals import Signalled, StopSignals
-from deploy.launcher.supervisor import StartError, Supervisor
+from deploy.launcher.supervisor import OBSERVERS, StartError, Supervisor
 from robot_agent.core import faults
 from world_server.core.layout import make_layout
 
@@ -59,8 +64,12 @@ log = logging.getLogger("swarm.run")
 # message: what they check costs a system call per robot process, and a process's death
 # comes as no message at all.
 LOOK_EVERY = 0.1
-# What the launcher takes in (status, clock, state, acks), at most: junk cannot grow it.
-EVENTS_BYTES, MAX_EVENT_BYTES = 64 * 2**20, protocol.MAX_PAYLOAD_BYTES + 1024
+# What the launcher takes in (status, clock, state, acks, the ending), at most: junk cannot
+# grow it.
+EVENTS_BYTES, MAX_EVENT_BYTES = 64 * 2**20, MAX_ENDING_SAMPLE_BYTES
+# Wall seconds the launcher waits for the run's ending once a process of the run exited on
+# its own: robots and the beacon exit when they hear the ending, maybe before it does.
+ENDING_GRACE = 2.0
 
 
 class Swarm:
@@ -84,6 +93,9 @@ class Swarm:
         self.plugin_failure: str | None = None  # a robot's plug-in failed: its one line
         self.ended_at: float | None = None
         self.departures = 0  # the world's count before the swarm was stopped (stopping adds)
+        self.world_ended = False  # the run ended by the world's ending (world/ending)
+        self.lost_workers: list[Any] = []  # --dask: workers that left before any ending
+        self._exits_seen: set[int] = set()  # processes seen to exit on their own
 
     def signalled(self, signum: int) -> None:
         """A stop signal, from the signals' relay: an event like any other."""
@@ -139,39 +151,75 @@ class Swarm:
         self.supervisor.restart_robot(robot)
 
     def look(self, signalled: bool) -> Halt | None:
-        """Whether the run stops now, and why (``bestofn_swarm.wire.endings.stop_reason``)."""
+        """Whether the run stops now, and why (``bestofn_swarm.wire.endings.stop_reason``):
+        the world's ending, once heard, for what the world decides (every running robot
+        decided, the sim time limit, the stall watchdog, a lost beacon or robot); a process
+        that died, a stop signal, a world that stopped ticking and the wall time limit are
+        the launcher's to see."""
         supervisor, follower, run = self.supervisor, self.follower, self.follower.run
-        for robot in supervisor.crashed_robots():
-            run.crashed(robot)
-        self.crash = supervisor.infrastructure_crash()
-        if self.crash is None and follower.paused:  # held for a page that is gone for good
-            self.crash = supervisor.crashed_observer("viewer")
-        if self.plugin_failure is None:
-            self.plugin_failure = supervisor.plugin_failure()
-        live = supervisor.live_robots() + run.outside_present()
-        # Robots join once the world ticks; a restart to come will make progress.
-        waiting = not follower.started or self.faults.restart_pending()
-        all_decided = not waiting and run.all_decided(live)
-        return stop_reason(
+        placement = supervisor.placement
+        lost = placement.lost() if placement is not None else []
+        if follower.ending is None and (self._exited() or len(lost) > len(self.lost_workers)):
+            signalled = self._await_ending() or signalled
+        ending = follower.ending
+        if ending is None:  # a process that exits after the ending did so because of it
+            for robot in supervisor.crashed_robots():
+                run.crashed(robot)
+            self.crash = supervisor.infrastructure_crash()
+            if self.crash is None and follower.paused:  # held for a page gone for good
+                self.crash = supervisor.crashed_observer("viewer")
+            if self.plugin_failure is None:
+                self.plugin_failure = supervisor.plugin_failure()
+            self.lost_workers = list(lost)
+        world = Halt(ending.stop, ending.timeout_kind) if ending is not None else None
+        halt = stop_reason(
             Look(
                 sim_time=run.sim_time,
-                sim_limit=self.plan.timeout,
-                all_decided=all_decided,
-                last_decision=run.last_decision(live) if all_decided else 0.0,
-                stalled=not waiting and run.stalled(run.sim_time),
+                sim_limit=math.inf,  # the world's to judge (world.ended)
+                all_decided=False,
+                last_decision=0.0,
+                stalled=False,
                 wall_time=self.clock() - self.launched_at - follower.paused_for(),
                 wall_limit=self.plan.wall_timeout,
-                crashed=self.crash is not None or self.plugin_failure is not None,
+                crashed=self.crash is not None
+                or self.plugin_failure is not None
+                or bool(self.lost_workers),
                 signalled=signalled,
                 world_stopped=follower.world_stopped(self.plan.world_stop_window),
+                ended=world,
             )
         )
+        self.world_ended = halt is not None and halt is world
+        return halt
+
+    def _exited(self) -> bool:
+        """A process of the run (not an observer) exited on its own since the last look."""
+        exited = {
+            child.pid for child in self.supervisor.group.crashed() if child.name not in OBSERVERS
+        }
+        new = bool(exited - self._exits_seen)
+        self._exits_seen |= exited
+        return new
+
+    def _await_ending(self) -> bool:
+        """Take in what comes for ENDING_GRACE, or until the world's ending came; whether a
+        stop signal came meanwhile."""
+        deadline = self.clock() + ENDING_GRACE
+        signalled = False
+        while self.follower.ending is None and self.clock() < deadline:
+            signalled = self.take_events(until=deadline) or signalled
+        return signalled
 
     def stop(self) -> protocol.WorldState | None:
         """Stop the robots and the beacon, and read the world's final counters (its last
-        state if it does not answer)."""
+        state if it does not answer; none needed once the world ended the run: its ending
+        holds them)."""
         supervisor, follower, run = self.supervisor, self.follower, self.follower.run
         self.ended_at = self.clock()
+        if self.world_ended:
+            supervisor.stop_swarm()  # most exited on the ending already
+            self.take_events(until=self.clock())
+            return None
         # A world whose clock stopped (frozen, or stuck) cannot answer: its last state is
         # all there is, without waiting out a question it will not hear.
         answering = not follower.world_stopped(self.plan.world_stop_window)
@@ -305,9 +353,100 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
             f"{swarm.crash.process.returncode}):\n{swarm.crash.tail()}",
             file=sys.stderr,
         )
-    run = follower.run
+    ending = follower.ending
+    if swarm.world_ended and ending is not None and not _crashes_unseen(swarm, ending):
+        swarm.stop()
+        summary = launcher_summary(swarm, ending)
+        code = ending.code
+    else:
+        summary = _own_summary(swarm, halt, signum)
+        code = Ending(summary["ended"]).exit_code(signum)
+    robot_crashes = [robot["id"] for robot in summary["per_robot"] if robot["crashed"]]
+    _name_lost_hosts(swarm, summary)
+    supervisor.finish_observers(summary)
+    if not args.quiet:
+        print(f"swarm run: {describe_ending(summary)}", file=sys.stderr)
+    problem = _finish_recording(swarm, summary, args.quiet)
+    if problem is not None:
+        print(f"swarm run: the recorder did not confirm {plan.record}: {problem}", file=sys.stderr)
+        summary["recording"] = None
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print_summary(summary, Console())
+    if robot_crashes and swarm.plugin_failure is None:
+        print(f"swarm run: robot process(es) {robot_crashes} crashed", file=sys.stderr)
+    return code
+
+
+def _counters_of(ending: protocol.RunEnding) -> protocol.WorldState:
+    """The world's counters as its ending's summary gives them."""
+    summary = ending.summary
+    return protocol.WorldState(
+        v=protocol.VERSION,
+        tick=ending.tick,
+        t=ending.t,
+        robots=[],
+        radio=protocol.RadioCounters(**summary["radio"]),
+        rejected=summary["world"]["rejected"],
+        stalls=summary["world"]["stalls"],
+        departures=summary["world"]["departures"],
+    )
+
+
+def _crashes_unseen(swarm: Swarm, ending: protocol.RunEnding) -> bool:
+    """Whether a robot process died that the world's ending does not count as lost: the
+    world saw only its token go (maybe a frozen process), the launcher saw it die. The
+    launcher's own summary then says so, as before the world ended runs."""
+    lost = {robot["id"] for robot in ending.summary.get("per_robot", []) if robot["crashed"]}
+    died = {record.id for record in swarm.follower.run.records.values() if record.crashed}
+    return bool(died - lost)
+
+
+def _name_lost_hosts(swarm: Swarm, summary: dict[str, Any]) -> None:
+    """--dask: the workers (and their hosts) that left with robots of the run, said on
+    stderr and kept in the summary's ``lost_hosts``."""
+    placement = swarm.supervisor.placement
+    if placement is None:
+        return
+    lost = swarm.lost_workers or placement.whose(
+        [robot["id"] for robot in summary["per_robot"] if robot["crashed"]]
+    )
+    if not lost:
+        return
+    summary["lost_hosts"] = [worker.as_dict() for worker in lost]
+    for worker in lost:
+        print(f"swarm run: lost {worker.describe()}", file=sys.stderr)
+
+
+def launcher_summary(swarm: Swarm, ending: protocol.RunEnding) -> dict[str, Any]:
+    """The run's summary from the world's (``world/ending``), with what only the launcher
+    knows: the run's configuration, its processes, the faults it applied, the recording,
+    what it refused itself, and its wall time without what the live page held or paused."""
+    plan, follower = swarm.plan, swarm.follower
+    summary = dict(ending.summary)
+    if follower.started_at is not None and swarm.ended_at is not None:
+        wall = max(swarm.ended_at - follower.started_at - follower.paused_for(), 1e-9)
+        summary["wall_time_s"] = round(wall, 3)
+        summary["real_time_factor"] = round(ending.t / wall, 2)
+    summary["config"] = plan.config
+    summary["robot_processes"] = swarm.supervisor.robot_processes
+    summary["rejected"] = {**summary.get("rejected", {}), "observer": swarm.follower.run.rejected}
+    summary["faults"] = [applied.record() for applied in swarm.faults.applied]
+    summary["recording"] = str(plan.record) if plan.record else None
+    return summary
+
+
+def _own_summary(swarm: Swarm, halt: Halt, signum: int | None) -> dict[str, Any]:
+    """The run's summary from what the launcher followed, for an ending it decided itself
+    (a process that died, a stop signal, a world that stopped ticking, the wall limit)."""
+    plan, follower, run = swarm.plan, swarm.follower, swarm.follower.run
     run.departed(run.outside_present())  # before the bridge stops and every link goes
     stats = swarm.stop()
+    ending = follower.ending
+    if swarm.world_ended and ending is not None:  # the world's counters at its ending
+        stats = _counters_of(ending)
+        swarm.departures = stats.departures
     robot_crashes = [record.id for record in run.records.values() if record.crashed]
     stop = halt.stop
     if robot_crashes and stop is not Stop.INTERRUPTED:
@@ -331,7 +470,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
         stop=stop,
         timeout_kind=halt.limit,
         byzantine={robot: str(how) for robot, how in plan.byzantine_robots.items()},
-        robot_processes=plan.robot_processes,
+        robot_processes=swarm.supervisor.robot_processes,
     )
     if signum is not None:
         summary["signal"] = signal.Signals(signum).name
@@ -339,20 +478,7 @@ def _finish(swarm: Swarm, args: argparse.Namespace, halt: Halt, signum: int | No
         summary["error"] = swarm.plugin_failure
     summary["faults"] = [applied.record() for applied in swarm.faults.applied]
     summary["recording"] = str(plan.record) if plan.record else None
-    supervisor.finish_observers(summary)
-    if not args.quiet:
-        print(f"swarm run: {describe_ending(summary)}", file=sys.stderr)
-    problem = _finish_recording(swarm, summary, args.quiet)
-    if problem is not None:
-        print(f"swarm run: the recorder did not confirm {plan.record}: {problem}", file=sys.stderr)
-        summary["recording"] = None
-    if args.json:
-        print(json.dumps(summary))
-    else:
-        print_summary(summary, Console())
-    if robot_crashes and swarm.plugin_failure is None:
-        print(f"swarm run: robot process(es) {robot_crashes} crashed", file=sys.stderr)
-    return Ending(summary["ended"]).exit_code(signum)
+    return summary
 
 
 def _finish_recording(swarm: Swarm, summary: dict[str, Any], quiet: bool) -> str | None:

@@ -101,6 +101,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="start robot processes by forking a preloaded server (fast) "
         "or as fresh interpreters (default: fork)",
     )
+    processes.add_argument(
+        "--dask",
+        default=None,
+        metavar="ADDRESS",
+        help="place the robot processes on the workers of the Dask scheduler at ADDRESS "
+        "(tcp://HOST:PORT), split by the workers' cores, each a client of its own host's "
+        "Zenoh router (a worker's --router, else its host's $BESTOFN_ROUTER, else "
+        "tcp/127.0.0.1:7447); the world, the beacon and the recorder run here, clients of "
+        "--connect (default: this host's router, the same way). Needs Dask: pip install "
+        "'.[dask]' (deploy/README.md)",
+    )
+    processes.add_argument(
+        "--dask-world",
+        default=None,
+        metavar="WORKER",
+        help="with --dask: run the world server and the beacon on this worker of the cluster "
+        "(its name, address or host) instead of here; only it is handed the run secret",
+    )
     network = parser.add_argument_group("network")
     network.add_argument(
         "--connect",

@@ -18,9 +18,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from bestofn_swarm.plumbing.cliargs import LOCAL_ENDPOINT
 from bestofn_swarm.plumbing.private_files import make_private_folder
 from bestofn_swarm.plumbing.tcp import free_port
 from bestofn_swarm.wire import settings
+from deploy.launcher.dask_worker import ROUTER_ENV
 from deploy.launcher.outside import OutsidePlan, outside_plan
 from deploy.launcher.switches import SWITCHES, RunSwitches, run_switches
 from deploy.viewer.options import VIEW_OPTIONS, Observer, holds, observers, view_linger
@@ -33,6 +35,12 @@ from robot_agent.node.options import RobotAgentConfig
 from robot_agent.plugins import registry
 from world_server.core.body import EPUCK
 from world_server.core.layout import make_layout
+from world_server.observer.referee import (
+    EndingRules,
+    LostRobot,
+    OutsideRobot,
+    PlannedDeparture,
+)
 from world_server.observer.watchdog import default_stall_window, default_world_stop_window
 from world_server.recorder.options import DEFAULT_NICENESS
 from world_server.recording.description import RunDescription
@@ -79,6 +87,9 @@ class RunPlan:
     secure: bool = False  # TLS and access control
     trace: Path | None = None  # --trace DIR: the world's and robot hosts' tick timelines
     outside: OutsidePlan | None = None  # --external: robots served to programs outside
+    lost_robot: LostRobot = LostRobot.CONTINUE  # what a robot lost mid-run does to the run
+    dask: str | None = None  # --dask: the scheduler whose workers host the robots
+    dask_world: str | None = None  # --dask-world: the worker of the world and the beacon
     hold: bool = False  # --view: the world waits at tick 0 until the page says play
     view_linger: float | None = 0.0  # wall seconds the page stays up after (None: until stopped)
 
@@ -109,13 +120,36 @@ class RunPlan:
 
     def world_argv(self) -> list[str]:
         """The world server's run and configuration (its network options come later)."""
-        world = self.switches.world
+        world = dataclasses.replace(self.switches.world, rules=self.ending_rules())
         if self.outside is not None:  # it waits for the outside robots as long as we do
             start = max(world.start_timeout, self.outside.wait + OUTSIDE_START_MARGIN)
             world = dataclasses.replace(world, start_timeout=start)
         if self.hold:
             world = dataclasses.replace(world, hold=True)
         return ["--run-id", self.run_id, "--config", settings.encode(world)]
+
+    def ending_rules(self) -> EndingRules:
+        """How the world is to end the run: this run's limits, robots and faults."""
+        return EndingRules(
+            timeout=self.timeout,
+            stall_window=self.stall_window,
+            lost_robot=self.lost_robot,
+            controller=self.switches.controller,
+            byzantine=tuple(
+                byzantine.ByzantineRobot(robot, how) for robot, how in self.byzantine_robots.items()
+            ),
+            # The faults the engine applies stop a robot's process (and a restart starts
+            # another): departures the world expects, not losses.
+            departures=tuple(
+                PlannedDeparture(fault.robot, fault.at, fault.RESTARTS)
+                for fault in self.faults
+                if fault.BY_ENGINE
+            ),
+            outside=tuple(
+                OutsideRobot(linked.robot, linked.address.transport)
+                for linked in (self.outside.robots if self.outside is not None else ())
+            ),
+        )
 
     def beacon_argv(self) -> list[str]:
         beacon = NestBeaconConfig(seed=self.seed, beacon=self.switches.beacon)
@@ -156,6 +190,8 @@ NOT_CONFIG = {
     "trace",
     "no_batch",
     "link_keys",  # where the outside robots' keys go
+    "dask",  # recorded only when given (where the robots ran)
+    "dask_world",
     *VIEW_OPTIONS,
 }
 
@@ -200,7 +236,15 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         )
     if args.view is None and (args.no_wait or args.view_linger is not None):
         raise ValueError("--no-wait and --view-linger go with --view")
-    if args.secure and args.connect:
+    connect = args.connect
+    if args.dask_world is not None and args.dask is None:
+        raise ValueError("--dask-world names a worker of the cluster --dask gives: give --dask")
+    if args.dask is not None:
+        refuse_on_dask(args, on_processes)
+        # The world, beacon and recorder are clients of this host's router, as the robots
+        # are of their hosts' (deploy/launcher/dask_worker.py).
+        connect = connect or os.environ.get(ROUTER_ENV) or LOCAL_ENDPOINT
+    elif args.secure and args.connect:
         raise ValueError("--secure makes the run's own TLS router: it cannot use --connect")
     if args.secure and args.no_keys:
         raise ValueError("--secure authenticates every message: it cannot go with --no-keys")
@@ -240,6 +284,10 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         [f"{linked.robot}={linked.address}" for linked in outside.robots] if outside else []
     )
     config["plugins"] = plugins.record()  # what made the run: names, versions, sources
+    if args.dask is not None:
+        config["dask"] = args.dask
+    if args.dask_world is not None:
+        config["dask_world"] = args.dask_world
     recorded = RunDescription(run_id, args.seed, args.robots, args.sites, config)
     recorder_args = [
         "--run-id",
@@ -260,7 +308,7 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         timeout=args.timeout,
         stall_window=stall_window,
         world_stop_window=world_stop_window,
-        connect=args.connect,
+        connect=connect,
         record=record,
         switches=switches,
         recorder_args=recorder_args,
@@ -276,10 +324,34 @@ def plan_from_args(args: argparse.Namespace) -> RunPlan:
         secure=args.secure,
         trace=args.trace,
         outside=outside,
+        # A lost host takes its robots with it: the run has no result left to wait for.
+        lost_robot=LostRobot.END if args.dask is not None else LostRobot.CONTINUE,
+        dask=args.dask,
+        dask_world=args.dask_world,
         hold=holds(args),
         view_linger=view_linger(args),
         plugins=plugins,
     )
+
+
+def refuse_on_dask(args: argparse.Namespace, on_processes: Sequence[RobotFault]) -> None:
+    """ValueError naming the first option that cannot go with ``--dask`` (``on_processes``:
+    the faults the launcher applies to a robot's process)."""
+    if not args.dask.startswith(("tcp://", "tls://", "ws://", "wss://")):
+        raise ValueError(f"--dask {args.dask}: give a scheduler address, tcp://HOST:PORT")
+    refused = [
+        *(
+            (True, f"--{fault.SWITCH}", "it acts on a robot's process on this machine")
+            for fault in on_processes[:1]
+        ),
+        (args.external is not None, "--external", "the bridge serves robots on this machine"),
+        (args.trace is not None, "--trace", "the robots' timelines would stay on the workers"),
+        (args.robots_per_process is not None, "--robots-per-process", "the workers' cores say"),
+        (args.secure and args.no_keys, "--no-keys", "--secure tags every message"),
+    ]
+    for refuse, option, why in refused:
+        if refuse:
+            raise ValueError(f"{option} cannot go with --dask: {why}")
 
 
 def check_recording_path(path: Path) -> None:
@@ -350,6 +422,7 @@ def refuse_unsupported(args: argparse.Namespace) -> None:
         (args.no_batch, "--no-batch", "there are no processes"),
         (args.spawn != "fork", "--spawn", "there are no processes to start"),
         (args.connect is not None, "--connect", "it uses no network"),
+        (args.dask is not None, "--dask", "it runs in this process"),
         (args.secure, "--secure", "it uses no network"),
         (args.view is not None, "--view", "the live page follows a run over Zenoh"),
         (args.foxglove is not None, "--foxglove", "Foxglove live follows a run over Zenoh"),

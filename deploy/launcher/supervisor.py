@@ -87,6 +87,7 @@ class Supervisor:
         self.network: RunNetwork | None = None  # made when the run starts
         self.session: zenoh.Session | None = None
         self._declared: list[Any] = []
+        self.placement: Any = None  # --dask: the robots on the cluster (dask_placement.py)
 
     @property
     def keyring(self) -> auth.Keyring | None:
@@ -115,6 +116,9 @@ class Supervisor:
             if stopping():
                 return False
             step(stopping)
+        if plan.dask is not None:
+            self._place("robots")
+            return not stopping()
         emulated = plan.emulated
         for first in range(0, len(emulated), plan.robots_per_process):
             if stopping():
@@ -128,16 +132,22 @@ class Supervisor:
         return not stopping()
 
     def _start_world(self, stopping: Stopping) -> None:
-        """The run's network (keys, private socket, certificates), then the world server."""
+        """The run's network (keys, private socket, certificates), then the world server
+        (--dask-world: with the beacon, on that worker of the cluster)."""
         plan = self.plan
         self.network = network = RunNetwork.create(
             plan.run_id, plan.robots, connect=plan.connect, keyed=plan.keyed, secure=plan.secure
         )
+        if plan.dask_world is not None:
+            self._place("world")
+            return
         world = self.group.start(
             "world",
             python_module(
                 "world_server.server",
                 *plan.world_argv(),
+                # It ends the run, and stays: the run's router until the recording is done.
+                "--until-stopped",
                 *network.world_args(),
                 *plan.trace_args("world"),
             ),
@@ -151,7 +161,7 @@ class Supervisor:
         """The launcher's session, once the world answers: the follower's subscriptions,
         the children's lines. (Each wait here is bounded, and short once the world runs.)"""
         network, world = self.network, self.world
-        assert network is not None and world is not None
+        assert network is not None
         config = network.config_of(zenoh_acl.LAUNCHER)
         opening = time.monotonic()
         try:
@@ -182,6 +192,7 @@ class Supervisor:
             python_module(
                 "world_server.recorder",
                 *plan.recorder_args,
+                "--await-finish",  # the launcher closes it with its summary (finish_recording)
                 *network.client_args(zenoh_acl.RECORDER),
             ),
             env=network.env(),
@@ -211,6 +222,8 @@ class Supervisor:
     def _start_beacon(self, stopping: Stopping) -> None:
         network = self.network
         assert network is not None
+        if self.plan.dask_world is not None:
+            return  # with the world, on its worker
         beacon = names.beacon_certificate(names.DEFAULT_BEACON)
         self.group.start(
             "beacon",
@@ -301,6 +314,44 @@ class Supervisor:
         bridge.expected_exit = True  # replaced, not a crash of the run
         self.bridge = self._launch_bridge()
         return True
+
+    def _place(self, part: str) -> None:
+        """--dask: the robot processes (or with --dask-world the world server and the
+        beacon) on the cluster's workers (Dask is needed only now)."""
+        try:
+            from deploy.launcher.dask_placement import DaskError, DaskPlacement
+        except ImportError as error:
+            raise StartError(f"--dask needs Dask: pip install '.[dask]' ({error})") from None
+        if self.placement is None:
+            self.placement = DaskPlacement(self.plan)
+        try:
+            if part == "world":
+                worker = self.placement.start_world(self.keyring)
+                print(
+                    f"swarm run: the world server and the beacon on worker {worker.address} "
+                    f"(host {worker.host})",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                return
+            placed = self.placement.start(self.keyring)
+        except DaskError as error:
+            raise StartError(str(error)) from None
+        for share in placed:
+            robots = ", ".join(str(robot) for robot in share.robots)
+            print(
+                f"swarm run: robots {robots} on worker {share.worker.address} "
+                f"(host {share.worker.host}), {len(share.processes)} process(es)",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    @property
+    def robot_processes(self) -> int:
+        """How many processes host the robots."""
+        if self.placement is not None:
+            return sum(len(share.processes) for share in self.placement.placed)
+        return self.plan.robot_processes
 
     def start_robots(self, robots: list[int]) -> Child:
         """One process for ``robots`` (each with its own Zenoh session inside it)."""
@@ -395,7 +446,10 @@ class Supervisor:
         return self.session is not None and self.world is not None and self.world.alive()
 
     def stop_swarm(self) -> None:
-        """Stop the robots and the beacon; the world, the recorder and the observers stay."""
+        """Stop the robots and the beacon (--dask: the tasks stop what the run's ending
+        did not); the world, the recorder and the observers stay."""
+        if self.placement is not None:
+            self.placement.stop()
         swarm = [
             child
             for child in self.group.children
@@ -460,6 +514,9 @@ class Supervisor:
             self.session.close()
             self.session = None
         self.group.stop_all()
+        if self.placement is not None:
+            self.placement.stop()  # (at once if it stopped already)
+            self.placement.close()
         if self.network is not None:
             self.network.close()  # its socket, certificates and keys
 

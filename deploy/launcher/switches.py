@@ -98,9 +98,22 @@ class RobotFaults:
 
 CONTROLLER = Options(ControllerConfig)
 PLUGINS = Options(ControllerChoice)
-# The world's size, seed and run id are swarm run's own options; it starts one beacon.
+# The world's size, seed and run id are swarm run's own options; it starts one beacon. How
+# the world ends the run, swarm run tells it from its own options and plan (plan.py).
 WORLD = Options(
-    WorldServerConfig, exclude={"--seed", "--sites", "--robots", "--start-timeout", "--beacons"}
+    WorldServerConfig,
+    exclude={
+        "--seed",
+        "--sites",
+        "--robots",
+        "--start-timeout",
+        "--beacons",
+        "--timeout",
+        "--stall-window",
+        "--lost-robot",
+        "--controller-settings",
+        "--byzantine",
+    },
 )
 BEACON = Options(BeaconConfig, prefix="beacon-", exclude={"--name"})
 FAULTS = Options(RobotFaults)

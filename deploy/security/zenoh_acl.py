@@ -170,6 +170,9 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
             [keys.token(Role.WORLD, "*")],
         ),
         _rule("follow-world-token", "egress", ["liveliness_token"], [keys.token(Role.WORLD, "*")]),
+        # Every process hears how the run ended, and exits.
+        _rule("hear-ending", "ingress", ["declare_subscriber"], [keys.of(keyspace.ENDING)]),
+        _rule("hear-ending-put", "egress", ["put"], [keys.of(keyspace.ENDING)]),
         # The world server: the robots' bodies, the radio medium, the clock.
         _rule("world-speak", "ingress", ["put"], keyspace.keys_for(keys, WORLD_SPEAKS)),
         _rule("world-alive", "ingress", ["liveliness_token"], [keys.token(Role.WORLD, "*")]),
@@ -255,6 +258,8 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 "robot-answer-info",
                 "follow-world",
                 "follow-world-token",
+                "hear-ending",
+                "hear-ending-put",
             ],
         )
     for beacon in plan.beacons:
@@ -297,6 +302,8 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
                 "robot-answer-info",
                 "follow-world",
                 "follow-world-token",
+                "hear-ending",
+                "hear-ending-put",
             ],
         )
     grant_client(OBSERVER, reading)
@@ -304,7 +311,17 @@ def access_control(plan: SwarmPlan) -> dict[str, Any]:
     grant_client(RECORDER, [*reading, "recorder-serve", "recorder-asked", "recorder-alive"])
     grant_client(VIEWER, [*reading, "viewer-serve", "viewer-asked", "viewer-alive", "viewer-speak"])
     grant_client(FOXGLOVE, [*reading, "foxglove-alive"])
-    grant_client(BRIDGE, ["bridge-speak", "bridge-alive", "follow-world", "follow-world-token"])
+    grant_client(
+        BRIDGE,
+        [
+            "bridge-speak",
+            "bridge-alive",
+            "follow-world",
+            "follow-world-token",
+            "hear-ending",
+            "hear-ending-put",
+        ],
+    )
     grant("routers", ["router-relay-in", "router-relay-out"], plan.routers)
     return {
         "enabled": True,

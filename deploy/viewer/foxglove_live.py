@@ -16,7 +16,8 @@ bounded queue (a sample that finds it full is dropped and counted: the view must
 grow without bound while the machine is busy: ``bestofn_swarm/plumbing/inbox.py``, charged at what a
 sample really costs); one thread passes them to the recorder's
 logic. The SDK keeps at most ``BACKLOG`` messages per connected app and drops the oldest
-beyond that.
+beyond that. It stops on a stop signal or on the run's ending (``world/ending``), passing
+on what it holds first; after the ending it exits with the run's exit code.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from bestofn_swarm.plumbing import cliargs, process_main
+from bestofn_swarm.plumbing.ending import hear_ending
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
 from bestofn_swarm.plumbing.stop_signals import on_stop_signals
 from bestofn_swarm.wire import names, protocol
@@ -170,8 +172,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"foxglove-live: cannot open Zenoh session: {error}", file=sys.stderr)
         server.stop()
         return 1
+    ended: list[int] = []  # the run's exit code, once its ending came
+
+    def on_ending(ending: protocol.RunEnding) -> None:
+        ended.append(ending.code)
+        stopping.set()
+
     with session:
         subscriber = session.declare_subscriber(keys.all, on_sample)
+        hearing = hear_ending(session, keys, keyring, on_ending)
         try:
             info: protocol.WorldInfo | None = fetch_world_info(
                 session, keys, 10.0, keyring, names.FOXGLOVE
@@ -196,6 +205,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         while not stopping.wait(0.2):
             pass
         token.undeclare()
+        hearing.undeclare()
         subscriber.undeclare()
         # What arrived before the stop still reaches the app: a niced process on a busy
         # machine may lag the run, and the end of a run is what a person wants to see.
@@ -207,7 +217,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         log.info("dropped %d samples while falling behind", dropped[0])
     if recorder.rejected:
         log.info("refused %d samples (the recorder/rejected channel)", recorder.rejected)
-    return 0
+    return ended[0] if ended else 0
 
 
 def _forward(recorder: McapRecorder, inbox: BoundedInbox[Sample | None]) -> None:

@@ -4,10 +4,12 @@ A process of the run like the recorder: it subscribes to the keys the page needs
 (``world/state``, ``world/clock``, ``robot/*/status``, ``radio/rx/*``), declares its
 liveliness token ``alive/viewer/0`` once its server listens, and serves the page
 (``deploy.viewer.server``). At the end the launcher sends the run summary to the
-``viewer/finish`` queryable; the bridge shows how the run ended, makes sure every page
-was sent that last frame, then answers. In a keyed run only the launcher's query counts
-(tagged with its key, as for the recorder's ``recorder/finish``); any other is refused and
-counted. Stopped by a signal instead, it tells the pages that the run stopped.
+``viewer/finish`` queryable (``--await-finish``); the bridge shows how the run ended, makes
+sure every page was sent that last frame, then answers. In a keyed run only the launcher's
+query counts (tagged with its key, as for the recorder's ``recorder/finish``); any other is
+refused and counted. Started by hand, the run's ending (``world/ending``) does the same
+with the summary it carries, and the page exits with the run's exit code. Stopped by a
+signal instead, it tells the pages that the run stopped.
 
 It listens, and says one thing the world hears: the page's pause, play and speed
 (``viewer/pace``, tagged with the view's key). A run started with ``--hold`` (``swarm run
@@ -40,6 +42,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from bestofn_swarm.plumbing import cliargs, process_main
+from bestofn_swarm.plumbing.ending import hear_ending
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
 from bestofn_swarm.wire import auth, keyspace, names, protocol
 from bestofn_swarm.wire.names import Role
@@ -289,6 +292,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=DEFAULT_NICENESS,
         help=f"how much to lower this process's CPU priority (default: {DEFAULT_NICENESS})",
     )
+    parser.add_argument(
+        "--await-finish",
+        action="store_true",
+        help="show how the run ended only when the launcher's finish query comes (swarm run, "
+        "which hands the page its own summary), and serve until stopped; by default the "
+        "run's ending does, and the page then exits",
+    )
     cliargs.add_zenoh_options(parser)
     cliargs.add_log_level(parser)
     return parser
@@ -334,6 +344,13 @@ async def _serve(
         loop.add_signal_handler(signum, stop.set)
     finish_queries: BoundedInbox[Any] = BoundedInbox(FINISH_QUERY_BYTES)
     query_came = asyncio.Event()
+    endings: list[protocol.RunEnding] = []
+    ending_came = asyncio.Event()
+
+    def on_ending(ending: protocol.RunEnding) -> None:
+        endings.append(ending)
+        loop.call_soon_threadsafe(ending_came.set)
+
     with session:
         lockstep = True
         try:
@@ -389,6 +406,9 @@ async def _serve(
                 query.drop()
 
         queryable = session.declare_queryable(keys.of(keyspace.VIEWER_FINISH), on_finish)
+        # A launcher finishes the page with its own summary (--await-finish); by hand, the
+        # run's ending does, and the page exits with the run's exit code.
+        hearing = None if args.await_finish else hear_ending(session, keys, keyring, on_ending)
         server = ViewServer(source, fps=args.fps)
         port = await server.start(args.host, args.port)
         token = session.liveliness().declare_token(keys.token(Role.VIEWER, 0))
@@ -397,12 +417,24 @@ async def _serve(
             _finish_on_query(finish_queries, query_came, source, server, keys)
         )
         stop_waiter = asyncio.create_task(stop.wait())
-        await asyncio.wait({finisher, stop_waiter}, return_when=asyncio.FIRST_COMPLETED)
-        if not finisher.done():  # stopped by a signal before the launcher's summary came
+        ending_waiter = asyncio.create_task(ending_came.wait())
+        await asyncio.wait(
+            {finisher, stop_waiter, ending_waiter}, return_when=asyncio.FIRST_COMPLETED
+        )
+        if endings and not finisher.done():  # the run ended: the page shows how, and goes
+            finisher.cancel()
+            source.finish(endings[0].summary, fallback="ended")
+            await server.flushed(server.publish(), FLUSH_TIMEOUT)
+        elif not finisher.done():  # stopped by a signal before the launcher's summary came
             finisher.cancel()
             source.finish(None)
             await server.flushed(server.publish(), FLUSH_TIMEOUT)
-        await stop.wait()  # after the summary, the launcher stops the view once it is done
+        if not endings:
+            await stop.wait()  # after the summary, the launcher stops the view once it is done
+        ending_waiter.cancel()
+        stop_waiter.cancel()
+        if hearing is not None:
+            hearing.undeclare()
         token.undeclare()
         queryable.undeclare()
         for subscriber in subscribers:
@@ -410,7 +442,7 @@ async def _serve(
         await server.close()
     if source.rejected:
         log.info("refused %d samples or queries in all", source.rejected)
-    return 0
+    return endings[0].code if endings else 0
 
 
 async def _next_query(queries: BoundedInbox[Any], came: asyncio.Event) -> Any:

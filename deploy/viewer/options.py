@@ -110,7 +110,8 @@ def observers(
             Observer(
                 "viewer",
                 "deploy.viewer.live",
-                [*common, *sizes, "--host", host, "--port", str(port)]
+                # The launcher finishes the page with its summary (viewer/finish).
+                [*common, *sizes, "--host", host, "--port", str(port), "--await-finish"]
                 + (["--hold"] if holds(args) else []),
                 f"http://{shown}:{port}/",
             )

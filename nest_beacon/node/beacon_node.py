@@ -19,10 +19,11 @@ from dataclasses import dataclass
 
 import zenoh
 
+from bestofn_swarm.plumbing.ending import hear_ending
 from bestofn_swarm.plumbing.inbox import STOP, BoundedInbox, Stop
 from bestofn_swarm.plumbing.world_info import world_proved
 from bestofn_swarm.plumbing.zenoh_session import reliable_publisher
-from bestofn_swarm.wire import keyspace
+from bestofn_swarm.wire import keyspace, protocol
 from bestofn_swarm.wire.names import Role
 from nest_beacon.core.endpoint import BeaconEndpoint
 
@@ -40,6 +41,7 @@ class Event:
     payload: bytes = b""
     attachment: bytes | None = None
     gone: bool = False
+    code: int = 0  # a stop: the process's exit code (the run's, when it ended)
 
 
 class BeaconNode:
@@ -59,6 +61,7 @@ class BeaconNode:
         self.inbox = inbox
         self.lock = threading.Lock()  # the beacon: one thread at a time
         self.stopped = False  # set under the lock: later clocks are not answered
+        self._refusals = 0  # endings not believed
         self._publishers = {
             kind: reliable_publisher(session, key) for kind, key in endpoint.output_keys.items()
         }
@@ -94,13 +97,28 @@ class BeaconNode:
         self._token = session.liveliness().declare_token(
             keys.token(Role.BEACON, self.endpoint.name)
         )
+        self._ending = hear_ending(session, keys, self.endpoint.keyring, self._ended, self._refused)
+
+    def _ended(self, ending: protocol.RunEnding) -> None:
+        log.info("the run ended: %s (exit code %d)", ending.ended, ending.code)
+        self.inbox.put(Event(STOP, code=ending.code), control=True)
+
+    def _refused(self, reason: str) -> None:
+        with self.lock:
+            self.endpoint.count_dropped(1)
+            first = not self._refusals
+            self._refusals += 1
+        if first:
+            log.warning("refused an ending (logged once): %s", reason[:300])
 
     def close(self) -> None:
+        self._ending.undeclare()
         self._token.undeclare()
 
-    def serve(self) -> None:
-        """Handle the inbox's events until a stop event arrives; the clock is answered in
-        its callback."""
+    def serve(self) -> int:
+        """Handle the inbox's events until a stop event arrives (a stop signal, or the
+        run's ending); the clock is answered in its callback. The process's exit code: the
+        run's, when it ended."""
         while True:
             try:
                 event = self.inbox.get(timeout=0.5)
@@ -109,7 +127,7 @@ class BeaconNode:
             if event is not None and event.kind == STOP:
                 with self.lock:
                     self.stopped = True
-                return
+                return event.code
             if (
                 event is not None
                 and event.kind is keyspace.ALIVE_WORLD

@@ -93,10 +93,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         node = BeaconNode(endpoint, session=session, keys=keys, inbox=inbox)
         node.start()
         log.info("beacon %s transmitting every %.2fs of sim time", name, config.period)
-        node.serve()
+        code = node.serve()
         node.close()
     log.info("beacon %s stopped (%d rejected clock messages)", name, endpoint.rejected)
-    return 0
+    return code
 
 
 if __name__ == "__main__":

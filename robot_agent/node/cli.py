@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import zenoh
 
 from bestofn_swarm.plumbing import cliargs, process_main, settings_cli
+from bestofn_swarm.plumbing.ending import hear_ending
 from bestofn_swarm.plumbing.inbox import STOP, BoundedInbox
 from bestofn_swarm.plumbing.stop_signals import on_stop_signals
 from bestofn_swarm.plumbing.trace import open_trace
@@ -210,6 +211,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     host: HostBatch | None = None
     trace = open_trace(args.trace)
     latest: LatestSenses | None = None  # real time: newest senses only (robot_node.py)
+    code = 0
     try:
         for requested in args.ids:
             session = open_from_args(args, requested)
@@ -254,10 +256,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                 host.start()
         for node in nodes:
             node.start()
+        ending = _hear_ending(nodes[0], inbox)
         log.info("robot(s) %s running", ", ".join(str(node.robot_id) for node in nodes))
-        failure = serve(nodes, inbox)
-        if failure is not None:  # a plug-in failed in a robot's step: the run ends
-            print(f"robot-agent: error: {failure}", file=sys.stderr)
+        stopped = serve(nodes, inbox)
+        ending.undeclare()
+        code = stopped.code
+        if stopped.failure is not None:  # a plug-in failed in a robot's step: the run ends
+            print(f"robot-agent: error: {stopped.failure}", file=sys.stderr)
             return PLUGIN_FAILED
     except (zenoh.ZError, TimeoutError, NoKeyError) as error:
         print(f"robot-agent: {error}", file=sys.stderr)
@@ -278,7 +283,27 @@ def main(argv: Sequence[str] | None = None) -> int:
             session.close()
         if trace is not None:
             trace.close()
-    return 0
+    return code
+
+
+def _hear_ending(node: RobotNode, inbox: BoundedInbox[Event]) -> zenoh.Subscriber:
+    """The run's ending, heard on the process's first robot's session and checked with its
+    key: the process stops with the run's exit code. An ending not believed is counted as
+    that robot's rejection (and logged once)."""
+    refused: list[str] = []
+
+    def ended(ending: protocol.RunEnding) -> None:
+        log.info("the run ended: %s (exit code %d)", ending.ended, ending.code)
+        inbox.put(Event(-1, STOP, code=ending.code), control=True)
+
+    def refuse(reason: str) -> None:
+        with node.lock:
+            node.endpoint.count_dropped(1)
+        if not refused:
+            refused.append(reason)
+            log.warning("refused an ending (logged once): %s", reason[:300])
+
+    return hear_ending(node.session, node.keys, node.endpoint.keyring, ended, refuse)
 
 
 if __name__ == "__main__":

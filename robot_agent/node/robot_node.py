@@ -76,6 +76,7 @@ class Event:
     attachment: bytes | None = None
     arrived: float = 0.0  # monotonic time the callback took it (only when tracing)
     gone: bool = False
+    code: int = 0  # a stop: the process's exit code (the run's, when it ended)
     failure: str | None = None
 
 
@@ -399,15 +400,16 @@ class HostBatch:
             self.steps.clear()
 
 
-def serve(nodes: Sequence[RobotNode], inbox: BoundedInbox[Event]) -> str | None:
+def serve(nodes: Sequence[RobotNode], inbox: BoundedInbox[Event]) -> Event:
     """Feed the nodes the events of their inbox (the world's liveliness) until a stop event
-    arrives; their inputs they handle in Zenoh's callbacks. What a plug-in's failure said,
-    if one stopped them."""
+    arrives (a stop signal, the run's ending, or a plug-in's failure); their inputs they
+    handle in Zenoh's callbacks. The stop event: its exit code (the run's, when it ended)
+    and what a plug-in's failure said, if one stopped them."""
     by_id = {node.robot_id: node for node in nodes}
     while True:
         event = inbox.get()
         if event.kind == STOP:
-            return event.failure
+            return event
         node = by_id[event.robot]
         if (
             event.kind is keyspace.ALIVE_WORLD

@@ -4,9 +4,11 @@
         --robot 9=serial:/dev/ttyUSB0@921600 --connect tcp/127.0.0.1:7447 --key-file bridge.json
 
 ``swarm run --external ... --link ...`` starts it with the run's keys, the robots'
-controller settings and, with ``--secure``, a certificate per robot. SIGINT or SIGTERM
-end it saying the run has ended (the programs then exit); SIGHUP ends it saying it is
-going away (they keep trying, and find the next bridge on the same link).
+controller settings and, with ``--secure``, a certificate per robot. The run's ending
+(``world/ending``, checked with the bridge's key), SIGINT or SIGTERM end it saying the run
+has ended (the programs then exit); SIGHUP ends it saying it is going away (they keep
+trying, and find the next bridge on the same link). It exits with the run's exit code
+once it heard the ending.
 """
 
 from __future__ import annotations
@@ -23,9 +25,10 @@ import zenoh
 
 from bestofn_swarm.link.core import codec
 from bestofn_swarm.plumbing import cliargs, process_main
+from bestofn_swarm.plumbing.ending import hear_ending
 from bestofn_swarm.plumbing.stop_signals import on_stop_signals
 from bestofn_swarm.plumbing.zenoh_session import open_from_args, open_session, session_mode
-from bestofn_swarm.wire import names
+from bestofn_swarm.wire import names, protocol
 from world_server.bridge import keys as link_keys
 from world_server.bridge.bridge import Bridge, BridgeConfig, LinkedRobot
 from world_server.bridge.core.impairment import LinkImpairment
@@ -201,6 +204,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             (signal.SIGINT, signal.SIGTERM, signal.SIGHUP),
         )
         bridge.declare()
+        ended: list[int] = []  # the run's exit code, once its ending came
+
+        def on_ending(ending: protocol.RunEnding) -> None:
+            log.info("the run ended: %s (exit code %d)", ending.ended, ending.code)
+            ended.append(ending.code)
+            bridge.stop(codec.ByeReason.RUN_ENDED)  # the programs outside exit too
+
+        hearing = hear_ending(session, begun.keys, keyring, on_ending)
         served = ", ".join(f"{linked.robot} on {linked.address}" for linked in robots)
         log.info("serving robot(s) %s", served)
         # The loop runs in its own thread so that this one stays free for the signals.
@@ -217,6 +228,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         worker.start()
         while worker.is_alive():
             worker.join(0.2)
+        hearing.undeclare()
         bridge.close()
         if failed:
             print(f"bridge: the loop failed: {failed[0]!r}", file=sys.stderr)
@@ -227,7 +239,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         for opened in sessions:
             opened.close()
-    return 0
+    return ended[0] if ended else 0
 
 
 if __name__ == "__main__":

@@ -150,7 +150,8 @@ class Coordinator:
         """Take one event handled at ``now``, without closing a tick."""
         self.now = now
         handler = self._handlers.get(event.kind)
-        if handler is not None and self.phase != Phase.STOPPED:
+        # A stopped world still says its counters (the launcher asks them at the end).
+        if handler is not None and (self.phase != Phase.STOPPED or event.kind is keyspace.STATS):
             handler(event)
 
     def wake(self, now: float) -> None:

@@ -209,6 +209,12 @@ class RunObserver:
         if self.watchdog is not None:
             self.watchdog.restarted(robot, self.sim_time)
 
+    def returned(self, robot: int) -> None:
+        """A robot given up as crashed runs again (its process was only cut off)."""
+        self.records[robot].crashed = False
+        if self.watchdog is not None:
+            self.watchdog.resumed(robot)
+
     def departed(self, present: Iterable[int]) -> None:
         """The run ends: an outside robot whose link is down is not among those that
         decide, as a robot whose process went."""

@@ -192,6 +192,13 @@ class Watchdog:
         if robot is not None:
             robot.running = False
 
+    def resumed(self, robot_id: int) -> None:
+        """A robot given up as gone runs again (its process was only cut off): its
+        progress goes on from where it was."""
+        robot = self._robots.get(robot_id)
+        if robot is not None:
+            robot.running = True
+
     def undecided(self) -> list[int]:
         """Running robots that have not decided, by id."""
         return [r.id for r in self._robots.values() if r.running and not r.decided]

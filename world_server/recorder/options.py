@@ -40,6 +40,12 @@ def build_parser() -> argparse.ArgumentParser:
         f"machine it yields to the swarm and catches up (default: "
         f"{DEFAULT_NICENESS})",
     )
+    parser.add_argument(
+        "--await-finish",
+        action="store_true",
+        help="close the file only when the launcher's finish query comes (swarm run, which "
+        "hands the recorder its own summary), not when the run's ending is heard",
+    )
     cliargs.add_zenoh_options(parser)
     cliargs.add_log_level(parser)
     return parser

@@ -3,8 +3,11 @@ into one MCAP file (``world_server/recording/writer.py`` writes it).
 
 It subscribes to ``<root>/<run>/**`` before it declares its liveliness token, and Zenoh
 callbacks only append ``(key, payload, attachment, wall time)`` to an inbox that one
-writer thread (``write_loop.py``) empties, in arrival order, until the launcher's finish
-query (``finish.py``) or a stop signal.
+writer thread (``write_loop.py``) empties, in arrival order, until the run's ending
+(``world/ending``: the file is closed with the summary it carries, and the recorder exits
+with the run's exit code), the launcher's finish query (``finish.py``; with
+``--await-finish``, as ``swarm run`` starts it, only that closes the file) or a stop
+signal.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from bestofn_swarm.plumbing import process_main, settings_cli
+from bestofn_swarm.plumbing.ending import MAX_ENDING_SAMPLE_BYTES, hear_ending
 from bestofn_swarm.plumbing.inbox import BoundedInbox, message_bytes
 from bestofn_swarm.plumbing.private_files import open_private
 from bestofn_swarm.plumbing.stop_signals import on_stop_signals
@@ -27,14 +31,15 @@ from bestofn_swarm.wire import auth, keyspace, names, protocol
 from bestofn_swarm.wire.names import Role
 from world_server.recorder.finish import query_parts
 from world_server.recorder.options import RECORDER_OPTIONS, build_parser
-from world_server.recorder.write_loop import STOP, Finish, write_loop
+from world_server.recorder.write_loop import STOP, Ended, Finish, write_loop
 from world_server.recording.description import RunDescription
 from world_server.recording.writer import McapRecorder, Sample
 
 log = logging.getLogger("recorder")
 
 INBOX_BYTES = 256 * 2**20  # what may wait for the writer thread, at most
-MAX_SAMPLE_BYTES = protocol.MAX_CAMERA_FRAME_BYTES + 1024  # a frame and its attachment
+# A camera frame and its attachment, or the run's ending (it carries the summary).
+MAX_SAMPLE_BYTES = max(protocol.MAX_CAMERA_FRAME_BYTES + 1024, MAX_ENDING_SAMPLE_BYTES)
 
 
 def _world_info(
@@ -112,12 +117,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     with session, stream:
         subscriber = session.declare_subscriber(keys.all, on_sample)
         queryable = session.declare_queryable(keys.of(keyspace.RECORDER_FINISH), on_finish)
+        ending = hear_ending(
+            session, keys, keyring, lambda heard: inbox.put(Ended(heard), control=True)
+        )
         info = _world_info(session, keys, args.info_timeout, keyring)
         recorder = McapRecorder(stream, keys, run, info, keyring=keyring)
         done = threading.Event()
+        ended: list[protocol.RunEnding] = []
         writer = threading.Thread(
             target=write_loop,
             args=(recorder, inbox, keys, done),
+            kwargs={"await_finish": args.await_finish, "ended": ended},
             name="mcap-writer",
             daemon=True,
         )
@@ -127,13 +137,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         while not done.wait(0.2):  # wake up for signals
             pass
         token.undeclare()
+        ending.undeclare()
         queryable.undeclare()
         subscriber.undeclare()
         if not recorder.closed:  # the writer thread failed: keep what can be kept
             with contextlib.suppress(Exception):
                 recorder.finish(finished_by="error")
             return 1
-    return 0
+    return ended[0].code if ended else 0
 
 
 if __name__ == "__main__":

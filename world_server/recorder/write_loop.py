@@ -1,5 +1,5 @@
-"""The recorder's writer thread: Zenoh callbacks only put samples (and a finish query, or a
-stop) into one inbox, and this thread records them in arrival order."""
+"""The recorder's writer thread: Zenoh callbacks only put samples (and a finish query, the
+run's ending, or a stop) into one inbox, and this thread records them in arrival order."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import time
 from typing import Any
 
 from bestofn_swarm.plumbing.inbox import BoundedInbox
-from bestofn_swarm.wire import keyspace
+from bestofn_swarm.wire import keyspace, protocol
 from world_server.recorder.finish import finish_on_query, refused
 from world_server.recording.writer import McapRecorder, Sample
 
@@ -32,18 +32,39 @@ class Finish:
 STOP = object()  # a stop signal in the queue
 
 
+class Ended:
+    """The run's ending, heard (``world/ending``): closes the recording with its summary,
+    unless a launcher finishes it (``await_finish``)."""
+
+    def __init__(self, ending: protocol.RunEnding) -> None:
+        self.ending = ending
+
+
 def write_loop(
     recorder: McapRecorder,
     inbox: BoundedInbox[Any],
     keys: keyspace.Keys,
     done: threading.Event,
+    *,
+    await_finish: bool = False,
+    ended: list[protocol.RunEnding] | None = None,
 ) -> None:
-    """The writer thread: record samples in arrival order until a finish query or a stop."""
+    """The writer thread: record samples in arrival order until a finish query, a stop, or
+    (unless ``await_finish``) the run's ending, which it appends to ``ended``."""
     try:
         while True:
             item = inbox.get()
             if isinstance(item, Sample):
                 recorder.record(item)
+            elif isinstance(item, Ended):
+                if await_finish:
+                    continue  # recorded as a sample; the launcher's query finishes the file
+                _drain(recorder, inbox, FINISH_QUIET, FINISH_DRAIN_LIMIT)
+                recorder.finish(item.ending.summary, finished_by="ending")
+                if ended is not None:
+                    ended.append(item.ending)
+                log.info("recording complete, the run ended %s", item.ending.ended)
+                return
             elif isinstance(item, Finish):
                 if refused(recorder, item.query, keys):
                     continue

@@ -1,7 +1,8 @@
 """What a ``world-server`` process is configured with, as one object (``WorldServerConfig``):
-the world (``WorldConfig``: layout, clock, radio medium and its faults, camera noise) and how
-the server paces and publishes it. ``swarm run`` hands it over as ``--config JSON``; by hand,
-its options are made from the settings' own definitions."""
+the world (``WorldConfig``: layout, clock, radio medium and its faults, camera noise), how
+the server paces and publishes it, and how it ends the run (``EndingRules``). ``swarm run``
+hands it over as ``--config JSON``; by hand, its options are made from the settings' own
+definitions."""
 
 from __future__ import annotations
 
@@ -15,15 +16,17 @@ from bestofn_swarm.plumbing.settings_cli import Options
 from bestofn_swarm.wire import settings
 from bestofn_swarm.wire.settings import Flag
 from world_server.core.world import WorldConfig
+from world_server.observer.referee import EndingRules
 
 
 @dataclass(frozen=True)
 class WorldServerConfig:
-    """The world and how the world server runs it."""
+    """The world, how the world server runs it, and how it ends the run."""
 
     FLAG_GROUP: ClassVar[str] = "clock"
 
     world: WorldConfig = field(default_factory=WorldConfig)
+    rules: EndingRules = field(default_factory=EndingRules)
     speed: Annotated[
         float,
         Meta(
