@@ -53,6 +53,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bestofn_swarm.link.core import codec
 from bestofn_swarm.wire import auth, batch, keyspace, names, numeric, protocol
+from bestofn_swarm.wire.endings import Ending, Stop, TimeLimit
 from bestofn_swarm.wire.keyspace import Part
 from bestofn_swarm.wire.rng import Stream, seed_of
 from examples.udp_radio import MAX_RADIO_PAYLOAD_BYTES, encode_frame
@@ -354,6 +355,152 @@ def link_stats_vectors() -> TypeVectors:
         "a link is udp or serial",
         changed(data, b'"transport":"udp"', b'"transport":"tcp"'),
         at="$.transport",
+    )
+    return vectors
+
+
+def pace_vectors() -> TypeVectors:
+    vectors = TypeVectors("pace.json", protocol.Pace)
+    data = vectors.add_valid("playing", protocol.Pace(v=1, playing=True, speed=4.0))
+    vectors.add_valid(
+        "paused",
+        protocol.Pace(v=1, playing=False),
+        note="speed null: as fast as the swarm answers (lockstep), or the world's --speed",
+    )
+    common_faults(vectors, data, b'"playing":true,', "playing")
+    vectors.add_invalid(
+        "speed_zero",
+        OUT_OF_RANGE,
+        "a speed is above 0 sim seconds a wall second",
+        changed(data, b'"speed":4.0', b'"speed":0.0'),
+        at="$.speed",
+    )
+    vectors.add_invalid(
+        "speed_too_high",
+        OUT_OF_RANGE,
+        f"a speed is at most {protocol.MAX_PACE_SPEED:g} sim seconds a wall second",
+        changed(data, b'"speed":4.0', b'"speed":1000.5'),
+        at="$.speed",
+    )
+    vectors.add_invalid(
+        "playing_as_number",
+        WRONG_TYPE,
+        "playing is true or false, never a number",
+        changed(data, b'"playing":true', b'"playing":1'),
+        at="$.playing",
+    )
+    return vectors
+
+
+RUN_ENDING = protocol.RunEnding(
+    v=1,
+    run="seed0",
+    ended=Ending.CONSENSUS,
+    code=0,
+    stop=Stop.DECIDED,
+    timeout_kind=None,
+    tick=1117,
+    t=111.7,
+    signal=None,
+    lost=[],
+    summary={
+        "run_id": "seed0",
+        "ended": "consensus",
+        "chosen_site": 3,
+        "digest": "063adecf824bce0b",
+    },
+)
+
+
+def run_ending_vectors() -> TypeVectors:
+    vectors = TypeVectors("run_ending.json", protocol.RunEnding)
+    data = vectors.add_valid("consensus", RUN_ENDING)
+    vectors.add_valid(
+        "lost_beacon",
+        protocol.RunEnding(
+            v=1,
+            run="seed0",
+            ended=Ending.CRASHED,
+            code=1,
+            stop=Stop.CRASHED,
+            timeout_kind=None,
+            tick=412,
+            t=41.2,
+            signal=None,
+            lost=["nest"],
+            summary={"run_id": "seed0", "ended": "crashed"},
+        ),
+        note="the beacon's liveliness went: the world ends the run crashed at once",
+    )
+    vectors.add_valid(
+        "sim_timeout",
+        protocol.RunEnding(
+            v=1,
+            run="seed0",
+            ended=Ending.TIMEOUT,
+            code=5,
+            stop=Stop.TIMEOUT,
+            timeout_kind=TimeLimit.SIM,
+            tick=6000,
+            t=600.0,
+            signal=None,
+            lost=["7"],
+            summary={"run_id": "seed0", "ended": "timeout", "timeout_kind": "sim"},
+        ),
+    )
+    common_faults(vectors, data, b'"code":0,', "code")
+    vectors.add_invalid(
+        "unknown_ending",
+        BAD_ENUM,
+        "ended names one of the endings (docs/running.md)",
+        changed(data, b'"ended":"consensus","code"', b'"ended":"won","code"'),
+        at="$.ended",
+    )
+    vectors.add_invalid(
+        "code_above_255",
+        OUT_OF_RANGE,
+        "an exit code is 0 to 255",
+        changed(data, b'"code":0', b'"code":256'),
+        at="$.code",
+    )
+    vectors.add_invalid(
+        "lost_bad_name",
+        BAD_NAME,
+        "a lost robot or beacon is named as on its keys",
+        changed(data, b'"lost":[]', b'"lost":["a/b"]'),
+        at="$.lost[0]",
+    )
+    vectors.add_invalid(
+        "summary_not_an_object",
+        WRONG_TYPE,
+        "summary is a JSON object",
+        changed(data, data[data.index(b'"summary":') : -1], b'"summary":[]'),
+        at="$.summary",
+    )
+    return vectors
+
+
+TAG_A = "00112233445566778899aabbccddeeff"
+TAG_B = "ffeeddccbbaa99887766554433221100"
+
+
+def ending_seals_vectors() -> TypeVectors:
+    vectors = TypeVectors("ending_seals.json", protocol.EndingSeals)
+    data = vectors.add_valid(
+        "keyed", protocol.EndingSeals(v=1, robots=[TAG_A, TAG_B], bridge=TAG_A)
+    )
+    vectors.add_valid(
+        "unkeyed",
+        protocol.EndingSeals(v=1, robots=[], bridge=None),
+        note="an unkeyed run: no tags",
+    )
+    common_faults(vectors, data, f'"robots":["{TAG_A}","{TAG_B}"],'.encode(), "robots")
+    vectors.add_invalid(
+        "short_tag",
+        WRONG_LENGTH,
+        "a tag is 16 bytes: 32 lowercase hex digits",
+        changed(data, f'"bridge":"{TAG_A}"'.encode(), f'"bridge":"{TAG_A[:30]}"'.encode()),
+        at="$.bridge",
     )
     return vectors
 
@@ -2106,6 +2253,9 @@ BUILDERS: tuple[Callable[[], TypeVectors], ...] = (
     opinion_vectors,
     vote_vectors,
     beacon_vectors,
+    pace_vectors,
+    run_ending_vectors,
+    ending_seals_vectors,
 )
 
 

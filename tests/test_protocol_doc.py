@@ -190,11 +190,15 @@ def controller_table() -> str:
         choices = getattr(kind, "__args__", None)
         if choices is not None:
             value, bounds = "one of " + ", ".join(f'`"{choice}"`' for choice in choices), ""
+        elif kind is str:  # a plug-in's name (docs/extending.md)
+            value = "a name, or `package.module:attribute`"
+            bounds = f"{constraints['min_length']} to {constraints['max_length']} characters"
         elif kind is int:
             value, bounds = "integer", settings.interval(constraints)
         else:
             value, bounds = "number", settings.interval(constraints)
-        default = json.dumps(setting.default) if choices is None else f'`"{setting.default}"`'
+        quoted = choices is not None or kind is str
+        default = f'`"{setting.default}"`' if quoted else json.dumps(setting.default)
         if kind is float:
             default = msgspec.json.encode(float(setting.default)).decode()
         meaning = setting.description.replace("|", "/")

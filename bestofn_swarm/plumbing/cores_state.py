@@ -15,9 +15,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from bestofn_swarm.plumbing import checkout
-
-REPO = checkout.ROOT  # where the packages are: the cores are built next to their sources
+# Where the packages are (a checkout's root, or site-packages): the cores are built next to
+# their sources. Nothing of the project is imported here before use_source_if_stale has
+# run: a module imported now would be the compiled one, stale or not.
+REPO = Path(__file__).resolve().parents[2]
 
 # The modules compiled, by path from the repository's root: the numeric kernel, the
 # robot's controller and its tick, and the world's tick. Every one is in a pure folder
@@ -120,6 +121,8 @@ def status() -> Status:
     if leftover:
         return Status("stale", f"{leftover[0].relative_to(REPO)} is not one of the cores")
     if not built and not shared_library().exists():
+        from bestofn_swarm.plumbing import checkout  # imports the project: not at the top
+
         if checkout.found() is None:
             return Status("interpreted", "an installed copy: they are built in a checkout only")
         return Status("interpreted", "not built; `make cores` builds them")
