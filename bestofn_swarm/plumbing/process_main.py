@@ -15,11 +15,13 @@ signals, the Zenoh sessions, what the program serves) is each program's own.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import os
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Generic, TypeVar
+from typing import Generic, NoReturn, TypeVar
 
 from bestofn_swarm.plumbing import cliargs, cores, run_keys
 from bestofn_swarm.plumbing.lifecycle import die_with_launcher
@@ -84,3 +86,17 @@ def _lower_priority(program: str, niceness: int) -> None:
         os.nice(niceness)
     except (AttributeError, OSError) as error:
         logging.getLogger(program).info("could not lower the %s's priority: %s", program, error)
+
+
+def end(code: int) -> NoReturn:
+    """The end of a program's main once its Zenoh sessions are closed and its files
+    written: its log and output flushed, then the exit with ``code`` at once, without the
+    interpreter's finalization. A Zenoh thread still finishing a callback as the
+    interpreter finalizes is stopped inside Zenoh's own code, which aborts the process
+    (glibc: "FATAL: exception not rethrown", exit code -6): a process that ends on a run's
+    ending, as every process of the run now hears it, met that one exit in a few."""
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):
+            stream.flush()
+    os._exit(code)

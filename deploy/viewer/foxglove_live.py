@@ -227,4 +227,4 @@ def _forward(recorder: McapRecorder, inbox: BoundedInbox[Sample | None]) -> None
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    process_main.end(main())

@@ -490,4 +490,4 @@ async def _finish_on_query(
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    process_main.end(main())

@@ -96,7 +96,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         code = node.serve()
         node.close()
     log.info("beacon %s stopped (%d rejected clock messages)", name, endpoint.rejected)
-    return code
+    process_main.end(code)
 
 
 if __name__ == "__main__":

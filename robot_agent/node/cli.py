@@ -283,7 +283,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             session.close()
         if trace is not None:
             trace.close()
-    return code
+    process_main.end(code)
 
 
 def _hear_ending(node: RobotNode, inbox: BoundedInbox[Event]) -> zenoh.Subscriber:

@@ -161,7 +161,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             worker.join(0.0 if lingering else 0.2)
         server.undeclare()
         server.close_trace()
-        return thread_result[0] if thread_result else 1
+        code = thread_result[0] if thread_result else 1
+    process_main.end(code)
 
 
 if __name__ == "__main__":
