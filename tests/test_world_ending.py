@@ -222,6 +222,24 @@ def test_the_plan_s_faults_are_a_kill_and_a_restart_not_a_loss() -> None:
     assert rows[1]["killed"] and not rows[1]["crashed"] and rows[2]["restarts"] == 1
 
 
+def test_a_robot_killed_then_restarted_by_the_plan_is_waited_for_and_counted_again() -> None:
+    """``--kill 2@10 --restart 2@20``: killed at 10 s, the run waits for the restart to
+    come, and the fresh process counts from the moment it joins (it once stayed killed,
+    and the run waited for a restart that had already happened until its time limit)."""
+    rules = EndingRules(
+        departures=(PlannedDeparture(2, 10.0), PlannedDeparture(2, 20.0, returns=True))
+    )
+    referee = _referee(_world(), rules)
+    _started(referee, range(4))
+    referee.now(5, 10.5, [0, 1, 3], ["nest"], wall=1.0)  # killed as planned
+    assert referee.running() == [0, 1, 3] and referee.look() is None  # a restart to come
+    referee.now(8, 20.5, [0, 1, 2, 3], ["nest"], wall=2.0)  # started again
+    assert referee.running() == [0, 1, 2, 3] and referee.lost == []
+    ending = referee.ending(Halt(Stop.TIMEOUT, TimeLimit.SIM), None, 1.0)
+    row = ending.summary["per_robot"][2]
+    assert row["restarts"] == 1 and not row["killed"] and not row["crashed"]
+
+
 def test_a_robot_that_leaves_before_its_planned_kill_is_lost() -> None:
     referee = _referee(_world(), EndingRules(departures=(PlannedDeparture(1, 10.0),)))
     _started(referee, range(4))

@@ -292,6 +292,12 @@ class Referee:
         if robot in self._restarting:
             self._restarting.discard(robot)
             return
+        # Killed by the plan earlier, now started again by it (--kill, then --restart).
+        planned = next((p for p in self._planned if p.robot == robot and p.returns), None)
+        if planned is not None and self.observer.records[robot].killed:
+            self._planned.remove(planned)
+            self.observer.restarted(robot)
+            return
         if self._away.pop(robot, None) is not None:
             self._returned.add(robot)  # back in time: as if it never went
             return
