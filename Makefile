@@ -1,6 +1,7 @@
 # `make run`: a default swarm to consensus.
 # `make test`: lint, the C robot's unit tests, then the whole test suite (every tier) on
-#   TEST_WORKERS workers (pytest-xdist; its live runs mostly wait on each other), printing
+#   TEST_WORKERS workers (pytest-xdist; three on two cores, as its live runs mostly wait
+#   on each other: about 7.5 minutes of pytest against 9 with two), printing
 #   the 20 slowest tests. CI's budget for it: 10 minutes on 2 cores.
 # `make test-fast`: the fast tier only: the tests of the pure layers, which start no process
 #   and open no Zenoh session or network connection. The tier is set per test in
@@ -42,7 +43,7 @@ RUN_LOCK := requirements/run.lock
 TEST_LOCK := requirements/test.lock
 UV_VERSION := 0.13.9
 LOCK_OPTIONS := --generate-hashes --universal --fork-strategy fewest --python-version 3.11
-TEST_WORKERS ?= 2
+TEST_WORKERS ?= 3
 # The seed of the studies' sample in make check-published: the day's date, so each day's
 # check makes other runs (make check-published CHECK_SEED=20250314 draws that day's again).
 CHECK_SEED ?= $(shell date -u +%Y%m%d)

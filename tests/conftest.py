@@ -65,21 +65,27 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 # and the short ones fill in at the end: the workers finish together.
 LONGEST_FIRST = (
     "test_outside",
+    "test_viewer",
     "test_attacks",
     "test_faults",
-    "test_endings",
     "test_attacks_presence",
-    "test_viewer",
     "test_swarm",
-    "test_experiment",
+    "test_endings",
     "test_multihost",
+    "test_conformance",
+    "test_notebook",
     "test_hosts",
-    "test_portable_runs",
+    "test_plugin_runs",
     "test_private_runs",
-    "test_flood_memory",
+    "test_study_runner",
+    "test_experiment",
+    "test_fault_plugins",
     "test_recording",
+    "test_compiled_cores",
+    "test_flood_memory",
     "test_secure",
     "test_report",
+    "test_portable_runs",
 )
 
 
