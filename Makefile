@@ -48,7 +48,7 @@ TEST_WORKERS ?= 3
 # check makes other runs (make check-published CHECK_SEED=20250314 draws that day's again).
 CHECK_SEED ?= $(shell date -u +%Y%m%d)
 
-.PHONY: run test test-fast check-published check-portable check-mcu explore lint bench lock c-robot clean cores clean-cores
+.PHONY: run test c-robot-test test-fast check-published check-portable check-mcu explore lint bench lock c-robot clean cores clean-cores
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -69,14 +69,17 @@ run: $(VENV)/.installed
 	$(BIN)/python -m bestofn_swarm.plumbing.cores build
 	$(BIN)/swarm run
 
+# The cores' build (a minute of one core on a fresh clone) runs beside the lint and the C
+# robot's tests; the suite starts when both are done.
 test: $(VENV)/.installed-test
-	$(BIN)/python -m bestofn_swarm.plumbing.cores build
-	$(BIN)/ruff check .
-	$(BIN)/ruff format --check .
-	$(BIN)/mypy
+	$(BIN)/python -m bestofn_swarm.plumbing.cores build & cores=$$!; \
+	$(MAKE) --no-print-directory lint c-robot-test; checks=$$?; \
+	wait $$cores && exit $$checks
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=20
+
+c-robot-test:
 	@if command -v $${CC:-gcc} >/dev/null 2>&1; then $(MAKE) -C c_robot test; \
 	else echo "make test: no C compiler ($${CC:-gcc}): the C robot's unit tests are skipped"; fi
-	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=20
 
 # The compiled cores (bestofn_swarm/plumbing/cores.py): mypyc builds the pure modules of the tick in
 # place, again whenever one of them changes; without a C compiler or mypyc, make says so

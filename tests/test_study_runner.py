@@ -201,22 +201,40 @@ def test_two_runners_on_one_results_file_make_each_run_once(root: Path, short_tm
             assert first.poll() is None, "the first runner ended before it took the lock"
             assert time.monotonic() < deadline, "the first runner took no lock"
             time.sleep(0.02)
+        # The first runner stands still, holding the lock, until the waiting one waits
+        # (else it may finish its few runs first on a busy machine: nothing to wait for).
+        os.killpg(first.pid, signal.SIGSTOP)
         second = subprocess.run(
             _command(root, *only), cwd=REPO, env=environment, capture_output=True, text=True,
             timeout=120,
         )  # fmt: skip
         assert second.returncode == 2
         assert f"is being made by pid {first.pid} on " in second.stderr
-        waited = subprocess.run(
-            _command(root, *only, "--wait"), cwd=REPO, env=environment, capture_output=True,
-            text=True, timeout=300,
+        waiting = subprocess.Popen(
+            _command(root, *only, "--wait"), cwd=REPO, env=environment, stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE, text=True,
         )  # fmt: skip
-        assert waited.returncode == 0, waited.stderr[-2000:]
-        assert "waiting for it to end" in " ".join(waited.stderr.split())
-        assert waited.stdout.strip().splitlines()[-1] == f"{IN_PROCESS} done, 0 missing"
+        try:
+            assert waiting.stderr is not None
+            said = ""
+            deadline = time.monotonic() + 120
+            while "waiting for it to end" not in " ".join(said.split()):
+                assert time.monotonic() < deadline, said[-2000:]
+                line = waiting.stderr.readline()
+                assert line, f"the waiting runner ended: {said[-2000:]}"
+                said += line
+            os.killpg(first.pid, signal.SIGCONT)
+            stdout, rest = waiting.communicate(timeout=300)
+        finally:
+            if waiting.poll() is None:
+                waiting.kill()
+                waiting.communicate()
+        assert waiting.returncode == 0, (said + rest)[-2000:]
+        assert stdout.strip().splitlines()[-1] == f"{IN_PROCESS} done, 0 missing"
         assert first.wait(timeout=300) == 0
     finally:
         if first.poll() is None:
+            os.killpg(first.pid, signal.SIGCONT)
             os.killpg(first.pid, signal.SIGKILL)
         first.communicate(timeout=30)
     keys = [json.loads(line)["key"] for line in _lines(results_file) if line.strip()]
