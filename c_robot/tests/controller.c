@@ -62,9 +62,17 @@ static void to_text(Text *t, const JNode *n) {
     }
 }
 
-static const char *text_of(const JNode *n, size_t *size) {
-    static char buffer[256 * 1024];
-    Text t = {buffer, 0, sizeof buffer, 0};
+/* A message of a track as text, and a camera frame's PNG bytes: the host's room for any,
+   less on the board (make test-m4), where the vectors' few kilobytes fit. */
+#ifndef TEXT_BYTES
+#define TEXT_BYTES (256 * 1024)
+#endif
+#ifndef TRACK_FRAME_BYTES
+#define TRACK_FRAME_BYTES MAX_FRAME_BYTES /* the robot's own limit of a frame */
+#endif
+
+static const char *text_of(const JNode *n, char *buffer, size_t *size) {
+    Text t = {buffer, 0, TEXT_BYTES, 0};
     buffer[0] = '\0';
     to_text(&t, n);
     *size = t.size;
@@ -153,7 +161,11 @@ static const char *status_differs(const StatusOut *s, const JNode *want) {
 
 /* --- one track ----------------------------------------------------------------------- */
 
+/* The radio messages of one tick the test holds (the vectors have a few; make test-m4 sets
+   fewer, for the board's memory). */
+#ifndef MAX_TICK_RX
 #define MAX_TICK_RX 256
+#endif
 
 typedef struct {
     Heard heard[MAX_TICK_RX];
@@ -198,22 +210,29 @@ static const char *tick_differs(Controller *c, const JNode *tick, const Command 
     return NULL;
 }
 
-static void run_track(const JNode *track) {
-    static WorldInfo world;
-    static unsigned char png[2 * 1024 * 1024];
-    static RadioPayload payloads[MAX_TICK_RX];
-    static char senders[MAX_TICK_RX][MAX_NAME + 1];
+/* What a track's ticks are decoded into: on the heap, taken before the vectors are read,
+   so that the other groups' vectors have the board's memory (make test-m4). */
+typedef struct {
+    WorldInfo world;
+    char text[TEXT_BYTES];
+    unsigned char png[TRACK_FRAME_BYTES];
+    RadioPayload payloads[MAX_TICK_RX];
+    char senders[MAX_TICK_RX][MAX_NAME + 1];
+} TrackBuffers;
+
+static void run_track(const JNode *track, TrackBuffers *b) {
+    RadioPayload *payloads = b->payloads;
     const char *name = jdom_str(track, "name");
     char label[160];
     size_t size;
-    const char *text = text_of(jdom_get(track, "world"), &size);
-    if (text == NULL || !decode_world_info(text, size, &world)) {
+    const char *text = text_of(jdom_get(track, "world"), b->text, &size);
+    if (text == NULL || !decode_world_info(text, size, &b->world)) {
         check(0, "controller vectors: the track's WorldInfo decodes", name);
         return;
     }
     ControllerConfig config;
     char error[256];
-    text = text_of(jdom_get(track, "controller"), &size);
+    text = text_of(jdom_get(track, "controller"), b->text, &size);
     if (text == NULL || decode_controller_config(text, size, &config, error, sizeof error) != 0) {
         check(0, "controller vectors: the track's ControllerConfig decodes", name);
         return;
@@ -221,8 +240,8 @@ static void run_track(const JNode *track) {
     int robot = (int)jdom_get(track, "robot")->integer;
     Controller *c = controller_instance();
     const char *why;
-    if (controller_init(c, robot, &world, &config, seed_of_robot((uint64_t)world.seed, (unsigned)robot),
-                        &why) != 0) {
+    uint64_t seed = seed_of_robot((uint64_t)b->world.seed, (unsigned)robot);
+    if (controller_init(c, robot, &b->world, &config, seed, &why) != 0) {
         check(0, "controller vectors: the controller is built", name);
         return;
     }
@@ -241,8 +260,9 @@ static void run_track(const JNode *track) {
         reading.frame = NULL;
         const JNode *frame = jdom_get(in, "frame");
         if (frame->type == J_NUM) {
-            long n = base64_decode(frames->items[frame->integer]->str, png, sizeof png);
-            if (n < 0 || png_decode(png, (size_t)n, &image, &why) != 0) {
+            const char *encoded = frames->items[frame->integer]->str;
+            long n = base64_decode(encoded, b->png, sizeof b->png);
+            if (n < 0 || png_decode(b->png, (size_t)n, &image, &why) != 0) {
                 snprintf(label, sizeof label, "track %s, tick %ld: its frame decodes", name, number);
                 check(0, "controller vectors", label);
                 return;
@@ -251,17 +271,23 @@ static void run_track(const JNode *track) {
         }
         Delivered delivered = {.count = 0, .next = 0};
         const JNode *rx = jdom_get(in, "rx");
-        for (size_t i = 0; i < rx->count && i < MAX_TICK_RX; i++) {
+        if (rx->count > MAX_TICK_RX) {
+            snprintf(label, sizeof label, "track %s, tick %ld: its radio fits MAX_TICK_RX", name,
+                     number);
+            check(0, "controller vectors", label);
+            return;
+        }
+        for (size_t i = 0; i < rx->count; i++) {
             const JNode *sender = rx->items[i]->items[0];
-            text = text_of(rx->items[i]->items[1], &size);
+            text = text_of(rx->items[i]->items[1], b->text, &size);
             if (text == NULL || !decode_radio(text, size, &payloads[delivered.count])) {
                 snprintf(label, sizeof label, "track %s, tick %ld: its radio payload decodes",
                          name, number);
                 check(0, "controller vectors", label);
                 return;
             }
-            snprintf(senders[delivered.count], sizeof senders[0], "%s", sender->str);
-            delivered.heard[delivered.count].sender = senders[delivered.count];
+            snprintf(b->senders[delivered.count], sizeof b->senders[0], "%s", sender->str);
+            delivered.heard[delivered.count].sender = b->senders[delivered.count];
             delivered.heard[delivered.count].payload = &payloads[delivered.count];
             delivered.count++;
         }
@@ -278,8 +304,15 @@ static void run_track(const JNode *track) {
 }
 
 void test_controller_vectors(void) {
+    TrackBuffers *buffers = malloc(sizeof *buffers);
+    if (buffers == NULL) {
+        check(0, "controller vectors: room for a track's buffers", "malloc");
+        return;
+    }
     JNode *root = load("controller.json");
-    if (!root) return;
-    const JNode *tracks = jdom_get(root, "tracks");
-    for (size_t i = 0; i < tracks->count; i++) run_track(tracks->items[i]);
+    if (root) {
+        const JNode *tracks = jdom_get(root, "tracks");
+        for (size_t i = 0; i < tracks->count; i++) run_track(tracks->items[i], buffers);
+    }
+    free(buffers);
 }

@@ -12,25 +12,40 @@ static void ws(P *p) {
     while (p->p < p->e && (*p->p == ' ' || *p->p == '\n' || *p->p == '\t' || *p->p == '\r')) p->p++;
 }
 
-/* What the DOM holds comes from blocks of ARENA_BLOCK bytes, never freed (each file is read
-   once): no allocation overhead, so that the vectors fit a board's RAM (make test-m4). */
+/* What the DOM holds comes from blocks of ARENA_BLOCK bytes, freed all at once by
+   jdom_release: no allocation overhead, so that the vectors fit a board's RAM (make
+   test-m4). Each block starts with the one before it. */
 #define ARENA_BLOCK (256 * 1024)
-static char *arena_at, *arena_end;
+#define BLOCK_HEADER 8 /* the link to the block before, kept 8-byte aligned */
+static char *arena_at, *arena_end, *last_block;
 
 static void *arena(size_t size) {
     size = (size + 7) & ~(size_t)7;
     if (size > (size_t)(arena_end - arena_at)) {
         size_t block = size > ARENA_BLOCK ? size : ARENA_BLOCK;
-        arena_at = malloc(block);
-        if (arena_at == NULL) {
+        char *fresh = malloc(BLOCK_HEADER + block);
+        if (fresh == NULL) {
             printf("FAIL the vectors do not fit in memory\n");
             exit(1);
         }
+        memcpy(fresh, &last_block, sizeof last_block);
+        last_block = fresh;
+        arena_at = fresh + BLOCK_HEADER;
         arena_end = arena_at + block;
     }
     void *p = arena_at;
     arena_at += size;
     return p;
+}
+
+void jdom_release(void) {
+    while (last_block != NULL) {
+        char *before;
+        memcpy(&before, last_block, sizeof before);
+        free(last_block);
+        last_block = before;
+    }
+    arena_at = arena_end = NULL;
 }
 
 static char *kept(const char *text, size_t size) {

@@ -20,6 +20,9 @@ typedef struct JNode {
 } JNode;
 
 JNode *jdom_parse_file(const char *path);
+/* Frees every DOM read so far (their nodes are gone): the runner calls it after each group
+   of tests, so that a board holds one group's vectors at a time. */
+void jdom_release(void);
 JNode *jdom_get(const JNode *obj, const char *key); /* NULL if absent */
 const char *jdom_str(const JNode *obj, const char *key);
 size_t jdom_hex(const char *hex, unsigned char *out, size_t cap); /* bytes written */

@@ -35,10 +35,11 @@ JNode *load(const char *file) {
     return n;
 }
 
+static JNode *cases_root; /* read again after each group's release */
+
 JNode *cases_json(void) {
-    static JNode *root;
-    if (root == NULL) root = jdom_parse_file("tests/cases.json");
-    return root;
+    if (cases_root == NULL) cases_root = jdom_parse_file("tests/cases.json");
+    return cases_root;
 }
 
 int main(int argc, char **argv) {
@@ -68,6 +69,8 @@ int main(int argc, char **argv) {
     for (size_t i = 0; i < sizeof groups / sizeof groups[0]; i++) {
         int before_p = passed, before_f = failed;
         groups[i].fn();
+        jdom_release();
+        cases_root = NULL;
         printf("%-10s %4d passed, %d failed\n", groups[i].name, passed - before_p,
                failed - before_f);
     }
