@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import bisect
-import json
 import sys
 import time
 from dataclasses import dataclass, field
@@ -36,7 +35,7 @@ from world_server.core.pooling import LINK_SECONDS, Pooling
 from world_server.observer.frame import FrameCollector
 from world_server.observer.observer import RunObserver
 from world_server.recording.frame import collector_for
-from world_server.recording.reader import RecordedMessage, RecordingReader
+from world_server.recording.reader import RecordedMessage, RecordingReader, count_of, json_of
 from world_server.recording.records import RUN_METADATA
 
 SPEEDS = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
@@ -183,24 +182,13 @@ def _read(path: Path, with_sense: bool) -> Timeline:
     )
     description = reader.description
     timeline.run_id = description.get("run_id") or Path(path).stem
-    timeline.seed = _int(description.get("seed"))
-    timeline.robots = _int(description.get("robots")) or len(timeline.statuses)
-    timeline.sites = _int(description.get("sites")) or _sites_of(timeline)
-    timeline.layout = _json(description.get("layout"))
-    summary = _json(reader.metadata.get(RUN_METADATA, {}).get("summary"))
+    timeline.seed = count_of(description.get("seed"))
+    timeline.robots = count_of(description.get("robots")) or len(timeline.statuses)
+    timeline.sites = count_of(description.get("sites")) or _sites_of(timeline)
+    timeline.layout = json_of(description.get("layout"))
+    summary = json_of(reader.metadata.get(RUN_METADATA, {}).get("summary"))
     timeline.summary = summary
     return timeline
-
-
-def _int(text: str | None) -> int:
-    return int(text) if text and text.isdigit() else 0
-
-
-def _json(text: str | None) -> Any:
-    try:
-        return json.loads(text) if text else None
-    except ValueError:
-        return None
 
 
 def _sites_of(timeline: Timeline) -> int:

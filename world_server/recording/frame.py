@@ -10,7 +10,6 @@ that does not grow with it (``swarm frame``).
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +19,7 @@ from bestofn_swarm.wire import keyspace
 from world_server.core.layout import make_layout
 from world_server.observer.frame import FrameCollector
 from world_server.observer.observer import RunObserver
-from world_server.recording.reader import RecordingReader
+from world_server.recording.reader import RecordingReader, count_of, json_of
 
 READS = (keyspace.STATUS, keyspace.STATE)  # what a run's time series is made of
 
@@ -90,8 +89,8 @@ def collector_for(
     """The collector of the run a recording describes: its sites and best site from the
     recorded layout, else from its shape and seed, else (no description) the sites from the
     first status's opinion and no best site."""
-    layout = _json(description.get("layout"))
-    sites = _int(description.get("sites"))
+    layout = json_of(description.get("layout"))
+    sites = count_of(description.get("sites"))
     if isinstance(layout, dict) and isinstance(layout.get("best_site"), int):
         return FrameCollector(
             sites or len(layout.get("sites") or ()),
@@ -100,26 +99,15 @@ def collector_for(
             robot_rows=robot_rows,
             keep=keep,
         )
-    robots, seed = _int(description.get("robots")), _int(description.get("seed"))
+    robots, seed = count_of(description.get("robots")), count_of(description.get("seed"))
     if sites and robots:
         best: int | None = make_layout(sites, robots, seed or 0).best_site
     else:
         best = None
-        opinion = _json(first.decode(errors="replace")) if first else None
+        opinion = json_of(first.decode(errors="replace")) if first else None
         if isinstance(opinion, dict) and isinstance(opinion.get("opinion"), list):
             sites = len(opinion["opinion"])
     return FrameCollector(max(sites, 2), best, every=every, robot_rows=robot_rows, keep=keep)
-
-
-def _int(text: str | None) -> int:
-    return int(text) if text and text.isdigit() else 0
-
-
-def _json(text: str | None) -> Any:
-    try:
-        return json.loads(text) if text else None
-    except ValueError:
-        return None
 
 
 def frame_of_recording(path: Path | str, *, swarm: bool = False, every: int = 1) -> Any:

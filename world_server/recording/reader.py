@@ -14,9 +14,10 @@ opened, OSError. A pass opens its file when its first message is asked for.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import IO, NamedTuple
+from typing import IO, Any, NamedTuple
 
 from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
@@ -103,6 +104,20 @@ def run_description(metadata: Mapping[str, dict[str, str]]) -> dict[str, str]:
     """Of a recording's metadata records, the final one if the run finished, else the one
     written at start (empty if neither was read)."""
     return metadata.get(RUN_METADATA) or metadata.get(START_METADATA) or {}
+
+
+def count_of(text: str | None) -> int:
+    """A count in a metadata record (its values are text): 0 when absent or not one."""
+    return int(text) if text and text.isdigit() else 0
+
+
+def json_of(text: str | None) -> Any:
+    """A JSON value of a recording (a metadata value, a message's text): None when absent or
+    not JSON."""
+    try:
+        return json.loads(text) if text else None
+    except ValueError:
+        return None
 
 
 def _stream_name(stream: IO[bytes]) -> str:
