@@ -137,10 +137,10 @@ def plot(records: Records, path: Path) -> None:
             nudge = (number - (len(DEFENCES) - 1) / 2) * 0.06
             mine = [row for row in rows if row["mode"] == mode and row["defence"] == defence.key]
             bars = [tables.error_bar(row["correct"], row["runs"]) for row in mine]
-            axis.errorbar(
+            tables.plot_bars(
+                axis,
                 [row["count"] + nudge for row in mine],
-                [bar[0] for bar in bars],
-                yerr=[[bar[1] for bar in bars], [bar[2] for bar in bars]],
+                bars,
                 fmt="-",
                 color=COLOURS[defence.key],
                 marker=MARKERS[defence.key],

@@ -240,14 +240,8 @@ def plot(records: Records, path: Path) -> None:
             if not mine:
                 continue
             bars = [tables.error_bar(r["correct"], r["runs"]) for r in mine]
-            axis.errorbar(
-                [100 * r["liars"] / robots for r in mine],
-                [bar[0] for bar in bars],
-                yerr=[[bar[1] for bar in bars], [bar[2] for bar in bars]],
-                fmt="o-",
-                capsize=2,
-                label=label(defence),
-            )
+            liars = [100 * r["liars"] / robots for r in mine]
+            tables.plot_bars(axis, liars, bars, fmt="o-", capsize=2, label=label(defence))
         if not any(r["robots"] == robots for r in found):
             tables.no_runs_yet(axis)
         axis.axhline(0.9, linestyle=":", color="grey")

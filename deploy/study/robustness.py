@@ -335,10 +335,7 @@ def plot_drop(records: Records, path: Path) -> None:
     if rows:
         bars = [tables.error_bar(row["correct"], row["runs"]) for _, row in rows]
         levels = [level for level, _ in rows]
-        accuracy.errorbar(
-            levels, [bar[0] for bar in bars], yerr=[[b[1] for b in bars], [b[2] for b in bars]],
-            fmt="o-", color="tab:blue", capsize=2,
-        )  # fmt: skip
+        tables.plot_bars(accuracy, levels, bars, fmt="o-", color="tab:blue", capsize=2)
         for run in records.where(sweep="drop"):
             result = tables.result(run)
             if result["consensus"]:
@@ -346,9 +343,8 @@ def plot_drop(records: Records, path: Path) -> None:
                     run["params"]["drop"], result["sim_time_s"], ".", color="tab:grey", alpha=0.5
                 )
         medians = [tables.median_bar(row["times"]) for _, row in rows]
-        timing.errorbar(
-            levels, [bar[0] for bar in medians],
-            yerr=[[bar[1] for bar in medians], [bar[2] for bar in medians]],
+        tables.plot_bars(
+            timing, levels, medians,
             fmt="o-", color="tab:blue", capsize=3, label="median (95% bootstrap interval)",
         )  # fmt: skip
         timing.legend()
@@ -388,17 +384,10 @@ def plot_noise(records: Records, path: Path) -> None:
         levels = [row["sigma"] for row in mine]
         style = {"color": COLOURS[setup.key], "marker": MARKERS[setup.key]}
         bars = [tables.error_bar(row["correct"], row["runs"]) for row in mine]
-        accuracy.errorbar(
-            [level + nudge for level in levels], [bar[0] for bar in bars],
-            yerr=[[b[1] for b in bars], [b[2] for b in bars]], fmt="-", capsize=2,
-            label=setup.label, **style,
-        )  # fmt: skip
+        nudged = [level + nudge for level in levels]
+        tables.plot_bars(accuracy, nudged, bars, fmt="-", capsize=2, label=setup.label, **style)
         medians = [tables.median_bar(row["times"]) for row in mine]
-        timing.errorbar(
-            [level + nudge for level in levels], [bar[0] for bar in medians],
-            yerr=[[bar[1] for bar in medians], [bar[2] for bar in medians]], fmt="-",
-            capsize=2, label=setup.label, **style,
-        )  # fmt: skip
+        tables.plot_bars(timing, nudged, medians, fmt="-", capsize=2, label=setup.label, **style)
         errors.plot(
             levels, [100 * row["wrong_share"] for row in mine], "-", label=setup.label, **style
         )

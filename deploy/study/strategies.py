@@ -184,27 +184,14 @@ def plot(records: Records, path: Path) -> None:
 def _times(axis: Any, rows: list[dict[str, Any]], style: str, colour: str, label: str) -> None:
     """The median time of the right runs of each row and its 95% bootstrap interval."""
     bars = [tables.median_bar(row["times"]) for row in rows]
-    axis.errorbar(
-        [row["n"] for row in rows],
-        [bar[0] for bar in bars],
-        yerr=[[bar[1] for bar in bars], [bar[2] for bar in bars]],
-        fmt=style,
-        color=colour,
-        capsize=2,
-        label=label,
+    tables.plot_bars(
+        axis, [row["n"] for row in rows], bars, fmt=style, color=colour, capsize=2, label=label
     )
 
 
 def _accuracy(axis: Any, rows: list[dict[str, Any]], style: str, colour: str) -> None:
     bars = [tables.error_bar(row["correct"], row["runs"]) for row in rows]
-    axis.errorbar(
-        [row["n"] for row in rows],
-        [bar[0] for bar in bars],
-        yerr=[[bar[1] for bar in bars], [bar[2] for bar in bars]],
-        fmt=style,
-        color=colour,
-        capsize=2,
-    )
+    tables.plot_bars(axis, [row["n"] for row in rows], bars, fmt=style, color=colour, capsize=2)
 
 
 STUDY = Study(

@@ -124,6 +124,20 @@ def median_bar(values: Sequence[float]) -> tuple[float, float, float]:
     return found.value, found.value - found.low, found.high - found.value
 
 
+def plot_bars(
+    axis: Any, xs: Sequence[float], bars: Sequence[tuple[float, float, float]], **style: Any
+) -> None:
+    """Points with their intervals: ``bars`` as ``error_bar`` and ``median_bar`` give them
+    (a value and the distances below and above it), ``style`` as matplotlib's errorbar
+    takes it."""
+    axis.errorbar(
+        xs,
+        [bar[0] for bar in bars],
+        yerr=[[bar[1] for bar in bars], [bar[2] for bar in bars]],
+        **style,
+    )
+
+
 def pyplot() -> Any:
     import matplotlib
 
